@@ -1,0 +1,1 @@
+//! calibrate (to be built; see the issue tracker).

@@ -1,0 +1,1 @@
+//! can-transport (to be built; see the issue tracker).

@@ -1,0 +1,1 @@
+//! crs-ipc (to be built; see the issue tracker).

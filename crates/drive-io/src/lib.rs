@@ -1,0 +1,1 @@
+//! drive-io (to be built; see the issue tracker).

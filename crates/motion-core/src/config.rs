@@ -1,0 +1,451 @@
+//! Operator platform TOML (`config/*.toml`): parsing and validation into a [`Platform`].
+//!
+//! Units are SI and named in every key (`_m`, `_n`, `_n_nm`); angles an operator types are in
+//! degrees (`_deg`) and converted here, at the edge. Unknown keys are rejected. Every error
+//! names the file, the key and the line.
+
+use crate::model::{Model, ModelError, ModelParams, Pulleys};
+use crate::pose::Pose;
+use crate::workspace::PositionBox;
+use nalgebra::{Vector3, Vector6};
+use serde::Deserialize;
+use std::fmt;
+use std::ops::Range;
+use std::path::Path;
+use toml::Spanned;
+
+/// A configuration error with its location.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConfigError {
+    pub file: String,
+    /// 1-based line and column, when known.
+    pub line: Option<usize>,
+    pub column: Option<usize>,
+    /// Dotted key path, e.g. `geometry.frame_anchors_m[3]`.
+    pub key: String,
+    pub message: String,
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if let (Some(l), Some(c)) = (self.line, self.column) {
+            write!(f, ":{l}:{c}")?;
+        }
+        if self.key.is_empty() {
+            write!(f, ": {}", self.message)
+        } else {
+            write!(f, ": `{}`: {}", self.key, self.message)
+        }
+    }
+}
+
+impl std::error::Error for ConfigError {}
+
+/// Table 5.1 motion limits, SI.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotionLimits {
+    pub linear_velocity_max: f64,
+    pub angular_velocity_max: f64,
+    pub linear_acceleration_max: f64,
+    pub angular_acceleration_max: f64,
+}
+
+/// Configured operating region: a position box and per-axis rotation bounds (rad).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Region {
+    pub position: PositionBox,
+    pub rotation_min: Vector3<f64>,
+    pub rotation_max: Vector3<f64>,
+}
+
+impl Region {
+    pub fn contains(&self, pose: &Pose) -> bool {
+        self.position.contains(&pose.r)
+            && (0..3).all(|k| pose.phi[k] >= self.rotation_min[k] && pose.phi[k] <= self.rotation_max[k])
+    }
+}
+
+/// Winch and rope data (table 5.1), SI.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WinchData {
+    pub drum_diameter: f64,
+    pub rope_diameter: f64,
+}
+
+/// A named cable subset for section wrenches (eq. 5.11), 0-based indices.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Section {
+    pub name: String,
+    pub cables: Vec<usize>,
+}
+
+/// Everything a platform TOML describes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Platform {
+    pub name: String,
+    pub description: String,
+    pub model: Model,
+    /// Absolute cable force limit (breaking/overload), N (table 5.1: 14000 N).
+    pub f_abs_max: f64,
+    pub limits: MotionLimits,
+    pub winch: WinchData,
+    pub region: Region,
+    /// Set-up ("home") pose at which the initial tension is set.
+    pub home: Pose,
+    /// Optional initial cable forces at the home pose, N (eq. 6.2 / 6.22).
+    pub f_ini: Option<Vec<f64>>,
+    pub sections: Vec<Section>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPlatform {
+    platform: RawMeta,
+    geometry: RawGeometry,
+    pulleys: Option<RawPulleys>,
+    elasticity: RawElasticity,
+    load: RawLoad,
+    forces: RawForces,
+    limits: RawLimits,
+    winch: RawWinch,
+    workspace: RawWorkspace,
+    home: RawHome,
+    #[serde(default)]
+    sections: std::collections::BTreeMap<String, Spanned<Vec<i64>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMeta {
+    name: Spanned<String>,
+    #[serde(default)]
+    description: String,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawGeometry {
+    frame_anchors_m: Spanned<Vec<[f64; 3]>>,
+    platform_anchors_m: Spanned<Vec<[f64; 3]>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPulleys {
+    radius_m: Spanned<PerCable>,
+    swivel_axes: Spanned<Vec<[f64; 3]>>,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum PerCable {
+    All(f64),
+    Each(Vec<f64>),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawElasticity {
+    /// k_F = EA, N.
+    k_f_n: Spanned<PerCable>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLoad {
+    wrench_n_nm: Spanned<[f64; 6]>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawForces {
+    f_min_n: Spanned<f64>,
+    f_max_n: Spanned<f64>,
+    f_abs_max_n: Spanned<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLimits {
+    linear_velocity_max_m_per_s: Spanned<f64>,
+    angular_velocity_max_deg_per_s: Spanned<f64>,
+    linear_acceleration_max_m_per_s2: Spanned<f64>,
+    angular_acceleration_max_deg_per_s2: Spanned<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawWinch {
+    drum_diameter_m: Spanned<f64>,
+    rope_diameter_m: Spanned<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawWorkspace {
+    position_min_m: Spanned<[f64; 3]>,
+    position_max_m: Spanned<[f64; 3]>,
+    rotation_min_deg: Spanned<[f64; 3]>,
+    rotation_max_deg: Spanned<[f64; 3]>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHome {
+    position_m: Spanned<[f64; 3]>,
+    rotation_deg: Spanned<[f64; 3]>,
+    f_ini_n: Option<Spanned<Vec<f64>>>,
+}
+
+/// Reads and validates a platform TOML file.
+pub fn load_platform(path: impl AsRef<Path>) -> Result<Platform, ConfigError> {
+    let path = path.as_ref();
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
+        file: file.clone(),
+        line: None,
+        column: None,
+        key: String::new(),
+        message: format!("cannot read: {e}"),
+    })?;
+    parse_platform(&text, &file)
+}
+
+/// Parses and validates platform TOML text; `file` names it in errors.
+pub fn parse_platform(text: &str, file: &str) -> Result<Platform, ConfigError> {
+    let loc = Locator { text, file };
+    let raw: RawPlatform = toml::from_str(text).map_err(|e| {
+        let (line, column) = e.span().map(|s| loc.line_col(s.start)).unzip();
+        ConfigError {
+            file: file.to_string(),
+            line,
+            column,
+            key: String::new(),
+            message: e.message().trim().to_string(),
+        }
+    })?;
+    build(raw, &loc)
+}
+
+struct Locator<'a> {
+    text: &'a str,
+    file: &'a str,
+}
+
+impl Locator<'_> {
+    fn line_col(&self, offset: usize) -> (usize, usize) {
+        let before = &self.text[..offset.min(self.text.len())];
+        let line = before.matches('\n').count() + 1;
+        let column = before.len() - before.rfind('\n').map_or(0, |p| p + 1) + 1;
+        (line, column)
+    }
+
+    fn err(&self, span: Range<usize>, key: impl Into<String>, message: impl Into<String>) -> ConfigError {
+        let (line, column) = self.line_col(span.start);
+        ConfigError {
+            file: self.file.to_string(),
+            line: Some(line),
+            column: Some(column),
+            key: key.into(),
+            message: message.into(),
+        }
+    }
+
+    fn finite<T>(&self, v: &Spanned<T>, key: &str, values: &[f64]) -> Result<(), ConfigError> {
+        match values.iter().position(|x| !x.is_finite()) {
+            Some(i) if values.len() > 1 => Err(self.err(v.span(), format!("{key}[{i}]"), "must be a finite number")),
+            Some(_) => Err(self.err(v.span(), key, "must be a finite number")),
+            None => Ok(()),
+        }
+    }
+
+    fn positive(&self, v: &Spanned<f64>, key: &str) -> Result<f64, ConfigError> {
+        let x = *v.get_ref();
+        self.finite(v, key, &[x])?;
+        if x <= 0.0 {
+            return Err(self.err(v.span(), key, format!("must be > 0, got {x}")));
+        }
+        Ok(x)
+    }
+}
+
+fn per_cable(loc: &Locator, v: &Spanned<PerCable>, key: &str, m: usize) -> Result<Vec<f64>, ConfigError> {
+    let vals = match v.get_ref() {
+        PerCable::All(x) => vec![*x; m],
+        PerCable::Each(xs) => {
+            if xs.len() != m {
+                return Err(loc.err(v.span(), key, format!("has {} entries but there are {m} cables", xs.len())));
+            }
+            xs.clone()
+        }
+    };
+    loc.finite(v, key, &vals)?;
+    Ok(vals)
+}
+
+fn vec3(a: &[f64; 3]) -> Vector3<f64> {
+    Vector3::new(a[0], a[1], a[2])
+}
+
+fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
+    let g = &raw.geometry;
+    let m = g.frame_anchors_m.get_ref().len();
+    let flat = |v: &Vec<[f64; 3]>| v.iter().flatten().copied().collect::<Vec<_>>();
+    loc.finite(&g.frame_anchors_m, "geometry.frame_anchors_m", &flat(g.frame_anchors_m.get_ref()))?;
+    loc.finite(&g.platform_anchors_m, "geometry.platform_anchors_m", &flat(g.platform_anchors_m.get_ref()))?;
+    if g.platform_anchors_m.get_ref().len() != m {
+        return Err(loc.err(
+            g.platform_anchors_m.span(),
+            "geometry.platform_anchors_m",
+            format!("has {} rows but geometry.frame_anchors_m has {m}", g.platform_anchors_m.get_ref().len()),
+        ));
+    }
+    let pulleys = match &raw.pulleys {
+        None => None,
+        Some(p) => {
+            let radius = per_cable(loc, &p.radius_m, "pulleys.radius_m", m)?;
+            if let Some(i) = radius.iter().position(|r| *r < 0.0) {
+                return Err(loc.err(p.radius_m.span(), format!("pulleys.radius_m[{i}]"), "must be >= 0"));
+            }
+            let axes = p.swivel_axes.get_ref();
+            if axes.len() != m {
+                return Err(loc.err(p.swivel_axes.span(), "pulleys.swivel_axes", format!("has {} rows but there are {m} cables", axes.len())));
+            }
+            loc.finite(&p.swivel_axes, "pulleys.swivel_axes", &flat(axes))?;
+            Some(Pulleys { radius, axis: axes.iter().map(vec3).collect() })
+        }
+    };
+    let k_f = per_cable(loc, &raw.elasticity.k_f_n, "elasticity.k_f_n", m)?;
+    let w = raw.load.wrench_n_nm.get_ref();
+    loc.finite(&raw.load.wrench_n_nm, "load.wrench_n_nm", w)?;
+    let fo = &raw.forces;
+    let f_min = *fo.f_min_n.get_ref();
+    loc.finite(&fo.f_min_n, "forces.f_min_n", &[f_min])?;
+    let f_max = loc.positive(&fo.f_max_n, "forces.f_max_n")?;
+    let f_abs_max = loc.positive(&fo.f_abs_max_n, "forces.f_abs_max_n")?;
+    if f_min < 0.0 || f_min >= f_max {
+        return Err(loc.err(fo.f_min_n.span(), "forces.f_min_n", format!("must satisfy 0 <= f_min_n < f_max_n ({f_min} N vs {f_max} N)")));
+    }
+    if f_max > f_abs_max {
+        return Err(loc.err(fo.f_max_n.span(), "forces.f_max_n", format!("must not exceed forces.f_abs_max_n ({f_max} N > {f_abs_max} N)")));
+    }
+
+    let params = ModelParams {
+        a: g.frame_anchors_m.get_ref().iter().map(vec3).collect(),
+        b: g.platform_anchors_m.get_ref().iter().map(vec3).collect(),
+        pulleys,
+        k_f,
+        w_e: Vector6::from_column_slice(w),
+        f_min,
+        f_max,
+    };
+    let model = Model::new(params).map_err(|e| model_error(loc, &raw, e))?;
+
+    let l = &raw.limits;
+    let limits = MotionLimits {
+        linear_velocity_max: loc.positive(&l.linear_velocity_max_m_per_s, "limits.linear_velocity_max_m_per_s")?,
+        angular_velocity_max: loc.positive(&l.angular_velocity_max_deg_per_s, "limits.angular_velocity_max_deg_per_s")?.to_radians(),
+        linear_acceleration_max: loc.positive(&l.linear_acceleration_max_m_per_s2, "limits.linear_acceleration_max_m_per_s2")?,
+        angular_acceleration_max: loc.positive(&l.angular_acceleration_max_deg_per_s2, "limits.angular_acceleration_max_deg_per_s2")?.to_radians(),
+    };
+    let winch = WinchData {
+        drum_diameter: loc.positive(&raw.winch.drum_diameter_m, "winch.drum_diameter_m")?,
+        rope_diameter: loc.positive(&raw.winch.rope_diameter_m, "winch.rope_diameter_m")?,
+    };
+
+    let ws = &raw.workspace;
+    for (v, key) in [
+        (&ws.position_min_m, "workspace.position_min_m"),
+        (&ws.position_max_m, "workspace.position_max_m"),
+        (&ws.rotation_min_deg, "workspace.rotation_min_deg"),
+        (&ws.rotation_max_deg, "workspace.rotation_max_deg"),
+    ] {
+        loc.finite(v, key, v.get_ref())?;
+    }
+    for k in 0..3 {
+        if ws.position_min_m.get_ref()[k] >= ws.position_max_m.get_ref()[k] {
+            return Err(loc.err(ws.position_max_m.span(), format!("workspace.position_max_m[{k}]"), "must be greater than workspace.position_min_m"));
+        }
+        if ws.rotation_min_deg.get_ref()[k] > ws.rotation_max_deg.get_ref()[k] {
+            return Err(loc.err(ws.rotation_max_deg.span(), format!("workspace.rotation_max_deg[{k}]"), "must be >= workspace.rotation_min_deg"));
+        }
+    }
+    let region = Region {
+        position: PositionBox { min: vec3(ws.position_min_m.get_ref()), max: vec3(ws.position_max_m.get_ref()) },
+        rotation_min: vec3(ws.rotation_min_deg.get_ref()).map(f64::to_radians),
+        rotation_max: vec3(ws.rotation_max_deg.get_ref()).map(f64::to_radians),
+    };
+
+    let h = &raw.home;
+    loc.finite(&h.position_m, "home.position_m", h.position_m.get_ref())?;
+    loc.finite(&h.rotation_deg, "home.rotation_deg", h.rotation_deg.get_ref())?;
+    let home = Pose::new(vec3(h.position_m.get_ref()), vec3(h.rotation_deg.get_ref()).map(f64::to_radians));
+    if !region.contains(&home) {
+        return Err(loc.err(h.position_m.span(), "home", "the home pose lies outside the workspace region"));
+    }
+    let f_ini = match &h.f_ini_n {
+        None => None,
+        Some(v) => {
+            let f = v.get_ref();
+            if f.len() != m {
+                return Err(loc.err(v.span(), "home.f_ini_n", format!("has {} entries but there are {m} cables", f.len())));
+            }
+            loc.finite(v, "home.f_ini_n", f)?;
+            if let Some(i) = f.iter().position(|x| *x <= 0.0 || *x > f_abs_max) {
+                return Err(loc.err(v.span(), format!("home.f_ini_n[{i}]"), format!("must lie in (0, f_abs_max_n], got {} N", f[i])));
+            }
+            Some(f.clone())
+        }
+    };
+
+    let mut sections = Vec::new();
+    for (name, cables) in &raw.sections {
+        let mut idx = Vec::new();
+        for c in cables.get_ref() {
+            if *c < 1 || *c as usize > m {
+                return Err(loc.err(cables.span(), format!("sections.{name}"), format!("cable {c} does not exist (cables are numbered 1..={m})")));
+            }
+            let i = (*c - 1) as usize;
+            if idx.contains(&i) {
+                return Err(loc.err(cables.span(), format!("sections.{name}"), format!("cable {c} listed twice")));
+            }
+            idx.push(i);
+        }
+        sections.push(Section { name: name.clone(), cables: idx });
+    }
+
+    let name = raw.platform.name.get_ref().trim().to_string();
+    if name.is_empty() {
+        return Err(loc.err(raw.platform.name.span(), "platform.name", "must not be empty"));
+    }
+    Ok(Platform {
+        name,
+        description: raw.platform.description.clone(),
+        model,
+        f_abs_max,
+        limits,
+        winch,
+        region,
+        home,
+        f_ini,
+        sections,
+    })
+}
+
+fn model_error(loc: &Locator, raw: &RawPlatform, e: ModelError) -> ConfigError {
+    let g = &raw.geometry;
+    let (span, key) = match &e {
+        ModelError::TooFewCables(_) | ModelError::TooManyCables(_) => (g.frame_anchors_m.span(), "geometry.frame_anchors_m".to_string()),
+        ModelError::DuplicateAnchor { what: "a", i, .. } => (g.frame_anchors_m.span(), format!("geometry.frame_anchors_m[{i}]")),
+        ModelError::DuplicateAnchor { i, .. } => (g.platform_anchors_m.span(), format!("geometry.platform_anchors_m[{i}]")),
+        ModelError::NonPositiveStiffness(i) => (raw.elasticity.k_f_n.span(), format!("elasticity.k_f_n[{i}]")),
+        ModelError::ZeroPulleyAxis(i) | ModelError::NegativePulleyRadius(i) => match &raw.pulleys {
+            Some(p) => (p.swivel_axes.span(), format!("pulleys[{i}]")),
+            None => (0..0, "pulleys".into()),
+        },
+        ModelError::ForceLimits { .. } => (raw.forces.f_min_n.span(), "forces".into()),
+        ModelError::LengthMismatch { what, .. } | ModelError::NotFinite { what, .. } => (g.frame_anchors_m.span(), what.to_string()),
+    };
+    loc.err(span, key, e.to_string())
+}

@@ -1,0 +1,30 @@
+//! Standard inverse kinematics φ(x, a, b), eq. (2.3)–(2.8).
+
+use super::KinematicsError;
+use crate::model::Data;
+use nalgebra::Vector3;
+
+/// One cable of the standard model: l_i = a_i − r − b_i (eq. 2.5), q_i = ‖l_i‖ (eq. 2.7),
+/// u_i = l_i / q_i (eq. 2.8).
+#[inline]
+pub(crate) fn cable(
+    data: &mut Data,
+    i: usize,
+    a: &Vector3<f64>,
+    pb: &Vector3<f64>,
+) -> Result<(), KinematicsError> {
+    let l = a - pb;
+    let q = l.norm();
+    if q <= 0.0 {
+        return Err(KinematicsError::DegenerateCable { cable: i });
+    }
+    data.l[i] = l;
+    data.q[i] = q;
+    data.q_free[i] = q;
+    data.beta[i] = 0.0;
+    data.u[i] = l / q;
+    data.p_exit[i] = *a;
+    data.pulley_ux[i] = Vector3::zeros();
+    data.pulley_bxy[i] = 0.0;
+    Ok(())
+}

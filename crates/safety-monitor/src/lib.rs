@@ -1,0 +1,1 @@
+//! safety-monitor (to be built; see the issue tracker).

@@ -1,0 +1,1 @@
+//! sim-plant (to be built; see the issue tracker).

@@ -1,0 +1,1 @@
+//! surrogate (to be built; see the issue tracker).
