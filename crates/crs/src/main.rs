@@ -1,1 +1,47 @@
-fn main() {}
+//! `crs`: the operator / commissioning command line of the cable-robot stack.
+
+mod model_cmd;
+mod plant_cmd;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "crs",
+    version,
+    about = "Cable-robot motion control stack (CableRobot Simulator model)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Model computations on a platform TOML: ik, fk, forces, stiffness, workspace.
+    Model {
+        #[command(subcommand)]
+        cmd: model_cmd::ModelCommand,
+    },
+    /// The simulated plant: measurement campaigns and data sets.
+    Plant {
+        #[command(subcommand)]
+        cmd: plant_cmd::PlantCommand,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Model { cmd } => model_cmd::run(cmd),
+        Command::Plant { cmd } => plant_cmd::run(cmd),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

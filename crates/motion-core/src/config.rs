@@ -62,7 +62,8 @@ pub struct Region {
 impl Region {
     pub fn contains(&self, pose: &Pose) -> bool {
         self.position.contains(&pose.r)
-            && (0..3).all(|k| pose.phi[k] >= self.rotation_min[k] && pose.phi[k] <= self.rotation_max[k])
+            && (0..3)
+                .all(|k| pose.phi[k] >= self.rotation_min[k] && pose.phi[k] <= self.rotation_max[k])
     }
 }
 
@@ -241,7 +242,12 @@ impl Locator<'_> {
         (line, column)
     }
 
-    fn err(&self, span: Range<usize>, key: impl Into<String>, message: impl Into<String>) -> ConfigError {
+    fn err(
+        &self,
+        span: Range<usize>,
+        key: impl Into<String>,
+        message: impl Into<String>,
+    ) -> ConfigError {
         let (line, column) = self.line_col(span.start);
         ConfigError {
             file: self.file.to_string(),
@@ -254,7 +260,9 @@ impl Locator<'_> {
 
     fn finite<T>(&self, v: &Spanned<T>, key: &str, values: &[f64]) -> Result<(), ConfigError> {
         match values.iter().position(|x| !x.is_finite()) {
-            Some(i) if values.len() > 1 => Err(self.err(v.span(), format!("{key}[{i}]"), "must be a finite number")),
+            Some(i) if values.len() > 1 => {
+                Err(self.err(v.span(), format!("{key}[{i}]"), "must be a finite number"))
+            }
             Some(_) => Err(self.err(v.span(), key, "must be a finite number")),
             None => Ok(()),
         }
@@ -270,12 +278,24 @@ impl Locator<'_> {
     }
 }
 
-fn per_cable(loc: &Locator, v: &Spanned<PerCable>, key: &str, m: usize) -> Result<Vec<f64>, ConfigError> {
+fn per_cable(
+    loc: &Locator,
+    v: &Spanned<PerCable>,
+    key: &str,
+    m: usize,
+) -> Result<Vec<f64>, ConfigError> {
     let vals = match v.get_ref() {
-        PerCable::All(x) => vec![*x; m],
+        PerCable::All(x) => {
+            loc.finite(v, key, &[*x])?;
+            vec![*x; m]
+        }
         PerCable::Each(xs) => {
             if xs.len() != m {
-                return Err(loc.err(v.span(), key, format!("has {} entries but there are {m} cables", xs.len())));
+                return Err(loc.err(
+                    v.span(),
+                    key,
+                    format!("has {} entries but there are {m} cables", xs.len()),
+                ));
             }
             xs.clone()
         }
@@ -292,13 +312,24 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
     let g = &raw.geometry;
     let m = g.frame_anchors_m.get_ref().len();
     let flat = |v: &Vec<[f64; 3]>| v.iter().flatten().copied().collect::<Vec<_>>();
-    loc.finite(&g.frame_anchors_m, "geometry.frame_anchors_m", &flat(g.frame_anchors_m.get_ref()))?;
-    loc.finite(&g.platform_anchors_m, "geometry.platform_anchors_m", &flat(g.platform_anchors_m.get_ref()))?;
+    loc.finite(
+        &g.frame_anchors_m,
+        "geometry.frame_anchors_m",
+        &flat(g.frame_anchors_m.get_ref()),
+    )?;
+    loc.finite(
+        &g.platform_anchors_m,
+        "geometry.platform_anchors_m",
+        &flat(g.platform_anchors_m.get_ref()),
+    )?;
     if g.platform_anchors_m.get_ref().len() != m {
         return Err(loc.err(
             g.platform_anchors_m.span(),
             "geometry.platform_anchors_m",
-            format!("has {} rows but geometry.frame_anchors_m has {m}", g.platform_anchors_m.get_ref().len()),
+            format!(
+                "has {} rows but geometry.frame_anchors_m has {m}",
+                g.platform_anchors_m.get_ref().len()
+            ),
         ));
     }
     let pulleys = match &raw.pulleys {
@@ -306,14 +337,25 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
         Some(p) => {
             let radius = per_cable(loc, &p.radius_m, "pulleys.radius_m", m)?;
             if let Some(i) = radius.iter().position(|r| *r < 0.0) {
-                return Err(loc.err(p.radius_m.span(), format!("pulleys.radius_m[{i}]"), "must be >= 0"));
+                return Err(loc.err(
+                    p.radius_m.span(),
+                    format!("pulleys.radius_m[{i}]"),
+                    "must be >= 0",
+                ));
             }
             let axes = p.swivel_axes.get_ref();
             if axes.len() != m {
-                return Err(loc.err(p.swivel_axes.span(), "pulleys.swivel_axes", format!("has {} rows but there are {m} cables", axes.len())));
+                return Err(loc.err(
+                    p.swivel_axes.span(),
+                    "pulleys.swivel_axes",
+                    format!("has {} rows but there are {m} cables", axes.len()),
+                ));
             }
             loc.finite(&p.swivel_axes, "pulleys.swivel_axes", &flat(axes))?;
-            Some(Pulleys { radius, axis: axes.iter().map(vec3).collect() })
+            Some(Pulleys {
+                radius,
+                axis: axes.iter().map(vec3).collect(),
+            })
         }
     };
     let k_f = per_cable(loc, &raw.elasticity.k_f_n, "elasticity.k_f_n", m)?;
@@ -325,10 +367,18 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
     let f_max = loc.positive(&fo.f_max_n, "forces.f_max_n")?;
     let f_abs_max = loc.positive(&fo.f_abs_max_n, "forces.f_abs_max_n")?;
     if f_min < 0.0 || f_min >= f_max {
-        return Err(loc.err(fo.f_min_n.span(), "forces.f_min_n", format!("must satisfy 0 <= f_min_n < f_max_n ({f_min} N vs {f_max} N)")));
+        return Err(loc.err(
+            fo.f_min_n.span(),
+            "forces.f_min_n",
+            format!("must satisfy 0 <= f_min_n < f_max_n ({f_min} N vs {f_max} N)"),
+        ));
     }
     if f_max > f_abs_max {
-        return Err(loc.err(fo.f_max_n.span(), "forces.f_max_n", format!("must not exceed forces.f_abs_max_n ({f_max} N > {f_abs_max} N)")));
+        return Err(loc.err(
+            fo.f_max_n.span(),
+            "forces.f_max_n",
+            format!("must not exceed forces.f_abs_max_n ({f_max} N > {f_abs_max} N)"),
+        ));
     }
 
     let params = ModelParams {
@@ -344,10 +394,26 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
 
     let l = &raw.limits;
     let limits = MotionLimits {
-        linear_velocity_max: loc.positive(&l.linear_velocity_max_m_per_s, "limits.linear_velocity_max_m_per_s")?,
-        angular_velocity_max: loc.positive(&l.angular_velocity_max_deg_per_s, "limits.angular_velocity_max_deg_per_s")?.to_radians(),
-        linear_acceleration_max: loc.positive(&l.linear_acceleration_max_m_per_s2, "limits.linear_acceleration_max_m_per_s2")?,
-        angular_acceleration_max: loc.positive(&l.angular_acceleration_max_deg_per_s2, "limits.angular_acceleration_max_deg_per_s2")?.to_radians(),
+        linear_velocity_max: loc.positive(
+            &l.linear_velocity_max_m_per_s,
+            "limits.linear_velocity_max_m_per_s",
+        )?,
+        angular_velocity_max: loc
+            .positive(
+                &l.angular_velocity_max_deg_per_s,
+                "limits.angular_velocity_max_deg_per_s",
+            )?
+            .to_radians(),
+        linear_acceleration_max: loc.positive(
+            &l.linear_acceleration_max_m_per_s2,
+            "limits.linear_acceleration_max_m_per_s2",
+        )?,
+        angular_acceleration_max: loc
+            .positive(
+                &l.angular_acceleration_max_deg_per_s2,
+                "limits.angular_acceleration_max_deg_per_s2",
+            )?
+            .to_radians(),
     };
     let winch = WinchData {
         drum_diameter: loc.positive(&raw.winch.drum_diameter_m, "winch.drum_diameter_m")?,
@@ -365,35 +431,65 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
     }
     for k in 0..3 {
         if ws.position_min_m.get_ref()[k] >= ws.position_max_m.get_ref()[k] {
-            return Err(loc.err(ws.position_max_m.span(), format!("workspace.position_max_m[{k}]"), "must be greater than workspace.position_min_m"));
+            return Err(loc.err(
+                ws.position_max_m.span(),
+                format!("workspace.position_max_m[{k}]"),
+                "must be greater than workspace.position_min_m",
+            ));
         }
         if ws.rotation_min_deg.get_ref()[k] > ws.rotation_max_deg.get_ref()[k] {
-            return Err(loc.err(ws.rotation_max_deg.span(), format!("workspace.rotation_max_deg[{k}]"), "must be >= workspace.rotation_min_deg"));
+            return Err(loc.err(
+                ws.rotation_max_deg.span(),
+                format!("workspace.rotation_max_deg[{k}]"),
+                "must be >= workspace.rotation_min_deg",
+            ));
         }
     }
     let region = Region {
-        position: PositionBox { min: vec3(ws.position_min_m.get_ref()), max: vec3(ws.position_max_m.get_ref()) },
+        position: PositionBox {
+            min: vec3(ws.position_min_m.get_ref()),
+            max: vec3(ws.position_max_m.get_ref()),
+        },
         rotation_min: vec3(ws.rotation_min_deg.get_ref()).map(f64::to_radians),
         rotation_max: vec3(ws.rotation_max_deg.get_ref()).map(f64::to_radians),
     };
 
     let h = &raw.home;
     loc.finite(&h.position_m, "home.position_m", h.position_m.get_ref())?;
-    loc.finite(&h.rotation_deg, "home.rotation_deg", h.rotation_deg.get_ref())?;
-    let home = Pose::new(vec3(h.position_m.get_ref()), vec3(h.rotation_deg.get_ref()).map(f64::to_radians));
+    loc.finite(
+        &h.rotation_deg,
+        "home.rotation_deg",
+        h.rotation_deg.get_ref(),
+    )?;
+    let home = Pose::new(
+        vec3(h.position_m.get_ref()),
+        vec3(h.rotation_deg.get_ref()).map(f64::to_radians),
+    );
     if !region.contains(&home) {
-        return Err(loc.err(h.position_m.span(), "home", "the home pose lies outside the workspace region"));
+        return Err(loc.err(
+            h.position_m.span(),
+            "home",
+            "the home pose lies outside the workspace region",
+        ));
     }
     let f_ini = match &h.f_ini_n {
         None => None,
         Some(v) => {
             let f = v.get_ref();
             if f.len() != m {
-                return Err(loc.err(v.span(), "home.f_ini_n", format!("has {} entries but there are {m} cables", f.len())));
+                return Err(loc.err(
+                    v.span(),
+                    "home.f_ini_n",
+                    format!("has {} entries but there are {m} cables", f.len()),
+                ));
             }
             loc.finite(v, "home.f_ini_n", f)?;
             if let Some(i) = f.iter().position(|x| *x <= 0.0 || *x > f_abs_max) {
-                return Err(loc.err(v.span(), format!("home.f_ini_n[{i}]"), format!("must lie in (0, f_abs_max_n], got {} N", f[i])));
+                return Err(loc.err(
+                    v.span(),
+                    format!("home.f_ini_n[{i}]"),
+                    format!("must lie in (0, f_abs_max_n], got {} N", f[i]),
+                ));
             }
             Some(f.clone())
         }
@@ -404,20 +500,35 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
         let mut idx = Vec::new();
         for c in cables.get_ref() {
             if *c < 1 || *c as usize > m {
-                return Err(loc.err(cables.span(), format!("sections.{name}"), format!("cable {c} does not exist (cables are numbered 1..={m})")));
+                return Err(loc.err(
+                    cables.span(),
+                    format!("sections.{name}"),
+                    format!("cable {c} does not exist (cables are numbered 1..={m})"),
+                ));
             }
             let i = (*c - 1) as usize;
             if idx.contains(&i) {
-                return Err(loc.err(cables.span(), format!("sections.{name}"), format!("cable {c} listed twice")));
+                return Err(loc.err(
+                    cables.span(),
+                    format!("sections.{name}"),
+                    format!("cable {c} listed twice"),
+                ));
             }
             idx.push(i);
         }
-        sections.push(Section { name: name.clone(), cables: idx });
+        sections.push(Section {
+            name: name.clone(),
+            cables: idx,
+        });
     }
 
     let name = raw.platform.name.get_ref().trim().to_string();
     if name.is_empty() {
-        return Err(loc.err(raw.platform.name.span(), "platform.name", "must not be empty"));
+        return Err(loc.err(
+            raw.platform.name.span(),
+            "platform.name",
+            "must not be empty",
+        ));
     }
     Ok(Platform {
         name,
@@ -436,16 +547,30 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
 fn model_error(loc: &Locator, raw: &RawPlatform, e: ModelError) -> ConfigError {
     let g = &raw.geometry;
     let (span, key) = match &e {
-        ModelError::TooFewCables(_) | ModelError::TooManyCables(_) => (g.frame_anchors_m.span(), "geometry.frame_anchors_m".to_string()),
-        ModelError::DuplicateAnchor { what: "a", i, .. } => (g.frame_anchors_m.span(), format!("geometry.frame_anchors_m[{i}]")),
-        ModelError::DuplicateAnchor { i, .. } => (g.platform_anchors_m.span(), format!("geometry.platform_anchors_m[{i}]")),
-        ModelError::NonPositiveStiffness(i) => (raw.elasticity.k_f_n.span(), format!("elasticity.k_f_n[{i}]")),
+        ModelError::TooFewCables(_) | ModelError::TooManyCables(_) => (
+            g.frame_anchors_m.span(),
+            "geometry.frame_anchors_m".to_string(),
+        ),
+        ModelError::DuplicateAnchor { what: "a", i, .. } => (
+            g.frame_anchors_m.span(),
+            format!("geometry.frame_anchors_m[{i}]"),
+        ),
+        ModelError::DuplicateAnchor { i, .. } => (
+            g.platform_anchors_m.span(),
+            format!("geometry.platform_anchors_m[{i}]"),
+        ),
+        ModelError::NonPositiveStiffness(i) => (
+            raw.elasticity.k_f_n.span(),
+            format!("elasticity.k_f_n[{i}]"),
+        ),
         ModelError::ZeroPulleyAxis(i) | ModelError::NegativePulleyRadius(i) => match &raw.pulleys {
             Some(p) => (p.swivel_axes.span(), format!("pulleys[{i}]")),
             None => (0..0, "pulleys".into()),
         },
         ModelError::ForceLimits { .. } => (raw.forces.f_min_n.span(), "forces".into()),
-        ModelError::LengthMismatch { what, .. } | ModelError::NotFinite { what, .. } => (g.frame_anchors_m.span(), what.to_string()),
+        ModelError::LengthMismatch { what, .. } | ModelError::NotFinite { what, .. } => {
+            (g.frame_anchors_m.span(), what.to_string())
+        }
     };
     loc.err(span, key, e.to_string())
 }

@@ -85,7 +85,9 @@ impl CableLaw for ConstantStiffness<'_> {
 impl Model {
     /// The model's own cable law (eq. 2.33–2.36).
     pub fn linear_law(&self) -> LinearElastic<'_> {
-        LinearElastic { k_f: &self.params().k_f }
+        LinearElastic {
+            k_f: &self.params().k_f,
+        }
     }
 }
 
@@ -149,7 +151,10 @@ pub fn inverse_wrench_lambda(
     let m = model.m();
     let h = statics::nullspace_basis(data);
     if lambda.len() != h.ncols() {
-        return Err(ElastostaticsError::LambdaLength { expected: h.ncols(), got: lambda.len() });
+        return Err(ElastostaticsError::LambdaLength {
+            expected: h.ncols(),
+            got: lambda.len(),
+        });
     }
     let mut f_ext = vec![0.0; m];
     let mut scratch = vec![0.0; m];
@@ -230,7 +235,11 @@ impl Stiffness {
     pub fn at(model: &Model, data: &Data) -> Self {
         let k_g = geometric_stiffness(model, data);
         let k_c = cable_stiffness(data);
-        Self { k_g, k_c, k_wx: k_g - k_c }
+        Self {
+            k_g,
+            k_c,
+            k_wx: k_g - k_c,
+        }
     }
 
     /// C_xw = K_wx^{-1} (eq. 2.77), so δx = −C_xw δw_e (eq. 2.78).

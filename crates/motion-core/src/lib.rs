@@ -18,6 +18,10 @@
 //! thread, and every hot-path function (inverse kinematics, force distribution, forward
 //! kinematics) writes into it without allocating.
 
+// Per-cable loops index several parallel arrays (q, q_θ, f, columns of A^T) by the cable
+// number, as the equations do; iterator zips of four slices would hide that.
+#![allow(clippy::needless_range_loop)]
+
 pub mod config;
 pub mod elastostatics;
 pub mod forward;

@@ -50,11 +50,19 @@ pub enum ModelError {
     #[error("at most {MAX_CABLES} cables are supported, got {0}")]
     TooManyCables(usize),
     #[error("{what} has {got} entries but there are {m} cables")]
-    LengthMismatch { what: &'static str, got: usize, m: usize },
+    LengthMismatch {
+        what: &'static str,
+        got: usize,
+        m: usize,
+    },
     #[error("{what}[{index}] is not finite")]
     NotFinite { what: &'static str, index: usize },
     #[error("{what}[{i}] and {what}[{j}] coincide (anchor points must be distinct)")]
-    DuplicateAnchor { what: &'static str, i: usize, j: usize },
+    DuplicateAnchor {
+        what: &'static str,
+        i: usize,
+        j: usize,
+    },
     #[error("k_f[{0}] must be > 0")]
     NonPositiveStiffness(usize),
     #[error("pulley radius[{0}] must be >= 0")]
@@ -107,7 +115,10 @@ impl Model {
         }
         for (i, k) in p.k_f.iter().enumerate() {
             if !k.is_finite() {
-                return Err(ModelError::NotFinite { what: "k_f", index: i });
+                return Err(ModelError::NotFinite {
+                    what: "k_f",
+                    index: i,
+                });
             }
             if *k <= 0.0 {
                 return Err(ModelError::NonPositiveStiffness(i));
@@ -115,18 +126,27 @@ impl Model {
         }
         for (i, w) in p.w_e.iter().enumerate() {
             if !w.is_finite() {
-                return Err(ModelError::NotFinite { what: "w_e", index: i });
+                return Err(ModelError::NotFinite {
+                    what: "w_e",
+                    index: i,
+                });
             }
         }
         if !(p.f_min.is_finite() && p.f_max.is_finite() && p.f_min >= 0.0 && p.f_min < p.f_max) {
-            return Err(ModelError::ForceLimits { f_min: p.f_min, f_max: p.f_max });
+            return Err(ModelError::ForceLimits {
+                f_min: p.f_min,
+                f_max: p.f_max,
+            });
         }
         if let Some(pl) = &mut p.pulleys {
             check_len("pulley radius", pl.radius.len())?;
             check_len("pulley axis", pl.axis.len())?;
             for (i, r) in pl.radius.iter().enumerate() {
                 if !r.is_finite() {
-                    return Err(ModelError::NotFinite { what: "pulley radius", index: i });
+                    return Err(ModelError::NotFinite {
+                        what: "pulley radius",
+                        index: i,
+                    });
                 }
                 if *r < 0.0 {
                     return Err(ModelError::NegativePulleyRadius(i));
@@ -134,7 +154,10 @@ impl Model {
             }
             for (i, ax) in pl.axis.iter_mut().enumerate() {
                 if !ax.iter().all(|c| c.is_finite()) {
-                    return Err(ModelError::NotFinite { what: "pulley axis", index: i });
+                    return Err(ModelError::NotFinite {
+                        what: "pulley axis",
+                        index: i,
+                    });
                 }
                 let n = ax.norm();
                 if n < 1e-12 {
@@ -244,7 +267,8 @@ impl Data {
             l: z3.clone(),
             u: z3.clone(),
             b_world: z3.clone(),
-            p_exit: z3.clone(),
+            // The standard model's exit point is a_i; the pulley model overwrites it.
+            p_exit: model.params().a.clone(),
             at: vec![Vector6::zeros(); m],
             pulley_ux: z3,
             pulley_bxy: vec![0.0; m],

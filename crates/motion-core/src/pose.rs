@@ -54,7 +54,21 @@ impl Pose {
 
     /// R_0P = R_x(φ_x) R_y(φ_y) R_z(φ_z), eq. (2.2).
     pub fn rotation(&self) -> Matrix3<f64> {
-        rot_x(self.phi.x) * rot_y(self.phi.y) * rot_z(self.phi.z)
+        // Product R_x R_y R_z written out (saves two 3×3 products in the 1 ms loop).
+        let (sx, cx) = self.phi.x.sin_cos();
+        let (sy, cy) = self.phi.y.sin_cos();
+        let (sz, cz) = self.phi.z.sin_cos();
+        Matrix3::new(
+            cy * cz,
+            -cy * sz,
+            sy,
+            cx * sz + sx * sy * cz,
+            cx * cz - sx * sy * sz,
+            -sx * cy,
+            sx * sz - cx * sy * cz,
+            sx * cz + cx * sy * sz,
+            cx * cy,
+        )
     }
 
     /// Geometric Jacobian J_P mapping angle increments to the infinitesimal rotation vector,
@@ -75,8 +89,16 @@ impl Pose {
     pub fn error_to(&self, other: &Pose) -> (f64, f64) {
         let dr = (self.r - other.r).norm();
         let rel = self.rotation().transpose() * other.rotation();
-        let c = ((rel.trace() - 1.0) * 0.5).clamp(-1.0, 1.0);
-        (dr, c.acos())
+        // atan2 of sine and cosine parts keeps full precision for small angles (acos does not).
+        let s = 0.5
+            * Vector3::new(
+                rel[(2, 1)] - rel[(1, 2)],
+                rel[(0, 2)] - rel[(2, 0)],
+                rel[(1, 0)] - rel[(0, 1)],
+            )
+            .norm();
+        let c = (rel.trace() - 1.0) * 0.5;
+        (dr, s.atan2(c))
     }
 }
 
@@ -105,6 +127,7 @@ pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
 /// (as in the spec); right-multiplying by this matrix gives them in pose coordinates.
 pub fn twist_from_coordinates(pose: &Pose) -> nalgebra::Matrix6<f64> {
     let mut t = nalgebra::Matrix6::identity();
-    t.fixed_view_mut::<3, 3>(3, 3).copy_from(&pose.angle_jacobian());
+    t.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&pose.angle_jacobian());
     t
 }

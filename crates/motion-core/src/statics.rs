@@ -133,7 +133,8 @@ pub fn nullspace_basis(data: &Data) -> DMatrix<f64> {
     let svd = nalgebra::linalg::SVD::new(a, true, false);
     let u = svd.u.expect("requested U");
     // U from the thin SVD has only 6 columns; complete the basis by projecting unit vectors.
-    let mut basis: Vec<nalgebra::DVector<f64>> = (0..u.ncols()).map(|k| u.column(k).into()).collect();
+    let mut basis: Vec<nalgebra::DVector<f64>> =
+        (0..u.ncols()).map(|k| u.column(k).into()).collect();
     let mut h = Vec::new();
     for k in 0..m {
         let mut e = nalgebra::DVector::zeros(m);

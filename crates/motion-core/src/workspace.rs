@@ -185,29 +185,63 @@ pub fn hull(
     let volume = triangles
         .iter()
         .map(|t| {
-            let (a, b, c) = (vertices[t[0]] - center, vertices[t[1]] - center, vertices[t[2]] - center);
+            let (a, b, c) = (
+                vertices[t[0]] - center,
+                vertices[t[1]] - center,
+                vertices[t[2]] - center,
+            );
             a.dot(&b.cross(&c)).abs() / 6.0
         })
         .sum();
-    Ok(Hull { center: *center, vertices, triangles, volume })
+    Ok(Hull {
+        center: *center,
+        vertices,
+        triangles,
+        volume,
+    })
 }
 
 /// Unit icosphere: vertices and outward triangles.
 fn icosphere(subdivisions: usize) -> (Vec<Vector3<f64>>, Vec<[usize; 3]>) {
     let t = (1.0 + 5f64.sqrt()) / 2.0;
     let mut v: Vec<Vector3<f64>> = [
-        [-1.0, t, 0.0], [1.0, t, 0.0], [-1.0, -t, 0.0], [1.0, -t, 0.0],
-        [0.0, -1.0, t], [0.0, 1.0, t], [0.0, -1.0, -t], [0.0, 1.0, -t],
-        [t, 0.0, -1.0], [t, 0.0, 1.0], [-t, 0.0, -1.0], [-t, 0.0, 1.0],
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
     ]
     .iter()
     .map(|p| Vector3::new(p[0], p[1], p[2]).normalize())
     .collect();
     let mut f: Vec<[usize; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     for _ in 0..subdivisions {
         let mut cache = std::collections::HashMap::new();

@@ -13,7 +13,11 @@ fn to_dm3(m: &Matrix3x6<f64>) -> DMatrix<f64> {
     DMatrix::from_iterator(3, 6, m.iter().copied())
 }
 
-fn analytic_rows(model: &Model, pose: &Pose, row: impl Fn(&Model, &Data, usize) -> RowVector6<f64>) -> DMatrix<f64> {
+fn analytic_rows(
+    model: &Model,
+    pose: &Pose,
+    row: impl Fn(&Model, &Data, usize) -> RowVector6<f64>,
+) -> DMatrix<f64> {
     let mut data = Data::new(model);
     kinematics::inverse(model, &mut data, pose).unwrap();
     let t = twist_from_coordinates(pose);
@@ -36,7 +40,9 @@ fn length_jacobian_is_minus_a() {
     // eq. (2.54) standard; sec. 2.7 pulley (u at the contact point).
     for (name, model) in check_models() {
         for pose in test_poses() {
-            let analytic = analytic_rows(&model, &pose, |_, d, i| differential::length_jacobian_row(d, i));
+            let analytic = analytic_rows(&model, &pose, |_, d, i| {
+                differential::length_jacobian_row(d, i)
+            });
             let mut data = Data::new(&model);
             let fd = fd_pose(&pose, 1e-6, |x| {
                 kinematics::inverse(&model, &mut data, x).unwrap();
@@ -95,7 +101,10 @@ fn pulley_differentials_match_fd() {
             });
             let an_pa = to_dm3(&(differential::contact_point_jacobian(&model, &data, i) * t));
             assert!(rel_diff(&an_pa, &fd_pa) < 1e-6, "contact point cable {i}");
-            assert!(fd_pa.amax() > 1e-4, "the contact point must move with the platform");
+            assert!(
+                fd_pa.amax() > 1e-4,
+                "the contact point must move with the platform"
+            );
 
             let fd_l = fd_pose(&pose, 1e-6, |x| {
                 kinematics::inverse(&model, &mut d2, x).unwrap();
@@ -142,7 +151,10 @@ fn parameter_jacobian_matches_fd() {
                         d.q[i]
                     };
                     let fd = (q_at(h) - q_at(-h)) / (2.0 * h);
-                    assert!((fd - analytic).abs() < 1e-7, "{name}: dq{i}/d{which}{k}: fd {fd} vs {analytic}");
+                    assert!(
+                        (fd - analytic).abs() < 1e-7,
+                        "{name}: dq{i}/d{which}{k}: fd {fd} vs {analytic}"
+                    );
                 }
             }
         }
@@ -160,7 +172,8 @@ fn residual_wrench_jacobian_is_kg_minus_kc() {
             let mut f = vec![0.0; model.m()];
             kinematics::inverse(&model, &mut data, &pose).unwrap();
             let p = model.params();
-            motion_core::statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut f).unwrap();
+            motion_core::statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut f)
+                .unwrap();
             let mut q_theta = vec![0.0; model.m()];
             elastostatics::inverse(&model, &mut data, &pose, &f, &mut q_theta).unwrap();
             elastostatics::cable_forces(&mut data, &law, &q_theta);
@@ -203,7 +216,10 @@ fn pose_sensitivity_matches_fd_of_elastostatic_fk() {
                 let mut qt = q_theta.clone();
                 qt[i] += d;
                 let mut dd = Data::new(&model);
-                forward::elastostatic(&model, &mut dd, &qt, &pose, &opts).unwrap().pose.to_vector()
+                forward::elastostatic(&model, &mut dd, &qt, &pose, &opts)
+                    .unwrap()
+                    .pose
+                    .to_vector()
             };
             let fd = (solve(h) - solve(-h)) / (2.0 * h);
             // J_xθ is in twist coordinates; convert the FD (pose coordinates) to the twist.

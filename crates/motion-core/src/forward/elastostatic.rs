@@ -20,7 +20,15 @@ pub fn elastostatic(
     guess: &Pose,
     opts: &FkOptions,
 ) -> Result<FkSolution, FkError> {
-    elastostatic_with_law(model, data, &model.linear_law(), &model.params().w_e, q_theta, guess, opts)
+    elastostatic_with_law(
+        model,
+        data,
+        &model.linear_law(),
+        &model.params().w_e,
+        q_theta,
+        guess,
+        opts,
+    )
 }
 
 /// ν_el with an arbitrary cable law and external wrench (used by the simulated plant).
@@ -43,7 +51,11 @@ pub fn elastostatic_with_law(
             return Err(FkError::AllSlack);
         }
         if rho.amax() <= opts.wrench_tolerance * scale(data, w_e) {
-            return Ok(FkSolution { pose: x, iterations: it - 1, residual_norm: rho.norm() });
+            return Ok(FkSolution {
+                pose: x,
+                iterations: it - 1,
+                residual_norm: rho.norm(),
+            });
         }
         let j = Stiffness::at(model, data).k_wx * twist_from_coordinates(&x);
         let jtj = j.transpose() * j;
@@ -114,7 +126,14 @@ fn accept(
         return Err(FkError::AllSlack);
     }
     if rho.amax() > opts.wrench_acceptance * scale(data, w_e) {
-        return Err(FkError::NotConverged { iterations, residual: rho.norm() });
+        return Err(FkError::NotConverged {
+            iterations,
+            residual: rho.norm(),
+        });
     }
-    Ok(FkSolution { pose: x, iterations, residual_norm: rho.norm() })
+    Ok(FkSolution {
+        pose: x,
+        iterations,
+        residual_norm: rho.norm(),
+    })
 }

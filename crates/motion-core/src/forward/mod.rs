@@ -69,7 +69,10 @@ pub enum FkError {
 
 pub(crate) fn check_input(m: usize, q_theta: &[f64], guess: &Pose) -> Result<(), FkError> {
     if q_theta.len() != m {
-        return Err(FkError::WrongLength { expected: m, got: q_theta.len() });
+        return Err(FkError::WrongLength {
+            expected: m,
+            got: q_theta.len(),
+        });
     }
     if let Some(cable) = q_theta.iter().position(|v| !v.is_finite()) {
         return Err(FkError::NonFiniteInput { cable });

@@ -12,8 +12,10 @@ use nalgebra::{Matrix3, Matrix3x6, RowVector3, RowVector6};
 /// ∂p_B,i/∂x = [I  −b̃_i] (eq. 2.48).
 pub fn anchor_jacobian(data: &Data, i: usize) -> Matrix3x6<f64> {
     let mut j = Matrix3x6::zeros();
-    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&Matrix3::identity());
-    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-skew(&data.b_world[i])));
+    j.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&Matrix3::identity());
+    j.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&(-skew(&data.b_world[i])));
     j
 }
 
@@ -60,7 +62,11 @@ pub fn wrap_angle_jacobian(model: &Model, data: &Data, i: usize) -> RowVector6<f
 
 /// Jacobian of the wound arc length q_u = β r_p (eq. 2.85).
 pub fn arc_length_jacobian(model: &Model, data: &Data, i: usize) -> RowVector6<f64> {
-    let r_p = model.params().pulleys.as_ref().map_or(0.0, |pl| pl.radius[i]);
+    let r_p = model
+        .params()
+        .pulleys
+        .as_ref()
+        .map_or(0.0, |pl| pl.radius[i]);
     wrap_angle_jacobian(model, data, i) * r_p
 }
 

@@ -18,7 +18,9 @@ pub enum KinematicsError {
     NonFinitePose,
     #[error("cable {cable}: platform anchor coincides with the frame anchor (zero cable length)")]
     DegenerateCable { cable: usize },
-    #[error("cable {cable}: platform anchor lies on the pulley swivel axis (pulley plane undefined)")]
+    #[error(
+        "cable {cable}: platform anchor lies on the pulley swivel axis (pulley plane undefined)"
+    )]
     OnSwivelAxis { cable: usize },
     #[error("cable {cable}: platform anchor lies inside the pulley circle")]
     InsidePulley { cable: usize },
@@ -33,21 +35,34 @@ pub fn inverse(model: &Model, data: &mut Data, pose: &Pose) -> Result<(), Kinema
     }
     let p = model.params();
     let rot = pose.rotation();
-    for i in 0..model.m() {
-        // eq. (2.6): b_i = R_0P b_i^(P); p_B,i = r + b_i.
-        let bw = rot * p.b[i];
-        let pb = pose.r + bw;
-        data.b_world[i] = bw;
-        match &p.pulleys {
-            None => standard::cable(data, i, &p.a[i], &pb)?,
-            Some(pl) => pulley::cable(data, i, &p.a[i], &pb, pl.radius[i], &pl.axis[i])?,
+    match &p.pulleys {
+        None => {
+            for i in 0..model.m() {
+                // eq. (2.6): b_i = R_0P b_i^(P); p_B,i = r + b_i.
+                let bw = rot * p.b[i];
+                data.b_world[i] = bw;
+                standard::cable(data, i, &p.a[i], &(pose.r + bw))?;
+                set_column(data, i);
+            }
         }
-        let u = data.u[i];
-        // eq. (2.30): column v_i = [u_i; b_i × u_i] of A^T.
-        let c = bw.cross(&u);
-        data.at[i] = Vector6::new(u.x, u.y, u.z, c.x, c.y, c.z);
+        Some(pl) => {
+            for i in 0..model.m() {
+                let bw = rot * p.b[i];
+                data.b_world[i] = bw;
+                pulley::cable(data, i, &p.a[i], &(pose.r + bw), pl.radius[i], &pl.axis[i])?;
+                set_column(data, i);
+            }
+        }
     }
     Ok(())
+}
+
+/// eq. (2.30): column v_i = [u_i; b_i × u_i] of A^T.
+#[inline(always)]
+fn set_column(data: &mut Data, i: usize) {
+    let u = data.u[i];
+    let c = data.b_world[i].cross(&u);
+    data.at[i] = Vector6::new(u.x, u.y, u.z, c.x, c.y, c.z);
 }
 
 /// Convenience: cable lengths of a pose into `out` (length m).

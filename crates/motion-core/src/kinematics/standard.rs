@@ -18,13 +18,11 @@ pub(crate) fn cable(
     if q <= 0.0 {
         return Err(KinematicsError::DegenerateCable { cable: i });
     }
+    // β = 0, p_exit = a and the pulley fields are constant for the standard model and set by
+    // `Data::new`; only the pose-dependent quantities are written here.
     data.l[i] = l;
     data.q[i] = q;
     data.q_free[i] = q;
-    data.beta[i] = 0.0;
     data.u[i] = l / q;
-    data.p_exit[i] = *a;
-    data.pulley_ux[i] = Vector3::zeros();
-    data.pulley_bxy[i] = 0.0;
     Ok(())
 }

@@ -23,8 +23,14 @@ pub fn pulley_model() -> Model {
 pub fn test_poses() -> Vec<Pose> {
     vec![
         Pose::new(Vector3::new(0.0, 0.0, 2.0), Vector3::zeros()),
-        Pose::new(Vector3::new(0.4, -0.3, 1.8), Vector3::new(0.05, -0.04, 0.08)),
-        Pose::new(Vector3::new(-0.4, 0.5, 1.9), Vector3::new(0.02, -0.015, 0.025)),
+        Pose::new(
+            Vector3::new(0.4, -0.3, 1.8),
+            Vector3::new(0.05, -0.04, 0.08),
+        ),
+        Pose::new(
+            Vector3::new(-0.4, 0.5, 1.9),
+            Vector3::new(0.02, -0.015, 0.025),
+        ),
         Pose::new(Vector3::new(0.9, 0.8, 1.6), Vector3::new(0.025, 0.02, 0.03)),
     ]
 }
