@@ -1,1 +1,114 @@
-//! can-transport (to be built; see the issue tracker).
+//! CAN frame transport for the CRS drive bus.
+//!
+//! Two implementations of [`CanBus`], chosen explicitly by a transport string (never silently):
+//! * `socketcan:<iface>`: Linux SocketCAN raw socket (e.g. `socketcan:can0`, `socketcan:vcan0`).
+//!   On a kernel without CAN support the open fails with [`CanError::NoCanSupport`], which names
+//!   the alternative below.
+//! * `udpbus:<group>:<port>`: CAN-over-UDP multicast on loopback with cannelloni framing. Every
+//!   process that opens the same group/port sees every other member's frames (but not its own,
+//!   like a SocketCAN raw socket), so drive-io, the plant and the safety monitor share one "bus".
+//! * `udp:<local ip:port>-><remote ip:port>`: point-to-point cannelloni, to bridge a real bus
+//!   through a `cannelloni` instance.
+//!
+//! [`candump`] formats/parses can-utils log lines and [`LoggingBus`] logs every frame.
+
+pub mod candump;
+pub mod cannelloni;
+mod frame;
+mod poll;
+mod socketcan_bus;
+mod spec;
+mod udp;
+
+pub use candump::LoggingBus;
+pub use frame::{CanFrame, FrameError, RxFrame};
+pub use socketcan_bus::SocketCanBus;
+pub use spec::{SpecError, TransportSpec};
+pub use udp::UdpBus;
+
+use std::time::Duration;
+
+/// Transport errors. Never a panic on bus input.
+#[derive(Debug, thiserror::Error)]
+pub enum CanError {
+    #[error(
+        "this kernel has no SocketCAN support for {iface:?} (os error {errno}: {what}); \
+         use a CAN-over-UDP transport instead, e.g. transport = \"udpbus:239.255.70.1:20000\" \
+         (all processes on this host share it), or run the HIL tests in the vcan VM (tools/hil-run.sh)"
+    )]
+    NoCanSupport {
+        iface: String,
+        errno: i32,
+        what: &'static str,
+    },
+    #[error("{op} on {iface:?} failed: {source}")]
+    Io {
+        iface: String,
+        op: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("transmit queue of {iface:?} full (frame dropped)")]
+    TxFull { iface: String },
+    #[error("invalid frame: {0}")]
+    Frame(#[from] FrameError),
+}
+
+/// A CAN bus endpoint. Implementations deliver frames sent by OTHER endpoints only.
+pub trait CanBus: Send {
+    /// Queues one frame for transmission (non-blocking; [`CanError::TxFull`] if the queue is full).
+    fn send(&mut self, frame: &CanFrame) -> Result<(), CanError>;
+    /// Waits up to `timeout` for a frame; `Ok(None)` on timeout. Malformed datagrams are skipped
+    /// (counted in [`CanBus::rx_errors`]), never returned as frames.
+    fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<RxFrame>, CanError>;
+    /// Non-blocking receive.
+    fn try_recv(&mut self) -> Result<Option<RxFrame>, CanError> {
+        self.recv_timeout(Duration::ZERO)
+    }
+    /// Human-readable interface name (used in candump logs), e.g. `vcan0` or `udpbus20000`.
+    fn interface(&self) -> &str;
+    /// Number of malformed packets/frames dropped so far.
+    fn rx_errors(&self) -> u64 {
+        0
+    }
+}
+
+impl<B: CanBus + ?Sized> CanBus for Box<B> {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
+        (**self).send(frame)
+    }
+    fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<RxFrame>, CanError> {
+        (**self).recv_timeout(timeout)
+    }
+    fn try_recv(&mut self) -> Result<Option<RxFrame>, CanError> {
+        (**self).try_recv()
+    }
+    fn interface(&self) -> &str {
+        (**self).interface()
+    }
+    fn rx_errors(&self) -> u64 {
+        (**self).rx_errors()
+    }
+}
+
+/// Opens the transport named by `spec`.
+pub fn open(spec: &TransportSpec) -> Result<Box<dyn CanBus>, CanError> {
+    Ok(match spec {
+        TransportSpec::SocketCan { iface } => Box::new(SocketCanBus::open(iface)?),
+        TransportSpec::UdpMulticast { group, port } => Box::new(UdpBus::multicast(*group, *port)?),
+        TransportSpec::UdpPeer { local, remote } => Box::new(UdpBus::peer(*local, *remote)?),
+    })
+}
+
+/// CLOCK_MONOTONIC in ns (the receive-timestamp clock of [`RxFrame`]).
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: valid pointer to a timespec; CLOCK_MONOTONIC always exists on Linux.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    (ts.tv_sec as u64)
+        .saturating_mul(1_000_000_000)
+        .saturating_add(ts.tv_nsec as u64)
+}

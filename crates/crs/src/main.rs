@@ -1,7 +1,9 @@
 //! `crs`: the operator / commissioning command line of the cable-robot stack.
 
+mod calibrate_cmd;
 mod model_cmd;
 mod plant_cmd;
+mod surrogate_cmd;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -29,6 +31,16 @@ enum Command {
         #[command(subcommand)]
         cmd: plant_cmd::PlantCommand,
     },
+    /// The polynomial surrogate of the elastostatic force control: fit, check, inspect.
+    Surrogate {
+        #[command(subcommand)]
+        cmd: surrogate_cmd::SurrogateCommand,
+    },
+    /// Calibration from measured data: identification, residual diagnosis, model extension.
+    Calibrate {
+        #[command(subcommand)]
+        cmd: calibrate_cmd::CalibrateCommand,
+    },
 }
 
 fn main() -> ExitCode {
@@ -36,6 +48,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Model { cmd } => model_cmd::run(cmd),
         Command::Plant { cmd } => plant_cmd::run(cmd),
+        Command::Surrogate { cmd } => surrogate_cmd::run(cmd),
+        Command::Calibrate { cmd } => calibrate_cmd::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

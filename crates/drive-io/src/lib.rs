@@ -1,1 +1,19 @@
-//! drive-io (to be built; see the issue tracker).
+//! drive-io: CANopen CiA 402 master for the m winch drives of the cable robot, in cyclic
+//! synchronous position mode (CSP, 0x6060 = 8), plus the drive-side emulation ([`slave`]) that
+//! simulated plants embed and a kinematic winch emulator ([`emulator`], a TEST DOUBLE).
+//!
+//! * [`config`]: config/drives.toml (transport, timing, per-winch length <-> counts scaling).
+//! * [`canopen`]: COB-IDs, objects, PDO/SDO/NMT encoding (docs/can-protocol.md).
+//! * [`master`]: pure master logic; [`runner`]: the 1 ms process loop with iceoryx2.
+//! * [`hil`]: hardware-in-the-loop scenarios run on the host (UDP bus) and in the vcan VM.
+
+pub mod canopen;
+pub mod config;
+pub mod emulator;
+pub mod hil;
+pub mod master;
+pub mod runner;
+pub mod slave;
+
+pub use config::{ConfigError, DrivesConfig, WinchConfig};
+pub use master::Master;

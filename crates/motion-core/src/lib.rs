@@ -23,10 +23,12 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod config;
+pub mod daemon;
 pub mod elastostatics;
 pub mod forward;
 pub mod kinematics;
 pub mod model;
+pub mod offset_target;
 pub mod pose;
 pub mod statics;
 pub mod workspace;

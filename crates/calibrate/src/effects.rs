@@ -1,0 +1,344 @@
+//! Residual diagnosis and model extension (beyond the spec).
+//!
+//! A catalogue of candidate effects, each an extension of the control model whose parameters
+//! reduce it exactly to the base model at zero (eq. 2.1; the terms are in
+//! [`crate::residual`]). After a fit, every candidate gets
+//! 1. a signature test: the score (Lagrange-multiplier) statistic of its parameters on the
+//!    residual, LM = r^T P J_e (J_e^T P J_e)^+ J_e^T P r / σ² with P the projector off the base
+//!    Jacobian, compared with the χ²_k critical value — does the residual point along the
+//!    effect's signature?
+//! 2. a fit of base + effect from the current optimum,
+//! 3. its held-out improvement (RMS of the weighted residual on samples not used in the fit),
+//! 4. a penalty for the added parameters: the Bayesian information criterion on the training
+//!    rows (bias-variance, Fig. 1.4).
+//!
+//! The candidate with the lowest held-out RMS among those that pass all of (1) significant
+//! score, (2) lower BIC, (3) held-out RMS reduced by at least `min_gain` is added; then the
+//! remaining candidates are scored again, while it pays.
+
+use crate::identify::{self, Fit, FitSpec};
+use crate::observation::Observation;
+use crate::params::{CalModel, ParamId};
+use crate::residual::Kind;
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+/// A candidate model extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+pub enum Effect {
+    /// Pulley kinematics with one shared radius r_p (swivel axes from the platform, else +z).
+    Pulleys,
+    /// Rope stored in the powertrain l_i: compliance (q + l_i)/k_F,i (eq. 6.18).
+    Powertrain,
+    /// Tension-dependent stiffness κ.
+    Stiffness,
+    /// Hysteresis band ±H depending on the direction of motion.
+    Hysteresis,
+    /// Cable sag (μ g)².
+    Sag,
+    /// Drum radius errors ε_i.
+    Drum,
+    /// Platform centre of gravity c (torque turns with the platform).
+    LoadCog,
+    /// Force-sensor gains and offsets, f = (1 + γ_i) f_M + β_i.
+    ForceSensors,
+}
+
+impl Effect {
+    pub const ALL: [Effect; 8] = [
+        Effect::Pulleys,
+        Effect::Powertrain,
+        Effect::Stiffness,
+        Effect::Hysteresis,
+        Effect::Sag,
+        Effect::Drum,
+        Effect::LoadCog,
+        Effect::ForceSensors,
+    ];
+
+    pub fn name(&self) -> &'static str {
+        match self {
+            Effect::Pulleys => "pulleys",
+            Effect::Powertrain => "powertrain",
+            Effect::Stiffness => "stiffness",
+            Effect::Hysteresis => "hysteresis",
+            Effect::Sag => "sag",
+            Effect::Drum => "drum",
+            Effect::LoadCog => "load_cog",
+            Effect::ForceSensors => "force_sensors",
+        }
+    }
+
+    pub fn from_name(s: &str) -> Option<Effect> {
+        Effect::ALL.iter().copied().find(|e| e.name() == s)
+    }
+
+    /// Its parameters for m cables.
+    pub fn params(&self, m: usize) -> Vec<ParamId> {
+        match self {
+            Effect::Pulleys => vec![ParamId::PulleyRadius],
+            Effect::Powertrain => (0..m).map(ParamId::ExtraLength).collect(),
+            Effect::Stiffness => vec![ParamId::StiffnessKappa],
+            Effect::Hysteresis => vec![ParamId::Hysteresis],
+            Effect::Sag => vec![ParamId::SagW2],
+            Effect::Drum => (0..m).map(ParamId::DrumScale).collect(),
+            Effect::LoadCog => (0..3).map(ParamId::Cog).collect(),
+            // A common gain of all sensors trades with k_F and w_e (the wrench residual only
+            // scales): cable 1 is the reference sensor, its gain stays 0 (gauge fixing).
+            Effect::ForceSensors => (1..m)
+                .map(ParamId::ForceGain)
+                .chain((0..m).map(ParamId::ForceOffset))
+                .collect(),
+        }
+    }
+
+    /// Needs force measurements (elastostatic residual).
+    pub fn needs_forces(&self) -> bool {
+        !matches!(self, Effect::Pulleys | Effect::Drum)
+    }
+
+    /// Switches the effect on at zero parameters (the base model exactly).
+    pub fn enable(&self, cal: &mut CalModel) {
+        if *self == Effect::Pulleys && !cal.pulleys {
+            cal.pulleys = true;
+            cal.pulley_radius = 0.0;
+        }
+    }
+}
+
+/// Selection settings.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SelectConfig {
+    pub candidates: Vec<Effect>,
+    /// Minimum relative reduction of the held-out RMS for an effect to be added.
+    pub min_gain: f64,
+    /// Upper normal quantile of the score test (3.09 ≈ 0.999).
+    pub z_critical: f64,
+    pub max_effects: usize,
+}
+
+impl Default for SelectConfig {
+    fn default() -> Self {
+        Self {
+            candidates: Effect::ALL.to_vec(),
+            min_gain: 0.05,
+            z_critical: 3.09,
+            max_effects: 4,
+        }
+    }
+}
+
+/// Scores of one candidate in one round.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CandidateScore {
+    pub effect: Effect,
+    pub n_params: usize,
+    /// Score statistic and its χ²_k critical value.
+    pub score: f64,
+    pub score_critical: f64,
+    pub holdout_rms_before: f64,
+    pub holdout_rms_after: f64,
+    pub bic_before: f64,
+    pub bic_after: f64,
+    /// Fitted effect parameters (SI) and 1σ.
+    pub params: Vec<(String, f64, f64)>,
+    pub accepted: bool,
+    pub verdict: String,
+}
+
+/// Result of the selection loop.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Selection {
+    pub rounds: Vec<Vec<CandidateScore>>,
+    pub chosen: Vec<Effect>,
+    pub fit: Fit,
+}
+
+/// RMS of the weighted residual of `cal` on `obs`.
+pub fn rms(kind: Kind, cal: &CalModel, obs: &[Observation], spec: &FitSpec) -> f64 {
+    match identify::residual(kind, cal, obs, spec.weights) {
+        Ok(r) if !r.is_empty() => (r.iter().map(|v| v * v).sum::<f64>() / r.len() as f64).sqrt(),
+        _ => f64::INFINITY,
+    }
+}
+
+fn bic(cost: f64, n: usize, p: usize) -> f64 {
+    let n = n as f64;
+    n * (2.0 * cost / n).max(1e-300).ln() + p as f64 * n.ln()
+}
+
+/// χ²_k upper quantile by Wilson–Hilferty.
+fn chi2_critical(k: usize, z: f64) -> f64 {
+    let k = k as f64;
+    let a = 2.0 / (9.0 * k);
+    k * (1.0 - a + z * a.sqrt()).powi(3)
+}
+
+/// Score (LM) statistic of adding `extra` to the fit.
+pub fn score_test(
+    fit: &Fit,
+    obs: &[Observation],
+    spec: &FitSpec,
+    effect: Effect,
+) -> Result<f64, String> {
+    let mut cal = fit.model.clone();
+    effect.enable(&mut cal);
+    let extra = effect.params(cal.m());
+    let jb = identify::jacobian(fit.kind, &cal, obs, spec.weights, &fit.free)
+        .map_err(|e| e.to_string())?;
+    let je =
+        identify::jacobian(fit.kind, &cal, obs, spec.weights, &extra).map_err(|e| e.to_string())?;
+    let r = DVector::from_vec(
+        identify::residual(fit.kind, &cal, obs, spec.weights).map_err(|e| e.to_string())?,
+    );
+    let n = r.len() as f64;
+    let sigma2 = r.norm_squared() / (n - fit.free.len() as f64).max(1.0);
+    // P J_e = J_e − J_b (J_b^+ J_e), J_b^+ by the (column-equilibrated) normal equations.
+    let d: Vec<f64> = (0..jb.ncols())
+        .map(|k| 1.0 / jb.column(k).norm().max(1e-300))
+        .collect();
+    let mut jbs = jb.clone();
+    for (k, dk) in d.iter().enumerate() {
+        let mut c = jbs.column_mut(k);
+        c *= *dk;
+    }
+    let n_mat = jbs.transpose() * &jbs;
+    let rhs = jbs.transpose() * &je;
+    let coef = match n_mat.clone().cholesky() {
+        Some(c) => c.solve(&rhs),
+        None => n_mat
+            .svd(true, true)
+            .solve(&rhs, 1e-14)
+            .map_err(|e| e.to_string())?,
+    };
+    let pje: DMatrix<f64> = &je - &jbs * coef;
+    let g = pje.tr_mul(&r);
+    let m = pje.transpose() * &pje;
+    let svd = m.svd(true, true);
+    let x = svd.solve(&g, 1e-12).map_err(|e| e.to_string())?;
+    Ok(g.dot(&x) / sigma2.max(1e-300))
+}
+
+/// Runs the diagnosis/extension loop from `base` (a fit on `train`).
+pub fn select(
+    base: Fit,
+    spec: &FitSpec,
+    train: &[Observation],
+    holdout: &[Observation],
+    cfg: &SelectConfig,
+    on_candidate: &mut dyn FnMut(Effect),
+) -> Selection {
+    let mut current = base;
+    let mut chosen: Vec<Effect> = Vec::new();
+    let mut rounds = Vec::new();
+    let has_forces = train.iter().all(|o| o.forces.is_some());
+    let eval_set = if holdout.is_empty() { train } else { holdout };
+    while chosen.len() < cfg.max_effects {
+        let rms_before = rms(current.kind, &current.model, eval_set, spec);
+        let bic_before = bic(current.cost, current.n_residuals, current.free.len());
+        let mut round = Vec::new();
+        let mut best: Option<(usize, Fit)> = None;
+        for &effect in &cfg.candidates {
+            if chosen.contains(&effect)
+                || (effect.needs_forces() && (!has_forces || current.kind == Kind::Kinematic))
+            {
+                continue;
+            }
+            if effect == Effect::Pulleys && current.model.pulleys {
+                continue;
+            }
+            on_candidate(effect);
+            let m = current.model.m();
+            let k = effect.params(m).len();
+            let mut cs = CandidateScore {
+                effect,
+                n_params: k,
+                score: f64::NAN,
+                score_critical: chi2_critical(k, cfg.z_critical),
+                holdout_rms_before: rms_before,
+                holdout_rms_after: f64::NAN,
+                bic_before,
+                bic_after: f64::NAN,
+                params: Vec::new(),
+                accepted: false,
+                verdict: String::new(),
+            };
+            match score_test(&current, train, spec, effect) {
+                Ok(s) => cs.score = s,
+                Err(e) => {
+                    cs.verdict = format!("score test failed: {e}");
+                    round.push(cs);
+                    continue;
+                }
+            }
+            let mut start = current.model.clone();
+            effect.enable(&mut start);
+            let mut s2 = spec.clone();
+            s2.kind = current.kind;
+            s2.free = current
+                .free
+                .iter()
+                .copied()
+                .chain(effect.params(m))
+                .collect();
+            match identify::fit(&start, train, &s2, &mut |_, _| {}) {
+                Ok(f) => {
+                    cs.holdout_rms_after = rms(f.kind, &f.model, eval_set, spec);
+                    cs.bic_after = bic(f.cost, f.n_residuals, f.free.len());
+                    cs.params = effect
+                        .params(m)
+                        .iter()
+                        .map(|p| {
+                            let sd = f
+                                .free
+                                .iter()
+                                .position(|q| q == p)
+                                .map_or(f64::NAN, |c| f.std[c]);
+                            (p.name(), f.model.get(*p), sd)
+                        })
+                        .collect();
+                    let significant = cs.score > cs.score_critical;
+                    let bic_ok = cs.bic_after < cs.bic_before;
+                    let gain_ok = cs.holdout_rms_after < (1.0 - cfg.min_gain) * rms_before;
+                    cs.verdict = match (significant, bic_ok, gain_ok) {
+                        (true, true, true) => "passes".into(),
+                        (false, _, _) => "signature not significant".into(),
+                        (_, false, _) => "BIC does not improve".into(),
+                        (_, _, false) => {
+                            format!("held-out gain below {:.0} %", cfg.min_gain * 100.0)
+                        }
+                    };
+                    if significant && bic_ok && gain_ok {
+                        let better = best.as_ref().is_none_or(|(bi, _)| {
+                            let b: &CandidateScore = &round[*bi];
+                            cs.holdout_rms_after < b.holdout_rms_after
+                        });
+                        if better {
+                            best = Some((round.len(), f));
+                        }
+                    }
+                }
+                Err(e) => cs.verdict = format!("fit failed: {e}"),
+            }
+            round.push(cs);
+        }
+        match best {
+            Some((idx, f)) => {
+                round[idx].accepted = true;
+                round[idx].verdict = "chosen".into();
+                chosen.push(round[idx].effect);
+                rounds.push(round);
+                current = f;
+            }
+            None => {
+                rounds.push(round);
+                break;
+            }
+        }
+    }
+    Selection {
+        rounds,
+        chosen,
+        fit: current,
+    }
+}

@@ -1,0 +1,273 @@
+//! The identified parameter set p = (a, b, k_F, w_e) of the elastostatic control model
+//! (eq. 6.14) plus the cable offsets (eq. 3.14, 6.24) and the parameters of the candidate
+//! model extensions of [`crate::effects`]. Every extension reduces exactly to the base model
+//! when its parameters are zero (eq. 2.1).
+
+use motion_core::{Model, ModelError, ModelParams, Pulleys};
+use nalgebra::{Vector3, Vector6};
+use serde::Serialize;
+
+/// Reference force of the tension-dependent stiffness candidate, N: the median operating force
+/// at which the CRS nominal k_F was measured (eq. 6.19).
+pub const STIFFNESS_REFERENCE_FORCE_N: f64 = 5000.0;
+
+/// One scalar parameter of [`CalModel`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+pub enum ParamId {
+    /// Frame anchor a_i, coordinate k (m).
+    A(usize, usize),
+    /// Platform anchor b_i^(P), coordinate k (m).
+    B(usize, usize),
+    /// k_F,i (N).
+    KF(usize),
+    /// w_e component k (N, N·m).
+    We(usize),
+    /// Cable offset δ_i: q_θ = s_i q_cmd + δ_i (m).
+    Offset(usize),
+    /// Shared pulley radius r_p (m), pulley kinematics eq. 2.16–2.29.
+    PulleyRadius,
+    /// Rope stored in the powertrain l_i (m): compliance (q + l_i)/k_F,i (eq. 6.18).
+    ExtraLength(usize),
+    /// Tension-dependent stiffness κ (1): elongation ∝ f + κ (f − f_s)²/(2 f_s).
+    StiffnessKappa,
+    /// Hysteresis half width H (N): elongation ∝ f − d H, d = ±1 the direction of motion.
+    Hysteresis,
+    /// Sag (μ g)² (N²/m²): chord shortening (μ g cos α)² q³ / (24 f²) (Irvine).
+    SagW2,
+    /// Drum radius error ε_i (1): q_θ = (1 + ε_i) q_cmd + δ_i.
+    DrumScale(usize),
+    /// Centre of gravity c (platform frame, m): τ(x) = τ_0 + ((R − I) c) × f_e.
+    Cog(usize),
+    /// Force-sensor gain error γ_i (1): f = (1 + γ_i) f_M + β_i.
+    ForceGain(usize),
+    /// Force-sensor offset β_i (N).
+    ForceOffset(usize),
+}
+
+impl ParamId {
+    /// Scale of the preconditioning matrix W_pc (eq. 4.42): the optimiser works in p / s.
+    pub fn scale(&self) -> f64 {
+        match self {
+            ParamId::A(..) | ParamId::B(..) => 1.0,
+            ParamId::KF(_) => 1e6,
+            ParamId::We(_) => 1e3,
+            ParamId::Offset(_) => 0.01,
+            ParamId::PulleyRadius => 0.1,
+            ParamId::ExtraLength(_) => 10.0,
+            ParamId::StiffnessKappa => 0.1,
+            ParamId::Hysteresis => 100.0,
+            ParamId::SagW2 => 100.0,
+            ParamId::DrumScale(_) => 1e-3,
+            ParamId::Cog(_) => 0.1,
+            ParamId::ForceGain(_) => 0.01,
+            ParamId::ForceOffset(_) => 10.0,
+        }
+    }
+
+    /// Human-readable name with 1-based cable numbers, e.g. `a_3.y`.
+    pub fn name(&self) -> String {
+        const XYZ: [&str; 3] = ["x", "y", "z"];
+        const W: [&str; 6] = ["f_x", "f_y", "f_z", "tau_x", "tau_y", "tau_z"];
+        match *self {
+            ParamId::A(i, k) => format!("a_{}.{}", i + 1, XYZ[k]),
+            ParamId::B(i, k) => format!("b_{}.{}", i + 1, XYZ[k]),
+            ParamId::KF(i) => format!("k_F{}", i + 1),
+            ParamId::We(k) => format!("w_e.{}", W[k]),
+            ParamId::Offset(i) => format!("q_off_{}", i + 1),
+            ParamId::PulleyRadius => "r_p".into(),
+            ParamId::ExtraLength(i) => format!("l_extra_{}", i + 1),
+            ParamId::StiffnessKappa => "kappa".into(),
+            ParamId::Hysteresis => "H_hyst".into(),
+            ParamId::SagW2 => "sag_w2".into(),
+            ParamId::DrumScale(i) => format!("drum_eps_{}", i + 1),
+            ParamId::Cog(k) => format!("cog.{}", XYZ[k]),
+            ParamId::ForceGain(i) => format!("force_gain_{}", i + 1),
+            ParamId::ForceOffset(i) => format!("force_offset_{}", i + 1),
+        }
+    }
+
+    /// True for parameters of the base model (a, b, k_F, w_e, offsets).
+    pub fn is_base(&self) -> bool {
+        matches!(
+            self,
+            ParamId::A(..) | ParamId::B(..) | ParamId::KF(_) | ParamId::We(_) | ParamId::Offset(_)
+        )
+    }
+}
+
+/// The full parameter state of a (possibly extended) control model.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CalModel {
+    pub a: Vec<Vector3<f64>>,
+    pub b: Vec<Vector3<f64>>,
+    pub k_f: Vec<f64>,
+    pub w_e: Vector6<f64>,
+    pub f_min: f64,
+    pub f_max: f64,
+    /// δ_i, m.
+    pub offset: Vec<f64>,
+    /// Pulley kinematics switched on (radius `pulley_radius`, axes `pulley_axis`).
+    pub pulleys: bool,
+    pub pulley_radius: f64,
+    pub pulley_axis: Vec<Vector3<f64>>,
+    pub extra_length: Vec<f64>,
+    pub stiffness_kappa: f64,
+    pub hysteresis: f64,
+    pub sag_w2: f64,
+    pub drum_scale: Vec<f64>,
+    pub cog: Vector3<f64>,
+    /// Force-sensor gain errors γ_i and offsets β_i (N): f = (1 + γ_i) f_M + β_i.
+    pub force_gain: Vec<f64>,
+    pub force_offset: Vec<f64>,
+}
+
+impl CalModel {
+    /// The base model of a motion-core model: extensions at zero, offsets zero. A model with
+    /// pulleys keeps them (the pulley candidate is then already part of the base).
+    pub fn from_model(model: &Model) -> Self {
+        let p = model.params();
+        let m = model.m();
+        let (pulleys, radius, axis) = match &p.pulleys {
+            Some(pl) => (
+                true,
+                pl.radius.iter().sum::<f64>() / m as f64,
+                pl.axis.clone(),
+            ),
+            None => (false, 0.0, vec![Vector3::z(); m]),
+        };
+        Self {
+            a: p.a.clone(),
+            b: p.b.clone(),
+            k_f: p.k_f.clone(),
+            w_e: p.w_e,
+            f_min: p.f_min,
+            f_max: p.f_max,
+            offset: vec![0.0; m],
+            pulleys,
+            pulley_radius: radius,
+            pulley_axis: axis,
+            extra_length: vec![0.0; m],
+            stiffness_kappa: 0.0,
+            hysteresis: 0.0,
+            sag_w2: 0.0,
+            drum_scale: vec![0.0; m],
+            cog: Vector3::zeros(),
+            force_gain: vec![0.0; m],
+            force_offset: vec![0.0; m],
+        }
+    }
+
+    pub fn m(&self) -> usize {
+        self.a.len()
+    }
+
+    /// The motion-core model of the geometry (a, b, pulleys), k_F and w_e.
+    pub fn model(&self) -> Result<Model, ModelError> {
+        Model::new(ModelParams {
+            a: self.a.clone(),
+            b: self.b.clone(),
+            pulleys: self.pulleys.then(|| Pulleys {
+                radius: vec![self.pulley_radius; self.m()],
+                axis: self.pulley_axis.clone(),
+            }),
+            k_f: self.k_f.clone(),
+            w_e: self.w_e,
+            f_min: self.f_min,
+            f_max: self.f_max,
+        })
+    }
+
+    pub fn get(&self, id: ParamId) -> f64 {
+        match id {
+            ParamId::A(i, k) => self.a[i][k],
+            ParamId::B(i, k) => self.b[i][k],
+            ParamId::KF(i) => self.k_f[i],
+            ParamId::We(k) => self.w_e[k],
+            ParamId::Offset(i) => self.offset[i],
+            ParamId::PulleyRadius => self.pulley_radius,
+            ParamId::ExtraLength(i) => self.extra_length[i],
+            ParamId::StiffnessKappa => self.stiffness_kappa,
+            ParamId::Hysteresis => self.hysteresis,
+            ParamId::SagW2 => self.sag_w2,
+            ParamId::DrumScale(i) => self.drum_scale[i],
+            ParamId::Cog(k) => self.cog[k],
+            ParamId::ForceGain(i) => self.force_gain[i],
+            ParamId::ForceOffset(i) => self.force_offset[i],
+        }
+    }
+
+    pub fn set(&mut self, id: ParamId, v: f64) {
+        match id {
+            ParamId::A(i, k) => self.a[i][k] = v,
+            ParamId::B(i, k) => self.b[i][k] = v,
+            ParamId::KF(i) => self.k_f[i] = v,
+            ParamId::We(k) => self.w_e[k] = v,
+            ParamId::Offset(i) => self.offset[i] = v,
+            ParamId::PulleyRadius => self.pulley_radius = v,
+            ParamId::ExtraLength(i) => self.extra_length[i] = v,
+            ParamId::StiffnessKappa => self.stiffness_kappa = v,
+            ParamId::Hysteresis => self.hysteresis = v,
+            ParamId::SagW2 => self.sag_w2 = v,
+            ParamId::DrumScale(i) => self.drum_scale[i] = v,
+            ParamId::Cog(k) => self.cog[k] = v,
+            ParamId::ForceGain(i) => self.force_gain[i] = v,
+            ParamId::ForceOffset(i) => self.force_offset[i] = v,
+        }
+    }
+
+    /// Physical controlled length from the command: q_θ = (1 + ε_i) q_cmd + δ_i.
+    #[inline]
+    pub fn q_theta(&self, i: usize, q_cmd: f64) -> f64 {
+        (1.0 + self.drum_scale[i]) * q_cmd + self.offset[i]
+    }
+
+    /// Cable force from a force-sensor reading: f = (1 + γ_i) f_M + β_i.
+    #[inline]
+    pub fn force_from_reading(&self, i: usize, f_m: f64) -> f64 {
+        (1.0 + self.force_gain[i]) * f_m + self.force_offset[i]
+    }
+
+    /// Force-sensor reading of a cable force (inverse of [`CalModel::force_from_reading`]).
+    #[inline]
+    pub fn reading_from_force(&self, i: usize, f: f64) -> f64 {
+        (f - self.force_offset[i]) / (1.0 + self.force_gain[i])
+    }
+
+    /// External wrench at a pose: w_e + [0; ((R − I) c) × f_e] (load/COG candidate).
+    pub fn wrench_at(&self, rot: &nalgebra::Matrix3<f64>) -> Vector6<f64> {
+        let mut w = self.w_e;
+        if self.cog != Vector3::zeros() {
+            let fe = Vector3::new(w[0], w[1], w[2]);
+            let t = ((rot - nalgebra::Matrix3::identity()) * self.cog).cross(&fe);
+            w[3] += t.x;
+            w[4] += t.y;
+            w[5] += t.z;
+        }
+        w
+    }
+}
+
+/// Parameter groups for selection lists.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Group {
+    A,
+    B,
+    KF,
+    We,
+    Offset,
+}
+
+/// The ids of a group for m cables.
+pub fn group(g: Group, m: usize) -> Vec<ParamId> {
+    match g {
+        Group::A => (0..m)
+            .flat_map(|i| (0..3).map(move |k| ParamId::A(i, k)))
+            .collect(),
+        Group::B => (0..m)
+            .flat_map(|i| (0..3).map(move |k| ParamId::B(i, k)))
+            .collect(),
+        Group::KF => (0..m).map(ParamId::KF).collect(),
+        Group::We => (0..6).map(ParamId::We).collect(),
+        Group::Offset => (0..m).map(ParamId::Offset).collect(),
+    }
+}

@@ -1,0 +1,226 @@
+//! The spec's calibration steps end to end (ch. 6.1–6.5) plus the model extension:
+//! nominal kinematic → optimal kinematic (eq. 4.8, sec. 6.2) → nominal elastostatic (offsets
+//! from the measured tension, eq. 3.14 / 6.24, sec. 6.4) → optimal elastostatic (eq. 4.38,
+//! sec. 6.5) → + the effects the residuals support ([`crate::effects`]). Every figure is
+//! computed on held-out samples through the forward kinematics ([`crate::validate`]).
+
+use crate::effects::{self, Effect, SelectConfig, Selection};
+use crate::identify::{self, Fit, FitError, FitSpec};
+use crate::observation::Observation;
+use crate::params::{CalModel, Group, ParamId, group};
+use crate::residual::{Kind, Weights};
+use crate::validate::{self, Errors};
+use motion_core::Model;
+use serde::Serialize;
+
+/// Pipeline settings.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PipelineConfig {
+    pub weights: Weights,
+    /// Ridge λ on the platform anchors b in the elastostatic fit (sec. 6.5), 0 = off.
+    pub ridge_b: f64,
+    /// Lasso λ on the platform anchors b, 0 = off (eq. 4.32).
+    pub lasso_b: f64,
+    /// Identify b in the kinematic step too (the spec's sec. 6.2 identifies a only).
+    pub kinematic_b: bool,
+    pub select: SelectConfig,
+    /// Skip the diagnosis/extension loop.
+    pub no_extension: bool,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        Self {
+            weights: Weights::default(),
+            ridge_b: 0.0,
+            lasso_b: 0.0,
+            kinematic_b: false,
+            select: SelectConfig::default(),
+            no_extension: false,
+        }
+    }
+}
+
+/// One step of the table.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Stage {
+    pub name: String,
+    pub kind: Kind,
+    pub model: CalModel,
+    pub fit: Option<Fit>,
+    pub holdout: Errors,
+}
+
+/// Everything the report shows.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PipelineReport {
+    pub n_train: usize,
+    pub n_holdout: usize,
+    pub config: PipelineConfig,
+    pub stages: Vec<Stage>,
+    pub selection: Option<Selection>,
+}
+
+impl PipelineReport {
+    pub fn stage(&self, name: &str) -> Option<&Stage> {
+        self.stages.iter().find(|s| s.name == name)
+    }
+    /// The final (best) model.
+    pub fn final_stage(&self) -> &Stage {
+        self.stages.last().expect("pipeline produces stages")
+    }
+}
+
+/// Offsets δ_i from the measured data with the model fixed (eq. 3.14 / 6.24 with the measured
+/// poses and forces instead of the single set-up pose): δ_i = mean_j(φ(_el)(x_Mj, f_Mj) − q_cmd,ij).
+pub fn estimate_offsets(
+    kind: Kind,
+    cal: &mut CalModel,
+    obs: &[Observation],
+    w: Weights,
+) -> Result<(), FitError> {
+    let m = cal.m();
+    cal.offset.iter_mut().for_each(|d| *d = 0.0);
+    let unit = Weights {
+        wrench: w.wrench,
+        length: 1.0,
+    };
+    let r = identify::residual(kind, cal, obs, unit)?;
+    let mut sum = vec![0.0; m];
+    let mut row = 0;
+    for o in obs {
+        let n = crate::residual::rows_per_sample(kind, m, o);
+        for i in 0..m {
+            sum[i] += r[row + n - m + i];
+        }
+        row += n;
+    }
+    for i in 0..m {
+        cal.offset[i] = sum[i] / obs.len() as f64;
+    }
+    Ok(())
+}
+
+/// Runs the steps on `train`, reporting on `holdout` (the training set if empty).
+pub fn run(
+    nominal: &Model,
+    train: &[Observation],
+    holdout: &[Observation],
+    cfg: &PipelineConfig,
+    progress: &mut dyn FnMut(&str, usize, f64),
+) -> Result<PipelineReport, FitError> {
+    let m = nominal.m();
+    let eval = if holdout.is_empty() { train } else { holdout };
+    let has_forces = train.iter().all(|o| o.forces.is_some());
+    let mut stages = Vec::new();
+    // 1. Nominal kinematic model p_N (offsets from the data).
+    let mut nom_k = CalModel::from_model(nominal);
+    estimate_offsets(Kind::Kinematic, &mut nom_k, train, cfg.weights)?;
+    stages.push(Stage {
+        name: "nominal kinematic".into(),
+        kind: Kind::Kinematic,
+        holdout: validate::evaluate(Kind::Kinematic, &nom_k, eval),
+        model: nom_k.clone(),
+        fit: None,
+    });
+    // 2. Optimal kinematic model (eq. 4.8–4.10).
+    let mut free: Vec<ParamId> = group(Group::A, m);
+    if cfg.kinematic_b {
+        free.extend(group(Group::B, m));
+    }
+    free.extend(group(Group::Offset, m));
+    let mut spec_k = FitSpec::new(Kind::Kinematic, free);
+    spec_k.weights = Weights {
+        wrench: cfg.weights.wrench,
+        length: 1.0,
+    };
+    let fit_k = identify::fit(&nom_k, train, &spec_k, &mut |it, c| {
+        progress("kinematic", it, c)
+    })?;
+    stages.push(Stage {
+        name: "optimal kinematic".into(),
+        kind: Kind::Kinematic,
+        holdout: validate::evaluate(Kind::Kinematic, &fit_k.model, eval),
+        model: fit_k.model.clone(),
+        fit: Some(fit_k),
+    });
+    if !has_forces {
+        return Ok(PipelineReport {
+            n_train: train.len(),
+            n_holdout: holdout.len(),
+            config: cfg.clone(),
+            stages,
+            selection: None,
+        });
+    }
+    // 3. Nominal elastostatic model: k_F, w_e of the platform, offsets from the tension (6.24).
+    let mut nom_e = CalModel::from_model(nominal);
+    estimate_offsets(Kind::Elastostatic, &mut nom_e, train, cfg.weights)?;
+    stages.push(Stage {
+        name: "nominal elastostatic".into(),
+        kind: Kind::Elastostatic,
+        holdout: validate::evaluate(Kind::Elastostatic, &nom_e, eval),
+        model: nom_e.clone(),
+        fit: None,
+    });
+    // 4. Optimal elastostatic model (eq. 4.38) with p = (a, b, k_F, w_e) + offsets.
+    let free: Vec<ParamId> = [Group::A, Group::B, Group::KF, Group::We, Group::Offset]
+        .iter()
+        .flat_map(|g| group(*g, m))
+        .collect();
+    let mut spec_e = FitSpec::new(Kind::Elastostatic, free);
+    spec_e.weights = cfg.weights;
+    if cfg.ridge_b > 0.0 {
+        spec_e.ridge = group(Group::B, m)
+            .into_iter()
+            .map(|p| (p, cfg.ridge_b))
+            .collect();
+    }
+    if cfg.lasso_b > 0.0 {
+        spec_e.lasso = group(Group::B, m)
+            .into_iter()
+            .map(|p| (p, cfg.lasso_b))
+            .collect();
+    }
+    let fit_e = identify::fit(&nom_e, train, &spec_e, &mut |it, c| {
+        progress("elastostatic", it, c)
+    })?;
+    stages.push(Stage {
+        name: "optimal elastostatic".into(),
+        kind: Kind::Elastostatic,
+        holdout: validate::evaluate(Kind::Elastostatic, &fit_e.model, eval),
+        model: fit_e.model.clone(),
+        fit: Some(fit_e.clone()),
+    });
+    // 5. Residual diagnosis and extension.
+    let selection = if cfg.no_extension {
+        None
+    } else {
+        let sel = effects::select(
+            fit_e,
+            &spec_e,
+            train,
+            holdout,
+            &cfg.select,
+            &mut |e: Effect| progress(&format!("candidate {}", e.name()), 0, f64::NAN),
+        );
+        if !sel.chosen.is_empty() {
+            let names: Vec<&str> = sel.chosen.iter().map(|e| e.name()).collect();
+            stages.push(Stage {
+                name: format!("optimal elastostatic + {}", names.join(" + ")),
+                kind: Kind::Elastostatic,
+                holdout: validate::evaluate(Kind::Elastostatic, &sel.fit.model, eval),
+                model: sel.fit.model.clone(),
+                fit: Some(sel.fit.clone()),
+            });
+        }
+        Some(sel)
+    };
+    Ok(PipelineReport {
+        n_train: train.len(),
+        n_holdout: holdout.len(),
+        config: cfg.clone(),
+        stages,
+        selection,
+    })
+}

@@ -1,0 +1,618 @@
+//! The calibration report: Markdown, JSON, SVG plots, and the identified model as a platform
+//! TOML (same schema as config/*.toml, loadable by `motion_core::config::load_platform`) plus
+//! a side file for the effects the platform schema cannot express.
+
+use crate::effects::Effect;
+use crate::params::{CalModel, ParamId};
+use crate::pipeline::{PipelineReport, Stage};
+use crate::residual::Kind;
+use crate::validate;
+use motion_core::config::Platform;
+use std::fmt::Write as _;
+
+fn fmt_opt(v: Option<f64>, prec: usize) -> String {
+    v.map_or("–".into(), |x| format!("{x:.prec$}"))
+}
+
+/// The spec's comparison numbers (ch. 6.2–6.5), next to ours.
+pub const SPEC_ROWS: [(&str, &str); 5] = [
+    (
+        "nominal kinematic",
+        "39.80 mm, 1.19°, ε_q 23.52 mm (eq. 6.4–6.6)",
+    ),
+    (
+        "optimal kinematic",
+        "9.66 mm, 0.29°, ε_q 4.08 mm (sec. 6.2)",
+    ),
+    (
+        "nominal elastostatic",
+        "34.5 mm, 1.03°, 2426.84 N (eq. 6.25–6.26)",
+    ),
+    (
+        "optimal elastostatic",
+        "2.73 mm, 0.11°, 582 N (sec. 6.5, 7.1)",
+    ),
+    ("+ effects", "– (beyond the spec)"),
+];
+
+/// Table of the stages in the spec's form.
+pub fn stage_table(rep: &PipelineReport) -> String {
+    let mut s = String::new();
+    s.push_str("| step | model | mean / max position error (mm) | mean / max rotation error (deg) | mean cable-length error (mm) | mean / max force error ‖f_P − f_M‖ (N) | spec |\n");
+    s.push_str("|---|---|---|---|---|---|---|\n");
+    for (k, st) in rep.stages.iter().enumerate() {
+        let spec = SPEC_ROWS
+            .iter()
+            .find(|(n, _)| *n == st.name)
+            .map_or(SPEC_ROWS[4].1, |(_, v)| *v);
+        let h = &st.holdout;
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.2} / {:.2} | {:.3} / {:.3} | {:.2} | {} / {} | {} |",
+            k + 1,
+            st.name,
+            h.pos_mean_mm,
+            h.pos_max_mm,
+            h.rot_mean_deg,
+            h.rot_max_deg,
+            h.len_mean_mm,
+            fmt_opt(h.force_mean_n, 1),
+            fmt_opt(h.force_max_n, 1),
+            spec
+        );
+    }
+    s
+}
+
+/// Markdown report.
+pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String {
+    let mut s = String::new();
+    s.push_str("# Calibration report\n\n");
+    let _ = writeln!(s, "Command: `{command}`\n");
+    let _ = writeln!(
+        s,
+        "Training samples: {}; held-out samples: {} (every figure below is on the held-out samples, computed through the model's forward kinematics, eq. 3.3–3.8).\n",
+        rep.n_train, rep.n_holdout
+    );
+    s.push_str("## Errors per step (held out)\n\n");
+    s.push_str(&stage_table(rep));
+    s.push_str("\n## Identification\n\n| step | parameters | residual rows | iterations | cond(J) SI (tab. 4.3 d) | cond(J W_pc) start (tab. 4.3 e) | cond(J W_pc) end | RMS wrench (N) | RMS length (mm) | fixed (unobservable) |\n|---|---|---|---|---|---|---|---|---|---|\n");
+    for st in &rep.stages {
+        if let Some(f) = &st.fit {
+            let fixed: Vec<String> = f.fixed_unobservable.iter().map(|(p, _)| p.name()).collect();
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} | {:.3e} | {:.1} | {:.1} | {:.2} | {:.3} | {} |",
+                st.name,
+                f.free.len(),
+                f.n_residuals,
+                f.iterations,
+                f.cond_start_unscaled,
+                f.cond_start_scaled,
+                f.cond_end_scaled,
+                f.rms_wrench,
+                f.rms_length * 1e3,
+                if fixed.is_empty() {
+                    "none".into()
+                } else {
+                    fixed.join(", ")
+                }
+            );
+        }
+    }
+    if let Some(sel) = &rep.selection {
+        s.push_str("\n## Residual diagnosis and model extension\n\n");
+        if sel.chosen.is_empty() {
+            s.push_str("No candidate effect is supported by the data: the base elastostatic model is kept.\n\n");
+        } else {
+            let names: Vec<&str> = sel.chosen.iter().map(|e| e.name()).collect();
+            let _ = writeln!(s, "Chosen effects, in order: **{}**.\n", names.join(", "));
+        }
+        s.push_str("A candidate is added when its score (signature) statistic exceeds the χ² critical value, the BIC on the training rows drops, and the held-out RMS of the weighted residual drops by at least ");
+        let _ = writeln!(
+            s,
+            "{:.0} %; the best such candidate per round is chosen.\n",
+            rep.config.select.min_gain * 100.0
+        );
+        s.push_str("| round | effect | k | score | χ² crit | held-out RMS before → after | BIC before → after | fitted parameters (±1σ) | verdict |\n|---|---|---|---|---|---|---|---|---|\n");
+        for (r, round) in sel.rounds.iter().enumerate() {
+            for c in round {
+                let params: Vec<String> = c
+                    .params
+                    .iter()
+                    .take(8)
+                    .map(|(n, v, sd)| format!("{n} = {v:.4e} ± {sd:.1e}"))
+                    .collect();
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {} | {:.3e} | {:.1} | {:.4e} → {:.4e} | {:.1} → {:.1} | {} | {} |",
+                    r + 1,
+                    c.effect.name(),
+                    c.n_params,
+                    c.score,
+                    c.score_critical,
+                    c.holdout_rms_before,
+                    c.holdout_rms_after,
+                    c.bic_before,
+                    c.bic_after,
+                    params.join("; "),
+                    c.verdict
+                );
+            }
+        }
+    }
+    let fin = rep.final_stage();
+    if let Some(f) = &fin.fit {
+        s.push_str("\n## Parameter changes of the final model (nominal → identified, ±1σ)\n\n| parameter | nominal | identified | change | 1σ |\n|---|---|---|---|---|\n");
+        let nominal = &rep.stages[0].model;
+        for (k, p) in f.free.iter().enumerate() {
+            let v0 = if p.is_base() && !matches!(p, ParamId::Offset(_)) {
+                nominal.get(*p)
+            } else {
+                0.0
+            };
+            let v = f.model.get(*p);
+            let _ = writeln!(
+                s,
+                "| {} | {:.6} | {:.6} | {:+.6} | {:.2e} |",
+                p.name(),
+                v0,
+                v,
+                v - v0,
+                f.std[k]
+            );
+        }
+    }
+    if !plots.is_empty() {
+        s.push_str("\n## Plots\n\n");
+        for p in plots {
+            let _ = writeln!(s, "![{p}]({p})\n");
+        }
+    }
+    s
+}
+
+/// Writes the identified model as a platform TOML in the schema of config/*.toml, taking the
+/// non-identified sections (limits, winch, workspace, home, sections) from `base`.
+pub fn platform_toml(base: &Platform, cal: &CalModel, name: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "# Identified by `crs calibrate` from {} (spec ch. 4).",
+        base.name
+    );
+    let _ = writeln!(
+        s,
+        "# Effects the platform schema cannot express are in the side file named in the report.\n"
+    );
+    let _ = writeln!(
+        s,
+        "[platform]\nname = {:?}\ndescription = {:?}\n",
+        name,
+        format!("calibrated from {}", base.name)
+    );
+    let v3 = |v: &nalgebra::Vector3<f64>| format!("[{:?}, {:?}, {:?}]", v.x, v.y, v.z);
+    s.push_str("[geometry]\nframe_anchors_m = [\n");
+    for a in &cal.a {
+        let _ = writeln!(s, "  {},", v3(a));
+    }
+    s.push_str("]\nplatform_anchors_m = [\n");
+    for b in &cal.b {
+        let _ = writeln!(s, "  {},", v3(b));
+    }
+    s.push_str("]\n\n");
+    if cal.pulleys {
+        let _ = writeln!(
+            s,
+            "[pulleys]\nradius_m = {:?}\nswivel_axes = [",
+            cal.pulley_radius
+        );
+        for ax in &cal.pulley_axis {
+            let _ = writeln!(s, "  {},", v3(ax));
+        }
+        s.push_str("]\n\n");
+    }
+    let kf: Vec<String> = cal.k_f.iter().map(|k| format!("{k:?}")).collect();
+    let _ = writeln!(s, "[elasticity]\nk_f_n = [{}]\n", kf.join(", "));
+    let w: Vec<String> = cal.w_e.iter().map(|k| format!("{k:?}")).collect();
+    let _ = writeln!(s, "[load]\nwrench_n_nm = [{}]\n", w.join(", "));
+    let _ = writeln!(
+        s,
+        "[forces]\nf_min_n = {:?}\nf_max_n = {:?}\nf_abs_max_n = {:?}\n",
+        cal.f_min, cal.f_max, base.f_abs_max
+    );
+    let l = &base.limits;
+    let _ = writeln!(
+        s,
+        "[limits]\nlinear_velocity_max_m_per_s = {:?}\nangular_velocity_max_deg_per_s = {:?}\nlinear_acceleration_max_m_per_s2 = {:?}\nangular_acceleration_max_deg_per_s2 = {:?}\n",
+        l.linear_velocity_max,
+        l.angular_velocity_max.to_degrees(),
+        l.linear_acceleration_max,
+        l.angular_acceleration_max.to_degrees()
+    );
+    let _ = writeln!(
+        s,
+        "[winch]\ndrum_diameter_m = {:?}\nrope_diameter_m = {:?}\n",
+        base.winch.drum_diameter, base.winch.rope_diameter
+    );
+    let r = &base.region;
+    let deg = |v: &nalgebra::Vector3<f64>| {
+        format!(
+            "[{:?}, {:?}, {:?}]",
+            v.x.to_degrees(),
+            v.y.to_degrees(),
+            v.z.to_degrees()
+        )
+    };
+    let _ = writeln!(
+        s,
+        "[workspace]\nposition_min_m = {}\nposition_max_m = {}\nrotation_min_deg = {}\nrotation_max_deg = {}\n",
+        v3(&r.position.min),
+        v3(&r.position.max),
+        deg(&r.rotation_min),
+        deg(&r.rotation_max)
+    );
+    let _ = writeln!(
+        s,
+        "[home]\nposition_m = {}\nrotation_deg = {}",
+        v3(&base.home.r),
+        deg(&base.home.phi)
+    );
+    if let Some(f) = &base.f_ini {
+        let fs: Vec<String> = f.iter().map(|v| format!("{v:?}")).collect();
+        let _ = writeln!(s, "f_ini_n = [{}]", fs.join(", "));
+    }
+    if !base.sections.is_empty() {
+        s.push_str("\n[sections]\n");
+        for sec in &base.sections {
+            let c: Vec<String> = sec.cables.iter().map(|c| (c + 1).to_string()).collect();
+            let _ = writeln!(s, "{} = [{}]", sec.name, c.join(", "));
+        }
+    }
+    s
+}
+
+/// Side file (TOML) with the cable offsets and every extension parameter of the model.
+pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
+    let mut s = String::new();
+    s.push_str("# Calibration quantities the platform schema cannot express (crates/calibrate).\n");
+    s.push_str(
+        "# q_theta = (1 + drum_scale_i) q_cmd + cable_offset_i (m); see docs/calibration.md.\n\n",
+    );
+    let names: Vec<String> = chosen.iter().map(|e| format!("{:?}", e.name())).collect();
+    let _ = writeln!(s, "effects = [{}]", names.join(", "));
+    let list = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x:?}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let _ = writeln!(s, "cable_offset_m = [{}]", list(&cal.offset));
+    let _ = writeln!(s, "drum_scale = [{}]", list(&cal.drum_scale));
+    let _ = writeln!(s, "extra_length_m = [{}]", list(&cal.extra_length));
+    let _ = writeln!(s, "stiffness_kappa = {:?}", cal.stiffness_kappa);
+    let _ = writeln!(
+        s,
+        "stiffness_reference_force_n = {:?}",
+        crate::params::STIFFNESS_REFERENCE_FORCE_N
+    );
+    let _ = writeln!(s, "hysteresis_half_width_n = {:?}", cal.hysteresis);
+    let _ = writeln!(s, "sag_weight_squared_n2_per_m2 = {:?}", cal.sag_w2);
+    let _ = writeln!(
+        s,
+        "center_of_gravity_m = [{:?}, {:?}, {:?}]",
+        cal.cog.x, cal.cog.y, cal.cog.z
+    );
+    s
+}
+
+// ----------------------------------------------------------------------------------------
+// SVG plots (hand-written, no plotting dependency).
+
+const W: f64 = 760.0;
+const H: f64 = 360.0;
+const ML: f64 = 70.0;
+const MB: f64 = 40.0;
+const MT: f64 = 30.0;
+
+fn svg_frame(title: &str, ylabel: &str) -> String {
+    format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{W}\" height=\"{H}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n<text x=\"{}\" y=\"18\" text-anchor=\"middle\" font-size=\"14\">{title}</text>\n<text x=\"14\" y=\"{}\" transform=\"rotate(-90 14 {})\" text-anchor=\"middle\">{ylabel}</text>\n",
+        W / 2.0,
+        H / 2.0,
+        H / 2.0
+    )
+}
+
+/// Grouped bar chart: `series` (name, colour, values per group).
+pub fn bar_chart(
+    title: &str,
+    ylabel: &str,
+    groups: &[String],
+    series: &[(String, &str, Vec<f64>)],
+) -> String {
+    let mut s = svg_frame(title, ylabel);
+    let ymax = series
+        .iter()
+        .flat_map(|x| x.2.iter())
+        .fold(0.0f64, |a, b| a.max(*b))
+        .max(1e-12)
+        * 1.1;
+    let pw = W - ML - 20.0;
+    let ph = H - MT - MB;
+    let y = |v: f64| MT + ph * (1.0 - v / ymax);
+    let _ = writeln!(
+        s,
+        "<line x1=\"{ML}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" stroke=\"black\"/>",
+        MT + ph,
+        ML + pw,
+        MT + ph
+    );
+    let _ = writeln!(
+        s,
+        "<line x1=\"{ML}\" y1=\"{MT}\" x2=\"{ML}\" y2=\"{}\" stroke=\"black\"/>",
+        MT + ph
+    );
+    for k in 0..=4 {
+        let v = ymax * k as f64 / 4.0;
+        let _ = writeln!(
+            s,
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{:.3}</text>",
+            ML - 4.0,
+            y(v) + 4.0,
+            v
+        );
+    }
+    let gw = pw / groups.len().max(1) as f64;
+    let bw = gw * 0.8 / series.len().max(1) as f64;
+    for (g, name) in groups.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{name}</text>",
+            ML + gw * (g as f64 + 0.5),
+            MT + ph + 16.0
+        );
+        for (k, (_, colour, vals)) in series.iter().enumerate() {
+            let v = vals.get(g).copied().unwrap_or(0.0);
+            let x = ML + gw * g as f64 + gw * 0.1 + bw * k as f64;
+            let _ = writeln!(
+                s,
+                "<rect x=\"{x:.1}\" y=\"{:.1}\" width=\"{bw:.1}\" height=\"{:.1}\" fill=\"{colour}\"/>",
+                y(v),
+                MT + ph - y(v)
+            );
+        }
+    }
+    // Legend: one entry per line, top right.
+    for (k, (name, colour, _)) in series.iter().enumerate() {
+        let (x, yl) = (W - 320.0, MT + 4.0 + 15.0 * k as f64);
+        let _ = writeln!(
+            s,
+            "<rect x=\"{x}\" y=\"{yl}\" width=\"10\" height=\"10\" fill=\"{colour}\"/><text x=\"{}\" y=\"{}\">{name}</text>",
+            x + 14.0,
+            yl + 9.0
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// A named, coloured set of (x, y) points.
+pub type PointSeries<'a> = (String, &'a str, Vec<(f64, f64)>);
+
+/// Scatter of (x, y) point sets.
+pub fn scatter(title: &str, xlabel: &str, ylabel: &str, series: &[PointSeries<'_>]) -> String {
+    let mut s = svg_frame(title, ylabel);
+    let pts = series.iter().flat_map(|x| x.2.iter());
+    let (mut x0, mut x1, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+    for (x, y) in pts {
+        x0 = x0.min(*x);
+        x1 = x1.max(*x);
+        y1 = y1.max(*y);
+    }
+    if !x0.is_finite() || x1 <= x0 {
+        x0 = 0.0;
+        x1 = 1.0;
+    }
+    y1 = y1.max(1e-12) * 1.1;
+    let pw = W - ML - 20.0;
+    let ph = H - MT - MB;
+    let px = |v: f64| ML + pw * (v - x0) / (x1 - x0);
+    let py = |v: f64| MT + ph * (1.0 - v / y1);
+    let _ = writeln!(
+        s,
+        "<line x1=\"{ML}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" stroke=\"black\"/>",
+        MT + ph,
+        ML + pw,
+        MT + ph
+    );
+    let _ = writeln!(
+        s,
+        "<line x1=\"{ML}\" y1=\"{MT}\" x2=\"{ML}\" y2=\"{}\" stroke=\"black\"/>",
+        MT + ph
+    );
+    for k in 0..=4 {
+        let v = y1 * k as f64 / 4.0;
+        let _ = writeln!(
+            s,
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{:.3}</text>",
+            ML - 4.0,
+            py(v) + 4.0,
+            v
+        );
+        let xv = x0 + (x1 - x0) * k as f64 / 4.0;
+        let _ = writeln!(
+            s,
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{:.2}</text>",
+            px(xv),
+            MT + ph + 14.0,
+            xv
+        );
+    }
+    let _ = writeln!(
+        s,
+        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{xlabel}</text>",
+        ML + pw / 2.0,
+        H - 20.0
+    );
+    for (k, (name, colour, pts)) in series.iter().enumerate() {
+        for (x, y) in pts {
+            let _ = writeln!(
+                s,
+                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"3\" fill=\"{colour}\"/>",
+                px(*x),
+                py(*y)
+            );
+        }
+        let lx = W - 320.0;
+        let _ = writeln!(
+            s,
+            "<circle cx=\"{lx}\" cy=\"{}\" r=\"4\" fill=\"{colour}\"/><text x=\"{}\" y=\"{}\">{name}</text>",
+            MT + 4.0 + 15.0 * k as f64,
+            lx + 8.0,
+            MT + 8.0 + 15.0 * k as f64
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// The report's plots: (file name, SVG text).
+pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let first: &Stage = &rep.stages[0];
+    let last = rep.final_stage();
+    let m = first.model.m();
+    let cables: Vec<String> = (1..=m).map(|i| format!("cable {i}")).collect();
+    let rms_per_cable = |st: &Stage| -> Vec<f64> {
+        validate::length_errors(st.kind, &st.model, holdout)
+            .iter()
+            .map(|v| 1e3 * (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt())
+            .collect()
+    };
+    let mut series = vec![(first.name.clone(), "#d62728", rms_per_cable(first))];
+    if let Some(e) = rep.stage("optimal elastostatic") {
+        series.push((e.name.clone(), "#1f77b4", rms_per_cable(e)));
+    }
+    if last.name != "optimal elastostatic" {
+        series.push((last.name.clone(), "#2ca02c", rms_per_cable(last)));
+    }
+    out.push((
+        "residuals_per_cable.svg".into(),
+        bar_chart(
+            "Held-out cable-length residual per cable (RMS)",
+            "mm",
+            &cables,
+            &series,
+        ),
+    ));
+    // Error over the workspace: position error vs distance from the workspace centre.
+    let mut sc = Vec::new();
+    for (st, colour) in [(first, "#d62728"), (last, "#2ca02c")] {
+        let mut pts = Vec::new();
+        for o in holdout {
+            if let Ok(p) = validate::predict(st.kind, &st.model, o) {
+                let (dp, _) = p.pose.error_to(&o.pose);
+                pts.push((o.pose.r.x.hypot(o.pose.r.y), dp * 1e3));
+            }
+        }
+        sc.push((st.name.clone(), colour, pts));
+    }
+    out.push((
+        "error_over_workspace.svg".into(),
+        scatter(
+            "Held-out position error over the workspace",
+            "horizontal distance from the centre (m)",
+            "mm",
+            &sc,
+        ),
+    ));
+    // Steps: mean position error.
+    let names: Vec<String> = (1..=rep.stages.len())
+        .map(|k| format!("step {k}"))
+        .collect();
+    let pos: Vec<f64> = rep.stages.iter().map(|s| s.holdout.pos_mean_mm).collect();
+    out.push((
+        "steps.svg".into(),
+        bar_chart(
+            "Mean held-out position error per step",
+            "mm",
+            &names,
+            &[("position".into(), "#1f77b4", pos)],
+        ),
+    ));
+    // Condition numbers.
+    let fits: Vec<&Stage> = rep.stages.iter().filter(|s| s.fit.is_some()).collect();
+    let labels: Vec<String> = fits
+        .iter()
+        .map(|s| s.name.chars().take(24).collect())
+        .collect();
+    let cu: Vec<f64> = fits
+        .iter()
+        .map(|s| {
+            s.fit
+                .as_ref()
+                .map_or(0.0, |f| f.cond_start_unscaled.log10())
+        })
+        .collect();
+    let cs: Vec<f64> = fits
+        .iter()
+        .map(|s| s.fit.as_ref().map_or(0.0, |f| f.cond_start_scaled.log10()))
+        .collect();
+    out.push((
+        "condition.svg".into(),
+        bar_chart(
+            "log10 cond(J): SI units vs preconditioned (eq. 4.42)",
+            "log10",
+            &labels,
+            &[("SI".into(), "#d62728", cu), ("W_pc".into(), "#1f77b4", cs)],
+        ),
+    ));
+    // Parameter changes of the geometry with uncertainty.
+    if let Some(f) = &last.fit {
+        let mut pts = Vec::new();
+        let mut sds = Vec::new();
+        for (k, p) in f.free.iter().enumerate() {
+            if matches!(p, ParamId::A(..) | ParamId::B(..)) {
+                pts.push((
+                    k as f64,
+                    1e3 * (f.model.get(*p) - first.model.get(*p)).abs(),
+                ));
+                sds.push((k as f64, 1e3 * f.std[k]));
+            }
+        }
+        out.push((
+            "parameter_changes.svg".into(),
+            scatter(
+                "|Δ geometry| (nominal → identified) and 1σ",
+                "parameter index (a, b)",
+                "mm",
+                &[
+                    ("|Δp|".into(), "#1f77b4", pts),
+                    ("1σ".into(), "#ff7f0e", sds),
+                ],
+            ),
+        ));
+    }
+    // Scores of the candidates (first round).
+    if let Some(r0) = rep.selection.as_ref().and_then(|sel| sel.rounds.first()) {
+        {
+            let names: Vec<String> = r0.iter().map(|c| c.effect.name().to_string()).collect();
+            let gain: Vec<f64> = r0
+                .iter()
+                .map(|c| (1.0 - c.holdout_rms_after / c.holdout_rms_before).max(0.0) * 100.0)
+                .collect();
+            out.push((
+                "candidates.svg".into(),
+                bar_chart(
+                    "Candidate effects, round 1: held-out RMS reduction",
+                    "%",
+                    &names,
+                    &[("gain".into(), "#2ca02c", gain)],
+                ),
+            ));
+        }
+    }
+    let _ = Kind::Kinematic;
+    out
+}

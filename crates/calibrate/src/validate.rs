@@ -1,0 +1,248 @@
+//! Validation through the model's forward kinematics (eq. 3.3–3.8): for every held-out sample
+//! the model predicts the pose x_P from the commanded lengths (kinematic ν, eq. 2.11, or
+//! elastostatic ν_el with the identified extensions, eq. 2.42) and the forces f_P, compared with
+//! the measured x_M, f_M. Cable-length errors are φ(x_M) − q_θ (eq. 6.6).
+
+use crate::observation::Observation;
+use crate::params::{CalModel, STIFFNESS_REFERENCE_FORCE_N};
+use crate::residual::{Kind, Weights};
+use motion_core::elastostatics::{CableForce, CableLaw};
+use motion_core::forward::{FkOptions, elastostatic_with_law, least_squares};
+use motion_core::{Data, Pose, kinematics};
+use serde::Serialize;
+
+/// Error statistics over a sample set.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Errors {
+    /// Samples evaluated (forward kinematics converged).
+    pub n: usize,
+    /// Samples whose forward kinematics did not converge (excluded from the statistics).
+    pub fk_failures: usize,
+    pub pos_mean_mm: f64,
+    pub pos_max_mm: f64,
+    pub rot_mean_deg: f64,
+    pub rot_max_deg: f64,
+    pub len_mean_mm: f64,
+    pub len_max_mm: f64,
+    /// Mean and max over samples of ‖f_P − f_M‖₂, N (elastostatic models with forces).
+    pub force_mean_n: Option<f64>,
+    pub force_max_n: Option<f64>,
+}
+
+/// The extended cable law of a [`CalModel`] (see [`crate::residual`]) for ν_el: the inverse
+/// q_θ = q + S/f² − (q + l)/k_F (g(f) − d H) is solved for f per cable.
+#[derive(Clone, Debug)]
+pub struct ExtendedLaw {
+    pub k_f: Vec<f64>,
+    pub extra: Vec<f64>,
+    pub kappa: f64,
+    pub hysteresis: f64,
+    pub sag_w2: f64,
+    /// cos² of the chord inclination, frozen per solve.
+    pub cos2: Vec<f64>,
+    /// Direction of motion per cable (hysteresis), ±1 or 0.
+    pub direction: Vec<f64>,
+}
+
+impl ExtendedLaw {
+    pub fn new(cal: &CalModel, direction: &[f64]) -> Self {
+        Self {
+            k_f: cal.k_f.clone(),
+            extra: cal.extra_length.clone(),
+            kappa: cal.stiffness_kappa,
+            hysteresis: cal.hysteresis,
+            sag_w2: cal.sag_w2,
+            cos2: vec![0.0; cal.m()],
+            direction: direction.to_vec(),
+        }
+    }
+
+    fn parts(&self, i: usize, q: f64, f: f64) -> (f64, f64, f64) {
+        let fs = STIFFNESS_REFERENCE_FORCE_N;
+        let g = f + self.kappa * (f - fs).powi(2) / (2.0 * fs);
+        let dg = 1.0 + self.kappa * (f - fs) / fs;
+        let s = self.sag_w2 * self.cos2[i] * q.powi(3) / 24.0;
+        (g - self.direction[i] * self.hysteresis, dg, s)
+    }
+}
+
+impl CableLaw for ExtendedLaw {
+    fn force(&self, i: usize, q: f64, q_theta: f64) -> CableForce {
+        let c = (q + self.extra[i]) / self.k_f[i];
+        let dh = self.direction[i] * self.hysteresis;
+        let lin = (q - q_theta) / c + dh;
+        if self.kappa == 0.0 && (self.sag_w2 == 0.0 || self.cos2[i] == 0.0) {
+            return CableForce {
+                f: lin,
+                df_dq: (1.0 - (lin - dh) / self.k_f[i]) / c,
+                df_dqt: -1.0 / c,
+            };
+        }
+        // Safeguarded Newton on h(f) = φ(f) − q_θ, decreasing in f on the physical branch.
+        let h = |f: f64| {
+            let (load, dg, s) = self.parts(i, q, f);
+            let sag = if s > 0.0 { s / (f * f) } else { 0.0 };
+            let dsag = if s > 0.0 { -2.0 * s / (f * f * f) } else { 0.0 };
+            (q + sag - c * load - q_theta, dsag - c * dg)
+        };
+        let sagging = self.sag_w2 > 0.0 && self.cos2[i] > 0.0;
+        let (mut lo, mut hi) = if sagging { (1e-9, 1e8) } else { (-1e8, 1e8) };
+        let mut f = if sagging { lin.max(1.0) } else { lin };
+        for _ in 0..100 {
+            let (v, dv) = h(f);
+            if v > 0.0 {
+                lo = f;
+            } else {
+                hi = f;
+            }
+            let mut next = f - v / dv;
+            if !(next > lo && next < hi && next.is_finite()) {
+                next = if sagging && lo > 0.0 {
+                    (lo * hi).sqrt()
+                } else {
+                    0.5 * (lo + hi)
+                };
+            }
+            let done = (next - f).abs() <= 1e-13 * (1.0 + f.abs());
+            f = next;
+            if done {
+                break;
+            }
+        }
+        let (load, dg, s) = self.parts(i, q, f);
+        let dphi_df = if sagging { -2.0 * s / (f * f * f) } else { 0.0 } - c * dg;
+        let dphi_dq = 1.0 + if sagging { 3.0 * s / (q * f * f) } else { 0.0 } - load / self.k_f[i];
+        CableForce {
+            f,
+            df_dq: -dphi_dq / dphi_df,
+            df_dqt: 1.0 / dphi_df,
+        }
+    }
+
+    fn controlled_length(&self, i: usize, q: f64, f: f64) -> f64 {
+        let c = (q + self.extra[i]) / self.k_f[i];
+        let (load, _, s) = self.parts(i, q, f);
+        let sag = if s > 0.0 && f > 0.0 { s / (f * f) } else { 0.0 };
+        q + sag - c * load
+    }
+}
+
+/// A forward-kinematics prediction for one sample.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Prediction {
+    pub pose: Pose,
+    pub forces: Option<Vec<f64>>,
+}
+
+/// Predicts the pose (and forces) of sample `o` from its command with the model.
+pub fn predict(kind: Kind, cal: &CalModel, o: &Observation) -> Result<Prediction, String> {
+    let model = cal.model().map_err(|e| e.to_string())?;
+    let mut data = Data::new(&model);
+    let m = cal.m();
+    let q_theta: Vec<f64> = (0..m).map(|i| cal.q_theta(i, o.q_cmd[i])).collect();
+    let guess = o.pose_ref.unwrap_or(o.pose);
+    let opts = FkOptions {
+        max_iterations: 200,
+        ..FkOptions::default()
+    };
+    match kind {
+        Kind::Kinematic => {
+            let sol = least_squares(&model, &mut data, &q_theta, &guess, &opts)
+                .map_err(|e| e.to_string())?;
+            Ok(Prediction {
+                pose: sol.pose,
+                forces: None,
+            })
+        }
+        Kind::Elastostatic => {
+            let mut law = ExtendedLaw::new(cal, &o.direction);
+            let dependent = cal.sag_w2 != 0.0 || cal.cog != nalgebra::Vector3::zeros();
+            let mut x = guess;
+            for _ in 0..30 {
+                kinematics::inverse(&model, &mut data, &x).map_err(|e| e.to_string())?;
+                for i in 0..m {
+                    law.cos2[i] = (1.0 - data.u[i].z * data.u[i].z).max(0.0);
+                }
+                let w = cal.wrench_at(&x.rotation());
+                let sol = elastostatic_with_law(&model, &mut data, &law, &w, &q_theta, &x, &opts)
+                    .map_err(|e| e.to_string())?;
+                let dx = (sol.pose.to_vector() - x.to_vector()).amax();
+                x = sol.pose;
+                if !dependent || dx < 1e-11 {
+                    return Ok(Prediction {
+                        pose: x,
+                        forces: Some(data.f.clone()),
+                    });
+                }
+            }
+            Err("pose-dependent load/sag iteration did not settle".into())
+        }
+    }
+}
+
+/// Error statistics of the model on `obs` (eq. 3.3–3.4, 6.6).
+pub fn evaluate(kind: Kind, cal: &CalModel, obs: &[Observation]) -> Errors {
+    let mut e = Errors::default();
+    let (mut sp, mut sr, mut sf, mut nf) = (0.0, 0.0, 0.0, 0usize);
+    let mut fmax = 0.0f64;
+    for o in obs {
+        match predict(kind, cal, o) {
+            Ok(p) => {
+                let (dp, dr) = p.pose.error_to(&o.pose);
+                sp += dp;
+                sr += dr;
+                e.pos_max_mm = e.pos_max_mm.max(dp * 1e3);
+                e.rot_max_deg = e.rot_max_deg.max(dr.to_degrees());
+                e.n += 1;
+                if let (Some(fp), Some(fm)) = (&p.forces, &o.forces) {
+                    let d: f64 = fp
+                        .iter()
+                        .zip(fm)
+                        .map(|(a, b)| (a - b).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    sf += d;
+                    fmax = fmax.max(d);
+                    nf += 1;
+                }
+            }
+            Err(_) => e.fk_failures += 1,
+        }
+    }
+    if e.n > 0 {
+        e.pos_mean_mm = sp / e.n as f64 * 1e3;
+        e.rot_mean_deg = (sr / e.n as f64).to_degrees();
+    }
+    if nf > 0 {
+        e.force_mean_n = Some(sf / nf as f64);
+        e.force_max_n = Some(fmax);
+    }
+    let lens = length_errors(kind, cal, obs);
+    let all: Vec<f64> = lens.iter().flatten().map(|v| v.abs()).collect();
+    if !all.is_empty() {
+        e.len_mean_mm = all.iter().sum::<f64>() / all.len() as f64 * 1e3;
+        e.len_max_mm = all.iter().fold(0.0f64, |a, b| a.max(*b)) * 1e3;
+    }
+    e
+}
+
+/// Cable-length residuals φ(x_M) − q_θ (kinematic) or φ_el(x_M, f_M) − q_θ (elastostatic) per
+/// cable: `out[i]` holds cable i's residuals over the samples, m.
+pub fn length_errors(kind: Kind, cal: &CalModel, obs: &[Observation]) -> Vec<Vec<f64>> {
+    let m = cal.m();
+    let mut out = vec![Vec::new(); m];
+    let w = Weights {
+        wrench: 1.0,
+        length: 1.0,
+    };
+    for o in obs {
+        let Ok(r) = crate::identify::residual(kind, cal, std::slice::from_ref(o), w) else {
+            continue;
+        };
+        let off = r.len() - m;
+        for i in 0..m {
+            out[i].push(r[off + i]);
+        }
+    }
+    out
+}

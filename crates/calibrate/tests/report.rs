@@ -1,0 +1,62 @@
+//! The identified model written back as a platform TOML loads with motion-core's loader and
+//! carries the identified parameters exactly; bad data sets give errors, not panics.
+
+mod common;
+use calibrate::effects::Effect;
+use calibrate::observation::ObservationError;
+use calibrate::{CalModel, from_dataset, report};
+use common::*;
+use motion_core::config::parse_platform;
+
+#[test]
+fn platform_toml_round_trips_through_load_platform() {
+    let base = nominal();
+    let mut cal = CalModel::from_model(&base.model);
+    cal.a[2].x += 0.123_456_789_012_345;
+    cal.b[5].z -= 0.004_2;
+    cal.k_f[1] = 1_987_654.321;
+    cal.w_e[4] = -512.25;
+    cal.pulleys = true;
+    cal.pulley_radius = 0.161;
+    let text = report::platform_toml(&base, &cal, "roundtrip");
+    let p = parse_platform(&text, "roundtrip.toml").expect("written platform must load");
+    let model = cal.model().unwrap();
+    assert_eq!(
+        p.model.params(),
+        model.params(),
+        "parameters must survive bit for bit"
+    );
+    assert_eq!(p.home, base.home);
+    assert_eq!(p.f_ini, base.f_ini);
+    assert_eq!(p.region, base.region);
+    let side = report::side_file(&cal, &[Effect::Pulleys]);
+    assert!(side.contains("effects = [\"pulleys\"]"));
+    assert!(
+        side.parse::<toml::Table>().is_ok(),
+        "side file must be TOML"
+    );
+}
+
+#[test]
+fn bad_data_sets_are_rejected_with_a_reason() {
+    let text = "# format: crs-dataset 1\n# units: SI (q_cmd m; x y z m; phi rad, R = Rx Ry Rz eq. 2.2; f N)\nsample,q_cmd_1,x,y,z,phi_x,phi_y,phi_z\n0,1.0,0,0,oops,0,0,0\n";
+    let err = sim_plant::read_dataset(text.as_bytes(), "bad.csv").unwrap_err();
+    assert_eq!(err.line, Some(4), "{err}");
+    let ok = "# format: crs-dataset 1\n# units: SI (q_cmd m; x y z m; phi rad, R = Rx Ry Rz eq. 2.2; f N)\nsample,q_cmd_1,x,y,z,phi_x,phi_y,phi_z,f_1\n0,1.0,0,0,1,0,0,0,-5\n";
+    let ds = sim_plant::read_dataset(ok.as_bytes(), "one.csv").unwrap();
+    assert_eq!(
+        from_dataset(&ds, 8),
+        Err(ObservationError::CableCount {
+            expected: 8,
+            got: 1
+        })
+    );
+    assert!(matches!(
+        from_dataset(&ds, 1),
+        Err(ObservationError::NonPositiveForce {
+            sample: 0,
+            cable: 1,
+            ..
+        })
+    ));
+}

@@ -1,0 +1,166 @@
+//! SocketCAN raw socket (real CAN or vcan) through the `socketcan` crate.
+
+use crate::frame::{CanFrame, RxFrame};
+use crate::poll::wait_readable;
+use crate::{CanBus, CanError, monotonic_ns};
+use socketcan::{
+    CanSocket, EmbeddedFrame, ExtendedId, Frame, Id, Socket, SocketOptions, StandardId,
+};
+use std::os::fd::AsRawFd;
+use std::time::{Duration, UNIX_EPOCH};
+
+pub struct SocketCanBus {
+    sock: CanSocket,
+    iface: String,
+    rx_errors: u64,
+}
+
+impl SocketCanBus {
+    /// Opens `iface`. On a kernel without CAN (ENODEV / EAFNOSUPPORT) returns
+    /// [`CanError::NoCanSupport`] naming the UDP alternative.
+    pub fn open(iface: &str) -> Result<Self, CanError> {
+        let sock = CanSocket::open(iface).map_err(|e| match e.raw_os_error() {
+            Some(libc::EAFNOSUPPORT) => CanError::NoCanSupport {
+                iface: iface.to_string(),
+                errno: libc::EAFNOSUPPORT,
+                what: "address family not supported: kernel built without CONFIG_CAN",
+            },
+            Some(libc::ENODEV) => CanError::NoCanSupport {
+                iface: iface.to_string(),
+                errno: libc::ENODEV,
+                what: "no such CAN device (no CAN support, or the interface is not created/up)",
+            },
+            _ => CanError::Io {
+                iface: iface.to_string(),
+                op: "open",
+                source: e,
+            },
+        })?;
+        let io = |op| {
+            move |source| CanError::Io {
+                iface: iface.to_string(),
+                op,
+                source,
+            }
+        };
+        sock.set_nonblocking(true).map_err(io("nonblocking"))?;
+        // Kernel receive timestamps (SO_TIMESTAMP) where available; not fatal if refused.
+        if let Err(e) = sock.set_recv_timestamp(true) {
+            tracing::info!(iface, error = %e, "no kernel receive timestamps");
+        }
+        Ok(Self {
+            sock,
+            iface: iface.to_string(),
+            rx_errors: 0,
+        })
+    }
+}
+
+fn to_socketcan(f: &CanFrame) -> Option<socketcan::CanFrame> {
+    let id: Id = if f.is_extended() {
+        Id::Extended(ExtendedId::new(f.id())?)
+    } else {
+        Id::Standard(StandardId::new(u16::try_from(f.id()).ok()?)?)
+    };
+    if f.is_rtr() {
+        socketcan::CanFrame::new_remote(id, f.len())
+    } else {
+        socketcan::CanFrame::new(id, f.data())
+    }
+}
+
+fn from_socketcan(f: &socketcan::CanFrame) -> Option<CanFrame> {
+    if f.is_error_frame() {
+        return None;
+    }
+    let (id, ext) = match f.id() {
+        Id::Standard(s) => (u32::from(s.as_raw()), false),
+        Id::Extended(e) => (e.as_raw(), true),
+    };
+    if f.is_remote_frame() {
+        CanFrame::remote(id, ext, f.dlc() as u8).ok()
+    } else {
+        CanFrame::with_flags(id, ext, false, f.data()).ok()
+    }
+}
+
+impl CanBus for SocketCanBus {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
+        let f = to_socketcan(frame).ok_or(CanError::Frame(crate::FrameError::IdRange {
+            id: frame.id(),
+            bits: if frame.is_extended() { 29 } else { 11 },
+        }))?;
+        match self.sock.write_frame(&f) {
+            Ok(()) => Ok(()),
+            Err(e)
+                if e.kind() == std::io::ErrorKind::WouldBlock
+                    || e.raw_os_error() == Some(libc::ENOBUFS) =>
+            {
+                Err(CanError::TxFull {
+                    iface: self.iface.clone(),
+                })
+            }
+            Err(e) => Err(CanError::Io {
+                iface: self.iface.clone(),
+                op: "write",
+                source: e,
+            }),
+        }
+    }
+
+    fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<RxFrame>, CanError> {
+        let deadline =
+            monotonic_ns().saturating_add(timeout.as_nanos().min(u64::MAX as u128) as u64);
+        loop {
+            match self.sock.read_frame_with_timestamp() {
+                Ok((f, ts)) => {
+                    let rx_monotonic_ns = monotonic_ns();
+                    match from_socketcan(&f) {
+                        Some(frame) => {
+                            let kernel = ts
+                                .duration_since(UNIX_EPOCH)
+                                .ok()
+                                .map(|d| d.as_nanos() as u64);
+                            return Ok(Some(RxFrame {
+                                frame,
+                                rx_monotonic_ns,
+                                kernel_rx_realtime_ns: kernel,
+                            }));
+                        }
+                        None => {
+                            self.rx_errors += 1;
+                            continue;
+                        }
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+                Err(e) => {
+                    return Err(CanError::Io {
+                        iface: self.iface.clone(),
+                        op: "read",
+                        source: e,
+                    });
+                }
+            }
+            let now = monotonic_ns();
+            if now >= deadline {
+                return Ok(None);
+            }
+            wait_readable(self.sock.as_raw_fd(), Duration::from_nanos(deadline - now)).map_err(
+                |e| CanError::Io {
+                    iface: self.iface.clone(),
+                    op: "ppoll",
+                    source: e,
+                },
+            )?;
+        }
+    }
+
+    fn interface(&self) -> &str {
+        &self.iface
+    }
+
+    fn rx_errors(&self) -> u64 {
+        self.rx_errors
+    }
+}

@@ -1,0 +1,302 @@
+//! `#[repr(C)]`, heap-free payloads. All lengths in m, angles in rad, forces in N, times in ns of
+//! CLOCK_MONOTONIC ([`crate::monotonic_ns`]). Arrays have fixed capacity [`MAX_CABLES`] and a
+//! `cable_count`; entries at index >= `cable_count` are unspecified (zero by convention).
+
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Version of this contract; bump on any layout or meaning change (also part of the type names).
+pub const CONTRACT_VERSION: u32 = 1;
+/// Capacity of every per-cable array.
+pub const MAX_CABLES: usize = 16;
+
+/// Pose vector x = [x, y, z, phi_x, phi_y, phi_z] in m / rad.
+pub type Pose6 = [f64; 6];
+
+/// Joint setpoint of one 1 ms cycle, published by motion-core.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("crs_ipc::JointSetpoint.v1")]
+#[repr(C)]
+pub struct JointSetpoint {
+    pub version: u32,
+    /// Number of valid entries in the per-cable arrays (<= MAX_CABLES).
+    pub cable_count: u32,
+    /// Strictly increasing per publisher; a repeated sequence number is not a new setpoint.
+    pub sequence: u64,
+    /// When the setpoint was computed (CLOCK_MONOTONIC ns).
+    pub timestamp_ns: u64,
+    /// Desired platform pose x (m, rad).
+    pub pose: Pose6,
+    /// Desired platform twist (m/s, rad/s).
+    pub pose_velocity: Pose6,
+    /// Commanded cable lengths q_theta (m), INCLUDING the surrogate offset.
+    pub cable_length_m: [f64; MAX_CABLES],
+    /// The surrogate offset contained in `cable_length_m` (m), for diagnosis.
+    pub surrogate_offset_m: [f64; MAX_CABLES],
+    /// Commanded cable speeds (m/s).
+    pub cable_velocity_m_per_s: [f64; MAX_CABLES],
+}
+
+impl Default for JointSetpoint {
+    fn default() -> Self {
+        Self {
+            version: CONTRACT_VERSION,
+            cable_count: 0,
+            sequence: 0,
+            timestamp_ns: 0,
+            pose: [0.0; 6],
+            pose_velocity: [0.0; 6],
+            cable_length_m: [0.0; MAX_CABLES],
+            surrogate_offset_m: [0.0; MAX_CABLES],
+            cable_velocity_m_per_s: [0.0; MAX_CABLES],
+        }
+    }
+}
+
+/// State of the drive bus as seen by drive-io (`DriveFeedback::bus_state`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum BusState {
+    /// NMT/SDO boot and CiA 402 enable sequence in progress.
+    Booting = 0,
+    /// All drives in Operation Enabled, waiting for the first setpoint (drives hold position).
+    Ready = 1,
+    /// Following setpoints.
+    Running = 2,
+    /// Quick stop commanded because setpoints went stale; drives hold.
+    StaleStop = 3,
+    /// Quick stop commanded because of an e-stop event; drives hold.
+    EStop = 4,
+    /// A drive faulted / lost heartbeat / sent EMCY; all drives quick-stopped and held.
+    Fault = 5,
+}
+
+impl BusState {
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Some(match v {
+            0 => Self::Booting,
+            1 => Self::Ready,
+            2 => Self::Running,
+            3 => Self::StaleStop,
+            4 => Self::EStop,
+            5 => Self::Fault,
+            _ => return None,
+        })
+    }
+}
+
+/// Reason codes in `DriveFeedback::fault_code` / `StateEvent::detail`.
+pub mod fault_code {
+    pub const NONE: u32 = 0;
+    pub const HEARTBEAT_LOST: u32 = 1;
+    pub const EMCY: u32 = 2;
+    pub const DRIVE_FAULT_BIT: u32 = 3;
+    pub const BOOT_TIMEOUT: u32 = 4;
+    pub const SETPOINT_INVALID: u32 = 5;
+    pub const SETPOINT_STEP: u32 = 6;
+    pub const UNEXPECTED_STATE: u32 = 7;
+    pub const BUS_ERROR: u32 = 8;
+    pub const PDO_TIMEOUT: u32 = 9;
+}
+
+/// Drive feedback of one SYNC cycle, published by drive-io.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("crs_ipc::DriveFeedback.v1")]
+#[repr(C)]
+pub struct DriveFeedback {
+    pub version: u32,
+    pub cable_count: u32,
+    /// SYNC cycle counter of drive-io.
+    pub cycle: u64,
+    /// When this feedback was assembled (CLOCK_MONOTONIC ns).
+    pub timestamp_ns: u64,
+    /// Sequence number of the last setpoint written to the drives (0 = none yet).
+    pub applied_setpoint_sequence: u64,
+    /// When the RPDOs carrying that setpoint were written to the bus (CLOCK_MONOTONIC ns).
+    pub applied_setpoint_write_ns: u64,
+    /// [`BusState`] as u32.
+    pub bus_state: u32,
+    /// A [`fault_code`] value.
+    pub fault_code: u32,
+    /// Node id of the drive that caused the fault (0 = none).
+    pub fault_node: u32,
+    /// Last EMCY error code received (0 = none).
+    pub last_emcy_code: u32,
+    /// SYNC cycles since the last NEW setpoint was applied (stale detection counter).
+    pub setpoint_age_cycles: u32,
+    /// SYNC ticks the drive-io loop missed so far (overruns).
+    pub overruns: u32,
+    /// Measured cable lengths (m), converted from position actual 0x6064.
+    pub cable_length_m: [f64; MAX_CABLES],
+    /// Measured cable speeds (m/s), from velocity actual 0x606C.
+    pub cable_velocity_m_per_s: [f64; MAX_CABLES],
+    /// Pulley force sensors (N).
+    pub cable_force_n: [f64; MAX_CABLES],
+    /// Receive time of the TPDO carrying the position (CLOCK_MONOTONIC ns; 0 = never).
+    pub rx_timestamp_ns: [u64; MAX_CABLES],
+    /// CiA 402 statusword 0x6041 per drive.
+    pub statusword: [u16; MAX_CABLES],
+}
+
+impl Default for DriveFeedback {
+    fn default() -> Self {
+        Self {
+            version: CONTRACT_VERSION,
+            cable_count: 0,
+            cycle: 0,
+            timestamp_ns: 0,
+            applied_setpoint_sequence: 0,
+            applied_setpoint_write_ns: 0,
+            bus_state: BusState::Booting as u32,
+            fault_code: fault_code::NONE,
+            fault_node: 0,
+            last_emcy_code: 0,
+            setpoint_age_cycles: 0,
+            overruns: 0,
+            cable_length_m: [0.0; MAX_CABLES],
+            cable_velocity_m_per_s: [0.0; MAX_CABLES],
+            cable_force_n: [0.0; MAX_CABLES],
+            rx_timestamp_ns: [0; MAX_CABLES],
+            statusword: [0; MAX_CABLES],
+        }
+    }
+}
+
+/// Who publishes a [`StateEvent`] / [`Heartbeat`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum ProcessId {
+    Unknown = 0,
+    MotionCore = 1,
+    DriveIo = 2,
+    SafetyMonitor = 3,
+    SimPlant = 4,
+    Operator = 5,
+    Test = 6,
+}
+
+/// Kind of a [`StateEvent`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum EventKind {
+    /// Emergency stop: every motion process stops (drive-io: quick stop + hold, latched).
+    EStop = 1,
+    /// Operator acknowledged / reset after an e-stop or fault.
+    Reset = 2,
+    /// A process changed state (`state` holds the process-specific state code).
+    StateChanged = 3,
+    /// A process detected a fault (`detail` holds a [`fault_code`]).
+    Fault = 4,
+}
+
+/// E-stop / state events (any process -> all).
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("crs_ipc::StateEvent.v1")]
+#[repr(C)]
+pub struct StateEvent {
+    pub version: u32,
+    /// [`ProcessId`] as u32.
+    pub source: u32,
+    /// [`EventKind`] as u32.
+    pub kind: u32,
+    /// Process-specific state code (drive-io: [`BusState`]).
+    pub state: u32,
+    /// Detail code (e.g. [`fault_code`]), node id in `detail_node`.
+    pub detail: u32,
+    pub detail_node: u32,
+    pub sequence: u64,
+    pub timestamp_ns: u64,
+}
+
+impl StateEvent {
+    pub fn new(source: ProcessId, kind: EventKind, sequence: u64) -> Self {
+        Self {
+            version: CONTRACT_VERSION,
+            source: source as u32,
+            kind: kind as u32,
+            state: 0,
+            detail: 0,
+            detail_node: 0,
+            sequence,
+            timestamp_ns: crate::monotonic_ns(),
+        }
+    }
+}
+
+/// Liveness of a process.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("crs_ipc::Heartbeat.v1")]
+#[repr(C)]
+pub struct Heartbeat {
+    pub version: u32,
+    /// [`ProcessId`] as u32.
+    pub source: u32,
+    /// Process-specific state code.
+    pub state: u32,
+    /// Overruns of the process's cyclic loop so far.
+    pub overruns: u32,
+    pub sequence: u64,
+    pub timestamp_ns: u64,
+}
+
+impl Heartbeat {
+    pub fn new(source: ProcessId, state: u32, sequence: u64) -> Self {
+        Self {
+            version: CONTRACT_VERSION,
+            source: source as u32,
+            state,
+            overruns: 0,
+            sequence,
+            timestamp_ns: crate::monotonic_ns(),
+        }
+    }
+}
+
+/// True platform pose as reported by the simulated plant (or a tracker).
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("crs_ipc::TrackerPose.v1")]
+#[repr(C)]
+pub struct TrackerPose {
+    pub version: u32,
+    /// 1 if the pose is valid (tracker sees the platform).
+    pub valid: u32,
+    pub sequence: u64,
+    pub timestamp_ns: u64,
+    pub pose: Pose6,
+    pub pose_velocity: Pose6,
+}
+
+impl Default for TrackerPose {
+    fn default() -> Self {
+        Self {
+            version: CONTRACT_VERSION,
+            valid: 0,
+            sequence: 0,
+            timestamp_ns: 0,
+            pose: [0.0; 6],
+            pose_velocity: [0.0; 6],
+        }
+    }
+}
+
+/// Identity of the platform model motion-core runs (a 32-byte hash, e.g. SHA-256 of the model
+/// TOML), so the safety monitor can check it uses the same platform.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("crs_ipc::PlatformIdentity.v1")]
+#[repr(C)]
+pub struct PlatformIdentity {
+    pub version: u32,
+    pub cable_count: u32,
+    pub timestamp_ns: u64,
+    pub hash: [u8; 32],
+}
+
+impl PlatformIdentity {
+    pub fn new(hash: [u8; 32], cable_count: u32) -> Self {
+        Self {
+            version: CONTRACT_VERSION,
+            cable_count,
+            timestamp_ns: crate::monotonic_ns(),
+            hash,
+        }
+    }
+}

@@ -1,0 +1,224 @@
+//! `crs calibrate …`: identification, residual diagnosis and model extension from measured
+//! data sets (docs/data-format.md), with a Markdown/JSON/SVG report and the identified model
+//! written back as a platform TOML (crates/calibrate, docs/calibration.md).
+
+use calibrate::effects::Effect;
+use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
+use calibrate::{Observation, from_dataset, report, split};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use motion_core::config::{Platform, load_platform};
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Subcommand, Debug)]
+pub enum CalibrateCommand {
+    /// Calibrate a platform from a recorded data set (and optionally a validation data set).
+    Run {
+        /// Nominal platform TOML (the start model p_N).
+        #[arg(long)]
+        platform: PathBuf,
+        /// Identification data set (CSV, docs/data-format.md).
+        #[arg(long)]
+        data: PathBuf,
+        /// Validation data set; without it, every `--holdout-every`-th pose is held out.
+        #[arg(long)]
+        validate: Option<PathBuf>,
+        #[command(flatten)]
+        opts: Opts,
+    },
+    /// Record identification and validation campaigns on the simulated plant, then calibrate
+    /// (the CRS-like scenario of docs/calibration.md).
+    Demo {
+        /// Plant TOML (config/plant/*.toml).
+        #[arg(long, default_value = "config/plant/crs-like.toml")]
+        plant: PathBuf,
+        /// Campaign TOML for the identification data.
+        #[arg(long, default_value = "config/plant/campaign-91.toml")]
+        campaign: PathBuf,
+        /// Seed offset of the validation campaign's random poses.
+        #[arg(long, default_value_t = 1000)]
+        validation_seed_offset: u64,
+        #[command(flatten)]
+        opts: Opts,
+    },
+}
+
+#[derive(Args, Debug)]
+pub struct Opts {
+    /// Output directory for report.md, report.json, plots, calibrated.toml.
+    #[arg(long, default_value = "calibration-out")]
+    out: PathBuf,
+    /// Hold out poses with pose_index % N == N − 1 when no validation set is given.
+    #[arg(long, default_value_t = 4)]
+    holdout_every: u64,
+    /// Weight of the wrench rows w_ρ,w (eq. 4.38).
+    #[arg(long, default_value_t = 1.0)]
+    w_wrench: f64,
+    /// Weight of the length rows w_ρ,q (eq. 4.38).
+    #[arg(long, default_value_t = 1e4)]
+    w_length: f64,
+    /// Ridge λ on the platform anchors b (eq. 4.32, sec. 6.5).
+    #[arg(long, default_value_t = 0.0)]
+    ridge_b: f64,
+    /// Lasso λ on the platform anchors b (eq. 4.32).
+    #[arg(long, default_value_t = 0.0)]
+    lasso_b: f64,
+    /// Candidate effects (comma separated): pulleys, powertrain, stiffness, hysteresis, sag, drum,
+    /// load_cog, force_sensors.
+    #[arg(long, value_delimiter = ',')]
+    candidates: Option<Vec<String>>,
+    /// Minimum held-out RMS reduction for an effect to be added (fraction).
+    #[arg(long, default_value_t = 0.05)]
+    min_gain: f64,
+    /// Skip the residual diagnosis / model extension.
+    #[arg(long)]
+    no_extension: bool,
+    /// Also print the report as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Error>> {
+    let mut cfg = PipelineConfig::default();
+    cfg.weights.wrench = o.w_wrench;
+    cfg.weights.length = o.w_length;
+    cfg.ridge_b = o.ridge_b;
+    cfg.lasso_b = o.lasso_b;
+    cfg.no_extension = o.no_extension;
+    cfg.select.min_gain = o.min_gain;
+    if let Some(c) = &o.candidates {
+        cfg.select.candidates = c
+            .iter()
+            .map(|n| {
+                Effect::from_name(n.trim())
+                    .ok_or_else(|| format!("--candidates: unknown effect `{n}`"))
+            })
+            .collect::<Result<_, _>>()?;
+    }
+    Ok(cfg)
+}
+
+fn load(path: &Path, m: usize) -> Result<Vec<Observation>, Box<dyn std::error::Error>> {
+    let ds = sim_plant::load_dataset(path)?;
+    Ok(from_dataset(&ds, m).map_err(|e| format!("{}: {e}", path.display()))?)
+}
+
+pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
+    let command: String = std::env::args().collect::<Vec<_>>().join(" ");
+    match cmd {
+        CalibrateCommand::Run {
+            platform,
+            data,
+            validate,
+            opts,
+        } => {
+            let base = load_platform(&platform)?;
+            let m = base.model.m();
+            let obs = load(&data, m)?;
+            let (train, holdout) = match &validate {
+                Some(v) => (obs, load(v, m)?),
+                None => split(&obs, opts.holdout_every),
+            };
+            calibrate_and_report(&base, &train, &holdout, &opts, &command)
+        }
+        CalibrateCommand::Demo {
+            plant,
+            campaign,
+            validation_seed_offset,
+            opts,
+        } => {
+            let pcfg = sim_plant::load_plant(&plant)?;
+            let camp = sim_plant::load_campaign(&campaign)?;
+            let base = pcfg.platform.clone();
+            let m = base.model.m();
+            let bar = spinner("recording identification campaign");
+            let mut p = sim_plant::Plant::new(pcfg.clone())?;
+            let ds = sim_plant::run_campaign(&mut p, &base, &camp, "nominal")?.dataset;
+            let mut vcamp = camp.clone();
+            if let sim_plant::PoseSet::Random { seed, .. } = &mut vcamp.poses {
+                *seed += validation_seed_offset;
+            }
+            vcamp.seed = Some(camp.seed.unwrap_or(pcfg.seed) + validation_seed_offset);
+            bar.set_message("recording validation campaign");
+            let mut p = sim_plant::Plant::new(pcfg)?;
+            let vds = sim_plant::run_campaign(&mut p, &base, &vcamp, "nominal")?.dataset;
+            bar.finish_and_clear();
+            std::fs::create_dir_all(&opts.out)?;
+            sim_plant::save_dataset(opts.out.join("identification.csv"), &ds)?;
+            sim_plant::save_dataset(opts.out.join("validation.csv"), &vds)?;
+            let train = from_dataset(&ds, m)?;
+            let holdout = from_dataset(&vds, m)?;
+            calibrate_and_report(&base, &train, &holdout, &opts, &command)
+        }
+    }
+}
+
+fn spinner(msg: &str) -> ProgressBar {
+    let bar = ProgressBar::new_spinner();
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed}] {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
+    bar.set_message(msg.to_string());
+    bar
+}
+
+fn calibrate_and_report(
+    base: &Platform,
+    train: &[Observation],
+    holdout: &[Observation],
+    opts: &Opts,
+    command: &str,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let cfg = config(opts)?;
+    let bar = spinner("identifying");
+    let rep: PipelineReport =
+        pipeline::run(&base.model, train, holdout, &cfg, &mut |stage, it, cost| {
+            if cost.is_finite() {
+                bar.set_message(format!("{stage}: iteration {it}, cost {cost:.4e}"));
+            } else {
+                bar.set_message(stage.to_string());
+            }
+        })?;
+    bar.finish_and_clear();
+    std::fs::create_dir_all(&opts.out)?;
+    let eval = if holdout.is_empty() { train } else { holdout };
+    let plots = report::plots(&rep, eval);
+    let mut names = Vec::new();
+    for (name, svg) in &plots {
+        std::fs::write(opts.out.join(name), svg)?;
+        names.push(name.clone());
+    }
+    let fin = rep.final_stage();
+    let chosen = rep
+        .selection
+        .as_ref()
+        .map(|s| s.chosen.clone())
+        .unwrap_or_default();
+    let toml_path = opts.out.join("calibrated.toml");
+    let side_path = opts.out.join("calibrated-effects.toml");
+    std::fs::write(
+        &toml_path,
+        report::platform_toml(base, &fin.model, &format!("{}-calibrated", base.name)),
+    )?;
+    std::fs::write(&side_path, report::side_file(&fin.model, &chosen))?;
+    // The written platform must load with the daemon's loader.
+    load_platform(&toml_path).map_err(|e| format!("written platform does not load: {e}"))?;
+    let mut md = report::markdown(&rep, command, &names);
+    md.push_str(&format!(
+        "\n## Output\n\n* Identified platform: `{}` (loads with `motion_core::config::load_platform`).\n* Side file (cable offsets and extension parameters the platform schema cannot express): `{}`.\n",
+        toml_path.display(),
+        side_path.display()
+    ));
+    std::fs::write(opts.out.join("report.md"), &md)?;
+    let json = serde_json::to_string_pretty(&rep)?;
+    std::fs::write(opts.out.join("report.json"), &json)?;
+    if opts.json {
+        println!("{json}");
+    } else {
+        println!("{}", report::stage_table(&rep));
+        println!("report: {}", opts.out.join("report.md").display());
+    }
+    Ok(())
+}

@@ -1,0 +1,84 @@
+//! drive-io daemon: CiA 402 master for the winch drives (see docs/can-protocol.md).
+
+use clap::Parser;
+use drive_io::{DrivesConfig, runner};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+#[derive(Parser)]
+#[command(about = "CANopen CiA 402 master for the cable-robot winch drives (CSP, 1 ms SYNC)")]
+struct Args {
+    /// Drive bus configuration (TOML).
+    #[arg(long, default_value = "config/drives.toml")]
+    config: PathBuf,
+    /// Override `bus.transport` (e.g. socketcan:can0, udpbus:239.255.70.1:20000).
+    #[arg(long)]
+    transport: Option<String>,
+    /// iceoryx2 service-name prefix (default: $CRS_IPC_PREFIX or none).
+    #[arg(long)]
+    ipc_prefix: Option<String>,
+    /// Run the SYNC loop as SCHED_FIFO with this priority (1..=99) and mlockall.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    rt_priority: Option<i32>,
+    /// Pin the SYNC loop to this CPU (with --rt-priority).
+    #[arg(long)]
+    cpu: Option<usize>,
+}
+
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    STOP.store(true, Ordering::SeqCst);
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .init();
+    let args = Args::parse();
+    match run(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("drive-io: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
+    let mut cfg = DrivesConfig::load(&args.config)?;
+    if let Some(t) = args.transport {
+        cfg.bus.transport = t;
+        cfg.validate()?;
+    }
+    let spec = cfg.transport()?;
+    // SAFETY: the handler only stores to an atomic (async-signal-safe).
+    unsafe {
+        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+    }
+    let ipc = match args.ipc_prefix {
+        Some(p) => crs_ipc::IpcNode::with_prefix("drive-io", &p)?,
+        None => crs_ipc::IpcNode::new("drive-io")?,
+    };
+    let bus = can_transport::open(&spec)?;
+    if let Some(p) = args.rt_priority {
+        runner::make_realtime(p, args.cpu)?;
+        tracing::info!(priority = p, cpu = ?args.cpu, "SCHED_FIFO + mlockall");
+    }
+    tracing::info!(transport = %spec, drives = cfg.winches.len(), "drive-io starting");
+    let summary = match &cfg.bus.candump_log {
+        Some(path) => runner::run(
+            &cfg,
+            can_transport::LoggingBus::create(bus, path.as_ref())?,
+            &ipc,
+            &STOP,
+        )?,
+        None => runner::run(&cfg, bus, &ipc, &STOP)?,
+    };
+    tracing::info!(?summary, "drive-io stopped");
+    Ok(())
+}

@@ -1,0 +1,243 @@
+//! Drive bus configuration (config/drives.toml): transport, timing, per-winch scaling.
+
+use can_transport::TransportSpec;
+use crs_ipc::MAX_CABLES;
+use serde::Deserialize;
+use std::f64::consts::PI;
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{path}: {source}")]
+    Read {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("drives TOML: {0}")]
+    Parse(String),
+    #[error("drives TOML: field `{field}`: {reason}")]
+    Invalid { field: String, reason: String },
+}
+
+fn invalid(field: impl Into<String>, reason: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid {
+        field: field.into(),
+        reason: reason.into(),
+    }
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BusConfig {
+    /// `socketcan:<iface>`, `udpbus:<group>:<port>` or `udp:<local>-><remote>`.
+    pub transport: String,
+    /// SYNC period (µs); 1000 = the 1 ms loop of thesis §5.6.
+    #[serde(default = "d_sync")]
+    pub sync_period_us: u32,
+    /// Quick stop if no new setpoint arrived for more than this many SYNC cycles.
+    #[serde(default = "d_stale")]
+    pub stale_setpoint_cycles: u32,
+    /// Heartbeat producer time written to every drive's 0x1017 (ms).
+    #[serde(default = "d_hb_prod")]
+    pub heartbeat_producer_ms: u16,
+    /// Heartbeat consumer timeout (ms): a drive silent this long faults the bus.
+    #[serde(default = "d_hb_timeout")]
+    pub heartbeat_timeout_ms: u32,
+    /// Time allowed for NMT boot, SDO configuration and the CiA 402 enable sequence (ms).
+    #[serde(default = "d_boot")]
+    pub boot_timeout_ms: u32,
+    /// Time allowed per SDO transfer (ms); retried up to 3 times.
+    #[serde(default = "d_sdo")]
+    pub sdo_timeout_ms: u32,
+    /// Largest accepted cable speed implied by consecutive setpoints (m/s); faster = fault.
+    #[serde(default = "d_vmax")]
+    pub max_cable_speed_m_per_s: f64,
+    /// Optional candump log of every frame.
+    #[serde(default)]
+    pub candump_log: Option<String>,
+}
+
+fn d_sync() -> u32 {
+    1000
+}
+fn d_stale() -> u32 {
+    10
+}
+fn d_hb_prod() -> u16 {
+    10
+}
+fn d_hb_timeout() -> u32 {
+    100
+}
+fn d_boot() -> u32 {
+    5000
+}
+fn d_sdo() -> u32 {
+    100
+}
+fn d_vmax() -> f64 {
+    5.0
+}
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct WinchConfig {
+    /// CANopen node id (1..=127), unique.
+    pub node_id: u8,
+    /// Drum diameter (m); one drum revolution winds π·d of cable.
+    pub drum_diameter_m: f64,
+    /// Motor revolutions per drum revolution.
+    pub gear_ratio: f64,
+    /// Encoder counts per motor revolution.
+    pub counts_per_rev: f64,
+    /// +1 if counts increase when the cable gets longer, -1 otherwise.
+    pub sign: i8,
+    /// Encoder counts at cable length 0 m.
+    #[serde(default)]
+    pub offset_counts: i64,
+    /// Largest cable length this winch may be commanded to (m); also bounds the i32 count range.
+    #[serde(default = "d_lmax")]
+    pub max_cable_length_m: f64,
+}
+
+fn d_lmax() -> f64 {
+    30.0
+}
+
+impl WinchConfig {
+    pub fn counts_per_m(&self) -> f64 {
+        self.gear_ratio * self.counts_per_rev / (PI * self.drum_diameter_m)
+    }
+    /// Cable length (m) -> encoder counts (rounded). `None` if out of [0, max] or not finite.
+    pub fn length_to_counts(&self, length_m: f64) -> Option<i32> {
+        if !length_m.is_finite() || length_m < 0.0 || length_m > self.max_cable_length_m {
+            return None;
+        }
+        let c = self.offset_counts as f64 + f64::from(self.sign) * length_m * self.counts_per_m();
+        let c = c.round();
+        (c >= f64::from(i32::MIN) && c <= f64::from(i32::MAX)).then_some(c as i32)
+    }
+    pub fn counts_to_length(&self, counts: i32) -> f64 {
+        (f64::from(counts) - self.offset_counts as f64) * f64::from(self.sign) / self.counts_per_m()
+    }
+    pub fn counts_per_s_to_m_per_s(&self, v: i32) -> f64 {
+        f64::from(v) * f64::from(self.sign) / self.counts_per_m()
+    }
+    pub fn m_per_s_to_counts_per_s(&self, v: f64) -> i32 {
+        (v * f64::from(self.sign) * self.counts_per_m())
+            .round()
+            .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+    }
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DrivesConfig {
+    pub bus: BusConfig,
+    #[serde(rename = "winch")]
+    pub winches: Vec<WinchConfig>,
+}
+
+impl DrivesConfig {
+    pub fn load(path: &std::path::Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::parse(&text)
+    }
+
+    /// Parses and validates; nothing is returned unless everything is valid.
+    pub fn parse(text: &str) -> Result<Self, ConfigError> {
+        let cfg: Self = toml::from_str(text).map_err(|e| ConfigError::Parse(e.to_string()))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    pub fn transport(&self) -> Result<TransportSpec, ConfigError> {
+        self.bus
+            .transport
+            .parse()
+            .map_err(|e: can_transport::SpecError| invalid("bus.transport", e.to_string()))
+    }
+
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let b = &self.bus;
+        self.transport()?;
+        if !(250..=100_000).contains(&b.sync_period_us) {
+            return Err(invalid("bus.sync_period_us", "must be in 250..=100000"));
+        }
+        if b.stale_setpoint_cycles == 0 {
+            return Err(invalid("bus.stale_setpoint_cycles", "must be >= 1"));
+        }
+        if b.heartbeat_producer_ms == 0 {
+            return Err(invalid("bus.heartbeat_producer_ms", "must be >= 1"));
+        }
+        if b.heartbeat_timeout_ms <= u32::from(b.heartbeat_producer_ms) {
+            return Err(invalid(
+                "bus.heartbeat_timeout_ms",
+                "must exceed bus.heartbeat_producer_ms",
+            ));
+        }
+        if b.boot_timeout_ms == 0 || b.sdo_timeout_ms == 0 {
+            return Err(invalid(
+                "bus.boot_timeout_ms/sdo_timeout_ms",
+                "must be >= 1",
+            ));
+        }
+        if !(b.max_cable_speed_m_per_s.is_finite() && b.max_cable_speed_m_per_s > 0.0) {
+            return Err(invalid(
+                "bus.max_cable_speed_m_per_s",
+                "must be finite and > 0",
+            ));
+        }
+        if self.winches.is_empty() || self.winches.len() > MAX_CABLES {
+            return Err(invalid(
+                "winch",
+                format!(
+                    "need 1..={MAX_CABLES} [[winch]] entries, got {}",
+                    self.winches.len()
+                ),
+            ));
+        }
+        for (i, w) in self.winches.iter().enumerate() {
+            let f = |name: &str| format!("winch[{i}].{name}");
+            if !(1..=127).contains(&w.node_id) {
+                return Err(invalid(f("node_id"), "must be in 1..=127"));
+            }
+            if self.winches[..i].iter().any(|o| o.node_id == w.node_id) {
+                return Err(invalid(
+                    f("node_id"),
+                    format!("node id {} used twice", w.node_id),
+                ));
+            }
+            for (name, v) in [
+                ("drum_diameter_m", w.drum_diameter_m),
+                ("gear_ratio", w.gear_ratio),
+                ("counts_per_rev", w.counts_per_rev),
+                ("max_cable_length_m", w.max_cable_length_m),
+            ] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(invalid(f(name), "must be finite and > 0"));
+                }
+            }
+            if w.sign != 1 && w.sign != -1 {
+                return Err(invalid(f("sign"), "must be 1 or -1"));
+            }
+            let span = w.max_cable_length_m * w.counts_per_m();
+            let lo = w.offset_counts as f64 - span;
+            let hi = w.offset_counts as f64 + span;
+            if lo < f64::from(i32::MIN) || hi > f64::from(i32::MAX) {
+                return Err(invalid(
+                    f("max_cable_length_m"),
+                    "0..max cable length does not fit the i32 position range (0x607A) with this scaling/offset",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    pub fn sync_period_ns(&self) -> u64 {
+        u64::from(self.bus.sync_period_us) * 1000
+    }
+}

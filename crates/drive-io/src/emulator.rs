@@ -1,0 +1,154 @@
+//! TEST DOUBLE: `winch-emulator` answers as m CiA 402 drives on the bus and moves each cable
+//! kinematically ([`WinchAxis`]) toward its target. It is not the plant (that is crates/sim-plant);
+//! it exists so drive-io can be tested without the physics.
+
+use crate::canopen::{Ds402State, NmtState};
+use crate::config::{DrivesConfig, WinchConfig};
+use crate::slave::{DriveBank, MotionDemand, WinchAxis};
+use can_transport::CanBus;
+use crs_ipc::MAX_CABLES;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, AtomicU64, Ordering};
+use std::time::Duration;
+
+/// Emulator parameters (SI).
+#[derive(Debug, Clone)]
+pub struct EmulatorConfig {
+    pub winches: Vec<WinchConfig>,
+    pub initial_length_m: Vec<f64>,
+    /// Physics step per SYNC (s): the drive interpolates over one SYNC period (CSP).
+    pub sync_period_s: f64,
+    pub max_speed_m_per_s: f64,
+    pub max_accel_m_per_s2: f64,
+    /// Heartbeat period before the master configures 0x1017 (ms).
+    pub default_heartbeat_ms: u16,
+    /// Reported pulley force: pretension + damping * cable speed (a stand-in, not physics).
+    pub pretension_n: f64,
+    pub damping_n_per_m_per_s: f64,
+}
+
+impl EmulatorConfig {
+    pub fn from_drives(cfg: &DrivesConfig, initial_length_m: f64) -> Self {
+        Self {
+            winches: cfg.winches.clone(),
+            initial_length_m: vec![initial_length_m; cfg.winches.len()],
+            sync_period_s: f64::from(cfg.bus.sync_period_us) * 1e-6,
+            max_speed_m_per_s: 5.0,
+            max_accel_m_per_s2: 14.0,
+            default_heartbeat_ms: cfg.bus.heartbeat_producer_ms,
+            pretension_n: 2000.0,
+            damping_n_per_m_per_s: 100.0,
+        }
+    }
+}
+
+/// Shared view/control of a running emulator (lock-free, for tests).
+#[derive(Default)]
+pub struct EmulatorControl {
+    pub stop: AtomicBool,
+    /// Bit i set = winch i stops producing heartbeats.
+    pub heartbeat_mute_mask: AtomicU32,
+    /// Number of SYNCs processed (by winch 0).
+    pub syncs: AtomicU64,
+    length_bits: [AtomicU64; MAX_CABLES],
+    velocity_bits: [AtomicU64; MAX_CABLES],
+    statusword: [AtomicU16; MAX_CABLES],
+    nmt: [AtomicU16; MAX_CABLES],
+}
+
+impl EmulatorControl {
+    pub fn new() -> Arc<Self> {
+        Arc::new(Self::default())
+    }
+    /// True cable length of winch `i` (m).
+    pub fn length_m(&self, i: usize) -> f64 {
+        f64::from_bits(self.length_bits[i].load(Ordering::Acquire))
+    }
+    pub fn velocity_m_per_s(&self, i: usize) -> f64 {
+        f64::from_bits(self.velocity_bits[i].load(Ordering::Acquire))
+    }
+    pub fn ds402_state(&self, i: usize) -> Ds402State {
+        Ds402State::from_statusword(self.statusword[i].load(Ordering::Acquire))
+    }
+    pub fn nmt_state(&self, i: usize) -> Option<NmtState> {
+        NmtState::from_code(self.nmt[i].load(Ordering::Acquire) as u8)
+    }
+    pub fn mute_heartbeat(&self, i: usize) {
+        self.heartbeat_mute_mask.fetch_or(1 << i, Ordering::AcqRel);
+    }
+}
+
+/// Runs the emulator until `control.stop` is set. Bus errors other than a full TX queue end it.
+pub fn run(
+    mut bus: impl CanBus,
+    cfg: &EmulatorConfig,
+    control: &EmulatorControl,
+) -> Result<(), can_transport::CanError> {
+    let m = cfg.winches.len().min(MAX_CABLES);
+    let ids: Vec<u8> = cfg.winches.iter().take(m).map(|w| w.node_id).collect();
+    let mut bank = DriveBank::new(&ids, cfg.default_heartbeat_ms);
+    let mut axes: Vec<WinchAxis> = (0..m)
+        .map(|i| {
+            WinchAxis::new(
+                cfg.initial_length_m.get(i).copied().unwrap_or(5.0),
+                cfg.max_speed_m_per_s,
+                cfg.max_accel_m_per_s2,
+            )
+        })
+        .collect();
+    for (i, (w, ax)) in cfg.winches.iter().zip(&axes).enumerate() {
+        let c = w.length_to_counts(ax.length_m).unwrap_or(0);
+        bank.set_actual(i, c, 0, (cfg.pretension_n * 1000.0) as i32);
+    }
+    bank.start(crs_ipc::monotonic_ns());
+    let publish = |bank: &DriveBank, axes: &[WinchAxis]| {
+        for (i, ax) in axes.iter().enumerate() {
+            control.length_bits[i].store(ax.length_m.to_bits(), Ordering::Release);
+            control.velocity_bits[i].store(ax.velocity_m_per_s.to_bits(), Ordering::Release);
+            if let Some(s) = bank.slave(i) {
+                control.statusword[i].store(s.statusword(), Ordering::Release);
+                control.nmt[i].store(u16::from(s.nmt_state().code()), Ordering::Release);
+            }
+        }
+    };
+    publish(&bank, &axes);
+    while !control.stop.load(Ordering::Acquire) {
+        bank.flush(&mut bus)?;
+        let rx = bus.recv_timeout(Duration::from_millis(2))?;
+        let now = crs_ipc::monotonic_ns();
+        if let Some(rx) = rx
+            && bank.handle_frame(&rx.frame, now)
+        {
+            for (i, (w, ax)) in cfg.winches.iter().zip(axes.iter_mut()).enumerate() {
+                match bank.demand(i) {
+                    MotionDemand::Follow { target_counts } => {
+                        ax.step(Some(w.counts_to_length(target_counts)), cfg.sync_period_s)
+                    }
+                    MotionDemand::QuickStop => ax.step(None, cfg.sync_period_s),
+                    MotionDemand::Hold => ax.hold(),
+                }
+                let pos = w
+                    .length_to_counts(ax.length_m)
+                    .unwrap_or(if ax.length_m < 0.0 { 0 } else { i32::MAX });
+                let force = cfg.pretension_n + cfg.damping_n_per_m_per_s * ax.velocity_m_per_s;
+                bank.set_actual(
+                    i,
+                    pos,
+                    w.m_per_s_to_counts_per_s(ax.velocity_m_per_s),
+                    (force * 1000.0) as i32,
+                );
+            }
+            bank.transmit_pdos();
+            control.syncs.fetch_add(1, Ordering::AcqRel);
+        }
+        let mute = control.heartbeat_mute_mask.load(Ordering::Acquire);
+        for i in 0..m {
+            if let Some(s) = bank.slave_mut(i) {
+                s.set_heartbeat_muted(mute & (1 << i) != 0);
+            }
+        }
+        bank.poll(now);
+        publish(&bank, &axes);
+    }
+    Ok(())
+}

@@ -1,0 +1,614 @@
+//! CiA 402 master core: pure logic (frames in, frames out), no I/O, no allocation per cycle.
+//! [`crate::runner`] ties it to a bus, the 1 ms SYNC timer and iceoryx2.
+//!
+//! Sequence: NMT reset-communication -> wait boot-up of every drive -> SDO: 0x1017 heartbeat
+//! producer time, 0x6060 = 8 (CSP), read back 0x6061 -> NMT start -> SYNC every period, RPDO
+//! controlword walks each drive to Operation Enabled holding its actual position -> Ready ->
+//! Running on the first new setpoint. Any of: stale setpoints, e-stop event, heartbeat loss,
+//! EMCY, drive fault bit, invalid setpoint => quick stop ALL drives and hold (latched until a
+//! Reset event).
+
+use crate::canopen::*;
+use crate::config::{DrivesConfig, WinchConfig};
+use can_transport::RxFrame;
+use crs_ipc::{
+    BusState, DriveFeedback, EventKind, JointSetpoint, MAX_CABLES, StateEvent, fault_code,
+};
+
+const SDO_RETRIES: u8 = 3;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum SdoStep {
+    WriteHeartbeat,
+    WriteMode,
+    ReadMode,
+    Done,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct DriveView {
+    node: u8,
+    booted: bool,
+    hb_monitored: bool,
+    last_hb_ns: u64,
+    last_hb_state: u8,
+    seen_operational: bool,
+    /// Heartbeat timeout already reported (reported once per loss, cleared by a heartbeat).
+    hb_lost: bool,
+    statusword: u16,
+    have_tpdo1: bool,
+    position: i32,
+    velocity: i32,
+    force_mn: i32,
+    rx_ns: u64,
+    sdo: SdoStep,
+    sdo_outstanding: bool,
+    sdo_sent_ns: u64,
+    sdo_tries: u8,
+}
+
+impl DriveView {
+    fn new(node: u8) -> Self {
+        Self {
+            node,
+            booted: false,
+            hb_monitored: false,
+            last_hb_ns: 0,
+            last_hb_state: 0,
+            seen_operational: false,
+            hb_lost: false,
+            statusword: 0,
+            have_tpdo1: false,
+            position: 0,
+            velocity: 0,
+            force_mn: 0,
+            rx_ns: 0,
+            sdo: SdoStep::WriteHeartbeat,
+            sdo_outstanding: false,
+            sdo_sent_ns: 0,
+            sdo_tries: 0,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    Boot,
+    Configure,
+    Enable,
+    Ready,
+    Running,
+    Stopped(BusState),
+}
+
+/// The master's per-bus state. Create once (allocates), then call [`Master::on_frame`],
+/// [`Master::on_event`] and [`Master::cycle`]; none of these allocate.
+pub struct Master {
+    winches: [WinchConfig; MAX_CABLES],
+    m: usize,
+    sync_period_ns: u64,
+    stale_cycles: u32,
+    hb_producer_ms: u16,
+    hb_timeout_ns: u64,
+    boot_timeout_ns: u64,
+    sdo_timeout_ns: u64,
+    max_step_counts: [f64; MAX_CABLES],
+    drives: [DriveView; MAX_CABLES],
+    phase: Phase,
+    boot_start_ns: Option<u64>,
+    cycle: u64,
+    toggle: bool,
+    target: [i32; MAX_CABLES],
+    last_seq: u64,
+    last_sp_timestamp_ns: u64,
+    setpoint_age: u32,
+    applied_seq: u64,
+    applied_this_cycle: bool,
+    fault_code: u32,
+    fault_node: u32,
+    last_emcy: u32,
+    state_changed: bool,
+    overruns: u32,
+    feedback: DriveFeedback,
+}
+
+impl Master {
+    pub fn new(cfg: &DrivesConfig) -> Self {
+        let m = cfg.winches.len().min(MAX_CABLES);
+        let mut winches = [cfg.winches[0]; MAX_CABLES];
+        winches[..m].copy_from_slice(&cfg.winches[..m]);
+        let mut drives = [DriveView::new(0); MAX_CABLES];
+        let mut max_step_counts = [0.0; MAX_CABLES];
+        let period_s = f64::from(cfg.bus.sync_period_us) * 1e-6;
+        for i in 0..m {
+            drives[i] = DriveView::new(winches[i].node_id);
+            // Largest step per SYNC period at max cable speed.
+            max_step_counts[i] =
+                cfg.bus.max_cable_speed_m_per_s * period_s * winches[i].counts_per_m();
+        }
+        let feedback = DriveFeedback {
+            cable_count: m as u32,
+            ..Default::default()
+        };
+        Self {
+            winches,
+            m,
+            sync_period_ns: cfg.sync_period_ns(),
+            stale_cycles: cfg.bus.stale_setpoint_cycles,
+            hb_producer_ms: cfg.bus.heartbeat_producer_ms,
+            hb_timeout_ns: u64::from(cfg.bus.heartbeat_timeout_ms) * 1_000_000,
+            boot_timeout_ns: u64::from(cfg.bus.boot_timeout_ms) * 1_000_000,
+            sdo_timeout_ns: u64::from(cfg.bus.sdo_timeout_ms) * 1_000_000,
+            max_step_counts,
+            drives,
+            phase: Phase::Boot,
+            boot_start_ns: None,
+            cycle: 0,
+            toggle: false,
+            target: [0; MAX_CABLES],
+            last_seq: 0,
+            last_sp_timestamp_ns: 0,
+            setpoint_age: 0,
+            applied_seq: 0,
+            applied_this_cycle: false,
+            fault_code: fault_code::NONE,
+            fault_node: 0,
+            last_emcy: 0,
+            state_changed: true,
+            overruns: 0,
+            feedback,
+        }
+    }
+
+    pub fn state(&self) -> BusState {
+        match self.phase {
+            Phase::Boot | Phase::Configure | Phase::Enable => BusState::Booting,
+            Phase::Ready => BusState::Ready,
+            Phase::Running => BusState::Running,
+            Phase::Stopped(s) => s,
+        }
+    }
+
+    pub fn sync_period_ns(&self) -> u64 {
+        self.sync_period_ns
+    }
+
+    /// Feedback of the last cycle.
+    pub fn feedback(&self) -> &DriveFeedback {
+        &self.feedback
+    }
+
+    /// Returns a [`StateEvent`] once after every bus-state change.
+    pub fn take_state_event(&mut self, sequence: u64) -> Option<StateEvent> {
+        if !self.state_changed {
+            return None;
+        }
+        self.state_changed = false;
+        let kind = if self.state() == BusState::Fault {
+            EventKind::Fault
+        } else {
+            EventKind::StateChanged
+        };
+        let mut ev = StateEvent::new(crs_ipc::ProcessId::DriveIo, kind, sequence);
+        ev.state = self.state() as u32;
+        ev.detail = self.fault_code;
+        ev.detail_node = self.fault_node;
+        Some(ev)
+    }
+
+    fn set_phase(&mut self, p: Phase) {
+        let before = self.state();
+        self.phase = p;
+        // Only bus-state changes are events (Boot/Configure/Enable are all `Booting`).
+        self.state_changed |= self.state() != before;
+    }
+
+    fn stop(&mut self, state: BusState, code: u32, node: u8) {
+        // The first cause is kept: a fault must not be masked by its consequences.
+        if matches!(self.phase, Phase::Stopped(BusState::Fault)) {
+            return;
+        }
+        if state == BusState::Fault || !matches!(self.phase, Phase::Stopped(_)) {
+            self.fault_code = code;
+            self.fault_node = u32::from(node);
+            tracing::error!(
+                ?state,
+                code,
+                node,
+                "drive bus stopping: quick stop all drives"
+            );
+            self.set_phase(Phase::Stopped(state));
+        }
+    }
+
+    fn index_of(&self, node: u8) -> Option<usize> {
+        self.drives[..self.m].iter().position(|d| d.node == node)
+    }
+
+    /// Handles one received frame.
+    pub fn on_frame(&mut self, rx: &RxFrame) {
+        let msg = decode(&rx.frame);
+        let node = match msg {
+            Message::Tpdo1 { node, .. }
+            | Message::Tpdo2 { node, .. }
+            | Message::Emcy { node, .. }
+            | Message::SdoResponse { node, .. }
+            | Message::Heartbeat { node, .. } => node,
+            _ => return,
+        };
+        let Some(i) = self.index_of(node) else { return };
+        let booting = matches!(self.phase, Phase::Boot | Phase::Configure | Phase::Enable);
+        let d = &mut self.drives[i];
+        match msg {
+            Message::Tpdo1 {
+                statusword,
+                position_counts,
+                ..
+            } => {
+                d.statusword = statusword;
+                d.position = position_counts;
+                d.rx_ns = rx.rx_monotonic_ns;
+                d.have_tpdo1 = true;
+            }
+            Message::Tpdo2 {
+                velocity_counts_per_s,
+                force_mn,
+                ..
+            } => {
+                d.velocity = velocity_counts_per_s;
+                d.force_mn = force_mn;
+            }
+            Message::Heartbeat { state, .. } => {
+                d.last_hb_ns = rx.rx_monotonic_ns;
+                d.last_hb_state = state;
+                d.hb_lost = false;
+                d.seen_operational |= state == NmtState::Operational.code();
+                if self.phase == Phase::Boot {
+                    d.booted = true;
+                } else if state == NmtState::BootUp.code() && !booting {
+                    // A drive rebooted under us: it lost its configuration and enable state.
+                    self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, node);
+                }
+            }
+            // Error code 0 is "error reset / no error": informational.
+            Message::Emcy { code, .. } if code != 0 => {
+                self.last_emcy = u32::from(code);
+                tracing::error!(node, code = format_args!("{code:#06x}"), "EMCY");
+                self.stop(BusState::Fault, fault_code::EMCY, node);
+            }
+            Message::SdoResponse { data, .. } => self.on_sdo(i, &data),
+            _ => {}
+        }
+    }
+
+    fn on_sdo(&mut self, i: usize, data: &[u8; 8]) {
+        let d = &mut self.drives[i];
+        if !d.sdo_outstanding {
+            return;
+        }
+        let (expect_index, is_read) = match d.sdo {
+            SdoStep::WriteHeartbeat => (OD_PRODUCER_HEARTBEAT_MS, false),
+            SdoStep::WriteMode => (OD_MODES_OF_OPERATION, false),
+            SdoStep::ReadMode => (OD_MODES_DISPLAY, true),
+            SdoStep::Done => return,
+        };
+        let node = d.node;
+        let ok = match parse_sdo_response(data) {
+            SdoResponse::DownloadOk { index, .. } if !is_read && index == expect_index => true,
+            SdoResponse::UploadOk { index, value, .. } if is_read && index == expect_index => {
+                if value as u8 as i8 != MODE_CSP {
+                    tracing::error!(node, value, "drive does not report CSP mode in 0x6061");
+                    self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
+                    return;
+                }
+                true
+            }
+            SdoResponse::Abort { index, code, .. } if index == expect_index => {
+                tracing::error!(
+                    node,
+                    index,
+                    code = format_args!("{code:#010x}"),
+                    "SDO abort"
+                );
+                self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
+                return;
+            }
+            _ => false, // stray or mismatched response: ignore, timeout handles it
+        };
+        if ok {
+            d.sdo_outstanding = false;
+            d.sdo_tries = 0;
+            if d.sdo == SdoStep::WriteHeartbeat {
+                d.hb_monitored = true;
+            }
+            d.sdo = match d.sdo {
+                SdoStep::WriteHeartbeat => SdoStep::WriteMode,
+                SdoStep::WriteMode => SdoStep::ReadMode,
+                _ => SdoStep::Done,
+            };
+        }
+    }
+
+    /// Handles an e-stop / reset event from the process bus.
+    pub fn on_event(&mut self, ev: &StateEvent, now_ns: u64) {
+        if ev.kind == EventKind::EStop as u32 {
+            self.stop(BusState::EStop, fault_code::NONE, 0);
+        } else if ev.kind == EventKind::Reset as u32
+            && matches!(self.phase, Phase::Stopped(_))
+            && self.heartbeats_fresh(now_ns)
+        {
+            tracing::info!("reset: re-enabling drives");
+            self.fault_code = fault_code::NONE;
+            self.fault_node = 0;
+            self.set_phase(Phase::Enable);
+            self.boot_start_ns = Some(now_ns);
+        }
+    }
+
+    fn heartbeats_fresh(&self, now_ns: u64) -> bool {
+        self.drives[..self.m]
+            .iter()
+            .all(|d| !d.hb_monitored || now_ns.saturating_sub(d.last_hb_ns) <= self.hb_timeout_ns)
+    }
+
+    /// One SYNC cycle at time `now_ns`: consumes the newest setpoint (if any), writes RPDOs and
+    /// the SYNC into `out`, updates the feedback.
+    pub fn cycle(&mut self, now_ns: u64, setpoint: Option<&JointSetpoint>, out: &mut FrameBuf) {
+        self.cycle += 1;
+        self.toggle = !self.toggle;
+        self.applied_this_cycle = false;
+        let boot_start = *self.boot_start_ns.get_or_insert(now_ns);
+
+        // Heartbeat consumer (CiA 301 §7.2.8.3.2.2), active per drive once its producer time is set.
+        for i in 0..self.m {
+            let d = self.drives[i];
+            if d.hb_monitored
+                && !d.hb_lost
+                && now_ns.saturating_sub(d.last_hb_ns) > self.hb_timeout_ns
+            {
+                self.drives[i].hb_lost = true;
+                tracing::error!(node = d.node, "heartbeat lost");
+                self.stop(BusState::Fault, fault_code::HEARTBEAT_LOST, d.node);
+            }
+        }
+        if matches!(self.phase, Phase::Boot | Phase::Configure | Phase::Enable)
+            && now_ns.saturating_sub(boot_start) > self.boot_timeout_ns
+        {
+            let node = self.drives[..self.m]
+                .iter()
+                .find(|d| {
+                    !d.booted
+                        || d.sdo != SdoStep::Done
+                        || Ds402State::from_statusword(d.statusword) != Ds402State::OperationEnabled
+                })
+                .map_or(0, |d| d.node);
+            tracing::error!(node, phase = ?self.phase, "boot timeout");
+            self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
+        }
+
+        match self.phase {
+            Phase::Boot => {
+                if self.cycle == 1 {
+                    out.push(nmt(NMT_RESET_COMM, 0));
+                }
+                if self.drives[..self.m].iter().all(|d| d.booted) {
+                    for d in &mut self.drives[..self.m] {
+                        d.last_hb_ns = now_ns;
+                    }
+                    self.set_phase(Phase::Configure);
+                }
+            }
+            Phase::Configure => {
+                let (hb, sdo_timeout) = (self.hb_producer_ms, self.sdo_timeout_ns);
+                let mut timed_out = None;
+                for d in &mut self.drives[..self.m] {
+                    if d.sdo == SdoStep::Done {
+                        continue;
+                    }
+                    if d.sdo_outstanding && now_ns.saturating_sub(d.sdo_sent_ns) < sdo_timeout {
+                        continue;
+                    }
+                    if d.sdo_outstanding && d.sdo_tries >= SDO_RETRIES {
+                        timed_out = Some(d.node);
+                        continue;
+                    }
+                    out.push(match d.sdo {
+                        SdoStep::WriteHeartbeat => {
+                            sdo_download(d.node, OD_PRODUCER_HEARTBEAT_MS, 0, u32::from(hb), 2)
+                        }
+                        SdoStep::WriteMode => sdo_download(
+                            d.node,
+                            OD_MODES_OF_OPERATION,
+                            0,
+                            u32::from(MODE_CSP as u8),
+                            1,
+                        ),
+                        _ => sdo_upload(d.node, OD_MODES_DISPLAY, 0),
+                    });
+                    d.sdo_outstanding = true;
+                    d.sdo_sent_ns = now_ns;
+                    d.sdo_tries += 1;
+                }
+                if let Some(node) = timed_out {
+                    tracing::error!(node, "SDO timeout");
+                    self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
+                } else if self.drives[..self.m].iter().all(|d| d.sdo == SdoStep::Done) {
+                    out.push(nmt(NMT_START, 0));
+                    self.set_phase(Phase::Enable);
+                }
+            }
+            Phase::Enable => {
+                let mut all_enabled = true;
+                for i in 0..self.m {
+                    let d = self.drives[i];
+                    let st = Ds402State::from_statusword(d.statusword);
+                    all_enabled &= d.have_tpdo1 && st == Ds402State::OperationEnabled;
+                    if d.have_tpdo1 {
+                        // Enable while holding the actual position: the drive must not jump.
+                        self.target[i] = d.position;
+                        out.push(rpdo1(d.node, enable_step(st, self.toggle), d.position));
+                    }
+                }
+                out.push(sync());
+                if all_enabled {
+                    self.setpoint_age = 0;
+                    self.set_phase(Phase::Ready);
+                }
+            }
+            Phase::Ready | Phase::Running => {
+                self.check_drives(now_ns);
+                if let Some(sp) = setpoint.filter(|sp| sp.sequence > self.last_seq) {
+                    self.last_seq = sp.sequence;
+                    if self.apply_setpoint(sp) {
+                        self.setpoint_age = 0;
+                        self.set_phase(Phase::Running);
+                    }
+                } else if self.phase == Phase::Running {
+                    self.setpoint_age = self.setpoint_age.saturating_add(1);
+                    if self.setpoint_age > self.stale_cycles {
+                        tracing::warn!(cycles = self.setpoint_age, "setpoints stale");
+                        self.stop(BusState::StaleStop, fault_code::NONE, 0);
+                    }
+                }
+                if matches!(self.phase, Phase::Ready | Phase::Running) {
+                    for i in 0..self.m {
+                        out.push(rpdo1(
+                            self.drives[i].node,
+                            CW_ENABLE_OPERATION,
+                            self.target[i],
+                        ));
+                    }
+                    out.push(sync());
+                } else {
+                    self.push_quick_stop(out);
+                }
+            }
+            Phase::Stopped(_) => self.push_quick_stop(out),
+        }
+        self.update_feedback(now_ns);
+    }
+
+    fn push_quick_stop(&mut self, out: &mut FrameBuf) {
+        // Keep SYNC running so the drives keep reporting; hold the last target.
+        if self.drives[..self.m].iter().any(|d| d.have_tpdo1) {
+            for i in 0..self.m {
+                out.push(rpdo1(self.drives[i].node, CW_QUICK_STOP, self.target[i]));
+            }
+            out.push(sync());
+        }
+    }
+
+    fn check_drives(&mut self, now_ns: u64) {
+        for i in 0..self.m {
+            let d = self.drives[i];
+            match Ds402State::from_statusword(d.statusword) {
+                Ds402State::OperationEnabled => {}
+                Ds402State::Fault | Ds402State::FaultReactionActive => {
+                    self.stop(BusState::Fault, fault_code::DRIVE_FAULT_BIT, d.node)
+                }
+                _ => self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, d.node),
+            }
+            // A drive that left Operational (NMT stop / pre-op by someone else) no longer follows.
+            if d.seen_operational && d.last_hb_state != NmtState::Operational.code() {
+                self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, d.node);
+            }
+            if now_ns.saturating_sub(d.rx_ns) > self.hb_timeout_ns {
+                tracing::error!(node = d.node, "TPDO timeout");
+                self.stop(BusState::Fault, fault_code::PDO_TIMEOUT, d.node);
+            }
+        }
+    }
+
+    /// Converts and checks a setpoint; on any invalid entry nothing is applied and the bus faults.
+    fn apply_setpoint(&mut self, sp: &JointSetpoint) -> bool {
+        if sp.version != crs_ipc::CONTRACT_VERSION || sp.cable_count as usize != self.m {
+            tracing::error!(
+                count = sp.cable_count,
+                expected = self.m,
+                "setpoint cable count/version mismatch"
+            );
+            self.stop(BusState::Fault, fault_code::SETPOINT_INVALID, 0);
+            return false;
+        }
+        let mut counts = [0i32; MAX_CABLES];
+        // The implied cable speed is judged on the setpoint stream's own clock (motion-core's
+        // timestamps), so a late drive-io cycle does not turn a valid stream into a fault. The
+        // first setpoint after enabling must start at the held position (one period of motion).
+        let periods = if self.phase == Phase::Running && sp.timestamp_ns > self.last_sp_timestamp_ns
+        {
+            ((sp.timestamp_ns - self.last_sp_timestamp_ns) as f64 / self.sync_period_ns as f64)
+                .clamp(1.0, 100.0)
+        } else {
+            1.0
+        };
+        for (i, count) in counts.iter_mut().enumerate().take(self.m) {
+            let node = self.drives[i].node;
+            let Some(c) = self.winches[i].length_to_counts(sp.cable_length_m[i]) else {
+                tracing::error!(
+                    node,
+                    length = sp.cable_length_m[i],
+                    "setpoint cable length out of range"
+                );
+                self.stop(BusState::Fault, fault_code::SETPOINT_INVALID, node);
+                return false;
+            };
+            // +2 counts: rounding of the commanded and the measured position.
+            if (f64::from(c) - f64::from(self.target[i])).abs()
+                > self.max_step_counts[i] * periods + 2.0
+            {
+                tracing::error!(
+                    node,
+                    length = sp.cable_length_m[i],
+                    "setpoint step exceeds max cable speed"
+                );
+                self.stop(BusState::Fault, fault_code::SETPOINT_STEP, node);
+                return false;
+            }
+            *count = c;
+        }
+        self.target[..self.m].copy_from_slice(&counts[..self.m]);
+        self.applied_seq = sp.sequence;
+        self.last_sp_timestamp_ns = sp.timestamp_ns;
+        self.applied_this_cycle = true;
+        true
+    }
+
+    /// The runner reports missed SYNC ticks here (published in the feedback).
+    pub fn add_overruns(&mut self, n: u32) {
+        self.overruns = self.overruns.saturating_add(n);
+    }
+
+    /// Call right after the cycle's frames were written to the bus.
+    pub fn mark_written(&mut self, now_ns: u64) {
+        if self.applied_this_cycle {
+            self.feedback.applied_setpoint_sequence = self.applied_seq;
+            self.feedback.applied_setpoint_write_ns = now_ns;
+        }
+    }
+
+    fn update_feedback(&mut self, now_ns: u64) {
+        let f = &mut self.feedback;
+        f.cycle = self.cycle;
+        f.timestamp_ns = now_ns;
+        f.bus_state = match self.phase {
+            Phase::Boot | Phase::Configure | Phase::Enable => BusState::Booting,
+            Phase::Ready => BusState::Ready,
+            Phase::Running => BusState::Running,
+            Phase::Stopped(s) => s,
+        } as u32;
+        f.fault_code = self.fault_code;
+        f.fault_node = self.fault_node;
+        f.last_emcy_code = self.last_emcy;
+        f.setpoint_age_cycles = self.setpoint_age;
+        f.overruns = self.overruns;
+        for i in 0..self.m {
+            let d = &self.drives[i];
+            let w = &self.winches[i];
+            f.cable_length_m[i] = w.counts_to_length(d.position);
+            f.cable_velocity_m_per_s[i] = w.counts_per_s_to_m_per_s(d.velocity);
+            f.cable_force_n[i] = f64::from(d.force_mn) * 1e-3;
+            f.rx_timestamp_ns[i] = d.rx_ns;
+            f.statusword[i] = d.statusword;
+        }
+    }
+}

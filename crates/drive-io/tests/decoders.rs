@@ -1,0 +1,122 @@
+//! Property tests: CANopen frame decoding, SDO parsing and the drives TOML never panic, and
+//! invalid TOML is rejected with an error naming the field.
+
+use can_transport::CanFrame;
+use drive_io::DrivesConfig;
+use drive_io::canopen::{self, FrameBuf, parse_sdo_request, parse_sdo_response};
+use drive_io::slave::DriveSlave;
+use proptest::prelude::*;
+
+const GOOD: &str = r#"
+[bus]
+transport = "udpbus:239.255.70.1:20000"
+[[winch]]
+node_id = 1
+drum_diameter_m = 0.305
+gear_ratio = 10.0
+counts_per_rev = 1048576
+sign = 1
+"#;
+
+proptest! {
+    #[test]
+    fn canopen_decode_and_slave_never_panic(id in 0u16..0x800, data in proptest::collection::vec(any::<u8>(), 0..=8)) {
+        let f = CanFrame::new(id, &data).unwrap();
+        let _ = canopen::decode(&f);
+        let mut s = DriveSlave::new(5, 10);
+        let mut out = FrameBuf::default();
+        s.start(0, &mut out);
+        s.handle_frame(&canopen::nmt(canopen::NMT_START, 0), 0, &mut out);
+        s.handle_frame(&f, 1, &mut out);
+        s.poll(u64::MAX / 2, &mut out);
+    }
+
+    #[test]
+    fn sdo_parsers_never_panic(d in any::<[u8; 8]>()) {
+        let _ = parse_sdo_request(&d);
+        let _ = parse_sdo_response(&d);
+    }
+
+    #[test]
+    fn toml_never_panics(s in "\\PC{0,200}") {
+        let _ = DrivesConfig::parse(&s);
+    }
+
+    #[test]
+    fn toml_mutations_never_panic(pos in 0usize..200, ch in any::<char>()) {
+        let mut s: Vec<char> = GOOD.chars().collect();
+        let p = pos.min(s.len() - 1);
+        s[p] = ch;
+        let s: String = s.into_iter().collect();
+        let _ = DrivesConfig::parse(&s);
+    }
+
+    #[test]
+    fn length_counts_round_trip(l in 0.0f64..30.0, sign in prop_oneof![Just(1i8), Just(-1i8)], off in -1_000_000i64..1_000_000) {
+        let cfg = DrivesConfig::parse(&GOOD.replace("sign = 1", &format!("sign = {sign}\noffset_counts = {off}"))).unwrap();
+        let w = cfg.winches[0];
+        let c = w.length_to_counts(l).unwrap();
+        prop_assert!((w.counts_to_length(c) - l).abs() <= 0.5 / w.counts_per_m() + 1e-12);
+    }
+}
+
+#[test]
+fn good_config_and_scaling() {
+    let cfg = DrivesConfig::parse(GOOD).unwrap();
+    let w = cfg.winches[0];
+    // One drum revolution = pi * 0.305 m = gear * cpr counts.
+    let rev = std::f64::consts::PI * 0.305;
+    assert_eq!(w.length_to_counts(rev), Some(10 * 1048576));
+    assert_eq!(cfg.bus.sync_period_us, 1000);
+    assert!(w.length_to_counts(-0.1).is_none() && w.length_to_counts(f64::NAN).is_none());
+}
+
+#[test]
+fn errors_name_the_field() {
+    let cases = [
+        (
+            GOOD.replace("node_id = 1", "node_id = 0"),
+            "winch[0].node_id",
+        ),
+        (GOOD.replace("sign = 1", "sign = 2"), "winch[0].sign"),
+        (
+            GOOD.replace("drum_diameter_m = 0.305", "drum_diameter_m = -1.0"),
+            "winch[0].drum_diameter_m",
+        ),
+        (
+            GOOD.replace("udpbus:239.255.70.1:20000", "udpbus:10.0.0.1:1"),
+            "bus.transport",
+        ),
+        (
+            GOOD.replace("[bus]", "[bus]\nstale_setpoint_cycles = 0"),
+            "bus.stale_setpoint_cycles",
+        ),
+        (
+            GOOD.replace("counts_per_rev = 1048576", "counts_per_rev = 1e12"),
+            "winch[0].max_cable_length_m",
+        ),
+        (
+            format!(
+                "{GOOD}\n[[winch]]\nnode_id = 1\ndrum_diameter_m = 0.3\ngear_ratio = 1.0\ncounts_per_rev = 4096\nsign = 1\n"
+            ),
+            "winch[1].node_id",
+        ),
+    ];
+    for (text, field) in cases {
+        let e = DrivesConfig::parse(&text).unwrap_err().to_string();
+        assert!(e.contains(field), "{field}: {e}");
+    }
+    // Unknown keys and syntax errors carry the TOML line.
+    let e = DrivesConfig::parse(&GOOD.replace("sign = 1", "sgn = 1"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("sgn") && e.contains("line"), "{e}");
+}
+
+#[test]
+fn repo_config_is_valid() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/drives.toml");
+    let cfg = DrivesConfig::load(&path).unwrap();
+    assert_eq!(cfg.winches.len(), 8);
+    assert!(cfg.winches.iter().all(|w| w.drum_diameter_m == 0.305));
+}

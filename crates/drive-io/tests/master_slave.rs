@@ -1,0 +1,333 @@
+//! Deterministic master <-> slave tests without a bus: frames are passed directly in virtual time.
+
+use can_transport::RxFrame;
+use crs_ipc::{BusState, JointSetpoint, fault_code};
+use drive_io::canopen::{self, Ds402State, FrameBuf, Message};
+use drive_io::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
+use drive_io::{DrivesConfig, Master, hil};
+
+struct Sim {
+    cfg: DrivesConfig,
+    master: Master,
+    slaves: Vec<DriveSlave>,
+    axes: Vec<WinchAxis>,
+    now: u64,
+    mute: Option<usize>,
+    log: Vec<Message>,
+}
+
+impl Sim {
+    fn new() -> Self {
+        let cfg = hil::hil_config("udpbus:239.255.0.1:1");
+        let master = Master::new(&cfg);
+        let slaves = cfg
+            .winches
+            .iter()
+            .map(|w| DriveSlave::new(w.node_id, 20))
+            .collect();
+        let axes = (0..cfg.winches.len())
+            .map(|i| WinchAxis::new(3.0 + i as f64, 5.0, 14.0))
+            .collect();
+        let mut s = Self {
+            cfg,
+            master,
+            slaves,
+            axes,
+            now: 1_000_000_000,
+            mute: None,
+            log: Vec::new(),
+        };
+        let mut out = FrameBuf::default();
+        for (i, sl) in s.slaves.iter_mut().enumerate() {
+            let c = s.cfg.winches[i]
+                .length_to_counts(s.axes[i].length_m)
+                .unwrap();
+            sl.set_actual(c, 0, 1000);
+            sl.start(s.now, &mut out);
+        }
+        s.deliver_to_master(&out);
+        s
+    }
+
+    fn deliver_to_master(&mut self, out: &FrameBuf) {
+        for f in out.as_slice() {
+            self.master.on_frame(&RxFrame {
+                frame: *f,
+                rx_monotonic_ns: self.now,
+                kernel_rx_realtime_ns: None,
+            });
+        }
+    }
+
+    /// One 1 ms cycle: master -> slaves -> physics -> slaves -> master.
+    fn step(&mut self, sp: Option<&JointSetpoint>) {
+        self.now += 1_000_000;
+        let mut m_out = FrameBuf::default();
+        self.master.cycle(self.now, sp, &mut m_out);
+        self.master.mark_written(self.now);
+        let mut s_out = FrameBuf::default();
+        for f in m_out.as_slice() {
+            self.log.push(canopen::decode(f));
+            for i in 0..self.slaves.len() {
+                if self.slaves[i].handle_frame(f, self.now, &mut s_out) == SlaveEvent::Sync {
+                    let w = self.cfg.winches[i];
+                    match self.slaves[i].demand() {
+                        MotionDemand::Follow { target_counts } => {
+                            self.axes[i].step(Some(w.counts_to_length(target_counts)), 1e-3)
+                        }
+                        MotionDemand::QuickStop => self.axes[i].step(None, 1e-3),
+                        MotionDemand::Hold => self.axes[i].hold(),
+                    }
+                    let c = w.length_to_counts(self.axes[i].length_m).unwrap();
+                    self.slaves[i].set_actual(
+                        c,
+                        w.m_per_s_to_counts_per_s(self.axes[i].velocity_m_per_s),
+                        1000,
+                    );
+                    self.slaves[i].transmit_pdos(&mut s_out);
+                }
+            }
+        }
+        for (i, sl) in self.slaves.iter_mut().enumerate() {
+            sl.set_heartbeat_muted(self.mute == Some(i));
+            sl.poll(self.now, &mut s_out);
+        }
+        self.deliver_to_master(&s_out);
+    }
+
+    fn boot(&mut self) {
+        for _ in 0..200 {
+            self.step(None);
+            if self.master.state() == BusState::Ready {
+                return;
+            }
+        }
+        panic!("not Ready after 200 cycles: {:?}", self.master.state());
+    }
+
+    fn setpoint(&self, seq: u64, lengths: &[f64]) -> JointSetpoint {
+        let mut sp = JointSetpoint {
+            sequence: seq,
+            cable_count: lengths.len() as u32,
+            timestamp_ns: self.now,
+            ..Default::default()
+        };
+        sp.cable_length_m[..lengths.len()].copy_from_slice(lengths);
+        sp
+    }
+}
+
+#[test]
+fn boot_sequence_uses_nmt_sdo_and_ds402() {
+    let mut s = Sim::new();
+    s.boot();
+    // NMT reset comm first, SDO writes of 0x1017 and 0x6060=8, NMT start, then RPDO/SYNC.
+    assert!(matches!(
+        s.log[0],
+        Message::Nmt {
+            command: canopen::NMT_RESET_COMM,
+            node: 0
+        }
+    ));
+    let sdo_mode = s.log.iter().filter(|m| matches!(m, Message::SdoRequest { data, .. } if data[0] == 0x2F && data[1] == 0x60 && data[2] == 0x60 && data[4] == 8)).count();
+    assert_eq!(sdo_mode, 4, "one 0x6060 = 8 write per drive");
+    let start = s
+        .log
+        .iter()
+        .position(|m| {
+            matches!(
+                m,
+                Message::Nmt {
+                    command: canopen::NMT_START,
+                    ..
+                }
+            )
+        })
+        .unwrap();
+    let first_sync = s
+        .log
+        .iter()
+        .position(|m| matches!(m, Message::Sync))
+        .unwrap();
+    assert!(start < first_sync);
+    for sl in &s.slaves {
+        assert_eq!(sl.ds402_state(), Ds402State::OperationEnabled);
+        assert_eq!(sl.mode_of_operation(), 8);
+    }
+}
+
+#[test]
+fn follows_setpoints_and_reports_feedback() {
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    let mut seq = 0;
+    for k in 1..=400 {
+        seq += 1;
+        let l: Vec<f64> = l0.iter().map(|x| x + 0.1 * (k as f64 / 400.0)).collect();
+        let sp = s.setpoint(seq, &l);
+        s.step(Some(&sp));
+        assert_eq!(s.master.state(), BusState::Running);
+    }
+    for _ in 0..50 {
+        seq += 1;
+        let l: Vec<f64> = l0.iter().map(|x| x + 0.1).collect();
+        let sp = s.setpoint(seq, &l);
+        s.step(Some(&sp));
+    }
+    let fb = s.master.feedback();
+    #[allow(clippy::needless_range_loop)] // indexes three parallel arrays
+    for i in 0..4 {
+        assert!(
+            (fb.cable_length_m[i] - (l0[i] + 0.1)).abs() < 1e-6,
+            "winch {i}: {}",
+            fb.cable_length_m[i]
+        );
+        assert!((s.axes[i].length_m - fb.cable_length_m[i]).abs() < 1e-6);
+        assert!((fb.cable_force_n[i] - 1.0).abs() < 1e-9);
+    }
+    assert_eq!(fb.applied_setpoint_sequence, seq);
+}
+
+#[test]
+fn stale_setpoints_quick_stop_after_exactly_the_configured_cycles() {
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    let sp = s.setpoint(1, &l0);
+    s.step(Some(&sp));
+    let limit = s.cfg.bus.stale_setpoint_cycles;
+    // Re-sending the SAME sequence number is not a new setpoint.
+    for _ in 0..limit {
+        s.step(Some(&sp));
+        assert_eq!(s.master.state(), BusState::Running);
+    }
+    s.step(Some(&sp));
+    assert_eq!(s.master.state(), BusState::StaleStop);
+    s.step(None);
+    assert!(
+        s.slaves
+            .iter()
+            .all(|sl| sl.ds402_state() == Ds402State::QuickStopActive)
+    );
+    // New setpoints after the stop are ignored: latched until a Reset event.
+    let far: Vec<f64> = l0.iter().map(|x| x + 0.001).collect();
+    let before: Vec<f64> = s.axes.iter().map(|a| a.length_m).collect();
+    for k in 0..20 {
+        let sp = s.setpoint(2 + k, &far);
+        s.step(Some(&sp));
+    }
+    assert_eq!(s.master.state(), BusState::StaleStop);
+    for (a, b) in s.axes.iter().zip(before) {
+        assert_eq!(a.length_m, b);
+    }
+}
+
+#[test]
+fn heartbeat_loss_faults_and_stops_all() {
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    s.mute = Some(1);
+    let timeout_cycles = s.cfg.bus.heartbeat_timeout_ms as u64;
+    let mut seq = 0;
+    let mut faulted_at = None;
+    for k in 0..(timeout_cycles + 100) {
+        seq += 1;
+        let sp = s.setpoint(seq, &l0);
+        s.step(Some(&sp));
+        if s.master.state() == BusState::Fault {
+            faulted_at = Some(k);
+            break;
+        }
+    }
+    let k = faulted_at.expect("fault after heartbeat loss");
+    // Last heartbeat <= 20 ms before muting; fault strictly after the timeout, within one period.
+    assert!(
+        k + 20 >= timeout_cycles && k <= timeout_cycles + 1,
+        "fault after {k} cycles"
+    );
+    let fb = s.master.feedback();
+    assert_eq!(fb.fault_code, fault_code::HEARTBEAT_LOST);
+    assert_eq!(fb.fault_node, u32::from(s.cfg.winches[1].node_id));
+    s.step(None);
+    assert!(
+        s.slaves
+            .iter()
+            .all(|sl| sl.ds402_state() == Ds402State::QuickStopActive)
+    );
+}
+
+#[test]
+fn invalid_setpoints_fault_without_moving() {
+    for bad in [f64::NAN, -1.0, 1e9] {
+        let mut s = Sim::new();
+        s.boot();
+        let mut l: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+        l[2] = bad;
+        let sp = s.setpoint(1, &l);
+        s.step(Some(&sp));
+        assert_eq!(s.master.state(), BusState::Fault);
+        assert_eq!(
+            s.master.feedback().fault_code,
+            fault_code::SETPOINT_INVALID,
+            "{bad}"
+        );
+    }
+    // A jump larger than max speed * period is refused, too: first setpoint away from the hold
+    // position, and later a step implying > 5 m/s on the stream's own clock.
+    let mut s = Sim::new();
+    s.boot();
+    let l: Vec<f64> = s.master.feedback().cable_length_m[..4]
+        .iter()
+        .map(|x| x + 0.0055)
+        .collect();
+    let sp = s.setpoint(1, &l);
+    s.step(Some(&sp));
+    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    let sp = s.setpoint(1, &l0);
+    s.step(Some(&sp));
+    // 4.5 mm in 1 ms (4.5 m/s) is accepted; 4.5 mm + 1 mm more is not.
+    let l: Vec<f64> = l0.iter().map(|x| x + 0.0045).collect();
+    let sp = s.setpoint(2, &l);
+    s.step(Some(&sp));
+    assert_eq!(s.master.state(), BusState::Running);
+    let l: Vec<f64> = l0.iter().map(|x| x + 0.0045 + 0.0055).collect();
+    let sp = s.setpoint(3, &l); // stamped 1 ms after setpoint 2
+    s.step(Some(&sp));
+    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    // Wrong cable count.
+    let mut s = Sim::new();
+    s.boot();
+    let sp = s.setpoint(1, &[5.0; 3]);
+    s.step(Some(&sp));
+    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_INVALID);
+}
+
+#[test]
+fn emcy_and_drive_fault_stop_all() {
+    let mut s = Sim::new();
+    s.boot();
+    let mut out = FrameBuf::default();
+    s.slaves[3].raise_fault(0x2310, &mut out);
+    s.deliver_to_master(&out);
+    s.step(None);
+    assert_eq!(s.master.state(), BusState::Fault);
+    let fb = s.master.feedback();
+    assert_eq!(
+        (fb.fault_code, fb.fault_node, fb.last_emcy_code),
+        (fault_code::EMCY, 4, 0x2310)
+    );
+    s.step(None);
+    for (i, sl) in s.slaves.iter().enumerate() {
+        let want = if i == 3 {
+            Ds402State::Fault
+        } else {
+            Ds402State::QuickStopActive
+        };
+        assert_eq!(sl.ds402_state(), want);
+    }
+}

@@ -1,0 +1,258 @@
+//! Drive-side emulation (`drive_io::slave`): NMT, SDO, CiA 402 transitions, CSP latching.
+
+use drive_io::canopen::*;
+use drive_io::slave::{DriveBank, DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
+
+fn frames(out: &FrameBuf) -> Vec<Message> {
+    out.as_slice().iter().map(decode).collect()
+}
+
+fn operational(node: u8) -> DriveSlave {
+    let mut s = DriveSlave::new(node, 10);
+    let mut out = FrameBuf::default();
+    s.start(0, &mut out);
+    assert_eq!(frames(&out), vec![Message::Heartbeat { node, state: 0x00 }]);
+    s.handle_frame(
+        &sdo_download(node, OD_MODES_OF_OPERATION, 0, 8, 1),
+        0,
+        &mut out,
+    );
+    s.handle_frame(&nmt(NMT_START, node), 0, &mut out);
+    assert_eq!(s.nmt_state(), NmtState::Operational);
+    s
+}
+
+#[test]
+fn enable_sequence_and_csp_latching_on_sync() {
+    let mut s = operational(3);
+    let mut out = FrameBuf::default();
+    s.set_actual(1000, 0, 0);
+    assert_eq!(s.ds402_state(), Ds402State::SwitchOnDisabled);
+    for (cw, want) in [
+        (CW_SHUTDOWN, Ds402State::ReadyToSwitchOn),
+        (CW_SWITCH_ON, Ds402State::SwitchedOn),
+        (CW_ENABLE_OPERATION, Ds402State::OperationEnabled),
+    ] {
+        s.handle_frame(&rpdo1(3, cw, 1000), 0, &mut out);
+        assert_eq!(s.ds402_state(), want);
+        assert_eq!(Ds402State::from_statusword(s.statusword()), want);
+    }
+    // The RPDO target becomes active only at SYNC (CSP).
+    s.handle_frame(&rpdo1(3, CW_ENABLE_OPERATION, 5000), 0, &mut out);
+    assert_eq!(
+        s.demand(),
+        MotionDemand::Follow {
+            target_counts: 1000
+        }
+    );
+    assert_eq!(s.handle_frame(&sync(), 0, &mut out), SlaveEvent::Sync);
+    assert_eq!(
+        s.demand(),
+        MotionDemand::Follow {
+            target_counts: 5000
+        }
+    );
+    out.clear();
+    s.set_actual(1234, -5, 777);
+    s.transmit_pdos(&mut out);
+    assert_eq!(
+        frames(&out),
+        vec![
+            Message::Tpdo1 {
+                node: 3,
+                statusword: 0x1237,
+                position_counts: 1234
+            },
+            Message::Tpdo2 {
+                node: 3,
+                velocity_counts_per_s: -5,
+                force_mn: 777
+            },
+        ]
+    );
+    // Frames for other nodes are ignored.
+    s.handle_frame(&rpdo1(4, CW_QUICK_STOP, 0), 0, &mut out);
+    assert_eq!(s.ds402_state(), Ds402State::OperationEnabled);
+    // Quick stop -> QuickStopActive, demand QuickStop; disable voltage -> SwitchOnDisabled.
+    s.handle_frame(&rpdo1(3, CW_QUICK_STOP, 5000), 0, &mut out);
+    assert_eq!(s.demand(), MotionDemand::QuickStop);
+    s.handle_frame(&rpdo1(3, CW_DISABLE_VOLTAGE, 5000), 0, &mut out);
+    assert_eq!(s.ds402_state(), Ds402State::SwitchOnDisabled);
+    assert_eq!(s.demand(), MotionDemand::Hold);
+}
+
+#[test]
+fn nmt_stop_holds_and_silences_pdos() {
+    let mut s = operational(1);
+    let mut out = FrameBuf::default();
+    for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
+        s.handle_frame(&rpdo1(1, cw, 0), 0, &mut out);
+    }
+    s.handle_frame(&nmt(NMT_STOP, 0), 0, &mut out);
+    assert_eq!(s.demand(), MotionDemand::Hold);
+    out.clear();
+    assert_eq!(s.handle_frame(&sync(), 0, &mut out), SlaveEvent::None);
+    s.transmit_pdos(&mut out);
+    // RPDOs and SDOs are ignored in Stopped; heartbeats continue with state 0x04.
+    s.handle_frame(&rpdo1(1, CW_QUICK_STOP, 99), 0, &mut out);
+    s.handle_frame(&sdo_upload(1, OD_STATUSWORD, 0), 0, &mut out);
+    assert!(out.is_empty());
+    s.poll(20_000_000, &mut out);
+    assert_eq!(
+        frames(&out),
+        vec![Message::Heartbeat {
+            node: 1,
+            state: 0x04
+        }]
+    );
+    s.set_heartbeat_muted(true);
+    out.clear();
+    s.poll(40_000_000, &mut out);
+    assert!(out.is_empty());
+}
+
+#[test]
+fn sdo_server_answers_and_aborts() {
+    let mut s = DriveSlave::new(2, 0);
+    let mut out = FrameBuf::default();
+    s.start(0, &mut out);
+    out.clear();
+    let ask = |s: &mut DriveSlave, f| {
+        let mut o = FrameBuf::default();
+        s.handle_frame(&f, 0, &mut o);
+        match decode(&o.as_slice()[0]) {
+            Message::SdoResponse { node: 2, data } => parse_sdo_response(&data),
+            m => panic!("{m:?}"),
+        }
+    };
+    assert_eq!(
+        ask(&mut s, sdo_download(2, OD_MODES_OF_OPERATION, 0, 1, 1)),
+        SdoResponse::Abort {
+            index: 0x6060,
+            sub: 0,
+            code: SDO_ABORT_VALUE_RANGE
+        }
+    );
+    assert_eq!(
+        ask(&mut s, sdo_download(2, OD_MODES_OF_OPERATION, 0, 8, 1)),
+        SdoResponse::DownloadOk {
+            index: 0x6060,
+            sub: 0
+        }
+    );
+    assert_eq!(
+        ask(&mut s, sdo_upload(2, OD_MODES_DISPLAY, 0)),
+        SdoResponse::UploadOk {
+            index: 0x6061,
+            sub: 0,
+            value: 8
+        }
+    );
+    assert_eq!(
+        ask(&mut s, sdo_download(2, OD_PRODUCER_HEARTBEAT_MS, 0, 25, 2)),
+        SdoResponse::DownloadOk {
+            index: 0x1017,
+            sub: 0
+        }
+    );
+    assert_eq!(
+        ask(&mut s, sdo_upload(2, OD_PRODUCER_HEARTBEAT_MS, 0)),
+        SdoResponse::UploadOk {
+            index: 0x1017,
+            sub: 0,
+            value: 25
+        }
+    );
+    assert_eq!(
+        ask(&mut s, sdo_upload(2, OD_DEVICE_TYPE, 0)),
+        SdoResponse::UploadOk {
+            index: 0x1000,
+            sub: 0,
+            value: DEVICE_TYPE_SERVO
+        }
+    );
+    assert_eq!(
+        ask(&mut s, sdo_upload(2, 0x1234, 0)),
+        SdoResponse::Abort {
+            index: 0x1234,
+            sub: 0,
+            code: SDO_ABORT_NO_OBJECT
+        }
+    );
+    assert_eq!(
+        ask(&mut s, sdo_download(2, OD_STATUSWORD, 0, 0, 2)),
+        SdoResponse::Abort {
+            index: 0x6041,
+            sub: 0,
+            code: SDO_ABORT_READ_ONLY
+        }
+    );
+    assert_eq!(
+        ask(&mut s, sdo_download(2, OD_MODES_OF_OPERATION, 0, 8, 4)),
+        SdoResponse::Abort {
+            index: 0x6060,
+            sub: 0,
+            code: SDO_ABORT_LENGTH
+        }
+    );
+}
+
+#[test]
+fn fault_needs_a_reset_edge_and_sends_emcy() {
+    let mut bank = DriveBank::new(&[7], 10);
+    bank.start(0);
+    bank.handle_frame(&nmt(NMT_START, 0), 0);
+    bank.raise_fault(0, 0x7300);
+    let s = bank.slave_mut(0).unwrap();
+    assert_eq!(s.ds402_state(), Ds402State::Fault);
+    let mut out = FrameBuf::default();
+    s.handle_frame(&rpdo1(7, CW_FAULT_RESET, 0), 0, &mut out);
+    assert_eq!(s.ds402_state(), Ds402State::SwitchOnDisabled);
+    struct Sink(Vec<can_transport::CanFrame>);
+    impl can_transport::CanBus for Sink {
+        fn send(&mut self, f: &can_transport::CanFrame) -> Result<(), can_transport::CanError> {
+            self.0.push(*f);
+            Ok(())
+        }
+        fn recv_timeout(
+            &mut self,
+            _: std::time::Duration,
+        ) -> Result<Option<can_transport::RxFrame>, can_transport::CanError> {
+            Ok(None)
+        }
+        fn interface(&self) -> &str {
+            "sink"
+        }
+    }
+    let mut sink = Sink(Vec::new());
+    bank.flush(&mut sink).unwrap();
+    let msgs: Vec<Message> = sink.0.iter().map(decode).collect();
+    assert!(
+        msgs.contains(&Message::Emcy {
+            node: 7,
+            code: 0x7300,
+            error_register: 1
+        }),
+        "{msgs:?}"
+    );
+}
+
+#[test]
+fn winch_axis_respects_limits_and_stops() {
+    let mut ax = WinchAxis::new(5.0, 5.0, 14.0);
+    let mut vmax = 0.0f64;
+    let mut prev_v = 0.0;
+    for _ in 0..3000 {
+        ax.step(Some(8.0), 1e-3);
+        vmax = vmax.max(ax.velocity_m_per_s.abs());
+        assert!((ax.velocity_m_per_s - prev_v).abs() <= 14.0 * 1e-3 + 1e-12);
+        prev_v = ax.velocity_m_per_s;
+    }
+    assert!(vmax <= 5.0 + 1e-12 && vmax > 4.9);
+    assert!((ax.length_m - 8.0).abs() < 1e-9, "{}", ax.length_m);
+    ax.step(Some(0.0), 1e-3);
+    for _ in 0..1000 {
+        ax.step(None, 1e-3);
+    }
+    assert_eq!(ax.velocity_m_per_s, 0.0);
+}

@@ -1,0 +1,416 @@
+//! `motion-core`: the 1 ms hard-loop daemon (spec sec. 5.6). See `motion_core::daemon`.
+
+use clap::Parser;
+use crs_ipc::{
+    EventKind, Heartbeat, IpcNode, JointSetpoint, PlatformIdentity, ProcessId, StateEvent,
+    TopicPublisher, TopicSubscriber,
+};
+use motion_core::config::load_platform;
+use motion_core::daemon::cycle::Cycle;
+use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
+use motion_core::daemon::stats::LoopStats;
+use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
+use motion_core::daemon::{
+    self, Command, CommandSource, HardLoop, LoopState, config, outbox, realtime,
+};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::time::Duration;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "motion-core",
+    about = "CRS 1 ms motion loop: IK + surrogate offset → joint setpoints (iceoryx2)"
+)]
+struct Args {
+    /// Daemon TOML.
+    #[arg(long, default_value = "config/motion-core.toml")]
+    config: PathBuf,
+    /// Waypoint CSV to run (overrides [trajectory].waypoints).
+    #[arg(long)]
+    waypoints: Option<PathBuf>,
+    /// Exit once the plan has been run and this many seconds of hold have passed.
+    #[arg(long)]
+    exit_after_plan_s: Option<f64>,
+}
+
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    STOP.store(true, Ordering::Relaxed);
+}
+
+/// The publish stage's iceoryx2 ports (see `daemon::outbox`).
+struct IoxPorts {
+    setpoints: TopicPublisher<JointSetpoint>,
+    heartbeats: TopicPublisher<Heartbeat>,
+    events: TopicPublisher<StateEvent>,
+    identity: TopicPublisher<PlatformIdentity>,
+    hb_seq: u64,
+    _node: IpcNode,
+}
+impl StagePorts for IoxPorts {
+    fn setpoint(&mut self, sp: &JointSetpoint) -> bool {
+        self.setpoints.publish(sp).is_ok()
+    }
+    fn heartbeat(&mut self, state: u32, overruns: u64) {
+        self.hb_seq += 1;
+        let mut hb = Heartbeat::new(ProcessId::MotionCore, state, self.hb_seq);
+        hb.overruns = overruns.min(u32::MAX as u64) as u32;
+        let _ = self.heartbeats.publish(&hb);
+    }
+    fn state_changed(&mut self, _from: u32, to: u32) {
+        let kind = if LoopState::code_is_latched(to) {
+            EventKind::Fault
+        } else {
+            EventKind::StateChanged
+        };
+        let mut ev = StateEvent::new(ProcessId::MotionCore, kind, self.hb_seq);
+        ev.state = to;
+        let _ = self.events.publish(&ev);
+    }
+}
+
+/// E-stop / reset events from any process (the safety monitor, the operator CLI, drive-io).
+struct IoxCommands(TopicSubscriber<StateEvent>);
+impl CommandSource for IoxCommands {
+    #[inline]
+    fn poll(&mut self) -> Option<Command> {
+        loop {
+            match self.0.receive() {
+                Ok(Some(ev)) if ev.kind == EventKind::EStop as u32 => return Some(Command::EStop),
+                Ok(Some(ev)) if ev.kind == EventKind::Reset as u32 => return Some(Command::Reset),
+                Ok(Some(_)) => continue,
+                _ => return None,
+            }
+        }
+    }
+}
+
+/// sd_notify(3) without libsystemd: one datagram to $NOTIFY_SOCKET, which systemd may give as
+/// a filesystem path or as an abstract socket name starting with '@'.
+fn sd_notify(msg: &str) {
+    use std::os::linux::net::SocketAddrExt;
+    let Ok(path) = std::env::var("NOTIFY_SOCKET") else {
+        return;
+    };
+    let Ok(sock) = std::os::unix::net::UnixDatagram::unbound() else {
+        return;
+    };
+    let addr = match path.strip_prefix('@') {
+        Some(name) => std::os::unix::net::SocketAddr::from_abstract_name(name.as_bytes()),
+        None => std::os::unix::net::SocketAddr::from_pathname(&path),
+    };
+    if let Ok(addr) = addr {
+        let _ = sock.send_to_addr(msg.as_bytes(), &addr);
+    }
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .init();
+    match run(Args::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{e}");
+            eprintln!("motion-core: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: Args) -> Result<(), String> {
+    let cfg = config::load(&args.config).map_err(|e| e.to_string())?;
+    let platform = load_platform(&cfg.platform).map_err(|e| e.to_string())?;
+    let model = platform.model.clone();
+    let identity = model.identity_hex();
+    tracing::info!(platform = %platform.name, identity = %identity, cables = model.m(), "platform loaded");
+
+    let mut cycle = Cycle::new(
+        model.clone(),
+        platform.limits,
+        platform.region,
+        cfg.check_wrench_feasibility,
+    );
+    match &cfg.surrogate {
+        None => tracing::info!(
+            "no surrogate configured: zero offset, pure standard kinematics (eq. 2.3)"
+        ),
+        Some(path) => {
+            let s = surrogate::Surrogate::load(path, &identity)
+                .map_err(|e| format!("refusing surrogate {}: {e}", path.display()))?;
+            let n = s.n_cables();
+            let bound = s.report().certified_bound_mm;
+            cycle
+                .set_surrogate(Box::new(s), n)
+                .map_err(|e| format!("refusing surrogate {}: {e}", path.display()))?;
+            tracing::info!(path = %path.display(), bound_mm = bound, "surrogate loaded (eq. 5.26)");
+        }
+    }
+
+    let waypoint_file = args.waypoints.clone().or(cfg.trajectory.waypoints.clone());
+    let waypoints: Vec<Waypoint> = match &waypoint_file {
+        Some(p) => trajectory::read_waypoints(p)?,
+        None => Vec::new(),
+    };
+    for (k, w) in waypoints.iter().enumerate() {
+        if !platform.region.contains(&w.pose) {
+            return Err(format!(
+                "waypoint {} lies outside the platform's workspace region",
+                k + 1
+            ));
+        }
+    }
+    let t = &cfg.trajectory;
+    let lim = PlannerLimits {
+        linear_velocity: platform.limits.linear_velocity_max * t.velocity_scale,
+        angular_velocity: platform.limits.angular_velocity_max * t.velocity_scale,
+        linear_acceleration: platform.limits.linear_acceleration_max * t.acceleration_scale,
+        angular_acceleration: platform.limits.angular_acceleration_max * t.acceleration_scale,
+        linear_jerk: t.linear_jerk_max,
+        angular_jerk: t.angular_jerk_max,
+    };
+    let period_s = cfg.realtime.period_ns as f64 * 1e-9;
+    // Verify the whole plan with the loop's own checks before anything moves: a plan that
+    // would leave the workspace or the wrench-feasible set is refused, naming where.
+    {
+        let mut check = Cycle::new(
+            model.clone(),
+            platform.limits,
+            platform.region,
+            cfg.check_wrench_feasibility,
+        );
+        let mut sp = JointSetpoint::default();
+        let mut n = 0usize;
+        trajectory::plan_samples(platform.home, &waypoints, lim, period_s, |seg, r| {
+            n += 1;
+            check.compute(&r, &mut sp).map_err(|e| {
+                format!(
+                    "plan refused: segment to waypoint {} at t = {:.3} s, pose [{:.3}, {:.3}, {:.3}] m: {e}",
+                    seg + 1,
+                    n as f64 * period_s,
+                    r.pose.r.x,
+                    r.pose.r.y,
+                    r.pose.r.z
+                )
+            })
+        })?;
+        tracing::info!(
+            samples = n,
+            duration_s = n as f64 * period_s,
+            "plan verified (workspace, limits, eq. 3.29)"
+        );
+    }
+    let plan_error = Arc::new(std::sync::Mutex::new(None::<String>));
+    let pe = plan_error.clone();
+    let sampler = trajectory::spawn_planner(platform.home, waypoints, lim, period_s, move |e| {
+        tracing::error!("planner: {e}");
+        *pe.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+    });
+
+    // The publish stage owns the iceoryx2 publishers (iceoryx2's `ipc::Service` ports are not
+    // `Send`, and publishing allocates: see `daemon::outbox`). It is spawned before the
+    // real-time settings so it does not inherit the loop's priority; it sets its own below it.
+    let period_ns = cfg.realtime.period_ns;
+    let start_ns = realtime::now_ns() + 50_000_000;
+    let outbox = Arc::new(Outbox::new(64));
+    let stats = Arc::new(LoopStats::default());
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
+    let stage = {
+        let outbox = outbox.clone();
+        let stats = stats.clone();
+        let identity = PlatformIdentity::new(model.identity(), model.m() as u32);
+        let mut rt = cfg.realtime;
+        rt.priority = (rt.priority - 1).max(0);
+        rt.lock_memory = false;
+        std::thread::Builder::new()
+            .name("crs-publish".into())
+            .spawn(move || {
+                let ports = (|| -> Result<IoxPorts, String> {
+                    let node = IpcNode::new("motion-core-publish").map_err(|e| e.to_string())?;
+                    let ports = IoxPorts {
+                        setpoints: node
+                            .publisher::<JointSetpoint>()
+                            .map_err(|e| e.to_string())?,
+                        heartbeats: node.publisher::<Heartbeat>().map_err(|e| e.to_string())?,
+                        events: node.publisher::<StateEvent>().map_err(|e| e.to_string())?,
+                        identity: node
+                            .publisher::<PlatformIdentity>()
+                            .map_err(|e| e.to_string())?,
+                        hb_seq: 0,
+                        _node: node,
+                    };
+                    ports
+                        .identity
+                        .publish(&identity)
+                        .map_err(|e| e.to_string())?;
+                    Ok(ports)
+                })();
+                let mut ports = match ports {
+                    Ok(p) => {
+                        let _ = ready_tx.send(Ok(()));
+                        p
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                        return;
+                    }
+                };
+                for (name, applied) in realtime::apply(&rt).lines() {
+                    if let realtime::Applied::Degraded(_) = applied {
+                        tracing::warn!("publish stage realtime {name}: {applied}");
+                    }
+                }
+                outbox::run_publish_stage(
+                    &outbox,
+                    &stats,
+                    &mut ports,
+                    start_ns,
+                    period_ns,
+                    outbox::PUBLISH_PHASE_NS.min(period_ns / 2),
+                    10,
+                    &STOP,
+                );
+            })
+            .map_err(|e| e.to_string())?
+    };
+    ready_rx
+        .recv()
+        .map_err(|_| "publish stage died during start-up".to_string())??;
+
+    let node = IpcNode::new("motion-core").map_err(|e| e.to_string())?;
+    let commands = node.subscriber::<StateEvent>().map_err(|e| e.to_string())?;
+
+    // SAFETY: installing an async-signal-safe handler that only stores to an atomic.
+    unsafe {
+        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+    }
+
+    let state_code = Arc::new(AtomicU32::new(LoopState::Running.code()));
+    let reporter = {
+        let stats = stats.clone();
+        let state_code = state_code.clone();
+        let outbox = outbox.clone();
+        let interval = cfg.stats_interval_s;
+        let file = cfg.stats_file.clone();
+        std::thread::Builder::new()
+            .name("crs-stats".into())
+            .spawn(move || report_loop(&stats, &outbox, &state_code, interval, file.as_deref()))
+            .map_err(|e| e.to_string())?
+    };
+
+    // Real-time settings last, so start-up allocations happen before mlockall/SCHED_FIFO, and
+    // only this thread (the loop) gets the loop's priority.
+    let report = realtime::apply(&cfg.realtime);
+    for (name, applied) in report.lines() {
+        match applied {
+            realtime::Applied::Degraded(_) => tracing::warn!("realtime {name}: {applied}"),
+            _ => tracing::info!("realtime {name}: {applied}"),
+        }
+    }
+    tracing::info!(period_us = period_ns / 1000, "hard loop starting");
+    sd_notify("READY=1\nSTATUS=motion loop running");
+
+    let mut hard_loop = HardLoop::new(cycle, sampler);
+    let mut sink = OutboxSink(&outbox);
+    let mut cmds = IoxCommands(commands);
+    let mut plan_done_at: Option<u64> = None;
+    let exit_after = args.exit_after_plan_s.map(|s| (s * 1e9) as u64);
+    daemon::run_timed(
+        &mut hard_loop,
+        start_ns,
+        period_ns,
+        &mut sink,
+        &mut cmds,
+        &stats,
+        &STOP,
+        |hl, now| {
+            let code = hl.state.code();
+            state_code.store(code, Ordering::Relaxed);
+            outbox.state.store(code, Ordering::Relaxed);
+            if let Some(after) = exit_after {
+                let latched = matches!(hl.state, LoopState::EStopped | LoopState::Refused(_));
+                if plan_done_at.is_none() && (hl.sampler.finished() || latched) {
+                    plan_done_at = Some(now);
+                }
+                if plan_done_at.is_some_and(|t0| now > t0 + after) {
+                    STOP.store(true, Ordering::Relaxed);
+                }
+            }
+        },
+    );
+    STOP.store(true, Ordering::Relaxed);
+    let _ = stage.join();
+    let _ = reporter.join();
+    tracing::info!(
+        "loop stopped: {} cycles, {} overruns, {} rejected references; lateness {}; compute {}",
+        stats.cycles.load(Ordering::Relaxed),
+        stats.overruns.load(Ordering::Relaxed),
+        stats.rejected.load(Ordering::Relaxed),
+        stats.lateness.snapshot().summary(),
+        stats.compute.snapshot().summary()
+    );
+    if let LoopState::Refused(r) = hard_loop.state {
+        tracing::warn!("the loop holds after refusing a reference: {r}");
+    }
+    if let Some(e) = plan_error.lock().unwrap_or_else(|p| p.into_inner()).take() {
+        return Err(format!("trajectory planning failed: {e}"));
+    }
+    Ok(())
+}
+
+fn report_loop(
+    stats: &LoopStats,
+    outbox: &Outbox,
+    state: &AtomicU32,
+    interval_s: f64,
+    file: Option<&std::path::Path>,
+) {
+    let tick = Duration::from_millis(100);
+    let mut last_cycles = 0;
+    let mut since = Duration::ZERO;
+    while !STOP.load(Ordering::Relaxed) {
+        std::thread::sleep(tick);
+        since += tick;
+        let cycles = stats.cycles.load(Ordering::Relaxed);
+        // Watchdog only while the loop makes progress: a frozen loop lets systemd kill us.
+        if cycles > last_cycles {
+            sd_notify("WATCHDOG=1");
+        }
+        last_cycles = cycles;
+        if interval_s > 0.0 && since.as_secs_f64() >= interval_s {
+            since = Duration::ZERO;
+            let lat = stats.lateness.snapshot();
+            let cmp = stats.compute.snapshot();
+            tracing::info!(
+                state = state.load(Ordering::Relaxed),
+                overruns = stats.overruns.load(Ordering::Relaxed),
+                "cycles {cycles}; lateness {}; compute {}",
+                lat.summary(),
+                cmp.summary()
+            );
+            if let Some(path) = file {
+                let json = serde_json::json!({
+                    "cycles": cycles,
+                    "overruns": stats.overruns.load(Ordering::Relaxed),
+                    "rejected": stats.rejected.load(Ordering::Relaxed),
+                    "outbox_dropped": outbox.dropped.load(Ordering::Relaxed),
+                    "publish_failures": outbox.publish_failures.load(Ordering::Relaxed),
+                    "state": state.load(Ordering::Relaxed),
+                    "lateness_ns": {"p50": lat.quantile_ns(0.5), "p99": lat.quantile_ns(0.99), "p999": lat.quantile_ns(0.999), "max": lat.max_ns},
+                    "compute_ns": {"p50": cmp.quantile_ns(0.5), "p99": cmp.quantile_ns(0.99), "p999": cmp.quantile_ns(0.999), "max": cmp.max_ns},
+                });
+                let tmp = path.with_extension("tmp");
+                if std::fs::write(&tmp, json.to_string()).is_ok() {
+                    let _ = std::fs::rename(&tmp, path);
+                }
+            }
+        }
+    }
+}

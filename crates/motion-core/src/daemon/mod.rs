@@ -1,0 +1,177 @@
+//! The 1 ms hard-loop daemon (spec sec. 5.6): standard inverse kinematics plus the precomputed
+//! polynomial surrogate offset, q_θ = φ(x) + φ_sg(x) (eq. 5.26), published as joint setpoints.
+//!
+//! Per cycle: sleep to the absolute deadline, poll e-stop/reset events, take the next reference
+//! (ruckig plan sampled off-loop, see [`trajectory`]), check it ([`cycle`]), publish the
+//! setpoint, record lateness/compute time in lock-free histograms ([`stats`]). On an e-stop or
+//! a rejected reference the loop stops moving, keeps publishing the last safe setpoint and
+//! latches until an explicit reset.
+
+pub mod config;
+pub mod cycle;
+pub mod outbox;
+pub mod realtime;
+pub mod stats;
+pub mod trajectory;
+
+use crs_ipc::JointSetpoint;
+use cycle::{Cycle, Reference, Rejection};
+use stats::LoopStats;
+use std::sync::atomic::{AtomicBool, Ordering};
+use trajectory::Sampler;
+
+/// Where the loop sends setpoints (iceoryx2 in the daemon, a buffer in tests).
+pub trait SetpointSink {
+    fn publish(&mut self, sp: &JointSetpoint) -> bool;
+}
+
+/// Operator/safety events the loop polls once per cycle (non-blocking).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Command {
+    EStop,
+    Reset,
+}
+
+pub trait CommandSource {
+    fn poll(&mut self) -> Option<Command>;
+}
+
+/// Loop state visible to heartbeats and logs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LoopState {
+    /// Following the reference.
+    Running,
+    /// Holding the last safe setpoint after an e-stop (latched).
+    EStopped,
+    /// Holding after the checks refused a reference (latched).
+    Refused(Rejection),
+    /// Reset after a latch: holding position, no plan active.
+    Holding,
+}
+
+impl LoopState {
+    /// True for the codes of the latched states (e-stop, refused reference).
+    pub fn code_is_latched(code: u32) -> bool {
+        code == 2 || code == 3
+    }
+
+    pub fn code(&self) -> u32 {
+        match self {
+            LoopState::Running => 1,
+            LoopState::EStopped => 2,
+            LoopState::Refused(_) => 3,
+            LoopState::Holding => 4,
+        }
+    }
+}
+
+/// The loop without its timer: one call per period. Separated so tests can drive many
+/// cycles under a counting allocator.
+pub struct HardLoop {
+    pub cycle: Cycle,
+    pub sampler: Sampler,
+    pub state: LoopState,
+    setpoint: JointSetpoint,
+    last_safe: Option<JointSetpoint>,
+    sequence: u64,
+}
+
+impl HardLoop {
+    pub fn new(cycle: Cycle, sampler: Sampler) -> Self {
+        Self {
+            cycle,
+            sampler,
+            state: LoopState::Running,
+            setpoint: JointSetpoint::default(),
+            last_safe: None,
+            sequence: 0,
+        }
+    }
+
+    /// One cycle at monotonic time `now_ns`. Returns the state after the cycle.
+    #[inline]
+    pub fn step(
+        &mut self,
+        now_ns: u64,
+        sink: &mut impl SetpointSink,
+        commands: &mut impl CommandSource,
+        stats: &LoopStats,
+    ) -> LoopState {
+        while let Some(c) = commands.poll() {
+            match (c, self.state) {
+                (Command::EStop, _) => self.state = LoopState::EStopped,
+                (Command::Reset, LoopState::EStopped | LoopState::Refused(_)) => {
+                    self.state = LoopState::Holding
+                }
+                (Command::Reset, _) => {}
+            }
+        }
+        if self.state == LoopState::Running {
+            let (reference, _starved): (Reference, bool) = self.sampler.next_reference();
+            match self.cycle.compute(&reference, &mut self.setpoint) {
+                Ok(()) => self.last_safe = Some(self.setpoint),
+                Err(r) => {
+                    stats.rejected.fetch_add(1, Ordering::Relaxed);
+                    self.state = LoopState::Refused(r);
+                }
+            }
+        }
+        let out = match (self.state, &self.last_safe) {
+            (LoopState::Running, _) => Some(self.setpoint),
+            // Hold: the last safe setpoint, not moving.
+            (_, Some(held)) => {
+                let mut h = *held;
+                h.pose_velocity = [0.0; 6];
+                h.cable_velocity_m_per_s = [0.0; crs_ipc::MAX_CABLES];
+                Some(h)
+            }
+            (_, None) => None,
+        };
+        if let Some(mut sp) = out {
+            self.sequence += 1;
+            sp.sequence = self.sequence;
+            sp.timestamp_ns = now_ns;
+            if sink.publish(&sp) {
+                stats.published.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        stats.cycles.fetch_add(1, Ordering::Relaxed);
+        self.state
+    }
+
+    pub fn last_setpoint(&self) -> Option<&JointSetpoint> {
+        self.last_safe.as_ref()
+    }
+}
+
+/// Runs `hard_loop` on the absolute-deadline timer until `stop` is set or `until` returns true.
+/// The first cycle runs at `start_ns` (CLOCK_MONOTONIC), so other stages can share the timeline.
+#[allow(clippy::too_many_arguments)]
+pub fn run_timed(
+    hard_loop: &mut HardLoop,
+    start_ns: u64,
+    period_ns: u64,
+    sink: &mut impl SetpointSink,
+    commands: &mut impl CommandSource,
+    stats: &LoopStats,
+    stop: &AtomicBool,
+    mut after_cycle: impl FnMut(&HardLoop, u64),
+) {
+    let mut deadline = start_ns;
+    while !stop.load(Ordering::Relaxed) {
+        realtime::sleep_until(deadline);
+        let woke = realtime::now_ns();
+        stats.lateness.record(woke.saturating_sub(deadline));
+        hard_loop.step(woke, sink, commands, stats);
+        let done = realtime::now_ns();
+        stats.compute.record(done - woke);
+        after_cycle(hard_loop, done);
+        deadline += period_ns;
+        if done > deadline {
+            stats.overruns.fetch_add(1, Ordering::Relaxed);
+            // Skip the missed deadlines instead of bursting to catch up.
+            let missed = (done - deadline) / period_ns + 1;
+            deadline += missed * period_ns;
+        }
+    }
+}

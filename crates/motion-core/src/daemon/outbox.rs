@@ -1,0 +1,156 @@
+//! Hand-off from the hard loop to the IPC publish stage.
+//!
+//! Why a separate stage: iceoryx2 0.10's `Publisher::loan_uninit` heap-allocates a 48-byte `Rc`
+//! per sample (`ChunkMutSharedState::new`, measured by `crates/crs-ipc/examples/alloc_probe.rs`),
+//! so publishing from the loop thread would break the rule that the hard loop allocates nothing.
+//! The loop therefore pushes each setpoint into a preallocated lock-free queue
+//! ([`crossbeam::queue::ArrayQueue`]: bounded, no allocation, no lock, never waits) and a publish
+//! stage thread, woken on the same absolute timeline a fixed phase later, moves them to
+//! iceoryx2. The added latency is that phase (default 200 µs), constant, not jitter of the loop.
+//!
+//! The stage also publishes the loop's heartbeat — only when the loop's cycle counter advanced,
+//! so a frozen loop goes silent to the safety monitor even though this thread keeps running —
+//! and a state event on every loop state change.
+
+use super::LoopState;
+use super::SetpointSink;
+use super::stats::LoopStats;
+use crossbeam::queue::ArrayQueue;
+use crs_ipc::JointSetpoint;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+
+/// Phase of the publish stage after the loop's tick: the loop's compute is ~1-3 µs, its wake-up
+/// lateness under load up to ~100 µs (benches/RESULTS.md), so 200 µs leaves the setpoint ready.
+pub const PUBLISH_PHASE_NS: u64 = 200_000;
+
+/// Shared between the loop (producer) and the publish stage (consumer). Allocated once at start.
+pub struct Outbox {
+    setpoints: ArrayQueue<JointSetpoint>,
+    /// Loop state code after the last cycle ([`LoopState::code`]).
+    pub state: AtomicU32,
+    /// Setpoints the loop could not hand over because the queue was full (stage stalled).
+    pub dropped: AtomicU64,
+    /// Setpoints the stage failed to publish over IPC.
+    pub publish_failures: AtomicU64,
+}
+
+impl Outbox {
+    /// `capacity` setpoints may wait for the stage; 64 = 64 ms at 1 kHz.
+    pub fn new(capacity: usize) -> Self {
+        Self {
+            setpoints: ArrayQueue::new(capacity.max(1)),
+            state: AtomicU32::new(LoopState::Running.code()),
+            dropped: AtomicU64::new(0),
+            publish_failures: AtomicU64::new(0),
+        }
+    }
+
+    /// Takes the oldest waiting setpoint (publish stage side).
+    pub fn pop(&self) -> Option<JointSetpoint> {
+        self.setpoints.pop()
+    }
+
+    pub fn len(&self) -> usize {
+        self.setpoints.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.setpoints.is_empty()
+    }
+}
+
+/// The loop's sink: a non-blocking, allocation-free push.
+pub struct OutboxSink<'a>(pub &'a Outbox);
+
+impl SetpointSink for OutboxSink<'_> {
+    #[inline]
+    fn publish(&mut self, sp: &JointSetpoint) -> bool {
+        if self.0.setpoints.push(*sp).is_err() {
+            self.0.dropped.fetch_add(1, Ordering::Relaxed);
+            return false;
+        }
+        true
+    }
+}
+
+/// What the publish stage sends; the daemon implements it with iceoryx2 ports.
+pub trait StagePorts {
+    fn setpoint(&mut self, sp: &JointSetpoint) -> bool;
+    /// Heartbeat of the loop: `state` code, `overruns` so far.
+    fn heartbeat(&mut self, state: u32, overruns: u64);
+    /// The loop changed state (`from` → `to` codes).
+    fn state_changed(&mut self, from: u32, to: u32);
+}
+
+/// One pass of the publish stage: drains the outbox, then heartbeat/state bookkeeping.
+/// `last_cycles`/`last_state` carry the stage's memory between passes. Returns setpoints sent.
+pub fn publish_pass(
+    outbox: &Outbox,
+    stats: &LoopStats,
+    ports: &mut impl StagePorts,
+    last_cycles: &mut u64,
+    last_state: &mut u32,
+    heartbeat_every_cycles: u64,
+) -> usize {
+    let mut n = 0;
+    while let Some(sp) = outbox.pop() {
+        if !ports.setpoint(&sp) {
+            outbox.publish_failures.fetch_add(1, Ordering::Relaxed);
+        }
+        n += 1;
+    }
+    let state = outbox.state.load(Ordering::Relaxed);
+    if state != *last_state {
+        ports.state_changed(*last_state, state);
+        *last_state = state;
+    }
+    let cycles = stats.cycles.load(Ordering::Relaxed);
+    // Heartbeat only on progress: a frozen loop must look silent to the safety monitor.
+    if cycles >= *last_cycles + heartbeat_every_cycles.max(1) {
+        ports.heartbeat(state, stats.overruns.load(Ordering::Relaxed));
+        *last_cycles = cycles;
+    }
+    n
+}
+
+/// Runs the publish stage on the loop's timeline shifted by `phase_ns` until `stop` is set.
+/// Drains once more after `stop` so the last setpoints are not lost.
+#[allow(clippy::too_many_arguments)]
+pub fn run_publish_stage(
+    outbox: &Outbox,
+    stats: &LoopStats,
+    ports: &mut impl StagePorts,
+    start_ns: u64,
+    period_ns: u64,
+    phase_ns: u64,
+    heartbeat_every_cycles: u64,
+    stop: &AtomicBool,
+) {
+    let mut last_cycles = 0;
+    let mut last_state = LoopState::Running.code();
+    let mut deadline = start_ns + phase_ns;
+    while !stop.load(Ordering::Relaxed) {
+        super::realtime::sleep_until(deadline);
+        publish_pass(
+            outbox,
+            stats,
+            ports,
+            &mut last_cycles,
+            &mut last_state,
+            heartbeat_every_cycles,
+        );
+        deadline += period_ns;
+        let now = super::realtime::now_ns();
+        if now > deadline {
+            deadline += (now - deadline) / period_ns * period_ns + period_ns;
+        }
+    }
+    publish_pass(
+        outbox,
+        stats,
+        ports,
+        &mut last_cycles,
+        &mut last_state,
+        heartbeat_every_cycles,
+    );
+}

@@ -1,0 +1,320 @@
+//! Jerk-limited trajectories with ruckig, planned OFF the hard loop.
+//!
+//! The ruckig crate's `update()`/`at_time()` allocate on every call (and its waypoint mode calls
+//! a cloud API, which this project never uses), so a planner thread computes each segment with
+//! `Ruckig::calculate` (offline mode, one target at a time, no intermediate waypoints), samples
+//! it at the loop period into preallocated chunks and hands them to the loop through a bounded
+//! lock-free queue. The loop only pops chunks, reads samples and returns the emptied chunks on a
+//! second queue: no allocation, no deallocation, no lock on the loop side.
+
+use super::cycle::Reference;
+use crate::pose::Pose;
+use crossbeam::queue::ArrayQueue;
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Samples per chunk (64 ms at 1 kHz).
+pub const CHUNK_LEN: usize = 64;
+/// Chunks in flight (≈ 1 s of look-ahead at 1 kHz).
+pub const CHUNKS: usize = 16;
+
+/// A block of consecutive 1-period samples.
+pub struct Chunk {
+    pub samples: [Reference; CHUNK_LEN],
+    pub len: usize,
+}
+
+/// Per-axis ruckig limits in pose coordinates. The loop checks the norms of table 5.1; the
+/// planner uses per-axis limits of (norm limit)/√3 so that the planned motion always passes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlannerLimits {
+    pub linear_velocity: f64,
+    pub angular_velocity: f64,
+    pub linear_acceleration: f64,
+    pub angular_acceleration: f64,
+    pub linear_jerk: f64,
+    pub angular_jerk: f64,
+}
+
+/// A target pose and the earliest time (s from start) the platform may arrive there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Waypoint {
+    pub pose: Pose,
+    pub not_before_s: f64,
+}
+
+/// Reads a waypoint CSV: header `t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg`, one waypoint
+/// per row, `#` comment lines allowed. Errors name the line.
+pub fn read_waypoints(path: &Path) -> Result<Vec<Waypoint>, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+    parse_waypoints(&text, &path.display().to_string())
+}
+
+pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, String> {
+    const HEADER: [&str; 7] = [
+        "t_s",
+        "x_m",
+        "y_m",
+        "z_m",
+        "phi_x_deg",
+        "phi_y_deg",
+        "phi_z_deg",
+    ];
+    let mut out = Vec::new();
+    let mut header_seen = false;
+    for (n, line) in text.lines().enumerate() {
+        let ln = n + 1;
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let cols: Vec<&str> = line.split(',').map(str::trim).collect();
+        if !header_seen {
+            if cols != HEADER {
+                return Err(format!(
+                    "{file}:{ln}: expected header `{}`",
+                    HEADER.join(",")
+                ));
+            }
+            header_seen = true;
+            continue;
+        }
+        if cols.len() != 7 {
+            return Err(format!(
+                "{file}:{ln}: expected 7 columns, found {}",
+                cols.len()
+            ));
+        }
+        let mut v = [0.0; 7];
+        for (k, c) in cols.iter().enumerate() {
+            v[k] = c
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    format!(
+                        "{file}:{ln}: column `{}`: `{c}` is not a finite number",
+                        HEADER[k]
+                    )
+                })?;
+        }
+        if let Some(prev) = out.last().map(|w: &Waypoint| w.not_before_s)
+            && v[0] < prev
+        {
+            return Err(format!(
+                "{file}:{ln}: column `t_s`: times must not decrease"
+            ));
+        }
+        out.push(Waypoint {
+            not_before_s: v[0],
+            pose: Pose::from_array([
+                v[1],
+                v[2],
+                v[3],
+                v[4].to_radians(),
+                v[5].to_radians(),
+                v[6].to_radians(),
+            ]),
+        });
+    }
+    if !header_seen {
+        return Err(format!("{file}: empty waypoint file"));
+    }
+    Ok(out)
+}
+
+/// Loop side: pops chunks and yields one reference per cycle.
+pub struct Sampler {
+    full: Arc<ArrayQueue<Box<Chunk>>>,
+    empty: Arc<ArrayQueue<Box<Chunk>>>,
+    current: Option<Box<Chunk>>,
+    index: usize,
+    last: Reference,
+    done: Arc<AtomicBool>,
+}
+
+impl Sampler {
+    /// Next reference; when the planner has nothing queued the last sample is held (zero
+    /// velocity and acceleration) and `starved` is reported. Allocation- and lock-free.
+    #[inline]
+    pub fn next_reference(&mut self) -> (Reference, bool) {
+        loop {
+            if let Some(c) = &self.current {
+                if self.index < c.len {
+                    self.last = c.samples[self.index];
+                    self.index += 1;
+                    return (self.last, false);
+                }
+                if let Some(c) = self.current.take() {
+                    // The planner allocated CHUNKS chunks and waits for this one: never full.
+                    let _ = self.empty.push(c);
+                }
+            }
+            match self.full.pop() {
+                Some(c) => {
+                    self.current = Some(c);
+                    self.index = 0;
+                }
+                None => {
+                    let hold = Reference {
+                        pose: self.last.pose,
+                        ..Reference::default()
+                    };
+                    return (hold, !self.done.load(Ordering::Acquire));
+                }
+            }
+        }
+    }
+
+    /// True when the planner has delivered everything and the queue is drained.
+    pub fn finished(&self) -> bool {
+        self.done.load(Ordering::Acquire)
+            && self.full.is_empty()
+            && self.current.as_ref().is_none_or(|c| self.index >= c.len)
+    }
+}
+
+/// Starts the planner thread for a list of waypoints from `start` and returns the loop-side
+/// sampler. Planning errors end the plan early and are reported through `on_error`.
+pub fn spawn_planner(
+    start: Pose,
+    waypoints: Vec<Waypoint>,
+    limits: PlannerLimits,
+    period_s: f64,
+    on_error: impl Fn(String) + Send + 'static,
+) -> Sampler {
+    let full = Arc::new(ArrayQueue::new(CHUNKS));
+    let empty = Arc::new(ArrayQueue::new(CHUNKS));
+    for _ in 0..CHUNKS {
+        let _ = empty.push(Box::new(Chunk {
+            samples: [Reference::default(); CHUNK_LEN],
+            len: 0,
+        }));
+    }
+    let done = Arc::new(AtomicBool::new(false));
+    let (f2, e2, d2) = (full.clone(), empty.clone(), done.clone());
+    std::thread::Builder::new()
+        .name("crs-planner".into())
+        .spawn(move || {
+            if let Err(e) = plan(start, &waypoints, limits, period_s, &f2, &e2) {
+                on_error(e);
+            }
+            d2.store(true, Ordering::Release);
+        })
+        .expect("spawning the planner thread");
+    Sampler {
+        full,
+        empty,
+        current: None,
+        index: 0,
+        last: Reference {
+            pose: start,
+            ..Reference::default()
+        },
+        done,
+    }
+}
+
+/// Samples the whole plan at the loop period, calling `emit(segment, reference)` for each
+/// sample (segment = 0-based waypoint index). Used both to verify a plan before it runs and to
+/// stream it to the loop.
+pub fn plan_samples(
+    start: Pose,
+    waypoints: &[Waypoint],
+    lim: PlannerLimits,
+    period_s: f64,
+    mut emit: impl FnMut(usize, Reference) -> Result<(), String>,
+) -> Result<(), String> {
+    let s3 = 3f64.sqrt();
+    let mut ruckig = ruckig::Ruckig::new_direct_and_offline(6);
+    let mut t_global = 0.0;
+    let mut current = start.to_array();
+    let lin_ang = |l: f64, a: f64| [l, l, l, a, a, a].map(|v| v / s3).to_vec();
+    for (k, wp) in waypoints.iter().enumerate() {
+        let mut input = ruckig::InputParameter::new(6);
+        input.current_position = current.to_vec();
+        input.target_position = wp.pose.to_array().to_vec();
+        input.max_velocity = lin_ang(lim.linear_velocity, lim.angular_velocity);
+        input.max_acceleration = lin_ang(lim.linear_acceleration, lim.angular_acceleration);
+        input.max_jerk = lin_ang(lim.linear_jerk, lim.angular_jerk);
+        let mut traj = ruckig::Trajectory::new_direct(6);
+        let res = ruckig.calculate(&mut input, &mut traj);
+        if !matches!(res, ruckig::Result::Working | ruckig::Result::Finished) {
+            return Err(format!(
+                "waypoint {}: ruckig could not plan the segment ({res:?})",
+                k + 1
+            ));
+        }
+        // Dwell until the waypoint's earliest arrival time allows the segment to end there.
+        let duration = traj.get_duration();
+        while t_global + duration < wp.not_before_s {
+            emit(
+                k,
+                Reference {
+                    pose: Pose::from_array(current),
+                    ..Reference::default()
+                },
+            )?;
+            t_global += period_s;
+        }
+        let steps = (duration / period_s).ceil() as usize;
+        for s in 1..=steps {
+            let t = (s as f64 * period_s).min(duration);
+            let (p, v, a) = traj.at_time(t);
+            let r = Reference {
+                pose: Pose::from_array([p[0], p[1], p[2], p[3], p[4], p[5]]),
+                velocity: [v[0], v[1], v[2], v[3], v[4], v[5]],
+                acceleration: [a[0], a[1], a[2], a[3], a[4], a[5]],
+            };
+            emit(k, r)?;
+            t_global += period_s;
+        }
+        current = wp.pose.to_array();
+    }
+    Ok(())
+}
+
+fn plan(
+    start: Pose,
+    waypoints: &[Waypoint],
+    lim: PlannerLimits,
+    period_s: f64,
+    full: &ArrayQueue<Box<Chunk>>,
+    empty: &ArrayQueue<Box<Chunk>>,
+) -> Result<(), String> {
+    let mut chunk: Option<Box<Chunk>> = None;
+    let wait = || std::thread::sleep(std::time::Duration::from_micros(500));
+    plan_samples(start, waypoints, lim, period_s, |_, r| {
+        let c = loop {
+            if let Some(c) = chunk.as_mut() {
+                break c;
+            }
+            match empty.pop() {
+                Some(mut c) => {
+                    c.len = 0;
+                    chunk = Some(c);
+                }
+                None => wait(),
+            }
+        };
+        c.samples[c.len] = r;
+        c.len += 1;
+        if c.len == CHUNK_LEN {
+            let mut full_chunk = chunk.take().expect("set above");
+            while let Err(back) = full.push(full_chunk) {
+                full_chunk = back;
+                wait();
+            }
+        }
+        Ok(())
+    })?;
+    if let Some(mut c) = chunk.take().filter(|c| c.len > 0) {
+        while let Err(back) = full.push(c) {
+            c = back;
+            wait();
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,395 @@
+//! The hard loop: zero allocation on the loop thread over many cycles (setpoints reach the
+//! real iceoryx2 publisher through the outbox and publish stage), e-stop latch and reset, refusal of bad references, input-file errors.
+mod common;
+
+use crs_ipc::{IpcNode, JointSetpoint};
+use motion_core::Pose;
+use motion_core::daemon::cycle::{Cycle, Reference, Rejection};
+use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts, publish_pass};
+use motion_core::daemon::stats::LoopStats;
+use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
+use motion_core::daemon::{Command, CommandSource, HardLoop, LoopState, SetpointSink};
+use nalgebra::Vector3;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+struct Counting;
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+thread_local!(static COUNT_HERE: Cell<bool> = const { Cell::new(false) });
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        if COUNT_HERE.with(|c| c.get()) {
+            ALLOCS.fetch_add(1, Ordering::Relaxed);
+        }
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        if COUNT_HERE.with(|c| c.get()) {
+            ALLOCS.fetch_add(1, Ordering::Relaxed);
+        }
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        if COUNT_HERE.with(|c| c.get()) {
+            ALLOCS.fetch_add(1, Ordering::Relaxed);
+        }
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn limits() -> PlannerLimits {
+    PlannerLimits {
+        linear_velocity: 1.0,
+        angular_velocity: 0.5,
+        linear_acceleration: 2.0,
+        angular_acceleration: 1.0,
+        linear_jerk: 20.0,
+        angular_jerk: 5.0,
+    }
+}
+
+fn setup(waypoints: Vec<Waypoint>) -> HardLoop {
+    let pf = common::platform("icosahedron.toml");
+    let cycle = Cycle::new(pf.model.clone(), pf.limits, pf.region, true);
+    let sampler = trajectory::spawn_planner(pf.home, waypoints, limits(), 1e-3, |e| panic!("{e}"));
+    HardLoop::new(cycle, sampler)
+}
+
+fn tour() -> Vec<Waypoint> {
+    [
+        [0.3, 0.0, 2.0],
+        [0.3, 0.3, 1.9],
+        [-0.2, 0.3, 2.0],
+        [0.0, 0.0, 2.0],
+    ]
+    .iter()
+    .map(|p| Waypoint {
+        pose: Pose::new(Vector3::from(*p), Vector3::zeros()),
+        not_before_s: 0.0,
+    })
+    .collect()
+}
+
+struct Ring(Vec<JointSetpoint>, usize);
+impl SetpointSink for Ring {
+    fn publish(&mut self, sp: &JointSetpoint) -> bool {
+        let n = self.0.len();
+        self.0[self.1 % n] = *sp;
+        self.1 += 1;
+        true
+    }
+}
+
+/// The publish stage's ports in the test: real iceoryx2 setpoint publisher, counted events.
+struct StageIox {
+    setpoints: crs_ipc::TopicPublisher<JointSetpoint>,
+    heartbeats: u64,
+}
+impl StagePorts for StageIox {
+    fn setpoint(&mut self, sp: &JointSetpoint) -> bool {
+        self.setpoints.publish(sp).is_ok()
+    }
+    fn heartbeat(&mut self, _state: u32, _overruns: u64) {
+        self.heartbeats += 1;
+    }
+    fn state_changed(&mut self, _from: u32, _to: u32) {}
+}
+
+struct Script(VecDeque<(u64, Command)>, u64);
+impl CommandSource for Script {
+    /// `self.1` is the current step, set by the test before each step.
+    fn poll(&mut self) -> Option<Command> {
+        match self.0.front() {
+            Some((at, _)) if *at <= self.1 => self.0.pop_front().map(|(_, c)| c),
+            _ => None,
+        }
+    }
+}
+
+#[test]
+fn loop_thread_allocates_nothing_over_many_cycles() {
+    // The loop hands setpoints to the publish stage through the outbox; the stage (another
+    // thread, real iceoryx2) publishes them. Only the loop thread is counted.
+    let prefix = format!("alloc{}/", std::process::id());
+    let outbox = Arc::new(Outbox::new(64));
+    let stats = Arc::new(LoopStats::default());
+    let stop = Arc::new(AtomicBool::new(false));
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let stage = {
+        let (outbox, stats, stop, prefix) =
+            (outbox.clone(), stats.clone(), stop.clone(), prefix.clone());
+        std::thread::spawn(move || {
+            let node = IpcNode::with_prefix("alloc_stage", &prefix).unwrap();
+            let mut ports = StageIox {
+                setpoints: node.publisher::<JointSetpoint>().unwrap(),
+                heartbeats: 0,
+            };
+            ready_tx.send(()).unwrap();
+            let (mut c, mut s) = (0, LoopState::Running.code());
+            let mut sent = 0;
+            while !stop.load(Ordering::Relaxed) {
+                sent += publish_pass(&outbox, &stats, &mut ports, &mut c, &mut s, 10);
+                std::thread::sleep(std::time::Duration::from_micros(200));
+            }
+            sent += publish_pass(&outbox, &stats, &mut ports, &mut c, &mut s, 10);
+            (sent, ports.heartbeats)
+        })
+    };
+    ready_rx.recv().unwrap();
+    let node = IpcNode::with_prefix("alloc_test", &prefix).unwrap();
+    let sub = node.subscriber::<JointSetpoint>().unwrap();
+    let mut hl = setup(tour());
+    let mut cmds = Script(VecDeque::new(), 0);
+    // Let the planner fill its queue so the loop never waits for it.
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let cycles = 5000u64;
+    let mut received = 0;
+    for k in 0..cycles {
+        COUNT_HERE.with(|c| c.set(true));
+        hl.step(k * 1_000_000, &mut OutboxSink(&outbox), &mut cmds, &stats);
+        COUNT_HERE.with(|c| c.set(false));
+        // Paced so the stage keeps up (the outbox holds 64); receiving is not the loop's job.
+        if k % 16 == 15 {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+            while let Ok(Some(_)) = sub.receive() {
+                received += 1;
+            }
+        }
+    }
+    let n = ALLOCS.load(Ordering::Relaxed);
+    stop.store(true, Ordering::Relaxed);
+    let (sent, heartbeats) = stage.join().unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(5));
+    while let Ok(Some(_)) = sub.receive() {
+        received += 1;
+    }
+    assert_eq!(hl.state, LoopState::Running);
+    assert_eq!(stats.cycles.load(Ordering::Relaxed), cycles);
+    assert_eq!(n, 0, "{n} heap operations on the loop thread");
+    // Every setpoint went through the outbox and over iceoryx2 (subscriber buffer 32: the test
+    // drains every 16 cycles, so nothing is overwritten).
+    assert_eq!(outbox.dropped.load(Ordering::Relaxed), 0);
+    assert_eq!(sent as u64, cycles);
+    assert_eq!(received, cycles);
+    // At most one heartbeat per 10 loop cycles, and some while the loop advanced.
+    assert!(
+        heartbeats > 0 && heartbeats <= cycles / 10,
+        "heartbeats {heartbeats}"
+    );
+    // The counter does see allocations on this thread.
+    COUNT_HERE.with(|c| c.set(true));
+    drop(std::hint::black_box(vec![0u8; 32]));
+    COUNT_HERE.with(|c| c.set(false));
+    assert!(ALLOCS.load(Ordering::Relaxed) > 0);
+}
+
+#[test]
+fn publish_stage_heartbeats_only_while_the_loop_advances() {
+    #[derive(Default)]
+    struct Count {
+        heartbeats: u64,
+        changes: Vec<(u32, u32)>,
+    }
+    impl StagePorts for Count {
+        fn setpoint(&mut self, _: &JointSetpoint) -> bool {
+            true
+        }
+        fn heartbeat(&mut self, _: u32, _: u64) {
+            self.heartbeats += 1;
+        }
+        fn state_changed(&mut self, from: u32, to: u32) {
+            self.changes.push((from, to));
+        }
+    }
+    let outbox = Outbox::new(4);
+    let stats = LoopStats::default();
+    let mut p = Count::default();
+    let (mut c, mut s) = (0, LoopState::Running.code());
+    for _ in 0..100 {
+        stats.cycles.fetch_add(1, Ordering::Relaxed);
+        publish_pass(&outbox, &stats, &mut p, &mut c, &mut s, 10);
+    }
+    assert_eq!(p.heartbeats, 10);
+    // The loop freezes: the stage keeps running but the heartbeat stops.
+    for _ in 0..100 {
+        publish_pass(&outbox, &stats, &mut p, &mut c, &mut s, 10);
+    }
+    assert_eq!(p.heartbeats, 10);
+    outbox
+        .state
+        .store(LoopState::EStopped.code(), Ordering::Relaxed);
+    publish_pass(&outbox, &stats, &mut p, &mut c, &mut s, 10);
+    assert_eq!(p.changes, vec![(1, 2)]);
+    // A full outbox drops (counted) instead of blocking the loop.
+    let mut sink = OutboxSink(&outbox);
+    let ok: Vec<bool> = (0..6)
+        .map(|_| sink.publish(&JointSetpoint::default()))
+        .collect();
+    assert_eq!(ok, vec![true, true, true, true, false, false]);
+    assert_eq!(outbox.dropped.load(Ordering::Relaxed), 2);
+}
+
+#[test]
+fn estop_latches_and_holds_until_reset() {
+    let mut hl = setup(tour());
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    let mut sink = Ring(vec![JointSetpoint::default(); 1], 0);
+    let stats = LoopStats::default();
+    let mut cmds = Script(
+        VecDeque::from([(500, Command::EStop), (1500, Command::Reset)]),
+        0,
+    );
+    let mut before = None;
+    for k in 0..2000u64 {
+        cmds.1 = k;
+        let st = hl.step(k, &mut sink, &mut cmds, &stats);
+        let sp = sink.0[0];
+        match k {
+            0..=498 => assert_eq!(st, LoopState::Running),
+            499 => before = Some(sp),
+            500..=1499 => {
+                assert_eq!(st, LoopState::EStopped);
+                let b = before.unwrap();
+                assert_eq!(
+                    sp.cable_length_m, b.cable_length_m,
+                    "no motion while e-stopped"
+                );
+                assert!(sp.cable_velocity_m_per_s.iter().all(|v| *v == 0.0));
+                assert_eq!(
+                    sp.sequence,
+                    k + 1,
+                    "setpoints keep flowing (held), numbered"
+                );
+            }
+            _ => {
+                // Reset releases the latch but does not resume the old plan.
+                assert_eq!(st, LoopState::Holding);
+                assert_eq!(sp.cable_length_m, before.unwrap().cable_length_m);
+            }
+        }
+    }
+    // The plan was moving before the e-stop.
+    assert!(sink.0[0].cable_length_m != JointSetpoint::default().cable_length_m);
+}
+
+#[test]
+fn bad_references_are_refused_and_latch() {
+    let pf = common::platform("icosahedron.toml");
+    let mut c = Cycle::new(pf.model.clone(), pf.limits, pf.region, true);
+    let mut sp = JointSetpoint::default();
+    let ok = Reference {
+        pose: pf.home,
+        ..Reference::default()
+    };
+    c.compute(&ok, &mut sp).unwrap();
+    assert_eq!(sp.cable_count, 8);
+    let mut r = ok;
+    r.pose.r.x = f64::NAN;
+    assert_eq!(c.compute(&r, &mut sp), Err(Rejection::NonFinite));
+    let mut r = ok;
+    r.pose.r.z = 5.0;
+    assert_eq!(c.compute(&r, &mut sp), Err(Rejection::OutsideRegion));
+    let mut r = ok;
+    r.velocity[0] = 6.0; // table 5.1: 5 m/s
+    assert!(matches!(
+        c.compute(&r, &mut sp),
+        Err(Rejection::LinearVelocity { .. })
+    ));
+    let mut r = ok;
+    r.acceleration[2] = 15.0; // 14 m/s²
+    assert!(matches!(
+        c.compute(&r, &mut sp),
+        Err(Rejection::LinearAcceleration { .. })
+    ));
+    // Inside the box but not wrench feasible (rotation the cabin cannot hold).
+    let mut r = ok;
+    r.pose = Pose::new(
+        Vector3::new(-1.4, 1.4, 2.7),
+        Vector3::new(-0.06, 0.0, -0.08),
+    );
+    assert!(matches!(
+        c.compute(&r, &mut sp),
+        Err(Rejection::NotWrenchFeasible { .. })
+    ));
+    // Without a surrogate the offset is zero and q_θ = φ(x).
+    c.compute(&ok, &mut sp).unwrap();
+    assert!(sp.surrogate_offset_m.iter().all(|o| *o == 0.0));
+}
+
+#[test]
+fn a_plan_through_infeasible_poses_is_refused_before_it_runs() {
+    let pf = common::platform("icosahedron.toml");
+    let mut c = Cycle::new(pf.model.clone(), pf.limits, pf.region, true);
+    let mut sp = JointSetpoint::default();
+    let bad = vec![Waypoint {
+        pose: Pose::new(
+            Vector3::new(-1.4, 1.4, 2.7),
+            Vector3::new(-0.06, 0.0, -0.08),
+        ),
+        not_before_s: 0.0,
+    }];
+    let err = trajectory::plan_samples(pf.home, &bad, limits(), 1e-3, |_, r| {
+        c.compute(&r, &mut sp).map_err(|e| e.to_string())
+    })
+    .unwrap_err();
+    assert!(
+        err.contains("wrench feasible") || err.contains("workspace"),
+        "{err}"
+    );
+    // The tour passes.
+    trajectory::plan_samples(pf.home, &tour(), limits(), 1e-3, |_, r| {
+        c.compute(&r, &mut sp).map_err(|e| e.to_string())
+    })
+    .unwrap();
+}
+
+#[test]
+fn waypoint_and_daemon_config_errors_name_the_line() {
+    let e = trajectory::parse_waypoints(
+        "t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n0,0,0,2,0,0,0\n1,0,zero,2,0,0,0\n",
+        "w.csv",
+    )
+    .unwrap_err();
+    assert!(e.starts_with("w.csv:3:") && e.contains("y_m"), "{e}");
+    let e = trajectory::parse_waypoints("t,x\n", "w.csv").unwrap_err();
+    assert!(e.contains("w.csv:1"), "{e}");
+    let e = trajectory::parse_waypoints(
+        "t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n2,0,0,2,0,0,0\n1,0,0,2,0,0,0\n",
+        "w.csv",
+    )
+    .unwrap_err();
+    assert!(e.contains("w.csv:3") && e.contains("decrease"), "{e}");
+    let base = std::fs::read_to_string(common::config_path("motion-core.toml")).unwrap();
+    let dir = std::path::Path::new(".");
+    motion_core::daemon::config::parse(&base, "mc.toml", dir).unwrap();
+    let e = motion_core::daemon::config::parse(
+        &base.replace("period_us = 1000", "period_us = 10"),
+        "mc.toml",
+        dir,
+    )
+    .unwrap_err();
+    assert_eq!(e.key, "realtime.period_us", "{e}");
+    assert!(e.line.is_some());
+    let e = motion_core::daemon::config::parse(
+        &base.replace("priority = 80", "priority = 80\nprio = 3"),
+        "mc.toml",
+        dir,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("prio"), "{e}");
+    let e = motion_core::daemon::config::parse(
+        &base.replace("velocity_scale = 0.3", "velocity_scale = 1.5"),
+        "mc.toml",
+        dir,
+    )
+    .unwrap_err();
+    assert_eq!(e.key, "trajectory.velocity_scale", "{e}");
+}

@@ -1,0 +1,117 @@
+//! Must-show (a): the plant with every effect off reproduces the control model exactly, and a
+//! purely kinematic command drifts by force propagation (eq. 3.24).
+
+#![allow(clippy::needless_range_loop)] // per-cable index loops read like the equations
+
+mod common;
+use common::*;
+use motion_core::forward::{FkOptions, elastostatic};
+use motion_core::{Data, elastostatics, kinematics, statics};
+use sim_plant::campaign::pose_errors;
+use sim_plant::{CampaignConfig, Plant, run_campaign};
+
+#[test]
+fn ideal_plant_settles_at_the_elastostatic_command_to_round_off() {
+    let cfg = ideal();
+    let control = cfg.platform.clone();
+    let model = &control.model;
+    let p = model.params();
+    let mut data = Data::new(model);
+    let mut plant = Plant::new(cfg).unwrap();
+    let mut f_ref = vec![0.0; 8];
+    let mut q = vec![0.0; 8];
+    let poses = [
+        pose(0.0, 0.0, 1.5, 0.0, 0.0, 0.0),
+        pose(1.2, -0.8, 1.4, 3.0, -2.0, 4.0),
+        pose(-1.0, 1.3, 1.9, -5.0, 5.0, -3.0),
+        pose(0.5, 0.5, 1.3, 0.0, 4.0, 0.0),
+    ];
+    let mut n = 0;
+    for x in &poses {
+        kinematics::inverse(model, &mut data, x).unwrap();
+        let fd = statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut f_ref).unwrap(); // eq. 3.41
+        assert!(fd.feasible);
+        elastostatics::inverse(model, &mut data, x, &f_ref, &mut q).unwrap(); // eq. 2.37
+        let eq = plant.step(&q).unwrap();
+        let (dp, dr) = eq.pose.error_to(x);
+        assert!(
+            dp < 1e-9 && dr < 1e-9,
+            "pose error {dp:e} m {dr:e} rad at {x:?}"
+        );
+        for i in 0..8 {
+            assert!(
+                (eq.forces[i] - f_ref[i]).abs() < 1e-5 * f_ref[i],
+                "cable {i}: {} vs {}",
+                eq.forces[i],
+                f_ref[i]
+            );
+        }
+        // and it is motion-core's ν_el bit for bit (same law, same wrench, same start)
+        let mut d2 = Data::new(model);
+        let sol = elastostatic(model, &mut d2, &q, &eq.pose, &FkOptions::default()).unwrap();
+        assert_eq!(pose_bits(&sol.pose), pose_bits(&eq.pose));
+        n += 1;
+    }
+    assert_eq!(n, poses.len());
+}
+
+#[test]
+fn kinematic_command_on_ideal_plant_drifts_by_force_propagation() {
+    let cfg = ideal();
+    let control = cfg.platform.clone();
+    let mut plant = Plant::new(cfg).unwrap();
+    let res = run_campaign(&mut plant, &control, &CampaignConfig::default(), "nominal").unwrap();
+    let e = pose_errors(&res.dataset).unwrap();
+    let (mean, max, n) = (e.mean_position, e.max_position, e.samples);
+    // eq. 3.24: Δx = C_xw (A^T f_ini + w_e) — millimetres on the CRS, never zero.
+    assert!(n > 50, "{n} reachable poses");
+    assert!(mean > 1e-3 && mean < 10e-3, "mean drift {mean} m");
+    assert!(max < 20e-3, "max drift {max} m");
+    // the home pose itself is reached exactly (the offsets are set there, eq. 3.14)
+    let home = control.home;
+    let mut data = Data::new(&control.model);
+    kinematics::inverse(&control.model, &mut data, &home).unwrap();
+    let q: Vec<f64> = (0..8).map(|i| data.q[i] + res.q_off[i]).collect();
+    let eq = plant.step(&q).unwrap();
+    assert!(eq.pose.error_to(&home).0 < 1e-9);
+    // q_off has the sign and size of eq. 6.24 (cables shorter than the geometric length: cm)
+    assert!(
+        res.q_off.iter().all(|v| *v < 0.0 && *v > -0.05),
+        "{:?}",
+        res.q_off
+    );
+}
+
+#[test]
+fn crs_like_plant_gives_nominal_model_errors_of_the_spec_order() {
+    let cfg = crs_like();
+    let control = cfg.platform.clone();
+    let mut plant = Plant::new(cfg).unwrap();
+    let res = run_campaign(&mut plant, &control, &CampaignConfig::default(), "nominal").unwrap();
+    let e = pose_errors(&res.dataset).unwrap();
+    let (mean, mean_rot, n) = (e.mean_position, e.mean_rotation, e.samples);
+    // sec. 6.1: 39.8 mm, 1.19° — tens of mm, about a degree
+    assert!(n >= 20, "{n} reachable poses");
+    assert!(
+        mean > 15e-3 && mean < 100e-3,
+        "mean position error {mean} m"
+    );
+    assert!(
+        mean_rot.to_degrees() > 0.2 && mean_rot.to_degrees() < 5.0,
+        "rotation {mean_rot}"
+    );
+    // poses outside the reachable workspace are bookkept with their reason, not sampled
+    assert!(!res.unreachable.is_empty());
+    for u in &res.unreachable {
+        assert!(
+            u.reason.contains("force limits") || u.reason.contains("plant"),
+            "{}",
+            u.reason
+        );
+    }
+    assert!(res.dataset.samples.iter().all(|s| {
+        !res.unreachable
+            .iter()
+            .any(|u| u.pose_index as u64 == s.pose_index)
+    }));
+}

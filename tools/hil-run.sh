@@ -1,0 +1,25 @@
+#!/bin/bash
+# usage: tools/hil-run.sh
+#   Builds the static HIL test binary (drive-io-hil) and runs it inside the vcan QEMU guest
+#   (tools/vcan-vm.sh): drive-io + the winch emulator on real SocketCAN vcan0..vcan3, one
+#   interface per scenario. Prints "HIL-VCAN: PASS" or "HIL-VCAN: FAIL"; exit status 0 iff PASS.
+# Env: HIL_PROFILE (dev|release, default dev), CRS_VCAN_CACHE (kernel cache, see vcan-vm.sh),
+#      CARGO_TARGET_DIR (default <repo>/target).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PROFILE=${HIL_PROFILE:-dev}
+TRIPLE=x86_64-unknown-linux-gnu
+# --target keeps build scripts/proc-macros dynamic while the test binary is static glibc.
+RUSTFLAGS="-C target-feature=+crt-static" cargo build --profile "$PROFILE" --target "$TRIPLE" \
+  -p drive-io --bin drive-io-hil
+DIR=$PROFILE; [ "$PROFILE" = dev ] && DIR=debug
+BIN=${CARGO_TARGET_DIR:-target}/$TRIPLE/$DIR/drive-io-hil
+LOG=$(mktemp); trap 'rm -f "$LOG"' EXIT
+start=$(date +%s)
+tools/vcan-vm.sh "$BIN" socketcan:vcan0 socketcan:vcan1 socketcan:vcan2 socketcan:vcan3 | tee "$LOG" || true
+secs=$(( $(date +%s) - start ))
+if grep -qx 'HIL_RESULT PASS' "$LOG" && grep -qx 'GUEST_EXIT rc=0' "$LOG"; then
+  echo "HIL-VCAN: PASS ($(grep -c '^HIL PASS' "$LOG") scenarios, VM ${secs} s)"
+else
+  echo "HIL-VCAN: FAIL (VM ${secs} s; see HIL FAIL lines above)"; exit 1
+fi
