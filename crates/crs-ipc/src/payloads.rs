@@ -300,3 +300,114 @@ impl PlatformIdentity {
         }
     }
 }
+
+/// Motion-cueing input: a stream of reference poses for motion-core (e.g. from a driving or
+/// flight simulator's washout filter). motion-core follows the newest one through its
+/// jerk-limited filter; every sample is checked like any reference.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("crs_ipc::CueingPose.v1")]
+#[repr(C)]
+pub struct CueingPose {
+    pub version: u32,
+    pub _reserved: u32,
+    /// Strictly increasing per publisher.
+    pub sequence: u64,
+    pub timestamp_ns: u64,
+    /// Desired platform pose x (m, rad).
+    pub pose: Pose6,
+}
+
+impl CueingPose {
+    pub fn new(pose: Pose6, sequence: u64) -> Self {
+        Self {
+            version: CONTRACT_VERSION,
+            _reserved: 0,
+            sequence,
+            timestamp_ns: crate::monotonic_ns(),
+            pose,
+        }
+    }
+}
+
+/// motion-core's loop statistics (published about once per second by its publish stage).
+/// Quantiles are upper bin edges of the lock-free histograms, ns.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("crs_ipc::LoopStatsSample.v1")]
+#[repr(C)]
+pub struct LoopStatsSample {
+    pub version: u32,
+    /// Loop state code (1 running, 2 e-stopped, 3 refused, 4 holding).
+    pub state: u32,
+    pub timestamp_ns: u64,
+    pub cycles: u64,
+    pub overruns: u64,
+    pub rejected: u64,
+    /// Setpoints the loop could not hand to the publish stage.
+    pub dropped: u64,
+    pub lateness_p50_ns: u64,
+    pub lateness_p99_ns: u64,
+    pub lateness_p999_ns: u64,
+    pub lateness_max_ns: u64,
+    pub compute_p50_ns: u64,
+    pub compute_p99_ns: u64,
+    pub compute_max_ns: u64,
+}
+
+impl Default for LoopStatsSample {
+    fn default() -> Self {
+        Self {
+            version: CONTRACT_VERSION,
+            state: 0,
+            timestamp_ns: 0,
+            cycles: 0,
+            overruns: 0,
+            rejected: 0,
+            dropped: 0,
+            lateness_p50_ns: 0,
+            lateness_p99_ns: 0,
+            lateness_p999_ns: 0,
+            lateness_max_ns: 0,
+            compute_p50_ns: 0,
+            compute_p99_ns: 0,
+            compute_max_ns: 0,
+        }
+    }
+}
+
+/// The simulated plant's true state (ground truth for the launcher and tests; a real robot has
+/// a tracker and force sensors instead).
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("crs_ipc::PlantTruth.v1")]
+#[repr(C)]
+pub struct PlantTruth {
+    pub version: u32,
+    pub cable_count: u32,
+    pub sequence: u64,
+    pub timestamp_ns: u64,
+    /// Actual platform pose x̂ (m, rad).
+    pub pose: Pose6,
+    /// Actual cable forces f̂ (N), slack = 0.
+    pub force_n: [f64; MAX_CABLES],
+    /// Controlled lengths the winches hold (m).
+    pub cable_length_m: [f64; MAX_CABLES],
+    /// 1 if the last equilibrium solve converged.
+    pub converged: u32,
+    /// 1 while the drives hold (brake engaged / not operation enabled).
+    pub braked: u32,
+}
+
+impl Default for PlantTruth {
+    fn default() -> Self {
+        Self {
+            version: CONTRACT_VERSION,
+            cable_count: 0,
+            sequence: 0,
+            timestamp_ns: 0,
+            pose: [0.0; 6],
+            force_n: [0.0; MAX_CABLES],
+            cable_length_m: [0.0; MAX_CABLES],
+            converged: 0,
+            braked: 0,
+        }
+    }
+}

@@ -95,3 +95,31 @@ topic!(
     publishers = 1,
     subscribers = 8
 );
+// Motion-cueing source -> motion-core. Reference poses at up to 1 kHz; motion-core takes the
+// newest each cycle.
+topic!(
+    CueingPose,
+    "crs/v1/cueing_pose",
+    buffer = 32,
+    history = 0,
+    publishers = 1,
+    subscribers = 4
+);
+// motion-core -> launcher, loggers: loop statistics about once per second.
+topic!(
+    LoopStatsSample,
+    "crs/v1/loop_stats",
+    buffer = 8,
+    history = 1,
+    publishers = 1,
+    subscribers = 8
+);
+// sim-plant -> launcher, tests: ground truth of the simulated plant (a real robot has none).
+topic!(
+    PlantTruth,
+    "crs/v1/plant_truth",
+    buffer = 64,
+    history = 1,
+    publishers = 1,
+    subscribers = 8
+);
