@@ -14,6 +14,10 @@
 #      VCAN_ACCEL      tcg|kvm (default: kvm only if /dev/kvm is writable AND cpuinfo has vmx/svm;
 #                      some nested /dev/kvm implementations cannot boot Debian kernels)
 #      VCAN_MEM        guest memory MiB (default 512)
+#      VCAN_EXTRA_BINS space-separated extra executables copied to the guest's /bin (on PATH, not
+#                      run as tests): the processes a multi-process test spawns
+#      VCAN_DATA       space-separated files/dirs (relative to the current directory) copied to
+#                      the guest's /work, which becomes the test's working directory
 # Timing inside the guest is emulated (TCG): assert behaviour there, never latency.
 set -euo pipefail
 [ $# -ge 1 ] || { echo "usage: $0 TEST_BIN [ARG...]" >&2; exit 2; }
@@ -48,12 +52,18 @@ cp /bin/busybox "$ROOT/bin/"
 for a in sh mount mkdir insmod ip poweroff cut cat; do ln -s busybox "$ROOT/bin/$a"; done
 cp "$C"/{can,can-raw,can-dev,vcan}.ko "$ROOT/mod/"
 cp "$BIN" "$ROOT/tests/$(basename "$BIN")"
-ldd "$BIN" 2>/dev/null | grep -oE '/[^ ]+' | while read -r l; do   # dynamic binaries: libs + loader
-  mkdir -p "$ROOT${l%/*}"; cp -L "$l" "$ROOT$l"; done || true
+for b in "$BIN" ${VCAN_EXTRA_BINS:-}; do
+  [ -x "$b" ] || { echo "vcan-vm: $b is not an executable file" >&2; exit 2; }
+  [ "$b" = "$BIN" ] || cp "$b" "$ROOT/bin/$(basename "$b")"
+  ldd "$b" 2>/dev/null | grep -oE '/[^ ]+' | while read -r l; do   # dynamic binaries: libs + loader
+    mkdir -p "$ROOT${l%/*}"; cp -L "$l" "$ROOT$l"; done || true
+done
+mkdir -p "$ROOT/work"
+for d in ${VCAN_DATA:-}; do cp -r --parents "$d" "$ROOT/work/"; done
 printf '%s\n' "$@" > "$ROOT/tests/args"
 cat > "$ROOT/init" <<'INIT'
 #!/bin/sh
-export PATH=/bin HOME=/tmp; cd /tmp
+export PATH=/bin HOME=/tmp; cd /work
 mount -t proc p /proc; mount -t sysfs s /sys; mount -t devtmpfs d /dev
 mkdir -p /dev/shm; mount -t tmpfs -o size=128m shm /dev/shm
 ip link set lo up

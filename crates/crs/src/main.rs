@@ -3,6 +3,7 @@
 mod calibrate_cmd;
 mod model_cmd;
 mod plant_cmd;
+mod sim_cmd;
 mod surrogate_cmd;
 
 use clap::{Parser, Subcommand};
@@ -21,6 +22,9 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Run the whole simulated stack (sim-plant, safety-monitor, drive-io, motion-core) on the
+    /// default platform and report tracking, forces, loop statistics and the monitor state.
+    Sim(sim_cmd::SimArgs),
     /// Model computations on a platform TOML: ik, fk, forces, stiffness, workspace.
     Model {
         #[command(subcommand)]
@@ -46,6 +50,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Sim(a) => sim_cmd::run(a),
         Command::Model { cmd } => model_cmd::run(cmd),
         Command::Plant { cmd } => plant_cmd::run(cmd),
         Command::Surrogate { cmd } => surrogate_cmd::run(cmd),

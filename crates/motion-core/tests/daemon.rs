@@ -393,3 +393,78 @@ fn waypoint_and_daemon_config_errors_name_the_line() {
     .unwrap_err();
     assert_eq!(e.key, "trajectory.velocity_scale", "{e}");
 }
+
+/// A cueing stream: a new target at given steps (the test sets the step in `.1`).
+struct CueScript(VecDeque<(u64, [f64; 6])>, std::rc::Rc<Cell<u64>>);
+impl motion_core::daemon::cueing::CueingSource for CueScript {
+    fn latest(&mut self) -> Option<[f64; 6]> {
+        let mut newest = None;
+        while let Some((at, _)) = self.0.front() {
+            if *at > self.1.get() {
+                break;
+            }
+            newest = self.0.pop_front().map(|(_, t)| t);
+        }
+        newest
+    }
+}
+
+#[test]
+fn cueing_stream_is_followed_and_a_target_outside_the_region_latches() {
+    use motion_core::daemon::cueing::{CueingFilter, CueingLimits};
+    let pf = common::platform("icosahedron.toml");
+    let limits = CueingLimits {
+        linear_velocity: 1.0,
+        linear_acceleration: 2.0,
+        angular_velocity: 0.5,
+        angular_acceleration: 1.0,
+    };
+    let step = std::rc::Rc::new(Cell::new(0u64));
+    let target = [0.3, -0.2, 2.1, 0.0, 0.02, 0.0];
+    let outside = [0.0, 0.0, 5.0, 0.0, 0.0, 0.0];
+    let cues = CueScript(
+        VecDeque::from([(10, target), (3000, outside)]),
+        step.clone(),
+    );
+    let filter = CueingFilter::new(&pf.home, limits, 1e-3);
+    let mut hl = setup(Vec::new()).with_cueing(filter, Box::new(cues));
+    assert!(hl.is_cueing());
+    let mut sink = Ring(vec![JointSetpoint::default(); 1], 0);
+    let mut cmds = Script(VecDeque::new(), 0);
+    let stats = LoopStats::default();
+    for k in 0..3000u64 {
+        step.set(k);
+        assert_eq!(hl.step(k, &mut sink, &mut cmds, &stats), LoopState::Running);
+    }
+    // Arrived at the target; the setpoint carries the IK of that pose.
+    let sp = sink.0[0];
+    for (p, t) in sp.pose.iter().zip(&target) {
+        assert!((p - t).abs() < 1e-9, "{:?}", sp.pose);
+    }
+    let mut d = motion_core::Data::new(&pf.model);
+    motion_core::kinematics::inverse(&pf.model, &mut d, &Pose::from_array(target)).unwrap();
+    for i in 0..pf.model.m() {
+        assert!((sp.cable_length_m[i] - d.q[i]).abs() < 1e-9);
+    }
+    // A target far outside: the tracker moves towards it and the checks refuse the first pose
+    // that leaves the region; the loop latches and holds.
+    let mut latched = None;
+    for k in 3000..8000u64 {
+        step.set(k);
+        if let LoopState::Refused(r) = hl.step(k, &mut sink, &mut cmds, &stats) {
+            latched = Some(r);
+            break;
+        }
+    }
+    assert!(latched.is_some(), "never refused");
+    let held = sink.0[0];
+    assert!(held.pose[2] <= pf.region.position.max.z + 1e-9);
+    for k in 0..100u64 {
+        step.set(8000 + k);
+        assert!(matches!(
+            hl.step(8000 + k, &mut sink, &mut cmds, &stats),
+            LoopState::Refused(_)
+        ));
+        assert_eq!(sink.0[0].cable_length_m, held.cable_length_m);
+    }
+}

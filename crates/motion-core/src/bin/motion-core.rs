@@ -2,10 +2,11 @@
 
 use clap::Parser;
 use crs_ipc::{
-    EventKind, Heartbeat, IpcNode, JointSetpoint, PlatformIdentity, ProcessId, StateEvent,
-    TopicPublisher, TopicSubscriber,
+    CueingPose, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlatformIdentity,
+    ProcessId, StateEvent, TopicPublisher, TopicSubscriber,
 };
 use motion_core::config::load_platform;
+use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
 use motion_core::daemon::cycle::Cycle;
 use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
 use motion_core::daemon::stats::LoopStats;
@@ -34,6 +35,23 @@ struct Args {
     /// Exit once the plan has been run and this many seconds of hold have passed.
     #[arg(long)]
     exit_after_plan_s: Option<f64>,
+    /// Reference input: `waypoints` (ruckig plan of the waypoint CSV) or `cueing` (follow the
+    /// `crs/v1/cueing_pose` stream through the velocity/acceleration-limited tracker).
+    #[arg(long, default_value = "waypoints", value_parser = ["waypoints", "cueing"])]
+    input: String,
+}
+
+/// The newest motion-cueing target since the last cycle (drains the subscriber; no allocation).
+struct IoxCueing(TopicSubscriber<CueingPose>);
+impl CueingSource for IoxCueing {
+    #[inline]
+    fn latest(&mut self) -> Option<[f64; 6]> {
+        let mut newest = None;
+        while let Ok(Some(c)) = self.0.receive() {
+            newest = Some(c.pose);
+        }
+        newest
+    }
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -48,6 +66,7 @@ struct IoxPorts {
     heartbeats: TopicPublisher<Heartbeat>,
     events: TopicPublisher<StateEvent>,
     identity: TopicPublisher<PlatformIdentity>,
+    loop_stats: TopicPublisher<LoopStatsSample>,
     hb_seq: u64,
     _node: IpcNode,
 }
@@ -60,6 +79,27 @@ impl StagePorts for IoxPorts {
         let mut hb = Heartbeat::new(ProcessId::MotionCore, state, self.hb_seq);
         hb.overruns = overruns.min(u32::MAX as u64) as u32;
         let _ = self.heartbeats.publish(&hb);
+    }
+    fn loop_stats(&mut self, stats: &LoopStats, outbox: &Outbox) {
+        let lat = stats.lateness.snapshot();
+        let cmp = stats.compute.snapshot();
+        let s = LoopStatsSample {
+            state: outbox.state.load(Ordering::Relaxed),
+            timestamp_ns: realtime::now_ns(),
+            cycles: stats.cycles.load(Ordering::Relaxed),
+            overruns: stats.overruns.load(Ordering::Relaxed),
+            rejected: stats.rejected.load(Ordering::Relaxed),
+            dropped: outbox.dropped.load(Ordering::Relaxed),
+            lateness_p50_ns: lat.quantile_ns(0.5),
+            lateness_p99_ns: lat.quantile_ns(0.99),
+            lateness_p999_ns: lat.quantile_ns(0.999),
+            lateness_max_ns: lat.max_ns,
+            compute_p50_ns: cmp.quantile_ns(0.5),
+            compute_p99_ns: cmp.quantile_ns(0.99),
+            compute_max_ns: cmp.max_ns,
+            ..LoopStatsSample::default()
+        };
+        let _ = self.loop_stats.publish(&s);
     }
     fn state_changed(&mut self, _from: u32, to: u32) {
         let kind = if LoopState::code_is_latched(to) {
@@ -153,7 +193,12 @@ fn run(args: Args) -> Result<(), String> {
         }
     }
 
-    let waypoint_file = args.waypoints.clone().or(cfg.trajectory.waypoints.clone());
+    let cueing = args.input == "cueing";
+    let waypoint_file = if cueing {
+        None
+    } else {
+        args.waypoints.clone().or(cfg.trajectory.waypoints.clone())
+    };
     let waypoints: Vec<Waypoint> = match &waypoint_file {
         Some(p) => trajectory::read_waypoints(p)?,
         None => Vec::new(),
@@ -242,6 +287,9 @@ fn run(args: Args) -> Result<(), String> {
                         identity: node
                             .publisher::<PlatformIdentity>()
                             .map_err(|e| e.to_string())?,
+                        loop_stats: node
+                            .publisher::<LoopStatsSample>()
+                            .map_err(|e| e.to_string())?,
                         hb_seq: 0,
                         _node: node,
                     };
@@ -318,6 +366,18 @@ fn run(args: Args) -> Result<(), String> {
     sd_notify("READY=1\nSTATUS=motion loop running");
 
     let mut hard_loop = HardLoop::new(cycle, sampler);
+    if cueing {
+        let limits = CueingLimits {
+            linear_velocity: lim.linear_velocity,
+            linear_acceleration: lim.linear_acceleration,
+            angular_velocity: lim.angular_velocity,
+            angular_acceleration: lim.angular_acceleration,
+        };
+        let filter = CueingFilter::new(&platform.home, limits, period_s);
+        let sub = node.subscriber::<CueingPose>().map_err(|e| e.to_string())?;
+        hard_loop = hard_loop.with_cueing(filter, Box::new(IoxCueing(sub)));
+        tracing::info!("reference input: motion-cueing stream (crs/v1/cueing_pose)");
+    }
     let mut sink = OutboxSink(&outbox);
     let mut cmds = IoxCommands(commands);
     let mut plan_done_at: Option<u64> = None;

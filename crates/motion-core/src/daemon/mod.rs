@@ -8,6 +8,7 @@
 //! latches until an explicit reset.
 
 pub mod config;
+pub mod cueing;
 pub mod cycle;
 pub mod outbox;
 pub mod realtime;
@@ -70,6 +71,8 @@ impl LoopState {
 pub struct HardLoop {
     pub cycle: Cycle,
     pub sampler: Sampler,
+    /// Motion-cueing input; when set it replaces the planned trajectory as the reference.
+    cueing: Option<(cueing::CueingFilter, Box<dyn cueing::CueingSource>)>,
     pub state: LoopState,
     setpoint: JointSetpoint,
     last_safe: Option<JointSetpoint>,
@@ -81,11 +84,27 @@ impl HardLoop {
         Self {
             cycle,
             sampler,
+            cueing: None,
             state: LoopState::Running,
             setpoint: JointSetpoint::default(),
             last_safe: None,
             sequence: 0,
         }
+    }
+
+    /// Follow a motion-cueing stream instead of the planned trajectory (see [`cueing`]).
+    pub fn with_cueing(
+        mut self,
+        filter: cueing::CueingFilter,
+        source: Box<dyn cueing::CueingSource>,
+    ) -> Self {
+        self.cueing = Some((filter, source));
+        self
+    }
+
+    /// True while following a cueing stream.
+    pub fn is_cueing(&self) -> bool {
+        self.cueing.is_some()
     }
 
     /// One cycle at monotonic time `now_ns`. Returns the state after the cycle.
@@ -107,7 +126,15 @@ impl HardLoop {
             }
         }
         if self.state == LoopState::Running {
-            let (reference, _starved): (Reference, bool) = self.sampler.next_reference();
+            let reference: Reference = match &mut self.cueing {
+                Some((filter, source)) => {
+                    if let Some(t) = source.latest() {
+                        filter.set_target(&t);
+                    }
+                    filter.step()
+                }
+                None => self.sampler.next_reference().0,
+            };
             match self.cycle.compute(&reference, &mut self.setpoint) {
                 Ok(()) => self.last_safe = Some(self.setpoint),
                 Err(r) => {

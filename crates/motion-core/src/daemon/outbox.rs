@@ -80,6 +80,8 @@ pub trait StagePorts {
     fn heartbeat(&mut self, state: u32, overruns: u64);
     /// The loop changed state (`from` → `to` codes).
     fn state_changed(&mut self, from: u32, to: u32);
+    /// Periodic loop statistics (about once per second; the stage may allocate, the loop not).
+    fn loop_stats(&mut self, _stats: &LoopStats, _outbox: &Outbox) {}
 }
 
 /// One pass of the publish stage: drains the outbox, then heartbeat/state bookkeeping.
@@ -129,6 +131,8 @@ pub fn run_publish_stage(
     let mut last_cycles = 0;
     let mut last_state = LoopState::Running.code();
     let mut deadline = start_ns + phase_ns;
+    let stats_every = (1_000_000_000 / period_ns.max(1)).max(1);
+    let mut passes = 0u64;
     while !stop.load(Ordering::Relaxed) {
         super::realtime::sleep_until(deadline);
         publish_pass(
@@ -139,6 +143,10 @@ pub fn run_publish_stage(
             &mut last_state,
             heartbeat_every_cycles,
         );
+        passes += 1;
+        if passes.is_multiple_of(stats_every) {
+            ports.loop_stats(stats, outbox);
+        }
         deadline += period_ns;
         let now = super::realtime::now_ns();
         if now > deadline {
@@ -153,4 +161,5 @@ pub fn run_publish_stage(
         &mut last_state,
         heartbeat_every_cycles,
     );
+    ports.loop_stats(stats, outbox);
 }
