@@ -22,6 +22,7 @@
 //! [`campaign`] drives the plant through measurement campaigns (ch. 6.1, 6.4) and [`dataset`]
 //! reads and writes the CSV data-set format (docs/data-format.md).
 
+pub mod bus;
 pub mod cable_law;
 pub mod campaign;
 pub mod config;

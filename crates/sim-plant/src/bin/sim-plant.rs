@@ -1,0 +1,203 @@
+//! sim-plant: the simulated plant on the drive bus. Answers as the m CiA 402 winch drives of
+//! the drives config (NMT, SDO, RPDO/SYNC, TPDOs, heartbeats), moves the winches toward their
+//! CSP targets, settles the elastostatic plant for the lengths they hold and reports the force
+//! sensors in the TPDOs; publishes the ground truth (`crs/v1/plant_truth`) and the tracker pose
+//! (`crs/v1/tracker_pose`) on iceoryx2 every plant cycle. See `sim_plant::bus` for the set-up
+//! and offset convention (eq. 3.14 / 6.24) and docs/plant-figures.md.
+
+use clap::Parser;
+use crs_ipc::{Heartbeat, IpcNode, PlantTruth, ProcessId, TrackerPose};
+use drive_io::DrivesConfig;
+use motion_core::config::load_platform;
+use sim_plant::bus::{self, BusOptions, ConfigFiles, PlantBus};
+use sim_plant::load_plant;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+#[derive(Parser)]
+#[command(
+    about = "Simulated cable robot on the CAN bus: answers as the winch drives (CiA 402 CSP) \
+             with the elastostatic plant behind them"
+)]
+struct Args {
+    /// Plant TOML (effects; its `plant.platform` is the nominal platform).
+    #[arg(long, default_value = "config/plant/icosahedron.toml")]
+    plant: PathBuf,
+    /// Drive bus configuration (TOML): transport, SYNC period, the winches' length <-> counts
+    /// scaling (the same file drive-io reads).
+    #[arg(long, default_value = "config/drives.toml")]
+    drives: PathBuf,
+    /// Platform TOML of the CONTROL model whose φ(home) the drives read at start (default: the
+    /// plant's nominal platform). Must be the one motion-core runs.
+    #[arg(long)]
+    control_platform: Option<PathBuf>,
+    /// Override `bus.transport` of the drives config (socketcan:vcan0, udpbus:239.255.70.1:20000).
+    #[arg(long)]
+    transport: Option<String>,
+    /// iceoryx2 service-name prefix (default: $CRS_IPC_PREFIX or none).
+    #[arg(long)]
+    ipc_prefix: Option<String>,
+    /// Plant cycle while no SYNC arrives (µs); with SYNC the plant steps once per SYNC.
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(100..=100_000))]
+    period_us: u32,
+    /// Re-solve the equilibrium only when a held cable length moved by more than this (m).
+    #[arg(long, default_value_t = 1e-7)]
+    resolve_epsilon_m: f64,
+    /// Initial cable forces at the home pose (N), comma separated, one per cable. Default: the
+    /// control platform's `home.f_ini_n`, else (f_min + f_max)/2 projected (eq. 3.19 / 3.41).
+    #[arg(long, value_delimiter = ',')]
+    f_ini_n: Option<Vec<f64>>,
+    /// Run the plant loop as SCHED_FIFO with this priority (1..=99) and mlockall.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    rt_priority: Option<i32>,
+    /// Pin the plant loop to this CPU (with --rt-priority).
+    #[arg(long)]
+    cpu: Option<usize>,
+}
+
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    STOP.store(true, Ordering::SeqCst);
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .init();
+    match run(Args::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("sim-plant: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
+    let plant_file = args.plant.display().to_string();
+    let drives_file = args.drives.display().to_string();
+    // Plant TOML errors carry file:line:column and the key (motion-core's ConfigError).
+    let plant_cfg = load_plant(&args.plant)?;
+    let mut drives = DrivesConfig::load(&args.drives).map_err(|e| format!("{drives_file}: {e}"))?;
+    if let Some(t) = &args.transport {
+        drives.bus.transport = t.clone();
+        drives
+            .validate()
+            .map_err(|e| format!("--transport {t:?}: {e}"))?;
+    }
+    let spec = drives
+        .transport()
+        .map_err(|e| format!("{drives_file}: {e}"))?;
+    let (control, control_file) = match &args.control_platform {
+        Some(p) => (load_platform(p)?, p.display().to_string()),
+        None => (
+            plant_cfg.platform.clone(),
+            plant_cfg.platform_path.display().to_string(),
+        ),
+    };
+    let mut opts = BusOptions::new(&drives, &control);
+    opts.resolve_epsilon_m = args.resolve_epsilon_m;
+    opts.f_ini_n = args.f_ini_n.clone();
+    opts.files = ConfigFiles {
+        plant: plant_file.clone(),
+        control: control_file.clone(),
+        drives: drives_file.clone(),
+    };
+    let name = plant_cfg.name.clone();
+    let effects = plant_cfg.effects.enabled_names().join(", ");
+    let mut plant = PlantBus::new(plant_cfg, &control, &drives, opts)?;
+    let (lo, hi) = plant
+        .q_off()
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(*v), b.max(*v))
+        });
+    let (dp, dr) = plant.equilibrium().pose.error_to(plant.home());
+    tracing::info!(
+        plant = %name,
+        effects = if effects.is_empty() { "none" } else { effects.as_str() },
+        control = %control_file,
+        drives = %drives_file,
+        cables = plant.m(),
+        "plant set up at the home pose"
+    );
+    tracing::info!(
+        home = ?plant.home().to_array(),
+        pose_error_mm = dp * 1e3,
+        rotation_error_deg = dr.to_degrees(),
+        forces_n = ?plant.setup().forces,
+        q_off_min_mm = lo * 1e3,
+        q_off_max_mm = hi * 1e3,
+        "initial tension set (eq. 3.19); encoders homed so the drives read φ(home) (eq. 3.14/6.24)"
+    );
+
+    // SAFETY: the handler only stores to an atomic (async-signal-safe).
+    unsafe {
+        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+    }
+    let ipc = match &args.ipc_prefix {
+        Some(p) => IpcNode::with_prefix("sim-plant", p)?,
+        None => IpcNode::new("sim-plant")?,
+    };
+    let truth_pub = ipc.publisher::<PlantTruth>()?;
+    let tracker_pub = ipc.publisher::<TrackerPose>()?;
+    let heartbeat_pub = ipc.publisher::<Heartbeat>()?;
+    let mut bus = can_transport::open(&spec).map_err(|e| format!("transport {spec}: {e}"))?;
+    if let Some(p) = args.rt_priority {
+        drive_io::runner::make_realtime(p, args.cpu)?;
+        tracing::info!(priority = p, cpu = ?args.cpu, "SCHED_FIFO + mlockall");
+    }
+    tracing::info!(
+        transport = %spec,
+        period_us = args.period_us,
+        truth = truth_pub.service_name(),
+        tracker = tracker_pub.service_name(),
+        "sim-plant running"
+    );
+    let mut publish_errors = 0u64;
+    let mut was_braked = None;
+    let mut was_converged = true;
+    let summary = bus::run(
+        &mut bus,
+        &mut plant,
+        Duration::from_micros(u64::from(args.period_us)),
+        &STOP,
+        |truth, tracker| {
+            let r = truth_pub
+                .publish(truth)
+                .and_then(|()| tracker_pub.publish(tracker));
+            if let Err(e) = r {
+                // Log the first and then every 1000th failure: never flood, never stop the plant.
+                if publish_errors.is_multiple_of(1000) {
+                    tracing::warn!(error = %e, count = publish_errors + 1, "publishing failed");
+                }
+                publish_errors += 1;
+            }
+            let braked = truth.braked != 0;
+            if was_braked != Some(braked) {
+                tracing::info!(
+                    braked,
+                    "winch brakes {}",
+                    if braked { "engaged" } else { "released" }
+                );
+                was_braked = Some(braked);
+            }
+            if was_converged && truth.converged == 0 {
+                tracing::warn!("plant truth: converged = 0");
+            }
+            was_converged = truth.converged != 0;
+            if truth.sequence.is_multiple_of(100) {
+                let hb = Heartbeat::new(ProcessId::SimPlant, truth.braked, truth.sequence);
+                let _ = heartbeat_pub.publish(&hb);
+            }
+        },
+    )?;
+    tracing::info!(?summary, "sim-plant stopped");
+    Ok(())
+}

@@ -1,0 +1,839 @@
+//! The plant behind the drives: the CAN face of the simulated plant (binary `sim-plant`).
+//!
+//! [`PlantBus`] answers as the m CiA 402 winch drives of `config/drives.toml` (the drive side
+//! is drive-io's [`DriveBank`]) and puts the elastostatic [`Plant`] behind them:
+//!
+//! * every drive owns a winch ([`CspWinch`]) that follows the stream of CSP target positions
+//!   like a CSP drive (velocity feed-forward from consecutive targets, dead-beat per SYNC
+//!   period) within the winch limits (cable speed ≤ `bus.max_cable_speed_m_per_s`,
+//!   acceleration ≤ the platform's table 5.1 limit), decelerates on quick stop and is held by
+//!   its brake otherwise (not Operation Enabled, NMT stopped, fault);
+//! * with `[safety_heartbeat]` in the drives config the drives validate the safety monitor's
+//!   heartbeat (drive-io's safety watch) and quick-stop without it;
+//! * the platform settles in the equilibrium of the [`Plant`] for the lengths the winches hold
+//!   (solved only when they changed by more than [`BusOptions::resolve_epsilon_m`]);
+//! * the TPDOs report the axis position (encoder counts, drive-io's scaling), its speed and the
+//!   force-sensor reading of the plant ([`Plant::measure`]); [`PlantBus::truth`] and
+//!   [`PlantBus::tracker`] are the iceoryx2 payloads (true state / tracker reading).
+//!
+//! ## Set-up and the offset convention (eq. 3.14, 6.24)
+//!
+//! At construction the plant is set up like the real robot (sec. 6.1): the platform is held at
+//! the control platform's home pose x_ini and the initial tension f_ini is set
+//! ([`Plant::setup_tension`], eq. 3.19), which gives the commands q̂_ini = φ̂_el(x_ini, f_0)
+//! that hold it. The drives' encoder zero is then chosen (homing) so that they READ the control
+//! model's kinematic lengths there, φ(x_ini) — standard (or pulley, if the control platform
+//! has pulleys) inverse kinematics, no surrogate. Per cable:
+//!
+//! ```text
+//! q_off,i   = q̂_ini,i − φ_i(x_ini)            (eq. 3.14 / 6.24, m; negative: the cables are stretched)
+//! q_plant,i = q_drive,i + q_off,i             (what the Plant is commanded with)
+//! q_drive,i = counts_to_length(position actual) (what drive-io reports and motion-core commands)
+//! ```
+//!
+//! So motion-core's standard command q_θ = φ(x) at the home pose holds exactly the set-up
+//! tension, drive-io's first targets (= the drives' actual positions) are φ(x_ini), and a
+//! kinematic command elsewhere is φ(x) + q_off on the plant, as in the spec's experiments.
+//! Without this convention the first setpoint would differ from the drives' positions by the
+//! cable stretch (≈ 20 mm at 5 kN, k_F = 2000 kN, q ≈ 8 m), far above drive-io's per-cycle
+//! step limit.
+//!
+//! Nothing here panics on bus input: targets outside `[0, max_cable_length_m]` are clamped
+//! (the drive's software position limits), a plant without equilibrium is reported
+//! (`converged = 0`, [`PlantBus::last_error`]) while the last equilibrium is kept.
+
+use crate::config::PlantConfig;
+use crate::plant::{Equilibrium, Plant, PlantError, TensionSetup};
+use can_transport::{CanBus, CanError, CanFrame};
+use crs_ipc::{CONTRACT_VERSION, MAX_CABLES, PlantTruth, TrackerPose};
+use drive_io::config::{DrivesConfig, WinchConfig};
+use drive_io::slave::{DriveBank, MotionDemand};
+use motion_core::config::Platform;
+use motion_core::{Data, Pose, kinematics};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// Names of the configuration files, for error messages (`file: key: reason`).
+#[derive(Clone, Debug)]
+pub struct ConfigFiles {
+    pub plant: String,
+    pub control: String,
+    pub drives: String,
+}
+
+impl Default for ConfigFiles {
+    fn default() -> Self {
+        Self {
+            plant: "plant TOML".into(),
+            control: "control platform TOML".into(),
+            drives: "drives TOML".into(),
+        }
+    }
+}
+
+/// Why the plant cannot be put on the bus. Every variant names the file(s) and key(s).
+#[derive(Debug, thiserror::Error)]
+pub enum BusPlantError {
+    #[error(
+        "{plant}: the plant has {plant_m} cables but {drives}: `winch` has {drives_m} [[winch]] \
+         entries (cable i is the i-th [[winch]])"
+    )]
+    CableCount {
+        plant: String,
+        plant_m: usize,
+        drives: String,
+        drives_m: usize,
+    },
+    #[error(
+        "{control}: the control platform has {control_m} cables but the plant ({plant}) has {plant_m}"
+    )]
+    ControlCableCount {
+        control: String,
+        control_m: usize,
+        plant: String,
+        plant_m: usize,
+    },
+    #[error(
+        "{drives}: `winch[{index}].drum_diameter_m` = {drives_m} m differs from {control}: \
+         `winch.drum_diameter_m` = {control_m} m (the drives' length <-> counts scaling must be \
+         the platform's drum)"
+    )]
+    DrumDiameter {
+        drives: String,
+        index: usize,
+        drives_m: f64,
+        control: String,
+        control_m: f64,
+    },
+    #[error("option `{name}`: {reason}")]
+    Option { name: &'static str, reason: String },
+    #[error("{plant}: the plant cannot be built: {source}")]
+    Plant {
+        plant: String,
+        #[source]
+        source: PlantError,
+    },
+    #[error("{control}: `home`: the control model cannot compute the home pose: {detail}")]
+    ControlHome { control: String, detail: String },
+    #[error(
+        "setting the initial tension at the home pose of {control} on the plant {plant} failed: {source}"
+    )]
+    Setup {
+        control: String,
+        plant: String,
+        #[source]
+        source: PlantError,
+    },
+    #[error(
+        "{drives}: `winch[{index}].max_cable_length_m` = {max} m: cable {cable} at the home pose \
+         reads {length:.4} m (φ(home)), outside [0, max_cable_length_m]"
+    )]
+    HomeOutOfRange {
+        drives: String,
+        index: usize,
+        cable: usize,
+        length: f64,
+        max: f64,
+    },
+}
+
+/// Parameters of the plant on the bus (SI).
+#[derive(Clone, Debug)]
+pub struct BusOptions {
+    /// Physics step per SYNC, s: a CSP drive interpolates to the target latched at a SYNC over
+    /// one SYNC period (the drives config's `bus.sync_period_us`).
+    pub sync_period_s: f64,
+    /// Largest cable speed a winch reaches, m/s.
+    pub max_cable_speed_m_per_s: f64,
+    /// Largest cable acceleration (also the quick-stop deceleration), m/s².
+    pub max_cable_accel_m_per_s2: f64,
+    /// The equilibrium is solved again only when a held length moved by more than this since
+    /// the last solve, m (one equilibrium costs up to ~80 µs with every effect on).
+    pub resolve_epsilon_m: f64,
+    /// Initial cable forces at the home pose, N. `None`: the control platform's `home.f_ini_n`,
+    /// or, if it has none, (f_min + f_max)/2 for every cable, which the projection of eq. 3.19
+    /// turns into the closed-form force distribution of eq. 3.41 at the home pose.
+    pub f_ini_n: Option<Vec<f64>>,
+    /// Heartbeat producer time before the master writes 0x1017, ms.
+    pub default_heartbeat_ms: u16,
+    pub files: ConfigFiles,
+}
+
+impl BusOptions {
+    /// Defaults from the drives config (SYNC period, cable speed limit, heartbeat) and the
+    /// control platform (acceleration limit, table 5.1).
+    pub fn new(drives: &DrivesConfig, control: &Platform) -> Self {
+        Self {
+            sync_period_s: f64::from(drives.bus.sync_period_us) * 1e-6,
+            max_cable_speed_m_per_s: drives.bus.max_cable_speed_m_per_s,
+            max_cable_accel_m_per_s2: control.limits.linear_acceleration_max,
+            resolve_epsilon_m: 1e-7,
+            f_ini_n: None,
+            default_heartbeat_ms: drives.bus.heartbeat_producer_ms,
+            files: ConfigFiles::default(),
+        }
+    }
+
+    fn validate(&self) -> Result<(), BusPlantError> {
+        let pos = |name, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(BusPlantError::Option {
+                    name,
+                    reason: format!("must be finite and > 0, got {v}"),
+                })
+            }
+        };
+        pos("sync_period_s", self.sync_period_s)?;
+        pos("max_cable_speed_m_per_s", self.max_cable_speed_m_per_s)?;
+        pos("max_cable_accel_m_per_s2", self.max_cable_accel_m_per_s2)?;
+        if !(self.resolve_epsilon_m.is_finite() && self.resolve_epsilon_m >= 0.0) {
+            return Err(BusPlantError::Option {
+                name: "resolve_epsilon_m",
+                reason: format!("must be finite and >= 0, got {}", self.resolve_epsilon_m),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// What one plant cycle did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CycleReport {
+    /// The equilibrium was solved this cycle (the held lengths moved by more than ε).
+    pub solved: bool,
+    /// The last solve found an equilibrium.
+    pub converged: bool,
+    /// At least one winch is held by its brake.
+    pub braked: bool,
+}
+
+/// Counters of the plant on the bus.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BusStats {
+    /// Winch steps ([`PlantBus::advance`]).
+    pub cycles: u64,
+    /// Equilibrium solves (held lengths moved by more than ε).
+    pub solves: u64,
+    /// Solves without equilibrium.
+    pub failed_solves: u64,
+}
+
+/// The simulated plant answering as the drives (see the module docs).
+pub struct PlantBus {
+    plant: Plant,
+    winches: Vec<WinchConfig>,
+    bank: DriveBank,
+    /// Winch axes in drive coordinates (what the encoders read, m).
+    axes: Vec<CspWinch>,
+    q_off: Vec<f64>,
+    home_drive: Vec<f64>,
+    home: Pose,
+    setup: TensionSetup,
+    /// Plant commands q_plant = q_drive + q_off of this cycle, m.
+    q_cmd: Vec<f64>,
+    /// Commands of the last solve attempt (successful or not), m.
+    q_solved: Vec<f64>,
+    /// Last equilibrium found.
+    eq: Equilibrium,
+    converged: bool,
+    last_error: Option<PlantError>,
+    braked: Vec<bool>,
+    measured_forces: Vec<f64>,
+    prev_pose: Pose,
+    truth: PlantTruth,
+    tracker: TrackerPose,
+    stats: BusStats,
+    opts: BusOptions,
+}
+
+impl PlantBus {
+    /// Builds the plant, sets the initial tension at the control platform's home pose, homes
+    /// the encoders (module docs) and settles the plant there. `control` is the model the
+    /// controller commands with (usually the plant's nominal platform, `plant.platform`).
+    pub fn new(
+        plant_cfg: PlantConfig,
+        control: &Platform,
+        drives: &DrivesConfig,
+        opts: BusOptions,
+    ) -> Result<Self, BusPlantError> {
+        opts.validate()?;
+        let files = opts.files.clone();
+        let mut plant = Plant::new(plant_cfg).map_err(|source| BusPlantError::Plant {
+            plant: files.plant.clone(),
+            source,
+        })?;
+        let m = plant.m();
+        if drives.winches.len() != m {
+            return Err(BusPlantError::CableCount {
+                plant: files.plant,
+                plant_m: m,
+                drives: files.drives,
+                drives_m: drives.winches.len(),
+            });
+        }
+        if control.model.m() != m {
+            return Err(BusPlantError::ControlCableCount {
+                control: files.control,
+                control_m: control.model.m(),
+                plant: files.plant,
+                plant_m: m,
+            });
+        }
+        // The drives config's scaling is the one both drive-io and this plant use; a platform
+        // whose drum differs would mean the configuration describes two different robots.
+        let drum = control.winch.drum_diameter;
+        if let Some((index, w)) = drives
+            .winches
+            .iter()
+            .enumerate()
+            .find(|(_, w)| (w.drum_diameter_m - drum).abs() > 1e-9 * drum.abs().max(1.0))
+        {
+            return Err(BusPlantError::DrumDiameter {
+                drives: files.drives,
+                index,
+                drives_m: w.drum_diameter_m,
+                control: files.control,
+                control_m: drum,
+            });
+        }
+        let f_ini = match &opts.f_ini_n {
+            Some(f) => f.clone(),
+            None => control.f_ini.clone().unwrap_or_else(|| {
+                let p = control.model.params();
+                vec![0.5 * (p.f_min + p.f_max); m]
+            }),
+        };
+        if f_ini.len() != m || f_ini.iter().any(|f| !(f.is_finite() && *f > 0.0)) {
+            return Err(BusPlantError::Option {
+                name: "f_ini_n",
+                reason: format!("need {m} finite forces > 0, got {f_ini:?}"),
+            });
+        }
+        let home = control.home;
+        // eq. (3.14) / (6.24): q_off = φ̂_el(x_ini, f_ini) − φ(x_ini).
+        let setup = plant
+            .setup_tension(&home, &f_ini)
+            .map_err(|source| BusPlantError::Setup {
+                control: files.control.clone(),
+                plant: files.plant.clone(),
+                source,
+            })?;
+        let mut data = Data::new(&control.model);
+        kinematics::inverse(&control.model, &mut data, &home).map_err(|e| {
+            BusPlantError::ControlHome {
+                control: files.control.clone(),
+                detail: e.to_string(),
+            }
+        })?;
+        let home_drive = data.q.clone();
+        let q_off: Vec<f64> = setup
+            .q_cmd
+            .iter()
+            .zip(&home_drive)
+            .map(|(qc, phi)| qc - phi)
+            .collect();
+        for (i, (w, l)) in drives.winches.iter().zip(&home_drive).enumerate() {
+            if w.length_to_counts(*l).is_none() {
+                return Err(BusPlantError::HomeOutOfRange {
+                    drives: files.drives,
+                    index: i,
+                    cable: i + 1,
+                    length: *l,
+                    max: w.max_cable_length_m,
+                });
+            }
+        }
+        // Settle at home with the set-up command, so the run starts from the set-up state.
+        let eq = plant
+            .step(&setup.q_cmd)
+            .map_err(|source| BusPlantError::Setup {
+                control: files.control.clone(),
+                plant: files.plant.clone(),
+                source,
+            })?;
+        let ids: Vec<u8> = drives.winches.iter().map(|w| w.node_id).collect();
+        let mut bank = DriveBank::new(&ids, opts.default_heartbeat_ms);
+        if let Some(sw) = drives.safety_heartbeat {
+            // The drives validate the safety monitor's heartbeat like the real ones (drives.toml
+            // `[safety_heartbeat]`): without it they quick-stop and the brakes hold.
+            bank.enable_safety_watch(sw);
+        }
+        let axes = home_drive
+            .iter()
+            .map(|l| {
+                CspWinch::new(
+                    *l,
+                    opts.max_cable_speed_m_per_s,
+                    opts.max_cable_accel_m_per_s2,
+                )
+            })
+            .collect();
+        let truth = PlantTruth {
+            version: CONTRACT_VERSION,
+            cable_count: m as u32,
+            ..PlantTruth::default()
+        };
+        let mut s = Self {
+            plant,
+            winches: drives.winches.clone(),
+            bank,
+            axes,
+            q_off,
+            home_drive,
+            home,
+            q_cmd: setup.q_cmd.clone(),
+            q_solved: setup.q_cmd.clone(),
+            setup,
+            prev_pose: eq.pose,
+            eq,
+            converged: true,
+            last_error: None,
+            braked: vec![true; m],
+            measured_forces: vec![0.0; m],
+            truth,
+            tracker: TrackerPose::default(),
+            stats: BusStats::default(),
+            opts,
+        };
+        s.measure_and_report(crs_ipc::monotonic_ns(), 0.0);
+        Ok(s)
+    }
+
+    pub fn m(&self) -> usize {
+        self.axes.len()
+    }
+
+    /// Power-on of all drives (boot-up messages queued; send with [`PlantBus::flush`]).
+    pub fn start(&mut self, now_ns: u64) {
+        self.bank.start(now_ns);
+    }
+
+    /// Handles one received frame for every drive; true if it was a SYNC the drives act on:
+    /// then run [`PlantBus::cycle`] with the SYNC period and [`PlantBus::transmit_pdos`].
+    pub fn handle_frame(&mut self, frame: &CanFrame, now_ns: u64) -> bool {
+        self.bank.handle_frame(frame, now_ns)
+    }
+
+    /// One plant cycle of `dt_s` seconds at `now_ns` (CLOCK_MONOTONIC, for the payload stamps):
+    /// [`PlantBus::advance`] then [`PlantBus::settle`].
+    pub fn cycle(&mut self, now_ns: u64, dt_s: f64) -> CycleReport {
+        self.advance(dt_s);
+        self.settle(now_ns, dt_s)
+    }
+
+    /// Moves the winch axes by `dt_s` seconds according to the drives' demand (cheap; call it
+    /// at every SYNC, as the drives latch a new target at every SYNC). A non-finite or
+    /// negative `dt_s` is treated as 0 (no motion).
+    pub fn advance(&mut self, dt_s: f64) {
+        let dt = if dt_s.is_finite() && dt_s > 0.0 {
+            dt_s
+        } else {
+            0.0
+        };
+        for i in 0..self.axes.len() {
+            let w = &self.winches[i];
+            let ax = &mut self.axes[i];
+            match self.bank.demand(i) {
+                MotionDemand::Follow { target_counts } => {
+                    if dt > 0.0 {
+                        // Software position limits of the drive: never beyond the drum range.
+                        let t = w
+                            .counts_to_length(target_counts)
+                            .clamp(0.0, w.max_cable_length_m);
+                        ax.follow(t, dt);
+                    }
+                    self.braked[i] = false;
+                }
+                MotionDemand::QuickStop => {
+                    if dt > 0.0 {
+                        ax.quick_stop(dt);
+                    }
+                    // Decelerated to rest: the brake holds (quick stop option code 6).
+                    self.braked[i] = ax.velocity_m_per_s == 0.0;
+                }
+                MotionDemand::Hold => {
+                    ax.hold();
+                    self.braked[i] = true;
+                }
+            }
+            self.q_cmd[i] = ax.length_m + self.q_off[i];
+        }
+        self.stats.cycles += 1;
+    }
+
+    /// Settles the platform for the lengths the winches hold now (the equilibrium is solved
+    /// only if they moved by more than ε since the last solve), reads the sensors and updates
+    /// the drives' actual values and the payloads. `dt_s` = time since the last settle (for
+    /// the tracker's pose velocity).
+    pub fn settle(&mut self, now_ns: u64, dt_s: f64) -> CycleReport {
+        let moved = self
+            .q_cmd
+            .iter()
+            .zip(&self.q_solved)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let solved = moved > self.opts.resolve_epsilon_m;
+        if solved {
+            self.q_solved.copy_from_slice(&self.q_cmd);
+            self.stats.solves += 1;
+            match self.plant.step(&self.q_cmd) {
+                Ok(eq) => {
+                    if !self.converged {
+                        tracing::info!("plant equilibrium found again");
+                    }
+                    self.eq = eq;
+                    self.converged = true;
+                    self.last_error = None;
+                }
+                Err(e) => {
+                    self.stats.failed_solves += 1;
+                    if self.converged {
+                        tracing::error!(
+                            error = %e,
+                            lengths_m = ?self.q_cmd,
+                            "plant has no equilibrium for the held cable lengths; reporting the \
+                             last equilibrium with converged = 0"
+                        );
+                    }
+                    self.converged = false;
+                    self.last_error = Some(e);
+                }
+            }
+        }
+        let dt = if dt_s.is_finite() && dt_s > 0.0 {
+            dt_s
+        } else {
+            0.0
+        };
+        self.measure_and_report(now_ns, dt);
+        CycleReport {
+            solved,
+            converged: self.converged,
+            braked: self.truth.braked != 0,
+        }
+    }
+
+    /// Sensor readings of the current equilibrium into the drives' actual values and payloads.
+    fn measure_and_report(&mut self, now_ns: u64, dt: f64) {
+        let reading = self.plant.measure(&self.eq);
+        let braked = self.braked.iter().any(|b| *b);
+        for i in 0..self.axes.len() {
+            let w = &self.winches[i];
+            let ax = &self.axes[i];
+            let counts = counts_saturating(w, ax.length_m);
+            self.measured_forces[i] = reading.forces[i];
+            let force_mn = (reading.forces[i] * 1000.0)
+                .round()
+                .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32;
+            self.bank.set_actual(
+                i,
+                counts,
+                w.m_per_s_to_counts_per_s(ax.velocity_m_per_s),
+                force_mn,
+            );
+        }
+        let t = &mut self.truth;
+        t.sequence += 1;
+        t.timestamp_ns = now_ns;
+        t.pose = self.eq.pose.to_array();
+        let m = self.axes.len().min(MAX_CABLES);
+        t.force_n[..m].copy_from_slice(&self.eq.forces[..m]);
+        t.cable_length_m[..m].copy_from_slice(&self.q_cmd[..m]);
+        t.converged = u32::from(self.converged);
+        t.braked = u32::from(braked);
+        let tr = &mut self.tracker;
+        tr.sequence += 1;
+        tr.timestamp_ns = now_ns;
+        tr.valid = u32::from(self.converged);
+        tr.pose = reading.pose.to_array();
+        let (p, q) = (self.eq.pose.to_array(), self.prev_pose.to_array());
+        for k in 0..6 {
+            tr.pose_velocity[k] = if dt > 0.0 { (p[k] - q[k]) / dt } else { 0.0 };
+        }
+        self.prev_pose = self.eq.pose;
+    }
+
+    /// TPDO1 + TPDO2 of every operational drive (after the cycle of a SYNC).
+    pub fn transmit_pdos(&mut self) {
+        self.bank.transmit_pdos();
+    }
+
+    /// Heartbeats when due.
+    pub fn poll(&mut self, now_ns: u64) {
+        self.bank.poll(now_ns);
+    }
+
+    /// Earliest heartbeat due time of all drives (CLOCK_MONOTONIC ns), if any drive produces one.
+    pub fn next_heartbeat_ns(&self) -> Option<u64> {
+        (0..self.bank.len())
+            .filter_map(|i| self.bank.slave(i).and_then(|s| s.next_heartbeat_ns()))
+            .min()
+    }
+
+    /// Sends the queued frames (a full TX queue drops frames, as a CAN controller would).
+    pub fn flush(&mut self, bus: &mut (impl CanBus + ?Sized)) -> Result<(), CanError> {
+        self.bank.flush(&mut BusRef(bus))
+    }
+
+    /// The drives (for fault injection and state inspection).
+    pub fn drives(&self) -> &DriveBank {
+        &self.bank
+    }
+    pub fn drives_mut(&mut self) -> &mut DriveBank {
+        &mut self.bank
+    }
+
+    /// Ground truth of the last cycle (iceoryx2 `crs/v1/plant_truth`). `cable_length_m` holds
+    /// the PLANT commands q_plant = q_drive + q_off; `force_n` the true forces.
+    pub fn truth(&self) -> &PlantTruth {
+        &self.truth
+    }
+    /// Tracker reading of the last cycle (iceoryx2 `crs/v1/tracker_pose`): the true pose with
+    /// the plant's tracker noise; `pose_velocity` is the finite difference of the true pose
+    /// coordinates over the cycle; `valid` = converged.
+    pub fn tracker(&self) -> &TrackerPose {
+        &self.tracker
+    }
+    /// Force-sensor readings reported in the last TPDOs, N.
+    pub fn measured_forces(&self) -> &[f64] {
+        &self.measured_forces
+    }
+    /// The last equilibrium found.
+    pub fn equilibrium(&self) -> &Equilibrium {
+        &self.eq
+    }
+    pub fn converged(&self) -> bool {
+        self.converged
+    }
+    /// Why the last solve failed (None while it converges).
+    pub fn last_error(&self) -> Option<&PlantError> {
+        self.last_error.as_ref()
+    }
+    /// Cable offsets q_off = q̂_ini − φ(x_ini), m (module docs).
+    pub fn q_off(&self) -> &[f64] {
+        &self.q_off
+    }
+    /// The set-up of the initial tension (plant commands and forces at the home pose).
+    pub fn setup(&self) -> &TensionSetup {
+        &self.setup
+    }
+    /// φ(x_ini) of the control model: the drive lengths at start, m.
+    pub fn home_drive_lengths(&self) -> &[f64] {
+        &self.home_drive
+    }
+    pub fn home(&self) -> &Pose {
+        &self.home
+    }
+    /// Cable length winch `i` holds in drive coordinates (encoder reading), m.
+    pub fn drive_length_m(&self, i: usize) -> Option<f64> {
+        self.axes.get(i).map(|a| a.length_m)
+    }
+    /// Plant commands of the last cycle, m.
+    pub fn plant_lengths(&self) -> &[f64] {
+        &self.q_cmd
+    }
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+    pub fn stats(&self) -> BusStats {
+        self.stats
+    }
+    pub fn options(&self) -> &BusOptions {
+        &self.opts
+    }
+}
+
+/// A winch in cyclic synchronous position mode (SI, drive coordinates).
+///
+/// A CSP drive receives a new target every SYNC period and moves so that it is there at the
+/// end of the period; the speed it needs follows from consecutive targets (velocity
+/// feed-forward), so a smooth target stream is followed without lag. A position error left
+/// over (start of following, a jump of the target, the limits) is removed with the largest
+/// speed from which the winch can still stop at the target (≈ √(2 a |e|)), so a far target
+/// is approached without overshoot. Speed and acceleration are limited throughout.
+/// (drive-io's `WinchAxis` test double treats every target as a stop point, which lags a
+/// moving target by v²/2a: 80 mm at 1.5 m/s.)
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CspWinch {
+    pub length_m: f64,
+    pub velocity_m_per_s: f64,
+    pub max_speed_m_per_s: f64,
+    pub max_accel_m_per_s2: f64,
+    /// Target of the previous SYNC period while following (None after a hold or quick stop).
+    prev_target_m: Option<f64>,
+}
+
+impl CspWinch {
+    pub fn new(length_m: f64, max_speed_m_per_s: f64, max_accel_m_per_s2: f64) -> Self {
+        Self {
+            length_m,
+            velocity_m_per_s: 0.0,
+            max_speed_m_per_s,
+            max_accel_m_per_s2,
+            prev_target_m: None,
+        }
+    }
+
+    /// One period `dt` (> 0) towards `target_m`, the target latched at this SYNC.
+    pub fn follow(&mut self, target_m: f64, dt: f64) {
+        let prev = self.prev_target_m.unwrap_or(target_m);
+        self.prev_target_m = Some(target_m);
+        let a = self.max_accel_m_per_s2;
+        let v_ff = (target_m - prev) / dt;
+        // Error to the previous target (what is left over from the last periods).
+        let e = prev - self.length_m;
+        // Largest speed from which the discrete braking (−a·dt per period) still stops at the
+        // target: (v/(a dt))·(v/(a dt) + 1)/2 · a dt² ≤ |e|, i.e. the continuous √(2 a |e|)
+        // less half a period's speed change; and never more than the rest in one period.
+        let h = 0.5 * a * dt;
+        let v_stop = (h * h + 2.0 * a * e.abs()).sqrt() - h;
+        let v_corr = (e.abs() / dt).min(v_stop).copysign(e);
+        let v_des = (v_ff + v_corr).clamp(-self.max_speed_m_per_s, self.max_speed_m_per_s);
+        self.velocity_m_per_s += (v_des - self.velocity_m_per_s).clamp(-a * dt, a * dt);
+        self.length_m += self.velocity_m_per_s * dt;
+    }
+
+    /// Quick stop: decelerate at the maximum deceleration to rest.
+    pub fn quick_stop(&mut self, dt: f64) {
+        self.prev_target_m = None;
+        let a = self.max_accel_m_per_s2 * dt;
+        self.velocity_m_per_s -= self.velocity_m_per_s.clamp(-a, a);
+        self.length_m += self.velocity_m_per_s * dt;
+    }
+
+    /// Brake: the drum stops at once.
+    pub fn hold(&mut self) {
+        self.prev_target_m = None;
+        self.velocity_m_per_s = 0.0;
+    }
+}
+
+/// Encoder counts of a cable length with drive-io's scaling, saturated to the i32 range of
+/// 0x6064 (a quick stop near the end of the range may overshoot it).
+fn counts_saturating(w: &WinchConfig, length_m: f64) -> i32 {
+    (w.offset_counts as f64 + f64::from(w.sign) * length_m * w.counts_per_m())
+        .round()
+        .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+}
+
+/// Adapter so an unsized bus (`Box<dyn CanBus>`, `&mut dyn CanBus`) can be flushed by the
+/// `impl CanBus` bound of [`DriveBank::flush`].
+struct BusRef<'a, B: CanBus + ?Sized>(&'a mut B);
+
+impl<B: CanBus + ?Sized> CanBus for BusRef<'_, B> {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
+        self.0.send(frame)
+    }
+    fn recv_timeout(
+        &mut self,
+        timeout: Duration,
+    ) -> Result<Option<can_transport::RxFrame>, CanError> {
+        self.0.recv_timeout(timeout)
+    }
+    fn interface(&self) -> &str {
+        self.0.interface()
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Process loop
+
+/// Frames handled at most before the plant settles (a flooded bus cannot stall the physics).
+const MAX_DRAIN: usize = 1024;
+
+/// Summary of [`run`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LoopSummary {
+    /// SYNCs acted on (one winch step of the SYNC period each).
+    pub syncs: u64,
+    /// Equilibria settled after SYNCs; fewer than `syncs` when the plant fell behind and
+    /// several SYNCs were waiting (their winch steps are all made, the platform settles once).
+    pub sync_settles: u64,
+    /// Free-running cycles (no SYNC on the bus).
+    pub free_cycles: u64,
+    /// Free-running deadlines missed by more than a period (host not real time).
+    pub overruns: u64,
+    pub frames_received: u64,
+    pub stats: BusStats,
+}
+
+/// Runs the plant on `bus` until `stop` is set.
+///
+/// The winches step once per SYNC by the SYNC period (CSP drives interpolate per SYNC). After
+/// the frames waiting on the bus are handled, the platform settles once and the TPDOs go out
+/// (with a solver slower than the SYNC period, e.g. an unoptimised build, the plant thus keeps
+/// the winch motion exact and answers at a lower rate instead of falling ever further behind).
+/// While no SYNC arrives for three SYNC periods (drive-io not started, or stopped) the plant
+/// runs free every `period` (no TPDOs), so the ground truth keeps flowing and quick stops
+/// complete. After every settle `publish` gets the truth and the tracker reading. Bus errors
+/// other than a full TX queue end the loop.
+pub fn run(
+    bus: &mut (impl CanBus + ?Sized),
+    plant: &mut PlantBus,
+    period: Duration,
+    stop: &AtomicBool,
+    mut publish: impl FnMut(&PlantTruth, &TrackerPose),
+) -> Result<LoopSummary, CanError> {
+    let period_ns = (period.as_nanos() as u64).max(1);
+    let period_s = period_ns as f64 * 1e-9;
+    let sync_s = plant.options().sync_period_s;
+    let quiet_ns = ((3.0 * sync_s * 1e9) as u64).max(period_ns);
+    let mut summary = LoopSummary::default();
+    let now = crs_ipc::monotonic_ns();
+    plant.start(now);
+    let mut next_free = now + period_ns;
+    let mut last_settle = now;
+    publish(plant.truth(), plant.tracker());
+    while !stop.load(Ordering::Relaxed) {
+        plant.flush(bus)?;
+        let now = crs_ipc::monotonic_ns();
+        let due = plant
+            .next_heartbeat_ns()
+            .map_or(next_free, |h| h.min(next_free));
+        let mut rx = bus.recv_timeout(Duration::from_nanos(due.saturating_sub(now)))?;
+        let mut syncs = 0u64;
+        let mut handled = 0;
+        while let Some(f) = rx {
+            summary.frames_received += 1;
+            handled += 1;
+            if plant.handle_frame(&f.frame, crs_ipc::monotonic_ns()) {
+                // The drives latched new targets: move the winches over this SYNC period now,
+                // before a later RPDO in the queue replaces the pending target.
+                plant.advance(sync_s);
+                syncs += 1;
+            }
+            if handled >= MAX_DRAIN {
+                break;
+            }
+            rx = bus.try_recv()?;
+        }
+        let now = crs_ipc::monotonic_ns();
+        if syncs > 0 {
+            plant.settle(now, (now - last_settle) as f64 * 1e-9);
+            plant.transmit_pdos();
+            publish(plant.truth(), plant.tracker());
+            last_settle = now;
+            summary.syncs += syncs;
+            summary.sync_settles += 1;
+            next_free = now + quiet_ns;
+        } else if now >= next_free {
+            plant.advance(period_s);
+            plant.settle(now, (now - last_settle) as f64 * 1e-9);
+            publish(plant.truth(), plant.tracker());
+            last_settle = now;
+            summary.free_cycles += 1;
+            next_free += period_ns;
+            if next_free <= now {
+                // Fell behind (non-real-time host): re-anchor instead of bursting cycles.
+                summary.overruns += 1;
+                next_free = now + period_ns;
+            }
+        }
+        plant.poll(now);
+    }
+    plant.flush(bus)?;
+    summary.stats = plant.stats();
+    Ok(summary)
+}

@@ -1,0 +1,1007 @@
+//! The plant on the drive bus (`sim_plant::bus`), on the host without CAN:
+//! * in virtual time against drive-io's real CiA 402 master ([`drive_io::Master`]), frames
+//!   handed over directly (deterministic);
+//! * with raw CANopen frames (state machine corner cases, bad input);
+//! * the process loop [`bus::run`] against drive-io's real runner over the UDP multicast bus.
+
+// Per-cable checks index several parallel arrays (feedback, truth, φ) by the cable number.
+#![allow(clippy::needless_range_loop)]
+
+use can_transport::{CanBus, CanError, CanFrame, RxFrame};
+use crs_ipc::{
+    BusState, DriveFeedback, EventKind, IpcNode, JointSetpoint, PlantTruth, ProcessId, StateEvent,
+};
+use drive_io::canopen::{self, Ds402State, NmtState};
+use drive_io::{DrivesConfig, Master};
+use motion_core::config::Platform;
+use motion_core::{Data, Pose, kinematics};
+use sim_plant::bus::{self, BusOptions, BusPlantError, PlantBus};
+use sim_plant::{Plant, PlantConfig, load_plant};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+fn config_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config")
+}
+
+fn plant_cfg(name: &str) -> PlantConfig {
+    load_plant(config_dir().join("plant").join(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+fn drives() -> DrivesConfig {
+    DrivesConfig::load(&config_dir().join("drives.toml")).expect("config/drives.toml")
+}
+
+fn plant_bus(cfg: PlantConfig) -> PlantBus {
+    let d = drives();
+    let control = cfg.platform.clone();
+    let opts = BusOptions::new(&d, &control);
+    PlantBus::new(cfg, &control, &d, opts).expect("plant on the bus")
+}
+
+/// Collects the frames the plant sends.
+#[derive(Default)]
+struct VecBus(Vec<CanFrame>);
+
+impl CanBus for VecBus {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
+        self.0.push(*frame);
+        Ok(())
+    }
+    fn recv_timeout(&mut self, _: Duration) -> Result<Option<RxFrame>, CanError> {
+        Ok(None)
+    }
+    fn interface(&self) -> &str {
+        "vec"
+    }
+}
+
+/// φ(x) of the control model: what motion-core commands (standard IK, no surrogate).
+fn phi(control: &Platform, x: &Pose) -> Vec<f64> {
+    let mut data = Data::new(&control.model);
+    kinematics::inverse(&control.model, &mut data, x).expect("IK");
+    data.q.clone()
+}
+
+/// drive-io's master and the plant, frames handed over directly in virtual time (1 ms SYNC).
+struct Rig {
+    master: Master,
+    plant: PlantBus,
+    control: Platform,
+    now: u64,
+    seq: u64,
+    wire: VecBus,
+    /// Plant commands of every cycle that solved the equilibrium, in order.
+    solved: Vec<Vec<f64>>,
+    reports: Vec<bus::CycleReport>,
+}
+
+impl Rig {
+    fn new(cfg: PlantConfig) -> Self {
+        let control = cfg.platform.clone();
+        let mut plant = plant_bus(cfg);
+        let master = Master::new(&drives());
+        let now = 1_000_000_000;
+        plant.start(now);
+        let mut r = Self {
+            master,
+            plant,
+            control,
+            now,
+            seq: 0,
+            wire: VecBus::default(),
+            solved: Vec::new(),
+            reports: Vec::new(),
+        };
+        r.deliver_to_master();
+        r
+    }
+
+    fn deliver_to_master(&mut self) {
+        self.plant.flush(&mut self.wire).unwrap();
+        for f in self.wire.0.drain(..) {
+            self.master.on_frame(&RxFrame {
+                frame: f,
+                rx_monotonic_ns: self.now,
+                kernel_rx_realtime_ns: None,
+            });
+        }
+    }
+
+    /// One SYNC period: master cycle -> drives -> plant cycle + TPDOs -> master.
+    fn step(&mut self, sp: Option<&JointSetpoint>) {
+        self.now += 1_000_000;
+        let mut out = canopen::FrameBuf::default();
+        self.master.cycle(self.now, sp, &mut out);
+        self.master.mark_written(self.now);
+        for f in out.as_slice() {
+            if self.plant.handle_frame(f, self.now) {
+                let rep = self.plant.cycle(self.now, 1e-3);
+                if rep.solved {
+                    self.solved.push(self.plant.plant_lengths().to_vec());
+                }
+                self.reports.push(rep);
+                self.plant.transmit_pdos();
+            }
+        }
+        self.plant.poll(self.now);
+        self.deliver_to_master();
+    }
+
+    fn boot(&mut self) {
+        for _ in 0..500 {
+            self.step(None);
+            if self.master.state() == BusState::Ready {
+                return;
+            }
+        }
+        panic!(
+            "drives not Ready after 500 cycles: {:?}",
+            self.master.state()
+        );
+    }
+
+    /// Setpoint of the control model's φ(x) (what motion-core publishes at x).
+    fn setpoint(&mut self, x: &Pose) -> JointSetpoint {
+        self.seq += 1;
+        let q = phi(&self.control, x);
+        let mut sp = JointSetpoint {
+            cable_count: q.len() as u32,
+            sequence: self.seq,
+            timestamp_ns: self.now + 1_000_000,
+            pose: x.to_array(),
+            ..Default::default()
+        };
+        sp.cable_length_m[..q.len()].copy_from_slice(&q);
+        sp
+    }
+
+    /// Follows a raised-cosine path home -> home + delta over `n` cycles, then holds `hold`.
+    fn move_by(&mut self, delta: [f64; 6], n: usize, hold: usize) -> Pose {
+        let x0 = self.plant.home().to_array();
+        let at = |s: f64| {
+            let mut x = x0;
+            for k in 0..6 {
+                x[k] += s * delta[k];
+            }
+            Pose::from_array(x)
+        };
+        for k in 1..=n {
+            let s = 0.5 - 0.5 * (std::f64::consts::PI * k as f64 / n as f64).cos();
+            let sp = self.setpoint(&at(s));
+            self.step(Some(&sp));
+        }
+        for _ in 0..hold {
+            let sp = self.setpoint(&at(1.0));
+            self.step(Some(&sp));
+        }
+        at(1.0)
+    }
+
+    fn feedback(&self) -> &DriveFeedback {
+        self.master.feedback()
+    }
+}
+
+/// A fresh plant set up like the bus plant, then stepped through `commands` in order.
+fn direct(cfg: PlantConfig, commands: &[Vec<f64>]) -> sim_plant::Equilibrium {
+    let control = cfg.platform.clone();
+    let m = control.model.m();
+    let p = control.model.params();
+    let mut plant = Plant::new(cfg).unwrap();
+    let s = plant
+        .setup_tension(&control.home, &vec![0.5 * (p.f_min + p.f_max); m])
+        .unwrap();
+    let mut eq = plant.step(&s.q_cmd).unwrap();
+    for q in commands {
+        eq = plant.step(q).unwrap();
+    }
+    eq
+}
+
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn starts_at_home_with_the_setup_tension_and_homed_encoders() {
+    let cfg = plant_cfg("icosahedron-ideal.toml");
+    let control = cfg.platform.clone();
+    let pb = plant_bus(cfg.clone());
+    let m = pb.m();
+    assert_eq!(m, 8);
+    // The plant settled at the home pose with the set-up forces (ideal plant: exactly).
+    let t = pb.truth();
+    let (dp, dr) = Pose::from_array(t.pose).error_to(&control.home);
+    assert!(
+        dp < 1e-9 && dr < 1e-9,
+        "start pose off home by {dp} m / {dr} rad"
+    );
+    assert!(max_abs_diff(&t.force_n[..m], &pb.setup().forces) < 1e-6);
+    let p = control.model.params();
+    assert!(
+        t.force_n[..m]
+            .iter()
+            .all(|f| *f >= p.f_min && *f <= p.f_max),
+        "set-up forces {:?} outside [f_min, f_max]",
+        &t.force_n[..m]
+    );
+    assert_eq!(t.converged, 1);
+    assert_eq!(t.braked, 1, "drives not enabled yet: brakes hold");
+    // Encoders homed: the drives read φ(home); the plant holds φ(home) + q_off = set-up command.
+    let phi_home = phi(&control, &control.home);
+    for i in 0..m {
+        assert!((pb.drive_length_m(i).unwrap() - phi_home[i]).abs() < 1e-12);
+        assert!((pb.q_off()[i] - (pb.setup().q_cmd[i] - phi_home[i])).abs() < 1e-12);
+        assert!((t.cable_length_m[i] - pb.setup().q_cmd[i]).abs() < 1e-12);
+        // Cables are stretched under tension: the controlled length is shorter than φ.
+        assert!(pb.q_off()[i] < 0.0, "q_off[{i}] = {}", pb.q_off()[i]);
+    }
+}
+
+#[test]
+fn boot_then_csp_targets_move_the_plant_and_match_a_direct_plant_step() {
+    let cfg = plant_cfg("icosahedron-ideal.toml");
+    let mut rig = Rig::new(cfg.clone());
+    let d = drives();
+    let start_lengths = rig.plant.plant_lengths().to_vec();
+    rig.boot();
+    // Boot went through NMT, SDO and the CiA 402 state machine; nothing moved meanwhile.
+    for i in 0..8 {
+        let sw = rig.feedback().statusword[i];
+        assert_eq!(
+            Ds402State::from_statusword(sw),
+            Ds402State::OperationEnabled
+        );
+        assert_eq!(rig.plant.drives().slave(i).unwrap().mode_of_operation(), 8);
+    }
+    assert!(
+        rig.reports.iter().any(|r| r.braked),
+        "brakes held during boot"
+    );
+    // Enabling latches target = position actual: the winches only settle onto the encoder
+    // count (≤ half a count ≈ 0.05 µm), below the re-solve threshold.
+    let count_m = 1.0 / d.winches[0].counts_per_m();
+    assert!(max_abs_diff(rig.plant.plant_lengths(), &start_lengths) <= 0.5 * count_m + 1e-12);
+    assert!(
+        rig.reports.iter().all(|r| !r.solved),
+        "nothing to solve during boot"
+    );
+    // drive-io reads φ(home) (one count ≈ 0.09 µm of quantisation).
+    let phi_home = phi(&rig.control, &rig.control.home);
+    for i in 0..8 {
+        let e = (rig.feedback().cable_length_m[i] - phi_home[i]).abs();
+        assert!(e <= count_m, "cable {i}: feedback off φ(home) by {e} m");
+    }
+
+    let delta = [
+        0.10,
+        -0.05,
+        0.08,
+        1f64.to_radians(),
+        -1f64.to_radians(),
+        2f64.to_radians(),
+    ];
+    let n_solved_before = rig.solved.len();
+    let x_end = rig.move_by(delta, 600, 150);
+    assert_eq!(rig.master.state(), BusState::Running);
+    assert!(
+        rig.solved.len() > n_solved_before + 500,
+        "equilibrium re-solved while moving"
+    );
+    let last = rig.reports.last().unwrap();
+    assert!(last.converged && !last.braked);
+
+    // The winches hold the commanded φ(x_end): drive-io reads it back within a count.
+    let q_end = phi(&rig.control, &x_end);
+    for i in 0..8 {
+        let e = (rig.feedback().cable_length_m[i] - q_end[i]).abs();
+        assert!(e <= count_m, "cable {i}: feedback off φ(x_end) by {e} m");
+        let e = (rig.plant.truth().cable_length_m[i] - (q_end[i] + rig.plant.q_off()[i])).abs();
+        // (the target went over the bus as counts: half a count of quantisation)
+        assert!(
+            e <= 0.5 * count_m + 1e-12,
+            "cable {i}: plant holds φ + q_off up to {e} m"
+        );
+    }
+    // The plant moved with the command, up to the force-propagation drift of a kinematic
+    // command (eq. 3.24, a few mm on this geometry).
+    let truth = *rig.plant.truth();
+    let pose = Pose::from_array(truth.pose);
+    let (dp, dr) = pose.error_to(&x_end);
+    assert!(
+        dp < 0.01 && dr < 0.5f64.to_radians(),
+        "pose error {dp} m, {dr} rad"
+    );
+    let (moved, _) = pose.error_to(&rig.control.home);
+    assert!(moved > 0.12, "platform moved only {moved} m");
+
+    // Truth == a direct Plant::step on the same lengths (ideal plant: path independent).
+    let eq = direct(cfg.clone(), &[truth.cable_length_m[..8].to_vec()]);
+    let (dp, dr) = eq.pose.error_to(&pose);
+    assert!(
+        dp < 1e-6 && dr < 1e-6,
+        "truth vs direct step: {dp} m, {dr} rad"
+    );
+    assert!(max_abs_diff(&eq.forces, &truth.force_n[..8]) < 1e-2);
+    // And the TPDO force (mN) is that force (no sensor noise on the ideal plant).
+    assert!(max_abs_diff(&rig.feedback().cable_force_n[..8], &truth.force_n[..8]) <= 0.5e-3);
+    assert!(truth.force_n[..8].iter().all(|f| *f > 0.0));
+}
+
+#[test]
+fn mild_plant_on_the_bus_replays_exactly_and_reports_noisy_sensors() {
+    let cfg = plant_cfg("icosahedron.toml");
+    assert!(cfg.effects.hysteresis.is_some() && cfg.effects.force_sensors.is_some());
+    let mut rig = Rig::new(cfg.clone());
+    rig.boot();
+    let delta = [-0.08, 0.06, -0.10, 0.0, 2f64.to_radians(), 0.0];
+    rig.move_by(delta, 500, 100);
+    let truth = *rig.plant.truth();
+    assert_eq!(truth.converged, 1);
+    // Path-dependent plant (hysteresis): replaying the same solved commands in the same order
+    // on a fresh plant gives the same equilibrium, bit for bit up to rounding.
+    let eq = direct(cfg, &rig.solved);
+    let (dp, dr) = eq.pose.error_to(&Pose::from_array(truth.pose));
+    assert!(
+        dp < 1e-12 && dr < 1e-12,
+        "replay differs by {dp} m, {dr} rad"
+    );
+    assert!(max_abs_diff(&eq.forces, &truth.force_n[..8]) < 1e-9);
+    // TPDO forces are sensor readings: true force + N(0, 10 N).
+    let fb = rig.feedback().cable_force_n;
+    let diffs: Vec<f64> = (0..8).map(|i| fb[i] - truth.force_n[i]).collect();
+    assert!(
+        diffs.iter().all(|d| d.abs() < 60.0),
+        "sensor error {diffs:?}"
+    );
+    assert!(
+        diffs.iter().any(|d| d.abs() > 1e-3),
+        "no sensor noise: {diffs:?}"
+    );
+    // The tracker pose is the true pose with noise (0.5 mm): close, not equal.
+    let tr = rig.plant.tracker();
+    assert_eq!(tr.valid, 1);
+    let (dp, _) = Pose::from_array(tr.pose).error_to(&Pose::from_array(truth.pose));
+    assert!(dp > 0.0 && dp < 0.005, "tracker off truth by {dp} m");
+}
+
+#[test]
+fn estop_quick_stop_decelerates_then_brakes_hold() {
+    let mut rig = Rig::new(plant_cfg("icosahedron-ideal.toml"));
+    rig.boot();
+    // Move and stop in the middle of the motion (cables at speed).
+    let x0 = rig.plant.home().to_array();
+    for k in 1..=300 {
+        let mut x = x0;
+        x[0] += 0.3 * (k as f64 / 1000.0); // 0.3 m/s along x
+        let sp = rig.setpoint(&Pose::from_array(x));
+        rig.step(Some(&sp));
+    }
+    let speed: f64 = (0..8)
+        .map(|i| rig.feedback().cable_velocity_m_per_s[i].abs())
+        .fold(0.0, f64::max);
+    assert!(
+        speed > 0.05,
+        "cables should be moving, max speed {speed} m/s"
+    );
+    assert_eq!(rig.plant.truth().braked, 0);
+    let ev = StateEvent::new(ProcessId::Test, EventKind::EStop, 1);
+    rig.master.on_event(&ev, rig.now);
+    // Setpoints keep coming (and keep moving): the drives must ignore them.
+    let mut braked_at = None;
+    for k in 301..=500 {
+        let mut x = x0;
+        x[0] += 0.3 * (k as f64 / 1000.0);
+        let sp = rig.setpoint(&Pose::from_array(x));
+        rig.step(Some(&sp));
+        if braked_at.is_none() && rig.plant.truth().braked == 1 {
+            braked_at = Some(k);
+        }
+    }
+    assert_eq!(rig.master.state(), BusState::EStop);
+    let braked_at = braked_at.expect("brakes never engaged after quick stop");
+    // Deceleration at 14 m/s² from < 0.5 m/s takes < 40 ms (+ 2 cycles of bus latency).
+    assert!(
+        braked_at - 300 <= 45,
+        "braked only after {} cycles",
+        braked_at - 300
+    );
+    for i in 0..8 {
+        assert_eq!(
+            Ds402State::from_statusword(rig.feedback().statusword[i]),
+            Ds402State::QuickStopActive
+        );
+    }
+    // Held: nothing moves and nothing is re-solved any more.
+    let held = rig.plant.plant_lengths().to_vec();
+    let pose = rig.plant.truth().pose;
+    let n = rig.reports.len();
+    for k in 501..=600 {
+        let mut x = x0;
+        x[0] += 0.3 * (k as f64 / 1000.0);
+        let sp = rig.setpoint(&Pose::from_array(x));
+        rig.step(Some(&sp));
+    }
+    assert_eq!(max_abs_diff(rig.plant.plant_lengths(), &held), 0.0);
+    assert_eq!(rig.plant.truth().pose, pose);
+    assert_eq!(rig.plant.truth().braked, 1);
+    assert!(rig.reports[n..].iter().all(|r| !r.solved && r.braked));
+}
+
+/// Raw CANopen frames from a hand-driven master.
+struct Raw {
+    plant: PlantBus,
+    now: u64,
+    wire: VecBus,
+}
+
+impl Raw {
+    fn new(cfg: PlantConfig) -> Self {
+        Self::with(cfg, |_| {})
+    }
+    fn with(cfg: PlantConfig, tweak: impl FnOnce(&mut BusOptions)) -> Self {
+        let d = drives();
+        let control = cfg.platform.clone();
+        let mut opts = BusOptions::new(&d, &control);
+        tweak(&mut opts);
+        let mut plant = PlantBus::new(cfg, &control, &d, opts).expect("plant on the bus");
+        plant.start(0);
+        Self {
+            plant,
+            now: 0,
+            wire: VecBus::default(),
+        }
+    }
+    fn send(&mut self, f: CanFrame) -> Option<bus::CycleReport> {
+        let r = self.plant.handle_frame(&f, self.now).then(|| {
+            let r = self.plant.cycle(self.now, 1e-3);
+            self.plant.transmit_pdos();
+            r
+        });
+        self.plant.flush(&mut self.wire).unwrap();
+        r
+    }
+    fn sync(&mut self) -> bus::CycleReport {
+        self.now += 1_000_000;
+        self.send(canopen::sync()).expect("SYNC acted on")
+    }
+    fn counts(&self, i: usize, length_m: f64) -> i32 {
+        drives().winches[i].length_to_counts(length_m).unwrap()
+    }
+    fn rpdo_all(&mut self, cw: u16, target: impl Fn(usize) -> i32) {
+        for i in 0..8 {
+            self.send(canopen::rpdo1(i as u8 + 1, cw, target(i)));
+        }
+    }
+    /// NMT start, CSP mode by SDO, shutdown / switch on / enable with target = actual.
+    fn enable(&mut self) {
+        self.send(canopen::nmt(canopen::NMT_START, 0));
+        for n in 1..=8u8 {
+            self.send(canopen::sdo_download(n, 0x6060, 0, 8, 1));
+        }
+        let home: Vec<i32> = (0..8)
+            .map(|i| self.counts(i, self.plant.drive_length_m(i).unwrap()))
+            .collect();
+        for cw in [0x06, 0x07, 0x0F] {
+            self.rpdo_all(cw, |i| home[i]);
+            self.sync();
+        }
+        for i in 0..8 {
+            let s = self.plant.drives().slave(i).unwrap();
+            assert_eq!(s.ds402_state(), Ds402State::OperationEnabled);
+        }
+    }
+}
+
+#[test]
+fn drives_not_enabled_or_nmt_stopped_hold_the_cables() {
+    let mut raw = Raw::new(plant_cfg("icosahedron-ideal.toml"));
+    let start = raw.plant.plant_lengths().to_vec();
+    // Operational but Switch On Disabled: enable-operation controlword and far targets do
+    // nothing (the state machine needs shutdown -> switch on first).
+    raw.send(canopen::nmt(canopen::NMT_START, 0));
+    for _ in 0..50 {
+        raw.rpdo_all(0x0F, |_| 0);
+        let r = raw.sync();
+        assert!(r.braked && !r.solved);
+    }
+    assert_eq!(max_abs_diff(raw.plant.plant_lengths(), &start), 0.0);
+    assert_eq!(raw.plant.truth().braked, 1);
+
+    // Enabled: the cables follow a 20 mm longer target for cable 1.
+    raw.enable();
+    let l0 = raw.plant.drive_length_m(0).unwrap();
+    let target0 = raw.counts(0, l0 + 0.02);
+    let hold: Vec<i32> = (0..8)
+        .map(|i| raw.counts(i, raw.plant.drive_length_m(i).unwrap()))
+        .collect();
+    for _ in 0..20 {
+        raw.rpdo_all(0x0F, |i| if i == 0 { target0 } else { hold[i] });
+        let r = raw.sync();
+        assert!(!r.braked);
+    }
+    let moving = raw.plant.drive_length_m(0).unwrap();
+    assert!(moving > l0 + 1e-4, "cable 1 did not move: {l0} -> {moving}");
+    // NMT stop of all drives mid-motion: brakes engage at once, nothing moves, no PDOs.
+    raw.send(canopen::nmt(canopen::NMT_STOP, 0));
+    raw.wire.0.clear();
+    let held = raw.plant.plant_lengths().to_vec();
+    for _ in 0..30 {
+        raw.rpdo_all(0x0F, |i| if i == 0 { target0 } else { hold[i] });
+        raw.now += 1_000_000;
+        // SYNC is not acted on in NMT stopped: the plant runs a free cycle (as `run` does).
+        assert!(raw.send(canopen::sync()).is_none());
+        let r = raw.plant.cycle(raw.now, 1e-3);
+        assert!(r.braked && !r.solved);
+    }
+    assert_eq!(max_abs_diff(raw.plant.plant_lengths(), &held), 0.0);
+    assert_eq!(raw.plant.truth().braked, 1);
+    let pdos = raw.wire.0.iter().filter(|f| {
+        matches!(
+            canopen::decode(f),
+            canopen::Message::Tpdo1 { .. } | canopen::Message::Tpdo2 { .. }
+        )
+    });
+    assert_eq!(pdos.count(), 0, "no PDOs in NMT stopped");
+    for i in 0..8 {
+        assert_eq!(
+            raw.plant.drives().slave(i).unwrap().nmt_state(),
+            NmtState::Stopped
+        );
+    }
+}
+
+#[test]
+fn no_equilibrium_is_reported_not_fatal_and_recovers() {
+    // Winches far beyond the real limits, so a cable jumps by up to 1 m per cycle: faster than
+    // the platform can follow quasi-statically, which the plant solver cannot track.
+    let mut raw = Raw::with(plant_cfg("icosahedron-ideal.toml"), |o| {
+        o.max_cable_speed_m_per_s = 1000.0;
+        o.max_cable_accel_m_per_s2 = 1e6;
+    });
+    raw.enable();
+    let home: Vec<i32> = (0..8)
+        .map(|i| raw.counts(i, raw.plant.drive_length_m(i).unwrap()))
+        .collect();
+    let good = *raw.plant.truth();
+    // Pay out 3 m on the four upper cables (anchors at z ≈ 6.5 m) at once: the platform loses
+    // its support and the solver finds no equilibrium (all cables slack).
+    let far: Vec<i32> = (0..8)
+        .map(|i| {
+            let l = raw.plant.drive_length_m(i).unwrap();
+            raw.counts(i, if i % 2 == 0 { l + 3.0 } else { l })
+        })
+        .collect();
+    let mut failed = false;
+    for _ in 0..20 {
+        raw.rpdo_all(0x0F, |i| far[i]);
+        let r = raw.sync();
+        if !r.converged {
+            failed = true;
+            break;
+        }
+    }
+    assert!(failed, "expected a plant without equilibrium");
+    let t = *raw.plant.truth();
+    assert_eq!(t.converged, 0);
+    assert_eq!(raw.plant.tracker().valid, 0);
+    assert!(raw.plant.last_error().is_some());
+    assert!(raw.plant.stats().failed_solves >= 1);
+    // TPDOs keep flowing (the drives do not know about the plant's solver).
+    raw.wire.0.clear();
+    raw.rpdo_all(0x0F, |i| far[i]);
+    raw.sync();
+    assert_eq!(raw.wire.0.len(), 16, "TPDO1 + TPDO2 of 8 drives");
+    // Winding back to the home lengths finds the equilibrium again.
+    let mut recovered = false;
+    for _ in 0..20 {
+        raw.rpdo_all(0x0F, |i| home[i]);
+        if raw.sync().converged {
+            recovered = true;
+        }
+    }
+    assert!(recovered, "no equilibrium after returning home");
+    let t = raw.plant.truth();
+    assert_eq!(t.converged, 1);
+    let (dp, _) = Pose::from_array(t.pose).error_to(&Pose::from_array(good.pose));
+    assert!(dp < 1e-3, "back home within 1 mm, got {dp} m");
+}
+
+#[test]
+fn bus_input_never_panics_and_targets_are_clamped() {
+    use proptest::prelude::*;
+    let mut raw = Raw::new(plant_cfg("icosahedron-ideal.toml"));
+    raw.enable();
+    // Extreme targets: clamped to [0, max_cable_length_m] of the drive, never NaN.
+    for target in [i32::MIN, i32::MAX, 0, -1] {
+        for _ in 0..3 {
+            raw.rpdo_all(0x0F, |_| target);
+            raw.sync();
+        }
+        for i in 0..8 {
+            let l = raw.plant.drive_length_m(i).unwrap();
+            assert!(
+                l.is_finite() && (0.0..=20.0 + 1.0).contains(&l),
+                "cable {i}: {l}"
+            );
+        }
+        assert!(raw.plant.truth().pose.iter().all(|v| v.is_finite()));
+    }
+    // Arbitrary frames and cycle lengths.
+    let mut runner = proptest::test_runner::TestRunner::new(ProptestConfig {
+        cases: 64,
+        ..ProptestConfig::default()
+    });
+    let frames = proptest::collection::vec(
+        (
+            0u32..0x800,
+            proptest::collection::vec(any::<u8>(), 0..=8),
+            any::<f64>(),
+        ),
+        1..40,
+    );
+    runner
+        .run(&frames, |fs| {
+            let mut r = Raw::new(plant_cfg("icosahedron-ideal.toml"));
+            for (id, data, dt) in fs {
+                let f = CanFrame::new(id as u16, &data).unwrap();
+                if r.plant.handle_frame(&f, r.now) {
+                    r.plant.cycle(r.now, dt);
+                    r.plant.transmit_pdos();
+                }
+                r.now += 1_000_000;
+                r.plant.cycle(r.now, dt);
+                r.plant.poll(r.now);
+                r.plant.flush(&mut r.wire).unwrap();
+            }
+            let t = r.plant.truth();
+            prop_assert!(t.pose.iter().all(|v| v.is_finite()));
+            Ok(())
+        })
+        .unwrap();
+}
+
+#[test]
+fn config_mismatches_are_clear_errors() {
+    let cfg = plant_cfg("icosahedron-ideal.toml");
+    let control = cfg.platform.clone();
+    let full = drives();
+    let mut four = full.clone();
+    four.winches.truncate(4);
+    let mut opts = BusOptions::new(&full, &control);
+    opts.files.plant = "config/plant/x.toml".into();
+    opts.files.drives = "config/drives.toml".into();
+    let e = PlantBus::new(cfg.clone(), &control, &four, opts.clone())
+        .err()
+        .unwrap();
+    assert!(matches!(
+        e,
+        BusPlantError::CableCount {
+            plant_m: 8,
+            drives_m: 4,
+            ..
+        }
+    ));
+    let msg = e.to_string();
+    assert!(
+        msg.contains("config/plant/x.toml") && msg.contains("config/drives.toml"),
+        "{msg}"
+    );
+
+    let mut drum = full.clone();
+    drum.winches[3].drum_diameter_m = 0.3;
+    let e = PlantBus::new(cfg.clone(), &control, &drum, opts.clone())
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("winch[3].drum_diameter_m"), "{e}");
+
+    let mut short = full.clone();
+    short.winches[5].max_cable_length_m = 5.0;
+    let e = PlantBus::new(cfg.clone(), &control, &short, opts.clone())
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("winch[5].max_cable_length_m"), "{e}");
+
+    let mut bad = opts.clone();
+    bad.f_ini_n = Some(vec![5000.0; 7]);
+    let e = PlantBus::new(cfg.clone(), &control, &full, bad)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("f_ini_n"), "{e}");
+    let mut bad = opts.clone();
+    bad.sync_period_s = f64::NAN;
+    assert!(PlantBus::new(cfg.clone(), &control, &full, bad).is_err());
+    // An initial tension that cannot be realised (a cable would push) names the cause.
+    let mut bad = opts;
+    bad.f_ini_n = Some(vec![1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]);
+    let e = PlantBus::new(cfg, &control, &full, bad).err().unwrap();
+    assert!(matches!(e, BusPlantError::Setup { .. }), "{e}");
+}
+
+#[test]
+fn binary_rejects_bad_files_naming_them() {
+    let exe = env!("CARGO_BIN_EXE_sim-plant");
+    let dir = std::env::temp_dir().join(format!("sim-plant-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(exe)
+            .args(args)
+            .current_dir(config_dir().join(".."))
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?} should fail");
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
+    // A plant TOML with a bad value: file:line:column and key.
+    let bad_plant = dir.join("bad-plant.toml");
+    std::fs::write(
+        &bad_plant,
+        format!(
+            "[plant]\nname = \"x\"\nplatform = \"{}\"\n\n[tracker]\nenabled = true\nposition_noise_m = -1.0\nrotation_noise_deg = 0.0\n",
+            config_dir().join("icosahedron.toml").display()
+        ),
+    )
+    .unwrap();
+    let err = run(&["--plant", bad_plant.to_str().unwrap()]);
+    assert!(
+        err.contains("bad-plant.toml:7:") && err.contains("tracker.position_noise_m"),
+        "{err}"
+    );
+    // Drives config with 4 winches for an 8-cable plant: both files named.
+    let text = std::fs::read_to_string(config_dir().join("drives.toml")).unwrap();
+    let cut = text.match_indices("[[winch]]").nth(4).unwrap().0;
+    let four = dir.join("four-drives.toml");
+    std::fs::write(&four, &text[..cut]).unwrap();
+    let err = run(&["--drives", four.to_str().unwrap()]);
+    assert!(
+        err.contains("four-drives.toml")
+            && err.contains("icosahedron.toml")
+            && err.contains("8 cables"),
+        "{err}"
+    );
+    let err = run(&["--plant", "config/plant/nope.toml"]);
+    assert!(err.contains("config/plant/nope.toml"), "{err}");
+    let err = run(&["--transport", "bogus:1"]);
+    assert!(err.contains("bogus:1"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The process loop end to end on the host: drive-io's real runner and [`bus::run`] as threads
+/// on the UDP multicast bus, setpoints over iceoryx2 as motion-core would publish them.
+#[test]
+fn run_loop_with_drive_io_over_udp_follows_setpoints() {
+    let port = 43000 + (std::process::id() % 1000) as u16 * 2;
+    let transport = format!("udpbus:239.255.70.3:{port}");
+    let prefix = format!("simplant/{}/", std::process::id());
+    let mut d = drives();
+    d.bus.transport = transport.clone();
+    // Lenient timing: the host is shared and not real time (behaviour is asserted, not timing).
+    d.bus.heartbeat_timeout_ms = 500;
+    d.bus.stale_setpoint_cycles = 200;
+    d.bus.boot_timeout_ms = 20_000;
+    d.bus.sdo_timeout_ms = 500;
+    d.validate().unwrap();
+    let cfg = plant_cfg("icosahedron-ideal.toml");
+    let control = cfg.platform.clone();
+    let spec = d.transport().unwrap();
+    let mut plant_bus_ep = can_transport::open(&spec).unwrap();
+    let dio_bus = can_transport::open(&spec).unwrap();
+    let mut plant = PlantBus::new(cfg, &control, &d, BusOptions::new(&d, &control)).unwrap();
+    let truth = Arc::new(Mutex::new(PlantTruth::default()));
+    let stop = Arc::new(AtomicBool::new(false));
+    let (t2, s2) = (truth.clone(), stop.clone());
+    let plant_thread = std::thread::spawn(move || {
+        bus::run(
+            &mut plant_bus_ep,
+            &mut plant,
+            Duration::from_millis(1),
+            &s2,
+            |t, _| *t2.lock().unwrap() = *t,
+        )
+    });
+    let (d2, s3, p2) = (d.clone(), stop.clone(), prefix.clone());
+    let dio_thread = std::thread::spawn(move || {
+        let ipc = IpcNode::with_prefix("drive-io", &p2).map_err(|e| e.to_string())?;
+        drive_io::runner::run(&d2, dio_bus, &ipc, &s3).map_err(|e| e.to_string())
+    });
+    let node = IpcNode::with_prefix("bus-test", &prefix).unwrap();
+    let setpoints = node.publisher::<JointSetpoint>().unwrap();
+    let feedback = node.subscriber::<DriveFeedback>().unwrap();
+    let result = (|| -> Result<(), String> {
+        let t0 = Instant::now();
+        let mut fb = DriveFeedback::default();
+        while BusState::from_u32(fb.bus_state) != Some(BusState::Ready) {
+            if let Some(f) = feedback.latest().map_err(|e| e.to_string())? {
+                fb = f;
+            }
+            if t0.elapsed() > Duration::from_secs(30) {
+                return Err(format!("not Ready: {:?}", BusState::from_u32(fb.bus_state)));
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        // All drives enabled: the brakes release with the next plant cycle.
+        let t_rel = Instant::now();
+        while truth.lock().unwrap().braked != 0 {
+            if t_rel.elapsed() > Duration::from_secs(2) {
+                return Err("brakes still engaged with all drives enabled".into());
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let phi_home = phi(&control, &control.home);
+        for i in 0..8 {
+            let e = (fb.cable_length_m[i] - phi_home[i]).abs();
+            if e > 1e-6 {
+                return Err(format!("cable {i}: drive-io reads {e} m off φ(home)"));
+            }
+        }
+        // Stream setpoints: 50 mm up in z over 0.5 s (raised cosine), stamped as published.
+        let x0 = control.home.to_array();
+        let mut seq = 0;
+        let t1 = Instant::now();
+        let total = Duration::from_millis(900);
+        let mut x_end = control.home;
+        while t1.elapsed() < total {
+            let s = (t1.elapsed().as_secs_f64() / 0.5).min(1.0);
+            let mut x = x0;
+            x[2] += 0.05 * (0.5 - 0.5 * (std::f64::consts::PI * s).cos());
+            x_end = Pose::from_array(x);
+            let q = phi(&control, &x_end);
+            seq += 1;
+            let mut sp = JointSetpoint {
+                cable_count: 8,
+                sequence: seq,
+                timestamp_ns: crs_ipc::monotonic_ns(),
+                pose: x,
+                ..Default::default()
+            };
+            sp.cable_length_m[..8].copy_from_slice(&q);
+            setpoints.publish(&sp).map_err(|e| e.to_string())?;
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+        if let Some(f) = feedback.latest().map_err(|e| e.to_string())? {
+            fb = f;
+        }
+        if BusState::from_u32(fb.bus_state) != Some(BusState::Running) {
+            return Err(format!(
+                "drive-io state {:?} (fault {} node {})",
+                BusState::from_u32(fb.bus_state),
+                fb.fault_code,
+                fb.fault_node
+            ));
+        }
+        let t = *truth.lock().unwrap();
+        let q_end = phi(&control, &x_end);
+        let mut err = 0.0f64;
+        for i in 0..8 {
+            err = err.max((fb.cable_length_m[i] - q_end[i]).abs());
+        }
+        if err > 1e-6 {
+            return Err(format!("drive feedback off the final setpoint by {err} m"));
+        }
+        let (dp, _) = Pose::from_array(t.pose).error_to(&x_end);
+        let (moved, _) = Pose::from_array(t.pose).error_to(&control.home);
+        if t.converged != 1 || t.braked != 0 || dp > 0.005 || moved < 0.045 {
+            return Err(format!(
+                "truth: converged {} braked {} pose error {dp} m, moved {moved} m",
+                t.converged, t.braked
+            ));
+        }
+        for i in 0..8 {
+            if (fb.cable_force_n[i] - t.force_n[i]).abs() > 1.0 {
+                return Err(format!(
+                    "cable {i}: TPDO force {} N vs truth {} N",
+                    fb.cable_force_n[i], t.force_n[i]
+                ));
+            }
+        }
+        Ok(())
+    })();
+    stop.store(true, Ordering::Release);
+    let summary = plant_thread.join().unwrap().expect("plant loop");
+    let dio = dio_thread.join().unwrap();
+    if let Err(e) = result {
+        panic!("{e}; plant loop {summary:?}; drive-io {dio:?}");
+    }
+    assert!(
+        summary.syncs > 500 && summary.sync_settles > 300,
+        "{summary:?}"
+    );
+    assert!(dio.is_ok(), "{dio:?}");
+}
+
+#[test]
+fn csp_winch_follows_a_moving_target_without_lag_and_stops_at_a_far_one() {
+    use sim_plant::bus::CspWinch;
+    let dt = 1e-3;
+    // A target stream accelerating at 10 m/s² to 1.5 m/s (beyond the stack's cable speeds),
+    // within the winch limits: the winch is exactly where the target is, every period.
+    let mut w = CspWinch::new(5.0, 5.0, 14.0);
+    let mut t = 5.0;
+    let mut v: f64 = 0.0;
+    let mut worst: f64 = 0.0;
+    for k in 0..600 {
+        v = (v + 10.0 * dt).min(1.5);
+        t += v * dt;
+        w.follow(t, dt);
+        if k > 5 {
+            worst = worst.max((w.length_m - t).abs());
+        }
+    }
+    assert!(worst < 1e-9, "following error {worst} m");
+    assert!((w.velocity_m_per_s - 1.5).abs() < 1e-9);
+    // A jump of the target by 2 m: limited speed and acceleration, no overshoot beyond 10 µm,
+    // at rest on the target in the end.
+    let mut w = CspWinch::new(5.0, 5.0, 14.0);
+    let (mut v_prev, mut peak, mut over) = (0.0f64, 0.0f64, 0.0f64);
+    for _ in 0..3000 {
+        w.follow(7.0, dt);
+        assert!(w.velocity_m_per_s.abs() <= 5.0 + 1e-12);
+        assert!((w.velocity_m_per_s - v_prev).abs() <= 14.0 * dt + 1e-12);
+        v_prev = w.velocity_m_per_s;
+        peak = peak.max(w.velocity_m_per_s);
+        over = over.max(w.length_m - 7.0);
+    }
+    eprintln!("2 m jump: peak {peak} m/s, overshoot {over} m");
+    assert!(peak > 3.0, "peak speed {peak}");
+    assert!(over < 1e-5, "overshoot {over} m");
+    assert!((w.length_m - 7.0).abs() < 1e-9 && w.velocity_m_per_s.abs() < 1e-9);
+    // Quick stop from 2 m/s at 14 m/s²: 143 ms, 0.143 m.
+    let mut w = CspWinch::new(5.0, 5.0, 14.0);
+    w.velocity_m_per_s = 2.0;
+    let mut n = 0;
+    while w.velocity_m_per_s != 0.0 {
+        w.quick_stop(dt);
+        n += 1;
+        assert!(n < 1000);
+    }
+    assert!((142..=144).contains(&n), "{n} periods");
+    assert!(
+        (w.length_m - 5.0 - 2.0 * 2.0 / 28.0).abs() < 2e-3,
+        "{}",
+        w.length_m
+    );
+}
+
+#[test]
+fn drives_with_a_safety_heartbeat_watch_stay_braked_without_the_monitor() {
+    let text = std::fs::read_to_string(config_dir().join("drives.toml")).unwrap();
+    let d = DrivesConfig::parse(&format!("{text}\n[safety_heartbeat]\n")).unwrap();
+    assert!(d.safety_heartbeat.is_some());
+    let cfg = plant_cfg("icosahedron-ideal.toml");
+    let control = cfg.platform.clone();
+    let mut plant = PlantBus::new(cfg, &control, &d, BusOptions::new(&d, &control)).unwrap();
+    let mut wire = VecBus::default();
+    let start = plant.plant_lengths().to_vec();
+    let mut now = 0;
+    plant.start(now);
+    plant.handle_frame(&canopen::nmt(canopen::NMT_START, 0), now);
+    for n in 1..=8u8 {
+        plant.handle_frame(&canopen::sdo_download(n, 0x6060, 0, 8, 1), now);
+    }
+    for cw in [0x06, 0x07, 0x0F, 0x0F, 0x0F] {
+        for i in 0..8 {
+            plant.handle_frame(&canopen::rpdo1(i as u8 + 1, cw, 0), now);
+        }
+        now += 1_000_000;
+        assert!(plant.handle_frame(&canopen::sync(), now));
+        let r = plant.cycle(now, 1e-3);
+        assert!(r.braked && !r.solved);
+        plant.flush(&mut wire).unwrap();
+    }
+    for i in 0..8 {
+        let s = plant.drives().slave(i).unwrap();
+        assert_ne!(
+            s.ds402_state(),
+            Ds402State::OperationEnabled,
+            "drive {i} enabled"
+        );
+    }
+    assert_eq!(max_abs_diff(plant.plant_lengths(), &start), 0.0);
+}
