@@ -16,6 +16,7 @@ pub mod candump;
 pub mod cannelloni;
 mod frame;
 mod poll;
+pub mod safety_frame;
 mod socketcan_bus;
 mod spec;
 mod udp;

@@ -136,6 +136,10 @@ pub struct DrivesConfig {
     pub bus: BusConfig,
     #[serde(rename = "winch")]
     pub winches: Vec<WinchConfig>,
+    /// Optional `[safety_heartbeat]`: validate the safety monitor's doubled heartbeat and stop
+    /// without it (see [`crate::safety_watch`]). Absent = no watch.
+    #[serde(default)]
+    pub safety_heartbeat: Option<crate::safety_watch::SafetyWatchConfig>,
 }
 
 impl DrivesConfig {
@@ -199,6 +203,10 @@ impl DrivesConfig {
                     self.winches.len()
                 ),
             ));
+        }
+        if let Some(sh) = &self.safety_heartbeat {
+            sh.validate()
+                .map_err(|(field, reason)| invalid(field, reason))?;
         }
         for (i, w) in self.winches.iter().enumerate() {
             let f = |name: &str| format!("winch[{i}].{name}");

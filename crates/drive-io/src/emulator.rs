@@ -4,11 +4,12 @@
 
 use crate::canopen::{Ds402State, NmtState};
 use crate::config::{DrivesConfig, WinchConfig};
+use crate::safety_watch::SafetyWatchConfig;
 use crate::slave::{DriveBank, MotionDemand, WinchAxis};
 use can_transport::CanBus;
 use crs_ipc::MAX_CABLES;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU16, AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU16, AtomicU32, AtomicU64, Ordering};
 use std::time::Duration;
 
 /// Emulator parameters (SI).
@@ -25,6 +26,8 @@ pub struct EmulatorConfig {
     /// Reported pulley force: pretension + damping * cable speed (a stand-in, not physics).
     pub pretension_n: f64,
     pub damping_n_per_m_per_s: f64,
+    /// Validate the safety monitor's heartbeat (drives.toml `[safety_heartbeat]`); None = off.
+    pub safety_watch: Option<SafetyWatchConfig>,
 }
 
 impl EmulatorConfig {
@@ -38,6 +41,7 @@ impl EmulatorConfig {
             default_heartbeat_ms: cfg.bus.heartbeat_producer_ms,
             pretension_n: 2000.0,
             damping_n_per_m_per_s: 100.0,
+            safety_watch: cfg.safety_heartbeat,
         }
     }
 }
@@ -54,7 +58,18 @@ pub struct EmulatorControl {
     velocity_bits: [AtomicU64; MAX_CABLES],
     statusword: [AtomicU16; MAX_CABLES],
     nmt: [AtomicU16; MAX_CABLES],
+    demand: [AtomicU8; MAX_CABLES],
+    left_follow_ns: [AtomicU64; MAX_CABLES],
+    /// Safety-heartbeat watch (if enabled): inhibiting now, trips so far, time of the last trip.
+    pub safety_inhibit: AtomicBool,
+    pub safety_trips: AtomicU64,
+    pub safety_tripped_ns: AtomicU64,
 }
+
+/// Motion demand codes in [`EmulatorControl::demand_code`].
+pub const DEMAND_HOLD: u8 = 0;
+pub const DEMAND_QUICK_STOP: u8 = 1;
+pub const DEMAND_FOLLOW: u8 = 2;
 
 impl EmulatorControl {
     pub fn new() -> Arc<Self> {
@@ -73,6 +88,14 @@ impl EmulatorControl {
     pub fn nmt_state(&self, i: usize) -> Option<NmtState> {
         NmtState::from_code(self.nmt[i].load(Ordering::Acquire) as u8)
     }
+    /// Motion demand of winch `i`: [`DEMAND_HOLD`], [`DEMAND_QUICK_STOP`] or [`DEMAND_FOLLOW`].
+    pub fn demand_code(&self, i: usize) -> u8 {
+        self.demand[i].load(Ordering::Acquire)
+    }
+    /// CLOCK_MONOTONIC ns when winch `i` last stopped following (0 = never).
+    pub fn left_follow_ns(&self, i: usize) -> u64 {
+        self.left_follow_ns[i].load(Ordering::Acquire)
+    }
     pub fn mute_heartbeat(&self, i: usize) {
         self.heartbeat_mute_mask.fetch_or(1 << i, Ordering::AcqRel);
     }
@@ -87,6 +110,10 @@ pub fn run(
     let m = cfg.winches.len().min(MAX_CABLES);
     let ids: Vec<u8> = cfg.winches.iter().take(m).map(|w| w.node_id).collect();
     let mut bank = DriveBank::new(&ids, cfg.default_heartbeat_ms);
+    if let Some(sw) = cfg.safety_watch {
+        bank.enable_safety_watch(sw);
+        control.safety_inhibit.store(true, Ordering::Release);
+    }
     let mut axes: Vec<WinchAxis> = (0..m)
         .map(|i| {
             WinchAxis::new(
@@ -101,8 +128,16 @@ pub fn run(
         bank.set_actual(i, c, 0, (cfg.pretension_n * 1000.0) as i32);
     }
     bank.start(crs_ipc::monotonic_ns());
-    let publish = |bank: &DriveBank, axes: &[WinchAxis]| {
+    let publish = |bank: &DriveBank, axes: &[WinchAxis], now: u64| {
         for (i, ax) in axes.iter().enumerate() {
+            let d = match bank.demand(i) {
+                MotionDemand::Follow { .. } => DEMAND_FOLLOW,
+                MotionDemand::QuickStop => DEMAND_QUICK_STOP,
+                MotionDemand::Hold => DEMAND_HOLD,
+            };
+            if control.demand[i].swap(d, Ordering::AcqRel) == DEMAND_FOLLOW && d != DEMAND_FOLLOW {
+                control.left_follow_ns[i].store(now, Ordering::Release);
+            }
             control.length_bits[i].store(ax.length_m.to_bits(), Ordering::Release);
             control.velocity_bits[i].store(ax.velocity_m_per_s.to_bits(), Ordering::Release);
             if let Some(s) = bank.slave(i) {
@@ -111,7 +146,7 @@ pub fn run(
             }
         }
     };
-    publish(&bank, &axes);
+    publish(&bank, &axes, crs_ipc::monotonic_ns());
     while !control.stop.load(Ordering::Acquire) {
         bank.flush(&mut bus)?;
         let rx = bus.recv_timeout(Duration::from_millis(2))?;
@@ -148,7 +183,20 @@ pub fn run(
             }
         }
         bank.poll(now);
-        publish(&bank, &axes);
+        if let Some((reason, at_ns)) = bank.take_safety_trip() {
+            tracing::error!(
+                ?reason,
+                at_ns,
+                "safety heartbeat invalid or missing: drives quick-stop"
+            );
+            control.safety_trips.fetch_add(1, Ordering::AcqRel);
+            control.safety_tripped_ns.store(at_ns, Ordering::Release);
+        }
+        if let Some(w) = bank.safety_watch() {
+            let inhibit = w.state() != crate::safety_watch::WatchState::Permit;
+            control.safety_inhibit.store(inhibit, Ordering::Release);
+        }
+        publish(&bank, &axes, now);
     }
     Ok(())
 }

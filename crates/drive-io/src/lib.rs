@@ -13,6 +13,7 @@ pub mod emulator;
 pub mod hil;
 pub mod master;
 pub mod runner;
+pub mod safety_watch;
 pub mod slave;
 
 pub use config::{ConfigError, DrivesConfig, WinchConfig};

@@ -3,6 +3,7 @@
 use crate::canopen::FrameBuf;
 use crate::config::DrivesConfig;
 use crate::master::Master;
+use crate::safety_watch::SafetyWatch;
 use can_transport::{CanBus, CanError};
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, ProcessId,
@@ -95,11 +96,21 @@ pub fn run(
     let mut tx_full = 0u64;
     let mut overruns = 0u32;
     let mut cycles = 0u64;
+    // Optional validation of the safety monitor's doubled heartbeat (drives.toml
+    // `[safety_heartbeat]`): without a valid RUN pair within the validation time the bus is
+    // e-stopped and resets are refused.
+    let mut watch = cfg.safety_heartbeat.map(SafetyWatch::new);
+    if let Some(w) = &watch {
+        tracing::info!(config = ?w.config(), "validating the safety monitor's heartbeat");
+    }
     while !stop.load(Ordering::Relaxed) {
         // Wait for the tick, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
         let mut now = monotonic_ns();
         while now < next {
             if let Some(rx) = bus.recv_timeout(Duration::from_nanos(next - now))? {
+                if let Some(w) = watch.as_mut() {
+                    w.on_frame(&rx.frame, rx.rx_monotonic_ns);
+                }
                 master.on_frame(&rx);
             }
             now = monotonic_ns();
@@ -109,7 +120,12 @@ pub fn run(
         // Bounded so a flooded bus cannot stall the cycle.
         for _ in 0..MAX_DRAIN_PER_CYCLE {
             match bus.try_recv()? {
-                Some(rx) => master.on_frame(&rx),
+                Some(rx) => {
+                    if let Some(w) = watch.as_mut() {
+                        w.on_frame(&rx.frame, rx.rx_monotonic_ns);
+                    }
+                    master.on_frame(&rx)
+                }
                 None => break,
             }
         }
@@ -126,13 +142,33 @@ pub fn run(
         }
         cycles += 1;
 
+        let permit = watch.as_mut().is_none_or(|w| w.permits(cycle_now));
+        let grace = watch
+            .as_mut()
+            .is_some_and(|w| w.in_startup_grace(cycle_now));
+        if let Some((reason, at_ns)) = watch.as_mut().and_then(SafetyWatch::take_trip) {
+            tracing::error!(
+                ?reason,
+                at_ns,
+                "safety heartbeat invalid or missing: e-stop"
+            );
+        }
         while let Some(ev) = events.receive().unwrap_or_else(|e| {
             tracing::warn!(error = %e, "bad state event ignored");
             None
         }) {
-            if ev.source != ProcessId::DriveIo as u32 {
-                master.on_event(&ev, cycle_now);
+            if ev.source == ProcessId::DriveIo as u32 {
+                continue;
             }
+            if !permit && ev.kind == EventKind::Reset as u32 {
+                tracing::warn!("reset refused: no valid safety heartbeat");
+                continue;
+            }
+            master.on_event(&ev, cycle_now);
+        }
+        if !permit && !grace && matches!(master.state(), BusState::Ready | BusState::Running) {
+            let ev = StateEvent::new(ProcessId::DriveIo, EventKind::EStop, 0);
+            master.on_event(&ev, cycle_now);
         }
         // A setpoint with a foreign contract version is an error: treat as no setpoint (stale).
         let sp = setpoints.latest().unwrap_or_else(|e| {

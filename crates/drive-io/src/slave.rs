@@ -19,6 +19,7 @@
 //! ```
 
 use crate::canopen::*;
+use crate::safety_watch::{InhibitReason, SafetyWatch, SafetyWatchConfig};
 use can_transport::CanFrame;
 
 /// What the drive asks its motor/physics to do this SYNC period.
@@ -57,6 +58,9 @@ pub struct DriveSlave {
     position: i32,
     velocity: i32,
     force_mn: i32,
+    /// Safe-torque path: set while the safety heartbeat is missing/invalid/STOP
+    /// ([`crate::safety_watch`]); forces Quick Stop Active and blocks enabling.
+    safety_inhibit: bool,
 }
 
 impl DriveSlave {
@@ -77,7 +81,22 @@ impl DriveSlave {
             position: 0,
             velocity: 0,
             force_mn: 0,
+            safety_inhibit: false,
         }
+    }
+
+    /// Safety inhibit from the safety-heartbeat watch: while set, an enabled drive is put into
+    /// Quick Stop Active (decelerate, then the brake holds) and no controlword can enable it.
+    /// Clearing it does not re-enable anything (the master must).
+    pub fn set_safety_inhibit(&mut self, inhibit: bool) {
+        self.safety_inhibit = inhibit;
+        if inhibit && self.state == Ds402State::OperationEnabled {
+            self.state = Ds402State::QuickStopActive;
+        }
+    }
+
+    pub fn safety_inhibited(&self) -> bool {
+        self.safety_inhibit
     }
 
     pub fn node_id(&self) -> u8 {
@@ -238,6 +257,7 @@ impl DriveSlave {
         let disable_voltage = cw & 0x82 == 0x00;
         let quick_stop = cw & 0x86 == 0x02;
         let fault_reset_edge = cw & 0x80 != 0 && prev & 0x80 == 0;
+        let before = self.state;
         self.state = match self.state {
             NotReadyToSwitchOn => SwitchOnDisabled,
             SwitchOnDisabled if shutdown => ReadyToSwitchOn,
@@ -259,6 +279,14 @@ impl DriveSlave {
             Fault if fault_reset_edge => SwitchOnDisabled,
             s => s,
         };
+        if self.safety_inhibit && self.state == OperationEnabled {
+            // No enabling without a valid safety heartbeat.
+            self.state = if before == OperationEnabled {
+                QuickStopActive
+            } else {
+                before
+            };
+        }
         if self.state == OperationEnabled && !matches!(prev & 0x8F, 0x0F) {
             // Entering Operation Enabled: never jump; start from where the drum is.
             self.pending_target = self.position;
@@ -402,6 +430,7 @@ impl WinchAxis {
 pub struct DriveBank {
     slaves: Vec<DriveSlave>,
     out: FrameBuf,
+    watch: Option<SafetyWatch>,
 }
 
 impl DriveBank {
@@ -413,6 +442,32 @@ impl DriveBank {
                 .map(|&n| DriveSlave::new(n, heartbeat_ms))
                 .collect(),
             out: FrameBuf::default(),
+            watch: None,
+        }
+    }
+    /// Makes every drive validate the safety monitor's doubled heartbeat (drives.toml
+    /// `[safety_heartbeat]`): without a valid RUN pair within the validation time, or on an
+    /// invalid pair, all drives quick-stop and cannot be enabled. Starts inhibited.
+    pub fn enable_safety_watch(&mut self, cfg: SafetyWatchConfig) {
+        self.watch = Some(SafetyWatch::new(cfg));
+        for s in &mut self.slaves {
+            s.set_safety_inhibit(true);
+        }
+    }
+    /// The safety-heartbeat watch, if enabled.
+    pub fn safety_watch(&self) -> Option<&SafetyWatch> {
+        self.watch.as_ref()
+    }
+    /// Trip of the watch not yet reported (reason, CLOCK_MONOTONIC ns), for logging.
+    pub fn take_safety_trip(&mut self) -> Option<(InhibitReason, u64)> {
+        self.watch.as_mut().and_then(SafetyWatch::take_trip)
+    }
+    fn apply_safety_watch(&mut self, now_ns: u64) {
+        if let Some(w) = self.watch.as_mut() {
+            let inhibit = !w.permits(now_ns);
+            for s in &mut self.slaves {
+                s.set_safety_inhibit(inhibit);
+            }
         }
     }
     pub fn len(&self) -> usize {
@@ -430,6 +485,10 @@ impl DriveBank {
     /// Handles one frame for every drive; true if it was a SYNC that the drives act on (step the
     /// physics now).
     pub fn handle_frame(&mut self, frame: &CanFrame, now_ns: u64) -> bool {
+        if let Some(w) = self.watch.as_mut() {
+            w.on_frame(frame, now_ns);
+            self.apply_safety_watch(now_ns);
+        }
         let mut sync = false;
         for s in &mut self.slaves {
             sync |= s.handle_frame(frame, now_ns, &mut self.out) == SlaveEvent::Sync;
@@ -460,8 +519,9 @@ impl DriveBank {
             s.transmit_pdos(&mut self.out);
         }
     }
-    /// Heartbeats when due.
+    /// Heartbeats when due; applies the safety-heartbeat validation time if the watch is on.
     pub fn poll(&mut self, now_ns: u64) {
+        self.apply_safety_watch(now_ns);
         for s in &mut self.slaves {
             s.poll(now_ns, &mut self.out);
         }

@@ -24,6 +24,10 @@ struct Args {
     mute_heartbeat_index: Option<usize>,
     #[arg(long, default_value_t = 0)]
     mute_after_ms: u64,
+    /// Write the emulated drives' true state to this file every 10 ms (atomic rename), for
+    /// multi-process tests: lengths, velocities, NMT/CiA 402 state, motion demand, safety watch.
+    #[arg(long)]
+    status_file: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -70,11 +74,55 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
             c.mute_heartbeat(i);
         });
     }
+    if let Some(path) = args.status_file.clone() {
+        let c = control.clone();
+        let m = cfg.winches.len();
+        std::thread::spawn(move || write_status_loop(&path, &c, m));
+    }
     tracing::info!(
         drives = cfg.winches.len(),
+        safety_watch = ?ecfg.safety_watch,
         "winch emulator (test double) running"
     );
     emulator::run(bus, &ecfg, &control)?;
     control.stop.store(true, Ordering::Release);
     Ok(())
+}
+
+/// Status file format (one record per line, space separated):
+/// `emulator <monotonic_ns> <syncs> <safety_inhibit 0|1> <safety_trips> <safety_tripped_ns>` then
+/// per drive `drive <i> <length_m> <velocity_m_per_s> <nmt code> <statusword> <demand 0 hold|1
+/// quick stop|2 follow> <left_follow_ns>`.
+fn write_status_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
+    use std::fmt::Write as _;
+    let tmp = path.with_extension("tmp");
+    let mut text = String::new();
+    while !c.stop.load(Ordering::Acquire) {
+        text.clear();
+        let _ = writeln!(
+            text,
+            "emulator {} {} {} {} {}",
+            crs_ipc::monotonic_ns(),
+            c.syncs.load(Ordering::Acquire),
+            u8::from(c.safety_inhibit.load(Ordering::Acquire)),
+            c.safety_trips.load(Ordering::Acquire),
+            c.safety_tripped_ns.load(Ordering::Acquire)
+        );
+        for i in 0..m {
+            let _ = writeln!(
+                text,
+                "drive {i} {:.9} {:.9} {} {} {} {}",
+                c.length_m(i),
+                c.velocity_m_per_s(i),
+                c.nmt_state(i).map_or(255, |s| s.code()),
+                c.ds402_state(i).statusword(),
+                c.demand_code(i),
+                c.left_follow_ns(i)
+            );
+        }
+        if std::fs::write(&tmp, &text).is_ok() {
+            let _ = std::fs::rename(&tmp, path);
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }

@@ -1,0 +1,114 @@
+//! Cost of the monitor's work per 15 ms cycle (criterion). Reported in
+//! benches/results-safety-monitor.md:
+//! * `phi_star_8_cables`: the monitor's own standard inverse kinematics (glam);
+//! * `cycle_15_setpoints`: one cycle at 1 kHz input: 15 setpoints checked + end of cycle;
+//! * `cycle_full`: 15 setpoints + 15 drive feedback samples + 120 RPDO targets (8 drives x 15)
+//!   + end of cycle, i.e. everything the monitor computes per cycle on the default config;
+//! * `safety_pair_encode_decode`: the doubled heartbeat, producer + consumer side.
+
+use can_transport::safety_frame::{self, PairReceiver, SafetyHeartbeat, SafetyState};
+use criterion::{Criterion, criterion_group, criterion_main};
+use crs_ipc::{BusState, DriveFeedback, JointSetpoint, PlatformIdentity};
+use safety_monitor::config;
+use safety_monitor::identity::platform_identity;
+use safety_monitor::kinematics::StandardKinematics;
+use safety_monitor::{Limits, Monitor};
+use std::hint::black_box;
+use std::path::PathBuf;
+
+fn bench(c: &mut Criterion) {
+    let cfg = config::load(
+        &PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/safety-monitor.toml"),
+    )
+    .expect("config/safety-monitor.toml");
+    let kin = StandardKinematics::new(&cfg.platform);
+    let id = platform_identity(&cfg.platform);
+    let pose = [0.3, -0.2, 2.1, 0.02, -0.01, 0.03];
+    let mut q = [0.0; crs_ipc::MAX_CABLES];
+    c.bench_function("phi_star_8_cables", |b| {
+        b.iter(|| {
+            kin.lengths(black_box(&pose), &mut q);
+            black_box(&q);
+        })
+    });
+
+    let mut sps = Vec::new();
+    for k in 0..15u64 {
+        let p = [0.3 + 1e-4 * k as f64, -0.2, 2.1, 0.02, -0.01, 0.03];
+        let mut s = JointSetpoint {
+            cable_count: 8,
+            pose: p,
+            timestamp_ns: k * 1_000_000,
+            ..JointSetpoint::default()
+        };
+        kin.lengths(&p, &mut s.cable_length_m);
+        sps.push(s);
+    }
+    let mut m = Monitor::new(Limits::from_config(&cfg), kin, id);
+    m.on_identity(&PlatformIdentity::new(id, 8));
+    let mut seq = 0u64;
+    let mut now = 0u64;
+    c.bench_function("cycle_15_setpoints", |b| {
+        b.iter(|| {
+            for s in &sps {
+                seq += 1;
+                let mut s = *s;
+                s.sequence = seq;
+                m.on_setpoint(&s);
+            }
+            now += 15_000_000;
+            black_box(m.end_cycle(now))
+        })
+    });
+
+    let winches = cfg.winches.clone();
+    c.bench_function("cycle_full", |b| {
+        b.iter(|| {
+            for s in &sps {
+                seq += 1;
+                let mut s = *s;
+                s.sequence = seq;
+                s.timestamp_ns = now;
+                m.on_setpoint(&s);
+                let mut f = DriveFeedback {
+                    cable_count: 8,
+                    applied_setpoint_sequence: seq,
+                    bus_state: BusState::Running as u32,
+                    ..DriveFeedback::default()
+                };
+                f.cable_length_m = s.cable_length_m;
+                m.on_feedback(&f);
+                for (i, w) in winches.iter().enumerate() {
+                    let counts = (s.cable_length_m[i] * w.counts_per_m * w.sign + w.offset_counts)
+                        .round() as i32;
+                    m.on_rpdo(i, w.counts_to_length_m(counts), now + 1);
+                }
+            }
+            now += 15_000_000;
+            black_box(m.end_cycle(now))
+        })
+    });
+
+    let mut rx = PairReceiver::new(safety_frame::DEFAULT_COB_ID, 10_000_000);
+    let mut counter = 0u32;
+    c.bench_function("safety_pair_encode_decode", |b| {
+        b.iter(|| {
+            counter = counter.wrapping_add(1);
+            let [a, bb] = safety_frame::encode(
+                &SafetyHeartbeat {
+                    state: SafetyState::Run,
+                    cause: 0,
+                    counter,
+                    cable: safety_frame::NO_CABLE,
+                },
+                safety_frame::DEFAULT_COB_ID,
+            );
+            rx.on_frame(&a, 1);
+            black_box(rx.on_frame(&bb, 2))
+        })
+    });
+    assert_eq!(m.trip_log().total(), 0, "the bench input must not trip");
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,126 @@
+//! `safety-monitor`: the independent 15 ms safety stage (see the crate docs and
+//! docs/safety-monitor.md).
+//!
+//! * `safety-monitor [--config F] [--transport T] [--ipc-prefix P]`: run the monitor.
+//! * `safety-monitor reset [--ipc-prefix P]`: operator reset; exit 0 if accepted, 1 if refused.
+//! * `safety-monitor identity [--config F]`: print the platform identity the monitor computes.
+
+use clap::{Parser, Subcommand};
+use safety_monitor::daemon::{self, ResetReply};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+#[derive(Parser)]
+#[command(
+    name = "safety-monitor",
+    about = "Independent 15 ms safety monitor: redundant kinematics check, latched e-stop, fail-safe CAN heartbeat"
+)]
+struct Args {
+    #[command(subcommand)]
+    cmd: Option<Cmd>,
+    /// Monitor TOML.
+    #[arg(long, default_value = "config/safety-monitor.toml", global = true)]
+    config: PathBuf,
+    /// Drive bus, overrides `[can].transport`: socketcan:<iface> | udpbus:<group>:<port> | udp:<l>-><r>.
+    #[arg(long)]
+    transport: Option<String>,
+    /// iceoryx2 service-name prefix (default: $CRS_IPC_PREFIX or none).
+    #[arg(long, global = true)]
+    ipc_prefix: Option<String>,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Ask the running monitor to release its latched e-stop (refused while the cause persists).
+    Reset {
+        /// How long to wait for the monitor's answer (ms).
+        #[arg(long, default_value_t = 2000)]
+        timeout_ms: u64,
+    },
+    /// Print the platform identity (SHA-256) the monitor computes from the platform TOML.
+    Identity,
+}
+
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    STOP.store(true, Ordering::SeqCst);
+}
+
+fn node(name: &str, prefix: &Option<String>) -> Result<crs_ipc::IpcNode, crs_ipc::IpcError> {
+    match prefix {
+        Some(p) => crs_ipc::IpcNode::with_prefix(name, p),
+        None => crs_ipc::IpcNode::new(name),
+    }
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .init();
+    let args = Args::parse();
+    match run(args) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("safety-monitor: error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
+    match args.cmd {
+        Some(Cmd::Reset { timeout_ms }) => {
+            let ipc = node("safety-monitor-reset", &args.ipc_prefix)?;
+            match daemon::request_reset(&ipc, Duration::from_millis(timeout_ms))? {
+                ResetReply::Accepted => {
+                    println!("reset accepted: e-stop released, drives re-enabled by drive-io");
+                    Ok(ExitCode::SUCCESS)
+                }
+                ResetReply::NotTripped => {
+                    println!("reset accepted: nothing was latched (stack released)");
+                    Ok(ExitCode::SUCCESS)
+                }
+                ResetReply::Refused(c) => {
+                    println!(
+                        "reset REFUSED: the cause persists ({})",
+                        c.map_or("unknown".to_string(), |c| c.to_string())
+                    );
+                    Ok(ExitCode::FAILURE)
+                }
+            }
+        }
+        Some(Cmd::Identity) => {
+            let cfg = safety_monitor::config::load(&args.config)?;
+            let id = safety_monitor::identity::platform_identity(&cfg.platform);
+            println!(
+                "{}  {} ({} cables)",
+                safety_monitor::identity::hex(&id),
+                cfg.platform_file.display(),
+                cfg.platform.cables()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        None => {
+            let cfg = safety_monitor::config::load(&args.config)?;
+            let t = args.transport.unwrap_or_else(|| cfg.can.transport.clone());
+            let spec: can_transport::TransportSpec = t.parse()?;
+            // SAFETY: the handler only stores to an atomic (async-signal-safe).
+            unsafe {
+                libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+                libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+            }
+            let ipc = node("safety-monitor", &args.ipc_prefix)?;
+            let s = daemon::run(&cfg, &spec, &ipc, &STOP)?;
+            tracing::info!(
+                ?s,
+                "safety monitor stopped (the drives brake without its heartbeat)"
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}

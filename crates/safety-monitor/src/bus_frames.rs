@@ -1,0 +1,94 @@
+//! The few CANopen frames the monitor sends and reads on the drive bus, encoded here on purpose
+//! (the stop path must not depend on drive-io's code). COB-IDs per docs/can-protocol.md.
+
+use can_transport::CanFrame;
+
+pub const COB_NMT: u16 = 0x000;
+pub const COB_RPDO1_BASE: u16 = 0x200;
+pub const COB_HEARTBEAT_BASE: u16 = 0x700;
+pub const NMT_START: u8 = 0x01;
+pub const NMT_STOP: u8 = 0x02;
+/// CiA 402 controlword "quick stop" (bits 1 = 1, 2 = 0).
+pub const CW_QUICK_STOP: u16 = 0x0002;
+/// CiA 402 controlword "enable operation": the only RPDOs that command motion.
+pub const CW_ENABLE_OPERATION: u16 = 0x000F;
+/// NMT state "operational" in heartbeats.
+pub const NMT_STATE_OPERATIONAL: u8 = 0x05;
+/// NMT state "stopped" in heartbeats.
+pub const NMT_STATE_STOPPED: u8 = 0x04;
+
+/// NMT command to `node` (0 = all nodes).
+pub fn nmt(command: u8, node: u8) -> CanFrame {
+    CanFrame::new_std_lossy(COB_NMT, &[command, node])
+}
+
+/// RPDO1 (controlword, target position) to `node`.
+pub fn rpdo1(node: u8, controlword: u16, target_counts: i32) -> CanFrame {
+    let mut d = [0u8; 6];
+    d[..2].copy_from_slice(&controlword.to_le_bytes());
+    d[2..].copy_from_slice(&target_counts.to_le_bytes());
+    CanFrame::new_std_lossy(COB_RPDO1_BASE + u16::from(node & 0x7F), &d)
+}
+
+/// What the monitor reads from the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Observed {
+    /// RPDO1 from the drive adapter to `node`.
+    Rpdo1 {
+        node: u8,
+        controlword: u16,
+        target_counts: i32,
+    },
+    /// Heartbeat of `node` with its NMT state.
+    Heartbeat { node: u8, state: u8 },
+}
+
+/// Decodes an RPDO1 or a heartbeat; anything else (or malformed) is `None`. Never panics.
+pub fn observe(f: &CanFrame) -> Option<Observed> {
+    if f.is_extended() || f.is_rtr() {
+        return None;
+    }
+    let id = f.id() as u16;
+    let node = (id & 0x7F) as u8;
+    if node == 0 {
+        return None;
+    }
+    let d = f.data();
+    match id & 0x780 {
+        COB_RPDO1_BASE if d.len() == 6 => Some(Observed::Rpdo1 {
+            node,
+            controlword: u16::from_le_bytes([d[0], d[1]]),
+            target_counts: i32::from_le_bytes([d[2], d[3], d[4], d[5]]),
+        }),
+        COB_HEARTBEAT_BASE if d.len() == 1 => Some(Observed::Heartbeat {
+            node,
+            state: d[0] & 0x7F,
+        }),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trips() {
+        assert_eq!(nmt(NMT_STOP, 0).data(), &[2, 0]);
+        assert_eq!(nmt(NMT_STOP, 0).id(), 0);
+        assert_eq!(
+            observe(&rpdo1(5, CW_QUICK_STOP, -7)),
+            Some(Observed::Rpdo1 {
+                node: 5,
+                controlword: 2,
+                target_counts: -7
+            })
+        );
+        assert_eq!(
+            observe(&CanFrame::new(0x703, &[0x85]).unwrap()),
+            Some(Observed::Heartbeat { node: 3, state: 5 })
+        );
+        assert_eq!(observe(&CanFrame::new(0x203, &[1, 2]).unwrap()), None);
+        assert_eq!(observe(&CanFrame::new(0x200, &[0; 6]).unwrap()), None);
+    }
+}

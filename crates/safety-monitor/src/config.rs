@@ -1,0 +1,424 @@
+//! `config/safety-monitor.toml`: the monitor's own settings, plus the platform TOML and the
+//! drives TOML it points to (read with the monitor's own parsers). Everything is validated
+//! before anything runs; errors name the file, the key and (for TOML syntax errors) the line.
+
+use crate::platform::{PlatformError, PlatformParams, load_platform};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// The spec's limit for |Δq| (sec. 5.6: 100 mm). A configuration above it is refused.
+pub const DQ_LIMIT_MAX_M: f64 = 0.100;
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        file: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{file}{}: {message}", line.map(|l| format!(":{l}")).unwrap_or_default())]
+    Parse {
+        file: String,
+        line: Option<usize>,
+        message: String,
+    },
+    #[error("{file}: `{key}`: {reason}")]
+    Invalid {
+        file: String,
+        key: String,
+        reason: String,
+    },
+    #[error(transparent)]
+    Platform(#[from] PlatformError),
+}
+
+/// `[monitor]`
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MonitorSection {
+    /// Platform TOML, relative to the config file.
+    pub platform: PathBuf,
+    /// Cycle period (ms); sec. 5.6: 15 ms.
+    #[serde(default = "d_cycle")]
+    pub cycle_ms: u32,
+    /// |Δq_i| limit (mm); at most 100 mm (sec. 5.6, eq. 5.27).
+    #[serde(default = "d_dq")]
+    pub dq_limit_mm: f64,
+    /// E-stop after this many consecutive cycles without a new setpoint (armed by the first).
+    #[serde(default = "d_silence")]
+    pub silence_cycles: u32,
+    /// E-stop when more setpoints than this were lost (sequence gaps, buffer overflow) within
+    /// the last `gap_window_cycles` cycles.
+    #[serde(default = "d_missing")]
+    pub max_missing_setpoints: u32,
+    #[serde(default = "d_gap_window")]
+    pub gap_window_cycles: u32,
+    /// Setpoints without a verified platform identity for this many cycles => e-stop.
+    #[serde(default = "d_identity_grace")]
+    pub identity_grace_cycles: u32,
+    /// The workspace box of the platform TOML is widened by this (m / deg) for the check.
+    #[serde(default)]
+    pub workspace_margin_m: f64,
+    #[serde(default)]
+    pub workspace_margin_deg: f64,
+    /// A reset is accepted only after this many consecutive cycles without any fault.
+    #[serde(default = "d_reset_clear")]
+    pub reset_clear_cycles: u32,
+    /// Optional file every trip is appended to (one line per trip); empty = none.
+    #[serde(default)]
+    pub trip_log: String,
+    /// SCHED_FIFO priority of the cycle thread (1..=99; 0 = SCHED_OTHER). Degrades with a
+    /// warning when not permitted.
+    #[serde(default)]
+    pub rt_priority: i32,
+    /// CPU to pin the cycle thread to (-1 = none).
+    #[serde(default = "d_cpu")]
+    pub cpu: i32,
+}
+
+/// `[feedback]`: drive-io's DriveFeedback against the setpoints it applied.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FeedbackSection {
+    /// Check the following error (only while drive-io reports Running).
+    #[serde(default = "d_true")]
+    pub check_following_error: bool,
+    /// |measured − commanded| bound (mm), against the closest of the last `window_setpoints`
+    /// setpoints up to the one drive-io reports as applied (the drives lag a few cycles).
+    #[serde(default = "d_following")]
+    pub following_error_mm: f64,
+    #[serde(default = "d_window")]
+    pub window_setpoints: u32,
+    /// E-stop after this many cycles without feedback once feedback was seen (dead drive-io);
+    /// 0 = off.
+    #[serde(default = "d_fb_silence")]
+    pub silence_cycles: u32,
+}
+
+/// `[can]`
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CanSection {
+    /// `socketcan:<iface>` / `udpbus:<group>:<port>` / `udp:<l>-><r>` (overridden by --transport).
+    pub transport: String,
+    /// drives TOML (node ids and length <-> counts scaling), relative to the config file.
+    pub drives: PathBuf,
+    /// COB-ID of the safety heartbeat's normal frame; the inverse uses `+ 1` (CiA 304 SRDO 1).
+    #[serde(default = "d_cob")]
+    pub safety_cob_id: u16,
+    /// Also check the RPDO1 target positions the drives receive on the bus.
+    #[serde(default = "d_true")]
+    pub check_rpdo: bool,
+    /// How long to wait after an accepted reset (NMT start) for every drive's operational
+    /// heartbeat before the Reset event is published (ms).
+    #[serde(default = "d_reset_wait")]
+    pub reset_wait_ms: u32,
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    monitor: MonitorSection,
+    #[serde(default = "d_feedback")]
+    feedback: FeedbackSection,
+    can: CanSection,
+}
+
+fn d_cycle() -> u32 {
+    15
+}
+fn d_dq() -> f64 {
+    100.0
+}
+fn d_silence() -> u32 {
+    2
+}
+fn d_missing() -> u32 {
+    5
+}
+fn d_gap_window() -> u32 {
+    67
+}
+fn d_identity_grace() -> u32 {
+    10
+}
+fn d_reset_clear() -> u32 {
+    3
+}
+fn d_cpu() -> i32 {
+    -1
+}
+fn d_true() -> bool {
+    true
+}
+fn d_following() -> f64 {
+    100.0
+}
+fn d_window() -> u32 {
+    50
+}
+fn d_fb_silence() -> u32 {
+    4
+}
+fn d_cob() -> u16 {
+    can_transport::safety_frame::DEFAULT_COB_ID
+}
+fn d_reset_wait() -> u32 {
+    1000
+}
+fn d_feedback() -> FeedbackSection {
+    FeedbackSection {
+        check_following_error: true,
+        following_error_mm: d_following(),
+        window_setpoints: d_window(),
+        silence_cycles: d_fb_silence(),
+    }
+}
+
+/// One winch as the monitor needs it: node id and the counts -> length scaling.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Winch {
+    pub node_id: u8,
+    /// counts per metre of cable (gear · counts/rev / (π · drum diameter)).
+    pub counts_per_m: f64,
+    pub sign: f64,
+    pub offset_counts: f64,
+}
+
+impl Winch {
+    /// Encoder counts -> cable length (m).
+    pub fn counts_to_length_m(&self, counts: i32) -> f64 {
+        (f64::from(counts) - self.offset_counts) * self.sign / self.counts_per_m
+    }
+}
+
+#[derive(Deserialize)]
+struct RawDrives {
+    #[serde(rename = "winch")]
+    winches: Vec<RawWinch>,
+}
+
+#[derive(Deserialize)]
+struct RawWinch {
+    node_id: i64,
+    drum_diameter_m: f64,
+    gear_ratio: f64,
+    counts_per_rev: f64,
+    sign: i64,
+    #[serde(default)]
+    offset_counts: i64,
+}
+
+/// Everything the monitor runs with, validated.
+#[derive(Debug, Clone)]
+pub struct MonitorConfig {
+    pub file: PathBuf,
+    pub monitor: MonitorSection,
+    pub feedback: FeedbackSection,
+    pub can: CanSection,
+    pub platform_file: PathBuf,
+    pub platform: PlatformParams,
+    pub drives_file: PathBuf,
+    /// In cable order (cable i = i-th `[[winch]]`).
+    pub winches: Vec<Winch>,
+}
+
+impl MonitorConfig {
+    pub fn dq_limit_m(&self) -> f64 {
+        self.monitor.dq_limit_mm * 1e-3
+    }
+    pub fn cycle_ns(&self) -> u64 {
+        u64::from(self.monitor.cycle_ms) * 1_000_000
+    }
+    pub fn trip_log(&self) -> Option<PathBuf> {
+        (!self.monitor.trip_log.is_empty()).then(|| relative_to(&self.file, &self.monitor.trip_log))
+    }
+}
+
+fn relative_to(file: &Path, p: impl AsRef<Path>) -> PathBuf {
+    let p = p.as_ref();
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        file.parent().unwrap_or(Path::new(".")).join(p)
+    }
+}
+
+fn read(path: &Path) -> Result<String, ConfigError> {
+    std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        file: path.display().to_string(),
+        source,
+    })
+}
+
+fn parse_err(file: &Path, text: &str, e: toml::de::Error) -> ConfigError {
+    ConfigError::Parse {
+        file: file.display().to_string(),
+        line: e
+            .span()
+            .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1),
+        message: e.message().trim().to_string(),
+    }
+}
+
+/// Loads `config/safety-monitor.toml` and the files it names.
+pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
+    let text = read(path)?;
+    let raw: RawConfig = toml::from_str(&text).map_err(|e| parse_err(path, &text, e))?;
+    let file = path.display().to_string();
+    let bad = |key: &str, reason: String| ConfigError::Invalid {
+        file: file.clone(),
+        key: key.to_string(),
+        reason,
+    };
+    let m = &raw.monitor;
+    if !(1..=100).contains(&m.cycle_ms) {
+        return Err(bad("monitor.cycle_ms", "must be in 1..=100".into()));
+    }
+    if !(m.dq_limit_mm.is_finite() && m.dq_limit_mm > 0.0) {
+        return Err(bad("monitor.dq_limit_mm", "must be a number > 0".into()));
+    }
+    if m.dq_limit_mm > DQ_LIMIT_MAX_M * 1e3 {
+        return Err(bad(
+            "monitor.dq_limit_mm",
+            format!(
+                "{} mm is above the 100 mm limit of the spec (sec. 5.6, eq. 5.27): refused",
+                m.dq_limit_mm
+            ),
+        ));
+    }
+    if m.silence_cycles == 0 {
+        return Err(bad("monitor.silence_cycles", "must be >= 1".into()));
+    }
+    if m.gap_window_cycles == 0 || m.gap_window_cycles > 10_000 {
+        return Err(bad(
+            "monitor.gap_window_cycles",
+            "must be in 1..=10000".into(),
+        ));
+    }
+    if m.identity_grace_cycles == 0 {
+        return Err(bad("monitor.identity_grace_cycles", "must be >= 1".into()));
+    }
+    for (key, v) in [
+        ("monitor.workspace_margin_m", m.workspace_margin_m),
+        ("monitor.workspace_margin_deg", m.workspace_margin_deg),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(bad(key, "must be a finite number >= 0".into()));
+        }
+    }
+    if m.reset_clear_cycles == 0 {
+        return Err(bad("monitor.reset_clear_cycles", "must be >= 1".into()));
+    }
+    if !(0..=99).contains(&m.rt_priority) {
+        return Err(bad("monitor.rt_priority", "must be in 0..=99".into()));
+    }
+    if m.cpu < -1 {
+        return Err(bad(
+            "monitor.cpu",
+            "must be -1 (none) or a CPU index".into(),
+        ));
+    }
+    let f = &raw.feedback;
+    if !(f.following_error_mm.is_finite() && f.following_error_mm > 0.0) {
+        return Err(bad(
+            "feedback.following_error_mm",
+            "must be a number > 0".into(),
+        ));
+    }
+    if !(1..=crate::monitor::HISTORY as u32).contains(&f.window_setpoints) {
+        return Err(bad(
+            "feedback.window_setpoints",
+            format!("must be in 1..={}", crate::monitor::HISTORY),
+        ));
+    }
+    let c = &raw.can;
+    c.transport
+        .parse::<can_transport::TransportSpec>()
+        .map_err(|e| bad("can.transport", e.to_string()))?;
+    if c.safety_cob_id == 0 || c.safety_cob_id >= 0x7FF || c.safety_cob_id.is_multiple_of(2) {
+        return Err(bad(
+            "can.safety_cob_id",
+            "must be an odd 11-bit id below 0x7FF (the pair uses id and id + 1)".into(),
+        ));
+    }
+    let platform_file = relative_to(path, &m.platform);
+    let platform = load_platform(&platform_file)?;
+    let drives_file = relative_to(path, &c.drives);
+    let winches = load_drives(&drives_file)?;
+    if winches.len() != platform.cables() {
+        return Err(ConfigError::Invalid {
+            file: drives_file.display().to_string(),
+            key: "winch".into(),
+            reason: format!(
+                "{} [[winch]] entries but the platform {} has {} cables",
+                winches.len(),
+                platform_file.display(),
+                platform.cables()
+            ),
+        });
+    }
+    Ok(MonitorConfig {
+        file: path.to_path_buf(),
+        monitor: raw.monitor,
+        feedback: raw.feedback,
+        can: raw.can,
+        platform_file,
+        platform,
+        drives_file,
+        winches,
+    })
+}
+
+/// Reads node ids and scaling from a drives TOML (the `[[winch]]` entries; other tables are
+/// drive-io's business and ignored here).
+pub fn load_drives(path: &Path) -> Result<Vec<Winch>, ConfigError> {
+    let text = read(path)?;
+    let raw: RawDrives = toml::from_str(&text).map_err(|e| parse_err(path, &text, e))?;
+    let file = path.display().to_string();
+    let mut out = Vec::with_capacity(raw.winches.len());
+    for (i, w) in raw.winches.iter().enumerate() {
+        let bad = |k: &str, r: &str| ConfigError::Invalid {
+            file: file.clone(),
+            key: format!("winch[{i}].{k}"),
+            reason: r.to_string(),
+        };
+        if !(1..=127).contains(&w.node_id) {
+            return Err(bad("node_id", "must be in 1..=127"));
+        }
+        if out
+            .iter()
+            .any(|o: &Winch| i64::from(o.node_id) == w.node_id)
+        {
+            return Err(bad("node_id", "used twice"));
+        }
+        for (k, v) in [
+            ("drum_diameter_m", w.drum_diameter_m),
+            ("gear_ratio", w.gear_ratio),
+            ("counts_per_rev", w.counts_per_rev),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(k, "must be finite and > 0"));
+            }
+        }
+        if w.sign != 1 && w.sign != -1 {
+            return Err(bad("sign", "must be 1 or -1"));
+        }
+        out.push(Winch {
+            node_id: w.node_id as u8,
+            counts_per_m: w.gear_ratio * w.counts_per_rev
+                / (std::f64::consts::PI * w.drum_diameter_m),
+            sign: w.sign as f64,
+            offset_counts: w.offset_counts as f64,
+        });
+    }
+    if out.is_empty() || out.len() > crs_ipc::MAX_CABLES {
+        return Err(ConfigError::Invalid {
+            file,
+            key: "winch".into(),
+            reason: format!("need 1..={} [[winch]] entries", crs_ipc::MAX_CABLES),
+        });
+    }
+    Ok(out)
+}

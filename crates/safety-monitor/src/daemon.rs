@@ -1,0 +1,533 @@
+//! The monitor process: its own 15 ms absolute-deadline cycle (clock_nanosleep TIMER_ABSTIME)
+//! around [`Monitor`], iceoryx2 in, iceoryx2 + CAN out.
+//!
+//! Per cycle: drain the platform identity, state events (reset requests), EVERY setpoint and
+//! feedback sample since the last cycle (the contract's subscriber buffer of 32 holds > 2 cycles
+//! at 1 kHz), the RPDO targets and drive heartbeats the bus reader thread saw; close the cycle;
+//! then
+//! * on a new trip: quick stop (RPDO1 controlword 0x0002) to every drive, NMT stop all, a STOP
+//!   safety heartbeat, all from the monitor's OWN CAN socket, and a latched `StateEvent::EStop`
+//!   on iceoryx2 (+ wake-up), so the stop works even if motion-core or drive-io hang;
+//! * while tripped: NMT stop all every cycle, STOP in the safety heartbeat, re-assert the e-stop
+//!   if anyone else publishes a Reset;
+//! * every cycle: the doubled safety heartbeat (RUN/STOP) and an iceoryx2 heartbeat.
+//!
+//! Reset protocol (operator CLI `safety-monitor reset`): a `StateEvent { source: Operator,
+//! kind: StateChanged, state: RESET_REQUEST }`; the monitor answers with `StateEvent { source:
+//! SafetyMonitor, kind: StateChanged, detail: RESET_ACCEPTED | RESET_REFUSED |
+//! RESET_NOT_TRIPPED, detail_node: persisting cause, sequence: the request's }`. When accepted it
+//! sends NMT start to all drives, RUN heartbeats, and once every drive reports operational (and
+//! the drives' watches had [`RESET_MIN_RUN_CYCLES`] RUN pairs to release) publishes
+//! `StateEvent { kind: Reset }`, which releases motion-core and drive-io.
+
+use crate::bus_frames::{self, Observed};
+use crate::config::MonitorConfig;
+use crate::identity::platform_identity;
+use crate::kinematics::StandardKinematics;
+use crate::monitor::{Limits, Monitor, MonitorState, ResetDecision};
+use crate::trip::{Cause, TripRecord};
+use can_transport::{CanBus, CanError, CanFrame, TransportSpec, safety_frame};
+use crossbeam::queue::ArrayQueue;
+use crs_ipc::{
+    DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, MAX_CABLES,
+    PlatformIdentity, ProcessId, StateEvent, monotonic_ns,
+};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// `StateEvent::state` of an operator's reset request (kind StateChanged, source Operator).
+pub const RESET_REQUEST: u32 = 0x5AFE_0001;
+/// `StateEvent::detail` of the monitor's answer.
+pub const RESET_ACCEPTED: u32 = 0x5AFE_0002;
+pub const RESET_REFUSED: u32 = 0x5AFE_0003;
+pub const RESET_NOT_TRIPPED: u32 = 0x5AFE_0004;
+/// `StateEvent::state` with which motion-core announces a graceful end of its setpoint stream
+/// (source MotionCore, kind StateChanged, published AFTER its last setpoint): the contract's
+/// `crs_ipc::motion_state::STOPPING`.
+pub const MOTION_CORE_STOPPING: u32 = crs_ipc::motion_state::STOPPING;
+/// Requests older than this are stale (e.g. history of a previous run) and ignored.
+pub const RESET_REQUEST_MAX_AGE_NS: u64 = 5_000_000_000;
+/// RUN heartbeats sent after an accepted reset before the Reset event (the drives' and
+/// drive-io's watches need `release_pairs` (default 3) consecutive RUN pairs to release).
+pub const RESET_MIN_RUN_CYCLES: u32 = 4;
+/// Bus observations buffered between two cycles.
+const OBS_QUEUE: usize = 8192;
+
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    #[error(transparent)]
+    Can(#[from] CanError),
+    #[error("{0}")]
+    Other(String),
+}
+
+/// What the process did, returned when it stops.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Summary {
+    pub cycles: u64,
+    pub overruns: u64,
+    pub trips: u64,
+    pub setpoints_checked: u64,
+    pub setpoints_missing: u64,
+    pub rpdo_checked: u64,
+    pub can_send_errors: u64,
+    pub max_abs_dq_m: f64,
+    pub max_lateness_ns: u64,
+}
+
+/// Sleeps until the absolute CLOCK_MONOTONIC time `t_ns` (TIMER_ABSTIME: no drift).
+pub fn sleep_until(t_ns: u64) {
+    let ts = libc::timespec {
+        tv_sec: (t_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (t_ns % 1_000_000_000) as libc::c_long,
+    };
+    loop {
+        // SAFETY: valid timespec; a null remainder is allowed with TIMER_ABSTIME.
+        let r = unsafe {
+            libc::clock_nanosleep(
+                libc::CLOCK_MONOTONIC,
+                libc::TIMER_ABSTIME,
+                &ts,
+                std::ptr::null_mut(),
+            )
+        };
+        if r != libc::EINTR {
+            return;
+        }
+    }
+}
+
+/// SCHED_FIFO at `priority` (+ optional CPU pinning, mlockall) for the calling thread; the
+/// error says which call failed.
+pub fn make_realtime(priority: i32, cpu: Option<usize>) -> Result<(), String> {
+    let err = |what: &str| format!("{what}: {}", std::io::Error::last_os_error());
+    // SAFETY: plain syscalls with valid arguments on the calling thread/process.
+    unsafe {
+        if libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) != 0 {
+            return Err(err("mlockall"));
+        }
+        let p = libc::sched_param {
+            sched_priority: priority,
+        };
+        if libc::sched_setscheduler(0, libc::SCHED_FIFO, &p) != 0 {
+            return Err(err("sched_setscheduler(SCHED_FIFO)"));
+        }
+        if let Some(c) = cpu {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            libc::CPU_SET(c, &mut set);
+            if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+                return Err(err("sched_setaffinity"));
+            }
+        }
+    }
+    Ok(())
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Obs {
+    what: Observed,
+    rx_ns: u64,
+}
+
+/// Batch period of the bus reader: it drains its socket this often instead of waking for
+/// every frame (a 1 kHz drive bus carries ~26 frames/ms; one wake-up per frame cost the
+/// monitor ~16 % of a core, see benches/results-safety-monitor.md).
+const READER_BATCH: Duration = Duration::from_millis(3);
+
+/// Reads the bus on its own socket and queues RPDO targets and drive heartbeats.
+fn bus_reader(
+    mut bus: Box<dyn CanBus>,
+    queue: Arc<ArrayQueue<Obs>>,
+    stop: Arc<AtomicBool>,
+    dropped: Arc<std::sync::atomic::AtomicU64>,
+) {
+    let mut next = monotonic_ns();
+    while !stop.load(Ordering::Relaxed) {
+        next += READER_BATCH.as_nanos() as u64;
+        sleep_until(next);
+        let now = monotonic_ns();
+        if now > next + 100_000_000 {
+            next = now;
+        }
+        loop {
+            match bus.try_recv() {
+                Ok(Some(rx)) => {
+                    if let Some(what) = bus_frames::observe(&rx.frame)
+                        && queue
+                            .push(Obs {
+                                what,
+                                rx_ns: rx.rx_monotonic_ns,
+                            })
+                            .is_err()
+                    {
+                        dropped.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::error!(error = %e, "bus reader: receive failed");
+                    std::thread::sleep(Duration::from_millis(50));
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// Sends one frame; counts (never propagates) failures: the cycle must go on, and a monitor that
+/// cannot send its heartbeat stops the drives by itself.
+fn send(bus: &mut dyn CanBus, f: &CanFrame, errors: &mut u64) {
+    if let Err(e) = bus.send(f) {
+        *errors += 1;
+        if errors.is_power_of_two() {
+            tracing::error!(error = %e, errors = *errors, "CAN send failed");
+        }
+    }
+}
+
+fn append_trip_log(path: &std::path::Path, rec: &TripRecord) {
+    use std::io::Write;
+    let unix = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0);
+    let line = format!("t_unix_s={unix:.3} {rec}\n");
+    let r = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .and_then(|mut f| f.write_all(line.as_bytes()));
+    if let Err(e) = r {
+        tracing::error!(path = %path.display(), error = %e, "cannot append to the trip log");
+    }
+}
+
+/// Runs the monitor until `stop` is set. `transport` overrides `[can].transport`.
+pub fn run(
+    cfg: &MonitorConfig,
+    transport: &TransportSpec,
+    ipc: &IpcNode,
+    stop: &AtomicBool,
+) -> Result<Summary, DaemonError> {
+    let identity = platform_identity(&cfg.platform);
+    let kin = StandardKinematics::new(&cfg.platform);
+    let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity);
+    let m = cfg.platform.cables();
+    let winches = cfg.winches.clone();
+    let cob = cfg.can.safety_cob_id;
+    let period = cfg.cycle_ns();
+    let trip_log = cfg.trip_log();
+
+    let setpoints = ipc.subscriber::<JointSetpoint>()?;
+    let feedback = ipc.subscriber::<DriveFeedback>()?;
+    let identities = ipc.subscriber::<PlatformIdentity>()?;
+    let events = ipc.subscriber::<StateEvent>()?;
+    let event_pub = ipc.publisher::<StateEvent>()?;
+    let heartbeat_pub = ipc.publisher::<Heartbeat>()?;
+    let wakeup = ipc.wakeup_notifier()?;
+
+    let mut tx = can_transport::open(transport)?;
+    let queue = Arc::new(ArrayQueue::new(OBS_QUEUE));
+    let reader_stop = Arc::new(AtomicBool::new(false));
+    let obs_dropped = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let reader = {
+        let rx = can_transport::open(transport)?;
+        let (q, s, d) = (queue.clone(), reader_stop.clone(), obs_dropped.clone());
+        std::thread::Builder::new()
+            .name("safety-bus-rx".into())
+            .spawn(move || bus_reader(rx, q, s, d))
+            .map_err(|e| DaemonError::Other(format!("spawning the bus reader: {e}")))?
+    };
+
+    if cfg.monitor.rt_priority > 0 {
+        let cpu = usize::try_from(cfg.monitor.cpu).ok();
+        match make_realtime(cfg.monitor.rt_priority, cpu) {
+            Ok(()) => tracing::info!(priority = cfg.monitor.rt_priority, ?cpu, "SCHED_FIFO"),
+            Err(e) => tracing::warn!("realtime settings not applied ({e}): running SCHED_OTHER"),
+        }
+    }
+    tracing::info!(
+        platform = %cfg.platform.name,
+        identity = %crate::identity::hex(&identity),
+        cables = m,
+        cycle_ms = cfg.monitor.cycle_ms,
+        dq_limit_mm = cfg.monitor.dq_limit_mm,
+        transport = %transport,
+        safety_cob_id = format_args!("{cob:#05x}"),
+        "safety monitor armed"
+    );
+
+    let mut sum = Summary::default();
+    let mut counter: u32 = 0;
+    let mut event_seq: u64 = 0;
+    let mut last_target = [None::<i32>; MAX_CABLES];
+    let mut drive_state = [0u8; MAX_CABLES];
+    let mut drive_state_ns = [0u64; MAX_CABLES];
+    // After an accepted reset: (NMT start time, cycles since).
+    let mut resetting: Option<(u64, u32)> = None;
+    let node_index = |node: u8| winches.iter().position(|w| w.node_id == node);
+    let mut deadline = monotonic_ns() + period;
+
+    while !stop.load(Ordering::Relaxed) {
+        sleep_until(deadline);
+        let now = monotonic_ns();
+        let late = now.saturating_sub(deadline);
+        sum.max_lateness_ns = sum.max_lateness_ns.max(late);
+
+        while let Some(id) = identities.receive().unwrap_or_else(|e| {
+            tracing::error!(error = %e, "platform identity receive failed");
+            monitor.on_ipc_error();
+            None
+        }) {
+            let before = monitor.identity_verified();
+            monitor.on_identity(&id);
+            if !monitor.identity_verified() {
+                tracing::error!(
+                    announced = %crate::identity::hex(&id.hash),
+                    own = %crate::identity::hex(&identity),
+                    cables = id.cable_count,
+                    "platform identity MISMATCH"
+                );
+            } else if !before {
+                tracing::info!("platform identity verified");
+            }
+        }
+        let mut reset_request = None;
+        let mut foreign_reset = false;
+        while let Some(ev) = events.receive().unwrap_or_else(|e| {
+            tracing::warn!(error = %e, "state event ignored");
+            None
+        }) {
+            let fresh = now.saturating_sub(ev.timestamp_ns) <= RESET_REQUEST_MAX_AGE_NS;
+            if ev.source == ProcessId::Operator as u32
+                && ev.kind == EventKind::StateChanged as u32
+                && ev.state == RESET_REQUEST
+                && fresh
+            {
+                reset_request = Some(ev.sequence);
+            } else if ev.source == ProcessId::MotionCore as u32
+                && ev.kind == EventKind::StateChanged as u32
+                && ev.state == MOTION_CORE_STOPPING
+                && fresh
+            {
+                tracing::info!("motion-core announced the end of its setpoint stream");
+                monitor.on_stream_end();
+            } else if ev.kind == EventKind::Reset as u32
+                && ev.source != ProcessId::SafetyMonitor as u32
+                && fresh
+            {
+                foreign_reset = true;
+            }
+        }
+        if let Err(e) = setpoints.drain(|sp| monitor.on_setpoint(sp)) {
+            tracing::error!(error = %e, "setpoint receive failed");
+            monitor.on_ipc_error();
+        }
+        if let Err(e) = feedback.drain(|fb| monitor.on_feedback(fb)) {
+            tracing::error!(error = %e, "drive feedback receive failed");
+            monitor.on_ipc_error();
+        }
+        while let Some(o) = queue.pop() {
+            match o.what {
+                Observed::Rpdo1 {
+                    node,
+                    controlword,
+                    target_counts,
+                } => {
+                    if let Some(i) = node_index(node) {
+                        last_target[i] = Some(target_counts);
+                        if controlword == bus_frames::CW_ENABLE_OPERATION {
+                            let l = winches[i].counts_to_length_m(target_counts);
+                            monitor.on_rpdo(i, l, o.rx_ns);
+                        }
+                    }
+                }
+                Observed::Heartbeat { node, state } => {
+                    if let Some(i) = node_index(node) {
+                        drive_state[i] = state;
+                        drive_state_ns[i] = o.rx_ns;
+                    }
+                }
+            }
+        }
+
+        let report = monitor.end_cycle(now);
+        if let Some(rec) = report.new_trip {
+            // Stop path first: quick stop to every drive, then NMT stop all.
+            for (i, w) in winches.iter().enumerate() {
+                if let Some(t) = last_target[i] {
+                    send(
+                        tx.as_mut(),
+                        &bus_frames::rpdo1(w.node_id, bus_frames::CW_QUICK_STOP, t),
+                        &mut sum.can_send_errors,
+                    );
+                }
+            }
+            send(
+                tx.as_mut(),
+                &bus_frames::nmt(bus_frames::NMT_STOP, 0),
+                &mut sum.can_send_errors,
+            );
+            resetting = None;
+            event_seq += 1;
+            let ev = estop_event(&rec, event_seq);
+            if let Err(e) = event_pub.publish(&ev) {
+                tracing::error!(error = %e, "publishing the e-stop failed");
+            }
+            let _ = wakeup.notify();
+            sum.trips += 1;
+            tracing::error!(%rec, "SAFETY TRIP: e-stop latched (NMT stop + quick stop sent)");
+            if let Some(p) = &trip_log {
+                append_trip_log(p, &rec);
+            }
+        } else if report.state == MonitorState::Tripped {
+            send(
+                tx.as_mut(),
+                &bus_frames::nmt(bus_frames::NMT_STOP, 0),
+                &mut sum.can_send_errors,
+            );
+            if foreign_reset && let Some(rec) = monitor.trip() {
+                event_seq += 1;
+                let ev = estop_event(rec, event_seq);
+                let _ = event_pub.publish(&ev);
+                let _ = wakeup.notify();
+                tracing::warn!("a Reset from another process while tripped: e-stop re-asserted");
+            }
+        }
+
+        if let Some(req) = reset_request {
+            let decision = monitor.request_reset();
+            let (detail, cause) = match decision {
+                ResetDecision::Accepted => (RESET_ACCEPTED, 0),
+                ResetDecision::NotTripped => (RESET_NOT_TRIPPED, 0),
+                ResetDecision::Refused(c) => (RESET_REFUSED, u32::from(c.code())),
+            };
+            let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::StateChanged, req);
+            ev.state = monitor.state().code();
+            ev.detail = detail;
+            ev.detail_node = cause;
+            let _ = event_pub.publish(&ev);
+            match decision {
+                ResetDecision::Refused(c) => {
+                    tracing::warn!(cause = %c, "reset REFUSED: the cause persists")
+                }
+                ResetDecision::Accepted | ResetDecision::NotTripped => {
+                    tracing::info!(?decision, "reset accepted: NMT start, releasing the stack");
+                    send(
+                        tx.as_mut(),
+                        &bus_frames::nmt(bus_frames::NMT_START, 0),
+                        &mut sum.can_send_errors,
+                    );
+                    resetting = Some((now, 0));
+                }
+            }
+        }
+        if let Some((t0, n)) = resetting.as_mut() {
+            *n += 1;
+            let all_up = (0..m).all(|i| {
+                drive_state[i] == bus_frames::NMT_STATE_OPERATIONAL && drive_state_ns[i] > *t0
+            });
+            let timed_out = now.saturating_sub(*t0) > u64::from(cfg.can.reset_wait_ms) * 1_000_000;
+            if *n >= RESET_MIN_RUN_CYCLES && (all_up || timed_out) {
+                if !all_up {
+                    tracing::warn!(
+                        "not every drive reported operational after the NMT start; releasing anyway"
+                    );
+                }
+                event_seq += 1;
+                let ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, event_seq);
+                let _ = event_pub.publish(&ev);
+                resetting = None;
+            }
+        }
+
+        // The fail-safe heartbeat: every cycle, STOP while tripped.
+        for f in safety_frame::encode(&monitor.heartbeat(counter), cob) {
+            send(tx.as_mut(), &f, &mut sum.can_send_errors);
+        }
+        counter = counter.wrapping_add(1);
+        let mut hb = Heartbeat::new(
+            ProcessId::SafetyMonitor,
+            monitor.state().code(),
+            monitor.stats().cycles,
+        );
+        hb.overruns = sum.overruns.min(u64::from(u32::MAX)) as u32;
+        let _ = heartbeat_pub.publish(&hb);
+
+        deadline += period;
+        let done = monotonic_ns();
+        if done > deadline {
+            // Skip missed deadlines instead of bursting; the setpoint buffer (32) covers a late
+            // cycle, lost samples show up as sequence gaps.
+            let missed = (done - deadline) / period + 1;
+            sum.overruns += missed;
+            deadline += missed * period;
+        }
+    }
+    reader_stop.store(true, Ordering::Relaxed);
+    let _ = reader.join();
+    let st = monitor.stats();
+    sum.cycles = st.cycles;
+    sum.setpoints_checked = st.setpoints_checked;
+    sum.setpoints_missing = st.setpoints_missing;
+    sum.rpdo_checked = st.rpdo_checked;
+    sum.max_abs_dq_m = st.max_abs_dq_m;
+    let dropped = obs_dropped.load(Ordering::Relaxed);
+    if dropped > 0 {
+        tracing::warn!(dropped, "bus observations dropped (queue full)");
+    }
+    Ok(sum)
+}
+
+fn estop_event(rec: &TripRecord, seq: u64) -> StateEvent {
+    let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::EStop, seq);
+    // The time of the cycle that detected the fault (the stop frames went out right after).
+    ev.timestamp_ns = rec.detected_ns;
+    ev.state = MonitorState::Tripped.code();
+    ev.detail = u32::from(rec.fault.cause.code());
+    ev.detail_node = rec.fault.cable.map_or(0, |c| u32::from(c) + 1);
+    ev
+}
+
+/// The monitor's answer to a reset request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResetReply {
+    Accepted,
+    NotTripped,
+    Refused(Option<Cause>),
+}
+
+/// Operator side: publishes a reset request and waits up to `timeout` for the monitor's answer.
+pub fn request_reset(ipc: &IpcNode, timeout: Duration) -> Result<ResetReply, DaemonError> {
+    let replies = ipc.subscriber::<StateEvent>()?;
+    let requests = ipc.publisher::<StateEvent>()?;
+    // Old events (history) are not answers to this request.
+    while let Ok(Some(_)) = replies.receive() {}
+    let id = monotonic_ns();
+    let mut ev = StateEvent::new(ProcessId::Operator, EventKind::StateChanged, id);
+    ev.state = RESET_REQUEST;
+    requests.publish(&ev)?;
+    let t0 = std::time::Instant::now();
+    while t0.elapsed() < timeout {
+        while let Some(r) = replies.receive()? {
+            if r.source == ProcessId::SafetyMonitor as u32
+                && r.kind == EventKind::StateChanged as u32
+                && r.sequence == id
+            {
+                return Ok(match r.detail {
+                    RESET_ACCEPTED => ResetReply::Accepted,
+                    RESET_NOT_TRIPPED => ResetReply::NotTripped,
+                    _ => ResetReply::Refused(Cause::from_code(r.detail_node)),
+                });
+            }
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    Err(DaemonError::Other(format!(
+        "no answer from the safety monitor within {} ms (is it running with the same --ipc-prefix?)",
+        timeout.as_millis()
+    )))
+}

@@ -1,0 +1,618 @@
+//! The monitor's core: every check of one 15 ms cycle and the latched state machine. Pure logic
+//! (inputs in, decisions out), no I/O, no allocation after construction, never panics on any
+//! payload: the process ([`crate::daemon`]) feeds it from iceoryx2 and CAN.
+//!
+//! Per cycle, for EVERY setpoint published since the last cycle (sec. 5.6):
+//! * Δq_i = φ*_i(x) − q_θ,i with the monitor's own standard kinematics; |Δq_i| > limit
+//!   (≤ 100 mm) ⇒ trip. q_θ is the setpoint's `cable_length_m`, i.e. the drive signal INCLUDING
+//!   the surrogate offset: sec. 5.6 compares the drive signal with the redundant computation,
+//!   and eq. (5.27) bounds the offset below the same limit, so the offset is what consumes the
+//!   budget (it is NOT subtracted: a faulty offset must trip the monitor too);
+//! * NaN/inf anywhere in the pose or the lengths, a wrong cable count, a pose outside the
+//!   workspace box, a sequence number that does not increase;
+//! * lost setpoints (sequence gaps, including subscriber-buffer overflow) counted over a sliding
+//!   window of cycles; more than the configured count ⇒ trip.
+//!
+//! Per cycle: no new setpoint for N cycles (frozen/dead loop), no platform identity (or a
+//! different one) than the monitor computed, drive-io feedback silent or its measured lengths
+//! farther than the following-error bound from the setpoints it applied, RPDO targets on the bus
+//! farther than the limit from φ*(x) of every recent setpoint.
+//!
+//! The first fault latches [`MonitorState::Tripped`] and is logged ([`TripLog`]); the checks keep
+//! running while tripped, and [`Monitor::request_reset`] is refused until no fault was seen for
+//! `reset_clear_cycles` consecutive cycles.
+
+use crate::config::MonitorConfig;
+use crate::kinematics::StandardKinematics;
+use crate::platform::WorkspaceBox;
+use crate::trip::{Cause, CauseSet, Fault, TripLog, TripRecord};
+use can_transport::safety_frame::{NO_CABLE, SafetyHeartbeat, SafetyState};
+use crs_ipc::{
+    BusState, CONTRACT_VERSION, DriveFeedback, JointSetpoint, MAX_CABLES, PlatformIdentity,
+};
+
+/// `value <= limit`, false for NaN: every comparison with a limit is written so that a NaN
+/// fails the check (trips) instead of passing it.
+#[inline]
+fn within(value: f64, limit: f64) -> bool {
+    value <= limit
+}
+
+/// Setpoints remembered for matching drive feedback and RPDO targets (256 ms at 1 kHz).
+pub const HISTORY: usize = 256;
+/// Largest gap window (cycles).
+pub const MAX_GAP_WINDOW: usize = 10_000;
+
+/// The thresholds of every check (SI).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    pub dq_limit_m: f64,
+    pub silence_cycles: u32,
+    pub max_missing_setpoints: u32,
+    pub gap_window_cycles: u32,
+    pub identity_grace_cycles: u32,
+    pub workspace: WorkspaceBox,
+    pub reset_clear_cycles: u32,
+    pub check_following_error: bool,
+    pub following_error_m: f64,
+    pub window_setpoints: u32,
+    /// 0 = off.
+    pub feedback_silence_cycles: u32,
+    pub check_rpdo: bool,
+}
+
+impl Limits {
+    pub fn from_config(c: &MonitorConfig) -> Self {
+        let m = &c.monitor;
+        Self {
+            dq_limit_m: c.dq_limit_m(),
+            silence_cycles: m.silence_cycles,
+            max_missing_setpoints: m.max_missing_setpoints,
+            gap_window_cycles: m.gap_window_cycles.min(MAX_GAP_WINDOW as u32),
+            identity_grace_cycles: m.identity_grace_cycles,
+            workspace: c
+                .platform
+                .workspace
+                .widened(m.workspace_margin_m, m.workspace_margin_deg.to_radians()),
+            reset_clear_cycles: m.reset_clear_cycles,
+            check_following_error: c.feedback.check_following_error,
+            following_error_m: c.feedback.following_error_mm * 1e-3,
+            window_setpoints: c.feedback.window_setpoints.min(HISTORY as u32),
+            feedback_silence_cycles: c.feedback.silence_cycles,
+            check_rpdo: c.can.check_rpdo,
+        }
+    }
+}
+
+/// Latched state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MonitorState {
+    /// No fault latched: the safety heartbeat says RUN.
+    Armed,
+    /// E-stop latched until an accepted reset: the safety heartbeat says STOP.
+    Tripped,
+}
+
+impl MonitorState {
+    /// Code in `Heartbeat::state` / `StateEvent::state`.
+    pub fn code(self) -> u32 {
+        match self {
+            MonitorState::Armed => 1,
+            MonitorState::Tripped => 2,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum IdentityState {
+    Unknown,
+    Verified,
+    Mismatch,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    sequence: u64,
+    timestamp_ns: u64,
+    q_cmd: [f64; MAX_CABLES],
+    q_star: [f64; MAX_CABLES],
+}
+
+const EMPTY: Entry = Entry {
+    sequence: 0,
+    timestamp_ns: 0,
+    q_cmd: [0.0; MAX_CABLES],
+    q_star: [0.0; MAX_CABLES],
+};
+
+/// Outcome of [`Monitor::end_cycle`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CycleReport {
+    pub state: MonitorState,
+    /// Set in the cycle that latched the e-stop.
+    pub new_trip: Option<TripRecord>,
+    /// Every cause seen this cycle (also while tripped).
+    pub faults: CauseSet,
+    pub setpoints: u32,
+    pub missing: u32,
+}
+
+/// Answer to a reset request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResetDecision {
+    /// Nothing was latched.
+    NotTripped,
+    /// The latch is released.
+    Accepted,
+    /// Refused: this cause was seen within the last `reset_clear_cycles` cycles.
+    Refused(Cause),
+}
+
+/// Running statistics (for the heartbeat, logs and the bench).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Stats {
+    pub cycles: u64,
+    pub setpoints_checked: u64,
+    pub setpoints_missing: u64,
+    pub feedback_checked: u64,
+    pub rpdo_checked: u64,
+    /// Largest |Δq| seen on any cable (m).
+    pub max_abs_dq_m: f64,
+}
+
+/// The monitor core. Construct once (allocates the gap window), then per cycle: `on_*` for every
+/// input, [`Monitor::end_cycle`] once.
+pub struct Monitor {
+    lim: Limits,
+    kin: StandardKinematics,
+    m: usize,
+    identity: [u8; 32],
+    state: MonitorState,
+    trip: Option<TripRecord>,
+    log: TripLog,
+    stats: Stats,
+    // This cycle.
+    faults: CauseSet,
+    first: Option<Fault>,
+    new_setpoints: u32,
+    missing: u32,
+    feedback_count: u32,
+    // Across cycles.
+    last_faults: CauseSet,
+    clear_streak: u32,
+    last_sequence: Option<u64>,
+    seen_setpoint: bool,
+    silent_cycles: u32,
+    gap_ring: Vec<u32>,
+    gap_pos: usize,
+    gap_sum: u64,
+    identity_state: IdentityState,
+    unverified_cycles: u32,
+    seen_feedback: bool,
+    feedback_silent: u32,
+    stream_end: bool,
+    hist: Box<[Entry; HISTORY]>,
+    hist_len: usize,
+    hist_next: usize,
+    q: [f64; MAX_CABLES],
+}
+
+impl Monitor {
+    /// `identity`: the platform identity the monitor computed itself
+    /// ([`crate::identity::platform_identity`]).
+    pub fn new(lim: Limits, kin: StandardKinematics, identity: [u8; 32]) -> Self {
+        let window = (lim.gap_window_cycles.max(1) as usize).min(MAX_GAP_WINDOW);
+        Self {
+            m: kin.cables(),
+            lim,
+            kin,
+            identity,
+            state: MonitorState::Armed,
+            trip: None,
+            log: TripLog::default(),
+            stats: Stats::default(),
+            faults: CauseSet::default(),
+            first: None,
+            new_setpoints: 0,
+            missing: 0,
+            feedback_count: 0,
+            last_faults: CauseSet::default(),
+            clear_streak: 0,
+            last_sequence: None,
+            seen_setpoint: false,
+            silent_cycles: 0,
+            gap_ring: vec![0; window],
+            gap_pos: 0,
+            gap_sum: 0,
+            identity_state: IdentityState::Unknown,
+            unverified_cycles: 0,
+            seen_feedback: false,
+            feedback_silent: 0,
+            stream_end: false,
+            hist: Box::new([EMPTY; HISTORY]),
+            hist_len: 0,
+            hist_next: 0,
+            q: [0.0; MAX_CABLES],
+        }
+    }
+
+    pub fn state(&self) -> MonitorState {
+        self.state
+    }
+    /// The trip that latched the current e-stop (None while armed).
+    pub fn trip(&self) -> Option<&TripRecord> {
+        self.trip.as_ref()
+    }
+    pub fn trip_log(&self) -> &TripLog {
+        &self.log
+    }
+    pub fn stats(&self) -> &Stats {
+        &self.stats
+    }
+    pub fn limits(&self) -> &Limits {
+        &self.lim
+    }
+    /// Causes seen in the last completed cycle.
+    pub fn last_faults(&self) -> CauseSet {
+        self.last_faults
+    }
+    /// True once a platform identity equal to the monitor's own was announced (and no other
+    /// since).
+    pub fn identity_verified(&self) -> bool {
+        self.identity_state == IdentityState::Verified
+    }
+
+    /// The safety heartbeat to send this cycle.
+    pub fn heartbeat(&self, counter: u32) -> SafetyHeartbeat {
+        match (self.state, &self.trip) {
+            (MonitorState::Tripped, Some(t)) => SafetyHeartbeat {
+                state: SafetyState::Stop,
+                cause: t.fault.cause.code(),
+                counter,
+                cable: t.fault.cable.unwrap_or(NO_CABLE),
+            },
+            (MonitorState::Tripped, None) => SafetyHeartbeat {
+                state: SafetyState::Stop,
+                cause: 0,
+                counter,
+                cable: NO_CABLE,
+            },
+            (MonitorState::Armed, _) => SafetyHeartbeat {
+                state: SafetyState::Run,
+                cause: 0,
+                counter,
+                cable: NO_CABLE,
+            },
+        }
+    }
+
+    fn fault(&mut self, f: Fault) {
+        self.faults.insert(f.cause);
+        if self.first.is_none() {
+            self.first = Some(f);
+        }
+    }
+
+    /// The setpoint producer announced a graceful end of its stream (it is stopping): at the
+    /// end of this cycle the silence and sequence checks are disarmed and the identity must be
+    /// announced again; the next setpoint (e.g. of a restarted producer, numbering from 1)
+    /// re-arms them. A frozen or killed producer cannot announce, so it still trips.
+    pub fn on_stream_end(&mut self) {
+        self.stream_end = true;
+    }
+
+    /// A process-bus failure (receive error, foreign contract version).
+    pub fn on_ipc_error(&mut self) {
+        self.fault(Fault::new(Cause::IpcError));
+    }
+
+    /// The platform identity motion-core announces.
+    pub fn on_identity(&mut self, id: &PlatformIdentity) {
+        self.identity_state = if id.version == CONTRACT_VERSION
+            && id.hash == self.identity
+            && id.cable_count as usize == self.m
+        {
+            IdentityState::Verified
+        } else {
+            IdentityState::Mismatch
+        };
+    }
+
+    /// Checks one setpoint (call for every setpoint received, in order).
+    pub fn on_setpoint(&mut self, sp: &JointSetpoint) {
+        self.new_setpoints += 1;
+        self.seen_setpoint = true;
+        self.stats.setpoints_checked += 1;
+        let at = |cause: Cause| Fault {
+            sequence: sp.sequence,
+            ..Fault::new(cause)
+        };
+        if let Some(last) = self.last_sequence {
+            if sp.sequence <= last {
+                self.fault(Fault {
+                    value: sp.sequence as f64,
+                    limit: last as f64,
+                    ..at(Cause::SequenceRegression)
+                });
+            } else {
+                let lost = (sp.sequence - last - 1).min(u64::from(u32::MAX)) as u32;
+                self.missing = self.missing.saturating_add(lost);
+            }
+        }
+        self.last_sequence = Some(sp.sequence);
+        if sp.version != CONTRACT_VERSION {
+            self.fault(at(Cause::IpcError));
+            return;
+        }
+        if sp.cable_count as usize != self.m {
+            self.fault(Fault {
+                value: f64::from(sp.cable_count),
+                limit: self.m as f64,
+                ..at(Cause::CableCount)
+            });
+            return;
+        }
+        let m = self.m;
+        if !sp.pose.iter().all(|v| v.is_finite()) {
+            self.fault(at(Cause::NonFinite));
+            return;
+        }
+        if let Some(i) = sp.cable_length_m[..m].iter().position(|v| !v.is_finite()) {
+            self.fault(Fault {
+                cable: Some(i as u8),
+                ..at(Cause::NonFinite)
+            });
+            return;
+        }
+        if !self.lim.workspace.contains(&sp.pose) {
+            self.fault(at(Cause::OutsideWorkspace));
+        }
+        self.kin.lengths(&sp.pose, &mut self.q);
+        // The worst cable of this setpoint is the one reported.
+        let mut worst: Option<(usize, f64)> = None;
+        for i in 0..m {
+            let dq = self.q[i] - sp.cable_length_m[i];
+            let a = dq.abs();
+            if a > self.stats.max_abs_dq_m {
+                self.stats.max_abs_dq_m = a;
+            }
+            if !within(a, self.lim.dq_limit_m) && worst.is_none_or(|(_, w)| !within(a, w.abs())) {
+                worst = Some((i, dq));
+            }
+        }
+        if let Some((i, dq)) = worst {
+            self.fault(Fault {
+                cable: Some(i as u8),
+                value: dq,
+                limit: self.lim.dq_limit_m,
+                ..at(Cause::DqLimit)
+            });
+        }
+        let e = &mut self.hist[self.hist_next];
+        e.sequence = sp.sequence;
+        e.timestamp_ns = sp.timestamp_ns;
+        e.q_cmd[..m].copy_from_slice(&sp.cable_length_m[..m]);
+        e.q_star[..m].copy_from_slice(&self.q[..m]);
+        self.hist_next = (self.hist_next + 1) % HISTORY;
+        self.hist_len = (self.hist_len + 1).min(HISTORY);
+    }
+
+    /// History entries, newest first.
+    fn recent(&self) -> impl Iterator<Item = &Entry> {
+        (1..=self.hist_len).map(move |k| &self.hist[(self.hist_next + HISTORY - k) % HISTORY])
+    }
+
+    /// drive-io's feedback (call for every sample received).
+    pub fn on_feedback(&mut self, fb: &DriveFeedback) {
+        self.feedback_count += 1;
+        self.seen_feedback = true;
+        self.stats.feedback_checked += 1;
+        if !self.lim.check_following_error
+            || BusState::from_u32(fb.bus_state) != Some(BusState::Running)
+        {
+            return;
+        }
+        let m = self.m;
+        if fb.cable_count as usize != m {
+            self.fault(Fault {
+                value: f64::from(fb.cable_count),
+                limit: m as f64,
+                ..Fault::new(Cause::FollowingError)
+            });
+            return;
+        }
+        let applied = fb.applied_setpoint_sequence;
+        let lo = applied.saturating_sub(u64::from(self.lim.window_setpoints));
+        for i in 0..m {
+            let meas = fb.cable_length_m[i];
+            let mut best = f64::INFINITY;
+            let mut any = false;
+            for e in self.recent() {
+                if e.sequence > applied {
+                    continue;
+                }
+                if e.sequence <= lo {
+                    break;
+                }
+                any = true;
+                let d = (meas - e.q_cmd[i]).abs();
+                if d < best {
+                    best = d;
+                    if within(best, self.lim.following_error_m) {
+                        break; // within the bound: no need for the exact minimum
+                    }
+                }
+            }
+            // Not enough history for this sample (e.g. the monitor just started): unchecked.
+            if !any {
+                return;
+            }
+            if !within(best, self.lim.following_error_m) {
+                self.fault(Fault {
+                    cable: Some(i as u8),
+                    value: if meas.is_finite() { best } else { f64::NAN },
+                    limit: self.lim.following_error_m,
+                    sequence: applied,
+                    ..Fault::new(Cause::FollowingError)
+                });
+                return;
+            }
+        }
+    }
+
+    /// An RPDO1 target seen on the bus for cable `cable` (converted to metres), received at
+    /// `rx_ns`. Compared with φ*(x) of the recent setpoints computed before it (the drive
+    /// adapter forwards one of them).
+    pub fn on_rpdo(&mut self, cable: usize, length_m: f64, rx_ns: u64) {
+        if !self.lim.check_rpdo || cable >= self.m || self.hist_len == 0 {
+            return;
+        }
+        self.stats.rpdo_checked += 1;
+        let limit = self.lim.dq_limit_m;
+        let mut best = f64::INFINITY;
+        let mut any = false;
+        for e in self.recent() {
+            if e.timestamp_ns > rx_ns {
+                continue;
+            }
+            any = true;
+            let d = (length_m - e.q_star[cable]).abs();
+            if d < best {
+                best = d;
+                if best <= limit {
+                    return;
+                }
+            }
+        }
+        if any {
+            self.fault(Fault {
+                cable: Some(cable as u8),
+                value: if length_m.is_finite() { best } else { f64::NAN },
+                limit,
+                ..Fault::new(Cause::RpdoMismatch)
+            });
+        }
+    }
+
+    /// Closes the cycle at `now_ns`: the per-cycle checks, then the latch.
+    pub fn end_cycle(&mut self, now_ns: u64) -> CycleReport {
+        self.stats.cycles += 1;
+        let ending = std::mem::take(&mut self.stream_end);
+        // Frozen / dead motion loop.
+        if self.seen_setpoint && !ending {
+            if self.new_setpoints == 0 {
+                self.silent_cycles = self.silent_cycles.saturating_add(1);
+            } else {
+                self.silent_cycles = 0;
+            }
+            if self.silent_cycles >= self.lim.silence_cycles {
+                self.fault(Fault {
+                    value: f64::from(self.silent_cycles),
+                    limit: f64::from(self.lim.silence_cycles),
+                    ..Fault::new(Cause::SetpointSilence)
+                });
+            }
+        }
+        // Lost setpoints over the sliding window.
+        self.stats.setpoints_missing += u64::from(self.missing);
+        let old = std::mem::replace(&mut self.gap_ring[self.gap_pos], self.missing);
+        self.gap_pos = (self.gap_pos + 1) % self.gap_ring.len();
+        self.gap_sum = self.gap_sum + u64::from(self.missing) - u64::from(old);
+        if self.gap_sum > u64::from(self.lim.max_missing_setpoints) {
+            self.fault(Fault {
+                value: self.gap_sum as f64,
+                limit: f64::from(self.lim.max_missing_setpoints),
+                ..Fault::new(Cause::SequenceGaps)
+            });
+        }
+        // Platform identity.
+        match self.identity_state {
+            IdentityState::Mismatch => self.fault(Fault::new(Cause::IdentityMismatch)),
+            IdentityState::Verified => self.unverified_cycles = 0,
+            IdentityState::Unknown => {
+                if self.new_setpoints > 0 || self.unverified_cycles > 0 {
+                    self.unverified_cycles = self.unverified_cycles.saturating_add(1);
+                }
+                if self.unverified_cycles > self.lim.identity_grace_cycles {
+                    self.fault(Fault {
+                        value: f64::from(self.unverified_cycles),
+                        limit: f64::from(self.lim.identity_grace_cycles),
+                        ..Fault::new(Cause::IdentityMissing)
+                    });
+                }
+            }
+        }
+        // Dead drive adapter.
+        if self.seen_feedback && self.lim.feedback_silence_cycles > 0 {
+            if self.feedback_count == 0 {
+                self.feedback_silent = self.feedback_silent.saturating_add(1);
+            } else {
+                self.feedback_silent = 0;
+            }
+            if self.feedback_silent >= self.lim.feedback_silence_cycles {
+                self.fault(Fault {
+                    value: f64::from(self.feedback_silent),
+                    limit: f64::from(self.lim.feedback_silence_cycles),
+                    ..Fault::new(Cause::FeedbackSilence)
+                });
+            }
+        }
+        let mut new_trip = None;
+        if let Some(first) = self.first {
+            self.clear_streak = 0;
+            if self.state == MonitorState::Armed {
+                let rec = TripRecord {
+                    fault: first,
+                    detected_ns: now_ns,
+                    cycle: self.stats.cycles,
+                };
+                self.state = MonitorState::Tripped;
+                self.trip = Some(rec);
+                self.log.push(rec);
+                new_trip = Some(rec);
+            }
+        } else {
+            self.clear_streak = self.clear_streak.saturating_add(1);
+        }
+        if ending {
+            // Clean end of the stream: disarm until the next setpoint.
+            self.seen_setpoint = false;
+            self.silent_cycles = 0;
+            self.last_sequence = None;
+            self.identity_state = IdentityState::Unknown;
+            self.unverified_cycles = 0;
+        }
+        let report = CycleReport {
+            state: self.state,
+            new_trip,
+            faults: self.faults,
+            setpoints: self.new_setpoints,
+            missing: self.missing,
+        };
+        self.last_faults = self.faults;
+        self.faults.clear();
+        self.first = None;
+        self.new_setpoints = 0;
+        self.missing = 0;
+        self.feedback_count = 0;
+        report
+    }
+
+    /// Operator reset: accepted only if no fault was seen for `reset_clear_cycles` cycles.
+    pub fn request_reset(&mut self) -> ResetDecision {
+        match self.state {
+            MonitorState::Armed => ResetDecision::NotTripped,
+            MonitorState::Tripped if self.clear_streak >= self.lim.reset_clear_cycles => {
+                self.state = MonitorState::Armed;
+                self.trip = None;
+                ResetDecision::Accepted
+            }
+            MonitorState::Tripped => ResetDecision::Refused(
+                self.last_faults
+                    .first()
+                    .or(self.trip.map(|t| t.fault.cause))
+                    .unwrap_or(Cause::IpcError),
+            ),
+        }
+    }
+}

@@ -1,0 +1,76 @@
+//! The monitor's independent implementation agrees with motion-core's (which is a dev-dependency
+//! ONLY: the monitor itself never links motion-core code).
+//! * the platform identity computed from the monitor's own parse equals `Model::identity()`
+//!   bit for bit on the project's platform files (a mismatch would trip the monitor at start);
+//! * φ*(x) equals motion-core's standard inverse kinematics to 1e-9 m over the workspace.
+
+use motion_core::config::{load_platform as mc_load, parse_platform as mc_parse};
+use proptest::prelude::*;
+use safety_monitor::identity::platform_identity;
+use safety_monitor::kinematics::StandardKinematics;
+use safety_monitor::platform::{load_platform, parse_platform};
+use std::path::PathBuf;
+
+fn config(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../config")
+        .join(name)
+}
+
+#[test]
+fn identity_agrees_with_motion_core_on_the_platform_files() {
+    for f in [
+        "icosahedron.toml",
+        "helicopter.toml",
+        "icosahedron-pulleys.toml",
+        "crs-nominal.toml",
+    ] {
+        let p = config(f);
+        let ours = platform_identity(&load_platform(&p).unwrap());
+        let theirs = mc_load(&p).unwrap().model.identity();
+        assert_eq!(ours, theirs, "{f}: identity differs");
+    }
+    // Different platforms have different identities.
+    let a = platform_identity(&load_platform(&config("icosahedron.toml")).unwrap());
+    let b = platform_identity(&load_platform(&config("helicopter.toml")).unwrap());
+    assert_ne!(a, b);
+}
+
+/// Non-unit pulley axes and per-cable arrays exercise the normalisation and the array forms.
+#[test]
+fn identity_agrees_with_non_unit_pulley_axes_and_per_cable_values() {
+    let text = std::fs::read_to_string(config("icosahedron.toml")).unwrap();
+    let text = text.replace(
+        "k_f_n = 2.0e6",
+        "k_f_n = [2.0e6, 2.1e6, 1.9e6, 2.0e6, 2.05e6, 1.95e6, 2.0e6, 2000000]",
+    ) + "\n[pulleys]\nradius_m = [0.161, 0.15, 0.161, 0.17, 0.161, 0.1, 0.161, 0.2]\n\
+         swivel_axes = [[0.3, 0.4, 1.2], [0, 0, 3], [0.1, -0.2, 0.7], [1e-3, 0, 1], \
+         [0, 0, 1], [-0.5, 0.25, 2], [0.2, 0.2, 0.2], [0, 0.6, 0.8]]\n";
+    let ours = platform_identity(&parse_platform(&text, "mem").unwrap());
+    let theirs = mc_parse(&text, "mem").unwrap().model.identity();
+    assert_eq!(ours, theirs);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+    #[test]
+    fn kinematics_agree_with_motion_core(
+        x in -1.5f64..1.5, y in -1.5f64..1.5, z in 1.25f64..2.75,
+        ax in -0.2f64..0.2, ay in -0.2f64..0.2, az in -3.2f64..3.2,
+        heli in any::<bool>(),
+    ) {
+        let f = config(if heli { "helicopter.toml" } else { "icosahedron.toml" });
+        let kin = StandardKinematics::new(&load_platform(&f).unwrap());
+        let platform = mc_load(&f).unwrap();
+        let model = platform.model;
+        let mut data = motion_core::Data::new(&model);
+        let pose = [x, y, z, ax, ay, az];
+        let mut q_mc = vec![0.0; model.m()];
+        motion_core::kinematics::lengths(&model, &mut data, &motion_core::Pose::from_array(pose), &mut q_mc).unwrap();
+        let mut q = [0.0; crs_ipc::MAX_CABLES];
+        kin.lengths(&pose, &mut q);
+        for i in 0..model.m() {
+            prop_assert!((q[i] - q_mc[i]).abs() < 1e-9, "cable {i}: {} vs {}", q[i], q_mc[i]);
+        }
+    }
+}

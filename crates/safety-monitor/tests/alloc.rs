@@ -1,0 +1,79 @@
+//! The monitor's per-cycle work (every check of a cycle, including a trip, the latch and a reset
+//! decision) allocates nothing: a counting global allocator observes a whole run of cycles.
+
+use crs_ipc::{BusState, DriveFeedback, JointSetpoint, PlatformIdentity};
+use safety_monitor::config;
+use safety_monitor::identity::platform_identity;
+use safety_monitor::kinematics::StandardKinematics;
+use safety_monitor::{Limits, Monitor, MonitorState};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+struct Counting;
+static ALLOCS: AtomicU64 = AtomicU64::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.dealloc(p, l) }
+    }
+}
+
+#[global_allocator]
+static A: Counting = Counting;
+
+#[test]
+fn a_cycle_allocates_nothing() {
+    let cfg = config::load(
+        &PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/safety-monitor.toml"),
+    )
+    .unwrap();
+    let kin = StandardKinematics::new(&cfg.platform);
+    let id = platform_identity(&cfg.platform);
+    let mut m = Monitor::new(Limits::from_config(&cfg), kin, id);
+    let ident = PlatformIdentity::new(id, 8);
+    let mut base = JointSetpoint {
+        cable_count: 8,
+        pose: [0.1, 0.0, 2.0, 0.0, 0.0, 0.0],
+        ..JointSetpoint::default()
+    };
+    kin.lengths(&base.pose, &mut base.cable_length_m);
+    let before = ALLOCS.load(Ordering::Relaxed);
+    let mut seq = 0;
+    for cycle in 0..1000u64 {
+        m.on_identity(&ident);
+        for _ in 0..15 {
+            seq += 1;
+            let mut s = base;
+            s.sequence = seq;
+            s.timestamp_ns = seq * 1_000_000;
+            if cycle == 500 {
+                s.cable_length_m[2] += 0.2; // one trip in the middle
+            }
+            m.on_setpoint(&s);
+            let mut f = DriveFeedback {
+                cable_count: 8,
+                applied_setpoint_sequence: seq,
+                bus_state: BusState::Running as u32,
+                ..DriveFeedback::default()
+            };
+            f.cable_length_m = s.cable_length_m;
+            m.on_feedback(&f);
+            m.on_rpdo(1, base.cable_length_m[1], s.timestamp_ns);
+        }
+        m.end_cycle(cycle * 15_000_000);
+        if cycle > 510 && m.state() == MonitorState::Tripped {
+            m.request_reset();
+        }
+    }
+    let n = ALLOCS.load(Ordering::Relaxed) - before;
+    assert_eq!(m.trip_log().total(), 1);
+    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(n, 0, "{n} allocations in 1000 cycles");
+}

@@ -1,0 +1,296 @@
+//! The monitor PROCESS LOOP ([`safety_monitor::daemon::run`]) on the host: iceoryx2 under a
+//! unique service prefix, the CAN-over-UDP multicast bus on a unique port (this kernel has no
+//! CAN; the same code runs on vcan in tools/safety-hil.sh). The test plays motion-core (identity
+//! and 1 kHz setpoints) and listens on the bus like the drives do. Conditions are awaited with
+//! deadlines; timing is printed, never asserted tightly (performance lives in benches/).
+
+use can_transport::safety_frame::{PairReceiver, SafetyState};
+use can_transport::{CanBus, TransportSpec};
+use crs_ipc::{EventKind, IpcNode, JointSetpoint, PlatformIdentity, ProcessId, StateEvent};
+use safety_monitor::daemon::{self, ResetReply};
+use safety_monitor::identity::platform_identity;
+use safety_monitor::kinematics::StandardKinematics;
+use safety_monitor::{Cause, config};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+const HOME: [f64; 6] = [0.0, 0.0, 2.0, 0.0, 0.0, 0.0];
+
+struct Rig {
+    stop: Arc<AtomicBool>,
+    monitor: Option<std::thread::JoinHandle<Result<daemon::Summary, String>>>,
+    ipc: IpcNode,
+    setpoints: crs_ipc::TopicPublisher<JointSetpoint>,
+    /// Kept alive: iceoryx2 keeps the history (the announced identity) in the publisher.
+    _identity: crs_ipc::TopicPublisher<PlatformIdentity>,
+    events: crs_ipc::TopicSubscriber<StateEvent>,
+    bus: Box<dyn CanBus>,
+    pairs: PairReceiver,
+    kin: StandardKinematics,
+    id: [u8; 32],
+    seq: u64,
+    prefix: String,
+    /// (state, time) of the last valid safety pair; NMT commands seen (command, time).
+    last_pair: Option<(SafetyState, Instant)>,
+    invalid_pairs: u32,
+    nmt: Vec<(u8, Instant)>,
+}
+
+impl Rig {
+    fn start(name: &str, port: u16) -> Rig {
+        let prefix = format!("sm-test-{}-{name}/", std::process::id());
+        let transport: TransportSpec = format!("udpbus:239.255.71.7:{port}").parse().unwrap();
+        let cfg_path =
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/safety-monitor.toml");
+        let mut cfg = config::load(&cfg_path).unwrap();
+        cfg.monitor.rt_priority = 0;
+        cfg.can.reset_wait_ms = 200;
+        let kin = StandardKinematics::new(&cfg.platform);
+        let id = platform_identity(&cfg.platform);
+        let bus = can_transport::open(&transport).unwrap();
+        let ipc = IpcNode::with_prefix("sm-test", &prefix).unwrap();
+        let setpoints = ipc.publisher::<JointSetpoint>().unwrap();
+        let identity = ipc.publisher::<PlatformIdentity>().unwrap();
+        let events = ipc.subscriber::<StateEvent>().unwrap();
+        identity.publish(&PlatformIdentity::new(id, 8)).unwrap();
+        let stop = Arc::new(AtomicBool::new(false));
+        let monitor = {
+            let (stop, prefix, t) = (stop.clone(), prefix.clone(), transport.clone());
+            std::thread::spawn(move || {
+                let ipc =
+                    IpcNode::with_prefix("safety-monitor", &prefix).map_err(|e| e.to_string())?;
+                daemon::run(&cfg, &t, &ipc, &stop).map_err(|e| e.to_string())
+            })
+        };
+        Rig {
+            stop,
+            monitor: Some(monitor),
+            ipc,
+            setpoints,
+            _identity: identity,
+            events,
+            bus,
+            pairs: PairReceiver::new(0x101, 10_000_000),
+            kin,
+            id,
+            seq: 0,
+            prefix,
+            last_pair: None,
+            invalid_pairs: 0,
+            nmt: Vec::new(),
+        }
+    }
+
+    fn setpoint(&mut self, cable: usize, offset: f64, nan_pose: bool) -> JointSetpoint {
+        self.seq += 1;
+        let mut s = JointSetpoint {
+            cable_count: 8,
+            sequence: self.seq,
+            timestamp_ns: crs_ipc::monotonic_ns(),
+            pose: HOME,
+            ..JointSetpoint::default()
+        };
+        let mut q = [0.0; crs_ipc::MAX_CABLES];
+        self.kin.lengths(&HOME, &mut q);
+        s.cable_length_m = q;
+        s.cable_length_m[cable] += offset;
+        if nan_pose {
+            s.pose[3] = f64::NAN;
+        }
+        s
+    }
+
+    fn poll_bus(&mut self) {
+        while let Ok(Some(rx)) = self.bus.try_recv() {
+            let f = rx.frame;
+            if f.id() == 0 && f.len() == 2 {
+                self.nmt.push((f.data()[0], Instant::now()));
+            }
+            match self.pairs.on_frame(&f, rx.rx_monotonic_ns) {
+                Some(Ok(m)) => self.last_pair = Some((m.state, Instant::now())),
+                Some(Err(_)) => self.invalid_pairs += 1,
+                None => {}
+            }
+        }
+    }
+
+    /// Publishes at ~1 kHz for `dur` (offset on cable 2), polling the bus.
+    fn run_for(&mut self, dur: Duration, offset: f64, nan_pose: bool) {
+        let t0 = Instant::now();
+        while t0.elapsed() < dur {
+            // Re-announce the identity now and then: iceoryx2 hands a publisher's history to a
+            // late subscriber only when that publisher sends again.
+            if self.seq.is_multiple_of(100) {
+                self._identity
+                    .publish(&PlatformIdentity::new(self.id, 8))
+                    .unwrap();
+            }
+            let s = self.setpoint(2, offset, nan_pose);
+            self.setpoints.publish(&s).unwrap();
+            self.poll_bus();
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// Publishes until `cond` holds (or panics after `limit`); returns the time it took.
+    fn until(
+        &mut self,
+        limit: Duration,
+        offset: f64,
+        nan_pose: bool,
+        mut cond: impl FnMut(&mut Rig) -> bool,
+    ) -> Duration {
+        let t0 = Instant::now();
+        loop {
+            self.run_for(Duration::from_millis(1), offset, nan_pose);
+            if cond(self) {
+                return t0.elapsed();
+            }
+            assert!(
+                t0.elapsed() < limit,
+                "condition not reached within {limit:?}"
+            );
+        }
+    }
+
+    fn estop_events(&mut self) -> Vec<StateEvent> {
+        let mut v = Vec::new();
+        while let Ok(Some(e)) = self.events.receive() {
+            if e.source == ProcessId::SafetyMonitor as u32 && e.kind == EventKind::EStop as u32 {
+                v.push(e);
+            }
+        }
+        v
+    }
+
+    fn finish(mut self) -> daemon::Summary {
+        self.stop.store(true, Ordering::Relaxed);
+        self.monitor.take().unwrap().join().unwrap().unwrap()
+    }
+}
+
+/// The reset CLI's request from another thread (its own iceoryx2 node), while this thread keeps
+/// publishing setpoints (`offset`, `nan_pose`) like a live motion core.
+fn reset(rig: &mut Rig, offset: f64, nan_pose: bool) -> ResetReply {
+    let p = rig.prefix.clone();
+    let h = std::thread::spawn(move || {
+        let ipc = IpcNode::with_prefix("sm-test-reset", &p).unwrap();
+        daemon::request_reset(&ipc, Duration::from_secs(2)).unwrap()
+    });
+    while !h.is_finished() {
+        rig.run_for(Duration::from_millis(1), offset, nan_pose);
+    }
+    h.join().unwrap()
+}
+
+#[test]
+fn offset_101_mm_trips_and_stops_the_bus_99_mm_does_not() {
+    let mut rig = Rig::start("offset", 21_301);
+    // Armed: RUN pairs every cycle while consistent setpoints flow.
+    rig.until(Duration::from_secs(3), 0.0, false, |r| {
+        matches!(r.last_pair, Some((SafetyState::Run, _)))
+    });
+    rig.run_for(Duration::from_millis(300), 0.099, false);
+    let ev = rig.estop_events();
+    assert!(ev.is_empty(), "99 mm must not trip: {ev:?}");
+    assert!(rig.nmt.is_empty());
+    assert!(
+        matches!(rig.last_pair, Some((SafetyState::Run, t)) if t.elapsed() < Duration::from_millis(100))
+    );
+
+    let t_inject = Instant::now();
+    let took = rig.until(Duration::from_secs(2), 0.101, false, |r| {
+        r.nmt.iter().any(|(c, _)| *c == 0x02)
+    });
+    let (_, t_nmt) = rig.nmt.iter().find(|(c, _)| *c == 0x02).copied().unwrap();
+    rig.run_for(Duration::from_millis(50), 0.101, false);
+    let ev = rig.estop_events();
+    assert_eq!(ev.len(), 1, "one latched e-stop event: {ev:?}");
+    assert_eq!(ev[0].detail, u32::from(Cause::DqLimit.code()));
+    assert_eq!(ev[0].detail_node, 3, "cable 3 (1-based)");
+    assert!(matches!(rig.last_pair, Some((SafetyState::Stop, _))));
+    println!(
+        "101 mm offset: NMT stop on the bus {:.1} ms after the first bad setpoint (host, udpbus; polled {took:?})",
+        (t_nmt - t_inject).as_secs_f64() * 1e3
+    );
+
+    // Refused while the offset persists, accepted once it is gone for reset_clear_cycles.
+    assert_eq!(
+        reset(&mut rig, 0.101, false),
+        ResetReply::Refused(Some(Cause::DqLimit))
+    );
+    assert!(matches!(rig.last_pair, Some((SafetyState::Stop, _))));
+    rig.run_for(Duration::from_millis(150), 0.0, false);
+    let n_before = rig.nmt.len();
+    assert_eq!(reset(&mut rig, 0.0, false), ResetReply::Accepted);
+    rig.until(Duration::from_secs(1), 0.0, false, |r| {
+        r.nmt[n_before..].iter().any(|(c, _)| *c == 0x01)
+            && matches!(r.last_pair, Some((SafetyState::Run, _)))
+    });
+    // No drives answer on this bus: the Reset event follows after reset_wait_ms.
+    let mut saw_reset = false;
+    rig.until(Duration::from_secs(2), 0.0, false, |r| {
+        while let Ok(Some(e)) = r.events.receive() {
+            saw_reset |=
+                e.source == ProcessId::SafetyMonitor as u32 && e.kind == EventKind::Reset as u32;
+        }
+        saw_reset
+    });
+    assert_eq!(rig.invalid_pairs, 0);
+    let s = rig.finish();
+    assert_eq!(s.trips, 1);
+    assert!(s.setpoints_checked > 500, "{s:?}");
+    println!("summary: {s:?}");
+}
+
+#[test]
+fn frozen_publisher_and_nan_pose_trip() {
+    let mut rig = Rig::start("silence", 21_302);
+    rig.until(Duration::from_secs(3), 0.0, false, |r| {
+        matches!(r.last_pair, Some((SafetyState::Run, _)))
+    });
+    rig.run_for(Duration::from_millis(100), 0.0, false);
+    // Freeze: stop publishing, keep listening.
+    let t0 = Instant::now();
+    while !rig.nmt.iter().any(|(c, _)| *c == 0x02) {
+        rig.poll_bus();
+        std::thread::sleep(Duration::from_millis(1));
+        assert!(
+            t0.elapsed() < Duration::from_secs(2),
+            "silence not detected"
+        );
+    }
+    let ev = rig.estop_events();
+    assert_eq!(ev[0].detail, u32::from(Cause::SetpointSilence.code()));
+    println!(
+        "frozen publisher: NMT stop {:.1} ms after the last setpoint (silence_cycles = 2 x 15 ms)",
+        t0.elapsed().as_secs_f64() * 1e3
+    );
+    // NaN while latched keeps the reset refused.
+    rig.run_for(Duration::from_millis(100), 0.0, true);
+    assert_eq!(
+        reset(&mut rig, 0.0, true),
+        ResetReply::Refused(Some(Cause::NonFinite))
+    );
+    rig.finish();
+}
+
+#[test]
+fn a_foreign_reset_while_tripped_is_countered() {
+    let mut rig = Rig::start("foreign", 21_303);
+    rig.run_for(Duration::from_millis(100), 0.0, false);
+    rig.until(Duration::from_secs(2), 0.2, false, |r| !r.nmt.is_empty());
+    assert_eq!(rig.estop_events().len(), 1);
+    // Someone else publishes Reset (e.g. a tool): the monitor re-asserts its e-stop.
+    let tool = rig.ipc.publisher::<StateEvent>().unwrap();
+    tool.publish(&StateEvent::new(ProcessId::Test, EventKind::Reset, 1))
+        .unwrap();
+    let mut n = 0;
+    rig.until(Duration::from_secs(1), 0.2, false, |r| {
+        n += r.estop_events().len();
+        n >= 1
+    });
+    rig.finish();
+}

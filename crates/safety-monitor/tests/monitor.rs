@@ -1,0 +1,571 @@
+//! The monitor core ([`safety_monitor::Monitor`]) against the shipped configuration
+//! (config/safety-monitor.toml -> config/icosahedron.toml, config/drives.toml). Setpoints are
+//! generated with motion-core's kinematics (dev-dependency), so Δq is the difference of two
+//! independent implementations plus the injected offset.
+
+use crs_ipc::{BusState, DriveFeedback, JointSetpoint, MAX_CABLES, PlatformIdentity};
+use proptest::prelude::*;
+use safety_monitor::config::{self, MonitorConfig};
+use safety_monitor::identity::platform_identity;
+use safety_monitor::kinematics::StandardKinematics;
+use safety_monitor::monitor::{HISTORY, Limits};
+use safety_monitor::{Cause, Monitor, MonitorState, ResetDecision};
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+fn cfg() -> &'static MonitorConfig {
+    static C: OnceLock<MonitorConfig> = OnceLock::new();
+    C.get_or_init(|| {
+        let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/safety-monitor.toml");
+        config::load(&p).unwrap()
+    })
+}
+
+fn mc() -> &'static motion_core::Model {
+    static M: OnceLock<motion_core::Model> = OnceLock::new();
+    M.get_or_init(|| {
+        motion_core::config::load_platform(&cfg().platform_file)
+            .unwrap()
+            .model
+    })
+}
+
+fn monitor_with(f: impl FnOnce(&mut Limits)) -> Monitor {
+    let c = cfg();
+    let mut lim = Limits::from_config(c);
+    f(&mut lim);
+    let mut m = Monitor::new(
+        lim,
+        StandardKinematics::new(&c.platform),
+        platform_identity(&c.platform),
+    );
+    m.on_identity(&PlatformIdentity::new(platform_identity(&c.platform), 8));
+    m
+}
+
+fn monitor() -> Monitor {
+    monitor_with(|_| {})
+}
+
+const HOME: [f64; 6] = [0.0, 0.0, 2.0, 0.0, 0.0, 0.0];
+
+/// A consistent setpoint (motion-core's φ(x)) with `offset` (m) added to cable `cable`.
+fn sp(seq: u64, pose: [f64; 6], cable: usize, offset: f64) -> JointSetpoint {
+    let model = mc();
+    let mut data = motion_core::Data::new(model);
+    let mut q = vec![0.0; 8];
+    motion_core::kinematics::lengths(
+        model,
+        &mut data,
+        &motion_core::Pose::from_array(pose),
+        &mut q,
+    )
+    .unwrap();
+    let mut s = JointSetpoint {
+        cable_count: 8,
+        sequence: seq,
+        timestamp_ns: seq * 1_000_000,
+        pose,
+        ..JointSetpoint::default()
+    };
+    s.cable_length_m[..8].copy_from_slice(&q);
+    s.cable_length_m[cable] += offset;
+    s
+}
+
+/// One 15 ms cycle of 15 consistent setpoints starting at `seq`; returns the next sequence.
+fn good_cycle(m: &mut Monitor, seq: u64, now: u64) -> u64 {
+    for k in 0..15 {
+        m.on_setpoint(&sp(seq + k, HOME, 0, 0.0));
+    }
+    m.end_cycle(now);
+    seq + 15
+}
+
+#[test]
+fn offset_101_mm_trips_99_mm_does_not_on_every_cable() {
+    for cable in 0..8 {
+        for sign in [1.0, -1.0] {
+            let mut m = monitor();
+            m.on_setpoint(&sp(1, HOME, cable, sign * 0.099));
+            let r = m.end_cycle(1);
+            assert_eq!(r.state, MonitorState::Armed, "99 mm on cable {cable}");
+            assert!(r.faults.is_empty());
+            m.on_setpoint(&sp(2, HOME, cable, sign * 0.101));
+            let r = m.end_cycle(2);
+            let t = r.new_trip.expect("101 mm must trip");
+            assert_eq!(t.fault.cause, Cause::DqLimit);
+            assert_eq!(t.fault.cable, Some(cable as u8));
+            assert_eq!(t.fault.sequence, 2);
+            // Δq = φ* − q_θ = −offset.
+            assert!(
+                (t.fault.value + sign * 0.101).abs() < 1e-9,
+                "{}",
+                t.fault.value
+            );
+            assert_eq!(t.fault.limit, 0.1);
+            assert_eq!(m.state(), MonitorState::Tripped);
+        }
+    }
+}
+
+#[test]
+fn every_setpoint_since_the_last_cycle_is_checked() {
+    let mut m = monitor();
+    let seq = good_cycle(&mut m, 1, 15);
+    // One bad setpoint in the middle of a cycle, followed by good ones: still a trip.
+    for k in 0..15 {
+        let off = if k == 7 { 0.2 } else { 0.0 };
+        m.on_setpoint(&sp(seq + k, HOME, 3, off));
+    }
+    let t = m.end_cycle(30).new_trip.expect("trip");
+    assert_eq!(t.fault.sequence, seq + 7);
+    assert_eq!(t.fault.cable, Some(3));
+}
+
+#[test]
+fn non_finite_inputs_trip() {
+    for (what, f) in [
+        (
+            "nan pose",
+            Box::new(|s: &mut JointSetpoint| s.pose[4] = f64::NAN)
+                as Box<dyn Fn(&mut JointSetpoint)>,
+        ),
+        (
+            "inf pose",
+            Box::new(|s: &mut JointSetpoint| s.pose[0] = f64::INFINITY),
+        ),
+        (
+            "nan length",
+            Box::new(|s: &mut JointSetpoint| s.cable_length_m[5] = f64::NAN),
+        ),
+        (
+            "-inf length",
+            Box::new(|s: &mut JointSetpoint| s.cable_length_m[0] = f64::NEG_INFINITY),
+        ),
+    ] {
+        let mut m = monitor();
+        let mut s = sp(1, HOME, 0, 0.0);
+        f(&mut s);
+        m.on_setpoint(&s);
+        let t = m
+            .end_cycle(1)
+            .new_trip
+            .unwrap_or_else(|| panic!("{what} must trip"));
+        assert_eq!(t.fault.cause, Cause::NonFinite, "{what}");
+    }
+}
+
+#[test]
+fn pose_outside_the_workspace_box_trips() {
+    // [workspace] of icosahedron.toml: x in [-1.5, 1.5], rot_x in [-4°, 4°].
+    let mut m = monitor();
+    m.on_setpoint(&sp(1, [1.49, 0.0, 2.0, 0.0, 0.0, 0.0], 0, 0.0));
+    assert!(m.end_cycle(1).faults.is_empty());
+    m.on_setpoint(&sp(2, [1.51, 0.0, 2.0, 0.0, 0.0, 0.0], 0, 0.0));
+    assert_eq!(
+        m.end_cycle(2).new_trip.unwrap().fault.cause,
+        Cause::OutsideWorkspace
+    );
+    let mut m = monitor();
+    m.on_setpoint(&sp(
+        1,
+        [0.0, 0.0, 2.0, 4.1f64.to_radians(), 0.0, 0.0],
+        0,
+        0.0,
+    ));
+    assert_eq!(
+        m.end_cycle(1).new_trip.unwrap().fault.cause,
+        Cause::OutsideWorkspace
+    );
+}
+
+#[test]
+fn sequence_gaps_are_counted_over_the_window() {
+    // Default: more than 5 lost within 67 cycles trips.
+    let mut m = monitor();
+    let mut seq = 1;
+    for _ in 0..5 {
+        // One lost setpoint per cycle.
+        seq = good_cycle(&mut m, seq, 0) + 1;
+    }
+    assert_eq!(m.state(), MonitorState::Armed, "5 lost: tolerated");
+    good_cycle(&mut m, seq, 0);
+    assert_eq!(m.state(), MonitorState::Armed);
+    let r = {
+        m.on_setpoint(&sp(seq + 15 + 1, HOME, 0, 0.0));
+        m.end_cycle(0)
+    };
+    let t = r.new_trip.expect("the 6th lost setpoint trips");
+    assert_eq!(t.fault.cause, Cause::SequenceGaps);
+    assert_eq!(t.fault.value, 6.0);
+
+    // The same losses spread wider than the window never trip.
+    let mut m = monitor();
+    let mut seq = 1;
+    for _ in 0..10 {
+        seq = good_cycle(&mut m, seq, 0) + 1;
+        for _ in 0..20 {
+            seq = good_cycle(&mut m, seq, 0);
+        }
+    }
+    assert_eq!(m.state(), MonitorState::Armed);
+}
+
+#[test]
+fn a_sequence_that_does_not_increase_trips() {
+    let mut m = monitor();
+    m.on_setpoint(&sp(10, HOME, 0, 0.0));
+    m.on_setpoint(&sp(10, HOME, 0, 0.0));
+    assert_eq!(
+        m.end_cycle(0).new_trip.unwrap().fault.cause,
+        Cause::SequenceRegression
+    );
+}
+
+#[test]
+fn silence_for_n_cycles_trips_only_after_the_first_setpoint() {
+    let mut m = monitor();
+    for _ in 0..100 {
+        assert!(
+            m.end_cycle(0).faults.is_empty(),
+            "no setpoint yet: not armed"
+        );
+    }
+    good_cycle(&mut m, 1, 0);
+    // silence_cycles = 2: the first empty cycle is tolerated, the second trips.
+    assert!(m.end_cycle(0).new_trip.is_none());
+    let t = m.end_cycle(0).new_trip.expect("2 silent cycles trip");
+    assert_eq!(t.fault.cause, Cause::SetpointSilence);
+}
+
+#[test]
+fn an_announced_end_of_stream_disarms_silence_and_a_new_stream_rearms() {
+    let mut m = monitor();
+    let seq = good_cycle(&mut m, 1, 0);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    m.on_stream_end();
+    assert!(m.end_cycle(0).faults.is_empty());
+    for _ in 0..100 {
+        let f = m.end_cycle(0).faults;
+        assert!(f.is_empty(), "a clean end is not a frozen loop: {f:?}");
+    }
+    // A restarted producer numbers from 1 again: not a regression. It must announce its
+    // identity again (the grace applies), and silence is armed again.
+    let c = cfg();
+    let mut seq = good_cycle(&mut m, 1, 0);
+    m.on_identity(&PlatformIdentity::new(platform_identity(&c.platform), 8));
+    seq = good_cycle(&mut m, seq, 0);
+    assert_eq!(m.state(), MonitorState::Armed);
+    let _ = seq;
+    m.end_cycle(0);
+    assert_eq!(
+        m.end_cycle(0).new_trip.map(|t| t.fault.cause),
+        Some(Cause::SetpointSilence)
+    );
+}
+
+#[test]
+fn identity_mismatch_and_missing_identity_trip() {
+    let c = cfg();
+    let lim = Limits::from_config(c);
+    let own = platform_identity(&c.platform);
+    let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
+    let mut other = own;
+    other[0] ^= 1;
+    m.on_identity(&PlatformIdentity::new(other, 8));
+    assert_eq!(
+        m.end_cycle(0).new_trip.unwrap().fault.cause,
+        Cause::IdentityMismatch
+    );
+    // Right hash, wrong cable count.
+    let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
+    m.on_identity(&PlatformIdentity::new(own, 7));
+    assert_eq!(
+        m.end_cycle(0).new_trip.unwrap().fault.cause,
+        Cause::IdentityMismatch
+    );
+    // No identity at all: setpoints are tolerated for identity_grace_cycles (10) cycles.
+    let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
+    let mut seq = 1;
+    for _ in 0..10 {
+        seq = good_cycle(&mut m, seq, 0);
+        assert_eq!(m.state(), MonitorState::Armed);
+    }
+    good_cycle(&mut m, seq, 0);
+    assert_eq!(m.trip().unwrap().fault.cause, Cause::IdentityMissing);
+}
+
+fn feedback(applied: u64, lengths: &[f64]) -> DriveFeedback {
+    let mut f = DriveFeedback {
+        cable_count: 8,
+        applied_setpoint_sequence: applied,
+        bus_state: BusState::Running as u32,
+        ..DriveFeedback::default()
+    };
+    f.cable_length_m[..8].copy_from_slice(lengths);
+    f
+}
+
+#[test]
+fn following_error_and_feedback_silence_trip() {
+    let mut m = monitor();
+    good_cycle(&mut m, 1, 0);
+    let q = sp(10, HOME, 0, 0.0).cable_length_m;
+    let mut meas = q[..8].to_vec();
+    meas[6] += 0.099;
+    m.on_feedback(&feedback(10, &meas));
+    m.on_setpoint(&sp(16, HOME, 0, 0.0));
+    assert!(m.end_cycle(0).faults.is_empty());
+    meas[6] += 0.002;
+    m.on_feedback(&feedback(10, &meas));
+    m.on_setpoint(&sp(17, HOME, 0, 0.0));
+    let t = m.end_cycle(0).new_trip.expect("following error");
+    assert_eq!(t.fault.cause, Cause::FollowingError);
+    assert_eq!(t.fault.cable, Some(6));
+    // Not judged while drive-io is not Running (e.g. quick-stopping).
+    let mut m = monitor();
+    good_cycle(&mut m, 1, 0);
+    let mut fb = feedback(10, &meas);
+    fb.bus_state = BusState::EStop as u32;
+    m.on_feedback(&fb);
+    m.on_setpoint(&sp(16, HOME, 0, 0.0));
+    assert!(m.end_cycle(0).faults.is_empty());
+    // drive-io silent for silence_cycles (4) after its first feedback.
+    let mut seq = 17;
+    for k in 0..4 {
+        seq = good_cycle(&mut m, seq, 0);
+        assert_eq!(m.state() == MonitorState::Tripped, k == 3, "cycle {k}");
+    }
+    assert_eq!(m.trip().unwrap().fault.cause, Cause::FeedbackSilence);
+}
+
+#[test]
+fn rpdo_targets_far_from_the_kinematics_trip() {
+    let mut m = monitor();
+    for k in 1..=15 {
+        m.on_setpoint(&sp(k, HOME, 0, 0.0));
+    }
+    m.end_cycle(0);
+    let q = sp(1, HOME, 0, 0.0).cable_length_m;
+    // What drive-io forwards: one of the recent setpoints (rounded to counts).
+    m.on_rpdo(2, q[2] + 1e-7, 15_000_000);
+    m.on_rpdo(2, q[2] + 0.0995, 15_000_000);
+    m.on_setpoint(&sp(16, HOME, 0, 0.0));
+    assert!(m.end_cycle(0).faults.is_empty());
+    m.on_rpdo(4, q[4] - 0.15, 15_000_000);
+    m.on_setpoint(&sp(17, HOME, 0, 0.0));
+    let t = m.end_cycle(0).new_trip.expect("rpdo");
+    assert_eq!(t.fault.cause, Cause::RpdoMismatch);
+    assert_eq!(t.fault.cable, Some(4));
+    assert!((t.fault.value - 0.15).abs() < 1e-9);
+}
+
+#[test]
+fn reset_is_refused_while_the_cause_persists_and_accepted_after() {
+    let mut m = monitor();
+    assert_eq!(m.request_reset(), ResetDecision::NotTripped);
+    let mut seq = good_cycle(&mut m, 1, 0);
+    let mut s = sp(seq, HOME, 0, 0.0);
+    s.pose[2] = f64::NAN;
+    m.on_setpoint(&s);
+    seq += 1;
+    assert!(m.end_cycle(0).new_trip.is_some());
+    // The NaN poses keep coming: refused, naming the cause.
+    for _ in 0..5 {
+        let mut s = sp(seq, HOME, 0, 0.0);
+        s.pose[2] = f64::NAN;
+        m.on_setpoint(&s);
+        seq += 1;
+        let r = m.end_cycle(0);
+        assert!(r.new_trip.is_none(), "latched: no second trip");
+        assert_eq!(m.request_reset(), ResetDecision::Refused(Cause::NonFinite));
+    }
+    // Good again, but fewer than reset_clear_cycles (3) clean cycles: still refused.
+    for _ in 0..2 {
+        seq = good_cycle(&mut m, seq, 0);
+        assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+    }
+    seq = good_cycle(&mut m, seq, 0);
+    assert_eq!(m.request_reset(), ResetDecision::Accepted);
+    assert_eq!(m.state(), MonitorState::Armed);
+    assert!(m.trip().is_none());
+    good_cycle(&mut m, seq, 0);
+    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.trip_log().total(), 1);
+    let rec = m.trip_log().last().unwrap();
+    assert_eq!(rec.fault.cause, Cause::NonFinite);
+    assert!(rec.to_string().contains("cause=non_finite"), "{rec}");
+}
+
+#[test]
+fn the_latch_holds_the_first_cause_and_logs_every_trip() {
+    let mut m = monitor();
+    m.on_setpoint(&sp(1, HOME, 5, 0.3));
+    m.end_cycle(7);
+    m.on_setpoint(&sp(2, HOME, 1, f64::NAN));
+    let r = m.end_cycle(8);
+    assert!(r.faults.contains(Cause::NonFinite));
+    let t = m.trip().unwrap();
+    assert_eq!(
+        (t.fault.cause, t.fault.cable, t.detected_ns),
+        (Cause::DqLimit, Some(5), 7)
+    );
+    let hb = m.heartbeat(3);
+    assert_eq!(hb.state, can_transport::safety_frame::SafetyState::Stop);
+    assert_eq!(hb.cause, Cause::DqLimit.code());
+    assert_eq!(hb.cable, 5);
+}
+
+#[test]
+fn the_limit_is_configurable_but_never_above_100_mm() {
+    let dir = std::env::temp_dir().join(format!("sm-cfg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let base = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/safety-monitor.toml"),
+    )
+    .unwrap();
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config");
+    let write = |name: &str, text: String| {
+        let text = text
+            .replace(
+                "platform = \"icosahedron.toml\"",
+                &format!("platform = {:?}", root.join("icosahedron.toml")),
+            )
+            .replace(
+                "drives = \"drives.toml\"",
+                &format!("drives = {:?}", root.join("drives.toml")),
+            );
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let p = write(
+        "a.toml",
+        base.replace("dq_limit_mm = 100.0", "dq_limit_mm = 100.5"),
+    );
+    let e = config::load(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("monitor.dq_limit_mm") && e.contains("100 mm"),
+        "{e}"
+    );
+    let p = write(
+        "b.toml",
+        base.replace("dq_limit_mm = 100.0", "dq_limit_mm = 50.0"),
+    );
+    let c = config::load(&p).unwrap();
+    assert_eq!(c.dq_limit_m(), 0.05);
+    let mut m = Monitor::new(
+        Limits::from_config(&c),
+        StandardKinematics::new(&c.platform),
+        platform_identity(&c.platform),
+    );
+    m.on_setpoint(&sp(1, HOME, 0, 0.051));
+    assert_eq!(m.end_cycle(0).new_trip.unwrap().fault.cause, Cause::DqLimit);
+    let p = write(
+        "c.toml",
+        base.replace("cycle_ms = 15", "cycle_ms = 15\nbogus = 1"),
+    );
+    let e = config::load(&p).unwrap_err().to_string();
+    assert!(e.contains("bogus") && e.contains(":"), "{e}");
+    let p = write(
+        "d.toml",
+        base.replace("safety_cob_id = 0x101", "safety_cob_id = 0x100"),
+    );
+    assert!(
+        config::load(&p)
+            .unwrap_err()
+            .to_string()
+            .contains("can.safety_cob_id")
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn platform_errors_name_the_key_and_line() {
+    let text = std::fs::read_to_string(&cfg().platform_file).unwrap();
+    let bad = text.replace("[-5.380,  7.677,  6.524]", "[-5.380,  7.677,  nan]");
+    let e = safety_monitor::platform::parse_platform(&bad, "x.toml").unwrap_err();
+    assert_eq!(e.key, "geometry.frame_anchors_m[2]");
+    assert!(e.line.is_some());
+    let bad = text.replace(
+        "platform_anchors_m = [\n  [-1.383,  0.528, -0.747],\n",
+        "platform_anchors_m = [\n",
+    );
+    let e = safety_monitor::platform::parse_platform(&bad, "x.toml").unwrap_err();
+    assert_eq!(e.key, "geometry.platform_anchors_m");
+    assert!(e.to_string().contains("x.toml:"), "{e}");
+}
+
+fn arb_f64() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        any::<f64>(),
+        Just(f64::NAN),
+        Just(f64::INFINITY),
+        -3.0f64..3.0,
+        0.0f64..20.0
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// Any offset strictly below the limit never trips; any above always trips, naming the cable.
+    #[test]
+    fn threshold_holds_over_the_workspace(
+        x in -1.4f64..1.4, y in -1.4f64..1.4, z in 1.3f64..2.7,
+        ax in -0.06f64..0.06, ay in -0.08f64..0.08, az in -0.08f64..0.08,
+        cable in 0usize..8, below in -0.0999f64..0.0999, above in 0.1001f64..2.0, neg in any::<bool>(),
+    ) {
+        let pose = [x, y, z, ax, ay, az];
+        let mut m = monitor();
+        m.on_setpoint(&sp(1, pose, cable, below));
+        prop_assert!(m.end_cycle(0).faults.is_empty());
+        m.on_setpoint(&sp(2, pose, cable, if neg { -above } else { above }));
+        let t = m.end_cycle(0).new_trip;
+        prop_assert!(t.is_some());
+        let t = t.unwrap();
+        prop_assert_eq!(t.fault.cause, Cause::DqLimit);
+        prop_assert_eq!(t.fault.cable, Some(cable as u8));
+    }
+
+    /// No panic on any payload, in any order; a trip always names a cause.
+    #[test]
+    fn no_panic_on_any_payload(
+        inputs in proptest::collection::vec(
+            (0u8..5, any::<u64>(), any::<u32>(), proptest::collection::vec(arb_f64(), 6 + MAX_CABLES), any::<u32>(), any::<[u8; 32]>()),
+            1..40)
+    ) {
+        let mut m = monitor();
+        for (kind, seq, count, vals, state, hash) in inputs {
+            match kind {
+                0 => {
+                    let mut s = JointSetpoint { cable_count: count % 20, sequence: seq, ..JointSetpoint::default() };
+                    s.pose.copy_from_slice(&vals[..6]);
+                    s.cable_length_m.copy_from_slice(&vals[6..]);
+                    m.on_setpoint(&s);
+                }
+                1 => {
+                    let mut f = DriveFeedback { cable_count: count % 20, applied_setpoint_sequence: seq, bus_state: state % 8, ..DriveFeedback::default() };
+                    f.cable_length_m.copy_from_slice(&vals[6..]);
+                    m.on_feedback(&f);
+                }
+                2 => m.on_identity(&PlatformIdentity { version: state % 3, cable_count: count, timestamp_ns: seq, hash }),
+                3 => m.on_rpdo(count as usize % 20, vals[0], seq),
+                _ => {
+                    let r = m.end_cycle(seq);
+                    if let Some(t) = r.new_trip {
+                        prop_assert!(r.faults.contains(t.fault.cause));
+                    }
+                    let _ = m.request_reset();
+                }
+            }
+        }
+        m.end_cycle(0);
+    }
+}
+
+#[test]
+fn history_is_large_enough_for_the_feedback_window() {
+    assert!(cfg().feedback.window_setpoints as usize <= HISTORY);
+}
