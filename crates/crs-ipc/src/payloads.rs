@@ -161,6 +161,19 @@ impl Default for DriveFeedback {
     }
 }
 
+/// `StateEvent::state` / `Heartbeat::state` codes of motion-core (source MotionCore).
+pub mod motion_state {
+    pub const RUNNING: u32 = 1;
+    /// Latched e-stop (kind Fault).
+    pub const ESTOPPED: u32 = 2;
+    /// Refused a reference (latched, kind Fault).
+    pub const REFUSED: u32 = 3;
+    pub const HOLDING: u32 = 4;
+    /// Graceful end of the setpoint stream: published (kind StateChanged) AFTER the last
+    /// setpoint, so the safety monitor disarms its silence watch instead of tripping.
+    pub const STOPPING: u32 = 5;
+}
+
 /// Who publishes a [`StateEvent`] / [`Heartbeat`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]

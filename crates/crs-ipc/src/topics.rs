@@ -85,8 +85,9 @@ topic!(
     publishers = 1,
     subscribers = 8
 );
-// motion-core -> safety monitor: which platform model the motion core runs. Announced at start;
-// history 1 so a monitor that starts later still receives it.
+// motion-core -> safety monitor: which platform model the motion core runs. Announced at start
+// and re-announced about once per second: iceoryx2 0.10 hands history to a late subscriber only
+// when the publisher next acts, so history 1 alone is not enough.
 topic!(
     PlatformIdentity,
     "crs/v1/platform_identity",

@@ -5,7 +5,9 @@ mod common;
 use crs_ipc::{IpcNode, JointSetpoint};
 use motion_core::Pose;
 use motion_core::daemon::cycle::{Cycle, Reference, Rejection};
-use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts, publish_pass};
+use motion_core::daemon::outbox::{
+    Outbox, OutboxSink, StagePorts, publish_pass, run_publish_stage,
+};
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
 use motion_core::daemon::{Command, CommandSource, HardLoop, LoopState, SetpointSink};
@@ -235,6 +237,39 @@ fn publish_stage_heartbeats_only_while_the_loop_advances() {
         .collect();
     assert_eq!(ok, vec![true, true, true, true, false, false]);
     assert_eq!(outbox.dropped.load(Ordering::Relaxed), 2);
+}
+
+#[test]
+fn publish_stage_ends_the_stream_after_the_last_setpoint() {
+    // The safety monitor disarms its silence watch on the stream-end event, so that event must
+    // follow every setpoint the loop queued.
+    #[derive(Default)]
+    struct Log(Vec<&'static str>);
+    impl StagePorts for Log {
+        fn setpoint(&mut self, _: &JointSetpoint) -> bool {
+            self.0.push("setpoint");
+            true
+        }
+        fn heartbeat(&mut self, _: u32, _: u64) {}
+        fn state_changed(&mut self, _: u32, _: u32) {}
+        fn announce(&mut self) {
+            self.0.push("announce");
+        }
+        fn stream_end(&mut self) {
+            self.0.push("end");
+        }
+    }
+    let outbox = Outbox::new(8);
+    let stats = LoopStats::default();
+    let stop = AtomicBool::new(true);
+    let mut sink = OutboxSink(&outbox);
+    for _ in 0..3 {
+        assert!(sink.publish(&JointSetpoint::default()));
+    }
+    let mut log = Log::default();
+    // Stop already set: the stage runs no periodic pass, only the final drain.
+    run_publish_stage(&outbox, &stats, &mut log, 0, 1_000_000, 0, 10, &stop);
+    assert_eq!(log.0, vec!["setpoint", "setpoint", "setpoint", "end"]);
 }
 
 #[test]

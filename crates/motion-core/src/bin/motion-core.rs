@@ -67,6 +67,7 @@ struct IoxPorts {
     events: TopicPublisher<StateEvent>,
     identity: TopicPublisher<PlatformIdentity>,
     loop_stats: TopicPublisher<LoopStatsSample>,
+    platform_identity: PlatformIdentity,
     hb_seq: u64,
     _node: IpcNode,
 }
@@ -100,6 +101,19 @@ impl StagePorts for IoxPorts {
             ..LoopStatsSample::default()
         };
         let _ = self.loop_stats.publish(&s);
+    }
+    fn announce(&mut self) {
+        // iceoryx2's history reaches a late subscriber only on the publisher's next activity,
+        // so the identity is re-sent about once per second for a monitor (re)started later.
+        let mut id = self.platform_identity;
+        id.timestamp_ns = crs_ipc::monotonic_ns();
+        let _ = self.identity.publish(&id);
+    }
+    fn stream_end(&mut self) {
+        self.hb_seq += 1;
+        let mut ev = StateEvent::new(ProcessId::MotionCore, EventKind::StateChanged, self.hb_seq);
+        ev.state = crs_ipc::motion_state::STOPPING;
+        let _ = self.events.publish(&ev);
     }
     fn state_changed(&mut self, _from: u32, to: u32) {
         let kind = if LoopState::code_is_latched(to) {
@@ -290,6 +304,7 @@ fn run(args: Args) -> Result<(), String> {
                         loop_stats: node
                             .publisher::<LoopStatsSample>()
                             .map_err(|e| e.to_string())?,
+                        platform_identity: identity,
                         hb_seq: 0,
                         _node: node,
                     };

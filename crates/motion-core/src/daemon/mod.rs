@@ -58,10 +58,10 @@ impl LoopState {
 
     pub fn code(&self) -> u32 {
         match self {
-            LoopState::Running => 1,
-            LoopState::EStopped => 2,
-            LoopState::Refused(_) => 3,
-            LoopState::Holding => 4,
+            LoopState::Running => crs_ipc::motion_state::RUNNING,
+            LoopState::EStopped => crs_ipc::motion_state::ESTOPPED,
+            LoopState::Refused(_) => crs_ipc::motion_state::REFUSED,
+            LoopState::Holding => crs_ipc::motion_state::HOLDING,
         }
     }
 }

@@ -82,6 +82,10 @@ pub trait StagePorts {
     fn state_changed(&mut self, from: u32, to: u32);
     /// Periodic loop statistics (about once per second; the stage may allocate, the loop not).
     fn loop_stats(&mut self, _stats: &LoopStats, _outbox: &Outbox) {}
+    /// About once per second: re-announce what late subscribers need (the platform identity).
+    fn announce(&mut self) {}
+    /// After the last setpoint of a graceful stop has been sent: the end of the stream.
+    fn stream_end(&mut self) {}
 }
 
 /// One pass of the publish stage: drains the outbox, then heartbeat/state bookkeeping.
@@ -146,6 +150,7 @@ pub fn run_publish_stage(
         passes += 1;
         if passes.is_multiple_of(stats_every) {
             ports.loop_stats(stats, outbox);
+            ports.announce();
         }
         deadline += period_ns;
         let now = super::realtime::now_ns();
@@ -162,4 +167,6 @@ pub fn run_publish_stage(
         heartbeat_every_cycles,
     );
     ports.loop_stats(stats, outbox);
+    // Only after the final drain: the monitor must have every setpoint before it disarms.
+    ports.stream_end();
 }
