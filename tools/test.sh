@@ -14,8 +14,17 @@ cargo clippy --workspace --all-targets -- -D warnings
 echo "== cargo test (host)"
 cargo test --workspace
 
-if [ -f tools/hil-run.sh ] && [ "${CRS_SKIP_HIL:-0}" != 1 ]; then
-  echo "== HIL tests on vcan (QEMU guest)"
+echo "== systemd units (systemd-analyze verify + the stack's unit policy)"
+bash tools/systemd-verify.sh
+
+if [ "${CRS_SKIP_HIL:-0}" != 1 ]; then
+  # One static release build serves all three (the emulated guest is slow; debug is slower).
+  export HIL_PROFILE=${HIL_PROFILE:-release}
+  echo "== HIL: drive adapter on vcan (QEMU guest)"
   bash tools/hil-run.sh
+  echo "== HIL: safety monitor fault-injection matrix on vcan (QEMU guest)"
+  bash tools/safety-hil.sh
+  echo "== HIL: the full simulated stack on vcan (QEMU guest)"
+  bash tools/stack-hil.sh
 fi
 echo "== all tests passed"

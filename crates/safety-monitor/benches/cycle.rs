@@ -1,5 +1,5 @@
 //! Cost of the monitor's work per 15 ms cycle (criterion). Reported in
-//! benches/results-safety-monitor.md:
+//! benches/RESULTS.md ("Safety monitor"):
 //! * `phi_star_8_cables`: the monitor's own standard inverse kinematics (glam);
 //! * `cycle_15_setpoints`: one cycle at 1 kHz input: 15 setpoints checked + end of cycle;
 //! * `cycle_full`: 15 setpoints + 15 drive feedback samples + 120 RPDO targets (8 drives x 15)

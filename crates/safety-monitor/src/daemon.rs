@@ -134,7 +134,7 @@ struct Obs {
 
 /// Batch period of the bus reader: it drains its socket this often instead of waking for
 /// every frame (a 1 kHz drive bus carries ~26 frames/ms; one wake-up per frame cost the
-/// monitor ~16 % of a core, see benches/results-safety-monitor.md).
+/// monitor ~16 % of a core, see benches/RESULTS.md ("Safety monitor")).
 const READER_BATCH: Duration = Duration::from_millis(3);
 
 /// Reads the bus on its own socket and queues RPDO targets and drive heartbeats.
