@@ -10,8 +10,9 @@ cd "$(dirname "$0")/.."
 PROFILE=${HIL_PROFILE:-dev}
 TRIPLE=x86_64-unknown-linux-gnu
 # --target keeps build scripts/proc-macros dynamic while the test binary is static glibc.
+# --workspace: the same feature set in every HIL script, so their builds share all artifacts.
 RUSTFLAGS="-C target-feature=+crt-static" cargo build --profile "$PROFILE" --target "$TRIPLE" \
-  -p drive-io --bin drive-io-hil
+  --workspace --bin drive-io-hil
 DIR=$PROFILE; [ "$PROFILE" = dev ] && DIR=debug
 BIN=${CARGO_TARGET_DIR:-target}/$TRIPLE/$DIR/drive-io-hil
 LOG=$(mktemp); trap 'rm -f "$LOG"' EXIT

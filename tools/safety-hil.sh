@@ -23,9 +23,9 @@ cd "$(dirname "$0")/.."
 PROFILE=${HIL_PROFILE:-release}
 TRIPLE=x86_64-unknown-linux-gnu
 # --target keeps build scripts/proc-macros dynamic while the binaries are static glibc.
+# --workspace: the same feature set in every HIL script, so their builds share all artifacts.
 RUSTFLAGS="-C target-feature=+crt-static" cargo build --profile "$PROFILE" --target "$TRIPLE" \
-  -p safety-monitor -p drive-io -p motion-core \
-  --bin safety-hil --bin safety-monitor --bin drive-io --bin winch-emulator --bin motion-core
+  --workspace --bin safety-hil --bin safety-monitor --bin drive-io --bin winch-emulator --bin motion-core
 DIR=$PROFILE; [ "$PROFILE" = dev ] && DIR=debug
 T=${CARGO_TARGET_DIR:-target}/$TRIPLE/$DIR
 LOG=$(mktemp); trap 'rm -f "$LOG"' EXIT
