@@ -31,7 +31,15 @@ fn plant_cfg(name: &str) -> PlantConfig {
 }
 
 fn drives() -> DrivesConfig {
-    DrivesConfig::load(&config_dir().join("drives.toml")).expect("config/drives.toml")
+    let mut d = DrivesConfig::load(&config_dir().join("drives.toml")).expect("config/drives.toml");
+    assert!(
+        d.safety_heartbeat.is_some(),
+        "the stack's drives config validates the safety monitor's heartbeat"
+    );
+    // These tests exercise the plant without a safety monitor on the bus; the drives' safety
+    // watch has its own tests (drives_with_a_safety_heartbeat_watch_* below, crates/drive-io).
+    d.safety_heartbeat = None;
+    d
 }
 
 fn plant_bus(cfg: PlantConfig) -> PlantBus {
@@ -971,8 +979,8 @@ fn csp_winch_follows_a_moving_target_without_lag_and_stops_at_a_far_one() {
 
 #[test]
 fn drives_with_a_safety_heartbeat_watch_stay_braked_without_the_monitor() {
-    let text = std::fs::read_to_string(config_dir().join("drives.toml")).unwrap();
-    let d = DrivesConfig::parse(&format!("{text}\n[safety_heartbeat]\n")).unwrap();
+    // The stack's drives config as it is: it validates the monitor's heartbeat.
+    let d = DrivesConfig::load(&config_dir().join("drives.toml")).unwrap();
     assert!(d.safety_heartbeat.is_some());
     let cfg = plant_cfg("icosahedron-ideal.toml");
     let control = cfg.platform.clone();
