@@ -41,41 +41,48 @@ pub enum CalibrateCommand {
         #[command(flatten)]
         opts: Opts,
     },
+    /// The closed loop on the running stack: record a campaign with the nominal model, identify,
+    /// deploy the identified model and a refitted surrogate, re-run the campaign, report the
+    /// measured pose error before and after.
+    Loop(crate::calibrate_loop_cmd::LoopArgs),
+    /// Make a calibration campaign: feasible waypoint poses spread over the workspace with
+    /// varied orientations, the whole plan verified with motion-core's checks.
+    Campaign(crate::calibrate_loop_cmd::CampaignArgs),
 }
 
 #[derive(Args, Debug)]
 pub struct Opts {
     /// Output directory for report.md, report.json, plots, calibrated.toml.
     #[arg(long, default_value = "calibration-out")]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Hold out poses with pose_index % N == N − 1 when no validation set is given.
     #[arg(long, default_value_t = 4)]
-    holdout_every: u64,
+    pub(crate) holdout_every: u64,
     /// Weight of the wrench rows w_ρ,w (eq. 4.38).
     #[arg(long, default_value_t = 1.0)]
-    w_wrench: f64,
+    pub(crate) w_wrench: f64,
     /// Weight of the length rows w_ρ,q (eq. 4.38).
     #[arg(long, default_value_t = 1e4)]
-    w_length: f64,
+    pub(crate) w_length: f64,
     /// Ridge λ on the platform anchors b (eq. 4.32, sec. 6.5).
     #[arg(long, default_value_t = 0.0)]
-    ridge_b: f64,
+    pub(crate) ridge_b: f64,
     /// Lasso λ on the platform anchors b (eq. 4.32).
     #[arg(long, default_value_t = 0.0)]
-    lasso_b: f64,
+    pub(crate) lasso_b: f64,
     /// Candidate effects (comma separated): pulleys, powertrain, stiffness, hysteresis, sag, drum,
     /// load_cog, force_sensors.
     #[arg(long, value_delimiter = ',')]
-    candidates: Option<Vec<String>>,
+    pub(crate) candidates: Option<Vec<String>>,
     /// Minimum held-out RMS reduction for an effect to be added (fraction).
     #[arg(long, default_value_t = 0.05)]
-    min_gain: f64,
+    pub(crate) min_gain: f64,
     /// Skip the residual diagnosis / model extension.
     #[arg(long)]
-    no_extension: bool,
+    pub(crate) no_extension: bool,
     /// Also print the report as JSON on stdout.
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
 }
 
 fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Error>> {
@@ -119,7 +126,7 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
                 Some(v) => (obs, load(v, m)?),
                 None => split(&obs, opts.holdout_every),
             };
-            calibrate_and_report(&base, &train, &holdout, &opts, &command)
+            calibrate_and_report(&base, &train, &holdout, &opts, &command).map(|_| ())
         }
         CalibrateCommand::Demo {
             plant,
@@ -148,12 +155,14 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
             sim_plant::save_dataset(opts.out.join("validation.csv"), &vds)?;
             let train = from_dataset(&ds, m)?;
             let holdout = from_dataset(&vds, m)?;
-            calibrate_and_report(&base, &train, &holdout, &opts, &command)
+            calibrate_and_report(&base, &train, &holdout, &opts, &command).map(|_| ())
         }
+        CalibrateCommand::Loop(a) => crate::calibrate_loop_cmd::run_loop(a, &command),
+        CalibrateCommand::Campaign(a) => crate::calibrate_loop_cmd::run_campaign(a),
     }
 }
 
-fn spinner(msg: &str) -> ProgressBar {
+pub(crate) fn spinner(msg: &str) -> ProgressBar {
     let bar = ProgressBar::new_spinner();
     bar.set_style(
         ProgressStyle::with_template("{spinner} [{elapsed}] {msg}")
@@ -164,13 +173,15 @@ fn spinner(msg: &str) -> ProgressBar {
     bar
 }
 
-fn calibrate_and_report(
+/// Identifies from `base`, writes the report, plots, calibrated.toml and the side file into
+/// `opts.out`; returns the pipeline report.
+pub(crate) fn calibrate_and_report(
     base: &Platform,
     train: &[Observation],
     holdout: &[Observation],
     opts: &Opts,
     command: &str,
-) -> Result<(), Box<dyn std::error::Error>> {
+) -> Result<PipelineReport, Box<dyn std::error::Error>> {
     let cfg = config(opts)?;
     let bar = spinner("identifying");
     let rep: PipelineReport =
@@ -220,5 +231,5 @@ fn calibrate_and_report(
         println!("{}", report::stage_table(&rep));
         println!("report: {}", opts.out.join("report.md").display());
     }
-    Ok(())
+    Ok(rep)
 }

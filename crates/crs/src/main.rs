@@ -1,8 +1,10 @@
 //! `crs`: the operator / commissioning command line of the cable-robot stack.
 
 mod calibrate_cmd;
+mod calibrate_loop_cmd;
 mod model_cmd;
 mod plant_cmd;
+mod rest_recorder;
 mod sim_cmd;
 mod surrogate_cmd;
 

@@ -21,22 +21,26 @@
 //! At construction the plant is set up like the real robot (sec. 6.1): the platform is held at
 //! the control platform's home pose x_ini and the initial tension f_ini is set
 //! ([`Plant::setup_tension`], eq. 3.19), which gives the commands q̂_ini = φ̂_el(x_ini, f_0)
-//! that hold it. The drives' encoder zero is then chosen (homing) so that they READ the control
-//! model's kinematic lengths there, φ(x_ini) — standard (or pulley, if the control platform
-//! has pulleys) inverse kinematics, no surrogate. Per cable:
+//! that hold it. The drives' encoder zero is then chosen (homing) so that they READ the
+//! controller's full command at the home pose, q_home: by default ([`BusOptions::home_lengths_m`]
+//! = `None`) the control model's kinematic lengths φ(x_ini) — standard (or pulley, if the
+//! control platform has pulleys) inverse kinematics, the command of a controller without a
+//! surrogate; a controller with a surrogate commands q_θ(x_ini) = φ(x_ini) + φ_sg(x_ini)
+//! (eq. 5.26) there, and the commissioning passes that as `home_lengths_m` (binary:
+//! `--home-lengths-m`; `crs sim` computes it from the daemon TOML). Per cable:
 //!
 //! ```text
-//! q_off,i   = q̂_ini,i − φ_i(x_ini)            (eq. 3.14 / 6.24, m; negative: the cables are stretched)
+//! q_off,i   = q̂_ini,i − q_home,i              (eq. 3.14 / 6.24, m; q_home = φ(x_ini) by default)
 //! q_plant,i = q_drive,i + q_off,i             (what the Plant is commanded with)
 //! q_drive,i = counts_to_length(position actual) (what drive-io reports and motion-core commands)
 //! ```
 //!
-//! So motion-core's standard command q_θ = φ(x) at the home pose holds exactly the set-up
-//! tension, drive-io's first targets (= the drives' actual positions) are φ(x_ini), and a
-//! kinematic command elsewhere is φ(x) + q_off on the plant, as in the spec's experiments.
-//! Without this convention the first setpoint would differ from the drives' positions by the
-//! cable stretch (≈ 20 mm at 5 kN, k_F = 2000 kN, q ≈ 8 m), far above drive-io's per-cycle
-//! step limit.
+//! So motion-core's command at the home pose holds exactly the set-up tension, drive-io's
+//! first targets (= the drives' actual positions) are q_home, and a command q_θ(x) elsewhere
+//! is q_θ(x) + q_off on the plant, as in the spec's experiments. Without this convention the
+//! first setpoint would differ from the drives' positions by the cable stretch (≈ 20 mm at
+//! 5 kN, k_F = 2000 kN, q ≈ 8 m) or by the surrogate offset at home, far above drive-io's
+//! per-cycle step limit.
 //!
 //! Nothing here panics on bus input: targets outside `[0, max_cable_length_m]` are clamped
 //! (the drive's software position limits), a plant without equilibrium is reported
@@ -126,7 +130,7 @@ pub enum BusPlantError {
     },
     #[error(
         "{drives}: `winch[{index}].max_cable_length_m` = {max} m: cable {cable} at the home pose \
-         reads {length:.4} m (φ(home)), outside [0, max_cable_length_m]"
+         reads {length:.4} m (the home lengths q_home), outside [0, max_cable_length_m]"
     )]
     HomeOutOfRange {
         drives: String,
@@ -154,6 +158,10 @@ pub struct BusOptions {
     /// or, if it has none, (f_min + f_max)/2 for every cable, which the projection of eq. 3.19
     /// turns into the closed-form force distribution of eq. 3.41 at the home pose.
     pub f_ini_n: Option<Vec<f64>>,
+    /// Lengths the drives read at the home pose after homing, m, one per cable (module docs).
+    /// `None`: φ(x_ini) of the control model (a controller without surrogate); with a surrogate
+    /// the controller's full command q_θ(x_ini) = φ(x_ini) + φ_sg(x_ini) (eq. 5.26).
+    pub home_lengths_m: Option<Vec<f64>>,
     /// Heartbeat producer time before the master writes 0x1017, ms.
     pub default_heartbeat_ms: u16,
     pub files: ConfigFiles,
@@ -169,6 +177,7 @@ impl BusOptions {
             max_cable_accel_m_per_s2: control.limits.linear_acceleration_max,
             resolve_epsilon_m: 1e-7,
             f_ini_n: None,
+            home_lengths_m: None,
             default_heartbeat_ms: drives.bus.heartbeat_producer_ms,
             files: ConfigFiles::default(),
         }
@@ -327,7 +336,18 @@ impl PlantBus {
                 detail: e.to_string(),
             }
         })?;
-        let home_drive = data.q.clone();
+        let home_drive = match &opts.home_lengths_m {
+            None => data.q.clone(),
+            Some(q) => {
+                if q.len() != m || q.iter().any(|l| !l.is_finite()) {
+                    return Err(BusPlantError::Option {
+                        name: "home_lengths_m",
+                        reason: format!("need {m} finite lengths (m), got {q:?}"),
+                    });
+                }
+                q.clone()
+            }
+        };
         let q_off: Vec<f64> = setup
             .q_cmd
             .iter()
@@ -611,7 +631,7 @@ impl PlantBus {
     pub fn last_error(&self) -> Option<&PlantError> {
         self.last_error.as_ref()
     }
-    /// Cable offsets q_off = q̂_ini − φ(x_ini), m (module docs).
+    /// Cable offsets q_off = q̂_ini − q_home, m (module docs).
     pub fn q_off(&self) -> &[f64] {
         &self.q_off
     }
@@ -619,7 +639,8 @@ impl PlantBus {
     pub fn setup(&self) -> &TensionSetup {
         &self.setup
     }
-    /// φ(x_ini) of the control model: the drive lengths at start, m.
+    /// q_home: the drive lengths at start (φ(x_ini) of the control model unless
+    /// [`BusOptions::home_lengths_m`] says otherwise), m.
     pub fn home_drive_lengths(&self) -> &[f64] {
         &self.home_drive
     }

@@ -89,7 +89,11 @@ struct Rig {
 impl Rig {
     fn new(cfg: PlantConfig) -> Self {
         let control = cfg.platform.clone();
-        let mut plant = plant_bus(cfg);
+        let plant = plant_bus(cfg);
+        Self::with_plant(control, plant)
+    }
+
+    fn with_plant(control: Platform, mut plant: PlantBus) -> Self {
         let master = Master::new(&drives());
         let now = 1_000_000_000;
         plant.start(now);
@@ -249,6 +253,88 @@ fn starts_at_home_with_the_setup_tension_and_homed_encoders() {
         assert!((t.cable_length_m[i] - pb.setup().q_cmd[i]).abs() < 1e-12);
         // Cables are stretched under tension: the controlled length is shorter than φ.
         assert!(pb.q_off()[i] < 0.0, "q_off[{i}] = {}", pb.q_off()[i]);
+    }
+}
+
+/// Commissioning with a surrogate controller: the drives are homed to the controller's full
+/// command at home, q_θ(home) = φ(home) + δ (δ = the surrogate offset there, tens of mm), so
+/// the first setpoint equals the drives' positions (no jump, no fault), the plant holds the
+/// set-up state at home, and the offset stream φ(x) + δ drives the plant exactly like the plain
+/// stream φ(x) with the default homing.
+#[test]
+fn home_lengths_option_homes_the_drives_to_the_controllers_full_command() {
+    let cfg = plant_cfg("icosahedron-ideal.toml");
+    let control = cfg.platform.clone();
+    let d = drives();
+    let phi_home = phi(&control, &control.home);
+    let delta: Vec<f64> = (0..8).map(|i| -0.020 - 0.002 * i as f64).collect();
+    let q_home: Vec<f64> = phi_home.iter().zip(&delta).map(|(p, e)| p + e).collect();
+    let mut opts = BusOptions::new(&d, &control);
+    opts.home_lengths_m = Some(q_home.clone());
+    let plant = PlantBus::new(cfg.clone(), &control, &d, opts).expect("plant with home lengths");
+    let default = plant_bus(cfg.clone());
+    for i in 0..8 {
+        assert!((plant.drive_length_m(i).unwrap() - q_home[i]).abs() < 1e-12);
+        assert!((plant.home_drive_lengths()[i] - q_home[i]).abs() < 1e-12);
+        // Same set-up (plant commands), the offset absorbs δ.
+        assert!((plant.setup().q_cmd[i] - default.setup().q_cmd[i]).abs() < 1e-12);
+        assert!((plant.q_off()[i] - (default.q_off()[i] - delta[i])).abs() < 1e-12);
+    }
+    let mut rig = Rig::with_plant(control.clone(), plant);
+    rig.boot();
+    let count_m = 1.0 / d.winches[0].counts_per_m();
+    for i in 0..8 {
+        let e = (rig.feedback().cable_length_m[i] - q_home[i]).abs();
+        assert!(e <= count_m, "cable {i}: drive-io reads {e} m off q_home");
+    }
+    // The controller's stream: φ(x) + δ (a constant offset stands in for φ_sg).
+    let offset_setpoint = |rig: &mut Rig, x: &Pose| {
+        let mut sp = rig.setpoint(x);
+        for i in 0..8 {
+            sp.cable_length_m[i] += delta[i];
+        }
+        sp
+    };
+    let home = control.home;
+    for _ in 0..50 {
+        let sp = offset_setpoint(&mut rig, &home);
+        rig.step(Some(&sp));
+    }
+    assert_eq!(
+        rig.master.state(),
+        BusState::Running,
+        "first setpoint accepted"
+    );
+    assert_eq!(rig.feedback().fault_code, 0);
+    let (dp, dr) = Pose::from_array(rig.plant.truth().pose).error_to(&home);
+    assert!(dp < 1e-6 && dr < 1e-6, "plant left home: {dp} m, {dr} rad");
+    // Move away and hold: the plant holds φ(x) + δ + q_off = φ(x) + q_off(default homing).
+    let x = Pose::from_array([0.2, -0.1, 2.1, 1f64.to_radians(), 0.0, -1f64.to_radians()]);
+    for k in 1..=800 {
+        let s = 0.5 - 0.5 * (std::f64::consts::PI * (k.min(600) as f64) / 600.0).cos();
+        let xs = Pose::from_array(std::array::from_fn(|j| {
+            home.to_array()[j] + s * (x.to_array()[j] - home.to_array()[j])
+        }));
+        let sp = offset_setpoint(&mut rig, &xs);
+        rig.step(Some(&sp));
+    }
+    assert_eq!(rig.master.state(), BusState::Running);
+    let phi_x = phi(&control, &x);
+    for i in 0..8 {
+        let expect = phi_x[i] + default.q_off()[i];
+        let e = (rig.plant.truth().cable_length_m[i] - expect).abs();
+        assert!(
+            e <= 0.5 * count_m + 1e-9,
+            "cable {i}: plant holds {e} m off φ(x) + q_off"
+        );
+    }
+    // A wrong number of home lengths is refused, naming the option.
+    let mut bad = BusOptions::new(&d, &control);
+    bad.home_lengths_m = Some(vec![8.0; 7]);
+    match PlantBus::new(cfg, &control, &d, bad) {
+        Err(BusPlantError::Option { name, .. }) => assert_eq!(name, "home_lengths_m"),
+        Err(e) => panic!("wrong error: {e}"),
+        Ok(_) => panic!("7 home lengths for 8 cables accepted"),
     }
 }
 

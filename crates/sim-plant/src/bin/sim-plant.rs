@@ -49,6 +49,12 @@ struct Args {
     /// control platform's `home.f_ini_n`, else (f_min + f_max)/2 projected (eq. 3.19 / 3.41).
     #[arg(long, value_delimiter = ',')]
     f_ini_n: Option<Vec<f64>>,
+    /// Lengths the drives read at the home pose after homing (m), comma separated, one per
+    /// cable: the controller's full command there. Default: φ(home) of the control platform
+    /// (a controller without surrogate); with a surrogate pass φ(home) + φ_sg(home) (eq. 5.26),
+    /// as `crs sim` does, so the first setpoint equals the drives' positions.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    home_lengths_m: Option<Vec<f64>>,
     /// Run the plant loop as SCHED_FIFO with this priority (1..=99) and mlockall.
     #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
     rt_priority: Option<i32>,
@@ -103,6 +109,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut opts = BusOptions::new(&drives, &control);
     opts.resolve_epsilon_m = args.resolve_epsilon_m;
     opts.f_ini_n = args.f_ini_n.clone();
+    opts.home_lengths_m = args.home_lengths_m.clone();
     opts.files = ConfigFiles {
         plant: plant_file.clone(),
         control: control_file.clone(),
@@ -131,9 +138,10 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         pose_error_mm = dp * 1e3,
         rotation_error_deg = dr.to_degrees(),
         forces_n = ?plant.setup().forces,
+        home_lengths_m = ?plant.home_drive_lengths(),
         q_off_min_mm = lo * 1e3,
         q_off_max_mm = hi * 1e3,
-        "initial tension set (eq. 3.19); encoders homed so the drives read φ(home) (eq. 3.14/6.24)"
+        "initial tension set (eq. 3.19); encoders homed so the drives read q_home (eq. 3.14/6.24)"
     );
 
     // SAFETY: the handler only stores to an atomic (async-signal-safe).
