@@ -456,7 +456,9 @@ pub fn split_rms(kind: Kind, obs: &[Observation], m: usize, w: Weights, r: &[f64
     let mut row = 0;
     for o in obs {
         let n = crate::residual::rows_per_sample(kind, m, o);
-        let nwr = n - m;
+        // Cartesian rows are all pose rows (weighted like the lengths); the others end with
+        // the m length rows after the wrench rows.
+        let nwr = if kind == Kind::Cartesian { 0 } else { n - m };
         for k in 0..nwr {
             sw += (r[row + k] / w.wrench).powi(2);
             nw += 1;

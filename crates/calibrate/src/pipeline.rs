@@ -26,6 +26,9 @@ pub struct PipelineConfig {
     pub select: SelectConfig,
     /// Skip the diagnosis/extension loop.
     pub no_extension: bool,
+    /// Also fit the kinematic parameters on the Cartesian residual through the forward
+    /// kinematics (eq. 4.3–4.4), from the optimal joint-space model; reported as its own stage.
+    pub cartesian: bool,
 }
 
 impl Default for PipelineConfig {
@@ -37,6 +40,7 @@ impl Default for PipelineConfig {
             kinematic_b: false,
             select: SelectConfig::default(),
             no_extension: false,
+            cartesian: false,
         }
     }
 }
@@ -137,6 +141,8 @@ pub fn run(
     let fit_k = identify::fit(&nom_k, train, &spec_k, &mut |it, c| {
         progress("kinematic", it, c)
     })?;
+    let free_k = fit_k.free.clone();
+    let start_c = fit_k.model.clone();
     stages.push(Stage {
         name: "optimal kinematic".into(),
         kind: Kind::Kinematic,
@@ -144,6 +150,25 @@ pub fn run(
         model: fit_k.model.clone(),
         fit: Some(fit_k),
     });
+    // 2b. Optional: the same parameters on the Cartesian residual (eq. 4.3–4.4), which weighs
+    // the errors as the pose tracker sees them rather than per cable.
+    if cfg.cartesian {
+        let mut spec_c = FitSpec::new(Kind::Cartesian, free_k);
+        spec_c.weights = Weights {
+            wrench: cfg.weights.wrench,
+            length: 1.0,
+        };
+        let fit_c = identify::fit(&start_c, train, &spec_c, &mut |it, c| {
+            progress("cartesian", it, c)
+        })?;
+        stages.push(Stage {
+            name: "optimal kinematic (Cartesian residual)".into(),
+            kind: Kind::Cartesian,
+            holdout: validate::evaluate(Kind::Cartesian, &fit_c.model, eval),
+            model: fit_c.model.clone(),
+            fit: Some(fit_c),
+        });
+    }
     if !has_forces {
         return Ok(PipelineReport {
             n_train: train.len(),

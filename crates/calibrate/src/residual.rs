@@ -6,7 +6,14 @@
 //!   elastostatic inverse kinematics ρ_q = w_ρq (φ_el(x_M, f_M, p) − q_θ), with
 //!   φ_el = q (1 − f / k_F) (eq. 4.39) and its derivatives (eq. 4.40–4.41, 4.34–4.35).
 //!
-//! Both take q_θ = (1 + ε_i) q_cmd + δ_i (cable offsets δ, eq. 3.14 / 6.24; drum candidate ε)
+//! * Cartesian (eq. 4.3–4.4, optional): ρ_x = [r_ν − r_M; log(R_ν R_M^T)] with
+//!   x_ν = ν(q_θ, p) the least-squares forward kinematics (eq. 2.11) of the commanded lengths,
+//!   i.e. the pose error itself in metres and radians. Jacobian by the implicit function theorem
+//!   at the FK optimum (Gauss–Newton, second-order residual terms dropped):
+//!   ∂ξ/∂p = (A^T A)^{-1} Σ_i a_i ∂e_i/∂p with e_i = φ_i(x_ν, p) − q_θ,i and a_i the columns of
+//!   A^T (eq. 2.30, 2.54), ξ the twist (δr, δθ world frame).
+//!
+//! All take q_θ = (1 + ε_i) q_cmd + δ_i (cable offsets δ, eq. 3.14 / 6.24; drum candidate ε)
 //! and, for the candidates of [`crate::effects`], the extended inverse model
 //!   φ_el = q + (μg cos α)² q³ / (24 f²) − (q + l_i)/k_F,i · (g(f) − d H),
 //!   g(f) = f + κ (f − f_s)² / (2 f_s),
@@ -15,16 +22,37 @@
 
 use crate::observation::Observation;
 use crate::params::{CalModel, ParamId, STIFFNESS_REFERENCE_FORCE_N};
+use motion_core::forward::{FkOptions, least_squares};
 use motion_core::kinematics::differential;
 use motion_core::pose::skew;
 use motion_core::{Data, Model, kinematics};
-use nalgebra::{DMatrix, Matrix3, RowVector3, Vector3};
+use nalgebra::{DMatrix, Matrix3, Matrix6, RowVector3, Vector3};
+
+/// Rotation vector (axis · angle) of a rotation matrix, the log map of SO(3); first-order equal
+/// to the world-frame infinitesimal rotation δθ of the twist.
+/// Computed from the skew part, v = vee((R − Rᵀ)/2) = sin θ · axis, scaled by θ / sin θ, so it
+/// stays exact for the µrad-sized rotations of a converging fit (nalgebra's `scaled_axis`
+/// returns zero below its epsilon). Pose errors here are far below π.
+fn rotation_vector(r: &Matrix3<f64>) -> Vector3<f64> {
+    let v = 0.5
+        * Vector3::new(
+            r[(2, 1)] - r[(1, 2)],
+            r[(0, 2)] - r[(2, 0)],
+            r[(1, 0)] - r[(0, 1)],
+        );
+    let s = v.norm();
+    let c = 0.5 * (r.trace() - 1.0);
+    let theta = s.atan2(c);
+    if s < 1e-12 { v } else { v * (theta / s) }
+}
 
 /// Which residual (eq. 4.8 or eq. 4.38).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum Kind {
     Kinematic,
     Elastostatic,
+    /// Pose residual through the forward kinematics (eq. 4.3–4.4); kinematic parameters only.
+    Cartesian,
 }
 
 /// Residual weights w_ρ of eq. (4.38) (the spec uses 1 for the wrench and 1e4 for the
@@ -48,6 +76,7 @@ impl Default for Weights {
 pub fn rows_per_sample(kind: Kind, m: usize, o: &Observation) -> usize {
     match kind {
         Kind::Kinematic => m,
+        Kind::Cartesian => 6,
         Kind::Elastostatic => {
             if o.forces.is_some() {
                 6 + m
@@ -67,6 +96,11 @@ pub enum ResidualError {
     Kinematics {
         sample: u64,
         err: motion_core::kinematics::KinematicsError,
+    },
+    #[error("sample {sample}: forward kinematics of the commanded lengths: {err}")]
+    Forward {
+        sample: u64,
+        err: motion_core::forward::FkError,
     },
 }
 
@@ -152,6 +186,11 @@ impl<'a> Evaluator<'a> {
             })?;
             let n = rows_per_sample(self.kind, m, o);
             let jr = jac.as_mut().map(|(j, c)| (&mut **j, *c));
+            if self.kind == Kind::Cartesian {
+                self.cartesian(cal, &model, &mut data, o, &mut r[row..row + n], jr, row)?;
+                row += n;
+                continue;
+            }
             match (self.kind, &o.forces) {
                 (Kind::Elastostatic, Some(fm)) => {
                     // Force-sensor candidate: f = (1 + γ) f_M + β (identity at zero).
@@ -189,6 +228,83 @@ impl<'a> Evaluator<'a> {
                 put(j, cols, row0 + i, ParamId::DrumScale(i), -w * o.q_cmd[i]);
             }
         }
+    }
+
+    /// Eq. (4.3–4.4): the pose error of the forward kinematics ν(q_θ, p) against x_M. `data`
+    /// is left with the inverse kinematics at ν(q_θ, p).
+    #[allow(clippy::too_many_arguments)]
+    fn cartesian(
+        &self,
+        cal: &CalModel,
+        model: &Model,
+        data: &mut Data,
+        o: &Observation,
+        r: &mut [f64],
+        jac: Option<(&mut DMatrix<f64>, &Columns)>,
+        row0: usize,
+    ) -> Result<(), ResidualError> {
+        let m = cal.m();
+        let w = self.weights.length;
+        let q_theta: Vec<f64> = (0..m).map(|i| cal.q_theta(i, o.q_cmd[i])).collect();
+        let opts = FkOptions {
+            max_iterations: 200,
+            ..FkOptions::default()
+        };
+        // Start at the measured pose: the model's solution is near it (mm), and the same start
+        // for every evaluation keeps the residual a smooth function of p.
+        let sol = least_squares(model, data, &q_theta, &o.pose, &opts).map_err(|err| {
+            ResidualError::Forward {
+                sample: o.sample,
+                err,
+            }
+        })?;
+        let x = sol.pose;
+        let dr = x.r - o.pose.r;
+        let dth = rotation_vector(&(x.rotation() * o.pose.rotation().transpose()));
+        for k in 0..3 {
+            r[k] = w * dr[k];
+            r[3 + k] = w * dth[k];
+        }
+        let Some((j, cols)) = jac else { return Ok(()) };
+        // ∂ξ/∂p = (AᵀA)⁻¹ Σ_i a_i ∂e_i/∂p: one 6-vector per cable and parameter kind.
+        let mut ata = Matrix6::zeros();
+        for i in 0..m {
+            ata += data.at[i] * data.at[i].transpose();
+        }
+        let Some(inv) = ata.try_inverse() else {
+            return Err(ResidualError::Forward {
+                sample: o.sample,
+                err: motion_core::forward::FkError::Singular { iteration: 0 },
+            });
+        };
+        for i in 0..m {
+            let g = inv * data.at[i] * w; // ∂ρ/∂e_i
+            let (dqa, dqb) = differential::length_parameter_jacobian(data, &x, i);
+            for k in 0..3 {
+                if let Some(c) = cols.get(ParamId::A(i, k)) {
+                    for row in 0..6 {
+                        j[(row0 + row, c)] += g[row] * dqa[k];
+                    }
+                }
+                if let Some(c) = cols.get(ParamId::B(i, k)) {
+                    for row in 0..6 {
+                        j[(row0 + row, c)] += g[row] * dqb[k];
+                    }
+                }
+            }
+            // e_i = φ_i − (1 + ε_i) q_cmd,i − δ_i.
+            for (p, de) in [
+                (ParamId::Offset(i), -1.0),
+                (ParamId::DrumScale(i), -o.q_cmd[i]),
+            ] {
+                if let Some(c) = cols.get(p) {
+                    for row in 0..6 {
+                        j[(row0 + row, c)] += g[row] * de;
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 
     #[allow(clippy::too_many_arguments)]

@@ -146,7 +146,8 @@ pub fn predict(kind: Kind, cal: &CalModel, o: &Observation) -> Result<Prediction
         ..FkOptions::default()
     };
     match kind {
-        Kind::Kinematic => {
+        // A model fitted on the Cartesian residual is a kinematic model.
+        Kind::Kinematic | Kind::Cartesian => {
             let sol = least_squares(&model, &mut data, &q_theta, &guess, &opts)
                 .map_err(|e| e.to_string())?;
             Ok(Prediction {
@@ -229,6 +230,13 @@ pub fn evaluate(kind: Kind, cal: &CalModel, obs: &[Observation]) -> Errors {
 /// Cable-length residuals φ(x_M) − q_θ (kinematic) or φ_el(x_M, f_M) − q_θ (elastostatic) per
 /// cable: `out[i]` holds cable i's residuals over the samples, m.
 pub fn length_errors(kind: Kind, cal: &CalModel, obs: &[Observation]) -> Vec<Vec<f64>> {
+    // A model fitted on the Cartesian residual is a kinematic model: its length errors are the
+    // joint-space residual's.
+    let kind = if kind == Kind::Cartesian {
+        Kind::Kinematic
+    } else {
+        kind
+    };
     let m = cal.m();
     let mut out = vec![Vec::new(); m];
     let w = Weights {

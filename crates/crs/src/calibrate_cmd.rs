@@ -80,6 +80,10 @@ pub struct Opts {
     /// Skip the residual diagnosis / model extension.
     #[arg(long)]
     pub(crate) no_extension: bool,
+    /// Also fit the kinematic parameters on the Cartesian residual through the forward
+    /// kinematics (eq. 4.3–4.4), reported as the stage "optimal kinematic (Cartesian residual)".
+    #[arg(long)]
+    pub(crate) cartesian: bool,
     /// Also print the report as JSON on stdout.
     #[arg(long)]
     pub(crate) json: bool,
@@ -92,6 +96,7 @@ fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Error>> {
     cfg.ridge_b = o.ridge_b;
     cfg.lasso_b = o.lasso_b;
     cfg.no_extension = o.no_extension;
+    cfg.cartesian = o.cartesian;
     cfg.select.min_gain = o.min_gain;
     if let Some(c) = &o.candidates {
         cfg.select.candidates = c

@@ -690,6 +690,7 @@ pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
         candidates: None,
         min_gain: 0.05,
         no_extension: true,
+        cartesian: false,
         json: false,
     };
     let cal_cmd = format!(
