@@ -687,6 +687,8 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
         transport: transport.clone(),
         monitor: with_monitor,
         force_min_n: f64::INFINITY,
+        static_position_mm: f64::NAN,
+        static_rotation_deg: f64::NAN,
         force_max_n: f64::NEG_INFINITY,
         f_min_n: f_min,
         f_max_n: f_max,
@@ -802,7 +804,9 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
         sum.tracking_position_mean_mm = sum_p / n_track as f64 * 1e3;
         sum.tracking_rotation_mean_deg = (sum_r / n_track as f64).to_degrees();
     }
-    if let (Some(t), Some(r)) = (last_truth, last_ref) {
+    // The static error is only that after a completed run (motion-core ended its plan and
+    // held); an aborted run leaves it NaN ("not reached").
+    if let (Some(t), Some(r), Ok(())) = (last_truth, last_ref, &result) {
         let (dp, dr) = Pose::from_array(t.pose).error_to(&Pose::from_array(r));
         sum.static_position_mm = dp * 1e3;
         sum.static_rotation_deg = dr.to_degrees();
@@ -892,10 +896,14 @@ fn print_summary(s: &Summary) {
         s.tracking_rotation_mean_deg,
         s.tracking_rotation_max_deg
     );
-    println!(
-        "  at rest after the trajectory: position {:.2} mm, rotation {:.3}°",
-        s.static_position_mm, s.static_rotation_deg
-    );
+    if s.static_position_mm.is_nan() {
+        println!("  at rest after the trajectory: not reached (the run did not complete)");
+    } else {
+        println!(
+            "  at rest after the trajectory: position {:.2} mm, rotation {:.3}°",
+            s.static_position_mm, s.static_rotation_deg
+        );
+    }
     if s.rest.rest_points > 0 || s.rest_points_skipped > 0 {
         let r = &s.rest;
         println!(

@@ -8,90 +8,25 @@
 //! `cargo test --workspace` (tools/test.sh) guarantees; with `cargo test -p crs` alone they may
 //! be missing or stale, and the test fails saying so (build them with
 //! `cargo build --workspace --bins`).
-use std::path::{Path, PathBuf};
+mod common;
+use common::{relaxed_configs, root, stack_bin_dir};
+use std::path::PathBuf;
 use std::process::Command;
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
 /// The measured mean position error after calibration must be at least this many times
-/// smaller than before (12 poses, 9 of them training: 6.14 → 1.45 mm = 4.2× and, with the
-/// relaxed timing, 6.11 → 1.80 mm = 3.4× in debug runs; the full 40-pose release run gives
-/// 11×, docs/calibration.md). A broken identification or deployment leaves it near 1×.
+/// smaller than before (20 poses, 15 of them training: 7.32 → 1.30 mm and 7.37 → 1.04 mm,
+/// 5.6–7×, in debug runs; the full 40-pose release run gives 11×, docs/calibration.md). A
+/// broken identification or deployment leaves it near 1×.
 const FACTOR: f64 = 2.0;
-
-/// Copies of the stack's daemon, drives and monitor TOML with the timing relaxed for this test
-/// (as tools/stack-hil.sh does for the emulated guest): 4 ms loop and SYNC, drives' stale
-/// setpoints 100 cycles, heartbeat timeout 300 ms, safety-heartbeat validation 150 ms, monitor
-/// silence 10 / feedback silence 20 cycles. The test runs DEBUG builds of four processes on a
-/// shared 2-core host, where the spec's 1 ms / 50 ms watchdogs trip on scheduling stalls (seen:
-/// the drives' safety-heartbeat timeout, then sequence gaps). It asserts what calibration does
-/// on the running stack, not timing: timing is the benches' job (benches/RESULTS.md). Returns
-/// [daemon, drives, monitor].
-fn relaxed_configs(dir: &Path) -> [PathBuf; 3] {
-    std::fs::create_dir_all(dir).unwrap();
-    let edit = |name: &str, rules: &[(&str, &str)]| -> PathBuf {
-        let text = std::fs::read_to_string(root().join("config").join(name)).unwrap();
-        let mut seen = vec![0usize; rules.len()];
-        let lines: Vec<String> = text
-            .lines()
-            .map(|l| {
-                for (k, (key, value)) in rules.iter().enumerate() {
-                    if l.starts_with(&format!("{key} = ")) {
-                        seen[k] += 1;
-                        return format!("{key} = {value}");
-                    }
-                }
-                l.to_string()
-            })
-            .collect();
-        assert!(
-            seen.iter().all(|n| *n > 0),
-            "config/{name}: a relaxed key is missing: {rules:?} {seen:?}"
-        );
-        let path = dir.join(name);
-        std::fs::write(&path, lines.join("\n") + "\n").unwrap();
-        path
-    };
-    [
-        edit("motion-core.toml", &[("period_us", "4000")]),
-        edit(
-            "drives.toml",
-            &[
-                ("sync_period_us", "4000"),
-                ("stale_setpoint_cycles", "100"),
-                ("heartbeat_producer_ms", "20"),
-                ("heartbeat_timeout_ms", "300"),
-                ("validation_time_ms", "150"),
-                ("pair_window_ms", "75"),
-            ],
-        ),
-        // Both silence_cycles keys ([monitor] and [feedback]) become 10; identity grace 40.
-        edit(
-            "safety-monitor.toml",
-            &[("silence_cycles", "10"), ("identity_grace_cycles", "40")],
-        ),
-    ]
-}
 
 #[test]
 fn closed_loop_on_the_stack_reduces_the_measured_pose_error() {
     let crs = PathBuf::from(env!("CARGO_BIN_EXE_crs"));
-    let bin_dir = crs.parent().unwrap().to_path_buf();
-    let missing: Vec<&str> = ["motion-core", "drive-io", "sim-plant", "safety-monitor"]
-        .into_iter()
-        .filter(|n| !bin_dir.join(n).is_file())
-        .collect();
-    assert!(
-        missing.is_empty(),
-        "{missing:?} not built in {}: run `cargo test --workspace` or `cargo build --workspace --bins` first",
-        bin_dir.display()
-    );
+    stack_bin_dir(&crs);
     let out = std::env::temp_dir().join(format!("crs-loop-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     let port = 20000 + (std::process::id() % 20000);
-    let poses = 12;
+    let poses = 20;
     let cfg = relaxed_configs(&out.join("cfg"));
     let o = Command::new(&crs)
         .current_dir(root())
@@ -151,6 +86,13 @@ fn closed_loop_on_the_stack_reduces_the_measured_pose_error() {
             let (dp, _) = s.pose.error_to(s.pose_ref.as_ref().unwrap());
             assert!(dp < 0.2, "{run}: rest point {} is {dp} m off", s.sample);
         }
+    }
+    // Diagnosis: k_F is the weakest-determined group on a short campaign (12 poses gave
+    // 1.0–5.3 MN against 1.9–2.2 MN true, a refitted surrogate above the 100 mm bound of eq.
+    // 5.27, which motion-core rightly refused); 20 poses keep it in range.
+    let cal = std::fs::read_to_string(out.join("identification/calibrated.toml")).unwrap();
+    if let Some(l) = cal.lines().find(|l| l.starts_with("k_f_n")) {
+        eprintln!("identified {l}");
     }
     let before = f(&rep["before"]["summary"]["rest"]["position_mean_mm"]);
     let after = f(&rep["after"]["summary"]["rest"]["position_mean_mm"]);

@@ -1,0 +1,184 @@
+//! `crs sim` supervises the stack as a user relies on: a child that dies stops all the others
+//! and the launcher exits with an error naming it; Ctrl-C (SIGINT) stops every process. Runs
+//! the real binaries on the CAN-over-UDP loopback bus, with the relaxed timing of the other
+//! stack tests (debug builds on a shared host; see tests/common).
+mod common;
+use common::{relaxed_configs, root, stack_bin_dir};
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+/// A running `crs sim` and the pids of the children it announced.
+struct Sim {
+    child: Child,
+    lines: mpsc::Receiver<String>,
+    log: Vec<String>,
+    out: PathBuf,
+}
+
+impl Sim {
+    fn start(tag: &str) -> Self {
+        let crs = PathBuf::from(env!("CARGO_BIN_EXE_crs"));
+        stack_bin_dir(&crs);
+        let out = std::env::temp_dir().join(format!("crs-sim-sup-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&out);
+        let cfg = relaxed_configs(&out.join("cfg"));
+        let port = 20000 + (std::process::id() % 20000) + if tag == "kill" { 0 } else { 1 };
+        let mut child = Command::new(&crs)
+            .current_dir(root())
+            .args([
+                "sim",
+                "--transport",
+                &format!("udpbus:239.255.70.11:{port}"),
+            ])
+            .arg("--config")
+            .arg(&cfg[0])
+            .arg("--drives")
+            .arg(&cfg[1])
+            .arg("--monitor-config")
+            .arg(&cfg[2])
+            .arg("--out")
+            .arg(out.join("run"))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn crs sim");
+        let (tx, lines) = mpsc::channel();
+        for stream in [
+            Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
+            Box::new(child.stderr.take().unwrap()),
+        ] {
+            let tx = tx.clone();
+            std::thread::spawn(move || {
+                for l in BufReader::new(stream).lines().map_while(Result::ok) {
+                    let _ = tx.send(l);
+                }
+            });
+        }
+        Self {
+            child,
+            lines,
+            log: Vec::new(),
+            out,
+        }
+    }
+
+    /// Waits (bounded) for a line containing `what`; returns it.
+    fn wait_line(&mut self, what: &str, secs: u64) -> String {
+        let deadline = Instant::now() + Duration::from_secs(secs);
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(l) => {
+                    self.log.push(l.clone());
+                    if l.contains(what) {
+                        return l;
+                    }
+                }
+                Err(_) => panic!("no `{what}` within {secs} s:\n{}", self.log.join("\n")),
+            }
+        }
+    }
+
+    /// Pids of the children from the "started NAME pid N" lines, waiting for all four.
+    fn children(&mut self) -> Vec<(String, u32)> {
+        let mut v = Vec::new();
+        for name in ["sim-plant", "safety-monitor", "drive-io", "motion-core"] {
+            let l = self.wait_line(&format!("started {name}"), 60);
+            let pid = l
+                .split_whitespace()
+                .skip_while(|w| *w != "pid")
+                .nth(1)
+                .and_then(|p| p.parse().ok())
+                .unwrap_or_else(|| panic!("no pid in `{l}`"));
+            v.push((name.to_string(), pid));
+        }
+        v
+    }
+
+    /// Waits (bounded) for `crs sim` to exit; returns its status and the rest of its output.
+    fn finish(&mut self, secs: u64) -> (std::process::ExitStatus, String) {
+        let deadline = Instant::now() + Duration::from_secs(secs);
+        let status = loop {
+            if let Some(st) = self.child.try_wait().unwrap() {
+                break st;
+            }
+            if Instant::now() > deadline {
+                let _ = self.child.kill();
+                panic!(
+                    "crs sim did not exit within {secs} s:\n{}",
+                    self.log.join("\n")
+                );
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        // The reader threads end at EOF once crs sim and its children closed the pipes.
+        while let Ok(l) = self.lines.recv_timeout(Duration::from_secs(5)) {
+            self.log.push(l);
+        }
+        (status, self.log.join("\n"))
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = std::fs::remove_dir_all(&self.out);
+    }
+}
+
+/// True while `pid` exists and is not a zombie.
+fn alive(pid: u32) -> bool {
+    match std::fs::read_to_string(Path::new("/proc").join(pid.to_string()).join("stat")) {
+        Ok(stat) => !stat
+            .rsplit_once(')')
+            .is_some_and(|(_, rest)| rest.trim_start().starts_with('Z')),
+        Err(_) => false,
+    }
+}
+
+#[test]
+fn a_crashed_child_stops_the_whole_stack() {
+    let mut sim = Sim::start("kill");
+    let kids = sim.children();
+    // All four run (motion-core was started after the drives were operational): killing
+    // drive-io now is a crash in the middle of a run.
+    let drive_io = kids.iter().find(|(n, _)| n == "drive-io").unwrap().1;
+    assert!(alive(drive_io));
+    // SAFETY: sending SIGKILL to a pid this test just read from crs sim's own output.
+    assert_eq!(unsafe { libc::kill(drive_io as i32, libc::SIGKILL) }, 0);
+    let (status, text) = sim.finish(60);
+    assert!(
+        !status.success(),
+        "crs sim must fail when a child dies:\n{text}"
+    );
+    assert!(text.contains("drive-io exited"), "{text}");
+    for (name, pid) in &kids {
+        assert!(
+            !alive(*pid),
+            "{name} (pid {pid}) still runs after crs sim exited"
+        );
+    }
+}
+
+#[test]
+fn ctrl_c_stops_every_process() {
+    let mut sim = Sim::start("int");
+    let kids = sim.children();
+    for (name, pid) in &kids {
+        assert!(alive(*pid), "{name} not running");
+    }
+    // SAFETY: SIGINT to the crs sim child this test spawned.
+    assert_eq!(
+        unsafe { libc::kill(sim.child.id() as i32, libc::SIGINT) },
+        0
+    );
+    let (status, text) = sim.finish(60);
+    assert!(!status.success(), "{text}");
+    assert!(text.contains("interrupted"), "{text}");
+    for (name, pid) in &kids {
+        assert!(!alive(*pid), "{name} (pid {pid}) still runs after Ctrl-C");
+    }
+}
