@@ -264,6 +264,48 @@ fn abs(p: &Path) -> Result<PathBuf, String> {
     std::fs::canonicalize(p).map_err(|e| format!("{}: {e}", p.display()))
 }
 
+/// A TOML template as a table; errors name the file.
+fn read_template(template: &Path) -> Result<toml::Table, String> {
+    let text =
+        std::fs::read_to_string(template).map_err(|e| format!("{}: {e}", template.display()))?;
+    text.parse()
+        .map_err(|e| format!("{}: {e}", template.display()))
+}
+
+/// The `[name]` table of a template (must exist).
+fn section<'a>(
+    t: &'a mut toml::Table,
+    name: &str,
+    template: &Path,
+) -> Result<&'a mut toml::Table, String> {
+    t.get_mut(name)
+        .and_then(|v| v.as_table_mut())
+        .ok_or_else(|| format!("{}: no [{name}] table", template.display()))
+}
+
+/// An absolute path as a TOML string (the written files live elsewhere than the template).
+fn path_value(p: &Path) -> Result<toml::Value, String> {
+    Ok(toml::Value::String(abs(p)?.display().to_string()))
+}
+
+/// Writes `t` to `out` with a header naming the template it came from.
+fn write_from_template(
+    out: &Path,
+    t: &toml::Table,
+    what: &str,
+    template: &Path,
+) -> Result<(), BoxErr> {
+    let body = toml::to_string(t)?;
+    std::fs::write(
+        out,
+        format!(
+            "# {what} TOML written by `crs calibrate loop` from {}.\n{body}",
+            template.display()
+        ),
+    )?;
+    Ok(())
+}
+
 /// The daemon TOML of one run: the template with platform, surrogate and waypoints replaced.
 fn write_daemon_toml(
     template: &Path,
@@ -272,40 +314,19 @@ fn write_daemon_toml(
     surrogate: Option<&Path>,
     waypoints: &Path,
 ) -> Result<(), BoxErr> {
-    let text =
-        std::fs::read_to_string(template).map_err(|e| format!("{}: {e}", template.display()))?;
-    let mut t: toml::Table = text
-        .parse()
-        .map_err(|e| format!("{}: {e}", template.display()))?;
-    let s = |p: &Path| -> Result<toml::Value, String> {
-        Ok(toml::Value::String(abs(p)?.display().to_string()))
-    };
-    let d = t
-        .get_mut("daemon")
-        .and_then(|v| v.as_table_mut())
-        .ok_or_else(|| format!("{}: no [daemon] table", template.display()))?;
-    d.insert("platform".into(), s(platform)?);
+    let mut t = read_template(template)?;
+    let d = section(&mut t, "daemon", template)?;
+    d.insert("platform".into(), path_value(platform)?);
     d.insert(
         "surrogate".into(),
         match surrogate {
-            Some(p) => s(p)?,
+            Some(p) => path_value(p)?,
             None => toml::Value::String(String::new()),
         },
     );
     d.remove("stats_file");
-    let tr = t
-        .get_mut("trajectory")
-        .and_then(|v| v.as_table_mut())
-        .ok_or_else(|| format!("{}: no [trajectory] table", template.display()))?;
-    tr.insert("waypoints".into(), s(waypoints)?);
-    let body = toml::to_string(&t)?;
-    std::fs::write(
-        out,
-        format!(
-            "# motion-core daemon TOML written by `crs calibrate loop` from {}.\n{body}",
-            template.display()
-        ),
-    )?;
+    section(&mut t, "trajectory", template)?.insert("waypoints".into(), path_value(waypoints)?);
+    write_from_template(out, &t, "motion-core daemon", template)?;
     // The daemon's loader must accept it.
     motion_core::daemon::config::load(out).map_err(|e| e.to_string())?;
     Ok(())
@@ -318,34 +339,12 @@ fn write_monitor_toml(
     platform: &Path,
     drives: &Path,
 ) -> Result<(), BoxErr> {
-    let text =
-        std::fs::read_to_string(template).map_err(|e| format!("{}: {e}", template.display()))?;
-    let mut t: toml::Table = text
-        .parse()
-        .map_err(|e| format!("{}: {e}", template.display()))?;
-    let s = |p: &Path| -> Result<toml::Value, String> {
-        Ok(toml::Value::String(abs(p)?.display().to_string()))
-    };
-    let mon = t
-        .get_mut("monitor")
-        .and_then(|v| v.as_table_mut())
-        .ok_or_else(|| format!("{}: no [monitor] table", template.display()))?;
-    mon.insert("platform".into(), s(platform)?);
+    let mut t = read_template(template)?;
+    let mon = section(&mut t, "monitor", template)?;
+    mon.insert("platform".into(), path_value(platform)?);
     mon.insert("trip_log".into(), toml::Value::String(String::new()));
-    let can = t
-        .get_mut("can")
-        .and_then(|v| v.as_table_mut())
-        .ok_or_else(|| format!("{}: no [can] table", template.display()))?;
-    can.insert("drives".into(), s(drives)?);
-    let body = toml::to_string(&t)?;
-    std::fs::write(
-        out,
-        format!(
-            "# safety-monitor TOML written by `crs calibrate loop` from {}.\n{body}",
-            template.display()
-        ),
-    )?;
-    Ok(())
+    section(&mut t, "can", template)?.insert("drives".into(), path_value(drives)?);
+    write_from_template(out, &t, "safety-monitor", template)
 }
 
 /// Fits the surrogate of `platform` (as `crs surrogate fit` with the default degree and margin).

@@ -158,11 +158,17 @@ fn loop_thread_allocates_nothing_over_many_cycles() {
         COUNT_HERE.with(|c| c.set(true));
         hl.step(k * 1_000_000, &mut OutboxSink(&outbox), &mut cmds, &stats);
         COUNT_HERE.with(|c| c.set(false));
-        // Paced so the stage keeps up (the outbox holds 64); receiving is not the loop's job.
+        // Paced by the data, not by time: every 16 cycles wait (bounded) until the stage has
+        // delivered every setpoint so far, so neither the outbox (64) nor the subscriber
+        // buffer (32) can overflow however the host schedules the stage. Receiving is not the
+        // loop's job (not counted).
         if k % 16 == 15 {
-            std::thread::sleep(std::time::Duration::from_millis(1));
-            while let Ok(Some(_)) = sub.receive() {
-                received += 1;
+            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+            while received < k + 1 && std::time::Instant::now() < deadline {
+                match sub.receive() {
+                    Ok(Some(_)) => received += 1,
+                    _ => std::thread::sleep(std::time::Duration::from_micros(100)),
+                }
             }
         }
     }
