@@ -21,6 +21,9 @@ pub struct PipelineConfig {
     pub ridge_b: f64,
     /// Lasso λ on the platform anchors b, 0 = off (eq. 4.32).
     pub lasso_b: f64,
+    /// Ridge λ on the cable stiffnesses k_F (towards the nominal, in units of 1e6 N) in the
+    /// elastostatic fit, 0 = off: k_F is the weakest-determined group on short campaigns.
+    pub ridge_kf: f64,
     /// Identify b in the kinematic step too (the spec's sec. 6.2 identifies a only).
     pub kinematic_b: bool,
     pub select: SelectConfig,
@@ -37,6 +40,7 @@ impl Default for PipelineConfig {
             weights: Weights::default(),
             ridge_b: 0.0,
             lasso_b: 0.0,
+            ridge_kf: 0.0,
             kinematic_b: false,
             select: SelectConfig::default(),
             no_extension: false,
@@ -200,6 +204,11 @@ pub fn run(
             .into_iter()
             .map(|p| (p, cfg.ridge_b))
             .collect();
+    }
+    if cfg.ridge_kf > 0.0 {
+        spec_e
+            .ridge
+            .extend(group(Group::KF, m).into_iter().map(|p| (p, cfg.ridge_kf)));
     }
     if cfg.lasso_b > 0.0 {
         spec_e.lasso = group(Group::B, m)

@@ -70,6 +70,9 @@ pub struct Opts {
     /// Lasso λ on the platform anchors b (eq. 4.32).
     #[arg(long, default_value_t = 0.0)]
     pub(crate) lasso_b: f64,
+    /// Ridge λ on the cable stiffnesses k_F towards the nominal (eq. 4.32; k_F in 1e6 N).
+    #[arg(long, default_value_t = 0.0)]
+    pub(crate) ridge_kf: f64,
     /// Candidate effects (comma separated): pulleys, powertrain, stiffness, hysteresis, sag, drum,
     /// load_cog, force_sensors.
     #[arg(long, value_delimiter = ',')]
@@ -95,6 +98,7 @@ fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Error>> {
     cfg.weights.length = o.w_length;
     cfg.ridge_b = o.ridge_b;
     cfg.lasso_b = o.lasso_b;
+    cfg.ridge_kf = o.ridge_kf;
     cfg.no_extension = o.no_extension;
     cfg.cartesian = o.cartesian;
     cfg.select.min_gain = o.min_gain;

@@ -15,7 +15,7 @@ use std::process::Command;
 
 /// The measured mean position error after calibration must be at least this many times
 /// smaller than before (20 poses, 15 of them training: 7.32 → 1.30 mm and 7.37 → 1.04 mm,
-/// 5.6–7×, in debug runs; the full 40-pose release run gives 11×, docs/calibration.md). A
+/// 5.6–7×, in debug runs; the full 40-pose release run gives 9×, docs/calibration.md). A
 /// broken identification or deployment leaves it near 1×.
 const FACTOR: f64 = 2.0;
 
@@ -89,9 +89,9 @@ fn closed_loop_on_the_stack_reduces_the_measured_pose_error() {
             assert!(dp < 0.2, "{run}: rest point {} is {dp} m off", s.sample);
         }
     }
-    // Diagnosis: k_F is the weakest-determined group on a short campaign (12 poses gave
-    // 1.0–5.3 MN against 1.9–2.2 MN true, a refitted surrogate above the 100 mm bound of eq.
-    // 5.27, which motion-core rightly refused); 20 poses keep it in range.
+    // Diagnosis: k_F is the weakest-determined group on a short campaign (12 poses without
+    // the loop's ridge on k_F gave 1.0–5.3 MN against 1.9–2.2 MN true and a refitted
+    // surrogate above the 100 mm bound of eq. 5.27, which motion-core rightly refused).
     let cal = std::fs::read_to_string(out.join("identification/calibrated.toml")).unwrap();
     if let Some(l) = cal.lines().find(|l| l.starts_with("k_f_n")) {
         eprintln!("identified {l}");
