@@ -354,6 +354,65 @@ fn write_monitor_toml(
     write_from_template(out, &t, "safety-monitor", template)
 }
 
+/// The surrogate of one run (none with `--no-surrogate`), its figures printed and its command
+/// recorded.
+fn maybe_fit_surrogate(
+    with_sg: bool,
+    platform: &Path,
+    a: &LoopArgs,
+    out: &Path,
+    commands: &mut Vec<String>,
+) -> Result<Option<surrogate::FitReport>, BoxErr> {
+    if !with_sg {
+        return Ok(None);
+    }
+    let r = fit_surrogate(platform, a.surrogate_validation_samples, out)?;
+    println!(
+        "  max |φ_sg| {:.1} mm, fit error max {:.3} mm → {}",
+        r.max_abs_offset_mm,
+        r.max_fit_error_mm,
+        out.display()
+    );
+    commands.push(format!(
+        "crs surrogate fit --platform {} --validation-samples {} --out {}",
+        platform.display(),
+        a.surrogate_validation_samples,
+        out.display()
+    ));
+    Ok(Some(r))
+}
+
+/// The daemon and safety-monitor TOMLs of one run in `dir`, both on `platform`.
+fn write_run_configs(
+    a: &LoopArgs,
+    dir: &Path,
+    platform: &Path,
+    surrogate: Option<&Path>,
+    campaign: &Path,
+) -> Result<(PathBuf, PathBuf), BoxErr> {
+    let (daemon, monitor) = (
+        dir.join("motion-core.toml"),
+        dir.join("safety-monitor.toml"),
+    );
+    write_daemon_toml(&a.daemon_config, &daemon, platform, surrogate, campaign)?;
+    write_monitor_toml(&a.monitor_config, &monitor, platform, &a.drives)?;
+    Ok((daemon, monitor))
+}
+
+/// A run must have recorded a rest point at every pose of the campaign.
+fn all_rest_points(label: &str, sum: &Summary, poses: usize, dir: &Path) -> Result<(), BoxErr> {
+    if sum.rest.rest_points == poses {
+        return Ok(());
+    }
+    Err(format!(
+        "the {label} run recorded {} rest points for {poses} poses ({} skipped): see {}",
+        sum.rest.rest_points,
+        sum.rest_points_skipped,
+        dir.display()
+    )
+    .into())
+}
+
 /// Fits the surrogate of `platform` (as `crs surrogate fit` with the default degree and margin).
 fn fit_surrogate(
     platform: &Path,
@@ -598,14 +657,6 @@ pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
             "kinematics only (--no-surrogate)"
         }
     );
-    let sg_cmd = |pf: &Path, out: &Path| {
-        format!(
-            "crs surrogate fit --platform {} --validation-samples {} --out {}",
-            pf.display(),
-            a.surrogate_validation_samples,
-            out.display()
-        )
-    };
     let sim_cmd_line = |dir: &Path| {
         format!(
             "crs sim --config {} --monitor-config {} --plant {} --drives {} --waypoints {} --dwell-s {} --settle-s {} --hold-s {} --record {} --out {}{}",
@@ -638,47 +689,21 @@ pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
         },
     );
     let sg_b = dir_b.join("surrogate.json");
-    let rep_sg_b = if with_sg {
-        let r = fit_surrogate(&a.platform, a.surrogate_validation_samples, &sg_b)?;
-        println!(
-            "  max |φ_sg| {:.1} mm, fit error max {:.3} mm → {}",
-            r.max_abs_offset_mm,
-            r.max_fit_error_mm,
-            sg_b.display()
-        );
-        commands.push(sg_cmd(&a.platform, &sg_b));
-        Some(r)
-    } else {
-        None
-    };
-    let (daemon_b, monitor_b) = (
-        dir_b.join("motion-core.toml"),
-        dir_b.join("safety-monitor.toml"),
-    );
-    write_daemon_toml(
-        &a.daemon_config,
-        &daemon_b,
+    let rep_sg_b = maybe_fit_surrogate(with_sg, &a.platform, &a, &sg_b, &mut commands)?;
+    let (daemon_b, monitor_b) = write_run_configs(
+        &a,
+        &dir_b,
         &a.platform,
         with_sg.then_some(sg_b.as_path()),
         &campaign,
     )?;
-    write_monitor_toml(&a.monitor_config, &monitor_b, &a.platform, &a.drives)?;
     step(2, "campaign on the stack with the nominal model (before)");
     let rec_b = dir_b.join("campaign.csv");
     let (sum_b, attempts_b) = stack_run(
         &a, &daemon_b, &monitor_b, &campaign, &dir_b, &rec_b, timeout_s, &name,
     )?;
     commands.push(sim_cmd_line(&dir_b));
-    if sum_b.rest.rest_points != wps.len() {
-        return Err(format!(
-            "the before run recorded {} rest points for {} poses ({} skipped): see {}",
-            sum_b.rest.rest_points,
-            wps.len(),
-            sum_b.rest_points_skipped,
-            dir_b.display()
-        )
-        .into());
-    }
+    all_rest_points("before", &sum_b, wps.len(), &dir_b)?;
 
     // 3. Identification from the nominal model.
     step(3, "identification from the nominal model on the recording");
@@ -723,35 +748,18 @@ pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
         },
     );
     let sg_a = dir_a.join("surrogate.json");
-    let rep_sg_a = if with_sg {
-        let r = fit_surrogate(&calibrated, a.surrogate_validation_samples, &sg_a)?;
-        println!(
-            "  max |φ_sg| {:.1} mm, fit error max {:.3} mm → {}",
-            r.max_abs_offset_mm,
-            r.max_fit_error_mm,
-            sg_a.display()
-        );
-        commands.push(sg_cmd(&calibrated, &sg_a));
-        Some(r)
-    } else {
-        None
-    };
+    let rep_sg_a = maybe_fit_surrogate(with_sg, &calibrated, &a, &sg_a, &mut commands)?;
     step(
         5,
         "daemon and safety-monitor configuration for the calibrated model",
     );
-    let (daemon_a, monitor_a) = (
-        dir_a.join("motion-core.toml"),
-        dir_a.join("safety-monitor.toml"),
-    );
-    write_daemon_toml(
-        &a.daemon_config,
-        &daemon_a,
+    let (daemon_a, monitor_a) = write_run_configs(
+        &a,
+        &dir_a,
         &calibrated,
         with_sg.then_some(sg_a.as_path()),
         &campaign,
     )?;
-    write_monitor_toml(&a.monitor_config, &monitor_a, &calibrated, &a.drives)?;
     let mut check = Cycle::new(
         cal_pf.model.clone(),
         cal_pf.limits,
@@ -776,15 +784,7 @@ pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
         &a, &daemon_a, &monitor_a, &campaign, &dir_a, &rec_a, timeout_s, &name,
     )?;
     commands.push(sim_cmd_line(&dir_a));
-    if sum_a.rest.rest_points != wps.len() {
-        return Err(format!(
-            "the after run recorded {} rest points for {} poses: see {}",
-            sum_a.rest.rest_points,
-            wps.len(),
-            dir_a.display()
-        )
-        .into());
-    }
+    all_rest_points("after", &sum_a, wps.len(), &dir_a)?;
 
     step(7, "report");
     let ratio = |b: f64, a: f64| if a > 0.0 { b / a } else { f64::INFINITY };

@@ -870,49 +870,57 @@ fn kill_monitor(st: &mut Stack) -> Res<Outcome> {
     })
 }
 
-fn sequence_gaps(st: &mut Stack) -> Res<Outcome> {
+/// One fault switched on in the fake publisher while the drives follow; the monitor must trip
+/// with `cause` and the drives brake.
+fn publisher_fault(
+    st: &mut Stack,
+    inject: impl FnOnce(&FakeCtl),
+    cause: Cause,
+    name: &str,
+    note: &str,
+) -> Res<Outcome> {
     let c = st.fake()?.clone();
     st.wait_following(false)?;
     let t0 = monotonic_ns();
-    c.skip_every.store(4, Ordering::Relaxed);
-    let ev = st.monitor_trip(Cause::SequenceGaps, 10.0)?;
+    inject(&c);
+    let ev = st.monitor_trip(cause, 10.0)?;
     let stopped = st.require_braked()?;
     Ok(Outcome {
-        cause: "sequence_gaps".into(),
+        cause: name.into(),
         detect_ms: ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
-        note: "every 4th sequence number skipped; > 5 lost within 67 cycles".into(),
+        note: note.into(),
     })
+}
+
+fn sequence_gaps(st: &mut Stack) -> Res<Outcome> {
+    publisher_fault(
+        st,
+        |c| c.skip_every.store(4, Ordering::Relaxed),
+        Cause::SequenceGaps,
+        "sequence_gaps",
+        "every 4th sequence number skipped; > 5 lost within 67 cycles",
+    )
 }
 
 fn nan_pose(st: &mut Stack) -> Res<Outcome> {
-    let c = st.fake()?.clone();
-    st.wait_following(false)?;
-    let t0 = monotonic_ns();
-    c.nan.store(true, Ordering::Relaxed);
-    let ev = st.monitor_trip(Cause::NonFinite, 10.0)?;
-    let stopped = st.require_braked()?;
-    Ok(Outcome {
-        cause: "non_finite".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
-        stop_ms: ms(t0, stopped),
-        note: "NaN in φ_x, cable lengths valid (drive-io would forward them)".into(),
-    })
+    publisher_fault(
+        st,
+        |c| c.nan.store(true, Ordering::Relaxed),
+        Cause::NonFinite,
+        "non_finite",
+        "NaN in φ_x, cable lengths valid (drive-io would forward them)",
+    )
 }
 
 fn identity_mismatch(st: &mut Stack) -> Res<Outcome> {
-    let c = st.fake()?.clone();
-    st.wait_following(false)?;
-    let t0 = monotonic_ns();
-    c.wrong_identity.store(true, Ordering::Relaxed);
-    let ev = st.monitor_trip(Cause::IdentityMismatch, 10.0)?;
-    let stopped = st.require_braked()?;
-    Ok(Outcome {
-        cause: "identity_mismatch".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
-        stop_ms: ms(t0, stopped),
-        note: "re-announced identity with one byte changed".into(),
-    })
+    publisher_fault(
+        st,
+        |c| c.wrong_identity.store(true, Ordering::Relaxed),
+        Cause::IdentityMismatch,
+        "identity_mismatch",
+        "re-announced identity with one byte changed",
+    )
 }
 
 fn open_bus(st: &Stack) -> Res<Box<dyn can_transport::CanBus>> {
