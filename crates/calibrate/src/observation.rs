@@ -1,9 +1,9 @@
 //! Measured samples for identification: the commanded lengths q_cmd, the measured pose x_M,
 //! the measured forces f_M (spec ch. 6.1: W_S = {x_M, q_θ, f_M}), read from the data-set format
-//! of docs/data-format.md via `sim_plant::dataset`.
+//! of docs/data-format.md via `crs_dataset`.
 
-use motion_core::Pose;
-use sim_plant::{Dataset, Phase};
+use cdpr_model::Pose;
+use crs_dataset::{Dataset, Phase};
 
 /// One measured sample.
 #[derive(Clone, Debug, PartialEq)]
@@ -44,7 +44,7 @@ pub enum ObservationError {
     },
 }
 
-/// Converts a data set (already validated line by line by `sim_plant::dataset`) into
+/// Converts a data set (already validated line by line by `crs_dataset`) into
 /// observations for a platform with `m` cables.
 pub fn from_dataset(ds: &Dataset, m: usize) -> Result<Vec<Observation>, ObservationError> {
     if ds.m != m {

@@ -3,7 +3,7 @@
 //! model extensions of [`crate::effects`]. Every extension reduces exactly to the base model
 //! when its parameters are zero (eq. 2.1).
 
-use motion_core::{Model, ModelError, ModelParams, Pulleys};
+use cdpr_model::{Model, ModelError, ModelParams, Pulleys};
 use nalgebra::{Vector3, Vector6};
 use serde::Serialize;
 

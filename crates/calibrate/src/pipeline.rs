@@ -10,7 +10,7 @@ use crate::observation::Observation;
 use crate::params::{CalModel, Group, ParamId, group};
 use crate::residual::{Kind, Weights};
 use crate::validate::{self, Errors};
-use motion_core::Model;
+use cdpr_model::Model;
 use serde::Serialize;
 
 /// Pipeline settings.

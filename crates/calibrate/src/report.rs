@@ -1,5 +1,5 @@
 //! The calibration report: Markdown, JSON, SVG plots, and the identified model as a platform
-//! TOML (same schema as config/*.toml, loadable by `motion_core::config::load_platform`) plus
+//! TOML (same schema as config/*.toml, loadable by `cdpr_model::config::load_platform`) plus
 //! a side file for the effects the platform schema cannot express.
 
 use crate::effects::Effect;
@@ -7,7 +7,7 @@ use crate::params::{CalModel, ParamId};
 use crate::pipeline::{PipelineReport, Stage};
 use crate::residual::Kind;
 use crate::validate;
-use motion_core::config::Platform;
+use cdpr_model::config::Platform;
 use std::fmt::Write as _;
 
 fn fmt_opt(v: Option<f64>, prec: usize) -> String {

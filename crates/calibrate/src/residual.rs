@@ -22,10 +22,10 @@
 
 use crate::observation::Observation;
 use crate::params::{CalModel, ParamId, STIFFNESS_REFERENCE_FORCE_N};
-use motion_core::forward::{FkOptions, least_squares};
-use motion_core::kinematics::differential;
-use motion_core::pose::skew;
-use motion_core::{Data, Model, kinematics};
+use cdpr_model::forward::{FkOptions, least_squares};
+use cdpr_model::kinematics::differential;
+use cdpr_model::pose::skew;
+use cdpr_model::{Data, Model, kinematics};
 use nalgebra::{DMatrix, Matrix3, Matrix6, RowVector3, Vector3};
 
 /// Rotation vector (axis · angle) of a rotation matrix, the log map of SO(3); first-order equal
@@ -91,16 +91,16 @@ pub fn rows_per_sample(kind: Kind, m: usize, o: &Observation) -> usize {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum ResidualError {
     #[error("invalid model: {0}")]
-    Model(#[from] motion_core::ModelError),
+    Model(#[from] cdpr_model::ModelError),
     #[error("sample {sample}: {err}")]
     Kinematics {
         sample: u64,
-        err: motion_core::kinematics::KinematicsError,
+        err: cdpr_model::kinematics::KinematicsError,
     },
     #[error("sample {sample}: forward kinematics of the commanded lengths: {err}")]
     Forward {
         sample: u64,
-        err: motion_core::forward::FkError,
+        err: cdpr_model::forward::FkError,
     },
 }
 
@@ -111,7 +111,7 @@ pub struct Columns {
     table: Vec<Option<usize>>,
 }
 
-const MC: usize = motion_core::MAX_CABLES;
+const MC: usize = cdpr_model::MAX_CABLES;
 
 fn key(p: ParamId) -> usize {
     match p {
@@ -274,7 +274,7 @@ impl<'a> Evaluator<'a> {
         let Some(inv) = ata.try_inverse() else {
             return Err(ResidualError::Forward {
                 sample: o.sample,
-                err: motion_core::forward::FkError::Singular { iteration: 0 },
+                err: cdpr_model::forward::FkError::Singular { iteration: 0 },
             });
         };
         for i in 0..m {

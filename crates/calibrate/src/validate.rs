@@ -6,9 +6,9 @@
 use crate::observation::Observation;
 use crate::params::{CalModel, STIFFNESS_REFERENCE_FORCE_N};
 use crate::residual::{Kind, Weights};
-use motion_core::elastostatics::{CableForce, CableLaw};
-use motion_core::forward::{FkOptions, elastostatic_with_law, least_squares};
-use motion_core::{Data, Pose, kinematics};
+use cdpr_model::elastostatics::{CableForce, CableLaw};
+use cdpr_model::forward::{FkOptions, elastostatic_with_law, least_squares};
+use cdpr_model::{Data, Pose, kinematics};
 use serde::Serialize;
 
 /// Error statistics over a sample set.

@@ -30,9 +30,9 @@ fn kinematic_data() -> (CalModel, CalModel, Vec<Observation>) {
     };
     let mut obs = campaign(effects, 20, 5, false);
     let model = truth.model().unwrap();
-    let mut data = motion_core::Data::new(&model);
+    let mut data = cdpr_model::Data::new(&model);
     for s in &mut obs {
-        motion_core::kinematics::inverse(&model, &mut data, &s.pose).unwrap();
+        cdpr_model::kinematics::inverse(&model, &mut data, &s.pose).unwrap();
         s.q_cmd = data.q.iter().map(|q| q - 0.01).collect();
     }
     // The truth includes the cable offsets the commands were made with.

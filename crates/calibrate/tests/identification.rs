@@ -89,9 +89,9 @@ fn kinematic_identification_recovers_geometry_on_kinematic_data() {
                 .unwrap(),
         );
         let model = truth.model().unwrap();
-        let mut data = motion_core::Data::new(&model);
+        let mut data = cdpr_model::Data::new(&model);
         for s in &mut o {
-            motion_core::kinematics::inverse(&model, &mut data, &s.pose).unwrap();
+            cdpr_model::kinematics::inverse(&model, &mut data, &s.pose).unwrap();
             s.q_cmd = data.q.iter().map(|q| q - 0.01).collect();
         }
         o
@@ -124,10 +124,10 @@ fn constant_orientation_data_fix_the_unobservable_platform_geometry() {
     let truth = CalModel::from_model(&nominal.model);
     let model = truth.model().unwrap();
     let mut obs = campaign(Effects::default(), 20, 5, false);
-    let mut data = motion_core::Data::new(&model);
+    let mut data = cdpr_model::Data::new(&model);
     for s in &mut obs {
         s.pose.phi = nalgebra::Vector3::zeros();
-        motion_core::kinematics::inverse(&model, &mut data, &s.pose).unwrap();
+        cdpr_model::kinematics::inverse(&model, &mut data, &s.pose).unwrap();
         s.q_cmd = data.q.clone();
     }
     let m = truth.m();

@@ -5,8 +5,8 @@ mod common;
 use calibrate::effects::Effect;
 use calibrate::observation::ObservationError;
 use calibrate::{CalModel, from_dataset, report};
+use cdpr_model::config::parse_platform;
 use common::*;
-use motion_core::config::parse_platform;
 
 #[test]
 fn platform_toml_round_trips_through_load_platform() {
@@ -40,10 +40,10 @@ fn platform_toml_round_trips_through_load_platform() {
 #[test]
 fn bad_data_sets_are_rejected_with_a_reason() {
     let text = "# format: crs-dataset 1\n# units: SI (q_cmd m; x y z m; phi rad, R = Rx Ry Rz eq. 2.2; f N)\nsample,q_cmd_1,x,y,z,phi_x,phi_y,phi_z\n0,1.0,0,0,oops,0,0,0\n";
-    let err = sim_plant::read_dataset(text.as_bytes(), "bad.csv").unwrap_err();
+    let err = crs_dataset::read_dataset(text.as_bytes(), "bad.csv").unwrap_err();
     assert_eq!(err.line, Some(4), "{err}");
     let ok = "# format: crs-dataset 1\n# units: SI (q_cmd m; x y z m; phi rad, R = Rx Ry Rz eq. 2.2; f N)\nsample,q_cmd_1,x,y,z,phi_x,phi_y,phi_z,f_1\n0,1.0,0,0,1,0,0,0,-5\n";
-    let ds = sim_plant::read_dataset(ok.as_bytes(), "one.csv").unwrap();
+    let ds = crs_dataset::read_dataset(ok.as_bytes(), "one.csv").unwrap();
     assert_eq!(
         from_dataset(&ds, 8),
         Err(ObservationError::CableCount {

@@ -5,9 +5,9 @@
 use calibrate::effects::Effect;
 use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
 use calibrate::{Observation, from_dataset, report, split};
+use cdpr_model::config::{Platform, load_platform};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use motion_core::config::{Platform, load_platform};
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Subcommand, Debug)]
@@ -115,7 +115,7 @@ fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Error>> {
 }
 
 fn load(path: &Path, m: usize) -> Result<Vec<Observation>, Box<dyn std::error::Error>> {
-    let ds = sim_plant::load_dataset(path)?;
+    let ds = crs_dataset::load_dataset(path)?;
     Ok(from_dataset(&ds, m).map_err(|e| format!("{}: {e}", path.display()))?)
 }
 
@@ -160,8 +160,8 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
             let vds = sim_plant::run_campaign(&mut p, &base, &vcamp, "nominal")?.dataset;
             bar.finish_and_clear();
             std::fs::create_dir_all(&opts.out)?;
-            sim_plant::save_dataset(opts.out.join("identification.csv"), &ds)?;
-            sim_plant::save_dataset(opts.out.join("validation.csv"), &vds)?;
+            crs_dataset::save_dataset(opts.out.join("identification.csv"), &ds)?;
+            crs_dataset::save_dataset(opts.out.join("validation.csv"), &vds)?;
             let train = from_dataset(&ds, m)?;
             let holdout = from_dataset(&vds, m)?;
             calibrate_and_report(&base, &train, &holdout, &opts, &command).map(|_| ())
@@ -227,7 +227,7 @@ pub(crate) fn calibrate_and_report(
     load_platform(&toml_path).map_err(|e| format!("written platform does not load: {e}"))?;
     let mut md = report::markdown(&rep, command, &names);
     md.push_str(&format!(
-        "\n## Output\n\n* Identified platform: `{}` (loads with `motion_core::config::load_platform`).\n* Side file (cable offsets and extension parameters the platform schema cannot express): `{}`.\n",
+        "\n## Output\n\n* Identified platform: `{}` (loads with `cdpr_model::config::load_platform`).\n* Side file (cable offsets and extension parameters the platform schema cannot express): `{}`.\n",
         toml_path.display(),
         side_path.display()
     ));

@@ -22,11 +22,11 @@ use crate::calibrate_cmd::{Opts, calibrate_and_report, spinner};
 use crate::sim_cmd::{self, SimArgs, Summary, planner_limits, timed_waypoints, write_waypoints};
 use calibrate::pipeline::PipelineReport;
 use calibrate::{from_dataset, split};
-use motion_core::Pose;
-use motion_core::config::{Platform, load_platform};
+use cdpr_model::Pose;
+use cdpr_model::config::{Platform, load_platform};
+use cdpr_model::offset_target::OffsetTarget;
 use motion_core::daemon::cycle::Cycle;
 use motion_core::daemon::trajectory::{self, Waypoint};
-use motion_core::offset_target::OffsetTarget;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -174,7 +174,7 @@ pub fn run_campaign(a: CampaignArgs) -> Result<(), BoxErr> {
     if a.poses == 0 || !(a.fraction > 0.0 && a.fraction <= 1.0) {
         return Err("--poses must be ≥ 1 and --fraction in (0, 1]".into());
     }
-    let (lo, hi) = motion_core::offset_target::region_box(&pf.region);
+    let (lo, hi) = cdpr_model::offset_target::region_box(&pf.region);
     let mut target = OffsetTarget::new(&pf.model);
     // Candidates: a 6-D Halton sequence over the shrunken box, kept where the reference forces
     // keep the margin.
@@ -707,7 +707,7 @@ pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
 
     // 3. Identification from the nominal model.
     step(3, "identification from the nominal model on the recording");
-    let ds = sim_plant::load_dataset(&rec_b)?;
+    let ds = crs_dataset::load_dataset(&rec_b)?;
     let obs =
         from_dataset(&ds, nominal.model.m()).map_err(|e| format!("{}: {e}", rec_b.display()))?;
     let (train, held) = split(&obs, holdout);

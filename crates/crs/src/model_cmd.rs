@@ -2,11 +2,11 @@
 //! platform TOML at a pose, as tables for people or JSON for scripts. Units on the command line
 //! are named in the flags: positions in m, angles in degrees, lengths in m, forces in N.
 
-use motion_core::config::{Platform, load_platform};
-use motion_core::elastostatics::{self, Stiffness};
-use motion_core::forward::{self, FkOptions};
-use motion_core::workspace;
-use motion_core::{Data, Pose, kinematics, statics};
+use cdpr_model::config::{Platform, load_platform};
+use cdpr_model::elastostatics::{self, Stiffness};
+use cdpr_model::forward::{self, FkOptions};
+use cdpr_model::workspace;
+use cdpr_model::{Data, Pose, kinematics, statics};
 use nalgebra::{Matrix6, Vector3};
 use serde_json::json;
 use std::error::Error;

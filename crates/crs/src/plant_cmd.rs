@@ -1,11 +1,10 @@
 //! `crs plant …`: the simulated plant (crates/sim-plant) from the command line — check a plant
 //! TOML, record a measurement campaign into a data set, evaluate a data set's pose errors.
 
-use motion_core::config::load_platform;
+use cdpr_model::config::load_platform;
+use crs_dataset::{load_dataset, save_dataset};
 use sim_plant::campaign::{ControlKind, PoseErrors, pose_errors};
-use sim_plant::{
-    CampaignConfig, Plant, load_campaign, load_dataset, load_plant, run_campaign, save_dataset,
-};
+use sim_plant::{CampaignConfig, Plant, load_campaign, load_plant, run_campaign};
 use std::path::PathBuf;
 
 #[derive(clap::Subcommand, Debug)]

@@ -9,7 +9,7 @@
 //! both the tracker and the force stream have passed its end before it is sampled; nothing
 //! depends on sleeps. Timestamps are CLOCK_MONOTONIC ns of the publishers (one host).
 
-use motion_core::Pose;
+use cdpr_model::Pose;
 use std::collections::VecDeque;
 
 /// Readings kept per stream (≈ 4 s at 1 kHz: far more than the few ms a window waits).
@@ -277,8 +277,8 @@ pub fn to_dataset(
     samples: &[RestSample],
     m: usize,
     metadata: Vec<(String, String)>,
-) -> Result<sim_plant::Dataset, String> {
-    let mut ds = sim_plant::Dataset::new(m, true, true);
+) -> Result<crs_dataset::Dataset, String> {
+    let mut ds = crs_dataset::Dataset::new(m, true, true);
     ds.metadata = metadata;
     for (k, s) in samples.iter().enumerate() {
         if s.q_cmd.len() < m || s.measured_forces.len() < m {
@@ -288,10 +288,10 @@ pub fn to_dataset(
                 s.measured_forces.len()
             ));
         }
-        ds.samples.push(sim_plant::Sample {
+        ds.samples.push(crs_dataset::Sample {
             sample: k as u64,
             pose_index: k as u64,
-            phase: sim_plant::Phase::Pose,
+            phase: crs_dataset::Phase::Pose,
             q_cmd: s.q_cmd[..m].to_vec(),
             pose: Pose::from_array(s.measured_pose),
             forces: Some(s.measured_forces[..m].to_vec()),
@@ -423,8 +423,8 @@ mod tests {
         )
         .unwrap();
         let mut buf = Vec::new();
-        sim_plant::write_dataset(&mut buf, &ds).unwrap();
-        let back = sim_plant::read_dataset(&buf[..], "mem").unwrap();
+        crs_dataset::write_dataset(&mut buf, &ds).unwrap();
+        let back = crs_dataset::read_dataset(&buf[..], "mem").unwrap();
         assert_eq!(back.samples.len(), 1);
         assert_eq!(back.samples[0].q_cmd, vec![8.0, 9.0]);
         assert_eq!(back.samples[0].pose.to_array(), s.measured_pose);

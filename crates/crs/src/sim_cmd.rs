@@ -19,12 +19,12 @@
 //! force sensors, reference — and the summary reports the measured pose error at the rest points.
 
 use crate::rest_recorder::{RestErrors, RestRecorder, rest_errors, to_dataset};
+use cdpr_model::Pose;
+use cdpr_model::config::{Platform, load_platform};
 use crs_ipc::{
     DriveFeedback, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlantTruth,
     ProcessId, StateEvent, TrackerPose,
 };
-use motion_core::Pose;
-use motion_core::config::{Platform, load_platform};
 use motion_core::daemon::config::DaemonConfig;
 use motion_core::daemon::cycle::{Cycle, Reference};
 use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
@@ -865,7 +865,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir)?;
         }
-        sim_plant::save_dataset(path, &ds).map_err(|e| format!("{}: {e}", path.display()))?;
+        crs_dataset::save_dataset(path, &ds).map_err(|e| format!("{}: {e}", path.display()))?;
         println!(
             "recorded {} rest points to {}",
             r.samples.len(),

@@ -1,9 +1,9 @@
 //! `crs surrogate …`: offline fit of the polynomial surrogate of the elastostatic force control
 //! (sec. 5.6, eq. 5.23–5.27), its file check, and its evaluation on the simulated plant.
 
-use motion_core::config::{Platform, load_platform};
-use motion_core::offset_target::{OffsetTarget, region_box};
-use motion_core::{Data, Pose, kinematics};
+use cdpr_model::config::{Platform, load_platform};
+use cdpr_model::offset_target::{OffsetTarget, region_box};
+use cdpr_model::{Data, Pose, kinematics};
 use sim_plant::{Plant, load_plant};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

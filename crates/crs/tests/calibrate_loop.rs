@@ -78,7 +78,7 @@ fn closed_loop_on_the_stack_reduces_the_measured_pose_error() {
         );
         // The recording is a crs-dataset 1 file of the rest points with forces and references.
         let rec = out.join(run).join("campaign.csv");
-        let ds = sim_plant::load_dataset(&rec).unwrap();
+        let ds = crs_dataset::load_dataset(&rec).unwrap();
         assert_eq!(ds.samples.len(), poses);
         assert!(ds.has_forces && ds.has_reference);
         assert_eq!(ds.meta("control_model"), Some("kinematic+surrogate"));

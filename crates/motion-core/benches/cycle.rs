@@ -5,7 +5,7 @@
 //! (`config/icosahedron.toml`, `check_wrench_feasibility = true`).
 //!
 //! The surrogate is fitted here, in the set-up, like `crs surrogate fit`: degree 3 (84 Legendre
-//! coefficients per cable) to q_off(x) = φ_el(x, f_ref(x)) − φ(x) (`motion_core::offset_target`).
+//! coefficients per cable) to q_off(x) = φ_el(x, f_ref(x)) − φ(x) (`cdpr_model::offset_target`).
 //! The references are the daemon's demo trajectory (`config/demo-waypoints.csv`) sampled at
 //! 1 ms by the same ruckig planner, so the inputs move through the workspace with real
 //! velocities and accelerations; the benches cycle through them.
@@ -16,14 +16,14 @@
 //! `cargo bench -p motion-core --bench cycle`; under `cargo test` (no `--bench` argument) the
 //! per-call run shrinks to 1e4 calls as a smoke test.
 
+use cdpr_model::Pose;
+use cdpr_model::config::{Platform, load_platform};
+use cdpr_model::offset_target::{OffsetTarget, region_box};
 use criterion::Criterion;
 use crs_ipc::JointSetpoint;
-use motion_core::Pose;
-use motion_core::config::{Platform, load_platform};
 use motion_core::daemon::cycle::{Cycle, Reference};
 use motion_core::daemon::realtime::now_ns;
 use motion_core::daemon::trajectory::{self, PlannerLimits};
-use motion_core::offset_target::{OffsetTarget, region_box};
 use std::hint::black_box;
 use surrogate::{FitOptions, Region, Surrogate, fit};
 

@@ -1,37 +1,12 @@
-//! # motion-core: the CDPR model library
+//! # motion-core: the 1 ms hard-loop daemon
 //!
-//! Models of the spec's chapter 2 (and the workspace of chapter 3) for spatial cable robots
-//! with m ≥ 7 cables and n = 6 DOF, with their differential counterparts:
-//!
-//! | job | module | equations |
-//! |---|---|---|
-//! | pose, rotation, J_P | [`pose`] | 2.2, 2.44–2.46 |
-//! | standard / pulley inverse kinematics | [`kinematics`] | 2.3–2.8, 2.16–2.29 |
-//! | differential kinematics | [`kinematics::differential`] | 2.47–2.65, 2.83–2.87, 4.5–4.6 |
-//! | statics, force distribution | [`statics`] | 2.30–2.31, 2.38–2.40, 3.41, 5.11 |
-//! | elastostatics, stiffness | [`elastostatics`] | 2.33–2.41, 2.66–2.80 |
-//! | forward kinematics ν, ν_el | [`forward`] | 2.9–2.15, 2.42–2.43, 2.81 |
-//! | wrench-feasible workspace | [`workspace`] | 3.29 |
-//! | operator TOML | [`config`] | tables 5.1, eq. 5.8, 5.12, 5.17, 6.1, 6.20 |
-//!
-//! Model/Data split: [`Model`] is immutable and validated; [`Data`] is preallocated per
-//! thread, and every hot-path function (inverse kinematics, force distribution, forward
-//! kinematics) writes into it without allocating.
+//! The daemon of sec. 5.5: per cycle the next reference (a ruckig plan or the motion-cueing
+//! stream), the checks (finite, workspace box, wrench feasibility eq. 3.29 in closed form
+//! eq. 3.41, velocity/acceleration limits), q_θ = φ(x) + φ_sg(x) (eq. 5.26) and the setpoint,
+//! published on iceoryx2 by a stage off the loop thread. The model it evaluates lives in
+//! [`cdpr_model`]; this crate adds real time, IPC and the lifecycle.
 
-// Per-cable loops index several parallel arrays (q, q_θ, f, columns of A^T) by the cable
-// number, as the equations do; iterator zips of four slices would hide that.
+// Per-cable loops index several parallel arrays by the cable number, as the equations do.
 #![allow(clippy::needless_range_loop)]
 
-pub mod config;
 pub mod daemon;
-pub mod elastostatics;
-pub mod forward;
-pub mod kinematics;
-pub mod model;
-pub mod offset_target;
-pub mod pose;
-pub mod statics;
-pub mod workspace;
-
-pub use model::{Data, MAX_CABLES, MIN_CABLES, Model, ModelError, ModelParams, Pulleys};
-pub use pose::Pose;

@@ -2,8 +2,8 @@
 //! real iceoryx2 publisher through the outbox and publish stage), e-stop latch and reset, refusal of bad references, input-file errors.
 mod common;
 
+use cdpr_model::Pose;
 use crs_ipc::{IpcNode, JointSetpoint};
-use motion_core::Pose;
 use motion_core::daemon::cycle::{Cycle, Reference, Rejection};
 use motion_core::daemon::outbox::{
     Outbox, OutboxSink, StagePorts, publish_pass, run_publish_stage,
@@ -482,8 +482,8 @@ fn cueing_stream_is_followed_and_a_target_outside_the_region_latches() {
     for (p, t) in sp.pose.iter().zip(&target) {
         assert!((p - t).abs() < 1e-9, "{:?}", sp.pose);
     }
-    let mut d = motion_core::Data::new(&pf.model);
-    motion_core::kinematics::inverse(&pf.model, &mut d, &Pose::from_array(target)).unwrap();
+    let mut d = cdpr_model::Data::new(&pf.model);
+    cdpr_model::kinematics::inverse(&pf.model, &mut d, &Pose::from_array(target)).unwrap();
     for i in 0..pf.model.m() {
         assert!((sp.cable_length_m[i] - d.q[i]).abs() < 1e-9);
     }

@@ -4,8 +4,8 @@
 //! never saw, and the daemon's cycle adds exactly that offset to the standard kinematics.
 mod common;
 
-use motion_core::offset_target::{OffsetTarget, region_box};
-use motion_core::{Data, Pose, kinematics};
+use cdpr_model::offset_target::{OffsetTarget, region_box};
+use cdpr_model::{Data, Pose, kinematics};
 use nalgebra::Vector3;
 use surrogate::{FitOptions, Region, fit};
 

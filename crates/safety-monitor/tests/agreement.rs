@@ -4,7 +4,7 @@
 //!   bit for bit on the project's platform files (a mismatch would trip the monitor at start);
 //! * φ*(x) equals motion-core's standard inverse kinematics to 1e-9 m over the workspace.
 
-use motion_core::config::{load_platform as mc_load, parse_platform as mc_parse};
+use cdpr_model::config::{load_platform as mc_load, parse_platform as mc_parse};
 use proptest::prelude::*;
 use safety_monitor::identity::platform_identity;
 use safety_monitor::kinematics::StandardKinematics;
@@ -63,10 +63,10 @@ proptest! {
         let kin = StandardKinematics::new(&load_platform(&f).unwrap());
         let platform = mc_load(&f).unwrap();
         let model = platform.model;
-        let mut data = motion_core::Data::new(&model);
+        let mut data = cdpr_model::Data::new(&model);
         let pose = [x, y, z, ax, ay, az];
         let mut q_mc = vec![0.0; model.m()];
-        motion_core::kinematics::lengths(&model, &mut data, &motion_core::Pose::from_array(pose), &mut q_mc).unwrap();
+        cdpr_model::kinematics::lengths(&model, &mut data, &cdpr_model::Pose::from_array(pose), &mut q_mc).unwrap();
         let mut q = [0.0; crs_ipc::MAX_CABLES];
         kin.lengths(&pose, &mut q);
         for i in 0..model.m() {

@@ -21,10 +21,10 @@ fn cfg() -> &'static MonitorConfig {
     })
 }
 
-fn mc() -> &'static motion_core::Model {
-    static M: OnceLock<motion_core::Model> = OnceLock::new();
+fn mc() -> &'static cdpr_model::Model {
+    static M: OnceLock<cdpr_model::Model> = OnceLock::new();
     M.get_or_init(|| {
-        motion_core::config::load_platform(&cfg().platform_file)
+        cdpr_model::config::load_platform(&cfg().platform_file)
             .unwrap()
             .model
     })
@@ -52,12 +52,12 @@ const HOME: [f64; 6] = [0.0, 0.0, 2.0, 0.0, 0.0, 0.0];
 /// A consistent setpoint (motion-core's φ(x)) with `offset` (m) added to cable `cable`.
 fn sp(seq: u64, pose: [f64; 6], cable: usize, offset: f64) -> JointSetpoint {
     let model = mc();
-    let mut data = motion_core::Data::new(model);
+    let mut data = cdpr_model::Data::new(model);
     let mut q = vec![0.0; 8];
-    motion_core::kinematics::lengths(
+    cdpr_model::kinematics::lengths(
         model,
         &mut data,
-        &motion_core::Pose::from_array(pose),
+        &cdpr_model::Pose::from_array(pose),
         &mut q,
     )
     .unwrap();

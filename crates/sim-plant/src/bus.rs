@@ -49,11 +49,11 @@
 use crate::config::PlantConfig;
 use crate::plant::{Equilibrium, Plant, PlantError, TensionSetup};
 use can_transport::{CanBus, CanError, CanFrame};
+use cdpr_model::config::Platform;
+use cdpr_model::{Data, Pose, kinematics};
 use crs_ipc::{CONTRACT_VERSION, MAX_CABLES, PlantTruth, TrackerPose};
 use drive_io::config::{DrivesConfig, WinchConfig};
 use drive_io::slave::{DriveBank, MotionDemand};
-use motion_core::config::Platform;
-use motion_core::{Data, Pose, kinematics};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 

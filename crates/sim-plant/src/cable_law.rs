@@ -21,7 +21,7 @@
 //! With every effect off the law is motion-core's [`LinearElastic`] bit for bit.
 
 use crate::config::{Effects, Hysteresis, TensionStiffness};
-use motion_core::elastostatics::{CableForce, CableLaw, LinearElastic};
+use cdpr_model::elastostatics::{CableForce, CableLaw, LinearElastic};
 
 /// Force law of the plant's cables plus the hysteresis state.
 #[derive(Clone, Debug)]

@@ -5,10 +5,10 @@
 //! cables and return (Fig. 6.15).
 
 use crate::config::{Locator, pose_deg};
-use crate::dataset::{Dataset, Phase, Sample};
 use crate::plant::{Plant, PlantError};
-use motion_core::config::{ConfigError, Platform};
-use motion_core::{Data, Pose, elastostatics, kinematics, statics};
+use cdpr_model::config::{ConfigError, Platform};
+use cdpr_model::{Data, Pose, elastostatics, kinematics, statics};
+use crs_dataset::{Dataset, Phase, Sample};
 use nalgebra::Vector3;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};

@@ -4,8 +4,8 @@
 //! degrees (`_deg`) and converted here. Unknown keys are rejected; every error names the file,
 //! the key and the line (motion-core's [`ConfigError`]).
 
-use motion_core::Pose;
-use motion_core::config::{ConfigError, Platform, load_platform};
+use cdpr_model::Pose;
+use cdpr_model::config::{ConfigError, Platform, load_platform};
 use nalgebra::{Vector3, Vector6};
 use serde::Deserialize;
 use std::ops::Range;

@@ -19,14 +19,13 @@
 //! | 7 platform mass and centre of gravity (eq. 6.20–6.23) | `load` | [`plant`] |
 //! | 8 tracker and force-sensor models | `tracker`, `force_sensors` | [`plant`] |
 //!
-//! [`campaign`] drives the plant through measurement campaigns (ch. 6.1, 6.4) and [`dataset`]
-//! reads and writes the CSV data-set format (docs/data-format.md).
+//! [`campaign`] drives the plant through measurement campaigns (ch. 6.1, 6.4) and returns its
+//! results in the CSV data-set format of the `crs-dataset` crate (docs/data-format.md).
 
 pub mod bus;
 pub mod cable_law;
 pub mod campaign;
 pub mod config;
-pub mod dataset;
 pub mod plant;
 
 pub use campaign::{
@@ -34,7 +33,4 @@ pub use campaign::{
     load_campaign, parse_campaign, pose_errors, run_campaign,
 };
 pub use config::{Effects, PlantConfig, load_plant, parse_plant};
-pub use dataset::{
-    Dataset, DatasetError, Phase, Sample, load_dataset, read_dataset, save_dataset, write_dataset,
-};
 pub use plant::{Equilibrium, Plant, PlantError, PlantState, SensorReading, TensionSetup};

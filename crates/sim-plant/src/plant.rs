@@ -5,12 +5,12 @@
 
 use crate::cable_law::{HysteresisState, PlantLaw};
 use crate::config::{Effects, PlantConfig};
-use motion_core::elastostatics::{self, Stiffness};
-use motion_core::forward::{FkError, FkOptions, FkSolution, elastostatic_with_law};
-use motion_core::kinematics::{self, KinematicsError};
-use motion_core::pose::twist_from_coordinates;
-use motion_core::statics::{self, StaticsError};
-use motion_core::{Data, Model, ModelError, Pose, Pulleys};
+use cdpr_model::elastostatics::{self, Stiffness};
+use cdpr_model::forward::{FkError, FkOptions, FkSolution, elastostatic_with_law};
+use cdpr_model::kinematics::{self, KinematicsError};
+use cdpr_model::pose::twist_from_coordinates;
+use cdpr_model::statics::{self, StaticsError};
+use cdpr_model::{Data, Model, ModelError, Pose, Pulleys};
 use nalgebra::{Vector3, Vector6};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -467,7 +467,7 @@ impl Plant {
         let mut q_cmd = vec![0.0; m];
         for i in 0..m {
             self.law.reset_at_force(i, forces[i]);
-            let qt = motion_core::elastostatics::CableLaw::controlled_length(
+            let qt = cdpr_model::elastostatics::CableLaw::controlled_length(
                 &self.law,
                 i,
                 self.data.q[i],

@@ -8,13 +8,13 @@
 #![allow(clippy::needless_range_loop)]
 
 use can_transport::{CanBus, CanError, CanFrame, RxFrame};
+use cdpr_model::config::Platform;
+use cdpr_model::{Data, Pose, kinematics};
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, IpcNode, JointSetpoint, PlantTruth, ProcessId, StateEvent,
 };
 use drive_io::canopen::{self, Ds402State, NmtState};
 use drive_io::{DrivesConfig, Master};
-use motion_core::config::Platform;
-use motion_core::{Data, Pose, kinematics};
 use sim_plant::bus::{self, BusOptions, BusPlantError, PlantBus};
 use sim_plant::{Plant, PlantConfig, load_plant};
 use std::path::PathBuf;

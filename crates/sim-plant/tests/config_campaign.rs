@@ -5,8 +5,9 @@
 
 mod common;
 use common::*;
+use crs_dataset::Phase;
 use sim_plant::campaign::parse_campaign;
-use sim_plant::{CampaignConfig, ControlKind, Phase, Plant, PoseSet, load_campaign, run_campaign};
+use sim_plant::{CampaignConfig, ControlKind, Plant, PoseSet, load_campaign, run_campaign};
 
 const MINI: &str = "[plant]\nname = \"t\"\nplatform = \"../crs-nominal.toml\"\n";
 
@@ -244,8 +245,8 @@ fn recorded_campaign_survives_a_file_round_trip() {
     let mut plant = Plant::new(cfg).unwrap();
     let res = run_campaign(&mut plant, &control, &small_campaign(Some(0.03)), "nominal").unwrap();
     let path = std::env::temp_dir().join(format!("sim-plant-roundtrip-{}.csv", std::process::id()));
-    sim_plant::save_dataset(&path, &res.dataset).unwrap();
-    let back = sim_plant::load_dataset(&path).unwrap();
+    crs_dataset::save_dataset(&path, &res.dataset).unwrap();
+    let back = crs_dataset::load_dataset(&path).unwrap();
     let _ = std::fs::remove_file(&path);
     assert_eq!(back, res.dataset);
     assert!(back.has_forces && back.has_reference && back.m == 8);

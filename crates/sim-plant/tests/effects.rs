@@ -3,9 +3,9 @@
 #![allow(clippy::needless_range_loop)] // per-cable index loops read like the equations
 
 mod common;
+use cdpr_model::elastostatics::CableLaw;
+use cdpr_model::{Data, Pose, kinematics, statics};
 use common::*;
-use motion_core::elastostatics::CableLaw;
-use motion_core::{Data, Pose, kinematics, statics};
 use sim_plant::cable_law::PlantLaw;
 use sim_plant::{Equilibrium, Plant, PlantConfig};
 

@@ -4,9 +4,9 @@
 #![allow(clippy::needless_range_loop)] // per-cable index loops read like the equations
 
 mod common;
+use cdpr_model::forward::{FkOptions, elastostatic};
+use cdpr_model::{Data, elastostatics, kinematics, statics};
 use common::*;
-use motion_core::forward::{FkOptions, elastostatic};
-use motion_core::{Data, elastostatics, kinematics, statics};
 use sim_plant::campaign::pose_errors;
 use sim_plant::{CampaignConfig, Plant, run_campaign};
 

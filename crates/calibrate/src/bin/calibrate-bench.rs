@@ -8,7 +8,7 @@
 use calibrate::params::{Group, group};
 use calibrate::pipeline::estimate_offsets;
 use calibrate::{CalModel, FitSpec, Kind, ParamId, fit, from_dataset};
-use sim_plant::Phase;
+use crs_dataset::Phase;
 use std::path::PathBuf;
 use std::time::Instant;
 

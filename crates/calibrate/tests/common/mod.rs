@@ -2,7 +2,7 @@
 //! Test data from the simulated plant (sim-plant): campaigns with chosen effects.
 
 use calibrate::{Observation, from_dataset};
-use motion_core::config::{Platform, load_platform};
+use cdpr_model::config::{Platform, load_platform};
 use nalgebra::Vector3;
 use sim_plant::config::Effects;
 use sim_plant::{CampaignConfig, Plant, PlantConfig, PoseSet, run_campaign};

@@ -25,16 +25,16 @@
 //! time `run_timed` read after waking. The daemon's own coarse `LoopStats` histograms are
 //! printed too, as a cross-check.
 
+use cdpr_model::Pose;
+use cdpr_model::config::{Platform, load_platform};
+use cdpr_model::offset_target::{OffsetTarget, region_box};
 use clap::Parser;
 use crs_ipc::JointSetpoint;
-use motion_core::Pose;
-use motion_core::config::{Platform, load_platform};
 use motion_core::daemon::cycle::Cycle;
 use motion_core::daemon::realtime::{self, RealtimeSettings, now_ns, sleep_until};
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
 use motion_core::daemon::{self, Command, CommandSource, HardLoop, LoopState, SetpointSink};
-use motion_core::offset_target::{OffsetTarget, region_box};
 use std::cell::Cell;
 use std::path::PathBuf;
 use std::process::ExitCode;

@@ -1,11 +1,11 @@
 //! `motion-core`: the 1 ms hard-loop daemon (spec sec. 5.6). See `motion_core::daemon`.
 
+use cdpr_model::config::load_platform;
 use clap::Parser;
 use crs_ipc::{
     CueingPose, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlatformIdentity,
     ProcessId, StateEvent, TopicPublisher, TopicSubscriber,
 };
-use motion_core::config::load_platform;
 use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
 use motion_core::daemon::cycle::Cycle;
 use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};

@@ -3,7 +3,7 @@
 //! errors name the file, key and line.
 
 use super::realtime::RealtimeSettings;
-use crate::config::ConfigError;
+use cdpr_model::config::ConfigError;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use toml::Spanned;

@@ -12,7 +12,7 @@
 //! (measured), hence this allocation-free law on the loop thread.
 
 use super::cycle::Reference;
-use crate::Pose;
+use cdpr_model::Pose;
 
 /// Where the newest cueing target comes from (iceoryx2 subscriber in the daemon). Must not
 /// block or allocate: called once per cycle on the loop thread.

@@ -2,11 +2,11 @@
 //! (eq. 2.3 + eq. 5.26) and the cable velocities q̇ = −A ẋ (eq. 2.54), fill the setpoint.
 //! Allocation-free and lock-free; every rejection is a typed value.
 
-use crate::config::{MotionLimits, Region};
-use crate::kinematics;
-use crate::model::{Data, Model};
-use crate::pose::{Pose, twist_from_coordinates};
-use crate::statics;
+use cdpr_model::config::{MotionLimits, Region};
+use cdpr_model::kinematics;
+use cdpr_model::model::{Data, Model};
+use cdpr_model::pose::{Pose, twist_from_coordinates};
+use cdpr_model::statics;
 use crs_ipc::{CONTRACT_VERSION, JointSetpoint, MAX_CABLES};
 use nalgebra::Vector6;
 

@@ -8,7 +8,7 @@
 //! second queue: no allocation, no deallocation, no lock on the loop side.
 
 use super::cycle::Reference;
-use crate::pose::Pose;
+use cdpr_model::pose::Pose;
 use crossbeam::queue::ArrayQueue;
 use std::path::Path;
 use std::sync::Arc;

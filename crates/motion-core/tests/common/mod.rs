@@ -1,6 +1,6 @@
 #![allow(dead_code)]
-use motion_core::config::{Platform, load_platform};
-use motion_core::{Model, Pose};
+use cdpr_model::config::{Platform, load_platform};
+use cdpr_model::{Model, Pose};
 use nalgebra::{DMatrix, Vector3};
 
 pub fn config_path(name: &str) -> String {

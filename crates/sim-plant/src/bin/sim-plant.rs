@@ -5,10 +5,10 @@
 //! (`crs/v1/tracker_pose`) on iceoryx2 every plant cycle. See `sim_plant::bus` for the set-up
 //! and offset convention (eq. 3.14 / 6.24) and docs/plant-figures.md.
 
+use cdpr_model::config::load_platform;
 use clap::Parser;
 use crs_ipc::{Heartbeat, IpcNode, PlantTruth, ProcessId, TrackerPose};
 use drive_io::DrivesConfig;
-use motion_core::config::load_platform;
 use sim_plant::bus::{self, BusOptions, ConfigFiles, PlantBus};
 use sim_plant::load_plant;
 use std::path::PathBuf;

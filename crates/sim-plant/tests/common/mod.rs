@@ -1,6 +1,6 @@
 #![allow(dead_code)]
 
-use motion_core::Pose;
+use cdpr_model::Pose;
 use sim_plant::config::parse_plant;
 use sim_plant::{Plant, PlantConfig, load_plant};
 use std::path::PathBuf;
@@ -18,7 +18,7 @@ pub fn crs_like() -> PlantConfig {
 }
 
 /// A plant config from TOML text placed in config/plant/ (so `../crs-nominal.toml` resolves).
-pub fn plant_from(text: &str) -> Result<PlantConfig, motion_core::config::ConfigError> {
+pub fn plant_from(text: &str) -> Result<PlantConfig, cdpr_model::config::ConfigError> {
     parse_plant(text, "test.toml", &config_dir().join("plant"))
 }
 

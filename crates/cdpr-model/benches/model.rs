@@ -2,14 +2,14 @@
 //! Targets (issue #2): standard IK ≤ 150 ns, closed-form forces ≤ 2 µs, LM FK from a
 //! 1 cm / 1° guess ≤ 10 µs, elastostatic FK ≤ 30 µs. Figures go to benches/RESULTS.md.
 
+use cdpr_model::config::load_platform;
+use cdpr_model::forward::{self, FkOptions};
+use cdpr_model::{Data, Pose, elastostatics, kinematics, statics};
 use criterion::{Criterion, criterion_group, criterion_main};
-use motion_core::config::load_platform;
-use motion_core::forward::{self, FkOptions};
-use motion_core::{Data, Pose, elastostatics, kinematics, statics};
 use nalgebra::Vector3;
 use std::hint::black_box;
 
-fn platform(name: &str) -> motion_core::Model {
+fn platform(name: &str) -> cdpr_model::Model {
     load_platform(format!(
         "{}/../../config/{name}",
         env!("CARGO_MANIFEST_DIR")

@@ -1,9 +1,9 @@
 //! Property tests over random poses in the operating region (proptest).
 mod common;
 
+use cdpr_model::forward::{self, FkOptions};
+use cdpr_model::{Data, Pose, kinematics, statics, workspace};
 use common::*;
-use motion_core::forward::{self, FkOptions};
-use motion_core::{Data, Pose, kinematics, statics, workspace};
 use nalgebra::Vector3;
 use proptest::prelude::*;
 
@@ -50,7 +50,7 @@ proptest! {
         let fd = workspace::check_pose(&model, &mut data, &pose, &mut f).unwrap();
         prop_assume!(fd.feasible);
         let mut qt = vec![0.0; 8];
-        motion_core::elastostatics::inverse(&model, &mut data, &pose, &f, &mut qt).unwrap();
+        cdpr_model::elastostatics::inverse(&model, &mut data, &pose, &f, &mut qt).unwrap();
         let sol = forward::elastostatic(&model, &mut data, &qt, &pose.add_increment(&nalgebra::Vector6::repeat(0.005)), &FkOptions::default()).unwrap();
         let (dr, dphi) = sol.pose.error_to(&pose);
         prop_assert!(dr < 1e-9 && dphi < 1e-9, "{dr:e} m, {dphi:e} rad");

@@ -3,9 +3,9 @@
 //! Only one test in this binary, so no other thread allocates while counting.
 mod common;
 
+use cdpr_model::forward::{self, FkOptions};
+use cdpr_model::{Data, Pose, elastostatics, kinematics, statics};
 use common::*;
-use motion_core::forward::{self, FkOptions};
-use motion_core::{Data, Pose, elastostatics, kinematics, statics};
 use nalgebra::Vector3;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};

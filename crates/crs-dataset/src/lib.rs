@@ -1,8 +1,10 @@
+//! # crs-dataset: the measurement data-set format
+//!
 //! Measurement data sets (docs/data-format.md): CSV with `#` metadata lines, one header row and
 //! one row per sample. Units are fixed (SI: m, rad, N) and declared in the file; a reader
 //! rejects a file that does not declare them, never guesses. Every error names the line.
 
-use motion_core::Pose;
+use cdpr_model::Pose;
 use std::fmt;
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;

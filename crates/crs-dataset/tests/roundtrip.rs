@@ -2,9 +2,9 @@
 
 #![allow(clippy::needless_range_loop)] // per-cable index loops read like the equations
 
-use motion_core::Pose;
-use sim_plant::dataset::{FORMAT, UNITS};
-use sim_plant::{Dataset, Phase, Sample, read_dataset, write_dataset};
+use cdpr_model::Pose;
+use crs_dataset::{Dataset, Phase, Sample, read_dataset, write_dataset};
+use crs_dataset::{FORMAT, UNITS};
 
 fn sample_set(forces: bool) -> Dataset {
     let mut ds = Dataset::new(8, forces, true);

@@ -1,12 +1,12 @@
 //! Finite-difference checks of every analytic Jacobian (standard, pulley, elastostatic).
 mod common;
 
+use cdpr_model::elastostatics::{self, Stiffness};
+use cdpr_model::forward::{self, FkOptions};
+use cdpr_model::kinematics::{self, differential};
+use cdpr_model::pose::twist_from_coordinates;
+use cdpr_model::{Data, Model, Pose};
 use common::*;
-use motion_core::elastostatics::{self, Stiffness};
-use motion_core::forward::{self, FkOptions};
-use motion_core::kinematics::{self, differential};
-use motion_core::pose::twist_from_coordinates;
-use motion_core::{Data, Model, Pose};
 use nalgebra::{DMatrix, Matrix3x6, RowVector6};
 
 fn to_dm3(m: &Matrix3x6<f64>) -> DMatrix<f64> {
@@ -172,7 +172,7 @@ fn residual_wrench_jacobian_is_kg_minus_kc() {
             let mut f = vec![0.0; model.m()];
             kinematics::inverse(&model, &mut data, &pose).unwrap();
             let p = model.params();
-            motion_core::statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut f)
+            cdpr_model::statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut f)
                 .unwrap();
             let mut q_theta = vec![0.0; model.m()];
             elastostatics::inverse(&model, &mut data, &pose, &f, &mut q_theta).unwrap();
@@ -184,7 +184,7 @@ fn residual_wrench_jacobian_is_kg_minus_kc() {
             let fd = fd_pose(&pose, 1e-7, |x| {
                 kinematics::inverse(&model, &mut d2, x).unwrap();
                 elastostatics::cable_forces(&mut d2, &law, &q_theta);
-                let w = motion_core::statics::cable_wrench(&d2, &d2.f);
+                let w = cdpr_model::statics::cable_wrench(&d2, &d2.f);
                 w.iter().copied().collect()
             });
             let e = rel_diff(&analytic, &fd);
@@ -204,7 +204,7 @@ fn pose_sensitivity_matches_fd_of_elastostatic_fk() {
         kinematics::inverse(&model, &mut data, &pose).unwrap();
         let p = model.params();
         let mut f = vec![0.0; model.m()];
-        motion_core::statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut f).unwrap();
+        cdpr_model::statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut f).unwrap();
         let mut q_theta = vec![0.0; model.m()];
         elastostatics::inverse(&model, &mut data, &pose, &f, &mut q_theta).unwrap();
         elastostatics::cable_forces(&mut data, &model.linear_law(), &q_theta);

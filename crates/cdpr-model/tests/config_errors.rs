@@ -1,7 +1,7 @@
 //! Bad platform TOML is rejected with file, key and line; nothing is half-applied.
 mod common;
 
-use motion_core::config::parse_platform;
+use cdpr_model::config::parse_platform;
 
 fn base() -> String {
     std::fs::read_to_string(common::config_path("icosahedron.toml")).unwrap()
@@ -121,7 +121,7 @@ fn limits_must_be_ordered_and_positive() {
 
 #[test]
 fn missing_file_and_syntax_errors_are_clear() {
-    let e = motion_core::config::load_platform("/nonexistent/p.toml").unwrap_err();
+    let e = cdpr_model::config::load_platform("/nonexistent/p.toml").unwrap_err();
     assert!(e.to_string().contains("/nonexistent/p.toml") && e.message.contains("cannot read"));
     let e = parse_platform(&base().replace("[forces]", "[forces"), "x.toml").unwrap_err();
     assert!(e.line.is_some(), "{e}");

@@ -1,12 +1,12 @@
 //! Forward kinematics round trips, model equivalences, statics and the spec's figures.
 mod common;
 
+use cdpr_model::elastostatics::{self, ConstantStiffness};
+use cdpr_model::forward::{self, FkError, FkOptions};
+use cdpr_model::kinematics;
+use cdpr_model::statics;
+use cdpr_model::{Data, Pose};
 use common::*;
-use motion_core::elastostatics::{self, ConstantStiffness};
-use motion_core::forward::{self, FkError, FkOptions};
-use motion_core::kinematics;
-use motion_core::statics;
-use motion_core::{Data, Pose};
 use nalgebra::{Vector3, Vector6};
 
 fn guess_off(pose: &Pose) -> Pose {
@@ -24,7 +24,7 @@ fn test_poses_are_wrench_feasible() {
         let mut data = Data::new(&model);
         let mut f = vec![0.0; model.m()];
         for pose in test_poses() {
-            let fd = motion_core::workspace::check_pose(&model, &mut data, &pose, &mut f).unwrap();
+            let fd = cdpr_model::workspace::check_pose(&model, &mut data, &pose, &mut f).unwrap();
             assert!(
                 fd.feasible,
                 "{pose:?}: forces {:.0}..{:.0} N",
@@ -344,9 +344,9 @@ fn workspace_sampler_and_hull_agree() {
     let pf = platform("icosahedron.toml");
     let model = &pf.model;
     let hull =
-        motion_core::workspace::hull(model, &pf.home.r, &Vector3::zeros(), 2, 8.0, 1e-3).unwrap();
+        cdpr_model::workspace::hull(model, &pf.home.r, &Vector3::zeros(), 2, 8.0, 1e-3).unwrap();
     // Grid over the hull's bounding box, padded, so both see the whole workspace.
-    let mut bounds = motion_core::workspace::PositionBox {
+    let mut bounds = cdpr_model::workspace::PositionBox {
         min: hull.center,
         max: hull.center,
     };
@@ -356,7 +356,7 @@ fn workspace_sampler_and_hull_agree() {
     }
     bounds.min -= Vector3::repeat(0.3);
     bounds.max += Vector3::repeat(0.3);
-    let g = motion_core::workspace::sample_grid(model, &bounds, &Vector3::zeros(), [25, 25, 25]);
+    let g = cdpr_model::workspace::sample_grid(model, &bounds, &Vector3::zeros(), [25, 25, 25]);
     assert!(
         g.fraction > 0.05 && g.fraction < 0.95,
         "fraction {}",
@@ -375,14 +375,14 @@ fn workspace_sampler_and_hull_agree() {
     let mut f = vec![0.0; 8];
     for v in &hull.vertices {
         let d = (v - hull.center).normalize();
-        let inside = motion_core::workspace::check_pose(
+        let inside = cdpr_model::workspace::check_pose(
             model,
             &mut data,
             &Pose::new(*v, Vector3::zeros()),
             &mut f,
         );
         assert!(inside.unwrap().feasible);
-        let out = motion_core::workspace::check_pose(
+        let out = cdpr_model::workspace::check_pose(
             model,
             &mut data,
             &Pose::new(v + d * 0.01, Vector3::zeros()),
