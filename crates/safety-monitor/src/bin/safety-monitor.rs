@@ -57,11 +57,7 @@ fn node(name: &str, prefix: &Option<String>) -> Result<crs_ipc::IpcNode, crs_ipc
 }
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
-        )
-        .init();
+    crs_log::init("safety-monitor");
     let args = Args::parse();
     match run(args) {
         Ok(code) => code,

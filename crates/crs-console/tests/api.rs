@@ -1,0 +1,233 @@
+//! The console's HTTP API against a fake stack on a private iceoryx2 prefix: status, the stop
+//! request on the bus, the token check, the live stream.
+
+use crs_console::{ConsoleConfig, PlatformView};
+use crs_ipc::{EventKind, Heartbeat, IpcNode, JointSetpoint, ProcessId, StateEvent};
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::time::{Duration, Instant};
+
+fn prefix(tag: &str) -> String {
+    format!("crs-console-test-{}-{tag}/", std::process::id())
+}
+
+fn config(prefix: &str, token: Option<&str>) -> ConsoleConfig {
+    ConsoleConfig {
+        addr: "127.0.0.1:0".parse().unwrap(),
+        token: token.map(str::to_string),
+        prefix: prefix.to_string(),
+        platform: Some(PlatformView {
+            name: "test".into(),
+            frame_anchors_m: vec![[1.0, 1.0, 1.0]; 8],
+            platform_anchors_m: vec![[0.1, 0.1, 0.1]; 8],
+            f_min_n: 1000.0,
+            f_max_n: 9000.0,
+        }),
+        plan: None,
+    }
+}
+
+/// One HTTP/1.1 request; returns (status code, body).
+fn http(addr: SocketAddr, method: &str, path: &str, headers: &[&str]) -> (u16, String) {
+    let mut s = TcpStream::connect(addr).expect("connect");
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    let mut req = format!(
+        "{method} {path} HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\nContent-Length: 0\r\n"
+    );
+    for h in headers {
+        req.push_str(h);
+        req.push_str("\r\n");
+    }
+    req.push_str("\r\n");
+    s.write_all(req.as_bytes()).unwrap();
+    let mut out = String::new();
+    s.read_to_string(&mut out).expect("read response");
+    let code = out[9..12].parse().expect("status code");
+    let body = out
+        .split_once("\r\n\r\n")
+        .map_or("", |(_, b)| b)
+        .to_string();
+    (code, body)
+}
+
+fn status(addr: SocketAddr) -> serde_json::Value {
+    let (code, body) = http(addr, "GET", "/api/status", &[]);
+    assert_eq!(code, 200, "{body}");
+    serde_json::from_str(&body).expect("status JSON")
+}
+
+#[test]
+fn status_reports_no_stack_then_live_values_and_stop_reaches_the_bus() {
+    let p = prefix("live");
+    let console = crs_console::spawn(config(&p, None)).expect("console starts");
+    let addr = console.addr;
+    let (code, page) = http(addr, "GET", "/", &[]);
+    assert_eq!(code, 200);
+    assert!(page.contains("CRS operator console"));
+    let s = status(addr);
+    assert_eq!(s["stack_running"], false, "{s}");
+
+    // A fake motion-core: heartbeats and setpoints.
+    let node = IpcNode::with_prefix("fake-stack", &p).unwrap();
+    let hb = node.publisher::<Heartbeat>().unwrap();
+    let sp = node.publisher::<JointSetpoint>().unwrap();
+    let events = node.subscriber::<StateEvent>().unwrap();
+    let t0 = Instant::now();
+    let mut seen = None;
+    for seq in 1.. {
+        hb.publish(&Heartbeat::new(ProcessId::MotionCore, 1, seq))
+            .unwrap();
+        let mut s = JointSetpoint {
+            sequence: seq,
+            cable_count: 8,
+            ..Default::default()
+        };
+        s.pose[2] = 2.0 + seq as f64 * 1e-3;
+        sp.publish(&s).unwrap();
+        std::thread::sleep(Duration::from_millis(5));
+        let st = status(addr);
+        if st["stack_running"] == true && st["setpoint_sequence"].as_u64().unwrap() > 0 {
+            match seen {
+                None => seen = Some(st["setpoint_sequence"].as_u64().unwrap()),
+                // Live: a later status shows a newer setpoint.
+                Some(first) if st["setpoint_sequence"].as_u64().unwrap() > first => {
+                    assert_eq!(st["motion_state"], "running");
+                    assert!(st["reference"]["position_m"][2].as_f64().unwrap() > 2.0);
+                    assert_eq!(
+                        st["reference"]["anchors_world_m"].as_array().unwrap().len(),
+                        8
+                    );
+                    break;
+                }
+                _ => {}
+            }
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(20),
+            "the console never showed live values"
+        );
+    }
+
+    // Stop: an e-stop from the operator on the bus.
+    let (code, body) = http(addr, "POST", "/api/stop", &[]);
+    assert_eq!(code, 200, "{body}");
+    let t0 = Instant::now();
+    loop {
+        if let Some(e) = events.receive().unwrap() {
+            if e.kind == EventKind::EStop as u32 {
+                assert_eq!(e.source, ProcessId::Operator as u32);
+                break;
+            }
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "no e-stop on the bus"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // The trip log names it.
+    let t0 = Instant::now();
+    loop {
+        let (code, body) = http(addr, "GET", "/api/trips", &[]);
+        assert_eq!(code, 200);
+        let trips: serde_json::Value = serde_json::from_str(&body).unwrap();
+        if trips
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t["kind"] == "E-STOP" && t["source"] == "operator")
+        {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "trip log without the stop: {body}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // No reset from the browser: there is no such route.
+    let (code, _) = http(addr, "POST", "/api/reset", &[]);
+    assert_eq!(code, 404);
+    console
+        .stop()
+        .expect("console stops while no stream is open");
+}
+
+#[test]
+fn token_is_checked_on_every_request() {
+    let p = prefix("token");
+    let tok = "0123456789abcdef-token";
+    let console = crs_console::spawn(config(&p, Some(tok))).unwrap();
+    let addr = console.addr;
+    for path in ["/", "/api/status", "/api/trips", "/api/events"] {
+        assert_eq!(http(addr, "GET", path, &[]).0, 401, "{path} without token");
+        assert_eq!(
+            http(
+                addr,
+                "GET",
+                path,
+                &["Authorization: Bearer wrong-token-0000000"]
+            )
+            .0,
+            401,
+            "{path} wrong token"
+        );
+    }
+    assert_eq!(http(addr, "POST", "/api/stop", &[]).0, 401);
+    assert_eq!(
+        http(
+            addr,
+            "GET",
+            "/api/status",
+            &[&format!("Authorization: Bearer {tok}")]
+        )
+        .0,
+        200
+    );
+    assert_eq!(
+        http(addr, "GET", &format!("/api/status?token={tok}"), &[]).0,
+        200
+    );
+}
+
+#[test]
+fn other_addresses_need_a_token() {
+    let mut c = config("x/", None);
+    c.addr = "0.0.0.0:8080".parse().unwrap();
+    assert!(matches!(
+        c.validate(),
+        Err(crs_console::ConsoleError::TokenRequired(_))
+    ));
+    c.token = Some("short".into());
+    assert!(matches!(
+        c.validate(),
+        Err(crs_console::ConsoleError::TokenTooShort)
+    ));
+    c.token = Some("long-enough-token-1234".into());
+    assert!(c.validate().is_ok());
+}
+
+#[test]
+fn live_stream_sends_status_events_and_ends_on_shutdown() {
+    let p = prefix("sse");
+    let console = crs_console::spawn(config(&p, None)).unwrap();
+    let mut s = TcpStream::connect(console.addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    s.write_all(b"GET /api/events HTTP/1.1\r\nHost: localhost\r\n\r\n")
+        .unwrap();
+    let mut buf = Vec::new();
+    let mut chunk = [0u8; 4096];
+    while String::from_utf8_lossy(&buf)
+        .matches("event: status")
+        .count()
+        < 3
+    {
+        let n = s.read(&mut chunk).expect("stream data");
+        assert!(n > 0, "stream ended early");
+        buf.extend_from_slice(&chunk[..n]);
+    }
+    // Stopping the console ends the open stream instead of waiting for the client.
+    let t0 = Instant::now();
+    console.stop().unwrap();
+    assert!(t0.elapsed() < Duration::from_secs(5));
+}
