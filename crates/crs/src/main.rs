@@ -2,13 +2,16 @@
 
 mod calibrate_cmd;
 mod calibrate_loop_cmd;
+mod console_cmd;
+mod gen_cmd;
 mod model_cmd;
 mod plant_cmd;
 mod rest_recorder;
 mod sim_cmd;
+mod sim_plots;
 mod surrogate_cmd;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 use std::process::ExitCode;
 
 #[derive(Parser, Debug)]
@@ -47,6 +50,16 @@ enum Command {
         #[command(subcommand)]
         cmd: calibrate_cmd::CalibrateCommand,
     },
+    /// The operator console: a web page with the running stack's live state and a stop button
+    /// (no reset), JSON at /api/status and /api/trips. Binds 127.0.0.1 unless given a token.
+    Console(console_cmd::ConsoleArgs),
+    /// Write man pages (crs.1, crs-sim.1, ...) into DIR.
+    GenMan {
+        /// Output directory.
+        dir: std::path::PathBuf,
+    },
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions { shell: clap_complete::Shell },
 }
 
 fn main() -> ExitCode {
@@ -57,6 +70,14 @@ fn main() -> ExitCode {
         Command::Plant { cmd } => plant_cmd::run(cmd),
         Command::Surrogate { cmd } => surrogate_cmd::run(cmd),
         Command::Calibrate { cmd } => calibrate_cmd::run(cmd),
+        Command::Console(a) => console_cmd::run(a),
+        Command::GenMan { dir } => gen_cmd::gen_man(Cli::command(), &dir)
+            .map(|files| println!("wrote {} man pages to {}", files.len(), dir.display()))
+            .map_err(Into::into),
+        Command::Completions { shell } => {
+            gen_cmd::completions(Cli::command(), shell);
+            Ok(())
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

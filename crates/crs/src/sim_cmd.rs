@@ -97,6 +97,8 @@ pub struct SimArgs {
     /// the SYNCs going on a loaded host (needs root; ignored with a note otherwise).
     #[arg(long, value_parser = clap::value_parser!(i32).range(6..=99))]
     pub(crate) rt_priority: Option<i32>,
+    #[command(flatten)] // i18: operator console
+    pub(crate) console: crate::console_cmd::SimConsoleArgs,
 }
 
 /// Planner limits of the daemon TOML (as motion-core computes them).
@@ -556,6 +558,16 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
     let heartbeats = node.subscriber::<Heartbeat>()?;
     let feedback = node.subscriber::<DriveFeedback>()?;
     let tracker = node.subscriber::<TrackerPose>()?;
+    // i18: operator console (--console) and the run's plots.
+    let console_wps = waypoints_arg.clone().or(waypoint_file.clone());
+    let _console = crate::console_cmd::start_for_sim(
+        &a.console,
+        &prefix,
+        &daemon,
+        &platform,
+        console_wps.as_deref(),
+    )?;
+    let mut plots = crate::sim_plots::RunRecord::new(f_min, f_max);
 
     let mut stack = Stack { procs: Vec::new() };
     let s = |p: &Path| p.display().to_string();
@@ -705,6 +717,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
     let result: Result<(), String> = loop {
         std::thread::sleep(Duration::from_millis(5));
         while let Ok(Some(sp)) = setpoints.receive() {
+            plots.setpoint(&sp); // i18
             sum.setpoints += 1;
             last_sp_ns = last_sp_ns.max(sp.timestamp_ns);
             if let Some(r) = recorder.as_mut() {
@@ -718,6 +731,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
             }
         }
         while let Ok(Some(t)) = truth.receive() {
+            plots.truth(&t); // i18
             sum.plant_samples += 1;
             if t.converged == 0 {
                 sum.non_converged_plant_steps += 1;
@@ -746,6 +760,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
             }
         }
         while let Ok(Some(s)) = loop_stats.receive() {
+            plots.loop_stats(&s); // i18
             sum.loop_cycles = s.cycles;
             sum.loop_overruns = s.overruns;
             sum.loop_rejected = s.rejected;
@@ -754,6 +769,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
             sum.loop_compute_p99_us = s.compute_p99_ns as f64 * 1e-3;
         }
         while let Ok(Some(e)) = events.receive() {
+            plots.event(&e); // i18
             if e.kind == EventKind::EStop as u32 {
                 sum.estops += 1;
                 println!("  E-STOP from process {} (detail {})", e.source, e.detail);
@@ -876,6 +892,11 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
     let json = a.out.join("summary.json");
     std::fs::write(&json, serde_json::to_string_pretty(&sum)?)?;
     println!("summary written to {}", json.display());
+    // i18: plots of the run next to the summary.
+    match crate::sim_plots::write(&a.out, &plots, &serde_json::to_value(&sum)?) {
+        Ok(index) => println!("plots written to {}", index.display()),
+        Err(e) => println!("plots NOT written: {e}"),
+    }
     result?;
     if sum.plant_samples == 0 || sum.setpoints == 0 {
         return Err("the run produced no plant states or no setpoints".into());
