@@ -27,4 +27,11 @@ if [ "${CRS_SKIP_HIL:-0}" != 1 ]; then
   echo "== HIL: the full simulated stack on vcan (QEMU guest)"
   bash tools/stack-hil.sh
 fi
+# The operator console in headless Chromium against a running `crs sim`, and the ecosystem's
+# tools (can-utils, python-can, man, completions, install.sh) on what the stack writes. Both use
+# the static release binaries the HIL scripts built (or build them the same way).
+echo "== operator console in headless Chromium (crs sim --console)"
+bash tools/console-test.sh
+echo "== ecosystem tools: candump log with can-utils and python-can, logs, plots, man pages, completions, install.sh"
+bash tools/ecosystem-test.sh
 echo "== all tests passed"
