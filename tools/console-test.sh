@@ -39,8 +39,9 @@ kill "${PIDS[0]}"; wait "${PIDS[0]}" 2>/dev/null || true
 
 echo "-- console on a running crs sim"
 P2=$(port)
-# A rest of 2 s at every waypoint keeps the platform moving long enough for the browser.
-"$BIN/crs" sim --bin-dir "$BIN" --console "127.0.0.1:$P2" --dwell-s 2 --timeout-s 120 \
+# A rest of 2 s at every waypoint keeps the platform moving long enough for the browser; after
+# the stop motion-core holds (--hold-s) until the test interrupts `crs sim`.
+"$BIN/crs" sim --bin-dir "$BIN" --console "127.0.0.1:$P2" --dwell-s 2 --hold-s 60 --timeout-s 180 \
   --out "$OUT/sim" >"$OUT/crs-sim.log" 2>&1 &
 SIM=$!
 PIDS+=($SIM)
