@@ -7,6 +7,7 @@ use crs_ipc::{
     DriveFeedback, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlantTruth,
     ProcessId, StateEvent,
 };
+use std::sync::Arc as SharedJson;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
@@ -14,6 +15,13 @@ use tokio::sync::{oneshot, watch};
 
 /// Updates per second sent to the page (the issue asks for >= 20).
 pub const POLL_HZ: u32 = 25;
+
+fn to_json(s: &Status) -> SharedJson<str> {
+    // Status holds only numbers and strings: serialization cannot fail.
+    serde_json::to_string(s)
+        .unwrap_or_else(|_| "{}".into())
+        .into()
+}
 
 /// A request from the web side to the poller thread.
 pub enum Request {
@@ -25,7 +33,9 @@ pub enum Request {
 
 /// The running poller.
 pub struct Poller {
-    pub status: watch::Receiver<Status>,
+    /// The newest status as JSON text: serialized once per update in the poller thread, so any
+    /// number of clients costs one serialization.
+    pub status: watch::Receiver<SharedJson<str>>,
     pub requests: mpsc::Sender<Request>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
@@ -55,7 +65,7 @@ pub fn start(
 ) -> Result<Poller, ConsoleError> {
     let (ready_tx, ready_rx) = mpsc::channel::<Result<(), ConsoleError>>();
     let mut collector = Collector::new(prefix, platform, plan);
-    let (status_tx, status_rx) = watch::channel(collector.status());
+    let (status_tx, status_rx) = watch::channel(to_json(&collector.status()));
     let (req_tx, req_rx) = mpsc::channel::<Request>();
     let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
@@ -130,7 +140,7 @@ pub fn start(
                 let _ = stats.drain(|s| collector.loop_stats(s));
                 let _ = hb.drain(|h| collector.heartbeat(h));
                 let _ = ev.drain(|e| collector.event(e));
-                if status_tx.send(collector.status()).is_err() {
+                if status_tx.send(to_json(&collector.status())).is_err() {
                     break;
                 }
             }

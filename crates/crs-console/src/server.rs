@@ -20,7 +20,7 @@ pub const PAGE: &str = include_str!("console.html");
 
 struct AppState {
     poller: std::sync::Mutex<std::sync::mpsc::Sender<Request>>,
-    status: tokio::sync::watch::Receiver<crate::Status>,
+    status: tokio::sync::watch::Receiver<Arc<str>>,
     token: Option<String>,
 }
 
@@ -59,7 +59,7 @@ async fn page() -> impl IntoResponse {
 
 async fn api_status(State(st): State<Arc<AppState>>) -> Response {
     let s = st.status.borrow().clone();
-    axum::Json(s).into_response()
+    ([(header::CONTENT_TYPE, "application/json")], s.to_string()).into_response()
 }
 
 async fn api_trips(State(st): State<Arc<AppState>>) -> Response {
@@ -100,11 +100,8 @@ async fn api_events(
 ) -> Sse<impl tokio_stream::Stream<Item = Result<Event, Infallible>>> {
     // Every status update of the poller (25 Hz) becomes one event; a slow client skips to the
     // newest (watch keeps only the latest value), so clients never queue up.
-    let stream = WatchStream::new(st.status.clone()).map(|s| {
-        Ok(Event::default()
-            .event("status")
-            .data(serde_json::to_string(&s).unwrap_or_else(|_| "{}".into())))
-    });
+    let stream =
+        WatchStream::new(st.status.clone()).map(|s| Ok(Event::default().event("status").data(&*s)));
     Sse::new(stream).keep_alive(KeepAlive::default())
 }
 
