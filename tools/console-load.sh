@@ -10,7 +10,8 @@ BIN=${CONSOLE_BIN_DIR:-target/x86_64-unknown-linux-gnu/release}
 OUT=out/console-load; mkdir -p "$OUT"
 port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 clients() {  # $1 port, $2 seconds: 20 SSE clients, prints the slowest client's rate
-  python3 - "$1" "$2" <<'PY'
+  # The clients stand in for browsers on other machines: kept on CPU 0, off the motion CPU.
+  taskset -c 0 python3 - "$1" "$2" <<'PY'
 import socket, sys, threading, time
 port, dur = int(sys.argv[1]), float(sys.argv[2])
 counts = [0] * 20

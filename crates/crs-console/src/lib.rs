@@ -53,6 +53,29 @@ pub struct ConsoleConfig {
     pub prefix: String,
     pub platform: Option<PlatformView>,
     pub plan: Option<PlanView>,
+    /// The hard loop's CPU (motion-core's `[realtime] cpu`): every console thread keeps off it
+    /// and runs at nice 10, so web clients compete with nothing on the motion CPU.
+    pub avoid_cpu: Option<usize>,
+}
+
+/// Makes the calling thread a background thread: nice 10 and, when given and other CPUs exist,
+/// off `avoid_cpu`. Best effort (a refused call leaves the thread as it is).
+pub fn background_thread(avoid_cpu: Option<usize>) {
+    // SAFETY: setpriority/sched_setaffinity on the calling thread (tid) with a valid cpu_set_t.
+    unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, 10);
+        if let Some(cpu) = avoid_cpu {
+            let n = libc::sysconf(libc::_SC_NPROCESSORS_ONLN).max(1) as usize;
+            if n > 1 && cpu < n {
+                let mut set: libc::cpu_set_t = std::mem::zeroed();
+                for c in (0..n.min(libc::CPU_SETSIZE as usize)).filter(|c| *c != cpu) {
+                    libc::CPU_SET(c, &mut set);
+                }
+                libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
+            }
+        }
+    }
 }
 
 impl ConsoleConfig {
@@ -104,9 +127,12 @@ pub fn spawn(cfg: ConsoleConfig) -> Result<ConsoleHandle, ConsoleError> {
     let thread = std::thread::Builder::new()
         .name("crs-console".into())
         .spawn(move || {
+            let avoid = cfg.avoid_cpu;
+            background_thread(avoid);
             let rt = tokio::runtime::Builder::new_multi_thread()
                 .worker_threads(2)
                 .thread_name("crs-console-http")
+                .on_thread_start(move || background_thread(avoid))
                 .enable_all()
                 .build()?;
             rt.block_on(async move {
@@ -138,8 +164,11 @@ pub fn spawn(cfg: ConsoleConfig) -> Result<ConsoleHandle, ConsoleError> {
 /// Runs the console in the foreground until Ctrl-C (`crs console`).
 pub fn run_blocking(cfg: ConsoleConfig) -> Result<(), ConsoleError> {
     cfg.validate()?;
+    let avoid = cfg.avoid_cpu;
+    background_thread(avoid);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
+        .on_thread_start(move || background_thread(avoid))
         .enable_all()
         .build()?;
     rt.block_on(server::serve(
@@ -149,4 +178,32 @@ pub fn run_blocking(cfg: ConsoleConfig) -> Result<(), ConsoleError> {
             let _ = tokio::signal::ctrl_c().await;
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn background_threads_keep_off_the_motion_cpu_at_nice_10() {
+        // SAFETY: sysconf has no preconditions.
+        let n = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) } as usize;
+        let (cpu1_allowed, nice) = std::thread::spawn(move || {
+            super::background_thread(Some(1));
+            // SAFETY: reading the calling thread's affinity and priority.
+            unsafe {
+                let mut set: libc::cpu_set_t = std::mem::zeroed();
+                libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set);
+                let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+                (
+                    libc::CPU_ISSET(1, &set),
+                    libc::getpriority(libc::PRIO_PROCESS, tid),
+                )
+            }
+        })
+        .join()
+        .unwrap();
+        assert_eq!(nice, 10);
+        if n > 1 {
+            assert!(!cpu1_allowed, "the console thread may still run on CPU 1");
+        }
+    }
 }

@@ -62,6 +62,7 @@ pub fn start(
     prefix: &str,
     platform: Option<PlatformView>,
     plan: Option<PlanView>,
+    avoid_cpu: Option<usize>,
 ) -> Result<Poller, ConsoleError> {
     let (ready_tx, ready_rx) = mpsc::channel::<Result<(), ConsoleError>>();
     let mut collector = Collector::new(prefix, platform, plan);
@@ -73,6 +74,7 @@ pub fn start(
     let thread = std::thread::Builder::new()
         .name("crs-console-iox".into())
         .spawn(move || {
+            crate::background_thread(avoid_cpu);
             // iceoryx2 ports are not Send: everything lives on this thread.
             let node_name = format!("crs-console-{}", std::process::id());
             let ports = (|| -> Result<_, ConsoleError> {

@@ -129,7 +129,12 @@ pub async fn serve(
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> Result<(), ConsoleError> {
     cfg.validate()?;
-    let poller = poller::start(&cfg.prefix, cfg.platform.clone(), cfg.plan.clone())?;
+    let poller = poller::start(
+        &cfg.prefix,
+        cfg.platform.clone(),
+        cfg.plan.clone(),
+        cfg.avoid_cpu,
+    )?;
     let app = router(&poller, cfg.token.clone());
     let listener = tokio::net::TcpListener::bind(cfg.addr)
         .await

@@ -24,6 +24,7 @@ fn config(prefix: &str, token: Option<&str>) -> ConsoleConfig {
             f_max_n: 9000.0,
         }),
         plan: None,
+        avoid_cpu: Some(1),
     }
 }
 

@@ -102,6 +102,7 @@ fn console_config(
         prefix: prefix.to_string(),
         platform: Some(platform_view(platform)),
         plan,
+        avoid_cpu: daemon.realtime.cpu,
     }
 }
 
@@ -131,6 +132,8 @@ pub(crate) fn start_for_sim(
 
 /// `crs console`: serves until Ctrl-C.
 pub fn run(a: ConsoleArgs) -> Result<(), Box<dyn std::error::Error>> {
+    // The console's own log (stop requests, events): journal under systemd, else stdout.
+    crs_log::init("crs-console");
     let daemon = motion_core::daemon::config::load(&a.config).map_err(|e| e.to_string())?;
     let platform = load_platform(&daemon.platform)?;
     let prefix = a
