@@ -139,11 +139,10 @@ pub fn spawn(cfg: ConsoleConfig) -> Result<ConsoleHandle, ConsoleError> {
                 let ready = move |addr: SocketAddr| {
                     let _ = ready_tx.send(Ok(addr));
                 };
-                let r = server::serve(cfg, ready, async {
+                server::serve(cfg, ready, async {
                     let _ = shutdown_rx.await;
                 })
-                .await;
-                r
+                .await
             })
         })?;
     match ready_rx.recv() {

@@ -114,11 +114,11 @@ fn status_reports_no_stack_then_live_values_and_stop_reaches_the_bus() {
     assert_eq!(code, 200, "{body}");
     let t0 = Instant::now();
     loop {
-        if let Some(e) = events.receive().unwrap() {
-            if e.kind == EventKind::EStop as u32 {
-                assert_eq!(e.source, ProcessId::Operator as u32);
-                break;
-            }
+        if let Some(e) = events.receive().unwrap()
+            && e.kind == EventKind::EStop as u32
+        {
+            assert_eq!(e.source, ProcessId::Operator as u32);
+            break;
         }
         assert!(
             t0.elapsed() < Duration::from_secs(10),

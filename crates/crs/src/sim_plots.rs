@@ -62,7 +62,7 @@ impl RunRecord {
             self.period_max_us = self.period_max_us.max(us);
         }
         self.last_sp_ns = Some(sp.timestamp_ns);
-        if self.n_sp % KEEP_EVERY == 0 {
+        if self.n_sp.is_multiple_of(KEEP_EVERY) {
             let t = self.t(sp.timestamp_ns);
             self.reference.push((t, sp.pose));
         }
@@ -70,7 +70,7 @@ impl RunRecord {
     }
 
     pub(crate) fn truth(&mut self, p: &PlantTruth) {
-        if self.n_truth % KEEP_EVERY == 0 {
+        if self.n_truth.is_multiple_of(KEEP_EVERY) {
             let t = self.t(p.timestamp_ns);
             let m = (p.cable_count as usize).min(MAX_CABLES);
             self.actual.push((t, p.pose, p.force_n[..m].to_vec()));
