@@ -479,7 +479,7 @@ mod tests {
         for k in 0..2000u64 {
             let mut sp = JointSetpoint {
                 sequence: k + 1,
-                timestamp_ns: 1_000_000_000 + k * 1_000_000 + if k == 1500 { 4_000_000 } else { 0 },
+                timestamp_ns: 1_000_000_000 + k * 1_000_000 + if k >= 1500 { 4_000_000 } else { 0 },
                 ..Default::default()
             };
             sp.pose[0] = k as f64 * 1e-4;
