@@ -222,8 +222,10 @@ pub fn read_dataset(r: impl BufRead, name: &str) -> Result<Dataset, DatasetError
     let mut units_seen = false;
     let mut layout: Option<Layout> = None;
     let mut samples = Vec::new();
+    let mut lines_read = 0;
     for (n, line) in r.lines().enumerate() {
         let ln = n + 1;
+        lines_read = ln;
         let line = line.map_err(|e| err(Some(ln), format!("cannot read: {e}")))?;
         let line = line.trim_end_matches('\r');
         if line.trim().is_empty() {
@@ -284,7 +286,10 @@ pub fn read_dataset(r: impl BufRead, name: &str) -> Result<Dataset, DatasetError
         }
     }
     let Some(lay) = layout else {
-        return Err(err(None, "no header row".into()));
+        return Err(err(
+            Some(lines_read.max(1)),
+            "end of file before the header row".into(),
+        ));
     };
     Ok(Dataset {
         metadata,

@@ -246,9 +246,18 @@ fn relative_to(file: &Path, p: impl AsRef<Path>) -> PathBuf {
 }
 
 fn read(path: &Path) -> Result<String, ConfigError> {
-    std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+    let bytes = std::fs::read(path).map_err(|source| ConfigError::Read {
         file: path.display().to_string(),
         source,
+    })?;
+    // Not UTF-8: say on which line, as for any other syntax error.
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        ConfigError::Parse {
+            file: path.display().to_string(),
+            line: Some(e.as_bytes()[..at].iter().filter(|b| **b == b'\n').count() + 1),
+            message: "not UTF-8 text".into(),
+        }
     })
 }
 
@@ -343,9 +352,18 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             "must be an odd 11-bit id below 0x7FF (the pair uses id and id + 1)".into(),
         ));
     }
+    // A file this one names but that cannot be opened is this file's error, at the key that
+    // names it; what is wrong inside it is reported by its own parser, with its own lines.
+    let named = |key: &str, f: &Path| match std::fs::metadata(f) {
+        Ok(md) if md.is_file() => Ok(()),
+        Ok(_) => Err(bad(key, format!("{} is not a file", f.display()))),
+        Err(e) => Err(bad(key, format!("{}: cannot open: {e}", f.display()))),
+    };
     let platform_file = relative_to(path, &m.platform);
+    named("monitor.platform", &platform_file)?;
     let platform = load_platform(&platform_file)?;
     let drives_file = relative_to(path, &c.drives);
+    named("can.drives", &drives_file)?;
     let winches = load_drives(&drives_file)?;
     if winches.len() != platform.cables() {
         return Err(ConfigError::Invalid {

@@ -120,7 +120,10 @@ pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, String> 
         });
     }
     if !header_seen {
-        return Err(format!("{file}: empty waypoint file"));
+        return Err(format!(
+            "{file}:{}: end of file without a waypoint row",
+            text.lines().count().max(1)
+        ));
     }
     Ok(out)
 }

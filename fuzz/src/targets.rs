@@ -1,0 +1,491 @@
+//! The fuzz targets: every decoder and loader of the stack, with the seed inputs a mutator starts
+//! from (the shipped configs, files the stack writes, valid frames) and the property checked
+//! beyond "does not panic".
+
+use can_transport::CanFrame;
+use can_transport::safety_frame::{self, SafetyHeartbeat, SafetyState};
+use drive_io::safety_watch::{SafetyWatch, SafetyWatchConfig};
+use nalgebra::Vector3;
+use rand::Rng;
+use rand::rngs::SmallRng;
+use std::path::{Path, PathBuf};
+
+/// What one case did.
+#[derive(Debug)]
+pub enum Verdict {
+    Accepted,
+    /// Rejected with this message.
+    Rejected(String),
+    /// A property beyond "no panic" failed (the message says which).
+    Violation(String),
+}
+
+/// How a text loader's rejection must point at the problem.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Locate {
+    /// Binary decoder: an error value is enough.
+    No,
+    /// Text file: the message names a line (`file:12`, `line 12`) or a key (`` `key` ``, `field`).
+    LineOrKey,
+}
+
+/// One target.
+pub struct Target {
+    pub name: &'static str,
+    pub what: &'static str,
+    pub locate: Locate,
+    pub seeds: fn(&Path) -> Vec<Vec<u8>>,
+    /// Runs one case; `scratch` is a per-run directory for loaders that take a path.
+    pub run: fn(&[u8], &Scratch) -> Verdict,
+}
+
+/// Paths a case may use.
+pub struct Scratch {
+    pub config_dir: PathBuf,
+    pub dir: PathBuf,
+}
+
+impl Scratch {
+    fn file(&self, name: &str, bytes: &[u8]) -> PathBuf {
+        let p = self.dir.join(name);
+        std::fs::write(&p, bytes).expect("scratch directory is writable");
+        p
+    }
+}
+
+fn text(b: &[u8]) -> Option<&str> {
+    std::str::from_utf8(b).ok()
+}
+
+fn verdict<T, E: std::fmt::Display>(r: Result<T, E>) -> Verdict {
+    match r {
+        Ok(_) => Verdict::Accepted,
+        Err(e) => Verdict::Rejected(e.to_string()),
+    }
+}
+
+fn read(dir: &Path, names: &[&str]) -> Vec<Vec<u8>> {
+    names
+        .iter()
+        .map(|n| std::fs::read(dir.join(n)).unwrap_or_else(|e| panic!("seed {n}: {e}")))
+        .collect()
+}
+
+const PLATFORMS: &[&str] = &[
+    "icosahedron.toml",
+    "icosahedron-pulleys.toml",
+    "helicopter.toml",
+    "crs-nominal.toml",
+];
+
+/// A frame as bytes: id (2, LE), length (1), data (up to 8).
+fn frame_bytes(f: &CanFrame) -> Vec<u8> {
+    let mut v = (f.id() as u16).to_le_bytes().to_vec();
+    v.push(f.data().len() as u8);
+    v.extend_from_slice(f.data());
+    v
+}
+
+fn frames_from(b: &[u8]) -> Vec<CanFrame> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i + 3 <= b.len() {
+        let id = u16::from_le_bytes([b[i], b[i + 1]]) & 0x7FF;
+        let len = (b[i + 2] as usize).min(8).min(b.len() - i - 3);
+        out.push(CanFrame::new_std_lossy(id, &b[i + 3..i + 3 + len]));
+        i += 3 + len;
+    }
+    out
+}
+
+fn frame_seeds(_: &Path) -> Vec<Vec<u8>> {
+    use drive_io::canopen as co;
+    let hb = SafetyHeartbeat {
+        state: SafetyState::Run,
+        cause: 0,
+        counter: 7,
+        cable: safety_frame::NO_CABLE,
+    };
+    let mut v: Vec<CanFrame> = vec![
+        co::nmt(1, 0),
+        co::sync(),
+        co::rpdo1(3, 0x000F, 123_456),
+        co::tpdo1(3, 0x0637, -42),
+        co::tpdo2(5, 1000, 4_200_000),
+        co::emcy(2, 0x8611, 0x81),
+        co::sdo_download(4, 0x6060, 0, 8, 1),
+        co::sdo_upload(4, 0x6041, 0),
+        co::sdo_download_ok(4, 0x6060, 0),
+        co::sdo_upload_ok(4, 0x6064, 0, 99, 4),
+        co::sdo_abort(4, 0x1234, 1, 0x0602_0000),
+    ];
+    v.extend(safety_frame::encode(&hb, safety_frame::DEFAULT_COB_ID));
+    let mut seeds: Vec<Vec<u8>> = v.iter().map(frame_bytes).collect();
+    seeds.push(v.iter().flat_map(frame_bytes).collect());
+    seeds
+}
+
+pub fn all() -> Vec<Target> {
+    vec![
+        Target {
+            name: "platform-toml",
+            what: "operator platform TOML (cdpr_model::config::parse_platform)",
+            locate: Locate::LineOrKey,
+            seeds: |d| read(d, PLATFORMS),
+            run: |b, _| match text(b) {
+                Some(t) => verdict(cdpr_model::config::parse_platform(t, "fuzz.toml")),
+                None => Verdict::Rejected("not UTF-8 (line 1)".into()),
+            },
+        },
+        Target {
+            name: "monitor-platform-toml",
+            what: "the safety monitor's own platform parser (safety_monitor::platform)",
+            locate: Locate::LineOrKey,
+            seeds: |d| read(d, PLATFORMS),
+            run: |b, _| match text(b) {
+                Some(t) => verdict(safety_monitor::platform::parse_platform(t, "fuzz.toml")),
+                None => Verdict::Rejected("not UTF-8 (line 1)".into()),
+            },
+        },
+        Target {
+            name: "monitor-toml",
+            what: "safety-monitor.toml (safety_monitor::config::load)",
+            locate: Locate::LineOrKey,
+            seeds: |d| read(d, &["safety-monitor.toml"]),
+            run: |b, s| {
+                // The monitor resolves its platform and drives files relative to its own file.
+                let p = s.file("safety-monitor.toml", b);
+                verdict(safety_monitor::config::load(&p))
+            },
+        },
+        Target {
+            name: "monitor-drives-toml",
+            what: "drives.toml as the monitor reads it (safety_monitor::config::load_drives)",
+            locate: Locate::LineOrKey,
+            seeds: |d| read(d, &["drives.toml"]),
+            run: |b, s| {
+                verdict(safety_monitor::config::load_drives(
+                    &s.file("drives.toml", b),
+                ))
+            },
+        },
+        Target {
+            name: "drives-toml",
+            what: "drives.toml (drive_io::DrivesConfig::parse)",
+            locate: Locate::LineOrKey,
+            seeds: |d| read(d, &["drives.toml"]),
+            run: |b, _| match text(b) {
+                Some(t) => verdict(drive_io::DrivesConfig::parse(t)),
+                None => Verdict::Rejected("not UTF-8 (line 1)".into()),
+            },
+        },
+        Target {
+            name: "motion-core-toml",
+            what: "motion-core.toml (motion_core::daemon::config::parse)",
+            locate: Locate::LineOrKey,
+            seeds: |d| read(d, &["motion-core.toml"]),
+            run: |b, s| match text(b) {
+                Some(t) => verdict(motion_core::daemon::config::parse(
+                    t,
+                    "motion-core.toml",
+                    &s.config_dir,
+                )),
+                None => Verdict::Rejected("not UTF-8 (line 1)".into()),
+            },
+        },
+        Target {
+            name: "plant-toml",
+            what: "plant TOML (sim_plant::parse_plant)",
+            locate: Locate::LineOrKey,
+            seeds: |d| {
+                read(
+                    &d.join("plant"),
+                    &[
+                        "crs-like.toml",
+                        "icosahedron.toml",
+                        "icosahedron-assembly.toml",
+                    ],
+                )
+            },
+            run: |b, s| match text(b) {
+                Some(t) => verdict(sim_plant::parse_plant(
+                    t,
+                    "plant.toml",
+                    &s.config_dir.join("plant"),
+                )),
+                None => Verdict::Rejected("not UTF-8 (line 1)".into()),
+            },
+        },
+        Target {
+            name: "campaign-toml",
+            what: "campaign TOML (sim_plant::parse_campaign)",
+            locate: Locate::LineOrKey,
+            seeds: |d| {
+                read(
+                    &d.join("plant"),
+                    &["campaign-91.toml", "campaign-default.toml"],
+                )
+            },
+            run: |b, s| match text(b) {
+                Some(t) => verdict(sim_plant::parse_campaign(
+                    t,
+                    "campaign.toml",
+                    &s.config_dir.join("plant"),
+                )),
+                None => Verdict::Rejected("not UTF-8 (line 1)".into()),
+            },
+        },
+        Target {
+            name: "waypoints-csv",
+            what: "waypoint CSV (motion_core::daemon::trajectory::parse_waypoints)",
+            locate: Locate::LineOrKey,
+            seeds: |d| read(d, &["demo-waypoints.csv", "calibration-campaign.csv"]),
+            run: |b, _| match text(b) {
+                Some(t) => verdict(motion_core::daemon::trajectory::parse_waypoints(
+                    t,
+                    "waypoints.csv",
+                )),
+                None => Verdict::Rejected("not UTF-8 (line 1)".into()),
+            },
+        },
+        Target {
+            name: "dataset-csv",
+            what: "measurement data set (crs_dataset::read_dataset)",
+            locate: Locate::LineOrKey,
+            seeds: |_| vec![dataset_seed(true), dataset_seed(false)],
+            run: |b, _| verdict(crs_dataset::read_dataset(b, "data.csv")),
+        },
+        Target {
+            name: "surrogate-json",
+            what: "surrogate file (surrogate::Surrogate::load)",
+            locate: Locate::No,
+            seeds: |_| vec![surrogate_seed()],
+            run: |b, s| {
+                let p = s.file("surrogate.json", b);
+                verdict(surrogate::Surrogate::load(&p, SURROGATE_PLATFORM))
+            },
+        },
+        Target {
+            name: "candump-line",
+            what: "candump log line (can_transport::candump::parse_line)",
+            locate: Locate::No,
+            seeds: |_| {
+                vec![
+                    b"(1700000000.000123) vcan0 181#3706C4FFFFFF".to_vec(),
+                    b"(0.000001) can0 701#05".to_vec(),
+                    b"(12.5) udpbus 101#0100070000000FF01".to_vec(),
+                ]
+            },
+            run: |b, _| match text(b) {
+                Some(t) => verdict(can_transport::candump::parse_line(t)),
+                None => Verdict::Rejected("not UTF-8".into()),
+            },
+        },
+        Target {
+            name: "cannelloni",
+            what: "CAN-over-UDP datagram (can_transport::cannelloni::decode)",
+            locate: Locate::No,
+            seeds: |d| {
+                frame_seeds(d)
+                    .iter()
+                    .map(|b| {
+                        let fs = frames_from(b);
+                        let mut out = vec![0u8; 1500];
+                        let n = can_transport::cannelloni::encode(3, &fs, &mut out)
+                            .expect("seed frames fit one datagram");
+                        out.truncate(n);
+                        out
+                    })
+                    .collect()
+            },
+            run: |b, _| {
+                let mut n = 0usize;
+                verdict(can_transport::cannelloni::decode(b, |_| n += 1))
+            },
+        },
+        Target {
+            name: "transport-spec",
+            what: "transport spec string (can_transport::TransportSpec)",
+            locate: Locate::No,
+            seeds: |_| {
+                vec![
+                    b"udpbus".to_vec(),
+                    b"socketcan:vcan0".to_vec(),
+                    b"udpbus:239.255.70.9:21182".to_vec(),
+                ]
+            },
+            run: |b, _| match text(b) {
+                Some(t) => verdict(t.parse::<can_transport::TransportSpec>()),
+                None => Verdict::Rejected("not UTF-8".into()),
+            },
+        },
+        Target {
+            name: "canopen-frame",
+            what: "CANopen decoding: NMT/SYNC/PDO/EMCY/SDO (drive_io::canopen), the monitor's bus observer",
+            locate: Locate::No,
+            seeds: frame_seeds,
+            run: |b, _| {
+                for f in frames_from(b) {
+                    let _ = drive_io::canopen::decode(&f);
+                    let _ = safety_monitor::bus_frames::observe(&f);
+                    let mut d = [0u8; 8];
+                    let n = f.data().len();
+                    d[..n].copy_from_slice(f.data());
+                    let _ = drive_io::canopen::parse_sdo_request(&d);
+                    let _ = drive_io::canopen::parse_sdo_response(&d);
+                }
+                Verdict::Accepted
+            },
+        },
+        Target {
+            name: "safety-pair",
+            what: "doubled safety frame (can_transport::safety_frame::decode_pair)",
+            locate: Locate::No,
+            seeds: frame_seeds,
+            run: |b, _| {
+                let fs = frames_from(b);
+                let mut any = Verdict::Accepted;
+                for w in fs.windows(2) {
+                    match safety_frame::decode_pair(&w[0], &w[1], safety_frame::DEFAULT_COB_ID) {
+                        Ok(hb) => {
+                            // A pair is valid only as exact inverses on the two ids.
+                            let inv_ok =
+                                w[0].data().iter().zip(w[1].data()).all(|(a, c)| *a == !*c)
+                                    && w[0].data().len() == 8
+                                    && w[1].data().len() == 8;
+                            if !inv_ok {
+                                return Verdict::Violation(format!(
+                                    "decode_pair accepted a pair that is not an exact inverse: {hb:?}"
+                                ));
+                            }
+                        }
+                        Err(e) => any = Verdict::Rejected(format!("{e:?}")),
+                    }
+                }
+                any
+            },
+        },
+        Target {
+            name: "safety-watch",
+            what: "SafetyWatch state machine (drive_io::safety_watch) under arbitrary frame sequences and times",
+            locate: Locate::No,
+            seeds: |_| vec![watch_seed()],
+            run: run_watch,
+        },
+    ]
+}
+
+/// Frame sequences for the watch: per event 1 byte time step (ms), then a frame as in
+/// [`frames_from`]. The seed is a valid RUN heartbeat every 15 ms.
+fn watch_seed() -> Vec<u8> {
+    let mut v = Vec::new();
+    for c in 0..40u32 {
+        let hb = SafetyHeartbeat {
+            state: SafetyState::Run,
+            cause: 0,
+            counter: c,
+            cable: safety_frame::NO_CABLE,
+        };
+        let [n, i] = safety_frame::encode(&hb, safety_frame::DEFAULT_COB_ID);
+        v.push(15);
+        v.extend(frame_bytes(&n));
+        v.push(0);
+        v.extend(frame_bytes(&i));
+    }
+    v
+}
+
+/// Properties: no panic; never PERMIT when no frame at all arrived on the safety ids within the
+/// validation time; never PERMIT right after the monitor said STOP in a valid pair.
+fn run_watch(b: &[u8], _: &Scratch) -> Verdict {
+    let cfg = SafetyWatchConfig::default();
+    let validation_ns = u64::from(cfg.validation_time_ms) * 1_000_000;
+    let mut w = SafetyWatch::new(cfg);
+    let mut now: u64 = 1_000_000_000;
+    let mut last_safety_frame: Option<u64> = None;
+    let mut i = 0;
+    let mut pending_normal: Option<CanFrame> = None;
+    while i + 4 <= b.len() {
+        now += u64::from(b[i]) * 1_000_000;
+        let fs = frames_from(&b[i + 1..]);
+        let Some(f) = fs.first().copied() else { break };
+        i += 1 + 3 + f.data().len();
+        w.on_frame(&f, now);
+        let id = f.id() as u16;
+        let safety_id = id == cfg.cob_id || id == cfg.cob_id + 1;
+        if safety_id {
+            last_safety_frame = Some(now);
+        }
+        let mut stop_said = false;
+        if id == cfg.cob_id {
+            pending_normal = Some(f);
+        } else if id == cfg.cob_id + 1
+            && let Some(n) = pending_normal.take()
+            && let Ok(hb) = safety_frame::decode_pair(&n, &f, cfg.cob_id)
+        {
+            stop_said = hb.state == SafetyState::Stop;
+        }
+        let permits = w.permits(now);
+        let silent = last_safety_frame.is_none_or(|t| now.saturating_sub(t) > validation_ns);
+        if permits && silent {
+            return Verdict::Violation(format!(
+                "SafetyWatch permits at t = {now} ns with no frame on the safety ids for more than the validation time"
+            ));
+        }
+        if permits && stop_said {
+            return Verdict::Violation(
+                "SafetyWatch permits right after a valid STOP pair".to_string(),
+            );
+        }
+    }
+    Verdict::Accepted
+}
+
+const SURROGATE_PLATFORM: &str = "fuzz-platform";
+
+fn surrogate_seed() -> Vec<u8> {
+    let region = surrogate::Region {
+        lower: [-1.0, -1.0, 1.0, -0.1, -0.1, -0.1],
+        upper: [1.0, 1.0, 2.0, 0.1, 0.1, 0.1],
+    };
+    let opts = surrogate::FitOptions {
+        degree: 2,
+        validation_samples: 200,
+        ..surrogate::FitOptions::default()
+    };
+    let (s, _) = surrogate::fit(&region, &opts, 8, SURROGATE_PLATFORM, |x: &[f64; 6]| {
+        Ok::<_, String>(std::array::from_fn::<f64, 8, _>(|j| {
+            0.01 * (x[0] + 0.1 * j as f64).sin() + 0.002 * x[3]
+        }))
+    })
+    .expect("seed surrogate fits");
+    let p = std::env::temp_dir().join(format!("crs-fuzz-seed-{}.json", std::process::id()));
+    s.save(&p).expect("seed surrogate saves");
+    let bytes = std::fs::read(&p).expect("seed surrogate reads back");
+    let _ = std::fs::remove_file(&p);
+    bytes
+}
+
+fn dataset_seed(forces: bool) -> Vec<u8> {
+    let mut ds = crs_dataset::Dataset::new(8, forces, true);
+    ds.metadata.push(("platform".into(), "fuzz".into()));
+    let mut rng: SmallRng = rand::SeedableRng::seed_from_u64(1);
+    for k in 0..6 {
+        let pose = cdpr_model::Pose::new(
+            Vector3::new(rng.random_range(-1.0..1.0), 0.2, 1.8),
+            Vector3::new(0.01, -0.02, 0.03),
+        );
+        ds.samples.push(crs_dataset::Sample {
+            sample: k,
+            pose_index: k / 2,
+            phase: crs_dataset::Phase::Pose,
+            q_cmd: (0..8).map(|_| rng.random_range(7.0..10.0)).collect(),
+            pose,
+            forces: forces.then(|| (0..8).map(|_| rng.random_range(1000.0..9000.0)).collect()),
+            pose_ref: Some(pose),
+        });
+    }
+    let mut out = Vec::new();
+    crs_dataset::write_dataset(&mut out, &ds).expect("seed data set writes");
+    out
+}
