@@ -48,6 +48,10 @@ pub enum CalibrateCommand {
     /// Make a calibration campaign: feasible waypoint poses spread over the workspace with
     /// varied orientations, the whole plan verified with motion-core's checks.
     Campaign(crate::calibrate_loop_cmd::CampaignArgs),
+    /// Diagnosis benchmark: single-effect scenarios on the simulated plant (every catalogue
+    /// effect plus a baseline, several seeds, randomised magnitudes); prints the confusion
+    /// matrix, FK failures and held-out error against the true-effect model.
+    BenchDiagnosis(crate::calibrate_bench::BenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -168,6 +172,7 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
         }
         CalibrateCommand::Loop(a) => crate::calibrate_loop_cmd::run_loop(a, &command),
         CalibrateCommand::Campaign(a) => crate::calibrate_loop_cmd::run_campaign(a),
+        CalibrateCommand::BenchDiagnosis(a) => crate::calibrate_bench::run(a),
     }
 }
 
