@@ -19,7 +19,7 @@ pub fn std_text(f: &crate::identify::Fit, k: usize) -> String {
     let p = f.free[k];
     if f.at_bound.contains(&p) {
         "at physical bound".into()
-    } else if f.unidentifiable.contains(&p) || !(f.std[k] > 0.0) {
+    } else if f.unidentifiable.contains(&p) || f.std[k].is_nan() || f.std[k] <= 0.0 {
         "unidentifiable".into()
     } else {
         format!("{:.2e}", f.std[k])

@@ -112,7 +112,7 @@ fn scenario_effects(effect: Option<Effect>, reference: &Effects, u: f64) -> Effe
             fx.winch = Some(w);
         }
         Some(Effect::LoadCog) => {
-            let mut l = reference.load.clone().expect("reference load");
+            let mut l = reference.load.expect("reference load");
             l.center_of_gravity *= u;
             fx.load = Some(l);
         }
@@ -174,7 +174,6 @@ struct Row {
     chosen: Vec<Effect>,
     fk_failed: bool,
     non_physical: Vec<String>,
-    base_pos: f64,
     final_pos: f64,
     true_pos: Option<f64>,
     matters: bool,
@@ -290,7 +289,6 @@ pub fn run(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
                 chosen,
                 fk_failed,
                 non_physical,
-                base_pos: base.holdout.pos_mean_mm,
                 final_pos: fin.holdout.pos_mean_mm,
                 true_pos,
                 matters,
@@ -376,8 +374,6 @@ fn print_summary(rows: &[Row], scenarios: &[Option<Effect>], a: &BenchArgs) {
         "| held-out position error within 10 % of the true-effect model | {within}/{} (worst ratio {worst:.2}) |",
         ratios.len()
     );
-    let gain: Vec<f64> = rows.iter().map(|r| r.base_pos).collect();
-    let _ = gain;
     println!("| pipeline time per set (mean / max) | {mean_s:.2} / {max_s:.2} s |");
     for r in rows.iter().filter(|r| !r.non_physical.is_empty()) {
         println!(

@@ -25,7 +25,16 @@ fn bench_diagnosis_smoke() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{out}{err}");
     assert!(out.contains("| baseline | 1 (0) |"), "{out}{err}");
-    assert!(out.contains("| runs with an FK failure in any step | 0/2 |"), "{out}");
-    assert!(out.contains("| runs with a non-physical final parameter | 0/2 |"), "{out}");
-    assert!(err.contains("drum          seed 0") && err.contains("chosen [drum"), "{err}");
+    assert!(
+        out.contains("| runs with an FK failure in any step | 0/2 |"),
+        "{out}"
+    );
+    assert!(
+        out.contains("| runs with a non-physical final parameter | 0/2 |"),
+        "{out}"
+    );
+    assert!(
+        err.contains("drum          seed 0") && err.contains("chosen [drum"),
+        "{err}"
+    );
 }
