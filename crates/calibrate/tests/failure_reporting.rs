@@ -58,12 +58,13 @@ fn failed_fk_is_reported_as_failed_never_as_zero() {
 
 #[test]
 fn bounded_identification_keeps_stiffness_physical() {
-    // Forces scaled by 3 on a rigid-enough plant: the unbounded fit used to run k_F away.
+    // Readings 40× the true forces (a wrong load-cell unit, ±40 % per cable): the elongation
+    // f/k_F then asks for k_F ≈ 80 MN/m, which the unbounded fit returns.
     let mut obs = campaign(Effects::default(), 16, 9, true);
     for o in &mut obs {
         if let Some(f) = &mut o.forces {
             for (i, v) in f.iter_mut().enumerate() {
-                *v *= 1.0 + 0.4 * (i as f64 - 3.5) / 3.5;
+                *v *= 40.0 * (1.0 + 0.4 * (i as f64 - 3.5) / 3.5);
             }
         }
     }
