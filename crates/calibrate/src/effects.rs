@@ -20,6 +20,7 @@ use crate::identify::{self, Fit, FitSpec};
 use crate::observation::Observation;
 use crate::params::{CalModel, ParamId};
 use crate::residual::Kind;
+use crate::validate;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
@@ -140,7 +141,16 @@ pub struct CandidateScore {
     pub holdout_rms_after: f64,
     pub bic_before: f64,
     pub bic_after: f64,
-    /// Fitted effect parameters (SI) and 1σ.
+    /// Held-out mean position error (mm) and force error ‖f_P − f_M‖ (N) through the model's
+    /// forward kinematics, before (current model) and after adding the candidate; `None`
+    /// when the FK failed on some held-out sample (see `fk_failure`).
+    pub holdout_pos_mm_before: Option<f64>,
+    pub holdout_pos_mm_after: Option<f64>,
+    pub holdout_force_n_before: Option<f64>,
+    pub holdout_force_n_after: Option<f64>,
+    /// "FK failed on k/n" when the candidate's model fails on held-out samples: never chosen.
+    pub fk_failure: Option<String>,
+    /// Fitted effect parameters (SI) and 1σ (NaN when unidentifiable or at a bound).
     pub params: Vec<(String, f64, f64)>,
     pub accepted: bool,
     pub verdict: String,
@@ -235,6 +245,13 @@ pub fn select(
     let eval_set = if holdout.is_empty() { train } else { holdout };
     while chosen.len() < cfg.max_effects {
         let rms_before = rms(current.kind, &current.model, eval_set, spec);
+        let fk_before = validate::evaluate(current.kind, &current.model, eval_set);
+        let pos_before = (!fk_before.failed()).then_some(fk_before.pos_mean_mm);
+        let force_before = if fk_before.failed() {
+            None
+        } else {
+            fk_before.force_mean_n
+        };
         let bic_before = bic(current.cost, current.n_residuals, current.free.len());
         let mut round = Vec::new();
         let mut best: Option<(usize, Fit)> = None;
@@ -259,6 +276,11 @@ pub fn select(
                 holdout_rms_after: f64::NAN,
                 bic_before,
                 bic_after: f64::NAN,
+                holdout_pos_mm_before: pos_before,
+                holdout_pos_mm_after: None,
+                holdout_force_n_before: force_before,
+                holdout_force_n_after: None,
+                fk_failure: None,
                 params: Vec::new(),
                 accepted: false,
                 verdict: String::new(),
@@ -293,25 +315,60 @@ pub fn select(
                                 .free
                                 .iter()
                                 .position(|q| q == p)
+                                .filter(|_| !f.at_bound.contains(p))
                                 .map_or(f64::NAN, |c| f.std[c]);
                             (p.name(), f.model.get(*p), sd)
                         })
                         .collect();
+                    // What a user cares about: the held-out pose and force through the FK.
+                    let fk = validate::evaluate(f.kind, &f.model, eval_set);
+                    cs.fk_failure = fk.failure_text();
+                    if !fk.failed() {
+                        cs.holdout_pos_mm_after = Some(fk.pos_mean_mm);
+                        cs.holdout_force_n_after = fk.force_mean_n;
+                    }
                     let significant = cs.score > cs.score_critical;
                     let bic_ok = cs.bic_after < cs.bic_before;
                     let gain_ok = cs.holdout_rms_after < (1.0 - cfg.min_gain) * rms_before;
-                    cs.verdict = match (significant, bic_ok, gain_ok) {
-                        (true, true, true) => "passes".into(),
-                        (false, _, _) => "signature not significant".into(),
-                        (_, false, _) => "BIC does not improve".into(),
-                        (_, _, false) => {
+                    // A candidate must not make the held-out pose worse (beyond 2 %, the
+                    // sample-to-sample noise of a ~100-pose mean): one that only moves the
+                    // force residual (e.g. force_sensors absorbing a length effect) is refused.
+                    let pose_ok = match (cs.holdout_pos_mm_after, pos_before) {
+                        (Some(a), Some(b)) => a <= 1.02 * b,
+                        (Some(_), None) => true,
+                        (None, _) => false,
+                    };
+                    let physical = f.at_bound.iter().all(|p| !effect.params(m).contains(p));
+                    cs.verdict = match (significant, bic_ok, gain_ok, pose_ok, physical) {
+                        _ if cs.fk_failure.is_some() => format!(
+                            "{} with it: refused",
+                            cs.fk_failure.as_deref().unwrap_or("FK failed")
+                        ),
+                        (true, true, true, true, true) => "passes".into(),
+                        (false, ..) => "signature not significant".into(),
+                        (_, false, ..) => "BIC does not improve".into(),
+                        (_, _, false, ..) => {
                             format!("held-out gain below {:.0} %", cfg.min_gain * 100.0)
                         }
+                        (_, _, _, false, _) => "held-out pose error gets worse".into(),
+                        (.., false) => {
+                            "a parameter ends at its physical bound (the effect's shape does not fit)".into()
+                        }
                     };
-                    if significant && bic_ok && gain_ok {
+                    if significant && bic_ok && gain_ok && pose_ok && physical {
+                        // Rank by the held-out pose error through the FK, then by the
+                        // weighted residual (which carries the force rows).
                         let better = best.as_ref().is_none_or(|(bi, _)| {
                             let b: &CandidateScore = &round[*bi];
-                            cs.holdout_rms_after < b.holdout_rms_after
+                            let (pa, pb) = (
+                                cs.holdout_pos_mm_after.unwrap_or(f64::INFINITY),
+                                b.holdout_pos_mm_after.unwrap_or(f64::INFINITY),
+                            );
+                            if (pa - pb).abs() > 0.01 * pb {
+                                pa < pb
+                            } else {
+                                cs.holdout_rms_after < b.holdout_rms_after
+                            }
                         });
                         if better {
                             best = Some((round.len(), f));

@@ -68,8 +68,15 @@ pub struct Fit {
     pub cond_end_scaled: f64,
     /// Singular values of J W_pc at the optimum, descending (eq. 4.19–4.21).
     pub singular_values: Vec<f64>,
-    /// 1σ uncertainty per free parameter (SI), from σ² (J^T J)^{-1}.
+    /// 1σ uncertainty per free parameter (SI), from σ² (J^T J)^{-1}; NaN where the normal
+    /// matrix gives none (listed in `unidentifiable`).
     pub std: Vec<f64>,
+    /// Free parameters the data do not determine: no finite, positive 1σ (singular normal
+    /// matrix or a zero column). The report names them instead of printing a number.
+    pub unidentifiable: Vec<ParamId>,
+    /// Free parameters that ended at (within 0.1 % of the range of) their physical bound
+    /// ([`ParamId::bounds`]): the data pushed them there; their 1σ is not meaningful.
+    pub at_bound: Vec<ParamId>,
     /// RMS of the wrench rows (N, N·m) and length rows (m) without weights.
     pub rms_wrench: f64,
     pub rms_length: f64,
@@ -98,6 +105,9 @@ struct Problem<'a> {
     lasso_w: Vec<f64>,
     buf: Vec<f64>,
     buf2: Vec<f64>,
+    /// Physical range per free parameter in z units (±∞ when unbounded), widened to contain
+    /// the start value so a start outside (a user's odd nominal) is never rejected.
+    bounds: Vec<(f64, f64)>,
 }
 
 const LASSO_EPS: f64 = 1e-3;
@@ -121,6 +131,17 @@ impl LsqProblem for Problem<'_> {
     }
 
     fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), String> {
+        // Bounded identification: a step that leaves a parameter's physical range is treated
+        // like one outside the model's valid region, so LM damps it back inside.
+        if let Some(k) =
+            (0..z.len()).find(|&k| !(z[k] >= self.bounds[k].0 && z[k] <= self.bounds[k].1))
+        {
+            return Err(format!(
+                "{} = {:.4e} outside its physical range",
+                self.free[k].name(),
+                z[k] * self.scale[k]
+            ));
+        }
         let c = self.model_at(z);
         let nd = self.n_data();
         self.ev
@@ -243,7 +264,17 @@ fn make_problem<'a>(
         .filter_map(|(id, l)| pos(id).map(|c| (c, *l)))
         .collect();
     let rows = ev.rows;
+    let bounds = free
+        .iter()
+        .zip(&scale)
+        .zip(z_start.iter())
+        .map(|((p, s), z0)| match p.bounds() {
+            Some((lo, hi)) => ((lo / s).min(*z0), (hi / s).max(*z0)),
+            None => (f64::NEG_INFINITY, f64::INFINITY),
+        })
+        .collect();
     Problem {
+        bounds,
         ev,
         start: cal.clone(),
         free: free.to_vec(),
@@ -427,9 +458,40 @@ pub fn fit(
             .collect(),
         None => vec![f64::NAN; free.len()],
     };
+    let std: Vec<f64> = std
+        .into_iter()
+        .map(|v: f64| {
+            if v.is_finite() && v > 0.0 {
+                v
+            } else {
+                f64::NAN
+            }
+        })
+        .collect();
+    let unidentifiable = free
+        .iter()
+        .zip(&std)
+        .filter(|(_, v)| v.is_nan())
+        .map(|(p, _)| *p)
+        .collect();
+    let at_bound = free
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| {
+            let (lo, hi) = prob.bounds[*k];
+            let z = res.z[*k];
+            lo.is_finite() && hi.is_finite() && {
+                let tol = 1e-3 * (hi - lo);
+                z - lo <= tol || hi - z <= tol
+            }
+        })
+        .map(|(_, p)| *p)
+        .collect();
     let (rms_wrench, rms_length) =
         split_rms(spec.kind, obs, model.m(), spec.weights, data_r.as_slice());
     Ok(Fit {
+        unidentifiable,
+        at_bound,
         kind: spec.kind,
         model,
         free,

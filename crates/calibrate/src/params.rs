@@ -11,6 +11,18 @@ use serde::Serialize;
 /// at which the CRS nominal k_F was measured (eq. 6.19).
 pub const STIFFNESS_REFERENCE_FORCE_N: f64 = 5000.0;
 
+/// Lowest physical cable stiffness k_F (N/m), see [`ParamId::bounds`].
+pub const KF_MIN_N: f64 = 0.2e6;
+/// Highest physical cable stiffness k_F (N/m).
+pub const KF_MAX_N: f64 = 50e6;
+/// Drum capacity bound on the rope stored in the powertrain (m): a CRS winch drum holds a
+/// few tens of metres of rope beyond the workspace's longest cable.
+pub const STORED_ROPE_MAX_M: f64 = 100.0;
+/// Largest drum radius error |ε| (1).
+pub const DRUM_EPS_MAX: f64 = 0.03;
+/// Largest pulley radius (m).
+pub const PULLEY_RADIUS_MAX_M: f64 = 0.5;
+
 /// One scalar parameter of [`CalModel`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
 pub enum ParamId {
@@ -61,6 +73,43 @@ impl ParamId {
             ParamId::Cog(_) => 0.1,
             ParamId::ForceGain(_) => 0.01,
             ParamId::ForceOffset(_) => 10.0,
+        }
+    }
+
+    /// Physical range of the parameter in SI units, or `None` when it has none (geometry,
+    /// offsets, the external wrench). The identification cannot leave it: a step outside is
+    /// rejected like a step outside the model's valid region (see [`crate::identify`] and
+    /// docs/calibration.md, "Bounded identification", for where each range comes from).
+    pub fn bounds(&self) -> Option<(f64, f64)> {
+        match self {
+            // Steel-rope axial stiffness of a CRS-sized cable including the powertrain: the
+            // nominal 2 MN/m (eq. 6.19) within a factor 10 down and 25 up; issue 13 asks that no
+            // k_F leaves [0.2, 50] MN/m.
+            ParamId::KF(_) => Some((KF_MIN_N, KF_MAX_N)),
+            // Rope stored on the drum and in the powertrain: ≥ 0, at most the drum capacity.
+            ParamId::ExtraLength(_) => Some((0.0, STORED_ROPE_MAX_M)),
+            // Drum radius error: a wrong drum or rope diameter, a few per cent at most.
+            ParamId::DrumScale(_) => Some((-DRUM_EPS_MAX, DRUM_EPS_MAX)),
+            // Pulley radius: ≥ 0 and no larger than a pulley of a robot this size.
+            ParamId::PulleyRadius => Some((0.0, PULLEY_RADIUS_MAX_M)),
+            // Tension-dependent stiffness: the elongation stays increasing in f over the
+            // operating range (|κ| < 1 keeps dg/df = 1 + κ (f − f_s)/f_s > 0 for f < 2 f_s).
+            ParamId::StiffnessKappa => Some((-0.9, 0.9)),
+            // Hysteresis half width: ≥ 0 (the band has a sign by definition), a fraction of
+            // the reference force.
+            ParamId::Hysteresis => Some((0.0, 0.5 * STIFFNESS_REFERENCE_FORCE_N)),
+            // Sag (μ g)² ≥ 0, μ ≤ 5 kg/m (far heavier than a CRS rope).
+            ParamId::SagW2 => Some((0.0, (5.0f64 * 9.81).powi(2))),
+            // Centre of gravity within the platform's size.
+            ParamId::Cog(_) => Some((-2.0, 2.0)),
+            // Force-sensor gain error: a load cell off by more than 30 % is broken, not
+            // miscalibrated.
+            ParamId::ForceGain(_) => Some((-0.3, 0.3)),
+            ParamId::A(..)
+            | ParamId::B(..)
+            | ParamId::We(_)
+            | ParamId::Offset(_)
+            | ParamId::ForceOffset(_) => None,
         }
     }
 

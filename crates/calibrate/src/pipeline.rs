@@ -59,6 +59,13 @@ pub struct Stage {
     pub holdout: Errors,
 }
 
+impl Stage {
+    /// The step's forward kinematics failed on some held-out sample: it is not validated.
+    pub fn failed(&self) -> bool {
+        self.holdout.failed()
+    }
+}
+
 /// Everything the report shows.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct PipelineReport {
@@ -76,6 +83,17 @@ impl PipelineReport {
     /// The final (best) model.
     pub fn final_stage(&self) -> &Stage {
         self.stages.last().expect("pipeline produces stages")
+    }
+    /// The last step whose forward kinematics converged on every held-out sample.
+    pub fn last_validated_stage(&self) -> Option<&Stage> {
+        self.stages.iter().rev().find(|s| !s.failed())
+    }
+    /// Steps that failed validation, with their failure text.
+    pub fn failed_stages(&self) -> Vec<(String, String)> {
+        self.stages
+            .iter()
+            .filter_map(|s| s.holdout.failure_text().map(|t| (s.name.clone(), t)))
+            .collect()
     }
 }
 

@@ -14,6 +14,26 @@ fn fmt_opt(v: Option<f64>, prec: usize) -> String {
     v.map_or("–".into(), |x| format!("{x:.prec$}"))
 }
 
+/// The 1σ of free parameter `k` of a fit, or why there is none (never NaN or ±0).
+pub fn std_text(f: &crate::identify::Fit, k: usize) -> String {
+    let p = f.free[k];
+    if f.at_bound.contains(&p) {
+        "at physical bound".into()
+    } else if f.unidentifiable.contains(&p) || f.std[k].is_nan() || f.std[k] <= 0.0 {
+        "unidentifiable".into()
+    } else {
+        format!("{:.2e}", f.std[k])
+    }
+}
+
+fn name_list(ps: &[ParamId]) -> String {
+    if ps.is_empty() {
+        "none".into()
+    } else {
+        ps.iter().map(|p| p.name()).collect::<Vec<_>>().join(", ")
+    }
+}
+
 /// The spec's comparison numbers (ch. 6.2–6.5), next to ours.
 pub const SPEC_ROWS: [(&str, &str); 5] = [
     (
@@ -46,6 +66,19 @@ pub fn stage_table(rep: &PipelineReport) -> String {
             .find(|(n, _)| *n == st.name)
             .map_or(SPEC_ROWS[4].1, |(_, v)| *v);
         let h = &st.holdout;
+        // A step whose FK failed anywhere prints no figure: its statistics would describe a
+        // subset (or nothing) and read as a result.
+        if let Some(fail) = h.failure_text() {
+            let _ = writeln!(
+                s,
+                "| {} | {} (**failed**) | {fail} | {fail} | {:.2} | {fail} | {} |",
+                k + 1,
+                st.name,
+                h.len_mean_mm,
+                spec
+            );
+            continue;
+        }
         let _ = writeln!(
             s,
             "| {} | {} | {:.2} / {:.2} | {:.3} / {:.3} | {:.2} | {} / {} | {} |",
@@ -74,15 +107,36 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
         "Training samples: {}; held-out samples: {} (every figure below is on the held-out samples, computed through the model's forward kinematics, eq. 3.3–3.8).\n",
         rep.n_train, rep.n_holdout
     );
+    let failed = rep.failed_stages();
+    if !failed.is_empty() {
+        s.push_str("## Failures\n\n");
+        for (name, text) in &failed {
+            let _ = writeln!(
+                s,
+                "* **{name}: failed** — {text} held-out samples; its errors are not reported."
+            );
+        }
+        match rep.last_validated_stage() {
+            Some(st) if rep.final_stage().failed() => {
+                let _ = writeln!(
+                    s,
+                    "\nThe final step failed; the last validated step is **{}**.\n",
+                    st.name
+                );
+            }
+            None => s.push_str("\nNo step validated.\n\n"),
+            _ => s.push('\n'),
+        }
+    }
     s.push_str("## Errors per step (held out)\n\n");
     s.push_str(&stage_table(rep));
-    s.push_str("\n## Identification\n\n| step | parameters | residual rows | iterations | cond(J) SI (tab. 4.3 d) | cond(J W_pc) start (tab. 4.3 e) | cond(J W_pc) end | RMS wrench (N) | RMS length (mm) | fixed (unobservable) |\n|---|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str("\n## Identification\n\n| step | parameters | residual rows | iterations | cond(J) SI (tab. 4.3 d) | cond(J W_pc) start (tab. 4.3 e) | cond(J W_pc) end | RMS wrench (N) | RMS length (mm) | fixed (unobservable) | unidentifiable (no finite 1σ) | at physical bound |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for st in &rep.stages {
         if let Some(f) = &st.fit {
             let fixed: Vec<String> = f.fixed_unobservable.iter().map(|(p, _)| p.name()).collect();
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {:.3e} | {:.1} | {:.1} | {:.2} | {:.3} | {} |",
+                "| {} | {} | {} | {} | {:.3e} | {:.1} | {:.1} | {:.2} | {:.3} | {} | {} | {} |",
                 st.name,
                 f.free.len(),
                 f.n_residuals,
@@ -96,7 +150,9 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
                     "none".into()
                 } else {
                     fixed.join(", ")
-                }
+                },
+                name_list(&f.unidentifiable),
+                name_list(&f.at_bound)
             );
         }
     }
@@ -114,18 +170,29 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
             "{:.0} %; the best such candidate per round is chosen.\n",
             rep.config.select.min_gain * 100.0
         );
-        s.push_str("| round | effect | k | score | χ² crit | held-out RMS before → after | BIC before → after | fitted parameters (±1σ) | verdict |\n|---|---|---|---|---|---|---|---|---|\n");
+        s.push_str("A candidate must also keep the forward kinematics converging on every held-out sample, not make the held-out position error worse (> 2 %), and keep its parameters inside their physical ranges; among those that pass, the lowest held-out position error through the FK wins.\n\n");
+        s.push_str("| round | effect | k | score | χ² crit | held-out RMS before → after | held-out position (mm) before → after, FK | held-out force (N) before → after, FK | BIC before → after | fitted parameters (±1σ) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
         for (r, round) in sel.rounds.iter().enumerate() {
             for c in round {
                 let params: Vec<String> = c
                     .params
                     .iter()
                     .take(8)
-                    .map(|(n, v, sd)| format!("{n} = {v:.4e} ± {sd:.1e}"))
+                    .map(|(n, v, sd)| {
+                        if sd.is_finite() && *sd > 0.0 {
+                            format!("{n} = {v:.4e} ± {sd:.1e}")
+                        } else {
+                            format!("{n} = {v:.4e} (unidentifiable or at bound)")
+                        }
+                    })
                     .collect();
+                let fk_after = |v: Option<f64>, prec: usize| match (&c.fk_failure, v) {
+                    (Some(t), _) => t.clone(),
+                    (None, v) => fmt_opt(v, prec),
+                };
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {} | {:.3e} | {:.1} | {:.4e} → {:.4e} | {:.1} → {:.1} | {} | {} |",
+                    "| {} | {} | {} | {:.3e} | {:.1} | {:.4e} → {:.4e} | {} → {} | {} → {} | {:.1} → {:.1} | {} | {} |",
                     r + 1,
                     c.effect.name(),
                     c.n_params,
@@ -133,6 +200,10 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
                     c.score_critical,
                     c.holdout_rms_before,
                     c.holdout_rms_after,
+                    fmt_opt(c.holdout_pos_mm_before, 2),
+                    fk_after(c.holdout_pos_mm_after, 2),
+                    fmt_opt(c.holdout_force_n_before, 1),
+                    fk_after(c.holdout_force_n_after, 1),
                     c.bic_before,
                     c.bic_after,
                     params.join("; "),
@@ -154,12 +225,12 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
             let v = f.model.get(*p);
             let _ = writeln!(
                 s,
-                "| {} | {:.6} | {:.6} | {:+.6} | {:.2e} |",
+                "| {} | {:.6} | {:.6} | {:+.6} | {} |",
                 p.name(),
                 v0,
                 v,
                 v - v0,
-                f.std[k]
+                std_text(f, k)
             );
         }
     }
@@ -528,10 +599,18 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
         ),
     ));
     // Steps: mean position error.
-    let names: Vec<String> = (1..=rep.stages.len())
-        .map(|k| format!("step {k}"))
+    // A failed step gets no bar (a bar of its partial mean would read as a result).
+    let shown: Vec<(usize, &Stage)> = rep
+        .stages
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| !s.failed())
         .collect();
-    let pos: Vec<f64> = rep.stages.iter().map(|s| s.holdout.pos_mean_mm).collect();
+    let names: Vec<String> = shown
+        .iter()
+        .map(|(k, _)| format!("step {}", k + 1))
+        .collect();
+    let pos: Vec<f64> = shown.iter().map(|(_, s)| s.holdout.pos_mean_mm).collect();
     out.push((
         "steps.svg".into(),
         bar_chart(
@@ -578,7 +657,9 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
                     k as f64,
                     1e3 * (f.model.get(*p) - first.model.get(*p)).abs(),
                 ));
-                sds.push((k as f64, 1e3 * f.std[k]));
+                if f.std[k].is_finite() {
+                    sds.push((k as f64, 1e3 * f.std[k]));
+                }
             }
         }
         out.push((

@@ -29,6 +29,25 @@ pub struct Errors {
     pub force_max_n: Option<f64>,
 }
 
+impl Errors {
+    /// True when the forward kinematics failed on any evaluated sample (or there was none):
+    /// the statistics then describe a subset and the model is not validated.
+    pub fn failed(&self) -> bool {
+        self.fk_failures > 0 || self.n == 0
+    }
+
+    /// Total samples evaluated (converged + failed).
+    pub fn total(&self) -> usize {
+        self.n + self.fk_failures
+    }
+
+    /// "FK failed on k/n" when [`Errors::failed`], for the error columns of a failed step.
+    pub fn failure_text(&self) -> Option<String> {
+        self.failed()
+            .then(|| format!("FK failed on {}/{}", self.fk_failures, self.total()))
+    }
+}
+
 /// The extended cable law of a [`CalModel`] (see [`crate::residual`]) for ν_el: the inverse
 /// q_θ = q + S/f² − (q + l)/k_F (g(f) − d H) is solved for f per cable.
 #[derive(Clone, Debug)]

@@ -48,6 +48,10 @@ pub enum CalibrateCommand {
     /// Make a calibration campaign: feasible waypoint poses spread over the workspace with
     /// varied orientations, the whole plan verified with motion-core's checks.
     Campaign(crate::calibrate_loop_cmd::CampaignArgs),
+    /// Diagnosis benchmark: single-effect scenarios on the simulated plant (every catalogue
+    /// effect plus a baseline, several seeds, randomised magnitudes); prints the confusion
+    /// matrix, FK failures and held-out error against the true-effect model.
+    BenchDiagnosis(crate::calibrate_bench::BenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -168,6 +172,7 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
         }
         CalibrateCommand::Loop(a) => crate::calibrate_loop_cmd::run_loop(a, &command),
         CalibrateCommand::Campaign(a) => crate::calibrate_loop_cmd::run_campaign(a),
+        CalibrateCommand::BenchDiagnosis(a) => crate::calibrate_bench::run(a),
     }
 }
 
@@ -211,26 +216,40 @@ pub(crate) fn calibrate_and_report(
         names.push(name.clone());
     }
     let fin = rep.final_stage();
-    let chosen = rep
-        .selection
-        .as_ref()
-        .map(|s| s.chosen.clone())
-        .unwrap_or_default();
     let toml_path = opts.out.join("calibrated.toml");
     let side_path = opts.out.join("calibrated-effects.toml");
-    std::fs::write(
-        &toml_path,
-        report::platform_toml(base, &fin.model, &format!("{}-calibrated", base.name)),
-    )?;
-    std::fs::write(&side_path, report::side_file(&fin.model, &chosen))?;
-    // The written platform must load with the daemon's loader.
-    load_platform(&toml_path).map_err(|e| format!("written platform does not load: {e}"))?;
+    // Never deploy a model that did not validate: write the last step whose FK converged on
+    // every held-out sample, or nothing (issue 13). Stale outputs of an earlier run go too.
+    let _ = std::fs::remove_file(&toml_path);
+    let _ = std::fs::remove_file(&side_path);
+    let written = rep.last_validated_stage();
     let mut md = report::markdown(&rep, command, &names);
-    md.push_str(&format!(
-        "\n## Output\n\n* Identified platform: `{}` (loads with `cdpr_model::config::load_platform`).\n* Side file (cable offsets and extension parameters the platform schema cannot express): `{}`.\n",
-        toml_path.display(),
-        side_path.display()
-    ));
+    if let Some(st) = written {
+        // The chosen effects belong to the final step only.
+        let chosen = if std::ptr::eq(st, fin) {
+            rep.selection
+                .as_ref()
+                .map(|s| s.chosen.clone())
+                .unwrap_or_default()
+        } else {
+            Vec::new()
+        };
+        std::fs::write(
+            &toml_path,
+            report::platform_toml(base, &st.model, &format!("{}-calibrated", base.name)),
+        )?;
+        std::fs::write(&side_path, report::side_file(&st.model, &chosen))?;
+        // The written platform must load with the daemon's loader.
+        load_platform(&toml_path).map_err(|e| format!("written platform does not load: {e}"))?;
+        md.push_str(&format!(
+            "\n## Output\n\n* Identified platform (step \"{}\"): `{}` (loads with `cdpr_model::config::load_platform`).\n* Side file (cable offsets and extension parameters the platform schema cannot express): `{}`.\n",
+            st.name,
+            toml_path.display(),
+            side_path.display()
+        ));
+    } else {
+        md.push_str("\n## Output\n\n* No step validated: no calibrated platform was written.\n");
+    }
     std::fs::write(opts.out.join("report.md"), &md)?;
     let json = serde_json::to_string_pretty(&rep)?;
     std::fs::write(opts.out.join("report.json"), &json)?;
@@ -239,6 +258,25 @@ pub(crate) fn calibrate_and_report(
     } else {
         println!("{}", report::stage_table(&rep));
         println!("report: {}", opts.out.join("report.md").display());
+    }
+    for (name, text) in rep.failed_stages() {
+        eprintln!("calibration step \"{name}\" failed: {text} held-out samples");
+    }
+    if fin.failed() {
+        let what = match written {
+            Some(st) => format!(
+                "{} holds the last validated step, \"{}\"",
+                toml_path.display(),
+                st.name
+            ),
+            None => "no calibrated platform was written".into(),
+        };
+        return Err(format!(
+            "the final calibration step \"{}\" failed validation ({}); {what}",
+            fin.name,
+            fin.holdout.failure_text().unwrap_or_default()
+        )
+        .into());
     }
     Ok(rep)
 }

@@ -1,5 +1,6 @@
 //! `crs`: the operator / commissioning command line of the cable-robot stack.
 
+mod calibrate_bench;
 mod calibrate_cmd;
 mod calibrate_loop_cmd;
 mod console_cmd;

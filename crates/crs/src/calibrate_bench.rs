@@ -1,0 +1,385 @@
+//! `crs calibrate bench-diagnosis`: the residual diagnosis held to a benchmark (issue 13).
+//! Single-effect scenarios on the simulated plant — every catalogue effect plus a baseline with
+//! none — each with several seeds and a randomised magnitude, run through the pipeline from the
+//! nominal model; prints the confusion matrix (true effect × first chosen effect), the FK
+//! failures, the non-physical parameters, and the held-out pose error against the model that
+//! carries the true effect.
+//!
+//! Magnitudes are the CRS-like plant's values (config/plant/crs-like.toml, each taken from the
+//! spec: r_p = 161 mm table 5.1, 12–25 m stored rope sec. 5.1, stiffness exponent and ±150 N
+//! hysteresis sized to the 600 N linear-fit error of sec. 5.1, 0.8 kg/m rope, 0.1 mm drum radius
+//! error, the cabin load of eq. 6.23, 1 % sensor gains) times a factor drawn log-uniformly from
+//! [0.25, 2]: a quarter is at or below what ~100 samples with 2 mm / 20 N noise resolve, twice is
+//! the largest a robot of this size plausibly shows. Tracker noise (2 mm, 0.05°) and 20 N force
+//! noise and the reference geometry deviation are on in every scenario.
+
+use calibrate::effects::Effect;
+use calibrate::identify::{self, FitSpec};
+use calibrate::params::ParamId;
+use calibrate::pipeline::{self, PipelineConfig};
+use calibrate::residual::Kind;
+use calibrate::validate;
+use calibrate::{Observation, from_dataset};
+use clap::Args;
+use cdpr_model::config::{Platform, load_platform};
+use nalgebra::Vector3;
+use sim_plant::config::{Effects, ForceSensors};
+use sim_plant::{CampaignConfig, Plant, PlantConfig, PoseSet, run_campaign};
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Nominal platform (the control model and the plant's nominal).
+    #[arg(long, default_value = "config/crs-nominal.toml")]
+    platform: PathBuf,
+    /// Plant whose effect magnitudes are the 1× reference.
+    #[arg(long, default_value = "config/plant/crs-like.toml")]
+    plant: PathBuf,
+    /// Seeds per scenario.
+    #[arg(long, default_value_t = 5)]
+    seeds: u64,
+    /// Random poses of the identification campaign (each with a tension test: 2 rows per pose
+    /// plus the return); the validation campaign has 3/4 of them.
+    #[arg(long, default_value_t = 40)]
+    poses: usize,
+    /// Scenarios (comma separated): baseline and catalogue effect names; default all.
+    #[arg(long, value_delimiter = ',')]
+    scenarios: Option<Vec<String>>,
+    /// A scenario's effect "matters" when the true-effect model cuts the held-out position or
+    /// force error of the base model by at least this fraction.
+    #[arg(long, default_value_t = 0.10)]
+    matters: f64,
+}
+
+/// splitmix64: reproducible magnitudes without a dependency.
+fn unit(seed: u64) -> f64 {
+    let mut z = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// The plant effects of one scenario at magnitude factor `u` of the reference plant.
+fn scenario_effects(effect: Option<Effect>, reference: &Effects, u: f64) -> Effects {
+    let m = 8;
+    // The reference plant's geometry deviation is in every scenario (the base model identifies
+    // it); it also tensions the cables like the assembly errors of a real robot do.
+    let mut fx = Effects {
+        geometry: reference.geometry.clone(),
+        tracker: reference.tracker,
+        force_sensors: Some(ForceSensors {
+            noise: reference.force_sensors.as_ref().map_or(20.0, |f| f.noise),
+            offset: vec![0.0; m],
+            gain: vec![1.0; m],
+        }),
+        ..Effects::default()
+    };
+    match effect {
+        None => {}
+        Some(Effect::Pulleys) => {
+            let mut p = reference.pulleys.clone().expect("reference pulleys");
+            p.radius.iter_mut().for_each(|r| *r *= u);
+            fx.pulleys = Some(p);
+        }
+        Some(Effect::Powertrain) => {
+            let mut p = reference.powertrain.clone().expect("reference powertrain");
+            p.extra_length.iter_mut().for_each(|l| *l *= u);
+            fx.powertrain = Some(p);
+        }
+        Some(Effect::Stiffness) => {
+            let mut s = reference.stiffness.expect("reference stiffness");
+            s.exponent = (s.exponent * u).min(0.9);
+            fx.stiffness = Some(s);
+        }
+        Some(Effect::Hysteresis) => {
+            let mut h = reference.hysteresis.expect("reference hysteresis");
+            h.half_width *= u;
+            fx.hysteresis = Some(h);
+        }
+        Some(Effect::Sag) => {
+            let mut s = reference.sag.expect("reference sag");
+            s.mass_per_length *= u;
+            fx.sag = Some(s);
+        }
+        Some(Effect::Drum) => {
+            let mut w = reference.winch.clone().expect("reference winch errors");
+            // 0.1 mm on a 152.5 mm drum is small against 2 mm tracker noise: the range is
+            // 0.25–2 × 1 mm (a wrong rope-diameter assumption), i.e. ×10 the plant's.
+            w.length_scale
+                .iter_mut()
+                .for_each(|s| *s = 1.0 + (*s - 1.0) * 10.0 * u);
+            w.encoder_offset.iter_mut().for_each(|o| *o = 0.0);
+            fx.winch = Some(w);
+        }
+        Some(Effect::LoadCog) => {
+            let mut l = reference.load.expect("reference load");
+            l.center_of_gravity *= u;
+            fx.load = Some(l);
+        }
+        Some(Effect::ForceSensors) => {
+            let f = reference.force_sensors.clone().expect("reference sensors");
+            fx.force_sensors = Some(ForceSensors {
+                noise: f.noise,
+                offset: f.offset.iter().map(|o| o * u).collect(),
+                gain: f.gain.iter().map(|g| 1.0 + (g - 1.0) * u).collect(),
+            });
+        }
+    }
+    fx
+}
+
+fn record(
+    platform: &Platform,
+    path: &std::path::Path,
+    effects: &Effects,
+    poses: usize,
+    seed: u64,
+) -> Result<Vec<Observation>, Box<dyn std::error::Error>> {
+    let mut cfg = PlantConfig::ideal(platform.clone(), path.to_path_buf());
+    cfg.effects = effects.clone();
+    cfg.seed = seed;
+    let mut plant = Plant::new(cfg)?;
+    let campaign = CampaignConfig {
+        name: "bench".into(),
+        poses: PoseSet::Random {
+            min: Vector3::new(-1.5, -1.5, 1.25),
+            max: Vector3::new(1.5, 1.5, 2.0),
+            count: poses,
+            rotation_max: Vector3::repeat(5f64.to_radians()),
+            seed,
+        },
+        tension_test: Some(0.03),
+        seed: Some(seed),
+        ..CampaignConfig::default()
+    };
+    let mut ds = run_campaign(&mut plant, platform, &campaign, "bench")?.dataset;
+    // A pose where the nominal controller leaves a cable slack gives a reading ≤ 0 (noise
+    // around zero force): such rows carry no elastostatic information and are dropped, as an
+    // engineer would drop them from a real campaign.
+    let before = ds.samples.len();
+    ds.samples
+        .retain(|s| s.forces.as_ref().is_none_or(|f| f.iter().all(|v| *v > 0.0)));
+    if ds.samples.len() < before {
+        eprintln!(
+            "seed {seed}: dropped {} of {before} rows with a slack cable",
+            before - ds.samples.len()
+        );
+    }
+    Ok(from_dataset(&ds, platform.model.m())?)
+}
+
+struct Row {
+    truth: Option<Effect>,
+    u: f64,
+    chosen: Vec<Effect>,
+    fk_failed: bool,
+    non_physical: Vec<String>,
+    final_pos: f64,
+    true_pos: Option<f64>,
+    matters: bool,
+    seconds: f64,
+}
+
+fn label(e: Option<Effect>) -> &'static str {
+    e.map_or("baseline", |e| e.name())
+}
+
+pub fn run(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
+    let platform = load_platform(&a.platform)?;
+    let reference = sim_plant::load_plant(&a.plant)?.effects;
+    let all: Vec<Option<Effect>> = std::iter::once(None)
+        .chain(Effect::ALL.iter().copied().map(Some))
+        .collect();
+    let scenarios: Vec<Option<Effect>> = match &a.scenarios {
+        None => all,
+        Some(names) => names
+            .iter()
+            .map(|n| match n.trim() {
+                "baseline" => Ok(None),
+                s => Effect::from_name(s)
+                    .map(Some)
+                    .ok_or_else(|| format!("--scenarios: unknown scenario `{s}`")),
+            })
+            .collect::<Result<_, _>>()?,
+    };
+    let cfg = PipelineConfig::default();
+    let mut rows = Vec::new();
+    for (si, truth) in scenarios.iter().enumerate() {
+        for seed in 0..a.seeds {
+            let s = 1000 * (si as u64 + 1) + seed;
+            let u = 0.25 * 8f64.powf(unit(s));
+            let fx = scenario_effects(*truth, &reference, u);
+            let train = record(&platform, &a.platform, &fx, a.poses, s)?;
+            let held = record(
+                &platform,
+                &a.platform,
+                &fx,
+                (a.poses * 3).div_ceil(4),
+                s + 500,
+            )?;
+            let t0 = std::time::Instant::now();
+            let rep = pipeline::run(&platform.model, &train, &held, &cfg, &mut |_, _, _| {})?;
+            let seconds = t0.elapsed().as_secs_f64();
+            let base = rep
+                .stage("optimal elastostatic")
+                .ok_or("no elastostatic step")?;
+            let fin = rep.final_stage();
+            let fk_failed = rep.stages.iter().any(|st| st.failed());
+            let mut non_physical = Vec::new();
+            for (i, k) in fin.model.k_f.iter().enumerate() {
+                if !(calibrate::params::KF_MIN_N..=calibrate::params::KF_MAX_N).contains(k) {
+                    non_physical.push(format!("k_F{} = {k:.3e}", i + 1));
+                }
+            }
+            // The model that carries the true effect: the base fit plus that effect.
+            let (true_pos, true_force) = match truth {
+                None => (Some(base.holdout.pos_mean_mm), base.holdout.force_mean_n),
+                Some(e) => {
+                    let f0 = base.fit.as_ref().ok_or("base step without a fit")?;
+                    let mut start = f0.model.clone();
+                    e.enable(&mut start);
+                    let mut spec = FitSpec::new(Kind::Elastostatic, Vec::new());
+                    spec.weights = cfg.weights;
+                    spec.free = f0
+                        .free
+                        .iter()
+                        .copied()
+                        .chain(e.params(start.m()))
+                        .collect::<Vec<ParamId>>();
+                    let f = identify::fit(&start, &train, &spec, &mut |_, _| {})?;
+                    let h = validate::evaluate(Kind::Elastostatic, &f.model, &held);
+                    if h.failed() {
+                        (None, None)
+                    } else {
+                        (Some(h.pos_mean_mm), h.force_mean_n)
+                    }
+                }
+            };
+            let matters = truth.is_some()
+                && (true_pos.is_some_and(|p| p <= (1.0 - a.matters) * base.holdout.pos_mean_mm)
+                    || match (true_force, base.holdout.force_mean_n) {
+                        (Some(t), Some(b)) => t <= (1.0 - a.matters) * b,
+                        _ => false,
+                    });
+            let chosen = rep
+                .selection
+                .as_ref()
+                .map(|s| s.chosen.clone())
+                .unwrap_or_default();
+            eprintln!(
+                "{:<13} seed {seed} ×{u:.2}: chosen [{}]{}{} base {:.2} mm → final {} (true-effect model {}) {:.2} s",
+                label(*truth),
+                chosen
+                    .iter()
+                    .map(|e| e.name())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if matters { " (matters)" } else { "" },
+                if fk_failed { " FK FAILED" } else { "" },
+                base.holdout.pos_mean_mm,
+                fin.holdout
+                    .failure_text()
+                    .unwrap_or_else(|| format!("{:.2} mm", fin.holdout.pos_mean_mm)),
+                true_pos.map_or("FK failed".into(), |p| format!("{p:.2} mm")),
+                seconds
+            );
+            rows.push(Row {
+                truth: *truth,
+                u,
+                chosen,
+                fk_failed,
+                non_physical,
+                final_pos: fin.holdout.pos_mean_mm,
+                true_pos,
+                matters,
+                seconds,
+            });
+        }
+    }
+    print_summary(&rows, &scenarios, &a);
+    Ok(())
+}
+
+fn print_summary(rows: &[Row], scenarios: &[Option<Effect>], a: &BenchArgs) {
+    let cols: Vec<Option<Effect>> = std::iter::once(None)
+        .chain(Effect::ALL.iter().copied().map(Some))
+        .collect();
+    println!(
+        "## Diagnosis benchmark: {} scenarios × {} seeds, {} identification poses\n",
+        scenarios.len(),
+        a.seeds,
+        a.poses
+    );
+    println!(
+        "Confusion matrix: true effect (rows) × first chosen effect (columns; `none` = nothing added). In brackets: scenarios where the effect matters (true-effect model ≥ {:.0} % better held out).\n",
+        a.matters * 100.0
+    );
+    let mut hdr = "| true \\ chosen |".to_string();
+    for c in &cols {
+        hdr.push_str(&format!(" {} |", c.map_or("none", |e| e.name())));
+    }
+    println!("{hdr}");
+    println!("|---|{}", "---|".repeat(cols.len()));
+    for t in scenarios {
+        let mine: Vec<&Row> = rows.iter().filter(|r| r.truth == *t).collect();
+        let mut line = format!("| {} |", label(*t));
+        for c in &cols {
+            let n = mine
+                .iter()
+                .filter(|r| r.chosen.first().copied() == *c)
+                .count();
+            let nm = mine
+                .iter()
+                .filter(|r| r.matters && r.chosen.first().copied() == *c)
+                .count();
+            line.push_str(&if n == 0 {
+                " · |".to_string()
+            } else {
+                format!(" {n} ({nm}) |")
+            });
+        }
+        println!("{line}");
+    }
+    let n = rows.len();
+    let fk = rows.iter().filter(|r| r.fk_failed).count();
+    let np = rows.iter().filter(|r| !r.non_physical.is_empty()).count();
+    let matter: Vec<&Row> = rows.iter().filter(|r| r.matters).collect();
+    let correct = matter
+        .iter()
+        .filter(|r| r.truth.is_some_and(|t| r.chosen.contains(&t)))
+        .count();
+    let base: Vec<&Row> = rows.iter().filter(|r| r.truth.is_none()).collect();
+    let clean = base.iter().filter(|r| r.chosen.is_empty()).count();
+    let ratios: Vec<f64> = rows
+        .iter()
+        .filter_map(|r| r.true_pos.map(|t| r.final_pos / t))
+        .collect();
+    let within = ratios.iter().filter(|x| **x <= 1.10).count();
+    let worst = ratios.iter().copied().fold(0.0f64, f64::max);
+    let mean_s = rows.iter().map(|r| r.seconds).sum::<f64>() / n.max(1) as f64;
+    let max_s = rows.iter().map(|r| r.seconds).fold(0.0f64, f64::max);
+    let u_lo = rows.iter().map(|r| r.u).fold(f64::INFINITY, f64::min);
+    let u_hi = rows.iter().map(|r| r.u).fold(0.0f64, f64::max);
+    println!();
+    println!("| figure | value |\n|---|---|");
+    println!("| runs | {n} (magnitude factor {u_lo:.2}–{u_hi:.2}) |");
+    println!("| runs with an FK failure in any step | {fk}/{n} |");
+    println!("| runs with a non-physical final parameter | {np}/{n} |");
+    println!(
+        "| effect named (anywhere in the chosen list) where it matters | {correct}/{} |",
+        matter.len()
+    );
+    println!("| baselines with nothing added | {clean}/{} |", base.len());
+    println!(
+        "| held-out position error within 10 % of the true-effect model | {within}/{} (worst ratio {worst:.2}) |",
+        ratios.len()
+    );
+    println!("| pipeline time per set (mean / max) | {mean_s:.2} / {max_s:.2} s |");
+    for r in rows.iter().filter(|r| !r.non_physical.is_empty()) {
+        println!(
+            "non-physical in {}: {}",
+            label(r.truth),
+            r.non_physical.join(", ")
+        );
+    }
+}
