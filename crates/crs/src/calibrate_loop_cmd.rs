@@ -19,13 +19,13 @@
 //! fixes them on the real robot too (eq. 3.14 / 6.24).
 
 use crate::calibrate_cmd::{Opts, calibrate_and_report, spinner};
-use crate::sim_cmd::{self, SimArgs, Summary, planner_limits, timed_waypoints, write_waypoints};
+use crate::sim_cmd::{self, SimArgs, Summary, timed_waypoints, write_waypoints};
 use calibrate::pipeline::PipelineReport;
 use calibrate::{from_dataset, split};
 use cdpr_model::Pose;
 use cdpr_model::config::{Platform, load_platform};
 use cdpr_model::offset_target::OffsetTarget;
-use motion_core::daemon::cycle::Cycle;
+use motion_core::daemon::lifecycle;
 use motion_core::daemon::trajectory::{self, Waypoint};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -150,24 +150,6 @@ fn force_margin_ok(target: &mut OffsetTarget, p: &Platform, pose: &Pose, margin:
     }
 }
 
-/// Verifies a whole plan from the home pose with motion-core's own per-cycle checks (workspace,
-/// limits, eq. 3.29), as the daemon does before it moves. Error names the waypoint.
-pub(crate) fn verify_plan(
-    cycle: &mut Cycle,
-    platform: &Platform,
-    wps: &[Waypoint],
-    daemon: &motion_core::daemon::config::DaemonConfig,
-) -> Result<(), String> {
-    let lim = planner_limits(daemon, platform);
-    let period_s = daemon.realtime.period_ns as f64 * 1e-9;
-    let mut sp = crs_ipc::JointSetpoint::default();
-    trajectory::plan_samples(platform.home, wps, lim, period_s, |seg, r| {
-        cycle
-            .compute(&r, &mut sp)
-            .map_err(|e| format!("segment to waypoint {}: {e}", seg + 1))
-    })
-}
-
 pub fn run_campaign(a: CampaignArgs) -> Result<(), BoxErr> {
     let daemon = motion_core::daemon::config::load(&a.daemon_config).map_err(|e| e.to_string())?;
     let pf = load_platform(&a.platform)?;
@@ -194,12 +176,7 @@ pub fn run_campaign(a: CampaignArgs) -> Result<(), BoxErr> {
         }
     }
     // Tour from the home pose through the candidates; the daemon's checks on every segment.
-    let mut cycle = Cycle::new(
-        pf.model.clone(),
-        pf.limits,
-        pf.region,
-        daemon.check_wrench_feasibility,
-    );
+    let checks = lifecycle::configure_checks(&daemon, &pf);
     let mut chosen: Vec<Waypoint> = Vec::new();
     // The first `poses` candidates in Halton order (spread over the box) make the pool; the
     // tour visits them nearest-first; a pose whose segment fails is replaced by the next
@@ -224,7 +201,7 @@ pub fn run_campaign(a: CampaignArgs) -> Result<(), BoxErr> {
             pose: next,
             not_before_s: 0.0,
         });
-        if verify_plan(&mut cycle, &pf, &trial, &daemon).is_ok() {
+        if checks.verify_plan(&trial).is_ok() {
             chosen = trial;
             cur = next;
         } else if let Some(p) = reserve.next() {
@@ -240,9 +217,13 @@ pub fn run_campaign(a: CampaignArgs) -> Result<(), BoxErr> {
         )
         .into());
     }
-    let lim = planner_limits(&daemon, &pf);
-    let period_s = daemon.realtime.period_ns as f64 * 1e-9;
-    let (_, dur) = timed_waypoints(pf.home, &chosen, lim, period_s, 0.0)?;
+    let (_, dur) = timed_waypoints(
+        pf.home,
+        &chosen,
+        checks.planner_limits(),
+        checks.period_s(),
+        0.0,
+    )?;
     let comment = format!(
         "Calibration campaign for `{}` ({}): {} poses, written by\n`crs calibrate campaign --platform {} --poses {} --fraction {} --force-margin-n {}`.\nHalton points over {:.0} % of the workspace box with varied orientations (platform geometry\nobservable), reference forces (eq. 3.41) within [f_min + {m}, f_max - {m}] N, ordered as a\nnearest-neighbour tour from the home pose; the whole plan ({dur:.1} s without rests) passes\nmotion-core's checks (workspace, limits, eq. 3.29). t_s = 0: `crs sim --dwell-s` times it.",
         pf.name,
@@ -621,20 +602,15 @@ pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
             a.campaign.display()
         ),
     )?;
-    let mut check = Cycle::new(
-        nominal.model.clone(),
-        nominal.limits,
-        nominal.region,
-        daemon_tpl.check_wrench_feasibility,
-    );
-    verify_plan(&mut check, &nominal, &wps, &daemon_tpl)
+    let nominal_checks = lifecycle::configure_checks(&daemon_tpl, &nominal);
+    nominal_checks
+        .verify_plan(&wps)
         .map_err(|e| format!("{}: the plan is refused: {e}", a.campaign.display()))?;
-    let period_s = daemon_tpl.realtime.period_ns as f64 * 1e-9;
     let (_, plan_s) = timed_waypoints(
         nominal.home,
         &wps,
-        planner_limits(&daemon_tpl, &nominal),
-        period_s,
+        nominal_checks.planner_limits(),
+        nominal_checks.period_s(),
         a.dwell_s,
     )?;
     let timeout_s = 1.5 * (plan_s + a.dwell_s) + 60.0;
@@ -760,18 +736,14 @@ pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
         with_sg.then_some(sg_a.as_path()),
         &campaign,
     )?;
-    let mut check = Cycle::new(
-        cal_pf.model.clone(),
-        cal_pf.limits,
-        cal_pf.region,
-        daemon_tpl.check_wrench_feasibility,
-    );
-    verify_plan(&mut check, &cal_pf, &wps, &daemon_tpl).map_err(|e| {
-        format!(
-            "the calibrated model {} refuses the campaign: {e}",
-            calibrated.display()
-        )
-    })?;
+    lifecycle::configure_checks(&daemon_tpl, &cal_pf)
+        .verify_plan(&wps)
+        .map_err(|e| {
+            format!(
+                "the calibrated model {} refuses the campaign: {e}",
+                calibrated.display()
+            )
+        })?;
     println!(
         "  {} (platform `{}`), {}",
         daemon_a.display(),

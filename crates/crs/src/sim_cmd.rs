@@ -20,13 +20,12 @@
 
 use crate::rest_recorder::{RestErrors, RestRecorder, rest_errors, to_dataset};
 use cdpr_model::Pose;
-use cdpr_model::config::{Platform, load_platform};
+use cdpr_model::config::load_platform;
 use crs_ipc::{
     DriveFeedback, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlantTruth,
     ProcessId, StateEvent, TrackerPose,
 };
-use motion_core::daemon::config::DaemonConfig;
-use motion_core::daemon::cycle::{Cycle, Reference};
+use motion_core::daemon::lifecycle;
 use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -99,60 +98,6 @@ pub struct SimArgs {
     pub(crate) rt_priority: Option<i32>,
 }
 
-/// Planner limits of the daemon TOML (as motion-core computes them).
-pub(crate) fn planner_limits(daemon: &DaemonConfig, platform: &Platform) -> PlannerLimits {
-    let t = &daemon.trajectory;
-    let l = &platform.limits;
-    PlannerLimits {
-        linear_velocity: l.linear_velocity_max * t.velocity_scale,
-        angular_velocity: l.angular_velocity_max * t.velocity_scale,
-        linear_acceleration: l.linear_acceleration_max * t.acceleration_scale,
-        angular_acceleration: l.angular_acceleration_max * t.acceleration_scale,
-        linear_jerk: t.linear_jerk_max,
-        angular_jerk: t.angular_jerk_max,
-    }
-}
-
-/// motion-core's cycle computation for the daemon TOML: platform, feasibility check and the
-/// surrogate (loaded and identity-checked as the daemon does).
-pub(crate) fn controller_cycle(
-    daemon: &DaemonConfig,
-    platform: &Platform,
-) -> Result<Cycle, String> {
-    let mut cycle = Cycle::new(
-        platform.model.clone(),
-        platform.limits,
-        platform.region,
-        daemon.check_wrench_feasibility,
-    );
-    if let Some(path) = &daemon.surrogate {
-        let s = surrogate::Surrogate::load(path, &platform.model.identity_hex())
-            .map_err(|e| format!("surrogate {}: {e}", path.display()))?;
-        let n = s.n_cables();
-        cycle
-            .set_surrogate(Box::new(s), n)
-            .map_err(|e| format!("surrogate {}: {e}", path.display()))?;
-    }
-    Ok(cycle)
-}
-
-/// The controller's full command at the home pose, q_θ(home) = φ(home) + φ_sg(home) (eq. 5.26):
-/// the lengths the drives are homed to.
-pub(crate) fn home_command(daemon: &DaemonConfig, platform: &Platform) -> Result<Vec<f64>, String> {
-    let mut cycle = controller_cycle(daemon, platform)?;
-    let mut sp = JointSetpoint::default();
-    cycle
-        .compute(
-            &Reference {
-                pose: platform.home,
-                ..Reference::default()
-            },
-            &mut sp,
-        )
-        .map_err(|e| format!("the controller refuses the home pose: {e}"))?;
-    Ok(sp.cable_length_m[..platform.model.m()].to_vec())
-}
-
 /// Waypoints with earliest-arrival times such that the platform rests `dwell_s` at each one
 /// (the planner holds a waypoint until the next segment may start, `trajectory::plan_samples`),
 /// and the plan's total duration (s).
@@ -174,7 +119,7 @@ pub(crate) fn timed_waypoints(
         })
         .collect();
     let mut steps = vec![0usize; waypoints.len()];
-    trajectory::plan_samples(start, &untimed, lim, period_s, |seg, _| {
+    trajectory::plan_samples::<String>(start, &untimed, lim, period_s, |seg, _| {
         steps[seg] += 1;
         Ok(())
     })?;
@@ -490,15 +435,22 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
     }
     // The controller's command at home (the drives are homed to it) and, with --dwell-s, the
     // waypoints timed for a rest at each.
-    let home_q = home_command(&daemon, &platform)?;
+    let mut configured = lifecycle::configure(&daemon, &platform)?;
+    let home_q = configured
+        .home_command()
+        .map_err(|e| format!("the controller refuses the home pose: {e}"))?;
     std::fs::create_dir_all(&a.out)?;
     let waypoint_file = a.waypoints.clone().or(daemon.trajectory.waypoints.clone());
     let waypoints_arg = match (a.dwell_s, &waypoint_file) {
         (Some(dwell), Some(file)) => {
             let wps = trajectory::read_waypoints(file)?;
-            let period_s = daemon.realtime.period_ns as f64 * 1e-9;
-            let lim = planner_limits(&daemon, &platform);
-            let (timed, dur) = timed_waypoints(platform.home, &wps, lim, period_s, dwell)?;
+            let (timed, dur) = timed_waypoints(
+                platform.home,
+                &wps,
+                configured.planner_limits(),
+                configured.period_s(),
+                dwell,
+            )?;
             let path = a.out.join("waypoints-timed.csv");
             write_waypoints(
                 &path,

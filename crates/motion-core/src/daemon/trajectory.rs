@@ -217,16 +217,33 @@ pub fn spawn_planner(
     }
 }
 
+/// ruckig found no trajectory for a segment.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("waypoint {}: ruckig could not plan the segment ({result})", waypoint + 1)]
+pub struct PlanningFailed {
+    /// 0-based waypoint index (the segment ending there).
+    pub waypoint: usize,
+    /// ruckig's result code.
+    pub result: String,
+}
+
+/// For the command-line glue whose errors are messages.
+impl From<PlanningFailed> for String {
+    fn from(e: PlanningFailed) -> Self {
+        e.to_string()
+    }
+}
+
 /// Samples the whole plan at the loop period, calling `emit(segment, reference)` for each
 /// sample (segment = 0-based waypoint index). Used both to verify a plan before it runs and to
 /// stream it to the loop.
-pub fn plan_samples(
+pub fn plan_samples<E: From<PlanningFailed>>(
     start: Pose,
     waypoints: &[Waypoint],
     lim: PlannerLimits,
     period_s: f64,
-    mut emit: impl FnMut(usize, Reference) -> Result<(), String>,
-) -> Result<(), String> {
+    mut emit: impl FnMut(usize, Reference) -> Result<(), E>,
+) -> Result<(), E> {
     let s3 = 3f64.sqrt();
     let mut ruckig = ruckig::Ruckig::new_direct_and_offline(6);
     let mut t_global = 0.0;
@@ -242,10 +259,11 @@ pub fn plan_samples(
         let mut traj = ruckig::Trajectory::new_direct(6);
         let res = ruckig.calculate(&mut input, &mut traj);
         if !matches!(res, ruckig::Result::Working | ruckig::Result::Finished) {
-            return Err(format!(
-                "waypoint {}: ruckig could not plan the segment ({res:?})",
-                k + 1
-            ));
+            return Err(PlanningFailed {
+                waypoint: k,
+                result: format!("{res:?}"),
+            }
+            .into());
         }
         // Dwell until the waypoint's earliest arrival time allows the segment to end there.
         let duration = traj.get_duration();
@@ -286,7 +304,7 @@ fn plan(
 ) -> Result<(), String> {
     let mut chunk: Option<Box<Chunk>> = None;
     let wait = || std::thread::sleep(std::time::Duration::from_micros(500));
-    plan_samples(start, waypoints, lim, period_s, |_, r| {
+    plan_samples::<String>(start, waypoints, lim, period_s, |_, r| {
         let c = loop {
             if let Some(c) = chunk.as_mut() {
                 break c;
