@@ -19,14 +19,13 @@
 //! fixes them on the real robot too (eq. 3.14 / 6.24).
 
 use crate::calibrate_cmd::{Opts, calibrate_and_report, spinner};
-use crate::sim_cmd::{self, SimArgs, Summary, timed_waypoints, write_waypoints};
+use crate::sim_cmd::{self, SimArgs, Summary};
 use calibrate::pipeline::PipelineReport;
 use calibrate::{from_dataset, split};
-use cdpr_model::Pose;
-use cdpr_model::config::{Platform, load_platform};
-use cdpr_model::offset_target::OffsetTarget;
+use cdpr_model::config::load_platform;
+use crs_stack::campaign::{self, timed_waypoints, write_waypoints};
 use motion_core::daemon::lifecycle;
-use motion_core::daemon::trajectory::{self, Waypoint};
+use motion_core::daemon::trajectory::{self};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -127,96 +126,11 @@ pub struct CampaignArgs {
     out: PathBuf,
 }
 
-fn radical_inverse(mut i: u64, base: u64) -> f64 {
-    let (mut f, mut r) = (1.0, 0.0);
-    while i > 0 {
-        f /= base as f64;
-        r += f * (i % base) as f64;
-        i /= base;
-    }
-    r
-}
-
-/// Reference forces (eq. 3.41) of `pose` within [f_min + margin, f_max − margin].
-fn force_margin_ok(target: &mut OffsetTarget, p: &Platform, pose: &Pose, margin: f64) -> bool {
-    let prm = p.model.params();
-    match target.reference_forces(pose) {
-        Ok((f, fd)) => {
-            fd.feasible
-                && f.iter()
-                    .all(|v| *v >= prm.f_min + margin && *v <= prm.f_max - margin)
-        }
-        Err(_) => false,
-    }
-}
-
 pub fn run_campaign(a: CampaignArgs) -> Result<(), BoxErr> {
     let daemon = motion_core::daemon::config::load(&a.daemon_config).map_err(|e| e.to_string())?;
     let pf = load_platform(&a.platform)?;
-    if a.poses == 0 || !(a.fraction > 0.0 && a.fraction <= 1.0) {
-        return Err("--poses must be ≥ 1 and --fraction in (0, 1]".into());
-    }
-    let (lo, hi) = cdpr_model::offset_target::region_box(&pf.region);
-    let mut target = OffsetTarget::new(&pf.model);
-    // Candidates: a 6-D Halton sequence over the shrunken box, kept where the reference forces
-    // keep the margin.
-    let mut cand = Vec::new();
-    let bases = [2u64, 3, 5, 7, 11, 13];
-    let mut i = 1u64;
-    while cand.len() < 8 * a.poses && i < 200_000 {
-        let x: [f64; 6] = std::array::from_fn(|k| {
-            let c = 0.5 * (lo[k] + hi[k]);
-            let h = 0.5 * (hi[k] - lo[k]) * a.fraction;
-            c + h * (2.0 * radical_inverse(i, bases[k]) - 1.0)
-        });
-        i += 1;
-        let pose = Pose::from_array(x);
-        if force_margin_ok(&mut target, &pf, &pose, a.force_margin_n) {
-            cand.push(pose);
-        }
-    }
-    // Tour from the home pose through the candidates; the daemon's checks on every segment.
     let checks = lifecycle::configure_checks(&daemon, &pf);
-    let mut chosen: Vec<Waypoint> = Vec::new();
-    // The first `poses` candidates in Halton order (spread over the box) make the pool; the
-    // tour visits them nearest-first; a pose whose segment fails is replaced by the next
-    // candidate.
-    let mut reserve = cand.into_iter();
-    let mut pool: Vec<Pose> = reserve.by_ref().take(a.poses).collect();
-    let mut cur = pf.home;
-    while chosen.len() < a.poses {
-        if pool.is_empty() {
-            match reserve.next() {
-                Some(p) => pool.push(p),
-                None => break,
-            }
-        }
-        pool.sort_by(|p, q| {
-            let d = |x: &Pose| (x.r - cur.r).norm();
-            d(q).total_cmp(&d(p))
-        });
-        let next = pool.pop().expect("non-empty");
-        let mut trial = chosen.clone();
-        trial.push(Waypoint {
-            pose: next,
-            not_before_s: 0.0,
-        });
-        if checks.verify_plan(&trial).is_ok() {
-            chosen = trial;
-            cur = next;
-        } else if let Some(p) = reserve.next() {
-            pool.push(p);
-        }
-    }
-    if chosen.len() < a.poses {
-        return Err(format!(
-            "only {} of {} poses are feasible with margin {} N: lower --poses or --force-margin-n",
-            chosen.len(),
-            a.poses,
-            a.force_margin_n
-        )
-        .into());
-    }
+    let chosen = campaign::generate(&checks, a.poses, a.fraction, a.force_margin_n)?;
     let (_, dur) = timed_waypoints(
         pf.home,
         &chosen,

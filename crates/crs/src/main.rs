@@ -4,7 +4,6 @@ mod calibrate_cmd;
 mod calibrate_loop_cmd;
 mod model_cmd;
 mod plant_cmd;
-mod rest_recorder;
 mod sim_cmd;
 mod surrogate_cmd;
 

@@ -13,23 +13,25 @@
 //! motion-core's own cycle computation (`--home-lengths-m`, see `sim_plant::bus`), so a
 //! surrogate's offset at home does not make the first setpoint jump.
 //!
-//! Recording (`--record FILE`, [`crate::rest_recorder`]): with `--dwell-s` the waypoints are
+//! Recording (`--record FILE`, [`crs_stack::rest_recording`]): with `--dwell-s` the waypoints are
 //! timed so the platform rests that long at each; every rest point (reference constant for at
 //! least `--settle-s`) gives one `crs-dataset 1` sample — commanded lengths, tracker pose,
 //! force sensors, reference — and the summary reports the measured pose error at the rest points.
 
-use crate::rest_recorder::{RestErrors, RestRecorder, rest_errors, to_dataset};
 use cdpr_model::Pose;
 use cdpr_model::config::load_platform;
 use crs_ipc::{
     DriveFeedback, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlantTruth,
     ProcessId, StateEvent, TrackerPose,
 };
+use crs_stack::campaign::{timed_waypoints, write_waypoints};
+use crs_stack::rest_recording::{RestErrors, RestRecorder, rest_errors, to_dataset};
+use crs_stack::supervisor::{self, Supervisor};
+use crs_stack::transport;
 use motion_core::daemon::lifecycle;
-use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
+use motion_core::daemon::trajectory::{self};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 #[derive(clap::Args, Debug)]
@@ -96,188 +98,6 @@ pub struct SimArgs {
     /// the SYNCs going on a loaded host (needs root; ignored with a note otherwise).
     #[arg(long, value_parser = clap::value_parser!(i32).range(6..=99))]
     pub(crate) rt_priority: Option<i32>,
-}
-
-/// Waypoints with earliest-arrival times such that the platform rests `dwell_s` at each one
-/// (the planner holds a waypoint until the next segment may start, `trajectory::plan_samples`),
-/// and the plan's total duration (s).
-pub(crate) fn timed_waypoints(
-    start: Pose,
-    waypoints: &[Waypoint],
-    lim: PlannerLimits,
-    period_s: f64,
-    dwell_s: f64,
-) -> Result<(Vec<Waypoint>, f64), String> {
-    if !(dwell_s.is_finite() && dwell_s >= 0.0) {
-        return Err(format!("--dwell-s must be finite and ≥ 0, got {dwell_s}"));
-    }
-    let untimed: Vec<Waypoint> = waypoints
-        .iter()
-        .map(|w| Waypoint {
-            pose: w.pose,
-            not_before_s: 0.0,
-        })
-        .collect();
-    let mut steps = vec![0usize; waypoints.len()];
-    trajectory::plan_samples::<String>(start, &untimed, lim, period_s, |seg, _| {
-        steps[seg] += 1;
-        Ok(())
-    })?;
-    let mut t = 0.0;
-    let mut out = Vec::with_capacity(waypoints.len());
-    for (k, w) in waypoints.iter().enumerate() {
-        if k > 0 {
-            t += dwell_s;
-        }
-        t += steps[k] as f64 * period_s;
-        out.push(Waypoint {
-            pose: w.pose,
-            not_before_s: t,
-        });
-    }
-    Ok((out, t))
-}
-
-/// Writes waypoints in the CSV format motion-core reads (`trajectory::read_waypoints`).
-pub(crate) fn write_waypoints(path: &Path, wps: &[Waypoint], comment: &str) -> Result<(), String> {
-    use std::fmt::Write as _;
-    let mut s = String::new();
-    for line in comment.lines() {
-        let _ = writeln!(s, "# {line}");
-    }
-    s.push_str("t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n");
-    for w in wps {
-        let p = w.pose.to_array();
-        let _ = writeln!(
-            s,
-            "{:?},{:?},{:?},{:?},{:?},{:?},{:?}",
-            w.not_before_s,
-            p[0],
-            p[1],
-            p[2],
-            p[3].to_degrees(),
-            p[4].to_degrees(),
-            p[5].to_degrees()
-        );
-    }
-    std::fs::write(path, s).map_err(|e| format!("{}: {e}", path.display()))
-}
-
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-
-extern "C" fn on_signal(_: libc::c_int) {
-    INTERRUPTED.store(true, Ordering::Relaxed);
-}
-
-struct Proc {
-    name: &'static str,
-    child: Child,
-    log: PathBuf,
-}
-
-/// The children, stopped (SIGTERM, then SIGKILL after 3 s) in reverse start order on drop.
-struct Stack {
-    procs: Vec<Proc>,
-}
-
-impl Stack {
-    fn spawn(
-        &mut self,
-        name: &'static str,
-        exe: &Path,
-        args: &[String],
-        prefix: &str,
-        out: &Path,
-    ) -> Result<(), String> {
-        let log = out.join(format!("{name}.log"));
-        let f = std::fs::File::create(&log).map_err(|e| format!("{}: {e}", log.display()))?;
-        let f2 = f.try_clone().map_err(|e| e.to_string())?;
-        let child = Command::new(exe)
-            .args(args)
-            .env("CRS_IPC_PREFIX", prefix)
-            .env(
-                "RUST_LOG",
-                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
-            )
-            .stdin(Stdio::null())
-            .stdout(f)
-            .stderr(f2)
-            .spawn()
-            .map_err(|e| format!("starting {}: {e}", exe.display()))?;
-        println!(
-            "  started {name:<15} pid {:>6}  log {}",
-            child.id(),
-            log.display()
-        );
-        self.procs.push(Proc { name, child, log });
-        Ok(())
-    }
-
-    /// The first child that has exited, with its status.
-    fn exited(&mut self) -> Option<(&'static str, std::process::ExitStatus, PathBuf)> {
-        for p in &mut self.procs {
-            if let Ok(Some(st)) = p.child.try_wait() {
-                return Some((p.name, st, p.log.clone()));
-            }
-        }
-        None
-    }
-
-    fn stop_all(&mut self) {
-        for p in self.procs.iter_mut().rev() {
-            if let Ok(None) = p.child.try_wait() {
-                // SAFETY: kill(2) on our own child's pid.
-                unsafe { libc::kill(p.child.id() as libc::pid_t, libc::SIGTERM) };
-            }
-        }
-        let t0 = Instant::now();
-        for p in self.procs.iter_mut().rev() {
-            loop {
-                match p.child.try_wait() {
-                    Ok(Some(_)) | Err(_) => break,
-                    Ok(None) if t0.elapsed() > Duration::from_secs(3) => {
-                        let _ = p.child.kill();
-                        let _ = p.child.wait();
-                        break;
-                    }
-                    Ok(None) => std::thread::sleep(Duration::from_millis(10)),
-                }
-            }
-        }
-        self.procs.clear();
-    }
-}
-
-impl Drop for Stack {
-    fn drop(&mut self) {
-        self.stop_all();
-    }
-}
-
-fn tail(path: &Path, n: usize) -> String {
-    let s = std::fs::read_to_string(path).unwrap_or_default();
-    let lines: Vec<&str> = s.lines().collect();
-    lines[lines.len().saturating_sub(n)..].join("\n")
-}
-
-/// vcan0 when the kernel can open it, else a UDP multicast bus with a per-run port.
-fn choose_transport(arg: &str, run_no: u32) -> Result<String, String> {
-    if arg != "auto" {
-        arg.parse::<can_transport::TransportSpec>()
-            .map_err(|e| format!("--transport: {e}"))?;
-        return Ok(arg.to_string());
-    }
-    let vcan = can_transport::TransportSpec::SocketCan {
-        iface: "vcan0".into(),
-    };
-    match can_transport::open(&vcan) {
-        Ok(_) => Ok("socketcan:vcan0".into()),
-        Err(e) => {
-            let port = 20000 + ((std::process::id() + 97 * run_no) % 20000) as u16;
-            println!("  vcan0 not available ({e}); using the CAN-over-UDP loopback bus");
-            Ok(format!("udpbus:239.255.70.9:{port}"))
-        }
-    }
 }
 
 /// What a run measured (printed, and written to <out>/summary.json).
@@ -481,7 +301,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
         }
         root
     });
-    let transport = choose_transport(&a.transport, run_no)?;
+    let transport = transport::choose_transport(&a.transport, run_no)?;
     let prefix = format!("crs-sim-{}-{run_no}/", std::process::id());
     println!(
         "crs sim: platform `{}`, transport {transport}, iceoryx2 prefix {prefix}, safety monitor {}",
@@ -495,11 +315,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
         }
     );
 
-    // SAFETY: the handler only stores to an atomic.
-    unsafe {
-        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
-        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
-    }
+    supervisor::install_interrupt_handler();
     let node = IpcNode::with_prefix("crs-sim", &prefix)?;
     let truth = node.subscriber::<PlantTruth>()?;
     let setpoints = node.subscriber::<JointSetpoint>()?;
@@ -509,27 +325,30 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
     let feedback = node.subscriber::<DriveFeedback>()?;
     let tracker = node.subscriber::<TrackerPose>()?;
 
-    let mut stack = Stack { procs: Vec::new() };
+    let mut stack = Supervisor::new(&prefix, &a.out);
     let s = |p: &Path| p.display().to_string();
-    let wait_for = |what: &str, secs: f64, ready: &mut dyn FnMut() -> bool, stack: &mut Stack| {
-        let t0 = Instant::now();
-        while !ready() {
-            if let Some((name, st, log)) = stack.exited() {
-                return Err(format!(
-                    "{name} exited ({st}) while waiting for {what}:\n{}",
-                    tail(&log, 15)
-                ));
+    let wait_for =
+        |what: &str, secs: f64, ready: &mut dyn FnMut() -> bool, stack: &mut Supervisor| {
+            let t0 = Instant::now();
+            while !ready() {
+                if let Some(e) = stack.exited() {
+                    return Err(format!(
+                        "{} exited ({}) while waiting for {what}:\n{}",
+                        e.name,
+                        e.status,
+                        supervisor::log_tail(&e.log, 15)
+                    ));
+                }
+                if supervisor::interrupted() {
+                    return Err("interrupted".to_string());
+                }
+                if t0.elapsed().as_secs_f64() > secs {
+                    return Err(format!("timed out after {secs} s waiting for {what}"));
+                }
+                std::thread::sleep(Duration::from_millis(10));
             }
-            if INTERRUPTED.load(Ordering::Relaxed) {
-                return Err("interrupted".to_string());
-            }
-            if t0.elapsed().as_secs_f64() > secs {
-                return Err(format!("timed out after {secs} s waiting for {what}"));
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        Ok(())
-    };
+            Ok(())
+        };
 
     let rt_args = |p: Option<i32>| match p {
         Some(p) => vec!["--rt-priority".to_string(), p.to_string()],
@@ -558,8 +377,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
             ],
         ]
         .concat(),
-        &prefix,
-        &a.out,
+        &[],
     )?;
     let mut first_truth = None;
     wait_for(
@@ -583,8 +401,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
                 "--transport".into(),
                 transport.clone(),
             ],
-            &prefix,
-            &a.out,
+            &[],
         )?;
     }
     stack.spawn(
@@ -600,8 +417,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
             ],
         ]
         .concat(),
-        &prefix,
-        &a.out,
+        &[],
     )?;
     let operational = crs_ipc::BusState::Ready as u32;
     wait_for(
@@ -626,13 +442,7 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
         mc_args.push("--waypoints".into());
         mc_args.push(s(w));
     }
-    stack.spawn(
-        "motion-core",
-        &exe("motion-core"),
-        &mc_args,
-        &prefix,
-        &a.out,
-    )?;
+    stack.spawn("motion-core", &exe("motion-core"), &mc_args, &[])?;
 
     // Follow the run.
     let mut sum = Summary {
@@ -730,16 +540,18 @@ pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>
                 r.forces(f.timestamp_ns, &f.cable_force_n[..m]);
             }
         }
-        if INTERRUPTED.load(Ordering::Relaxed) {
+        if supervisor::interrupted() {
             break Err("interrupted (Ctrl-C): stopped all processes".into());
         }
-        if let Some((name, st, log)) = stack.exited() {
-            if name == "motion-core" && st.success() {
+        if let Some(e) = stack.exited() {
+            if e.name == "motion-core" && e.status.success() {
                 break Ok(());
             }
             break Err(format!(
-                "{name} exited ({st}); stopping the stack:\n{}",
-                tail(&log, 20)
+                "{} exited ({}); stopping the stack:\n{}",
+                e.name,
+                e.status,
+                supervisor::log_tail(&e.log, 20)
             ));
         }
         if t0.elapsed().as_secs_f64() > a.timeout_s {
