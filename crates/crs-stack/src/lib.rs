@@ -9,9 +9,11 @@
 //! - [`rest_recording`]: rest points of a run from the live topics → a `crs-dataset 1` file.
 //! - [`campaign`]: calibration-campaign generation and waypoint timing/writing, checked with
 //!   motion-core's own [`configure`](motion_core::daemon::lifecycle::configure) step.
+//! - [`sim_run`]: one run of the whole simulated stack (`crs sim`), its summary and verdict.
 //! - [`transport`]: which CAN transport a run uses (vcan0 or the UDP loopback bus).
 
 pub mod campaign;
 pub mod rest_recording;
+pub mod sim_run;
 pub mod supervisor;
 pub mod transport;

@@ -19,11 +19,11 @@
 //! fixes them on the real robot too (eq. 3.14 / 6.24).
 
 use crate::calibrate_cmd::{Opts, calibrate_and_report, spinner};
-use crate::sim_cmd::{self, SimArgs, Summary};
 use calibrate::pipeline::PipelineReport;
 use calibrate::{from_dataset, split};
 use cdpr_model::config::load_platform;
 use crs_stack::campaign::{self, timed_waypoints, write_waypoints};
+use crs_stack::sim_run::{self, SimOptions, Summary};
 use motion_core::daemon::lifecycle;
 use motion_core::daemon::trajectory::{self};
 use std::fmt::Write as _;
@@ -383,7 +383,7 @@ fn stack_run(
     timeout_s: f64,
     name: &str,
 ) -> Result<(Summary, usize), BoxErr> {
-    let args = SimArgs {
+    let args = SimOptions {
         config: daemon_toml.to_path_buf(),
         drives: a.drives.clone(),
         plant: a.plant.clone(),
@@ -405,7 +405,7 @@ fn stack_run(
     };
     let mut attempt = 0;
     let sum = loop {
-        let sum = sim_cmd::execute(&args)?;
+        let sum = sim_run::execute(&args)?;
         match &sum.bus_stopped_during_run {
             Some(b) if attempt < a.retries => {
                 attempt += 1;

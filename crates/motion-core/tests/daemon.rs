@@ -633,7 +633,7 @@ fn home_command_is_the_inverse_kinematics_at_home_without_a_surrogate() {
     let mut data = cdpr_model::Data::new(&pf.model);
     cdpr_model::kinematics::inverse(&pf.model, &mut data, &pf.home).unwrap();
     assert_eq!(q.len(), 8);
-    for i in 0..8 {
-        assert_eq!(q[i], data.q[i]);
+    for (i, qi) in q.iter().enumerate() {
+        assert_eq!(*qi, data.q[i]);
     }
 }
