@@ -3,6 +3,8 @@
 //! What `crs sim`, the closed calibration loop (`crs calibrate loop`) and the HIL runners share,
 //! so the `crs` binary stays command-line glue:
 //!
+//! - [`calibration_loop`]: the closed calibration loop (`crs calibrate loop`): before run,
+//!   identification, after run, report.
 //! - [`supervisor`]: ONE process supervisor — start the daemons in order with their logs and
 //!   IPC prefix, notice the first child that dies, stop all (SIGTERM, then SIGKILL) in reverse
 //!   order, Ctrl-C handling.
@@ -12,6 +14,7 @@
 //! - [`sim_run`]: one run of the whole simulated stack (`crs sim`), its summary and verdict.
 //! - [`transport`]: which CAN transport a run uses (vcan0 or the UDP loopback bus).
 
+pub mod calibration_loop;
 pub mod campaign;
 pub mod rest_recording;
 pub mod sim_run;
