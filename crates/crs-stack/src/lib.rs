@@ -12,6 +12,7 @@
 //! - [`campaign`]: calibration-campaign generation and waypoint timing/writing, checked with
 //!   motion-core's own [`configure`](motion_core::daemon::lifecycle::configure) step.
 //! - [`sim_run`]: one run of the whole simulated stack (`crs sim`), its summary and verdict.
+//! - [`surrogate_evaluation`]: the surrogate fit of a platform and its evaluation on the plant.
 //! - [`transport`]: which CAN transport a run uses (vcan0 or the UDP loopback bus).
 
 pub mod calibration_loop;
@@ -19,4 +20,5 @@ pub mod campaign;
 pub mod rest_recording;
 pub mod sim_run;
 pub mod supervisor;
+pub mod surrogate_evaluation;
 pub mod transport;
