@@ -26,8 +26,8 @@ use crate::transport;
 use cdpr_model::Pose;
 use cdpr_model::config::load_platform;
 use crs_ipc::{
-    DriveFeedback, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlantTruth,
-    ProcessId, StateEvent, TrackerPose,
+    DriveFeedback, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlantTruth, ProcessId,
+    StateEvent, TrackerPose,
 };
 use motion_core::daemon::lifecycle;
 use motion_core::daemon::trajectory::{self};
@@ -497,7 +497,7 @@ pub fn execute(a: &SimOptions) -> Result<Summary, Box<dyn std::error::Error>> {
             sum.loop_compute_p99_us = s.compute_p99_ns as f64 * 1e-3;
         }
         while let Ok(Some(e)) = events.receive() {
-            if e.kind == EventKind::EStop as u32 {
+            if let Ok(crs_ipc::Event::EStop { .. }) = e.decode() {
                 sum.estops += 1;
                 println!("  E-STOP from process {} (detail {})", e.source, e.detail);
             }

@@ -536,6 +536,17 @@ fn only_a_reset_event_mints_a_reset_and_other_commands_do_not_clear_the_latch() 
         let ev = crs_ipc::StateEvent::new(crs_ipc::ProcessId::SafetyMonitor, kind, 1);
         assert_eq!(ResetAuthority::from_event(&ev), None, "{kind:?}");
     }
+    let mut foreign = crs_ipc::StateEvent::new(
+        crs_ipc::ProcessId::SafetyMonitor,
+        crs_ipc::EventKind::Reset,
+        1,
+    );
+    foreign.version = crs_ipc::CONTRACT_VERSION + 1;
+    assert_eq!(
+        ResetAuthority::from_event(&foreign),
+        None,
+        "other contract version"
+    );
     let mut hl = setup(tour());
     let mut sink = Ring(vec![JointSetpoint::default(); 1], 0);
     let stats = LoopStats::default();

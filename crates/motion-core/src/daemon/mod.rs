@@ -43,9 +43,10 @@ pub enum Command {
 pub struct ResetAuthority(());
 
 impl ResetAuthority {
-    /// The reset a state event carries, if it is one.
+    /// The reset a state event carries, if it is one. Strict: only a well-formed reset event of
+    /// this contract version (an e-stop, by contrast, is honoured on its kind code alone).
     pub fn from_event(ev: &crs_ipc::StateEvent) -> Option<Self> {
-        (ev.kind == crs_ipc::EventKind::Reset as u32).then_some(Self(()))
+        matches!(ev.decode(), Ok(crs_ipc::Event::Reset { .. })).then_some(Self(()))
     }
 }
 
