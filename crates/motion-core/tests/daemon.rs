@@ -410,15 +410,19 @@ fn waypoint_and_daemon_config_errors_name_the_line() {
         "t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n0,0,0,2,0,0,0\n1,0,zero,2,0,0,0\n",
         "w.csv",
     )
-    .unwrap_err();
+    .unwrap_err()
+    .to_string();
     assert!(e.starts_with("w.csv:3:") && e.contains("y_m"), "{e}");
-    let e = trajectory::parse_waypoints("t,x\n", "w.csv").unwrap_err();
+    let e = trajectory::parse_waypoints("t,x\n", "w.csv")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("w.csv:1"), "{e}");
     let e = trajectory::parse_waypoints(
         "t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n2,0,0,2,0,0,0\n1,0,0,2,0,0,0\n",
         "w.csv",
     )
-    .unwrap_err();
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("w.csv:3") && e.contains("decrease"), "{e}");
     let base = std::fs::read_to_string(common::config_path("motion-core.toml")).unwrap();
     let dir = std::path::Path::new(".");

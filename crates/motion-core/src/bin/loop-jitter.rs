@@ -300,7 +300,7 @@ fn run(args: Args) -> Result<ExitCode, String> {
     let lim = configured.planner_limits();
     let period_s = period_ns as f64 * 1e-9;
     let tour: Vec<Waypoint> = match &t.waypoints {
-        Some(p) => trajectory::read_waypoints(p)?,
+        Some(p) => trajectory::read_waypoints(p).map_err(|e| e.to_string())?,
         None => Vec::new(),
     };
     let mut tour_samples = 0usize;

@@ -205,7 +205,7 @@ fn run(args: Args) -> Result<(), String> {
         args.waypoints.clone().or(cfg.trajectory.waypoints.clone())
     };
     let waypoints: Vec<Waypoint> = match &waypoint_file {
-        Some(p) => trajectory::read_waypoints(p)?,
+        Some(p) => trajectory::read_waypoints(p).map_err(|e| e.to_string())?,
         None => Vec::new(),
     };
     let lim = configured.planner_limits();

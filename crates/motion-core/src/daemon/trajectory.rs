@@ -44,26 +44,57 @@ pub struct Waypoint {
     pub not_before_s: f64,
 }
 
+/// A waypoint file that cannot be used; every variant names the file and, where there is one,
+/// the line.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum WaypointError {
+    #[error("{file}: cannot read: {reason}")]
+    Read { file: String, reason: String },
+    #[error("{file}:{line}: expected header `{}`", HEADER.join(","))]
+    Header { file: String, line: usize },
+    #[error("{file}:{line}: expected 7 columns, found {found}")]
+    Columns {
+        file: String,
+        line: usize,
+        found: usize,
+    },
+    #[error("{file}:{line}: column `{column}`: `{value}` is not a finite number")]
+    NotANumber {
+        file: String,
+        line: usize,
+        column: &'static str,
+        value: String,
+    },
+    #[error("{file}:{line}: column `t_s`: times must not decrease")]
+    Decreasing { file: String, line: usize },
+    #[error("{file}: empty waypoint file")]
+    Empty { file: String },
+}
+
+const HEADER: [&str; 7] = [
+    "t_s",
+    "x_m",
+    "y_m",
+    "z_m",
+    "phi_x_deg",
+    "phi_y_deg",
+    "phi_z_deg",
+];
+
 /// Reads a waypoint CSV: header `t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg`, one waypoint
 /// per row, `#` comment lines allowed. Errors name the line.
-pub fn read_waypoints(path: &Path) -> Result<Vec<Waypoint>, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+pub fn read_waypoints(path: &Path) -> Result<Vec<Waypoint>, WaypointError> {
+    let text = std::fs::read_to_string(path).map_err(|e| WaypointError::Read {
+        file: path.display().to_string(),
+        reason: e.to_string(),
+    })?;
     parse_waypoints(&text, &path.display().to_string())
 }
 
-pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, String> {
-    const HEADER: [&str; 7] = [
-        "t_s",
-        "x_m",
-        "y_m",
-        "z_m",
-        "phi_x_deg",
-        "phi_y_deg",
-        "phi_z_deg",
-    ];
+pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, WaypointError> {
     let mut out = Vec::new();
     let mut header_seen = false;
+    let file = || file.to_string();
     for (n, line) in text.lines().enumerate() {
         let ln = n + 1;
         let line = line.trim();
@@ -73,19 +104,20 @@ pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, String> 
         let cols: Vec<&str> = line.split(',').map(str::trim).collect();
         if !header_seen {
             if cols != HEADER {
-                return Err(format!(
-                    "{file}:{ln}: expected header `{}`",
-                    HEADER.join(",")
-                ));
+                return Err(WaypointError::Header {
+                    file: file(),
+                    line: ln,
+                });
             }
             header_seen = true;
             continue;
         }
         if cols.len() != 7 {
-            return Err(format!(
-                "{file}:{ln}: expected 7 columns, found {}",
-                cols.len()
-            ));
+            return Err(WaypointError::Columns {
+                file: file(),
+                line: ln,
+                found: cols.len(),
+            });
         }
         let mut v = [0.0; 7];
         for (k, c) in cols.iter().enumerate() {
@@ -93,19 +125,20 @@ pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, String> 
                 .parse::<f64>()
                 .ok()
                 .filter(|x| x.is_finite())
-                .ok_or_else(|| {
-                    format!(
-                        "{file}:{ln}: column `{}`: `{c}` is not a finite number",
-                        HEADER[k]
-                    )
+                .ok_or_else(|| WaypointError::NotANumber {
+                    file: file(),
+                    line: ln,
+                    column: HEADER[k],
+                    value: c.to_string(),
                 })?;
         }
         if let Some(prev) = out.last().map(|w: &Waypoint| w.not_before_s)
             && v[0] < prev
         {
-            return Err(format!(
-                "{file}:{ln}: column `t_s`: times must not decrease"
-            ));
+            return Err(WaypointError::Decreasing {
+                file: file(),
+                line: ln,
+            });
         }
         out.push(Waypoint {
             not_before_s: v[0],
@@ -120,7 +153,7 @@ pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, String> 
         });
     }
     if !header_seen {
-        return Err(format!("{file}: empty waypoint file"));
+        return Err(WaypointError::Empty { file: file() });
     }
     Ok(out)
 }
