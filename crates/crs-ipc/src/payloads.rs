@@ -235,6 +235,81 @@ impl StateEvent {
     }
 }
 
+/// A [`StateEvent`] decoded: the kind as a type, the source as a [`ProcessId`]. Readers
+/// match on this instead of comparing raw `kind` codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Event {
+    EStop {
+        source: ProcessId,
+        detail: u32,
+    },
+    Reset {
+        source: ProcessId,
+    },
+    StateChanged {
+        source: ProcessId,
+        state: u32,
+    },
+    Fault {
+        source: ProcessId,
+        state: u32,
+        detail: u32,
+        node: u32,
+    },
+}
+
+/// A [`StateEvent`] that is not of this contract version or carries an unknown kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum DecodeError {
+    #[error("state event of contract version {0}, expected {CONTRACT_VERSION}")]
+    Version(u32),
+    #[error("state event of unknown kind {0}")]
+    Kind(u32),
+}
+
+impl ProcessId {
+    /// The process of a raw code; unknown codes are [`ProcessId::Unknown`].
+    pub fn from_code(code: u32) -> Self {
+        match code {
+            1 => Self::MotionCore,
+            2 => Self::DriveIo,
+            3 => Self::SafetyMonitor,
+            4 => Self::SimPlant,
+            5 => Self::Operator,
+            6 => Self::Test,
+            _ => Self::Unknown,
+        }
+    }
+}
+
+impl StateEvent {
+    /// The event as a typed [`Event`].
+    pub fn decode(&self) -> Result<Event, DecodeError> {
+        if self.version != CONTRACT_VERSION {
+            return Err(DecodeError::Version(self.version));
+        }
+        let source = ProcessId::from_code(self.source);
+        Ok(match self.kind {
+            k if k == EventKind::EStop as u32 => Event::EStop {
+                source,
+                detail: self.detail,
+            },
+            k if k == EventKind::Reset as u32 => Event::Reset { source },
+            k if k == EventKind::StateChanged as u32 => Event::StateChanged {
+                source,
+                state: self.state,
+            },
+            k if k == EventKind::Fault as u32 => Event::Fault {
+                source,
+                state: self.state,
+                detail: self.detail,
+                node: self.detail_node,
+            },
+            k => return Err(DecodeError::Kind(k)),
+        })
+    }
+}
+
 /// Liveness of a process.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("crs_ipc::Heartbeat.v1")]

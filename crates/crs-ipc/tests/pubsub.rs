@@ -100,3 +100,47 @@ fn bus_state_codes_round_trip() {
     }
     assert_eq!(BusState::from_u32(6), None);
 }
+
+#[test]
+fn state_events_decode_to_their_kind_and_unknown_ones_are_errors() {
+    use crs_ipc::{DecodeError, Event, EventKind, ProcessId, StateEvent};
+    let mut e = StateEvent::new(ProcessId::SafetyMonitor, EventKind::EStop, 1);
+    e.detail = 7;
+    assert_eq!(
+        e.decode(),
+        Ok(Event::EStop {
+            source: ProcessId::SafetyMonitor,
+            detail: 7
+        })
+    );
+    let r = StateEvent::new(ProcessId::Operator, EventKind::Reset, 2);
+    assert_eq!(
+        r.decode(),
+        Ok(Event::Reset {
+            source: ProcessId::Operator
+        })
+    );
+    let mut s = StateEvent::new(ProcessId::MotionCore, EventKind::StateChanged, 3);
+    s.state = crs_ipc::motion_state::STOPPING;
+    assert_eq!(
+        s.decode(),
+        Ok(Event::StateChanged {
+            source: ProcessId::MotionCore,
+            state: 5
+        })
+    );
+    let mut bad = r;
+    bad.kind = 99;
+    assert_eq!(bad.decode(), Err(DecodeError::Kind(99)));
+    let mut old = r;
+    old.version = 0;
+    assert_eq!(old.decode(), Err(DecodeError::Version(0)));
+    let mut stranger = r;
+    stranger.source = 42;
+    assert_eq!(
+        stranger.decode(),
+        Ok(Event::Reset {
+            source: ProcessId::Unknown
+        })
+    );
+}

@@ -1,35 +1,17 @@
-//! `crs calibrate loop`: the closed loop on the running stack (issue 8) — record a campaign on
+//! `crs calibrate loop` and `crs calibrate campaign`: the command line of
+//! [`crs_stack::calibration_loop`] and [`crs_stack::campaign`]. The closed loop on the running stack (issue 8) — record a campaign on
 //! the simulated stack with the nominal model, identify, deploy the identified model and a
 //! refitted surrogate, re-run the same campaign and report the MEASURED pose error at the rest
 //! points before and after. `crs calibrate campaign` makes the campaign file.
-//!
-//! Steps (each one a command an operator could run by hand; the report lists them):
-//! 1. surrogate of the nominal platform (`crs surrogate fit`), unless `--no-surrogate`;
-//! 2. daemon + safety-monitor TOMLs pointing to it (same platform in both: identity check);
-//! 3. `crs sim --dwell-s … --record before/campaign.csv` on the plant with undeclared effects;
-//! 4. identification from the nominal model on the recording, held-out split
-//!    (`crs calibrate run`), writing calibrated.toml;
-//! 5. surrogate refitted on calibrated.toml;
-//! 6. daemon + monitor TOMLs pointing to calibrated.toml and the new surrogate;
-//! 7. the same campaign again (`after/campaign.csv`);
-//! 8. report.md / report.json: before/after at the rest points, forces, identification figures.
-//!
-//! The cable offsets of the identification are not deployed: the stack's commissioning homes
-//! the drives at the set-up pose to the controller's command there (`sim_plant::bus`), which
-//! fixes them on the real robot too (eq. 3.14 / 6.24).
 
 use crate::calibrate_cmd::{Opts, calibrate_and_report, spinner};
-use crate::sim_cmd::{self, SimArgs, Summary, planner_limits, timed_waypoints, write_waypoints};
+use calibrate::Observation;
 use calibrate::pipeline::PipelineReport;
-use calibrate::{from_dataset, split};
-use cdpr_model::Pose;
 use cdpr_model::config::{Platform, load_platform};
-use cdpr_model::offset_target::OffsetTarget;
-use motion_core::daemon::cycle::Cycle;
-use motion_core::daemon::trajectory::{self, Waypoint};
-use std::fmt::Write as _;
+use crs_stack::calibration_loop::{LoopOptions, LoopTools};
+use crs_stack::campaign::{self, timed_waypoints, write_waypoints};
+use motion_core::daemon::lifecycle;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 type BoxErr = Box<dyn std::error::Error>;
 
@@ -104,6 +86,80 @@ pub struct LoopArgs {
     out: PathBuf,
 }
 
+impl LoopArgs {
+    fn options(&self) -> LoopOptions {
+        LoopOptions {
+            platform: self.platform.clone(),
+            plant: self.plant.clone(),
+            campaign: self.campaign.clone(),
+            max_poses: self.max_poses,
+            dwell_s: self.dwell_s,
+            settle_s: self.settle_s,
+            holdout_every: self.holdout_every,
+            no_surrogate: self.no_surrogate,
+            surrogate_validation_samples: self.surrogate_validation_samples,
+            daemon_config: self.daemon_config.clone(),
+            monitor_config: self.monitor_config.clone(),
+            drives: self.drives.clone(),
+            transport: self.transport.clone(),
+            bin_dir: self.bin_dir.clone(),
+            no_monitor: self.no_monitor,
+            ridge_kf: self.ridge_kf,
+            rt_priority: self.rt_priority,
+            retries: self.retries,
+            min_improvement: self.min_improvement,
+            out: self.out.clone(),
+        }
+    }
+}
+
+/// The CLI's surrogate fit (with a spinner) and identification (report, plots, calibrated.toml).
+struct CliTools;
+
+impl LoopTools for CliTools {
+    fn fit_surrogate(
+        &mut self,
+        pf: &Platform,
+        opts: &surrogate::FitOptions,
+    ) -> Result<(surrogate::Surrogate, surrogate::FitReport), BoxErr> {
+        let bar = spinner(&format!("fitting the surrogate of `{}`", pf.name));
+        let r = crate::surrogate_cmd::fit_platform(pf, opts);
+        bar.finish_and_clear();
+        r
+    }
+
+    fn identify(
+        &mut self,
+        nominal: &Platform,
+        train: &[Observation],
+        held: &[Observation],
+        out: &Path,
+        holdout_every: u64,
+        ridge_kf: f64,
+        command: &str,
+    ) -> Result<PipelineReport, BoxErr> {
+        let opts = Opts {
+            out: out.to_path_buf(),
+            holdout_every,
+            w_wrench: 1.0,
+            w_length: 1e4,
+            ridge_b: 0.0,
+            lasso_b: 0.0,
+            ridge_kf,
+            candidates: None,
+            min_gain: 0.05,
+            no_extension: true,
+            cartesian: false,
+            json: false,
+        };
+        calibrate_and_report(nominal, train, held, &opts, command)
+    }
+}
+
+pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
+    crs_stack::calibration_loop::run_loop(a.options(), command, &mut CliTools)
+}
+
 #[derive(clap::Args, Debug)]
 pub struct CampaignArgs {
     /// Platform TOML whose workspace region, force limits and planner limits are used.
@@ -127,122 +183,18 @@ pub struct CampaignArgs {
     out: PathBuf,
 }
 
-fn radical_inverse(mut i: u64, base: u64) -> f64 {
-    let (mut f, mut r) = (1.0, 0.0);
-    while i > 0 {
-        f /= base as f64;
-        r += f * (i % base) as f64;
-        i /= base;
-    }
-    r
-}
-
-/// Reference forces (eq. 3.41) of `pose` within [f_min + margin, f_max − margin].
-fn force_margin_ok(target: &mut OffsetTarget, p: &Platform, pose: &Pose, margin: f64) -> bool {
-    let prm = p.model.params();
-    match target.reference_forces(pose) {
-        Ok((f, fd)) => {
-            fd.feasible
-                && f.iter()
-                    .all(|v| *v >= prm.f_min + margin && *v <= prm.f_max - margin)
-        }
-        Err(_) => false,
-    }
-}
-
-/// Verifies a whole plan from the home pose with motion-core's own per-cycle checks (workspace,
-/// limits, eq. 3.29), as the daemon does before it moves. Error names the waypoint.
-pub(crate) fn verify_plan(
-    cycle: &mut Cycle,
-    platform: &Platform,
-    wps: &[Waypoint],
-    daemon: &motion_core::daemon::config::DaemonConfig,
-) -> Result<(), String> {
-    let lim = planner_limits(daemon, platform);
-    let period_s = daemon.realtime.period_ns as f64 * 1e-9;
-    let mut sp = crs_ipc::JointSetpoint::default();
-    trajectory::plan_samples(platform.home, wps, lim, period_s, |seg, r| {
-        cycle
-            .compute(&r, &mut sp)
-            .map_err(|e| format!("segment to waypoint {}: {e}", seg + 1))
-    })
-}
-
 pub fn run_campaign(a: CampaignArgs) -> Result<(), BoxErr> {
     let daemon = motion_core::daemon::config::load(&a.daemon_config).map_err(|e| e.to_string())?;
     let pf = load_platform(&a.platform)?;
-    if a.poses == 0 || !(a.fraction > 0.0 && a.fraction <= 1.0) {
-        return Err("--poses must be ≥ 1 and --fraction in (0, 1]".into());
-    }
-    let (lo, hi) = cdpr_model::offset_target::region_box(&pf.region);
-    let mut target = OffsetTarget::new(&pf.model);
-    // Candidates: a 6-D Halton sequence over the shrunken box, kept where the reference forces
-    // keep the margin.
-    let mut cand = Vec::new();
-    let bases = [2u64, 3, 5, 7, 11, 13];
-    let mut i = 1u64;
-    while cand.len() < 8 * a.poses && i < 200_000 {
-        let x: [f64; 6] = std::array::from_fn(|k| {
-            let c = 0.5 * (lo[k] + hi[k]);
-            let h = 0.5 * (hi[k] - lo[k]) * a.fraction;
-            c + h * (2.0 * radical_inverse(i, bases[k]) - 1.0)
-        });
-        i += 1;
-        let pose = Pose::from_array(x);
-        if force_margin_ok(&mut target, &pf, &pose, a.force_margin_n) {
-            cand.push(pose);
-        }
-    }
-    // Tour from the home pose through the candidates; the daemon's checks on every segment.
-    let mut cycle = Cycle::new(
-        pf.model.clone(),
-        pf.limits,
-        pf.region,
-        daemon.check_wrench_feasibility,
-    );
-    let mut chosen: Vec<Waypoint> = Vec::new();
-    // The first `poses` candidates in Halton order (spread over the box) make the pool; the
-    // tour visits them nearest-first; a pose whose segment fails is replaced by the next
-    // candidate.
-    let mut reserve = cand.into_iter();
-    let mut pool: Vec<Pose> = reserve.by_ref().take(a.poses).collect();
-    let mut cur = pf.home;
-    while chosen.len() < a.poses {
-        if pool.is_empty() {
-            match reserve.next() {
-                Some(p) => pool.push(p),
-                None => break,
-            }
-        }
-        pool.sort_by(|p, q| {
-            let d = |x: &Pose| (x.r - cur.r).norm();
-            d(q).total_cmp(&d(p))
-        });
-        let next = pool.pop().expect("non-empty");
-        let mut trial = chosen.clone();
-        trial.push(Waypoint {
-            pose: next,
-            not_before_s: 0.0,
-        });
-        if verify_plan(&mut cycle, &pf, &trial, &daemon).is_ok() {
-            chosen = trial;
-            cur = next;
-        } else if let Some(p) = reserve.next() {
-            pool.push(p);
-        }
-    }
-    if chosen.len() < a.poses {
-        return Err(format!(
-            "only {} of {} poses are feasible with margin {} N: lower --poses or --force-margin-n",
-            chosen.len(),
-            a.poses,
-            a.force_margin_n
-        )
-        .into());
-    }
-    let lim = planner_limits(&daemon, &pf);
-    let period_s = daemon.realtime.period_ns as f64 * 1e-9;
-    let (_, dur) = timed_waypoints(pf.home, &chosen, lim, period_s, 0.0)?;
+    let checks = lifecycle::configure_checks(&daemon, &pf);
+    let chosen = campaign::generate(&checks, a.poses, a.fraction, a.force_margin_n)?;
+    let (_, dur) = timed_waypoints(
+        pf.home,
+        &chosen,
+        checks.planner_limits(),
+        checks.period_s(),
+        0.0,
+    )?;
     let comment = format!(
         "Calibration campaign for `{}` ({}): {} poses, written by\n`crs calibrate campaign --platform {} --poses {} --fraction {} --force-margin-n {}`.\nHalton points over {:.0} % of the workspace box with varied orientations (platform geometry\nobservable), reference forces (eq. 3.41) within [f_min + {m}, f_max - {m}] N, ordered as a\nnearest-neighbour tour from the home pose; the whole plan ({dur:.1} s without rests) passes\nmotion-core's checks (workspace, limits, eq. 3.29). t_s = 0: `crs sim --dwell-s` times it.",
         pf.name,
@@ -265,783 +217,4 @@ pub fn run_campaign(a: CampaignArgs) -> Result<(), BoxErr> {
         a.out.display()
     );
     Ok(())
-}
-
-fn abs(p: &Path) -> Result<PathBuf, String> {
-    std::fs::canonicalize(p).map_err(|e| format!("{}: {e}", p.display()))
-}
-
-/// A TOML template as a table; errors name the file.
-fn read_template(template: &Path) -> Result<toml::Table, String> {
-    let text =
-        std::fs::read_to_string(template).map_err(|e| format!("{}: {e}", template.display()))?;
-    text.parse()
-        .map_err(|e| format!("{}: {e}", template.display()))
-}
-
-/// The `[name]` table of a template (must exist).
-fn section<'a>(
-    t: &'a mut toml::Table,
-    name: &str,
-    template: &Path,
-) -> Result<&'a mut toml::Table, String> {
-    t.get_mut(name)
-        .and_then(|v| v.as_table_mut())
-        .ok_or_else(|| format!("{}: no [{name}] table", template.display()))
-}
-
-/// An absolute path as a TOML string (the written files live elsewhere than the template).
-fn path_value(p: &Path) -> Result<toml::Value, String> {
-    Ok(toml::Value::String(abs(p)?.display().to_string()))
-}
-
-/// Writes `t` to `out` with a header naming the template it came from.
-fn write_from_template(
-    out: &Path,
-    t: &toml::Table,
-    what: &str,
-    template: &Path,
-) -> Result<(), BoxErr> {
-    let body = toml::to_string(t)?;
-    std::fs::write(
-        out,
-        format!(
-            "# {what} TOML written by `crs calibrate loop` from {}.\n{body}",
-            template.display()
-        ),
-    )?;
-    Ok(())
-}
-
-/// The daemon TOML of one run: the template with platform, surrogate and waypoints replaced.
-fn write_daemon_toml(
-    template: &Path,
-    out: &Path,
-    platform: &Path,
-    surrogate: Option<&Path>,
-    waypoints: &Path,
-) -> Result<(), BoxErr> {
-    let mut t = read_template(template)?;
-    let d = section(&mut t, "daemon", template)?;
-    d.insert("platform".into(), path_value(platform)?);
-    d.insert(
-        "surrogate".into(),
-        match surrogate {
-            Some(p) => path_value(p)?,
-            None => toml::Value::String(String::new()),
-        },
-    );
-    d.remove("stats_file");
-    section(&mut t, "trajectory", template)?.insert("waypoints".into(), path_value(waypoints)?);
-    write_from_template(out, &t, "motion-core daemon", template)?;
-    // The daemon's loader must accept it.
-    motion_core::daemon::config::load(out).map_err(|e| e.to_string())?;
-    Ok(())
-}
-
-/// The safety-monitor TOML of one run: the template with [monitor] platform and [can] drives.
-fn write_monitor_toml(
-    template: &Path,
-    out: &Path,
-    platform: &Path,
-    drives: &Path,
-) -> Result<(), BoxErr> {
-    let mut t = read_template(template)?;
-    let mon = section(&mut t, "monitor", template)?;
-    mon.insert("platform".into(), path_value(platform)?);
-    mon.insert("trip_log".into(), toml::Value::String(String::new()));
-    section(&mut t, "can", template)?.insert("drives".into(), path_value(drives)?);
-    write_from_template(out, &t, "safety-monitor", template)
-}
-
-/// The surrogate of one run (none with `--no-surrogate`), its figures printed and its command
-/// recorded.
-fn maybe_fit_surrogate(
-    with_sg: bool,
-    platform: &Path,
-    a: &LoopArgs,
-    out: &Path,
-    commands: &mut Vec<String>,
-) -> Result<Option<surrogate::FitReport>, BoxErr> {
-    if !with_sg {
-        return Ok(None);
-    }
-    let r = fit_surrogate(platform, a.surrogate_validation_samples, out)?;
-    println!(
-        "  max |φ_sg| {:.1} mm, fit error max {:.3} mm → {}",
-        r.max_abs_offset_mm,
-        r.max_fit_error_mm,
-        out.display()
-    );
-    commands.push(format!(
-        "crs surrogate fit --platform {} --validation-samples {} --out {}",
-        platform.display(),
-        a.surrogate_validation_samples,
-        out.display()
-    ));
-    Ok(Some(r))
-}
-
-/// The daemon and safety-monitor TOMLs of one run in `dir`, both on `platform`.
-fn write_run_configs(
-    a: &LoopArgs,
-    dir: &Path,
-    platform: &Path,
-    surrogate: Option<&Path>,
-    campaign: &Path,
-) -> Result<(PathBuf, PathBuf), BoxErr> {
-    let (daemon, monitor) = (
-        dir.join("motion-core.toml"),
-        dir.join("safety-monitor.toml"),
-    );
-    write_daemon_toml(&a.daemon_config, &daemon, platform, surrogate, campaign)?;
-    write_monitor_toml(&a.monitor_config, &monitor, platform, &a.drives)?;
-    Ok((daemon, monitor))
-}
-
-/// A run must have recorded a rest point at every pose of the campaign.
-fn all_rest_points(label: &str, sum: &Summary, poses: usize, dir: &Path) -> Result<(), BoxErr> {
-    if sum.rest.rest_points == poses {
-        return Ok(());
-    }
-    Err(format!(
-        "the {label} run recorded {} rest points for {poses} poses ({} skipped): see {}",
-        sum.rest.rest_points,
-        sum.rest_points_skipped,
-        dir.display()
-    )
-    .into())
-}
-
-/// Fits the surrogate of `platform` (as `crs surrogate fit` with the default degree and margin).
-fn fit_surrogate(
-    platform: &Path,
-    validation_samples: usize,
-    out: &Path,
-) -> Result<surrogate::FitReport, BoxErr> {
-    let pf = load_platform(platform)?;
-    let opts = surrogate::FitOptions {
-        validation_samples,
-        margin_m: 0.010,
-        ..surrogate::FitOptions::default()
-    };
-    let bar = spinner(&format!("fitting the surrogate of `{}`", pf.name));
-    let (sg, report) = crate::surrogate_cmd::fit_platform(&pf, &opts)?;
-    bar.finish_and_clear();
-    sg.save(out)
-        .map_err(|e| format!("{}: {e}", out.display()))?;
-    Ok(report)
-}
-
-/// One run of the campaign on the stack, as reported.
-#[derive(Clone, Debug, serde::Serialize)]
-struct RunReport {
-    platform: PathBuf,
-    surrogate: Option<PathBuf>,
-    surrogate_max_offset_mm: Option<f64>,
-    daemon_config: PathBuf,
-    monitor_config: PathBuf,
-    record: PathBuf,
-    /// Runs needed (more than 1: drive-io stopped the bus in an earlier one, `--retries`).
-    attempts: usize,
-    summary: Summary,
-}
-
-#[derive(Clone, Debug, serde::Serialize)]
-struct StageRow {
-    name: String,
-    holdout: calibrate::validate::Errors,
-}
-
-#[derive(Clone, Debug, serde::Serialize)]
-struct LoopReport {
-    command: String,
-    plant: PathBuf,
-    campaign: PathBuf,
-    poses: usize,
-    dwell_s: f64,
-    settle_s: f64,
-    control_model: String,
-    before: RunReport,
-    identification: Vec<StageRow>,
-    identification_train: usize,
-    identification_holdout: usize,
-    deployed_stage: String,
-    calibrated_platform: PathBuf,
-    after: RunReport,
-    /// Measured mean position error before / after at the rest points.
-    improvement_position_mean: f64,
-    improvement_position_max: f64,
-    improvement_rotation_mean: f64,
-    runtime_s: f64,
-    commands: Vec<String>,
-}
-
-#[allow(clippy::too_many_arguments)]
-fn stack_run(
-    a: &LoopArgs,
-    daemon_toml: &Path,
-    monitor_toml: &Path,
-    campaign: &Path,
-    dir: &Path,
-    record: &Path,
-    timeout_s: f64,
-    name: &str,
-) -> Result<(Summary, usize), BoxErr> {
-    let args = SimArgs {
-        config: daemon_toml.to_path_buf(),
-        drives: a.drives.clone(),
-        plant: a.plant.clone(),
-        transport: a.transport.clone(),
-        waypoints: Some(campaign.to_path_buf()),
-        hold_s: a.dwell_s,
-        timeout_s,
-        bin_dir: a.bin_dir.clone(),
-        out: dir.to_path_buf(),
-        no_monitor: a.no_monitor,
-        check: false,
-        max_static_error_mm: f64::INFINITY,
-        monitor_config: monitor_toml.to_path_buf(),
-        dwell_s: Some(a.dwell_s),
-        record: Some(record.to_path_buf()),
-        settle_s: a.settle_s,
-        campaign: Some(name.to_string()),
-        rt_priority: (a.rt_priority >= 6).then_some(a.rt_priority),
-        console: Default::default(),
-    };
-    let mut attempt = 0;
-    let sum = loop {
-        let sum = sim_cmd::execute(&args)?;
-        match &sum.bus_stopped_during_run {
-            Some(b) if attempt < a.retries => {
-                attempt += 1;
-                println!(
-                    "  the {name} run was interrupted: drive-io stopped the bus ({b}), most likely a gap in the setpoint stream on a loaded host; running it again ({attempt}/{})",
-                    a.retries
-                );
-            }
-            _ => break sum,
-        }
-    };
-    let mut fails = Vec::new();
-    if let Some(b) = &sum.bus_stopped_during_run {
-        fails.push(format!("drive-io stopped the bus during the run ({b})"));
-    }
-    if sum.estops > 0 {
-        fails.push(format!("{} e-stop(s)", sum.estops));
-    }
-    if sum.drive_faults > 0 {
-        fails.push(format!("{} drive fault reports", sum.drive_faults));
-    }
-    if sum.loop_rejected > 0 {
-        fails.push(format!("{} references refused", sum.loop_rejected));
-    }
-    if sum.non_converged_plant_steps > 0 {
-        fails.push(format!(
-            "{} plant steps without equilibrium",
-            sum.non_converged_plant_steps
-        ));
-    }
-    if !fails.is_empty() {
-        return Err(format!(
-            "the {name} run failed: {} (logs in {})",
-            fails.join("; "),
-            dir.display()
-        )
-        .into());
-    }
-    Ok((sum, attempt + 1))
-}
-
-pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
-    let t_start = Instant::now();
-    if !(a.dwell_s.is_finite() && a.settle_s > 0.0 && a.dwell_s > a.settle_s) {
-        return Err(format!(
-            "--dwell-s ({}) must exceed --settle-s ({}) > 0",
-            a.dwell_s, a.settle_s
-        )
-        .into());
-    }
-    for f in [
-        &a.platform,
-        &a.plant,
-        &a.campaign,
-        &a.daemon_config,
-        &a.monitor_config,
-        &a.drives,
-    ] {
-        if !f.is_file() {
-            return Err(format!("{}: no such file", f.display()).into());
-        }
-    }
-    let nominal = load_platform(&a.platform)?;
-    let pcfg = sim_plant::load_plant(&a.plant)?;
-    if pcfg.platform.model.identity_hex() != nominal.model.identity_hex() {
-        return Err(format!(
-            "{}: the plant's nominal platform ({}) is not {}",
-            a.plant.display(),
-            pcfg.platform_path.display(),
-            a.platform.display()
-        )
-        .into());
-    }
-    let daemon_tpl =
-        motion_core::daemon::config::load(&a.daemon_config).map_err(|e| e.to_string())?;
-    let mut wps = trajectory::read_waypoints(&a.campaign)?;
-    if let Some(n) = a.max_poses {
-        if n == 0 {
-            return Err("--max-poses must be ≥ 1".into());
-        }
-        wps.truncate(n);
-    }
-    let holdout = a.holdout_every;
-    if holdout != 0 && wps.len() < 2 * holdout as usize {
-        return Err(format!(
-            "{} poses are too few for a held-out split every {holdout}",
-            wps.len()
-        )
-        .into());
-    }
-    std::fs::create_dir_all(&a.out)?;
-    let (dir_b, dir_i, dir_a) = (
-        a.out.join("before"),
-        a.out.join("identification"),
-        a.out.join("after"),
-    );
-    for d in [&dir_b, &dir_i, &dir_a] {
-        std::fs::create_dir_all(d)?;
-    }
-    // The campaign as run (first N poses).
-    let campaign = a.out.join("campaign.csv");
-    write_waypoints(
-        &campaign,
-        &wps,
-        &format!(
-            "{} poses of {} (crs calibrate loop)",
-            wps.len(),
-            a.campaign.display()
-        ),
-    )?;
-    let mut check = Cycle::new(
-        nominal.model.clone(),
-        nominal.limits,
-        nominal.region,
-        daemon_tpl.check_wrench_feasibility,
-    );
-    verify_plan(&mut check, &nominal, &wps, &daemon_tpl)
-        .map_err(|e| format!("{}: the plan is refused: {e}", a.campaign.display()))?;
-    let period_s = daemon_tpl.realtime.period_ns as f64 * 1e-9;
-    let (_, plan_s) = timed_waypoints(
-        nominal.home,
-        &wps,
-        planner_limits(&daemon_tpl, &nominal),
-        period_s,
-        a.dwell_s,
-    )?;
-    let timeout_s = 1.5 * (plan_s + a.dwell_s) + 60.0;
-    let name = a
-        .campaign
-        .file_stem()
-        .map_or("campaign".into(), |n| n.to_string_lossy().into_owned());
-    let with_sg = !a.no_surrogate;
-    let steps = 7;
-    let step = |k: usize, what: &str| println!("\n[{k}/{steps}] {what}");
-    println!(
-        "crs calibrate loop: {} poses of {}, rest {} s each (plan {plan_s:.0} s per run), plant {}, controller {}",
-        wps.len(),
-        a.campaign.display(),
-        a.dwell_s,
-        a.plant.display(),
-        if with_sg {
-            "kinematics + surrogate"
-        } else {
-            "kinematics only (--no-surrogate)"
-        }
-    );
-    let sim_cmd_line = |dir: &Path| {
-        format!(
-            "crs sim --config {} --monitor-config {} --plant {} --drives {} --waypoints {} --dwell-s {} --settle-s {} --hold-s {} --record {} --out {}{}",
-            dir.join("motion-core.toml").display(),
-            dir.join("safety-monitor.toml").display(),
-            a.plant.display(),
-            a.drives.display(),
-            campaign.display(),
-            a.dwell_s,
-            a.settle_s,
-            a.dwell_s,
-            dir.join("campaign.csv").display(),
-            dir.display(),
-            if a.rt_priority >= 6 {
-                format!(" --rt-priority {}", a.rt_priority)
-            } else {
-                String::new()
-            }
-        )
-    };
-    let mut commands = Vec::new();
-
-    // 1-2. Before: the nominal platform (+ its surrogate).
-    step(
-        1,
-        if with_sg {
-            "surrogate of the nominal platform"
-        } else {
-            "no surrogate (--no-surrogate)"
-        },
-    );
-    let sg_b = dir_b.join("surrogate.json");
-    let rep_sg_b = maybe_fit_surrogate(with_sg, &a.platform, &a, &sg_b, &mut commands)?;
-    let (daemon_b, monitor_b) = write_run_configs(
-        &a,
-        &dir_b,
-        &a.platform,
-        with_sg.then_some(sg_b.as_path()),
-        &campaign,
-    )?;
-    step(2, "campaign on the stack with the nominal model (before)");
-    let rec_b = dir_b.join("campaign.csv");
-    let (sum_b, attempts_b) = stack_run(
-        &a, &daemon_b, &monitor_b, &campaign, &dir_b, &rec_b, timeout_s, &name,
-    )?;
-    commands.push(sim_cmd_line(&dir_b));
-    all_rest_points("before", &sum_b, wps.len(), &dir_b)?;
-
-    // 3. Identification from the nominal model.
-    step(3, "identification from the nominal model on the recording");
-    let ds = crs_dataset::load_dataset(&rec_b)?;
-    let obs =
-        from_dataset(&ds, nominal.model.m()).map_err(|e| format!("{}: {e}", rec_b.display()))?;
-    let (train, held) = split(&obs, holdout);
-    let opts = Opts {
-        out: dir_i.clone(),
-        holdout_every: holdout,
-        w_wrench: 1.0,
-        w_length: 1e4,
-        ridge_b: 0.0,
-        lasso_b: 0.0,
-        ridge_kf: a.ridge_kf,
-        candidates: None,
-        min_gain: 0.05,
-        no_extension: true,
-        cartesian: false,
-        json: false,
-    };
-    let cal_cmd = format!(
-        "crs calibrate run --platform {} --data {} --holdout-every {holdout} --no-extension --ridge-kf {} --out {}",
-        a.platform.display(),
-        rec_b.display(),
-        a.ridge_kf,
-        dir_i.display()
-    );
-    let rep: PipelineReport = calibrate_and_report(&nominal, &train, &held, &opts, &cal_cmd)?;
-    commands.push(cal_cmd);
-    let calibrated = dir_i.join("calibrated.toml");
-    let deployed_stage = rep.final_stage().name.clone();
-    let cal_pf = load_platform(&calibrated)?;
-
-    // 4-5. After: the calibrated platform (+ its refitted surrogate).
-    step(
-        4,
-        if with_sg {
-            "surrogate refitted on the calibrated platform"
-        } else {
-            "no surrogate (--no-surrogate)"
-        },
-    );
-    let sg_a = dir_a.join("surrogate.json");
-    let rep_sg_a = maybe_fit_surrogate(with_sg, &calibrated, &a, &sg_a, &mut commands)?;
-    step(
-        5,
-        "daemon and safety-monitor configuration for the calibrated model",
-    );
-    let (daemon_a, monitor_a) = write_run_configs(
-        &a,
-        &dir_a,
-        &calibrated,
-        with_sg.then_some(sg_a.as_path()),
-        &campaign,
-    )?;
-    let mut check = Cycle::new(
-        cal_pf.model.clone(),
-        cal_pf.limits,
-        cal_pf.region,
-        daemon_tpl.check_wrench_feasibility,
-    );
-    verify_plan(&mut check, &cal_pf, &wps, &daemon_tpl).map_err(|e| {
-        format!(
-            "the calibrated model {} refuses the campaign: {e}",
-            calibrated.display()
-        )
-    })?;
-    println!(
-        "  {} (platform `{}`), {}",
-        daemon_a.display(),
-        cal_pf.name,
-        monitor_a.display()
-    );
-    step(6, "the same campaign with the calibrated model (after)");
-    let rec_a = dir_a.join("campaign.csv");
-    let (sum_a, attempts_a) = stack_run(
-        &a, &daemon_a, &monitor_a, &campaign, &dir_a, &rec_a, timeout_s, &name,
-    )?;
-    commands.push(sim_cmd_line(&dir_a));
-    all_rest_points("after", &sum_a, wps.len(), &dir_a)?;
-
-    step(7, "report");
-    let ratio = |b: f64, a: f64| if a > 0.0 { b / a } else { f64::INFINITY };
-    let report = LoopReport {
-        command: command.to_string(),
-        plant: a.plant.clone(),
-        campaign: a.campaign.clone(),
-        poses: wps.len(),
-        dwell_s: a.dwell_s,
-        settle_s: a.settle_s,
-        control_model: if with_sg {
-            "kinematic+surrogate".into()
-        } else {
-            "kinematic".into()
-        },
-        before: RunReport {
-            platform: a.platform.clone(),
-            surrogate: with_sg.then(|| sg_b.clone()),
-            surrogate_max_offset_mm: rep_sg_b.map(|r| r.max_abs_offset_mm),
-            daemon_config: daemon_b,
-            monitor_config: monitor_b,
-            record: rec_b,
-            attempts: attempts_b,
-            summary: sum_b.clone(),
-        },
-        identification: rep
-            .stages
-            .iter()
-            .map(|s| StageRow {
-                name: s.name.clone(),
-                holdout: s.holdout.clone(),
-            })
-            .collect(),
-        identification_train: rep.n_train,
-        identification_holdout: rep.n_holdout,
-        deployed_stage,
-        calibrated_platform: calibrated.clone(),
-        after: RunReport {
-            platform: calibrated.clone(),
-            surrogate: with_sg.then(|| sg_a.clone()),
-            surrogate_max_offset_mm: rep_sg_a.map(|r| r.max_abs_offset_mm),
-            daemon_config: daemon_a,
-            monitor_config: monitor_a,
-            record: rec_a,
-            attempts: attempts_a,
-            summary: sum_a.clone(),
-        },
-        improvement_position_mean: ratio(sum_b.rest.position_mean_mm, sum_a.rest.position_mean_mm),
-        improvement_position_max: ratio(sum_b.rest.position_max_mm, sum_a.rest.position_max_mm),
-        improvement_rotation_mean: ratio(
-            sum_b.rest.rotation_mean_deg,
-            sum_a.rest.rotation_mean_deg,
-        ),
-        runtime_s: t_start.elapsed().as_secs_f64(),
-        commands,
-    };
-    let md = markdown(&report);
-    std::fs::write(a.out.join("report.md"), &md)?;
-    std::fs::write(
-        a.out.join("report.json"),
-        serde_json::to_string_pretty(&report)?,
-    )?;
-    println!("\n{}", before_after_table(&report));
-    println!(
-        "measured mean position error {:.2} mm → {:.2} mm ({:.1}×) in {:.0} s; report {}",
-        sum_b.rest.position_mean_mm,
-        sum_a.rest.position_mean_mm,
-        report.improvement_position_mean,
-        report.runtime_s,
-        a.out.join("report.md").display()
-    );
-    if let Some(f) = a.min_improvement
-        && (report.improvement_position_mean.is_nan() || report.improvement_position_mean < f)
-    {
-        return Err(format!(
-            "the measured mean position error dropped by {:.2}×, less than --min-improvement {f}",
-            report.improvement_position_mean
-        )
-        .into());
-    }
-    Ok(())
-}
-
-fn before_after_table(r: &LoopReport) -> String {
-    let mut s = String::new();
-    s.push_str("| at the rest points | before (nominal) | after (calibrated) |\n|---|---|---|\n");
-    let (b, a) = (&r.before.summary, &r.after.summary);
-    let row = |s: &mut String, name: &str, vb: String, va: String| {
-        let _ = writeln!(s, "| {name} | {vb} | {va} |");
-    };
-    row(
-        &mut s,
-        "rest points",
-        b.rest.rest_points.to_string(),
-        a.rest.rest_points.to_string(),
-    );
-    row(
-        &mut s,
-        "measured position error mean / max (mm)",
-        format!(
-            "{:.2} / {:.2}",
-            b.rest.position_mean_mm, b.rest.position_max_mm
-        ),
-        format!(
-            "{:.2} / {:.2}",
-            a.rest.position_mean_mm, a.rest.position_max_mm
-        ),
-    );
-    row(
-        &mut s,
-        "measured rotation error mean / max (deg)",
-        format!(
-            "{:.3} / {:.3}",
-            b.rest.rotation_mean_deg, b.rest.rotation_max_deg
-        ),
-        format!(
-            "{:.3} / {:.3}",
-            a.rest.rotation_mean_deg, a.rest.rotation_max_deg
-        ),
-    );
-    row(
-        &mut s,
-        "true position error mean / max (mm, plant truth)",
-        format!(
-            "{:.2} / {:.2}",
-            b.rest.true_position_mean_mm, b.rest.true_position_max_mm
-        ),
-        format!(
-            "{:.2} / {:.2}",
-            a.rest.true_position_mean_mm, a.rest.true_position_max_mm
-        ),
-    );
-    let forces = |x: &Summary| {
-        format!(
-            "{:.0} … {:.0} ({})",
-            x.force_min_n,
-            x.force_max_n,
-            if x.force_min_n >= x.f_min_n && x.force_max_n <= x.f_max_n {
-                "within"
-            } else {
-                "OUTSIDE"
-            }
-        )
-    };
-    row(
-        &mut s,
-        &format!(
-            "cable forces over the run (N; limits {:.0} … {:.0})",
-            b.f_min_n, b.f_max_n
-        ),
-        forces(b),
-        forces(a),
-    );
-    row(
-        &mut s,
-        "tracking error mean / max while moving (mm)",
-        format!(
-            "{:.2} / {:.2}",
-            b.tracking_position_mean_mm, b.tracking_position_max_mm
-        ),
-        format!(
-            "{:.2} / {:.2}",
-            a.tracking_position_mean_mm, a.tracking_position_max_mm
-        ),
-    );
-    row(
-        &mut s,
-        "e-stops / drive faults / refused references",
-        format!("{} / {} / {}", b.estops, b.drive_faults, b.loop_rejected),
-        format!("{} / {} / {}", a.estops, a.drive_faults, a.loop_rejected),
-    );
-    row(
-        &mut s,
-        "stack runs needed (bus stopped by host load otherwise)",
-        r.before.attempts.to_string(),
-        r.after.attempts.to_string(),
-    );
-    row(
-        &mut s,
-        "run time (s)",
-        format!("{:.1}", b.duration_s),
-        format!("{:.1}", a.duration_s),
-    );
-    s
-}
-
-fn markdown(r: &LoopReport) -> String {
-    let mut s = String::new();
-    s.push_str("# Closed calibration loop on the running stack\n\n");
-    let _ = writeln!(s, "Command: `{}`\n", r.command);
-    let _ = writeln!(
-        s,
-        "Plant `{}` (effects the model does not declare), campaign `{}` ({} poses, rest {} s each, readings taken after {} s settled: the last tracker pose and force-sensor readings before the reference moves). Controller: {}. The pose errors are MEASURED: the tracker's pose against the reference at every rest point; the plant's true pose is shown for comparison.\n",
-        r.plant.display(),
-        r.campaign.display(),
-        r.poses,
-        r.dwell_s,
-        r.settle_s,
-        r.control_model
-    );
-    s.push_str("## Before / after\n\n");
-    s.push_str(&before_after_table(r));
-    let _ = writeln!(
-        s,
-        "\nMeasured mean position error: {:.1}× smaller (max {:.1}×, mean rotation {:.1}×). Total run time {:.0} s.\n",
-        r.improvement_position_mean,
-        r.improvement_position_max,
-        r.improvement_rotation_mean,
-        r.runtime_s
-    );
-    s.push_str("## Identification (held-out figures, through the model's forward kinematics)\n\n");
-    let _ = writeln!(
-        s,
-        "{} training and {} held-out rest points from the before run; deployed: **{}** → `{}`.\n",
-        r.identification_train,
-        r.identification_holdout,
-        r.deployed_stage,
-        r.calibrated_platform.display()
-    );
-    s.push_str("| step | mean / max position (mm) | mean / max rotation (deg) | mean cable length (mm) | mean / max force (N) |\n|---|---|---|---|---|\n");
-    for st in &r.identification {
-        let h = &st.holdout;
-        let f = |v: Option<f64>| v.map_or("–".into(), |x| format!("{x:.1}"));
-        let _ = writeln!(
-            s,
-            "| {} | {:.2} / {:.2} | {:.3} / {:.3} | {:.2} | {} / {} |",
-            st.name,
-            h.pos_mean_mm,
-            h.pos_max_mm,
-            h.rot_mean_deg,
-            h.rot_max_deg,
-            h.len_mean_mm,
-            f(h.force_mean_n),
-            f(h.force_max_n)
-        );
-    }
-    s.push_str("\nThe identification's own report (condition numbers, parameters, plots) is in `identification/report.md`.\n\n## Deployed configuration\n\n");
-    for (name, run) in [("before", &r.before), ("after", &r.after)] {
-        let _ = writeln!(
-            s,
-            "* {name}: platform `{}`, surrogate {}, daemon `{}`, monitor `{}`, recording `{}`",
-            run.platform.display(),
-            match (&run.surrogate, run.surrogate_max_offset_mm) {
-                (Some(p), Some(mx)) => format!("`{}` (max |φ_sg| {mx:.1} mm)", p.display()),
-                (Some(p), None) => format!("`{}`", p.display()),
-                _ => "none".into(),
-            },
-            run.daemon_config.display(),
-            run.monitor_config.display(),
-            run.record.display()
-        );
-    }
-    s.push_str("\n## The same by hand\n\n```sh\n");
-    for c in &r.commands {
-        let _ = writeln!(s, "{c}");
-    }
-    s.push_str("```\n");
-    s
 }

@@ -60,11 +60,11 @@ pub fn plan_view(
 ) -> Result<PlanView, Box<dyn std::error::Error>> {
     let wps = trajectory::read_waypoints(waypoints)?;
     let period_s = daemon.realtime.period_ns as f64 * 1e-9;
-    let lim = crate::sim_cmd::planner_limits(daemon, platform);
+    let lim = motion_core::daemon::lifecycle::planner_limits(&platform.limits, &daemon.trajectory);
     let mut steps = vec![0usize; wps.len()];
     trajectory::plan_samples(platform.home, &wps, lim, period_s, |seg, _| {
         steps[seg] += 1;
-        Ok(())
+        Ok::<(), motion_core::daemon::trajectory::PlanningFailed>(())
     })?;
     let mut t = 0.0;
     let waypoint_end_s = steps

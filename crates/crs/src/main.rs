@@ -7,7 +7,6 @@ mod console_cmd;
 mod gen_cmd;
 mod model_cmd;
 mod plant_cmd;
-mod rest_recorder;
 mod sim_cmd;
 mod sim_plots;
 mod surrogate_cmd;

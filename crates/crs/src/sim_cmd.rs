@@ -1,37 +1,13 @@
-//! `crs sim`: the whole simulated stack as separate processes, as a user runs it.
-//!
-//! sim-plant (the winches + platform physics on the bus), safety-monitor (when built),
-//! drive-io (CiA 402 master) and motion-core (the 1 ms loop) start in that order on the default
-//! icosahedron configuration, over vcan0 when the kernel has it and over the CAN-over-UDP
-//! loopback bus otherwise (the launcher says which). motion-core runs the demo trajectory; the
-//! launcher listens on iceoryx2 (its own service prefix per run) and prints the tracked-pose
-//! error against the reference, the cable forces against the limits, the loop statistics and the
-//! monitor state. Ctrl-C stops all children cleanly; a child that dies stops the rest.
-//!
-//! Commissioning: sim-plant homes the drives to the controller's full command at the home pose,
-//! q_θ(home) = φ(home) + φ_sg(home) (eq. 5.26), computed here from the daemon TOML with
-//! motion-core's own cycle computation (`--home-lengths-m`, see `sim_plant::bus`), so a
-//! surrogate's offset at home does not make the first setpoint jump.
-//!
-//! Recording (`--record FILE`, [`crate::rest_recorder`]): with `--dwell-s` the waypoints are
-//! timed so the platform rests that long at each; every rest point (reference constant for at
-//! least `--settle-s`) gives one `crs-dataset 1` sample — commanded lengths, tracker pose,
-//! force sensors, reference — and the summary reports the measured pose error at the rest points.
+//! `crs sim`: the whole simulated stack as separate processes, as a user runs it — the
+//! command line of [`crs_stack::sim_run`] (which starts, follows and stops the processes and
+//! writes the summary) plus the `--check` verdict.
 
-use crate::rest_recorder::{RestErrors, RestRecorder, rest_errors, to_dataset};
-use cdpr_model::Pose;
-use cdpr_model::config::{Platform, load_platform};
-use crs_ipc::{
-    DriveFeedback, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlantTruth,
-    ProcessId, StateEvent, TrackerPose,
-};
-use motion_core::daemon::config::DaemonConfig;
-use motion_core::daemon::cycle::{Cycle, Reference};
-use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use crate::console_cmd::SimConsoleArgs;
+use crate::sim_plots::RunRecord;
+use crs_ipc::{JointSetpoint, LoopStatsSample, PlantTruth, StateEvent};
+use crs_stack::sim_run::{RunObserver, RunStart, SimOptions, Summary, execute_observed};
+use std::path::Path;
+use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct SimArgs {
@@ -97,324 +73,100 @@ pub struct SimArgs {
     /// the SYNCs going on a loaded host (needs root; ignored with a note otherwise).
     #[arg(long, value_parser = clap::value_parser!(i32).range(6..=99))]
     pub(crate) rt_priority: Option<i32>,
-    #[command(flatten)] // i18: operator console
-    pub(crate) console: crate::console_cmd::SimConsoleArgs,
+    #[command(flatten)]
+    pub(crate) console: SimConsoleArgs,
 }
 
-/// Planner limits of the daemon TOML (as motion-core computes them).
-pub(crate) fn planner_limits(daemon: &DaemonConfig, platform: &Platform) -> PlannerLimits {
-    let t = &daemon.trajectory;
-    let l = &platform.limits;
-    PlannerLimits {
-        linear_velocity: l.linear_velocity_max * t.velocity_scale,
-        angular_velocity: l.angular_velocity_max * t.velocity_scale,
-        linear_acceleration: l.linear_acceleration_max * t.acceleration_scale,
-        angular_acceleration: l.angular_acceleration_max * t.acceleration_scale,
-        linear_jerk: t.linear_jerk_max,
-        angular_jerk: t.angular_jerk_max,
-    }
+/// What `crs sim` runs next to the stack: the operator console (`--console`) and the run's
+/// plots (out/sim/*.svg + index.html).
+struct SimObserver<'a> {
+    console_args: &'a SimConsoleArgs,
+    console: Option<crs_console::ConsoleHandle>,
+    plots: Option<RunRecord>,
 }
 
-/// motion-core's cycle computation for the daemon TOML: platform, feasibility check and the
-/// surrogate (loaded and identity-checked as the daemon does).
-pub(crate) fn controller_cycle(
-    daemon: &DaemonConfig,
-    platform: &Platform,
-) -> Result<Cycle, String> {
-    let mut cycle = Cycle::new(
-        platform.model.clone(),
-        platform.limits,
-        platform.region,
-        daemon.check_wrench_feasibility,
-    );
-    if let Some(path) = &daemon.surrogate {
-        let s = surrogate::Surrogate::load(path, &platform.model.identity_hex())
-            .map_err(|e| format!("surrogate {}: {e}", path.display()))?;
-        let n = s.n_cables();
-        cycle
-            .set_surrogate(Box::new(s), n)
-            .map_err(|e| format!("surrogate {}: {e}", path.display()))?;
-    }
-    Ok(cycle)
-}
-
-/// The controller's full command at the home pose, q_θ(home) = φ(home) + φ_sg(home) (eq. 5.26):
-/// the lengths the drives are homed to.
-pub(crate) fn home_command(daemon: &DaemonConfig, platform: &Platform) -> Result<Vec<f64>, String> {
-    let mut cycle = controller_cycle(daemon, platform)?;
-    let mut sp = JointSetpoint::default();
-    cycle
-        .compute(
-            &Reference {
-                pose: platform.home,
-                ..Reference::default()
-            },
-            &mut sp,
-        )
-        .map_err(|e| format!("the controller refuses the home pose: {e}"))?;
-    Ok(sp.cable_length_m[..platform.model.m()].to_vec())
-}
-
-/// Waypoints with earliest-arrival times such that the platform rests `dwell_s` at each one
-/// (the planner holds a waypoint until the next segment may start, `trajectory::plan_samples`),
-/// and the plan's total duration (s).
-pub(crate) fn timed_waypoints(
-    start: Pose,
-    waypoints: &[Waypoint],
-    lim: PlannerLimits,
-    period_s: f64,
-    dwell_s: f64,
-) -> Result<(Vec<Waypoint>, f64), String> {
-    if !(dwell_s.is_finite() && dwell_s >= 0.0) {
-        return Err(format!("--dwell-s must be finite and ≥ 0, got {dwell_s}"));
-    }
-    let untimed: Vec<Waypoint> = waypoints
-        .iter()
-        .map(|w| Waypoint {
-            pose: w.pose,
-            not_before_s: 0.0,
-        })
-        .collect();
-    let mut steps = vec![0usize; waypoints.len()];
-    trajectory::plan_samples(start, &untimed, lim, period_s, |seg, _| {
-        steps[seg] += 1;
-        Ok(())
-    })?;
-    let mut t = 0.0;
-    let mut out = Vec::with_capacity(waypoints.len());
-    for (k, w) in waypoints.iter().enumerate() {
-        if k > 0 {
-            t += dwell_s;
-        }
-        t += steps[k] as f64 * period_s;
-        out.push(Waypoint {
-            pose: w.pose,
-            not_before_s: t,
-        });
-    }
-    Ok((out, t))
-}
-
-/// Writes waypoints in the CSV format motion-core reads (`trajectory::read_waypoints`).
-pub(crate) fn write_waypoints(path: &Path, wps: &[Waypoint], comment: &str) -> Result<(), String> {
-    use std::fmt::Write as _;
-    let mut s = String::new();
-    for line in comment.lines() {
-        let _ = writeln!(s, "# {line}");
-    }
-    s.push_str("t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n");
-    for w in wps {
-        let p = w.pose.to_array();
-        let _ = writeln!(
-            s,
-            "{:?},{:?},{:?},{:?},{:?},{:?},{:?}",
-            w.not_before_s,
-            p[0],
-            p[1],
-            p[2],
-            p[3].to_degrees(),
-            p[4].to_degrees(),
-            p[5].to_degrees()
-        );
-    }
-    std::fs::write(path, s).map_err(|e| format!("{}: {e}", path.display()))
-}
-
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-
-extern "C" fn on_signal(_: libc::c_int) {
-    INTERRUPTED.store(true, Ordering::Relaxed);
-}
-
-struct Proc {
-    name: &'static str,
-    child: Child,
-    log: PathBuf,
-}
-
-/// The children, stopped (SIGTERM, then SIGKILL after 3 s) in reverse start order on drop.
-struct Stack {
-    procs: Vec<Proc>,
-}
-
-impl Stack {
-    fn spawn(
-        &mut self,
-        name: &'static str,
-        exe: &Path,
-        args: &[String],
-        prefix: &str,
-        out: &Path,
-    ) -> Result<(), String> {
-        let log = out.join(format!("{name}.log"));
-        let f = std::fs::File::create(&log).map_err(|e| format!("{}: {e}", log.display()))?;
-        let f2 = f.try_clone().map_err(|e| e.to_string())?;
-        let child = Command::new(exe)
-            .args(args)
-            .env("CRS_IPC_PREFIX", prefix)
-            .env(
-                "RUST_LOG",
-                std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()),
-            )
-            .stdin(Stdio::null())
-            .stdout(f)
-            .stderr(f2)
-            .spawn()
-            .map_err(|e| format!("starting {}: {e}", exe.display()))?;
-        println!(
-            "  started {name:<15} pid {:>6}  log {}",
-            child.id(),
-            log.display()
-        );
-        self.procs.push(Proc { name, child, log });
+impl RunObserver for SimObserver<'_> {
+    fn started(&mut self, run: &RunStart<'_>) -> Result<(), Box<dyn std::error::Error>> {
+        self.console = crate::console_cmd::start_for_sim(
+            self.console_args,
+            run.prefix,
+            run.daemon,
+            run.platform,
+            run.waypoints,
+        )?;
+        let p = run.platform.model.params();
+        self.plots = Some(RunRecord::new(p.f_min, p.f_max));
         Ok(())
     }
-
-    /// The first child that has exited, with its status.
-    fn exited(&mut self) -> Option<(&'static str, std::process::ExitStatus, PathBuf)> {
-        for p in &mut self.procs {
-            if let Ok(Some(st)) = p.child.try_wait() {
-                return Some((p.name, st, p.log.clone()));
-            }
+    fn setpoint(&mut self, sp: &JointSetpoint) {
+        if let Some(p) = self.plots.as_mut() {
+            p.setpoint(sp);
         }
-        None
     }
-
-    fn stop_all(&mut self) {
-        for p in self.procs.iter_mut().rev() {
-            if let Ok(None) = p.child.try_wait() {
-                // SAFETY: kill(2) on our own child's pid.
-                unsafe { libc::kill(p.child.id() as libc::pid_t, libc::SIGTERM) };
-            }
+    fn truth(&mut self, t: &PlantTruth) {
+        if let Some(p) = self.plots.as_mut() {
+            p.truth(t);
         }
-        let t0 = Instant::now();
-        for p in self.procs.iter_mut().rev() {
-            loop {
-                match p.child.try_wait() {
-                    Ok(Some(_)) | Err(_) => break,
-                    Ok(None) if t0.elapsed() > Duration::from_secs(3) => {
-                        let _ = p.child.kill();
-                        let _ = p.child.wait();
-                        break;
-                    }
-                    Ok(None) => std::thread::sleep(Duration::from_millis(10)),
-                }
-            }
+    }
+    fn loop_stats(&mut self, s: &LoopStatsSample) {
+        if let Some(p) = self.plots.as_mut() {
+            p.loop_stats(s);
         }
-        self.procs.clear();
     }
-}
-
-impl Drop for Stack {
-    fn drop(&mut self) {
-        self.stop_all();
+    fn event(&mut self, e: &StateEvent) {
+        if let Some(p) = self.plots.as_mut() {
+            p.event(e);
+        }
     }
-}
-
-fn tail(path: &Path, n: usize) -> String {
-    let s = std::fs::read_to_string(path).unwrap_or_default();
-    let lines: Vec<&str> = s.lines().collect();
-    lines[lines.len().saturating_sub(n)..].join("\n")
-}
-
-/// vcan0 when the kernel can open it, else a UDP multicast bus with a per-run port.
-fn choose_transport(arg: &str, run_no: u32) -> Result<String, String> {
-    if arg != "auto" {
-        arg.parse::<can_transport::TransportSpec>()
-            .map_err(|e| format!("--transport: {e}"))?;
-        return Ok(arg.to_string());
-    }
-    let vcan = can_transport::TransportSpec::SocketCan {
-        iface: "vcan0".into(),
-    };
-    match can_transport::open(&vcan) {
-        Ok(_) => Ok("socketcan:vcan0".into()),
-        Err(e) => {
-            let port = 20000 + ((std::process::id() + 97 * run_no) % 20000) as u16;
-            println!("  vcan0 not available ({e}); using the CAN-over-UDP loopback bus");
-            Ok(format!("udpbus:239.255.70.9:{port}"))
+    fn finished(&mut self, out: &Path, summary: &Summary) {
+        let Some(plots) = self.plots.as_ref() else {
+            return;
+        };
+        let written = serde_json::to_value(summary)
+            .map_err(|e| e.to_string())
+            .and_then(|v| crate::sim_plots::write(out, plots, &v).map_err(|e| e.to_string()));
+        match written {
+            Ok(index) => println!("plots written to {}", index.display()),
+            Err(e) => println!("plots NOT written: {e}"),
         }
     }
 }
 
-/// What a run measured (printed, and written to <out>/summary.json).
-#[derive(Clone, Debug, Default, serde::Serialize)]
-pub(crate) struct Summary {
-    pub(crate) transport: String,
-    pub(crate) monitor: bool,
-    pub(crate) plant_samples: u64,
-    pub(crate) setpoints: u64,
-    pub(crate) tracking_position_mean_mm: f64,
-    pub(crate) tracking_position_max_mm: f64,
-    pub(crate) tracking_rotation_mean_deg: f64,
-    pub(crate) tracking_rotation_max_deg: f64,
-    pub(crate) static_position_mm: f64,
-    pub(crate) static_rotation_deg: f64,
-    pub(crate) force_min_n: f64,
-    pub(crate) force_max_n: f64,
-    pub(crate) f_min_n: f64,
-    pub(crate) f_max_n: f64,
-    pub(crate) non_converged_plant_steps: u64,
-    pub(crate) loop_cycles: u64,
-    pub(crate) loop_overruns: u64,
-    pub(crate) loop_rejected: u64,
-    pub(crate) loop_lateness_p99_us: f64,
-    pub(crate) loop_lateness_max_us: f64,
-    pub(crate) loop_compute_p99_us: f64,
-    pub(crate) estops: u64,
-    pub(crate) monitor_heartbeats: u64,
-    pub(crate) drive_faults: u64,
-    /// Pose error at the rest points (measured: tracker vs reference; true: plant vs reference).
-    pub(crate) rest: RestErrors,
-    /// Settled stretches without readings (tracker invalid or no force feedback).
-    pub(crate) rest_points_skipped: usize,
-    /// drive-io stopped the bus (stale setpoints, e-stop, fault: [`crs_ipc::BusState`]) while
-    /// motion-core was still streaming: the drives held from then on (on an overloaded host a
-    /// gap of > `bus.stale_setpoint_cycles` SYNC periods in the setpoint stream does this).
-    pub(crate) bus_stopped_during_run: Option<String>,
-    /// The recording written (--record).
-    pub(crate) record: Option<PathBuf>,
-    pub(crate) duration_s: f64,
+impl SimArgs {
+    pub(crate) fn options(&self) -> SimOptions {
+        SimOptions {
+            config: self.config.clone(),
+            drives: self.drives.clone(),
+            plant: self.plant.clone(),
+            transport: self.transport.clone(),
+            waypoints: self.waypoints.clone(),
+            hold_s: self.hold_s,
+            timeout_s: self.timeout_s,
+            bin_dir: self.bin_dir.clone(),
+            out: self.out.clone(),
+            no_monitor: self.no_monitor,
+            check: self.check,
+            max_static_error_mm: self.max_static_error_mm,
+            monitor_config: self.monitor_config.clone(),
+            dwell_s: self.dwell_s,
+            record: self.record.clone(),
+            settle_s: self.settle_s,
+            campaign: self.campaign.clone(),
+            rt_priority: self.rt_priority,
+        }
+    }
 }
 
 pub fn run(a: SimArgs) -> Result<(), Box<dyn std::error::Error>> {
-    let sum = execute(&a)?;
+    let mut observer = SimObserver {
+        console_args: &a.console,
+        console: None,
+        plots: None,
+    };
+    let sum = execute_observed(&a.options(), &mut observer)?;
+    drop(observer.console.take());
     if a.check {
-        let (f_min, f_max) = (sum.f_min_n, sum.f_max_n);
-        let mut fails = Vec::new();
-        if sum.estops > 0 {
-            fails.push(format!("{} e-stop(s)", sum.estops));
-        }
-        if sum.non_converged_plant_steps > 0 {
-            fails.push(format!(
-                "{} plant steps without equilibrium",
-                sum.non_converged_plant_steps
-            ));
-        }
-        if !(sum.force_min_n >= f_min && sum.force_max_n <= f_max) {
-            fails.push(format!(
-                "forces {:.0} … {:.0} N outside [{f_min:.0}, {f_max:.0}] N",
-                sum.force_min_n, sum.force_max_n
-            ));
-        }
-        if sum.static_position_mm.is_nan() || sum.static_position_mm > a.max_static_error_mm {
-            fails.push(format!(
-                "static position error {:.2} mm > {} mm",
-                sum.static_position_mm, a.max_static_error_mm
-            ));
-        }
-        if sum.loop_rejected > 0 {
-            fails.push(format!(
-                "{} references rejected by motion-core",
-                sum.loop_rejected
-            ));
-        }
-        if sum.drive_faults > 0 {
-            fails.push(format!("{} drive fault reports", sum.drive_faults));
-        }
-        if let Some(b) = &sum.bus_stopped_during_run {
-            fails.push(format!("drive-io stopped the bus during the run ({b})"));
-        }
+        let fails = sum.check_failures(a.max_static_error_mm);
         if !fails.is_empty() {
             println!("SIM-CHECK: FAIL ({})", fails.join("; "));
             return Err(format!("check failed: {}", fails.join("; ")).into());
@@ -422,552 +174,4 @@ pub fn run(a: SimArgs) -> Result<(), Box<dyn std::error::Error>> {
         println!("SIM-CHECK: PASS");
     }
     Ok(())
-}
-
-/// Runs of this process (each gets its own iceoryx2 prefix and UDP port).
-static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
-
-/// Runs the stack once as `crs sim` does (without the --check verdict): starts the processes,
-/// follows the run, stops everything, prints and writes the summary (and the recording).
-pub(crate) fn execute(a: &SimArgs) -> Result<Summary, Box<dyn std::error::Error>> {
-    let run_no = RUNS.fetch_add(1, Ordering::Relaxed);
-    let bin_dir = match &a.bin_dir {
-        Some(d) => d.clone(),
-        None => std::env::current_exe()?
-            .parent()
-            .map(Path::to_path_buf)
-            .ok_or("cannot locate the binary directory")?,
-    };
-    let exe = |name: &str| bin_dir.join(name);
-    for need in ["motion-core", "drive-io", "sim-plant"] {
-        if !exe(need).is_file() {
-            return Err(format!(
-                "{} not found: build the stack first (`cargo build --release --workspace --bins`) or pass --bin-dir",
-                exe(need).display()
-            )
-            .into());
-        }
-    }
-    let with_monitor = !a.no_monitor && exe("safety-monitor").is_file();
-    // Validate the inputs before anything starts.
-    let daemon = motion_core::daemon::config::load(&a.config).map_err(|e| e.to_string())?;
-    let platform = load_platform(&daemon.platform)?;
-    let p = platform.model.params();
-    let (f_min, f_max) = (p.f_min, p.f_max);
-    for f in [&a.drives, &a.plant] {
-        if !f.is_file() {
-            return Err(format!("{}: no such file", f.display()).into());
-        }
-    }
-    // Drives that validate the monitor's safety heartbeat never enable without it: refuse the
-    // run up front instead of letting drive-io time out waiting for operational drives.
-    let drives_cfg = drive_io::config::DrivesConfig::load(&a.drives)
-        .map_err(|e| format!("{}: {e}", a.drives.display()))?;
-    if drives_cfg.safety_heartbeat.is_some() && !with_monitor {
-        return Err(format!(
-            "{}: [safety_heartbeat] is set, so the drives stay braked without the safety monitor's \
-             heartbeat; {}. Use a drives config without [safety_heartbeat] to run without it",
-            a.drives.display(),
-            if a.no_monitor {
-                "--no-monitor was given".to_string()
-            } else {
-                format!("{} is not built", exe("safety-monitor").display())
-            }
-        )
-        .into());
-    }
-    if !(a.hold_s.is_finite() && a.hold_s >= 0.0 && a.timeout_s > 0.0) {
-        return Err("--hold-s must be ≥ 0 and --timeout-s > 0".into());
-    }
-    let mut recorder = match &a.record {
-        Some(_) => Some(RestRecorder::new(a.settle_s)?),
-        None => None,
-    };
-    if a.record.is_some() && a.hold_s < a.settle_s {
-        return Err(format!(
-            "--hold-s {} < --settle-s {}: the last waypoint could not become a rest point",
-            a.hold_s, a.settle_s
-        )
-        .into());
-    }
-    // The controller's command at home (the drives are homed to it) and, with --dwell-s, the
-    // waypoints timed for a rest at each.
-    let home_q = home_command(&daemon, &platform)?;
-    std::fs::create_dir_all(&a.out)?;
-    let waypoint_file = a.waypoints.clone().or(daemon.trajectory.waypoints.clone());
-    let waypoints_arg = match (a.dwell_s, &waypoint_file) {
-        (Some(dwell), Some(file)) => {
-            let wps = trajectory::read_waypoints(file)?;
-            let period_s = daemon.realtime.period_ns as f64 * 1e-9;
-            let lim = planner_limits(&daemon, &platform);
-            let (timed, dur) = timed_waypoints(platform.home, &wps, lim, period_s, dwell)?;
-            let path = a.out.join("waypoints-timed.csv");
-            write_waypoints(
-                &path,
-                &timed,
-                &format!(
-                    "{} timed by `crs sim --dwell-s {dwell}`: rest {dwell} s at every waypoint; plan {dur:.1} s",
-                    file.display()
-                ),
-            )?;
-            println!(
-                "  {} waypoints timed for a {dwell} s rest at each: plan {dur:.1} s ({})",
-                timed.len(),
-                path.display()
-            );
-            Some(path)
-        }
-        (Some(_), None) => {
-            return Err("--dwell-s needs waypoints (--waypoints or [trajectory].waypoints)".into());
-        }
-        (None, _) => a.waypoints.clone(),
-    };
-    // SCHED_FIFO + mlockall for drive-io and sim-plant only where it cannot fail (root).
-    // SAFETY: geteuid(2) has no preconditions.
-    let rt = a.rt_priority.filter(|_| {
-        let root = unsafe { libc::geteuid() } == 0;
-        if !root {
-            println!("  --rt-priority ignored: not root (drive-io and sim-plant run SCHED_OTHER)");
-        }
-        root
-    });
-    let transport = choose_transport(&a.transport, run_no)?;
-    let prefix = format!("crs-sim-{}-{run_no}/", std::process::id());
-    println!(
-        "crs sim: platform `{}`, transport {transport}, iceoryx2 prefix {prefix}, safety monitor {}",
-        platform.name,
-        if with_monitor {
-            "on"
-        } else if a.no_monitor {
-            "off (--no-monitor)"
-        } else {
-            "not built (crates/safety-monitor): running without"
-        }
-    );
-
-    // SAFETY: the handler only stores to an atomic.
-    unsafe {
-        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
-        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
-    }
-    let node = IpcNode::with_prefix("crs-sim", &prefix)?;
-    let truth = node.subscriber::<PlantTruth>()?;
-    let setpoints = node.subscriber::<JointSetpoint>()?;
-    let loop_stats = node.subscriber::<LoopStatsSample>()?;
-    let events = node.subscriber::<StateEvent>()?;
-    let heartbeats = node.subscriber::<Heartbeat>()?;
-    let feedback = node.subscriber::<DriveFeedback>()?;
-    let tracker = node.subscriber::<TrackerPose>()?;
-    // i18: operator console (--console) and the run's plots.
-    let console_wps = waypoints_arg.clone().or(waypoint_file.clone());
-    let _console = crate::console_cmd::start_for_sim(
-        &a.console,
-        &prefix,
-        &daemon,
-        &platform,
-        console_wps.as_deref(),
-    )?;
-    let mut plots = crate::sim_plots::RunRecord::new(f_min, f_max);
-
-    let mut stack = Stack { procs: Vec::new() };
-    let s = |p: &Path| p.display().to_string();
-    let wait_for = |what: &str, secs: f64, ready: &mut dyn FnMut() -> bool, stack: &mut Stack| {
-        let t0 = Instant::now();
-        while !ready() {
-            if let Some((name, st, log)) = stack.exited() {
-                return Err(format!(
-                    "{name} exited ({st}) while waiting for {what}:\n{}",
-                    tail(&log, 15)
-                ));
-            }
-            if INTERRUPTED.load(Ordering::Relaxed) {
-                return Err("interrupted".to_string());
-            }
-            if t0.elapsed().as_secs_f64() > secs {
-                return Err(format!("timed out after {secs} s waiting for {what}"));
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        Ok(())
-    };
-
-    let rt_args = |p: Option<i32>| match p {
-        Some(p) => vec!["--rt-priority".to_string(), p.to_string()],
-        None => Vec::new(),
-    };
-    stack.spawn(
-        "sim-plant",
-        &exe("sim-plant"),
-        &[
-            rt_args(rt.map(|p| p - 5)),
-            vec![
-                "--plant".into(),
-                s(&a.plant),
-                "--drives".into(),
-                s(&a.drives),
-                "--transport".into(),
-                transport.clone(),
-                "--control-platform".into(),
-                s(&daemon.platform),
-                "--home-lengths-m".into(),
-                home_q
-                    .iter()
-                    .map(|q| format!("{q:?}"))
-                    .collect::<Vec<_>>()
-                    .join(","),
-            ],
-        ]
-        .concat(),
-        &prefix,
-        &a.out,
-    )?;
-    let mut first_truth = None;
-    wait_for(
-        "the plant's first state",
-        20.0,
-        &mut || {
-            while let Ok(Some(t)) = truth.receive() {
-                first_truth = Some(t);
-            }
-            first_truth.is_some()
-        },
-        &mut stack,
-    )?;
-    if with_monitor {
-        stack.spawn(
-            "safety-monitor",
-            &exe("safety-monitor"),
-            &[
-                "--config".into(),
-                s(&a.monitor_config),
-                "--transport".into(),
-                transport.clone(),
-            ],
-            &prefix,
-            &a.out,
-        )?;
-    }
-    stack.spawn(
-        "drive-io",
-        &exe("drive-io"),
-        &[
-            rt_args(rt),
-            vec![
-                "--config".into(),
-                s(&a.drives),
-                "--transport".into(),
-                transport.clone(),
-            ],
-        ]
-        .concat(),
-        &prefix,
-        &a.out,
-    )?;
-    let operational = crs_ipc::BusState::Ready as u32;
-    wait_for(
-        "the drives to be operational (NMT boot, SDO, CiA 402 enable)",
-        30.0,
-        &mut || {
-            let mut ok = false;
-            while let Ok(Some(f)) = feedback.receive() {
-                ok |= f.bus_state == operational;
-            }
-            ok
-        },
-        &mut stack,
-    )?;
-    let mut mc_args = vec![
-        "--config".into(),
-        s(&a.config),
-        "--exit-after-plan-s".into(),
-        a.hold_s.to_string(),
-    ];
-    if let Some(w) = &waypoints_arg {
-        mc_args.push("--waypoints".into());
-        mc_args.push(s(w));
-    }
-    stack.spawn(
-        "motion-core",
-        &exe("motion-core"),
-        &mc_args,
-        &prefix,
-        &a.out,
-    )?;
-
-    // Follow the run.
-    let mut sum = Summary {
-        transport: transport.clone(),
-        monitor: with_monitor,
-        force_min_n: f64::INFINITY,
-        static_position_mm: f64::NAN,
-        static_rotation_deg: f64::NAN,
-        force_max_n: f64::NEG_INFINITY,
-        f_min_n: f_min,
-        f_max_n: f_max,
-        ..Summary::default()
-    };
-    let mut refs: std::collections::VecDeque<(u64, [f64; 6])> = Default::default();
-    let (mut sum_p, mut sum_r, mut n_track) = (0.0, 0.0, 0u64);
-    let mut last_truth = first_truth;
-    let mut last_ref = None;
-    let mut last_sp_ns = 0u64;
-    let mut was_running = false;
-    let mut bus_stop: Option<(u64, u32)> = None;
-    let t0 = Instant::now();
-    let result: Result<(), String> = loop {
-        std::thread::sleep(Duration::from_millis(5));
-        while let Ok(Some(sp)) = setpoints.receive() {
-            plots.setpoint(&sp); // i18
-            sum.setpoints += 1;
-            last_sp_ns = last_sp_ns.max(sp.timestamp_ns);
-            if let Some(r) = recorder.as_mut() {
-                let m = (sp.cable_count as usize).min(crs_ipc::MAX_CABLES);
-                r.setpoint(sp.timestamp_ns, sp.pose, &sp.cable_length_m[..m]);
-            }
-            refs.push_back((sp.timestamp_ns, sp.pose));
-            last_ref = Some(sp.pose);
-            if refs.len() > 4000 {
-                refs.pop_front();
-            }
-        }
-        while let Ok(Some(t)) = truth.receive() {
-            plots.truth(&t); // i18
-            sum.plant_samples += 1;
-            if t.converged == 0 {
-                sum.non_converged_plant_steps += 1;
-            }
-            for f in &t.force_n[..t.cable_count as usize] {
-                sum.force_min_n = sum.force_min_n.min(*f);
-                sum.force_max_n = sum.force_max_n.max(*f);
-            }
-            // Tracking error against the newest reference published before this plant state.
-            if let Some((_, x_ref)) = refs.iter().rev().find(|(ts, _)| *ts <= t.timestamp_ns) {
-                let (dp, dr) = Pose::from_array(t.pose).error_to(&Pose::from_array(*x_ref));
-                sum_p += dp;
-                sum_r += dr;
-                n_track += 1;
-                sum.tracking_position_max_mm = sum.tracking_position_max_mm.max(dp * 1e3);
-                sum.tracking_rotation_max_deg = sum.tracking_rotation_max_deg.max(dr.to_degrees());
-            }
-            if let Some(r) = recorder.as_mut() {
-                r.truth(t.timestamp_ns, t.pose);
-            }
-            last_truth = Some(t);
-        }
-        while let Ok(Some(tp)) = tracker.receive() {
-            if let Some(r) = recorder.as_mut() {
-                r.tracker(tp.timestamp_ns, tp.pose, tp.valid != 0);
-            }
-        }
-        while let Ok(Some(s)) = loop_stats.receive() {
-            plots.loop_stats(&s); // i18
-            sum.loop_cycles = s.cycles;
-            sum.loop_overruns = s.overruns;
-            sum.loop_rejected = s.rejected;
-            sum.loop_lateness_p99_us = s.lateness_p99_ns as f64 * 1e-3;
-            sum.loop_lateness_max_us = s.lateness_max_ns as f64 * 1e-3;
-            sum.loop_compute_p99_us = s.compute_p99_ns as f64 * 1e-3;
-        }
-        while let Ok(Some(e)) = events.receive() {
-            plots.event(&e); // i18
-            if e.kind == EventKind::EStop as u32 {
-                sum.estops += 1;
-                println!("  E-STOP from process {} (detail {})", e.source, e.detail);
-            }
-        }
-        while let Ok(Some(h)) = heartbeats.receive() {
-            if h.source == ProcessId::SafetyMonitor as u32 {
-                sum.monitor_heartbeats += 1;
-            }
-        }
-        while let Ok(Some(f)) = feedback.receive() {
-            if f.fault_code != 0 {
-                sum.drive_faults += 1;
-            }
-            was_running |= f.bus_state == crs_ipc::BusState::Running as u32;
-            if was_running && bus_stop.is_none() && f.bus_state != crs_ipc::BusState::Running as u32
-            {
-                bus_stop = Some((f.timestamp_ns, f.bus_state));
-            }
-            if let Some(r) = recorder.as_mut() {
-                let m = (f.cable_count as usize).min(crs_ipc::MAX_CABLES);
-                r.forces(f.timestamp_ns, &f.cable_force_n[..m]);
-            }
-        }
-        if INTERRUPTED.load(Ordering::Relaxed) {
-            break Err("interrupted (Ctrl-C): stopped all processes".into());
-        }
-        if let Some((name, st, log)) = stack.exited() {
-            if name == "motion-core" && st.success() {
-                break Ok(());
-            }
-            break Err(format!(
-                "{name} exited ({st}); stopping the stack:\n{}",
-                tail(&log, 20)
-            ));
-        }
-        if t0.elapsed().as_secs_f64() > a.timeout_s {
-            break Err(format!("timed out after {} s", a.timeout_s));
-        }
-    };
-    // Let the last plant states arrive, then stop everything.
-    std::thread::sleep(Duration::from_millis(50));
-    while let Ok(Some(t)) = truth.receive() {
-        last_truth = Some(t);
-    }
-    stack.stop_all();
-    if n_track > 0 {
-        sum.tracking_position_mean_mm = sum_p / n_track as f64 * 1e3;
-        sum.tracking_rotation_mean_deg = (sum_r / n_track as f64).to_degrees();
-    }
-    // The static error is only that after a completed run (motion-core ended its plan and
-    // held); an aborted run leaves it NaN ("not reached").
-    if let (Some(t), Some(r), Ok(())) = (last_truth, last_ref, &result) {
-        let (dp, dr) = Pose::from_array(t.pose).error_to(&Pose::from_array(r));
-        sum.static_position_mm = dp * 1e3;
-        sum.static_rotation_deg = dr.to_degrees();
-    }
-    sum.duration_s = t0.elapsed().as_secs_f64();
-    // A stop after the last setpoint is the normal end (motion-core exited, setpoints went
-    // stale); one while setpoints kept coming (50 ms later) interrupted the run.
-    if let Some((ts, state)) = bus_stop
-        && last_sp_ns > ts + 50_000_000
-    {
-        let name = crs_ipc::BusState::from_u32(state)
-            .map_or(format!("state {state}"), |b| format!("{b:?}"));
-        sum.bus_stopped_during_run = Some(format!(
-            "{name} {:.3} s before the last setpoint",
-            (last_sp_ns - ts) as f64 * 1e-9
-        ));
-    }
-    if let Some(r) = recorder.as_mut() {
-        r.finish();
-        sum.rest = rest_errors(&r.samples);
-        sum.rest_points_skipped = r.skipped.len();
-    }
-    print_summary(&sum);
-    if let (Some(path), Some(r), Ok(())) = (&a.record, &recorder, &result) {
-        let m = platform.model.m();
-        let campaign = a.campaign.clone().unwrap_or_else(|| {
-            waypoint_file
-                .as_ref()
-                .and_then(|f| f.file_stem())
-                .map_or("waypoints".into(), |n| n.to_string_lossy().into_owned())
-        });
-        let meta = vec![
-            (
-                "platform".to_string(),
-                format!("{} ({})", platform.name, daemon.platform.display()),
-            ),
-            (
-                "control_model".into(),
-                if daemon.surrogate.is_some() {
-                    "kinematic+surrogate".into()
-                } else {
-                    "kinematic".into()
-                },
-            ),
-            ("campaign".into(), campaign),
-            (
-                "recorded".into(),
-                format!(
-                    "crs sim on the running stack ({}): rest points after {} s settled, last tracker/force reading before the reference moved",
-                    transport, a.settle_s
-                ),
-            ),
-            ("force_limits_n".into(), format!("{f_min} {f_max}")),
-        ];
-        let ds = to_dataset(&r.samples, m, meta)?;
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir)?;
-        }
-        crs_dataset::save_dataset(path, &ds).map_err(|e| format!("{}: {e}", path.display()))?;
-        println!(
-            "recorded {} rest points to {}",
-            r.samples.len(),
-            path.display()
-        );
-        sum.record = Some(path.clone());
-    }
-    let json = a.out.join("summary.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&sum)?)?;
-    println!("summary written to {}", json.display());
-    // i18: plots of the run next to the summary.
-    match crate::sim_plots::write(&a.out, &plots, &serde_json::to_value(&sum)?) {
-        Ok(index) => println!("plots written to {}", index.display()),
-        Err(e) => println!("plots NOT written: {e}"),
-    }
-    result?;
-    if sum.plant_samples == 0 || sum.setpoints == 0 {
-        return Err("the run produced no plant states or no setpoints".into());
-    }
-    Ok(sum)
-}
-
-fn print_summary(s: &Summary) {
-    println!("\n== crs sim summary ({})", s.transport);
-    println!(
-        "  setpoints {}, plant states {} ({} without equilibrium)",
-        s.setpoints, s.plant_samples, s.non_converged_plant_steps
-    );
-    println!(
-        "  tracked pose vs reference: position mean {:.2} mm, max {:.2} mm; rotation mean {:.3}°, max {:.3}°",
-        s.tracking_position_mean_mm,
-        s.tracking_position_max_mm,
-        s.tracking_rotation_mean_deg,
-        s.tracking_rotation_max_deg
-    );
-    if s.static_position_mm.is_nan() {
-        println!("  at rest after the trajectory: not reached (the run did not complete)");
-    } else {
-        println!(
-            "  at rest after the trajectory: position {:.2} mm, rotation {:.3}°",
-            s.static_position_mm, s.static_rotation_deg
-        );
-    }
-    if s.rest.rest_points > 0 || s.rest_points_skipped > 0 {
-        let r = &s.rest;
-        println!(
-            "  rest points: {} ({} skipped); measured (tracker) vs reference: position mean {:.2} mm, max {:.2} mm; rotation mean {:.3}°, max {:.3}° (true: {:.2} / {:.2} mm)",
-            r.rest_points,
-            s.rest_points_skipped,
-            r.position_mean_mm,
-            r.position_max_mm,
-            r.rotation_mean_deg,
-            r.rotation_max_deg,
-            r.true_position_mean_mm,
-            r.true_position_max_mm
-        );
-    }
-    let ok = s.force_min_n >= s.f_min_n && s.force_max_n <= s.f_max_n;
-    println!(
-        "  cable forces {:.0} … {:.0} N (limits {:.0} … {:.0} N): {}",
-        s.force_min_n,
-        s.force_max_n,
-        s.f_min_n,
-        s.f_max_n,
-        if ok { "within" } else { "OUTSIDE" }
-    );
-    println!(
-        "  loop: {} cycles, {} overruns, {} rejected; lateness p99 {:.1} µs, max {:.1} µs; compute p99 {:.1} µs",
-        s.loop_cycles,
-        s.loop_overruns,
-        s.loop_rejected,
-        s.loop_lateness_p99_us,
-        s.loop_lateness_max_us,
-        s.loop_compute_p99_us
-    );
-    println!(
-        "  safety monitor: {}; e-stops {}; drive faults reported {}",
-        if s.monitor {
-            format!("{} heartbeats", s.monitor_heartbeats)
-        } else {
-            "not running".into()
-        },
-        s.estops,
-        s.drive_faults
-    );
-    if let Some(b) = &s.bus_stopped_during_run {
-        println!("  DRIVE BUS STOPPED DURING THE RUN: {b}; the drives held from then on");
-    }
 }

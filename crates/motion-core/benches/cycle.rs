@@ -23,7 +23,7 @@ use criterion::Criterion;
 use crs_ipc::JointSetpoint;
 use motion_core::daemon::cycle::{Cycle, Reference};
 use motion_core::daemon::realtime::now_ns;
-use motion_core::daemon::trajectory::{self, PlannerLimits};
+use motion_core::daemon::trajectory;
 use std::hint::black_box;
 use surrogate::{FitOptions, Region, Surrogate, fit};
 
@@ -69,17 +69,11 @@ fn fit_surrogate(pf: &Platform) -> Surrogate {
 fn demo_references(pf: &Platform) -> Vec<Reference> {
     let waypoints = trajectory::read_waypoints(config("demo-waypoints.csv").as_ref())
         .unwrap_or_else(|e| panic!("{e}"));
-    let l = &pf.limits;
-    let lim = PlannerLimits {
-        linear_velocity: l.linear_velocity_max * 0.3,
-        angular_velocity: l.angular_velocity_max * 0.3,
-        linear_acceleration: l.linear_acceleration_max * 0.2,
-        angular_acceleration: l.angular_acceleration_max * 0.2,
-        linear_jerk: 20.0,
-        angular_jerk: 200f64.to_radians(),
-    };
+    let daemon = motion_core::daemon::config::load(config("motion-core.toml").as_ref())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let lim = motion_core::daemon::lifecycle::planner_limits(&pf.limits, &daemon.trajectory);
     let mut refs = Vec::new();
-    trajectory::plan_samples(pf.home, &waypoints, lim, 1e-3, |_, r| {
+    trajectory::plan_samples::<String>(pf.home, &waypoints, lim, 1e-3, |_, r| {
         refs.push(r);
         Ok(())
     })

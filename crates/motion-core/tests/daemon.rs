@@ -10,7 +10,9 @@ use motion_core::daemon::outbox::{
 };
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
-use motion_core::daemon::{Command, CommandSource, HardLoop, LoopState, SetpointSink};
+use motion_core::daemon::{
+    Command, CommandSource, HardLoop, LoopState, ResetAuthority, SetpointSink, config, lifecycle,
+};
 use nalgebra::Vector3;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -46,6 +48,16 @@ unsafe impl GlobalAlloc for Counting {
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
+
+/// A reset minted the one way there is: from a reset event.
+fn reset() -> ResetAuthority {
+    let ev = crs_ipc::StateEvent::new(
+        crs_ipc::ProcessId::SafetyMonitor,
+        crs_ipc::EventKind::Reset,
+        1,
+    );
+    ResetAuthority::from_event(&ev).expect("a reset event carries a reset")
+}
 
 fn limits() -> PlannerLimits {
     PlannerLimits {
@@ -179,7 +191,7 @@ fn loop_thread_allocates_nothing_over_many_cycles() {
     while let Ok(Some(_)) = sub.receive() {
         received += 1;
     }
-    assert_eq!(hl.state, LoopState::Running);
+    assert_eq!(hl.state(), LoopState::Running);
     assert_eq!(stats.cycles.load(Ordering::Relaxed), cycles);
     assert_eq!(n, 0, "{n} heap operations on the loop thread");
     // Every setpoint went through the outbox and over iceoryx2 (subscriber buffer 32: the test
@@ -285,7 +297,7 @@ fn estop_latches_and_holds_until_reset() {
     let mut sink = Ring(vec![JointSetpoint::default(); 1], 0);
     let stats = LoopStats::default();
     let mut cmds = Script(
-        VecDeque::from([(500, Command::EStop), (1500, Command::Reset)]),
+        VecDeque::from([(500, Command::EStop), (1500, Command::Reset(reset()))]),
         0,
     );
     let mut before = None;
@@ -377,7 +389,7 @@ fn a_plan_through_infeasible_poses_is_refused_before_it_runs() {
         ),
         not_before_s: 0.0,
     }];
-    let err = trajectory::plan_samples(pf.home, &bad, limits(), 1e-3, |_, r| {
+    let err = trajectory::plan_samples::<String>(pf.home, &bad, limits(), 1e-3, |_, r| {
         c.compute(&r, &mut sp).map_err(|e| e.to_string())
     })
     .unwrap_err();
@@ -386,7 +398,7 @@ fn a_plan_through_infeasible_poses_is_refused_before_it_runs() {
         "{err}"
     );
     // The tour passes.
-    trajectory::plan_samples(pf.home, &tour(), limits(), 1e-3, |_, r| {
+    trajectory::plan_samples::<String>(pf.home, &tour(), limits(), 1e-3, |_, r| {
         c.compute(&r, &mut sp).map_err(|e| e.to_string())
     })
     .unwrap();
@@ -398,15 +410,19 @@ fn waypoint_and_daemon_config_errors_name_the_line() {
         "t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n0,0,0,2,0,0,0\n1,0,zero,2,0,0,0\n",
         "w.csv",
     )
-    .unwrap_err();
+    .unwrap_err()
+    .to_string();
     assert!(e.starts_with("w.csv:3:") && e.contains("y_m"), "{e}");
-    let e = trajectory::parse_waypoints("t,x\n", "w.csv").unwrap_err();
+    let e = trajectory::parse_waypoints("t,x\n", "w.csv")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("w.csv:1"), "{e}");
     let e = trajectory::parse_waypoints(
         "t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n2,0,0,2,0,0,0\n1,0,0,2,0,0,0\n",
         "w.csv",
     )
-    .unwrap_err();
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("w.csv:3") && e.contains("decrease"), "{e}");
     let base = std::fs::read_to_string(common::config_path("motion-core.toml")).unwrap();
     let dir = std::path::Path::new(".");
@@ -507,5 +523,132 @@ fn cueing_stream_is_followed_and_a_target_outside_the_region_latches() {
             LoopState::Refused(_)
         ));
         assert_eq!(sink.0[0].cable_length_m, held.cable_length_m);
+    }
+}
+
+fn shipped_daemon_config() -> config::DaemonConfig {
+    config::load(common::config_path("motion-core.toml").as_ref()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn only_a_reset_event_mints_a_reset_and_other_commands_do_not_clear_the_latch() {
+    for kind in [
+        crs_ipc::EventKind::EStop,
+        crs_ipc::EventKind::StateChanged,
+        crs_ipc::EventKind::Fault,
+    ] {
+        let ev = crs_ipc::StateEvent::new(crs_ipc::ProcessId::SafetyMonitor, kind, 1);
+        assert_eq!(ResetAuthority::from_event(&ev), None, "{kind:?}");
+    }
+    let mut foreign = crs_ipc::StateEvent::new(
+        crs_ipc::ProcessId::SafetyMonitor,
+        crs_ipc::EventKind::Reset,
+        1,
+    );
+    foreign.version = crs_ipc::CONTRACT_VERSION + 1;
+    assert_eq!(
+        ResetAuthority::from_event(&foreign),
+        None,
+        "other contract version"
+    );
+    let mut hl = setup(tour());
+    let mut sink = Ring(vec![JointSetpoint::default(); 1], 0);
+    let stats = LoopStats::default();
+    let mut cmds = Script(
+        VecDeque::from([(0, Command::EStop), (5, Command::EStop)]),
+        0,
+    );
+    for k in 0..20u64 {
+        cmds.1 = k;
+        assert_eq!(
+            hl.step(k, &mut sink, &mut cmds, &stats),
+            LoopState::EStopped
+        );
+    }
+    // A reset while running is a no-op, not a state change.
+    let mut hl = setup(tour());
+    let mut cmds = Script(VecDeque::from([(0, Command::Reset(reset()))]), 0);
+    assert_eq!(hl.step(0, &mut sink, &mut cmds, &stats), LoopState::Running);
+    let (state, last) = hl.deactivate();
+    assert_eq!(state, LoopState::Running);
+    assert!(last.is_some());
+}
+
+#[test]
+fn configure_scales_the_planner_limits_and_verifies_the_shipped_demo_plan() {
+    let cfg = shipped_daemon_config();
+    let pf = common::platform("icosahedron.toml");
+    let c = lifecycle::configure(&cfg, &pf).unwrap_or_else(|e| panic!("{e}"));
+    let l = c.planner_limits();
+    // motion-core.toml: velocity_scale 0.3, acceleration_scale 0.2 of table 5.1.
+    assert_eq!(l.linear_velocity, pf.limits.linear_velocity_max * 0.3);
+    assert_eq!(
+        l.angular_acceleration,
+        pf.limits.angular_acceleration_max * 0.2
+    );
+    assert_eq!(l.linear_jerk, 20.0);
+    assert!(!c.has_surrogate());
+    let wps = trajectory::read_waypoints(cfg.trajectory.waypoints.as_ref().unwrap()).unwrap();
+    let plan = c.verify_plan(&wps).unwrap_or_else(|e| panic!("{e}"));
+    assert!(plan.samples > 1000, "{plan:?}");
+    assert!((plan.duration_s - plan.samples as f64 * 1e-3).abs() < 1e-12);
+}
+
+#[test]
+fn configure_refuses_plans_that_leave_the_workspace_or_the_feasible_set() {
+    let cfg = shipped_daemon_config();
+    let pf = common::platform("icosahedron.toml");
+    let c = lifecycle::configure(&cfg, &pf).unwrap();
+    let infeasible = Waypoint {
+        pose: Pose::new(
+            Vector3::new(-1.4, 1.4, 2.7),
+            Vector3::new(-0.06, 0.0, -0.08),
+        ),
+        not_before_s: 0.0,
+    };
+    match c.verify_plan(&[infeasible]) {
+        Err(lifecycle::PlanRefused::Rejected {
+            segment: 0,
+            rejection,
+            ..
+        }) => {
+            assert!(
+                matches!(rejection, Rejection::NotWrenchFeasible { .. }),
+                "{rejection}"
+            )
+        }
+        other => panic!("{other:?}"),
+    }
+    let outside = Waypoint {
+        pose: Pose::new(Vector3::new(0.0, 0.0, 50.0), Vector3::zeros()),
+        not_before_s: 0.0,
+    };
+    assert_eq!(
+        c.verify_plan(&tour().into_iter().chain([outside]).collect::<Vec<_>>()),
+        Err(lifecycle::PlanRefused::WaypointOutside { index: 4 })
+    );
+}
+
+#[test]
+fn configure_refuses_a_missing_surrogate_file_naming_it() {
+    let mut cfg = shipped_daemon_config();
+    cfg.surrogate = Some("/nonexistent/surrogate.json".into());
+    let pf = common::platform("icosahedron.toml");
+    let e = lifecycle::configure(&cfg, &pf).err().expect("refused");
+    assert!(matches!(e, lifecycle::ConfigureError::SurrogateFile { .. }));
+    assert!(e.to_string().contains("/nonexistent/surrogate.json"), "{e}");
+}
+
+#[test]
+fn home_command_is_the_inverse_kinematics_at_home_without_a_surrogate() {
+    let cfg = shipped_daemon_config();
+    let pf = common::platform("icosahedron.toml");
+    let mut c = lifecycle::configure(&cfg, &pf).unwrap();
+    let q = c.home_command().unwrap();
+    let mut data = cdpr_model::Data::new(&pf.model);
+    cdpr_model::kinematics::inverse(&pf.model, &mut data, &pf.home).unwrap();
+    assert_eq!(q.len(), 8);
+    for (i, qi) in q.iter().enumerate() {
+        assert_eq!(*qi, data.q[i]);
     }
 }

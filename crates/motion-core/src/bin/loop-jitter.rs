@@ -30,11 +30,10 @@ use cdpr_model::config::{Platform, load_platform};
 use cdpr_model::offset_target::{OffsetTarget, region_box};
 use clap::Parser;
 use crs_ipc::JointSetpoint;
-use motion_core::daemon::cycle::Cycle;
 use motion_core::daemon::realtime::{self, RealtimeSettings, now_ns, sleep_until};
 use motion_core::daemon::stats::LoopStats;
-use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
-use motion_core::daemon::{self, Command, CommandSource, HardLoop, LoopState, SetpointSink};
+use motion_core::daemon::trajectory::{self, Waypoint};
+use motion_core::daemon::{self, Command, CommandSource, LoopState, SetpointSink, lifecycle};
 use std::cell::Cell;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -273,50 +272,39 @@ fn run(args: Args) -> Result<ExitCode, String> {
     }
     let period_ns = rt.period_ns;
 
-    let mut cycle = Cycle::new(
-        platform.model.clone(),
-        platform.limits,
-        platform.region,
-        cfg.check_wrench_feasibility,
-    );
+    // The daemon's own configure step (surrogate of the TOML, identity- and bound-checked);
+    // without one in the TOML a degree-3 surrogate is fitted here so the bench measures the
+    // loop with an offset model, as the daemon runs it.
+    let mut daemon_cfg = cfg.clone();
+    if args.no_surrogate {
+        daemon_cfg.surrogate = None;
+    }
+    let mut configured = lifecycle::configure(&daemon_cfg, &platform).map_err(|e| e.to_string())?;
     let surrogate_note = if args.no_surrogate {
         "none (--no-surrogate)".to_string()
+    } else if let Some(s) = configured.surrogate() {
+        format!("{}", s.path.display())
     } else {
-        let (sg, note) = match &cfg.surrogate {
-            Some(path) => (
-                surrogate::Surrogate::load(path, &platform.model.identity_hex())
-                    .map_err(|e| format!("{}: {e}", path.display()))?,
-                format!("{}", path.display()),
-            ),
-            None => (
-                fit_surrogate(&platform)?,
-                "degree 3, fitted at start-up".to_string(),
-            ),
-        };
+        let sg = fit_surrogate(&platform)?;
         let n = sg.n_cables();
-        cycle.set_surrogate(Box::new(sg), n)?;
-        note
+        configured
+            .install_surrogate(Box::new(sg), n)
+            .map_err(|e| e.to_string())?;
+        "degree 3, fitted at start-up".to_string()
     };
 
     // The demo tour, repeated so the plan outlasts the daemon's share of the run (it starts and
     // ends at home, so the repeats join up). A refused reference would latch the loop and
     // shorten its cycles: checked after the run.
     let t = &cfg.trajectory;
-    let lim = PlannerLimits {
-        linear_velocity: platform.limits.linear_velocity_max * t.velocity_scale,
-        angular_velocity: platform.limits.angular_velocity_max * t.velocity_scale,
-        linear_acceleration: platform.limits.linear_acceleration_max * t.acceleration_scale,
-        angular_acceleration: platform.limits.angular_acceleration_max * t.acceleration_scale,
-        linear_jerk: t.linear_jerk_max,
-        angular_jerk: t.angular_jerk_max,
-    };
+    let lim = configured.planner_limits();
     let period_s = period_ns as f64 * 1e-9;
     let tour: Vec<Waypoint> = match &t.waypoints {
-        Some(p) => trajectory::read_waypoints(p)?,
+        Some(p) => trajectory::read_waypoints(p).map_err(|e| e.to_string())?,
         None => Vec::new(),
     };
     let mut tour_samples = 0usize;
-    trajectory::plan_samples(platform.home, &tour, lim, period_s, |_, _| {
+    trajectory::plan_samples::<String>(platform.home, &tour, lim, period_s, |_, _| {
         tour_samples += 1;
         Ok(())
     })?;
@@ -332,9 +320,7 @@ fn run(args: Args) -> Result<ExitCode, String> {
         .cycle()
         .take(tour.len() * repeats)
         .collect();
-    let sampler = trajectory::spawn_planner(platform.home, waypoints, lim, period_s, |e| {
-        eprintln!("loop-jitter: planner: {e}")
-    });
+    let mut hard_loop = configured.activate(waypoints, |e| eprintln!("loop-jitter: planner: {e}"));
 
     // Everything the loops touch is allocated now, before mlockall and the real-time settings.
     let block_ns = args.block_ms * 1_000_000;
@@ -355,7 +341,6 @@ fn run(args: Args) -> Result<ExitCode, String> {
     let mut bare = Samples::with_capacity(cycles_per_loop);
     let stats = LoopStats::default();
     let stop = AtomicBool::new(false);
-    let mut hard_loop = HardLoop::new(cycle, sampler);
     let mut cmds = NoCommands;
     // Let the planner fill its look-ahead queue, as the daemon's 50 ms start offset does.
     std::thread::sleep(std::time::Duration::from_millis(300));
@@ -412,7 +397,7 @@ fn run(args: Args) -> Result<ExitCode, String> {
     }
     let loadavg_after = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
 
-    let state = hard_loop.state;
+    let state = hard_loop.state();
     let rejected = stats.rejected.load(Ordering::Relaxed);
     let cycles = stats.cycles.load(Ordering::Relaxed);
     let d = sink.lateness.summary();

@@ -7,12 +7,11 @@ use crs_ipc::{
     ProcessId, StateEvent, TopicPublisher, TopicSubscriber,
 };
 use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
-use motion_core::daemon::cycle::Cycle;
 use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
 use motion_core::daemon::stats::LoopStats;
-use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
+use motion_core::daemon::trajectory::{self, Waypoint};
 use motion_core::daemon::{
-    self, Command, CommandSource, HardLoop, LoopState, config, outbox, realtime,
+    self, Command, CommandSource, LoopState, ResetAuthority, config, lifecycle, outbox, realtime,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -135,8 +134,10 @@ impl CommandSource for IoxCommands {
         loop {
             match self.0.receive() {
                 Ok(Some(ev)) if ev.kind == EventKind::EStop as u32 => return Some(Command::EStop),
-                Ok(Some(ev)) if ev.kind == EventKind::Reset as u32 => return Some(Command::Reset),
-                Ok(Some(_)) => continue,
+                Ok(Some(ev)) => match ResetAuthority::from_event(&ev) {
+                    Some(r) => return Some(Command::Reset(r)),
+                    None => continue,
+                },
                 _ => return None,
             }
         }
@@ -181,26 +182,16 @@ fn run(args: Args) -> Result<(), String> {
     let identity = model.identity_hex();
     tracing::info!(platform = %platform.name, identity = %identity, cables = model.m(), "platform loaded");
 
-    let mut cycle = Cycle::new(
-        model.clone(),
-        platform.limits,
-        platform.region,
-        cfg.check_wrench_feasibility,
-    );
-    match &cfg.surrogate {
+    let configured = lifecycle::configure(&cfg, &platform).map_err(|e| e.to_string())?;
+    match configured.surrogate() {
         None => tracing::info!(
             "no surrogate configured: zero offset, pure standard kinematics (eq. 2.3)"
         ),
-        Some(path) => {
-            let s = surrogate::Surrogate::load(path, &identity)
-                .map_err(|e| format!("refusing surrogate {}: {e}", path.display()))?;
-            let n = s.n_cables();
-            let bound = s.report().certified_bound_mm;
-            cycle
-                .set_surrogate(Box::new(s), n)
-                .map_err(|e| format!("refusing surrogate {}: {e}", path.display()))?;
-            tracing::info!(path = %path.display(), bound_mm = bound, "surrogate loaded (eq. 5.26)");
-        }
+        Some(s) => tracing::info!(
+            path = %s.path.display(),
+            bound_mm = s.certified_bound_mm,
+            "surrogate loaded (eq. 5.26)"
+        ),
     }
 
     let cueing = args.input == "cueing";
@@ -210,63 +201,27 @@ fn run(args: Args) -> Result<(), String> {
         args.waypoints.clone().or(cfg.trajectory.waypoints.clone())
     };
     let waypoints: Vec<Waypoint> = match &waypoint_file {
-        Some(p) => trajectory::read_waypoints(p)?,
+        Some(p) => trajectory::read_waypoints(p).map_err(|e| e.to_string())?,
         None => Vec::new(),
     };
-    for (k, w) in waypoints.iter().enumerate() {
-        if !platform.region.contains(&w.pose) {
-            return Err(format!(
-                "waypoint {} lies outside the platform's workspace region",
-                k + 1
-            ));
-        }
-    }
-    let t = &cfg.trajectory;
-    let lim = PlannerLimits {
-        linear_velocity: platform.limits.linear_velocity_max * t.velocity_scale,
-        angular_velocity: platform.limits.angular_velocity_max * t.velocity_scale,
-        linear_acceleration: platform.limits.linear_acceleration_max * t.acceleration_scale,
-        angular_acceleration: platform.limits.angular_acceleration_max * t.acceleration_scale,
-        linear_jerk: t.linear_jerk_max,
-        angular_jerk: t.angular_jerk_max,
-    };
-    let period_s = cfg.realtime.period_ns as f64 * 1e-9;
+    let lim = configured.planner_limits();
+    let period_s = configured.period_s();
     // Verify the whole plan with the loop's own checks before anything moves: a plan that
     // would leave the workspace or the wrench-feasible set is refused, naming where.
-    {
-        let mut check = Cycle::new(
-            model.clone(),
-            platform.limits,
-            platform.region,
-            cfg.check_wrench_feasibility,
-        );
-        let mut sp = JointSetpoint::default();
-        let mut n = 0usize;
-        trajectory::plan_samples(platform.home, &waypoints, lim, period_s, |seg, r| {
-            n += 1;
-            check.compute(&r, &mut sp).map_err(|e| {
-                format!(
-                    "plan refused: segment to waypoint {} at t = {:.3} s, pose [{:.3}, {:.3}, {:.3}] m: {e}",
-                    seg + 1,
-                    n as f64 * period_s,
-                    r.pose.r.x,
-                    r.pose.r.y,
-                    r.pose.r.z
-                )
-            })
-        })?;
-        tracing::info!(
-            samples = n,
-            duration_s = n as f64 * period_s,
-            "plan verified (workspace, limits, eq. 3.29)"
-        );
-    }
+    let plan = configured
+        .verify_plan(&waypoints)
+        .map_err(|e| e.to_string())?;
+    tracing::info!(
+        samples = plan.samples,
+        duration_s = plan.duration_s,
+        "plan verified (workspace, limits, eq. 3.29)"
+    );
     let plan_error = Arc::new(std::sync::Mutex::new(None::<String>));
     let pe = plan_error.clone();
-    let sampler = trajectory::spawn_planner(platform.home, waypoints, lim, period_s, move |e| {
+    let on_plan_error = move |e: String| {
         tracing::error!("planner: {e}");
         *pe.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
-    });
+    };
 
     // The publish stage owns the iceoryx2 publishers (iceoryx2's `ipc::Service` ports are not
     // `Send`, and publishing allocates: see `daemon::outbox`). It is spawned before the
@@ -376,7 +331,7 @@ fn run(args: Args) -> Result<(), String> {
     tracing::info!(period_us = period_ns / 1000, "hard loop starting");
     sd_notify("READY=1\nSTATUS=motion loop running");
 
-    let mut hard_loop = HardLoop::new(cycle, sampler);
+    let mut hard_loop = configured.activate(waypoints, on_plan_error);
     if cueing {
         let limits = CueingLimits {
             linear_velocity: lim.linear_velocity,
@@ -402,12 +357,12 @@ fn run(args: Args) -> Result<(), String> {
         &stats,
         &STOP,
         |hl, now| {
-            let code = hl.state.code();
+            let code = hl.state().code();
             state_code.store(code, Ordering::Relaxed);
             outbox.state.store(code, Ordering::Relaxed);
             if let Some(after) = exit_after {
-                let latched = matches!(hl.state, LoopState::EStopped | LoopState::Refused(_));
-                if plan_done_at.is_none() && (hl.sampler.finished() || latched) {
+                let latched = hl.state().is_latched();
+                if plan_done_at.is_none() && (hl.plan_finished() || latched) {
                     plan_done_at = Some(now);
                 }
                 if plan_done_at.is_some_and(|t0| now > t0 + after) {
@@ -427,7 +382,8 @@ fn run(args: Args) -> Result<(), String> {
         stats.lateness.snapshot().summary(),
         stats.compute.snapshot().summary()
     );
-    if let LoopState::Refused(r) = hard_loop.state {
+    let (final_state, _) = hard_loop.deactivate();
+    if let LoopState::Refused(r) = final_state {
         tracing::warn!("the loop holds after refusing a reference: {r}");
     }
     if let Some(e) = plan_error.lock().unwrap_or_else(|p| p.into_inner()).take() {

@@ -61,6 +61,19 @@ pub enum Rejection {
     Surrogate { cable: usize },
 }
 
+/// Why [`Cycle::set_surrogate`] refused a surrogate.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum SurrogateRejected {
+    #[error("surrogate has {surrogate} cables, the platform {platform}")]
+    CableCount { surrogate: usize, platform: usize },
+    #[error(
+        "surrogate offsets can reach {:.1} mm, above the {:.0} mm bound of eq. 5.27",
+        bound_m * 1e3,
+        DELTA_Q_LIMIT_M * 1e3
+    )]
+    Bound { bound_m: f64 },
+}
+
 /// Preallocated state of the cycle computation (Model/Data split).
 pub struct Cycle {
     model: Model,
@@ -110,20 +123,16 @@ impl Cycle {
         &mut self,
         s: Box<dyn OffsetModel>,
         n_cables: usize,
-    ) -> Result<(), String> {
+    ) -> Result<(), SurrogateRejected> {
         if n_cables != self.model.m() {
-            return Err(format!(
-                "surrogate has {n_cables} cables, the platform {}",
-                self.model.m()
-            ));
+            return Err(SurrogateRejected::CableCount {
+                surrogate: n_cables,
+                platform: self.model.m(),
+            });
         }
         let b = s.bound_m();
         if !(b.is_finite() && b < DELTA_Q_LIMIT_M) {
-            return Err(format!(
-                "surrogate offsets can reach {:.1} mm, above the {:.0} mm bound of eq. 5.27",
-                b * 1e3,
-                DELTA_Q_LIMIT_M * 1e3
-            ));
+            return Err(SurrogateRejected::Bound { bound_m: b });
         }
         self.surrogate = Some(s);
         Ok(())

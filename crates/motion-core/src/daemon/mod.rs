@@ -10,6 +10,7 @@
 pub mod config;
 pub mod cueing;
 pub mod cycle;
+pub mod lifecycle;
 pub mod outbox;
 pub mod realtime;
 pub mod stats;
@@ -30,7 +31,23 @@ pub trait SetpointSink {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Command {
     EStop,
-    Reset,
+    /// Leaves a latched state; only a [`ResetAuthority`] value can ask for it.
+    Reset(ResetAuthority),
+}
+
+/// The right to clear the loop's latch (e-stop or refused reference). It has no public
+/// constructor: [`ResetAuthority::from_event`] is the single place that decides which events
+/// may reset the loop (today any `EventKind::Reset` event, from the monitor, the operator CLI
+/// or drive-io; issue 16 narrows this to the monitor's verified reset here and only here).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ResetAuthority(());
+
+impl ResetAuthority {
+    /// The reset a state event carries, if it is one. Strict: only a well-formed reset event of
+    /// this contract version (an e-stop, by contrast, is honoured on its kind code alone).
+    pub fn from_event(ev: &crs_ipc::StateEvent) -> Option<Self> {
+        matches!(ev.decode(), Ok(crs_ipc::Event::Reset { .. })).then_some(Self(()))
+    }
 }
 
 pub trait CommandSource {
@@ -53,7 +70,12 @@ pub enum LoopState {
 impl LoopState {
     /// True for the codes of the latched states (e-stop, refused reference).
     pub fn code_is_latched(code: u32) -> bool {
-        code == 2 || code == 3
+        code == crs_ipc::motion_state::ESTOPPED || code == crs_ipc::motion_state::REFUSED
+    }
+
+    /// True in the latched states, which only a [`Command::Reset`] leaves.
+    pub fn is_latched(&self) -> bool {
+        matches!(self, LoopState::EStopped | LoopState::Refused(_))
     }
 
     pub fn code(&self) -> u32 {
@@ -67,13 +89,14 @@ impl LoopState {
 }
 
 /// The loop without its timer: one call per period. Separated so tests can drive many
-/// cycles under a counting allocator.
+/// cycles under a counting allocator. Built by [`lifecycle::Configured::activate`]; its state
+/// changes only inside [`HardLoop::step`], and a latch only on a [`Command::Reset`].
 pub struct HardLoop {
-    pub cycle: Cycle,
-    pub sampler: Sampler,
+    cycle: Cycle,
+    sampler: Sampler,
     /// Motion-cueing input; when set it replaces the planned trajectory as the reference.
     cueing: Option<(cueing::CueingFilter, Box<dyn cueing::CueingSource>)>,
-    pub state: LoopState,
+    state: LoopState,
     setpoint: JointSetpoint,
     last_safe: Option<JointSetpoint>,
     sequence: u64,
@@ -102,6 +125,26 @@ impl HardLoop {
         self
     }
 
+    /// The state after the last cycle.
+    pub fn state(&self) -> LoopState {
+        self.state
+    }
+
+    /// True once the planner has delivered the whole plan and the loop has read it.
+    pub fn plan_finished(&self) -> bool {
+        self.sampler.finished()
+    }
+
+    pub fn cycle(&self) -> &Cycle {
+        &self.cycle
+    }
+
+    /// Deactivates: the final state and the last safe setpoint (the planner thread is
+    /// detached; it only ever fills its bounded queue).
+    pub fn deactivate(self) -> (LoopState, Option<JointSetpoint>) {
+        (self.state, self.last_safe)
+    }
+
     /// True while following a cueing stream.
     pub fn is_cueing(&self) -> bool {
         self.cueing.is_some()
@@ -119,10 +162,10 @@ impl HardLoop {
         while let Some(c) = commands.poll() {
             match (c, self.state) {
                 (Command::EStop, _) => self.state = LoopState::EStopped,
-                (Command::Reset, LoopState::EStopped | LoopState::Refused(_)) => {
+                (Command::Reset(ResetAuthority(())), s) if s.is_latched() => {
                     self.state = LoopState::Holding
                 }
-                (Command::Reset, _) => {}
+                (Command::Reset(_), _) => {}
             }
         }
         if self.state == LoopState::Running {

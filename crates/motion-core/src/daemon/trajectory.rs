@@ -44,26 +44,57 @@ pub struct Waypoint {
     pub not_before_s: f64,
 }
 
+/// A waypoint file that cannot be used; every variant names the file and, where there is one,
+/// the line.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum WaypointError {
+    #[error("{file}: cannot read: {reason}")]
+    Read { file: String, reason: String },
+    #[error("{file}:{line}: expected header `{}`", HEADER.join(","))]
+    Header { file: String, line: usize },
+    #[error("{file}:{line}: expected 7 columns, found {found}")]
+    Columns {
+        file: String,
+        line: usize,
+        found: usize,
+    },
+    #[error("{file}:{line}: column `{column}`: `{value}` is not a finite number")]
+    NotANumber {
+        file: String,
+        line: usize,
+        column: &'static str,
+        value: String,
+    },
+    #[error("{file}:{line}: column `t_s`: times must not decrease")]
+    Decreasing { file: String, line: usize },
+    #[error("{file}:{line}: end of file without a waypoint row")]
+    Empty { file: String, line: usize },
+}
+
+const HEADER: [&str; 7] = [
+    "t_s",
+    "x_m",
+    "y_m",
+    "z_m",
+    "phi_x_deg",
+    "phi_y_deg",
+    "phi_z_deg",
+];
+
 /// Reads a waypoint CSV: header `t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg`, one waypoint
 /// per row, `#` comment lines allowed. Errors name the line.
-pub fn read_waypoints(path: &Path) -> Result<Vec<Waypoint>, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+pub fn read_waypoints(path: &Path) -> Result<Vec<Waypoint>, WaypointError> {
+    let text = std::fs::read_to_string(path).map_err(|e| WaypointError::Read {
+        file: path.display().to_string(),
+        reason: e.to_string(),
+    })?;
     parse_waypoints(&text, &path.display().to_string())
 }
 
-pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, String> {
-    const HEADER: [&str; 7] = [
-        "t_s",
-        "x_m",
-        "y_m",
-        "z_m",
-        "phi_x_deg",
-        "phi_y_deg",
-        "phi_z_deg",
-    ];
+pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, WaypointError> {
     let mut out = Vec::new();
     let mut header_seen = false;
+    let file = || file.to_string();
     for (n, line) in text.lines().enumerate() {
         let ln = n + 1;
         let line = line.trim();
@@ -73,19 +104,20 @@ pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, String> 
         let cols: Vec<&str> = line.split(',').map(str::trim).collect();
         if !header_seen {
             if cols != HEADER {
-                return Err(format!(
-                    "{file}:{ln}: expected header `{}`",
-                    HEADER.join(",")
-                ));
+                return Err(WaypointError::Header {
+                    file: file(),
+                    line: ln,
+                });
             }
             header_seen = true;
             continue;
         }
         if cols.len() != 7 {
-            return Err(format!(
-                "{file}:{ln}: expected 7 columns, found {}",
-                cols.len()
-            ));
+            return Err(WaypointError::Columns {
+                file: file(),
+                line: ln,
+                found: cols.len(),
+            });
         }
         let mut v = [0.0; 7];
         for (k, c) in cols.iter().enumerate() {
@@ -93,19 +125,20 @@ pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, String> 
                 .parse::<f64>()
                 .ok()
                 .filter(|x| x.is_finite())
-                .ok_or_else(|| {
-                    format!(
-                        "{file}:{ln}: column `{}`: `{c}` is not a finite number",
-                        HEADER[k]
-                    )
+                .ok_or_else(|| WaypointError::NotANumber {
+                    file: file(),
+                    line: ln,
+                    column: HEADER[k],
+                    value: c.to_string(),
                 })?;
         }
         if let Some(prev) = out.last().map(|w: &Waypoint| w.not_before_s)
             && v[0] < prev
         {
-            return Err(format!(
-                "{file}:{ln}: column `t_s`: times must not decrease"
-            ));
+            return Err(WaypointError::Decreasing {
+                file: file(),
+                line: ln,
+            });
         }
         out.push(Waypoint {
             not_before_s: v[0],
@@ -120,10 +153,10 @@ pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, String> 
         });
     }
     if !header_seen {
-        return Err(format!(
-            "{file}:{}: end of file without a waypoint row",
-            text.lines().count().max(1)
-        ));
+        return Err(WaypointError::Empty {
+            file: file(),
+            line: text.lines().count().max(1),
+        });
     }
     Ok(out)
 }
@@ -220,16 +253,33 @@ pub fn spawn_planner(
     }
 }
 
+/// ruckig found no trajectory for a segment.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("waypoint {}: ruckig could not plan the segment ({result})", waypoint + 1)]
+pub struct PlanningFailed {
+    /// 0-based waypoint index (the segment ending there).
+    pub waypoint: usize,
+    /// ruckig's result code.
+    pub result: String,
+}
+
+/// For the command-line glue whose errors are messages.
+impl From<PlanningFailed> for String {
+    fn from(e: PlanningFailed) -> Self {
+        e.to_string()
+    }
+}
+
 /// Samples the whole plan at the loop period, calling `emit(segment, reference)` for each
 /// sample (segment = 0-based waypoint index). Used both to verify a plan before it runs and to
 /// stream it to the loop.
-pub fn plan_samples(
+pub fn plan_samples<E: From<PlanningFailed>>(
     start: Pose,
     waypoints: &[Waypoint],
     lim: PlannerLimits,
     period_s: f64,
-    mut emit: impl FnMut(usize, Reference) -> Result<(), String>,
-) -> Result<(), String> {
+    mut emit: impl FnMut(usize, Reference) -> Result<(), E>,
+) -> Result<(), E> {
     let s3 = 3f64.sqrt();
     let mut ruckig = ruckig::Ruckig::new_direct_and_offline(6);
     let mut t_global = 0.0;
@@ -245,10 +295,11 @@ pub fn plan_samples(
         let mut traj = ruckig::Trajectory::new_direct(6);
         let res = ruckig.calculate(&mut input, &mut traj);
         if !matches!(res, ruckig::Result::Working | ruckig::Result::Finished) {
-            return Err(format!(
-                "waypoint {}: ruckig could not plan the segment ({res:?})",
-                k + 1
-            ));
+            return Err(PlanningFailed {
+                waypoint: k,
+                result: format!("{res:?}"),
+            }
+            .into());
         }
         // Dwell until the waypoint's earliest arrival time allows the segment to end there.
         let duration = traj.get_duration();
@@ -289,7 +340,7 @@ fn plan(
 ) -> Result<(), String> {
     let mut chunk: Option<Box<Chunk>> = None;
     let wait = || std::thread::sleep(std::time::Duration::from_micros(500));
-    plan_samples(start, waypoints, lim, period_s, |_, r| {
+    plan_samples::<String>(start, waypoints, lim, period_s, |_, r| {
         let c = loop {
             if let Some(c) = chunk.as_mut() {
                 break c;

@@ -12,6 +12,20 @@
 use cdpr_model::Pose;
 use std::collections::VecDeque;
 
+/// Why a recording could not be set up or converted.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum RecordingError {
+    #[error("--settle-s must be finite and > 0, got {0}")]
+    SettleTime(f64),
+    #[error("rest point {index}: {lengths} lengths / {forces} forces for {cables} cables")]
+    ShortSample {
+        index: usize,
+        lengths: usize,
+        forces: usize,
+        cables: usize,
+    },
+}
+
 /// Readings kept per stream (≈ 4 s at 1 kHz: far more than the few ms a window waits).
 const RING: usize = 4096;
 
@@ -95,9 +109,9 @@ pub struct RestRecorder {
 
 impl RestRecorder {
     /// `settle_s`: how long the reference must have been constant before readings count.
-    pub fn new(settle_s: f64) -> Result<Self, String> {
+    pub fn new(settle_s: f64) -> Result<Self, RecordingError> {
         if !(settle_s.is_finite() && settle_s > 0.0) {
-            return Err(format!("--settle-s must be finite and > 0, got {settle_s}"));
+            return Err(RecordingError::SettleTime(settle_s));
         }
         Ok(Self {
             settle_ns: (settle_s * 1e9) as u64,
@@ -277,16 +291,17 @@ pub fn to_dataset(
     samples: &[RestSample],
     m: usize,
     metadata: Vec<(String, String)>,
-) -> Result<crs_dataset::Dataset, String> {
+) -> Result<crs_dataset::Dataset, RecordingError> {
     let mut ds = crs_dataset::Dataset::new(m, true, true);
     ds.metadata = metadata;
     for (k, s) in samples.iter().enumerate() {
         if s.q_cmd.len() < m || s.measured_forces.len() < m {
-            return Err(format!(
-                "rest point {k}: {} lengths / {} forces for {m} cables",
-                s.q_cmd.len(),
-                s.measured_forces.len()
-            ));
+            return Err(RecordingError::ShortSample {
+                index: k,
+                lengths: s.q_cmd.len(),
+                forces: s.measured_forces.len(),
+                cables: m,
+            });
         }
         ds.samples.push(crs_dataset::Sample {
             sample: k as u64,

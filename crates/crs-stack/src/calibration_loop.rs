@@ -1,0 +1,872 @@
+//! The closed calibration loop on the running stack (`crs calibrate loop`, issue 8) — record a
+//! campaign on the simulated stack with the nominal model, identify, deploy the identified
+//! model and a refitted surrogate, re-run the same campaign and report the MEASURED pose error
+//! at the rest points before and after.
+//!
+//! Steps (each one a command an operator could run by hand; the report lists them):
+//! 1. surrogate of the nominal platform (`crs surrogate fit`), unless `--no-surrogate`;
+//! 2. daemon + safety-monitor TOMLs pointing to it (same platform in both: identity check);
+//! 3. `crs sim --dwell-s … --record before/campaign.csv` on the plant with undeclared effects;
+//! 4. identification from the nominal model on the recording, held-out split
+//!    (`crs calibrate run`), writing calibrated.toml;
+//! 5. surrogate refitted on calibrated.toml;
+//! 6. daemon + monitor TOMLs pointing to calibrated.toml and the new surrogate;
+//! 7. the same campaign again (`after/campaign.csv`);
+//! 8. report.md / report.json: before/after at the rest points, forces, identification figures.
+//!
+//! The cable offsets of the identification are not deployed: the stack's commissioning homes
+//! the drives at the set-up pose to the controller's command there (`sim_plant::bus`), which
+//! fixes them on the real robot too (eq. 3.14 / 6.24).
+
+//!
+//! The identification with its report and the surrogate fit are the command line's (`crs
+//! calibrate run`, `crs surrogate fit`): they come in through [`LoopTools`], so this library
+//! does not depend on the CLI.
+
+use crate::campaign::timed_waypoints;
+use crate::campaign::write_waypoints;
+use crate::sim_run::{self, SimOptions, Summary};
+use calibrate::Observation;
+use calibrate::pipeline::PipelineReport;
+use calibrate::{from_dataset, split};
+use cdpr_model::config::{Platform, load_platform};
+use motion_core::daemon::lifecycle;
+use motion_core::daemon::trajectory;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+type BoxErr = Box<dyn std::error::Error>;
+
+/// What the loop takes from the command line: the two steps an operator also runs by hand.
+pub trait LoopTools {
+    /// `crs surrogate fit` of `pf` with `opts` (progress shown as the caller likes).
+    fn fit_surrogate(
+        &mut self,
+        pf: &Platform,
+        opts: &surrogate::FitOptions,
+    ) -> Result<(surrogate::Surrogate, surrogate::FitReport), BoxErr>;
+    /// `crs calibrate run --no-extension --holdout-every … --ridge-kf …` from `nominal` on
+    /// the recorded observations, writing its report and calibrated.toml into `out`.
+    #[allow(clippy::too_many_arguments)]
+    fn identify(
+        &mut self,
+        nominal: &Platform,
+        train: &[Observation],
+        held: &[Observation],
+        out: &Path,
+        holdout_every: u64,
+        ridge_kf: f64,
+        command: &str,
+    ) -> Result<PipelineReport, BoxErr>;
+}
+
+/// The options of `crs calibrate loop`.
+#[derive(Clone, Debug)]
+pub struct LoopOptions {
+    /// Nominal platform TOML: the model the stack runs before calibration and the start of the
+    /// identification.
+    pub platform: PathBuf,
+    /// Plant TOML with the effects the model does not declare.
+    pub plant: PathBuf,
+    /// Campaign: waypoint CSV (motion-core's format; the times are recomputed for the dwell).
+    pub campaign: PathBuf,
+    /// Use only the first N poses of the campaign.
+    pub max_poses: Option<usize>,
+    /// Rest at every pose (s); must exceed --settle-s.
+    pub dwell_s: f64,
+    /// Reference constant this long before a rest point's readings count (s).
+    pub settle_s: f64,
+    /// Hold out poses with index % N == N − 1 for the identification's validation figures.
+    pub holdout_every: u64,
+    /// Run both campaigns with the kinematic controller only (no surrogate fitted or deployed).
+    pub no_surrogate: bool,
+    /// Validation samples of each surrogate fit (Halton, in addition to the 3^6 grid).
+    pub surrogate_validation_samples: usize,
+    /// Daemon TOML template ([realtime], [trajectory] limits); platform, surrogate and
+    /// waypoints are replaced.
+    pub daemon_config: PathBuf,
+    /// Safety-monitor TOML template; [monitor] platform and [can] drives are replaced.
+    pub monitor_config: PathBuf,
+    pub drives: PathBuf,
+    /// `auto` (vcan0 if present, else the UDP loopback bus) or a transport spec.
+    pub transport: String,
+    /// Directory with the stack's binaries (default: next to this `crs`).
+    pub bin_dir: Option<PathBuf>,
+    /// Run without the safety monitor.
+    pub no_monitor: bool,
+    /// Ridge λ on k_F towards the nominal in the identification (`crs calibrate run
+    /// --ridge-kf`, k_F in 1e6 N): keeps the weakly determined stiffnesses of a short campaign
+    /// in range. Without it, 12 poses gave k_F of 1.0–5.3 MN (true 1.9–2.2) and a refitted
+    /// surrogate above the 100 mm bound that motion-core refused; with 1000, 1.8–2.2 MN and
+    /// 5–7× lower error. 0 = off.
+    pub ridge_kf: f64,
+    /// SCHED_FIFO priority of drive-io (sim-plant 5 below), as `crs sim --rt-priority`; 0 = off.
+    /// On a shared, loaded host the default keeps the setpoint stream and SYNCs without gaps.
+    pub rt_priority: i32,
+    /// Runs again (up to this many times) when drive-io stopped the bus during a run (a gap in
+    /// the setpoint stream on a loaded, non-real-time host); the report counts the retries.
+    pub retries: usize,
+    /// Fail (exit 1) unless the measured mean position error drops by at least this factor.
+    pub min_improvement: Option<f64>,
+    /// Output directory (before/, identification/, after/, report.md, report.json).
+    pub out: PathBuf,
+}
+
+fn abs(p: &Path) -> Result<PathBuf, String> {
+    std::fs::canonicalize(p).map_err(|e| format!("{}: {e}", p.display()))
+}
+
+/// A TOML template as a table; errors name the file.
+fn read_template(template: &Path) -> Result<toml::Table, String> {
+    let text =
+        std::fs::read_to_string(template).map_err(|e| format!("{}: {e}", template.display()))?;
+    text.parse()
+        .map_err(|e| format!("{}: {e}", template.display()))
+}
+
+/// The `[name]` table of a template (must exist).
+fn section<'a>(
+    t: &'a mut toml::Table,
+    name: &str,
+    template: &Path,
+) -> Result<&'a mut toml::Table, String> {
+    t.get_mut(name)
+        .and_then(|v| v.as_table_mut())
+        .ok_or_else(|| format!("{}: no [{name}] table", template.display()))
+}
+
+/// An absolute path as a TOML string (the written files live elsewhere than the template).
+fn path_value(p: &Path) -> Result<toml::Value, String> {
+    Ok(toml::Value::String(abs(p)?.display().to_string()))
+}
+
+/// Writes `t` to `out` with a header naming the template it came from.
+fn write_from_template(
+    out: &Path,
+    t: &toml::Table,
+    what: &str,
+    template: &Path,
+) -> Result<(), BoxErr> {
+    let body = toml::to_string(t)?;
+    std::fs::write(
+        out,
+        format!(
+            "# {what} TOML written by `crs calibrate loop` from {}.\n{body}",
+            template.display()
+        ),
+    )?;
+    Ok(())
+}
+
+/// The daemon TOML of one run: the template with platform, surrogate and waypoints replaced.
+fn write_daemon_toml(
+    template: &Path,
+    out: &Path,
+    platform: &Path,
+    surrogate: Option<&Path>,
+    waypoints: &Path,
+) -> Result<(), BoxErr> {
+    let mut t = read_template(template)?;
+    let d = section(&mut t, "daemon", template)?;
+    d.insert("platform".into(), path_value(platform)?);
+    d.insert(
+        "surrogate".into(),
+        match surrogate {
+            Some(p) => path_value(p)?,
+            None => toml::Value::String(String::new()),
+        },
+    );
+    d.remove("stats_file");
+    section(&mut t, "trajectory", template)?.insert("waypoints".into(), path_value(waypoints)?);
+    write_from_template(out, &t, "motion-core daemon", template)?;
+    // The daemon's loader must accept it.
+    motion_core::daemon::config::load(out).map_err(|e| e.to_string())?;
+    Ok(())
+}
+
+/// The safety-monitor TOML of one run: the template with [monitor] platform and [can] drives.
+fn write_monitor_toml(
+    template: &Path,
+    out: &Path,
+    platform: &Path,
+    drives: &Path,
+) -> Result<(), BoxErr> {
+    let mut t = read_template(template)?;
+    let mon = section(&mut t, "monitor", template)?;
+    mon.insert("platform".into(), path_value(platform)?);
+    mon.insert("trip_log".into(), toml::Value::String(String::new()));
+    section(&mut t, "can", template)?.insert("drives".into(), path_value(drives)?);
+    write_from_template(out, &t, "safety-monitor", template)
+}
+
+/// The surrogate of one run (none with `--no-surrogate`), its figures printed and its command
+/// recorded.
+fn maybe_fit_surrogate(
+    tools: &mut dyn LoopTools,
+    with_sg: bool,
+    platform: &Path,
+    a: &LoopOptions,
+    out: &Path,
+    commands: &mut Vec<String>,
+) -> Result<Option<surrogate::FitReport>, BoxErr> {
+    if !with_sg {
+        return Ok(None);
+    }
+    let r = fit_surrogate(tools, platform, a.surrogate_validation_samples, out)?;
+    println!(
+        "  max |φ_sg| {:.1} mm, fit error max {:.3} mm → {}",
+        r.max_abs_offset_mm,
+        r.max_fit_error_mm,
+        out.display()
+    );
+    commands.push(format!(
+        "crs surrogate fit --platform {} --validation-samples {} --out {}",
+        platform.display(),
+        a.surrogate_validation_samples,
+        out.display()
+    ));
+    Ok(Some(r))
+}
+
+/// The daemon and safety-monitor TOMLs of one run in `dir`, both on `platform`.
+fn write_run_configs(
+    a: &LoopOptions,
+    dir: &Path,
+    platform: &Path,
+    surrogate: Option<&Path>,
+    campaign: &Path,
+) -> Result<(PathBuf, PathBuf), BoxErr> {
+    let (daemon, monitor) = (
+        dir.join("motion-core.toml"),
+        dir.join("safety-monitor.toml"),
+    );
+    write_daemon_toml(&a.daemon_config, &daemon, platform, surrogate, campaign)?;
+    write_monitor_toml(&a.monitor_config, &monitor, platform, &a.drives)?;
+    Ok((daemon, monitor))
+}
+
+/// A run must have recorded a rest point at every pose of the campaign.
+fn all_rest_points(label: &str, sum: &Summary, poses: usize, dir: &Path) -> Result<(), BoxErr> {
+    if sum.rest.rest_points == poses {
+        return Ok(());
+    }
+    Err(format!(
+        "the {label} run recorded {} rest points for {poses} poses ({} skipped): see {}",
+        sum.rest.rest_points,
+        sum.rest_points_skipped,
+        dir.display()
+    )
+    .into())
+}
+
+/// Fits the surrogate of `platform` (as `crs surrogate fit` with the default degree and margin).
+fn fit_surrogate(
+    tools: &mut dyn LoopTools,
+    platform: &Path,
+    validation_samples: usize,
+    out: &Path,
+) -> Result<surrogate::FitReport, BoxErr> {
+    let pf = load_platform(platform)?;
+    let opts = surrogate::FitOptions {
+        validation_samples,
+        margin_m: 0.010,
+        ..surrogate::FitOptions::default()
+    };
+    let (sg, report) = tools.fit_surrogate(&pf, &opts)?;
+    sg.save(out)
+        .map_err(|e| format!("{}: {e}", out.display()))?;
+    Ok(report)
+}
+
+/// One run of the campaign on the stack, as reported.
+#[derive(Clone, Debug, serde::Serialize)]
+struct RunReport {
+    platform: PathBuf,
+    surrogate: Option<PathBuf>,
+    surrogate_max_offset_mm: Option<f64>,
+    daemon_config: PathBuf,
+    monitor_config: PathBuf,
+    record: PathBuf,
+    /// Runs needed (more than 1: drive-io stopped the bus in an earlier one, `--retries`).
+    attempts: usize,
+    summary: Summary,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+struct StageRow {
+    name: String,
+    holdout: calibrate::validate::Errors,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+struct LoopReport {
+    command: String,
+    plant: PathBuf,
+    campaign: PathBuf,
+    poses: usize,
+    dwell_s: f64,
+    settle_s: f64,
+    control_model: String,
+    before: RunReport,
+    identification: Vec<StageRow>,
+    identification_train: usize,
+    identification_holdout: usize,
+    deployed_stage: String,
+    calibrated_platform: PathBuf,
+    after: RunReport,
+    /// Measured mean position error before / after at the rest points.
+    improvement_position_mean: f64,
+    improvement_position_max: f64,
+    improvement_rotation_mean: f64,
+    runtime_s: f64,
+    commands: Vec<String>,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn stack_run(
+    a: &LoopOptions,
+    daemon_toml: &Path,
+    monitor_toml: &Path,
+    campaign: &Path,
+    dir: &Path,
+    record: &Path,
+    timeout_s: f64,
+    name: &str,
+) -> Result<(Summary, usize), BoxErr> {
+    let args = SimOptions {
+        config: daemon_toml.to_path_buf(),
+        drives: a.drives.clone(),
+        plant: a.plant.clone(),
+        transport: a.transport.clone(),
+        waypoints: Some(campaign.to_path_buf()),
+        hold_s: a.dwell_s,
+        timeout_s,
+        bin_dir: a.bin_dir.clone(),
+        out: dir.to_path_buf(),
+        no_monitor: a.no_monitor,
+        check: false,
+        max_static_error_mm: f64::INFINITY,
+        monitor_config: monitor_toml.to_path_buf(),
+        dwell_s: Some(a.dwell_s),
+        record: Some(record.to_path_buf()),
+        settle_s: a.settle_s,
+        campaign: Some(name.to_string()),
+        rt_priority: (a.rt_priority >= 6).then_some(a.rt_priority),
+    };
+    let mut attempt = 0;
+    let sum = loop {
+        let sum = sim_run::execute(&args)?;
+        match &sum.bus_stopped_during_run {
+            Some(b) if attempt < a.retries => {
+                attempt += 1;
+                println!(
+                    "  the {name} run was interrupted: drive-io stopped the bus ({b}), most likely a gap in the setpoint stream on a loaded host; running it again ({attempt}/{})",
+                    a.retries
+                );
+            }
+            _ => break sum,
+        }
+    };
+    let mut fails = Vec::new();
+    if let Some(b) = &sum.bus_stopped_during_run {
+        fails.push(format!("drive-io stopped the bus during the run ({b})"));
+    }
+    if sum.estops > 0 {
+        fails.push(format!("{} e-stop(s)", sum.estops));
+    }
+    if sum.drive_faults > 0 {
+        fails.push(format!("{} drive fault reports", sum.drive_faults));
+    }
+    if sum.loop_rejected > 0 {
+        fails.push(format!("{} references refused", sum.loop_rejected));
+    }
+    if sum.non_converged_plant_steps > 0 {
+        fails.push(format!(
+            "{} plant steps without equilibrium",
+            sum.non_converged_plant_steps
+        ));
+    }
+    if !fails.is_empty() {
+        return Err(format!(
+            "the {name} run failed: {} (logs in {})",
+            fails.join("; "),
+            dir.display()
+        )
+        .into());
+    }
+    Ok((sum, attempt + 1))
+}
+
+/// Runs the closed loop (see the module doc) and writes its report.
+pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Result<(), BoxErr> {
+    let t_start = Instant::now();
+    if !(a.dwell_s.is_finite() && a.settle_s > 0.0 && a.dwell_s > a.settle_s) {
+        return Err(format!(
+            "--dwell-s ({}) must exceed --settle-s ({}) > 0",
+            a.dwell_s, a.settle_s
+        )
+        .into());
+    }
+    for f in [
+        &a.platform,
+        &a.plant,
+        &a.campaign,
+        &a.daemon_config,
+        &a.monitor_config,
+        &a.drives,
+    ] {
+        if !f.is_file() {
+            return Err(format!("{}: no such file", f.display()).into());
+        }
+    }
+    let nominal = load_platform(&a.platform)?;
+    let pcfg = sim_plant::load_plant(&a.plant)?;
+    if pcfg.platform.model.identity_hex() != nominal.model.identity_hex() {
+        return Err(format!(
+            "{}: the plant's nominal platform ({}) is not {}",
+            a.plant.display(),
+            pcfg.platform_path.display(),
+            a.platform.display()
+        )
+        .into());
+    }
+    let daemon_tpl =
+        motion_core::daemon::config::load(&a.daemon_config).map_err(|e| e.to_string())?;
+    let mut wps = trajectory::read_waypoints(&a.campaign)?;
+    if let Some(n) = a.max_poses {
+        if n == 0 {
+            return Err("--max-poses must be ≥ 1".into());
+        }
+        wps.truncate(n);
+    }
+    let holdout = a.holdout_every;
+    if holdout != 0 && wps.len() < 2 * holdout as usize {
+        return Err(format!(
+            "{} poses are too few for a held-out split every {holdout}",
+            wps.len()
+        )
+        .into());
+    }
+    std::fs::create_dir_all(&a.out)?;
+    let (dir_b, dir_i, dir_a) = (
+        a.out.join("before"),
+        a.out.join("identification"),
+        a.out.join("after"),
+    );
+    for d in [&dir_b, &dir_i, &dir_a] {
+        std::fs::create_dir_all(d)?;
+    }
+    // The campaign as run (first N poses).
+    let campaign = a.out.join("campaign.csv");
+    write_waypoints(
+        &campaign,
+        &wps,
+        &format!(
+            "{} poses of {} (crs calibrate loop)",
+            wps.len(),
+            a.campaign.display()
+        ),
+    )?;
+    let nominal_checks = lifecycle::configure_checks(&daemon_tpl, &nominal);
+    nominal_checks
+        .verify_plan(&wps)
+        .map_err(|e| format!("{}: the plan is refused: {e}", a.campaign.display()))?;
+    let (_, plan_s) = timed_waypoints(
+        nominal.home,
+        &wps,
+        nominal_checks.planner_limits(),
+        nominal_checks.period_s(),
+        a.dwell_s,
+    )?;
+    let timeout_s = 1.5 * (plan_s + a.dwell_s) + 60.0;
+    let name = a
+        .campaign
+        .file_stem()
+        .map_or("campaign".into(), |n| n.to_string_lossy().into_owned());
+    let with_sg = !a.no_surrogate;
+    let steps = 7;
+    let step = |k: usize, what: &str| println!("\n[{k}/{steps}] {what}");
+    println!(
+        "crs calibrate loop: {} poses of {}, rest {} s each (plan {plan_s:.0} s per run), plant {}, controller {}",
+        wps.len(),
+        a.campaign.display(),
+        a.dwell_s,
+        a.plant.display(),
+        if with_sg {
+            "kinematics + surrogate"
+        } else {
+            "kinematics only (--no-surrogate)"
+        }
+    );
+    let sim_cmd_line = |dir: &Path| {
+        format!(
+            "crs sim --config {} --monitor-config {} --plant {} --drives {} --waypoints {} --dwell-s {} --settle-s {} --hold-s {} --record {} --out {}{}",
+            dir.join("motion-core.toml").display(),
+            dir.join("safety-monitor.toml").display(),
+            a.plant.display(),
+            a.drives.display(),
+            campaign.display(),
+            a.dwell_s,
+            a.settle_s,
+            a.dwell_s,
+            dir.join("campaign.csv").display(),
+            dir.display(),
+            if a.rt_priority >= 6 {
+                format!(" --rt-priority {}", a.rt_priority)
+            } else {
+                String::new()
+            }
+        )
+    };
+    let mut commands = Vec::new();
+
+    // 1-2. Before: the nominal platform (+ its surrogate).
+    step(
+        1,
+        if with_sg {
+            "surrogate of the nominal platform"
+        } else {
+            "no surrogate (--no-surrogate)"
+        },
+    );
+    let sg_b = dir_b.join("surrogate.json");
+    let rep_sg_b = maybe_fit_surrogate(tools, with_sg, &a.platform, &a, &sg_b, &mut commands)?;
+    let (daemon_b, monitor_b) = write_run_configs(
+        &a,
+        &dir_b,
+        &a.platform,
+        with_sg.then_some(sg_b.as_path()),
+        &campaign,
+    )?;
+    step(2, "campaign on the stack with the nominal model (before)");
+    let rec_b = dir_b.join("campaign.csv");
+    let (sum_b, attempts_b) = stack_run(
+        &a, &daemon_b, &monitor_b, &campaign, &dir_b, &rec_b, timeout_s, &name,
+    )?;
+    commands.push(sim_cmd_line(&dir_b));
+    all_rest_points("before", &sum_b, wps.len(), &dir_b)?;
+
+    // 3. Identification from the nominal model.
+    step(3, "identification from the nominal model on the recording");
+    let ds = crs_dataset::load_dataset(&rec_b)?;
+    let obs =
+        from_dataset(&ds, nominal.model.m()).map_err(|e| format!("{}: {e}", rec_b.display()))?;
+    let (train, held) = split(&obs, holdout);
+    let cal_cmd = format!(
+        "crs calibrate run --platform {} --data {} --holdout-every {holdout} --no-extension --ridge-kf {} --out {}",
+        a.platform.display(),
+        rec_b.display(),
+        a.ridge_kf,
+        dir_i.display()
+    );
+    let rep: PipelineReport = tools.identify(
+        &nominal, &train, &held, &dir_i, holdout, a.ridge_kf, &cal_cmd,
+    )?;
+    commands.push(cal_cmd);
+    let calibrated = dir_i.join("calibrated.toml");
+    let deployed_stage = rep.final_stage().name.clone();
+    let cal_pf = load_platform(&calibrated)?;
+
+    // 4-5. After: the calibrated platform (+ its refitted surrogate).
+    step(
+        4,
+        if with_sg {
+            "surrogate refitted on the calibrated platform"
+        } else {
+            "no surrogate (--no-surrogate)"
+        },
+    );
+    let sg_a = dir_a.join("surrogate.json");
+    let rep_sg_a = maybe_fit_surrogate(tools, with_sg, &calibrated, &a, &sg_a, &mut commands)?;
+    step(
+        5,
+        "daemon and safety-monitor configuration for the calibrated model",
+    );
+    let (daemon_a, monitor_a) = write_run_configs(
+        &a,
+        &dir_a,
+        &calibrated,
+        with_sg.then_some(sg_a.as_path()),
+        &campaign,
+    )?;
+    lifecycle::configure_checks(&daemon_tpl, &cal_pf)
+        .verify_plan(&wps)
+        .map_err(|e| {
+            format!(
+                "the calibrated model {} refuses the campaign: {e}",
+                calibrated.display()
+            )
+        })?;
+    println!(
+        "  {} (platform `{}`), {}",
+        daemon_a.display(),
+        cal_pf.name,
+        monitor_a.display()
+    );
+    step(6, "the same campaign with the calibrated model (after)");
+    let rec_a = dir_a.join("campaign.csv");
+    let (sum_a, attempts_a) = stack_run(
+        &a, &daemon_a, &monitor_a, &campaign, &dir_a, &rec_a, timeout_s, &name,
+    )?;
+    commands.push(sim_cmd_line(&dir_a));
+    all_rest_points("after", &sum_a, wps.len(), &dir_a)?;
+
+    step(7, "report");
+    let ratio = |b: f64, a: f64| if a > 0.0 { b / a } else { f64::INFINITY };
+    let report = LoopReport {
+        command: command.to_string(),
+        plant: a.plant.clone(),
+        campaign: a.campaign.clone(),
+        poses: wps.len(),
+        dwell_s: a.dwell_s,
+        settle_s: a.settle_s,
+        control_model: if with_sg {
+            "kinematic+surrogate".into()
+        } else {
+            "kinematic".into()
+        },
+        before: RunReport {
+            platform: a.platform.clone(),
+            surrogate: with_sg.then(|| sg_b.clone()),
+            surrogate_max_offset_mm: rep_sg_b.map(|r| r.max_abs_offset_mm),
+            daemon_config: daemon_b,
+            monitor_config: monitor_b,
+            record: rec_b,
+            attempts: attempts_b,
+            summary: sum_b.clone(),
+        },
+        identification: rep
+            .stages
+            .iter()
+            .map(|s| StageRow {
+                name: s.name.clone(),
+                holdout: s.holdout.clone(),
+            })
+            .collect(),
+        identification_train: rep.n_train,
+        identification_holdout: rep.n_holdout,
+        deployed_stage,
+        calibrated_platform: calibrated.clone(),
+        after: RunReport {
+            platform: calibrated.clone(),
+            surrogate: with_sg.then(|| sg_a.clone()),
+            surrogate_max_offset_mm: rep_sg_a.map(|r| r.max_abs_offset_mm),
+            daemon_config: daemon_a,
+            monitor_config: monitor_a,
+            record: rec_a,
+            attempts: attempts_a,
+            summary: sum_a.clone(),
+        },
+        improvement_position_mean: ratio(sum_b.rest.position_mean_mm, sum_a.rest.position_mean_mm),
+        improvement_position_max: ratio(sum_b.rest.position_max_mm, sum_a.rest.position_max_mm),
+        improvement_rotation_mean: ratio(
+            sum_b.rest.rotation_mean_deg,
+            sum_a.rest.rotation_mean_deg,
+        ),
+        runtime_s: t_start.elapsed().as_secs_f64(),
+        commands,
+    };
+    let md = markdown(&report);
+    std::fs::write(a.out.join("report.md"), &md)?;
+    std::fs::write(
+        a.out.join("report.json"),
+        serde_json::to_string_pretty(&report)?,
+    )?;
+    println!("\n{}", before_after_table(&report));
+    println!(
+        "measured mean position error {:.2} mm → {:.2} mm ({:.1}×) in {:.0} s; report {}",
+        sum_b.rest.position_mean_mm,
+        sum_a.rest.position_mean_mm,
+        report.improvement_position_mean,
+        report.runtime_s,
+        a.out.join("report.md").display()
+    );
+    if let Some(f) = a.min_improvement
+        && (report.improvement_position_mean.is_nan() || report.improvement_position_mean < f)
+    {
+        return Err(format!(
+            "the measured mean position error dropped by {:.2}×, less than --min-improvement {f}",
+            report.improvement_position_mean
+        )
+        .into());
+    }
+    Ok(())
+}
+
+fn before_after_table(r: &LoopReport) -> String {
+    let mut s = String::new();
+    s.push_str("| at the rest points | before (nominal) | after (calibrated) |\n|---|---|---|\n");
+    let (b, a) = (&r.before.summary, &r.after.summary);
+    let row = |s: &mut String, name: &str, vb: String, va: String| {
+        let _ = writeln!(s, "| {name} | {vb} | {va} |");
+    };
+    row(
+        &mut s,
+        "rest points",
+        b.rest.rest_points.to_string(),
+        a.rest.rest_points.to_string(),
+    );
+    row(
+        &mut s,
+        "measured position error mean / max (mm)",
+        format!(
+            "{:.2} / {:.2}",
+            b.rest.position_mean_mm, b.rest.position_max_mm
+        ),
+        format!(
+            "{:.2} / {:.2}",
+            a.rest.position_mean_mm, a.rest.position_max_mm
+        ),
+    );
+    row(
+        &mut s,
+        "measured rotation error mean / max (deg)",
+        format!(
+            "{:.3} / {:.3}",
+            b.rest.rotation_mean_deg, b.rest.rotation_max_deg
+        ),
+        format!(
+            "{:.3} / {:.3}",
+            a.rest.rotation_mean_deg, a.rest.rotation_max_deg
+        ),
+    );
+    row(
+        &mut s,
+        "true position error mean / max (mm, plant truth)",
+        format!(
+            "{:.2} / {:.2}",
+            b.rest.true_position_mean_mm, b.rest.true_position_max_mm
+        ),
+        format!(
+            "{:.2} / {:.2}",
+            a.rest.true_position_mean_mm, a.rest.true_position_max_mm
+        ),
+    );
+    let forces = |x: &Summary| {
+        format!(
+            "{:.0} … {:.0} ({})",
+            x.force_min_n,
+            x.force_max_n,
+            if x.force_min_n >= x.f_min_n && x.force_max_n <= x.f_max_n {
+                "within"
+            } else {
+                "OUTSIDE"
+            }
+        )
+    };
+    row(
+        &mut s,
+        &format!(
+            "cable forces over the run (N; limits {:.0} … {:.0})",
+            b.f_min_n, b.f_max_n
+        ),
+        forces(b),
+        forces(a),
+    );
+    row(
+        &mut s,
+        "tracking error mean / max while moving (mm)",
+        format!(
+            "{:.2} / {:.2}",
+            b.tracking_position_mean_mm, b.tracking_position_max_mm
+        ),
+        format!(
+            "{:.2} / {:.2}",
+            a.tracking_position_mean_mm, a.tracking_position_max_mm
+        ),
+    );
+    row(
+        &mut s,
+        "e-stops / drive faults / refused references",
+        format!("{} / {} / {}", b.estops, b.drive_faults, b.loop_rejected),
+        format!("{} / {} / {}", a.estops, a.drive_faults, a.loop_rejected),
+    );
+    row(
+        &mut s,
+        "stack runs needed (bus stopped by host load otherwise)",
+        r.before.attempts.to_string(),
+        r.after.attempts.to_string(),
+    );
+    row(
+        &mut s,
+        "run time (s)",
+        format!("{:.1}", b.duration_s),
+        format!("{:.1}", a.duration_s),
+    );
+    s
+}
+
+fn markdown(r: &LoopReport) -> String {
+    let mut s = String::new();
+    s.push_str("# Closed calibration loop on the running stack\n\n");
+    let _ = writeln!(s, "Command: `{}`\n", r.command);
+    let _ = writeln!(
+        s,
+        "Plant `{}` (effects the model does not declare), campaign `{}` ({} poses, rest {} s each, readings taken after {} s settled: the last tracker pose and force-sensor readings before the reference moves). Controller: {}. The pose errors are MEASURED: the tracker's pose against the reference at every rest point; the plant's true pose is shown for comparison.\n",
+        r.plant.display(),
+        r.campaign.display(),
+        r.poses,
+        r.dwell_s,
+        r.settle_s,
+        r.control_model
+    );
+    s.push_str("## Before / after\n\n");
+    s.push_str(&before_after_table(r));
+    let _ = writeln!(
+        s,
+        "\nMeasured mean position error: {:.1}× smaller (max {:.1}×, mean rotation {:.1}×). Total run time {:.0} s.\n",
+        r.improvement_position_mean,
+        r.improvement_position_max,
+        r.improvement_rotation_mean,
+        r.runtime_s
+    );
+    s.push_str("## Identification (held-out figures, through the model's forward kinematics)\n\n");
+    let _ = writeln!(
+        s,
+        "{} training and {} held-out rest points from the before run; deployed: **{}** → `{}`.\n",
+        r.identification_train,
+        r.identification_holdout,
+        r.deployed_stage,
+        r.calibrated_platform.display()
+    );
+    s.push_str("| step | mean / max position (mm) | mean / max rotation (deg) | mean cable length (mm) | mean / max force (N) |\n|---|---|---|---|---|\n");
+    for st in &r.identification {
+        let h = &st.holdout;
+        let f = |v: Option<f64>| v.map_or("–".into(), |x| format!("{x:.1}"));
+        let _ = writeln!(
+            s,
+            "| {} | {:.2} / {:.2} | {:.3} / {:.3} | {:.2} | {} / {} |",
+            st.name,
+            h.pos_mean_mm,
+            h.pos_max_mm,
+            h.rot_mean_deg,
+            h.rot_max_deg,
+            h.len_mean_mm,
+            f(h.force_mean_n),
+            f(h.force_max_n)
+        );
+    }
+    s.push_str("\nThe identification's own report (condition numbers, parameters, plots) is in `identification/report.md`.\n\n## Deployed configuration\n\n");
+    for (name, run) in [("before", &r.before), ("after", &r.after)] {
+        let _ = writeln!(
+            s,
+            "* {name}: platform `{}`, surrogate {}, daemon `{}`, monitor `{}`, recording `{}`",
+            run.platform.display(),
+            match (&run.surrogate, run.surrogate_max_offset_mm) {
+                (Some(p), Some(mx)) => format!("`{}` (max |φ_sg| {mx:.1} mm)", p.display()),
+                (Some(p), None) => format!("`{}`", p.display()),
+                _ => "none".into(),
+            },
+            run.daemon_config.display(),
+            run.monitor_config.display(),
+            run.record.display()
+        );
+    }
+    s.push_str("\n## The same by hand\n\n```sh\n");
+    for c in &r.commands {
+        let _ = writeln!(s, "{c}");
+    }
+    s.push_str("```\n");
+    s
+}

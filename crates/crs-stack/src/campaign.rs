@@ -1,0 +1,233 @@
+//! Calibration campaigns: generation (Halton poses with a force margin, toured nearest-first
+//! and checked with motion-core's own configure step), timing for rests at each pose, and the
+//! waypoint CSV motion-core reads (`trajectory::read_waypoints`).
+
+use cdpr_model::Pose;
+use cdpr_model::config::Platform;
+use cdpr_model::offset_target::OffsetTarget;
+use motion_core::daemon::lifecycle::Configured;
+use motion_core::daemon::trajectory::{self, PlannerLimits, PlanningFailed, Waypoint};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum CampaignError {
+    #[error("--poses must be ≥ 1 and --fraction in (0, 1]")]
+    Arguments,
+    #[error(
+        "only {found} of {wanted} poses are feasible with margin {margin_n} N: lower --poses or --force-margin-n"
+    )]
+    TooFewPoses {
+        found: usize,
+        wanted: usize,
+        margin_n: f64,
+    },
+    #[error("--dwell-s must be finite and ≥ 0, got {0}")]
+    Dwell(f64),
+    #[error(transparent)]
+    Planning(#[from] PlanningFailed),
+    #[error("{}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// i-th element of the van der Corput sequence in `base` (one Halton coordinate).
+fn radical_inverse(mut i: u64, base: u64) -> f64 {
+    let (mut f, mut r) = (1.0, 0.0);
+    while i > 0 {
+        f /= base as f64;
+        r += f * (i % base) as f64;
+        i /= base;
+    }
+    r
+}
+
+/// Reference forces (eq. 3.41) of `pose` within [f_min + margin, f_max − margin].
+fn force_margin_ok(target: &mut OffsetTarget, p: &Platform, pose: &Pose, margin: f64) -> bool {
+    let prm = p.model.params();
+    match target.reference_forces(pose) {
+        Ok((f, fd)) => {
+            fd.feasible
+                && f.iter()
+                    .all(|v| *v >= prm.f_min + margin && *v <= prm.f_max - margin)
+        }
+        Err(_) => false,
+    }
+}
+
+/// `poses` campaign poses: a 6-D Halton sequence over `fraction` of the workspace box, kept
+/// where the reference forces keep `force_margin_n`, toured nearest-first from home; a pose
+/// whose segment the daemon's checks (`checks`, see `lifecycle::configure_checks`) refuse is
+/// replaced by the next candidate.
+pub fn generate(
+    checks: &Configured,
+    poses: usize,
+    fraction: f64,
+    force_margin_n: f64,
+) -> Result<Vec<Waypoint>, CampaignError> {
+    let pf = checks.platform();
+    if poses == 0 || !(fraction > 0.0 && fraction <= 1.0) {
+        return Err(CampaignError::Arguments);
+    }
+    let (lo, hi) = cdpr_model::offset_target::region_box(&pf.region);
+    let mut target = OffsetTarget::new(&pf.model);
+    let mut cand = Vec::new();
+    let bases = [2u64, 3, 5, 7, 11, 13];
+    let mut i = 1u64;
+    while cand.len() < 8 * poses && i < 200_000 {
+        let x: [f64; 6] = std::array::from_fn(|k| {
+            let c = 0.5 * (lo[k] + hi[k]);
+            let h = 0.5 * (hi[k] - lo[k]) * fraction;
+            c + h * (2.0 * radical_inverse(i, bases[k]) - 1.0)
+        });
+        i += 1;
+        let pose = Pose::from_array(x);
+        if force_margin_ok(&mut target, pf, &pose, force_margin_n) {
+            cand.push(pose);
+        }
+    }
+    let mut chosen: Vec<Waypoint> = Vec::new();
+    // The first `poses` candidates in Halton order (spread over the box) make the pool; the
+    // tour visits them nearest-first.
+    let mut reserve = cand.into_iter();
+    let mut pool: Vec<Pose> = reserve.by_ref().take(poses).collect();
+    let mut cur = pf.home;
+    while chosen.len() < poses {
+        if pool.is_empty() {
+            match reserve.next() {
+                Some(p) => pool.push(p),
+                None => break,
+            }
+        }
+        pool.sort_by(|p, q| {
+            let d = |x: &Pose| (x.r - cur.r).norm();
+            d(q).total_cmp(&d(p))
+        });
+        let next = pool.pop().expect("non-empty");
+        let mut trial = chosen.clone();
+        trial.push(Waypoint {
+            pose: next,
+            not_before_s: 0.0,
+        });
+        if checks.verify_plan(&trial).is_ok() {
+            chosen = trial;
+            cur = next;
+        } else if let Some(p) = reserve.next() {
+            pool.push(p);
+        }
+    }
+    if chosen.len() < poses {
+        return Err(CampaignError::TooFewPoses {
+            found: chosen.len(),
+            wanted: poses,
+            margin_n: force_margin_n,
+        });
+    }
+    Ok(chosen)
+}
+
+/// Waypoints with earliest-arrival times such that the platform rests `dwell_s` at each one
+/// (the planner holds a waypoint until the next segment may start, `trajectory::plan_samples`),
+/// and the plan's total duration (s).
+pub fn timed_waypoints(
+    start: Pose,
+    waypoints: &[Waypoint],
+    lim: PlannerLimits,
+    period_s: f64,
+    dwell_s: f64,
+) -> Result<(Vec<Waypoint>, f64), CampaignError> {
+    if !(dwell_s.is_finite() && dwell_s >= 0.0) {
+        return Err(CampaignError::Dwell(dwell_s));
+    }
+    let untimed: Vec<Waypoint> = waypoints
+        .iter()
+        .map(|w| Waypoint {
+            pose: w.pose,
+            not_before_s: 0.0,
+        })
+        .collect();
+    let mut steps = vec![0usize; waypoints.len()];
+    trajectory::plan_samples::<CampaignError>(start, &untimed, lim, period_s, |seg, _| {
+        steps[seg] += 1;
+        Ok(())
+    })?;
+    let mut t = 0.0;
+    let mut out = Vec::with_capacity(waypoints.len());
+    for (k, w) in waypoints.iter().enumerate() {
+        if k > 0 {
+            t += dwell_s;
+        }
+        t += steps[k] as f64 * period_s;
+        out.push(Waypoint {
+            pose: w.pose,
+            not_before_s: t,
+        });
+    }
+    Ok((out, t))
+}
+
+/// Writes waypoints in the CSV format motion-core reads (`trajectory::read_waypoints`), the
+/// comment as `#` lines on top.
+pub fn write_waypoints(path: &Path, wps: &[Waypoint], comment: &str) -> Result<(), CampaignError> {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    for line in comment.lines() {
+        let _ = writeln!(s, "# {line}");
+    }
+    s.push_str("t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n");
+    for w in wps {
+        let p = w.pose.to_array();
+        let _ = writeln!(
+            s,
+            "{:?},{:?},{:?},{:?},{:?},{:?},{:?}",
+            w.not_before_s,
+            p[0],
+            p[1],
+            p[2],
+            p[3].to_degrees(),
+            p[4].to_degrees(),
+            p[5].to_degrees()
+        );
+    }
+    std::fs::write(path, s).map_err(|source| CampaignError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn written_waypoints_read_back_exactly() {
+        let wps = vec![
+            Waypoint {
+                pose: Pose::from_array([0.1, -0.2, 2.0, 0.01, -0.02, 0.03]),
+                not_before_s: 1.5,
+            },
+            Waypoint {
+                pose: Pose::from_array([0.0, 0.0, 2.0, 0.0, 0.0, 0.0]),
+                not_before_s: 3.25,
+            },
+        ];
+        let p = std::env::temp_dir().join(format!("crs-stack-wps-{}.csv", std::process::id()));
+        write_waypoints(&p, &wps, "two\nlines").unwrap();
+        let back = trajectory::read_waypoints(&p).unwrap();
+        assert_eq!(back.len(), 2);
+        for (a, b) in wps.iter().zip(&back) {
+            assert_eq!(a.not_before_s, b.not_before_s);
+            for (x, y) in a.pose.to_array().iter().zip(b.pose.to_array()) {
+                assert!((x - y).abs() < 1e-15, "{x} {y}");
+            }
+        }
+    }
+
+    #[test]
+    fn van_der_corput_base_2() {
+        let v: Vec<f64> = (1..=4).map(|i| radical_inverse(i, 2)).collect();
+        assert_eq!(v, vec![0.5, 0.25, 0.75, 0.125]);
+    }
+}

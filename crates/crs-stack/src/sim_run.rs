@@ -1,0 +1,745 @@
+//! One run of the whole simulated stack as separate processes (`crs sim`, the closed
+//! calibration loop), as a user runs it.
+//!
+//! sim-plant (the winches + platform physics on the bus), safety-monitor (when built),
+//! drive-io (CiA 402 master) and motion-core (the 1 ms loop) start in that order on the default
+//! icosahedron configuration, over vcan0 when the kernel has it and over the CAN-over-UDP
+//! loopback bus otherwise (the launcher says which). motion-core runs the demo trajectory; the
+//! launcher listens on iceoryx2 (its own service prefix per run) and prints the tracked-pose
+//! error against the reference, the cable forces against the limits, the loop statistics and the
+//! monitor state. Ctrl-C stops all children cleanly; a child that dies stops the rest.
+//!
+//! Commissioning: sim-plant homes the drives to the controller's full command at the home pose,
+//! q_θ(home) = φ(home) + φ_sg(home) (eq. 5.26), computed here from the daemon TOML with
+//! motion-core's own cycle computation (`--home-lengths-m`, see `sim_plant::bus`), so a
+//! surrogate's offset at home does not make the first setpoint jump.
+//!
+//! Recording (`--record FILE`, [`crate::rest_recording`]): with `--dwell-s` the waypoints are
+//! timed so the platform rests that long at each; every rest point (reference constant for at
+//! least `--settle-s`) gives one `crs-dataset 1` sample — commanded lengths, tracker pose,
+//! force sensors, reference — and the summary reports the measured pose error at the rest points.
+
+use crate::campaign::{timed_waypoints, write_waypoints};
+use crate::rest_recording::{RestErrors, RestRecorder, rest_errors, to_dataset};
+use crate::supervisor::{self, Supervisor};
+use crate::transport;
+use cdpr_model::Pose;
+use cdpr_model::config::load_platform;
+use crs_ipc::{
+    DriveFeedback, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlantTruth, ProcessId,
+    StateEvent, TrackerPose,
+};
+use motion_core::daemon::lifecycle;
+use motion_core::daemon::trajectory::{self};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+/// One run of the stack (the options of `crs sim`; paths as given).
+#[derive(Clone, Debug)]
+pub struct SimOptions {
+    /// motion-core daemon TOML (platform, surrogate, realtime, trajectory).
+    pub config: PathBuf,
+    /// Drive bus TOML.
+    pub drives: PathBuf,
+    /// Plant TOML (must be the platform of the daemon TOML).
+    pub plant: PathBuf,
+    /// `auto` (vcan0 if present, else the UDP loopback bus), or a transport such as
+    /// `socketcan:vcan0` / `udpbus:239.255.70.9:20900`.
+    pub transport: String,
+    /// Waypoint CSV for the demo trajectory (default: the daemon TOML's).
+    pub waypoints: Option<PathBuf>,
+    /// Seconds to hold after the trajectory before stopping (static error is taken here).
+    pub hold_s: f64,
+    /// Give up after this many seconds.
+    pub timeout_s: f64,
+    /// Directory with the stack's binaries (default: next to this `crs`).
+    pub bin_dir: Option<PathBuf>,
+    /// Directory for the children's logs and the JSON summary.
+    pub out: PathBuf,
+    /// Run without the safety monitor even if it is built.
+    pub no_monitor: bool,
+    /// Fail (exit 1) unless the run meets the expectations: trajectory completed, no e-stop,
+    /// every plant step converged, forces within [f_min, f_max], static error below
+    /// --max-static-error-mm. For tests and CI.
+    pub check: bool,
+    /// Static (at rest) position error bound for --check, mm.
+    pub max_static_error_mm: f64,
+    /// Safety-monitor TOML (its [monitor] platform must be the daemon's platform).
+    pub monitor_config: PathBuf,
+    /// Rest this long at every waypoint (s): the waypoint times are recomputed with the
+    /// daemon's planner limits (written to <out>/waypoints-timed.csv). Default: the CSV's times.
+    pub dwell_s: Option<f64>,
+    /// Write the rest points of the run as a crs-dataset 1 CSV (docs/data-format.md):
+    /// commanded lengths, tracker pose, force sensors, reference pose.
+    pub record: Option<PathBuf>,
+    /// A rest point needs the reference constant for at least this long (s); its sample is the
+    /// last tracker / force reading before the reference moves again.
+    pub settle_s: f64,
+    /// Campaign name for the recording's metadata (default: the waypoint file's name).
+    pub campaign: Option<String>,
+    /// Run drive-io's SYNC loop (this priority) and sim-plant's loop (5 below) as SCHED_FIFO
+    /// with mlockall, as motion-core and the monitor run theirs: keeps the setpoint stream and
+    /// the SYNCs going on a loaded host (needs root; ignored with a note otherwise).
+    pub rt_priority: Option<i32>,
+}
+
+/// What a run measured (printed, and written to <out>/summary.json).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct Summary {
+    pub transport: String,
+    pub monitor: bool,
+    pub plant_samples: u64,
+    pub setpoints: u64,
+    pub tracking_position_mean_mm: f64,
+    pub tracking_position_max_mm: f64,
+    pub tracking_rotation_mean_deg: f64,
+    pub tracking_rotation_max_deg: f64,
+    pub static_position_mm: f64,
+    pub static_rotation_deg: f64,
+    pub force_min_n: f64,
+    pub force_max_n: f64,
+    pub f_min_n: f64,
+    pub f_max_n: f64,
+    pub non_converged_plant_steps: u64,
+    pub loop_cycles: u64,
+    pub loop_overruns: u64,
+    pub loop_rejected: u64,
+    pub loop_lateness_p99_us: f64,
+    pub loop_lateness_max_us: f64,
+    pub loop_compute_p99_us: f64,
+    pub estops: u64,
+    pub monitor_heartbeats: u64,
+    pub drive_faults: u64,
+    /// Pose error at the rest points (measured: tracker vs reference; true: plant vs reference).
+    pub rest: RestErrors,
+    /// Settled stretches without readings (tracker invalid or no force feedback).
+    pub rest_points_skipped: usize,
+    /// drive-io stopped the bus (stale setpoints, e-stop, fault: [`crs_ipc::BusState`]) while
+    /// motion-core was still streaming: the drives held from then on (on an overloaded host a
+    /// gap of > `bus.stale_setpoint_cycles` SYNC periods in the setpoint stream does this).
+    pub bus_stopped_during_run: Option<String>,
+    /// The recording written (--record).
+    pub record: Option<PathBuf>,
+    pub duration_s: f64,
+}
+
+impl Summary {
+    /// What fails `crs sim --check`: e-stops, plant steps without equilibrium, forces outside
+    /// [f_min, f_max], static error above `max_static_error_mm` (or not reached), rejected
+    /// references, drive faults, a bus stop during the run. Empty = pass.
+    pub fn check_failures(&self, max_static_error_mm: f64) -> Vec<String> {
+        let (f_min, f_max) = (self.f_min_n, self.f_max_n);
+        let mut fails = Vec::new();
+        if self.estops > 0 {
+            fails.push(format!("{} e-stop(s)", self.estops));
+        }
+        if self.non_converged_plant_steps > 0 {
+            fails.push(format!(
+                "{} plant steps without equilibrium",
+                self.non_converged_plant_steps
+            ));
+        }
+        if !(self.force_min_n >= f_min && self.force_max_n <= f_max) {
+            fails.push(format!(
+                "forces {:.0} … {:.0} N outside [{f_min:.0}, {f_max:.0}] N",
+                self.force_min_n, self.force_max_n
+            ));
+        }
+        if self.static_position_mm.is_nan() || self.static_position_mm > max_static_error_mm {
+            fails.push(format!(
+                "static position error {:.2} mm > {} mm",
+                self.static_position_mm, max_static_error_mm
+            ));
+        }
+        if self.loop_rejected > 0 {
+            fails.push(format!(
+                "{} references rejected by motion-core",
+                self.loop_rejected
+            ));
+        }
+        if self.drive_faults > 0 {
+            fails.push(format!("{} drive fault reports", self.drive_faults));
+        }
+        if let Some(b) = &self.bus_stopped_during_run {
+            fails.push(format!("drive-io stopped the bus during the run ({b})"));
+        }
+        fails
+    }
+}
+
+/// Runs of this process (each gets its own iceoryx2 prefix and UDP port).
+static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+
+/// What a run is, for an observer starting alongside it.
+pub struct RunStart<'a> {
+    /// The run's iceoryx2 service prefix.
+    pub prefix: &'a str,
+    pub daemon: &'a motion_core::daemon::config::DaemonConfig,
+    pub platform: &'a cdpr_model::config::Platform,
+    /// The waypoint file motion-core runs (None: the daemon TOML's own).
+    pub waypoints: Option<&'a Path>,
+}
+
+/// Something that follows a run next to the summary (the operator console, the run's plots):
+/// it sees every sample the launcher receives, on the launcher's thread, and is told when the
+/// run is over. It never talks to the processes of the stack.
+pub trait RunObserver {
+    fn started(&mut self, _run: &RunStart<'_>) -> Result<(), Box<dyn std::error::Error>> {
+        Ok(())
+    }
+    fn setpoint(&mut self, _sp: &JointSetpoint) {}
+    fn truth(&mut self, _t: &PlantTruth) {}
+    fn loop_stats(&mut self, _s: &LoopStatsSample) {}
+    fn event(&mut self, _e: &StateEvent) {}
+    /// After the summary was written to `out`.
+    fn finished(&mut self, _out: &Path, _summary: &Summary) {}
+}
+
+/// No observer.
+pub struct NoObserver;
+impl RunObserver for NoObserver {}
+
+/// Runs the stack once as `crs sim` does (without the --check verdict): starts the processes,
+/// follows the run, stops everything, prints and writes the summary (and the recording).
+pub fn execute(a: &SimOptions) -> Result<Summary, Box<dyn std::error::Error>> {
+    execute_observed(a, &mut NoObserver)
+}
+
+/// [`execute`] with an observer.
+pub fn execute_observed(
+    a: &SimOptions,
+    observer: &mut dyn RunObserver,
+) -> Result<Summary, Box<dyn std::error::Error>> {
+    let run_no = RUNS.fetch_add(1, Ordering::Relaxed);
+    let bin_dir = match &a.bin_dir {
+        Some(d) => d.clone(),
+        None => std::env::current_exe()?
+            .parent()
+            .map(Path::to_path_buf)
+            .ok_or("cannot locate the binary directory")?,
+    };
+    let exe = |name: &str| bin_dir.join(name);
+    for need in ["motion-core", "drive-io", "sim-plant"] {
+        if !exe(need).is_file() {
+            return Err(format!(
+                "{} not found: build the stack first (`cargo build --release --workspace --bins`) or pass --bin-dir",
+                exe(need).display()
+            )
+            .into());
+        }
+    }
+    let with_monitor = !a.no_monitor && exe("safety-monitor").is_file();
+    // Validate the inputs before anything starts.
+    let daemon = motion_core::daemon::config::load(&a.config).map_err(|e| e.to_string())?;
+    let platform = load_platform(&daemon.platform)?;
+    let p = platform.model.params();
+    let (f_min, f_max) = (p.f_min, p.f_max);
+    for f in [&a.drives, &a.plant] {
+        if !f.is_file() {
+            return Err(format!("{}: no such file", f.display()).into());
+        }
+    }
+    // Drives that validate the monitor's safety heartbeat never enable without it: refuse the
+    // run up front instead of letting drive-io time out waiting for operational drives.
+    let drives_cfg = drive_io::config::DrivesConfig::load(&a.drives)
+        .map_err(|e| format!("{}: {e}", a.drives.display()))?;
+    if drives_cfg.safety_heartbeat.is_some() && !with_monitor {
+        return Err(format!(
+            "{}: [safety_heartbeat] is set, so the drives stay braked without the safety monitor's \
+             heartbeat; {}. Use a drives config without [safety_heartbeat] to run without it",
+            a.drives.display(),
+            if a.no_monitor {
+                "--no-monitor was given".to_string()
+            } else {
+                format!("{} is not built", exe("safety-monitor").display())
+            }
+        )
+        .into());
+    }
+    if !(a.hold_s.is_finite() && a.hold_s >= 0.0 && a.timeout_s > 0.0) {
+        return Err("--hold-s must be ≥ 0 and --timeout-s > 0".into());
+    }
+    let mut recorder = match &a.record {
+        Some(_) => Some(RestRecorder::new(a.settle_s)?),
+        None => None,
+    };
+    if a.record.is_some() && a.hold_s < a.settle_s {
+        return Err(format!(
+            "--hold-s {} < --settle-s {}: the last waypoint could not become a rest point",
+            a.hold_s, a.settle_s
+        )
+        .into());
+    }
+    // The controller's command at home (the drives are homed to it) and, with --dwell-s, the
+    // waypoints timed for a rest at each.
+    let mut configured = lifecycle::configure(&daemon, &platform)?;
+    let home_q = configured
+        .home_command()
+        .map_err(|e| format!("the controller refuses the home pose: {e}"))?;
+    std::fs::create_dir_all(&a.out)?;
+    let waypoint_file = a.waypoints.clone().or(daemon.trajectory.waypoints.clone());
+    let waypoints_arg = match (a.dwell_s, &waypoint_file) {
+        (Some(dwell), Some(file)) => {
+            let wps = trajectory::read_waypoints(file)?;
+            let (timed, dur) = timed_waypoints(
+                platform.home,
+                &wps,
+                configured.planner_limits(),
+                configured.period_s(),
+                dwell,
+            )?;
+            let path = a.out.join("waypoints-timed.csv");
+            write_waypoints(
+                &path,
+                &timed,
+                &format!(
+                    "{} timed by `crs sim --dwell-s {dwell}`: rest {dwell} s at every waypoint; plan {dur:.1} s",
+                    file.display()
+                ),
+            )?;
+            println!(
+                "  {} waypoints timed for a {dwell} s rest at each: plan {dur:.1} s ({})",
+                timed.len(),
+                path.display()
+            );
+            Some(path)
+        }
+        (Some(_), None) => {
+            return Err("--dwell-s needs waypoints (--waypoints or [trajectory].waypoints)".into());
+        }
+        (None, _) => a.waypoints.clone(),
+    };
+    // SCHED_FIFO + mlockall for drive-io and sim-plant only where it cannot fail (root).
+    // SAFETY: geteuid(2) has no preconditions.
+    let rt = a.rt_priority.filter(|_| {
+        let root = unsafe { libc::geteuid() } == 0;
+        if !root {
+            println!("  --rt-priority ignored: not root (drive-io and sim-plant run SCHED_OTHER)");
+        }
+        root
+    });
+    let transport = transport::choose_transport(&a.transport, run_no)?;
+    let prefix = format!("crs-sim-{}-{run_no}/", std::process::id());
+    println!(
+        "crs sim: platform `{}`, transport {transport}, iceoryx2 prefix {prefix}, safety monitor {}",
+        platform.name,
+        if with_monitor {
+            "on"
+        } else if a.no_monitor {
+            "off (--no-monitor)"
+        } else {
+            "not built (crates/safety-monitor): running without"
+        }
+    );
+
+    supervisor::install_interrupt_handler();
+    let node = IpcNode::with_prefix("crs-sim", &prefix)?;
+    let truth = node.subscriber::<PlantTruth>()?;
+    let setpoints = node.subscriber::<JointSetpoint>()?;
+    let loop_stats = node.subscriber::<LoopStatsSample>()?;
+    let events = node.subscriber::<StateEvent>()?;
+    let heartbeats = node.subscriber::<Heartbeat>()?;
+    let feedback = node.subscriber::<DriveFeedback>()?;
+    let tracker = node.subscriber::<TrackerPose>()?;
+    observer.started(&RunStart {
+        prefix: &prefix,
+        daemon: &daemon,
+        platform: &platform,
+        waypoints: waypoints_arg.as_deref().or(waypoint_file.as_deref()),
+    })?;
+
+    let mut stack = Supervisor::new(&prefix, &a.out);
+    let s = |p: &Path| p.display().to_string();
+    let wait_for =
+        |what: &str, secs: f64, ready: &mut dyn FnMut() -> bool, stack: &mut Supervisor| {
+            let t0 = Instant::now();
+            while !ready() {
+                if let Some(e) = stack.exited() {
+                    return Err(format!(
+                        "{} exited ({}) while waiting for {what}:\n{}",
+                        e.name,
+                        e.status,
+                        supervisor::log_tail(&e.log, 15)
+                    ));
+                }
+                if supervisor::interrupted() {
+                    return Err("interrupted".to_string());
+                }
+                if t0.elapsed().as_secs_f64() > secs {
+                    return Err(format!("timed out after {secs} s waiting for {what}"));
+                }
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            Ok(())
+        };
+
+    let rt_args = |p: Option<i32>| match p {
+        Some(p) => vec!["--rt-priority".to_string(), p.to_string()],
+        None => Vec::new(),
+    };
+    stack.spawn(
+        "sim-plant",
+        &exe("sim-plant"),
+        &[
+            rt_args(rt.map(|p| p - 5)),
+            vec![
+                "--plant".into(),
+                s(&a.plant),
+                "--drives".into(),
+                s(&a.drives),
+                "--transport".into(),
+                transport.clone(),
+                "--control-platform".into(),
+                s(&daemon.platform),
+                "--home-lengths-m".into(),
+                home_q
+                    .iter()
+                    .map(|q| format!("{q:?}"))
+                    .collect::<Vec<_>>()
+                    .join(","),
+            ],
+        ]
+        .concat(),
+        &[],
+    )?;
+    let mut first_truth = None;
+    wait_for(
+        "the plant's first state",
+        20.0,
+        &mut || {
+            while let Ok(Some(t)) = truth.receive() {
+                first_truth = Some(t);
+            }
+            first_truth.is_some()
+        },
+        &mut stack,
+    )?;
+    if with_monitor {
+        stack.spawn(
+            "safety-monitor",
+            &exe("safety-monitor"),
+            &[
+                "--config".into(),
+                s(&a.monitor_config),
+                "--transport".into(),
+                transport.clone(),
+            ],
+            &[],
+        )?;
+    }
+    stack.spawn(
+        "drive-io",
+        &exe("drive-io"),
+        &[
+            rt_args(rt),
+            vec![
+                "--config".into(),
+                s(&a.drives),
+                "--transport".into(),
+                transport.clone(),
+            ],
+        ]
+        .concat(),
+        &[],
+    )?;
+    let operational = crs_ipc::BusState::Ready as u32;
+    wait_for(
+        "the drives to be operational (NMT boot, SDO, CiA 402 enable)",
+        30.0,
+        &mut || {
+            let mut ok = false;
+            while let Ok(Some(f)) = feedback.receive() {
+                ok |= f.bus_state == operational;
+            }
+            ok
+        },
+        &mut stack,
+    )?;
+    let mut mc_args = vec![
+        "--config".into(),
+        s(&a.config),
+        "--exit-after-plan-s".into(),
+        a.hold_s.to_string(),
+    ];
+    if let Some(w) = &waypoints_arg {
+        mc_args.push("--waypoints".into());
+        mc_args.push(s(w));
+    }
+    stack.spawn("motion-core", &exe("motion-core"), &mc_args, &[])?;
+
+    // Follow the run.
+    let mut sum = Summary {
+        transport: transport.clone(),
+        monitor: with_monitor,
+        force_min_n: f64::INFINITY,
+        static_position_mm: f64::NAN,
+        static_rotation_deg: f64::NAN,
+        force_max_n: f64::NEG_INFINITY,
+        f_min_n: f_min,
+        f_max_n: f_max,
+        ..Summary::default()
+    };
+    let mut refs: std::collections::VecDeque<(u64, [f64; 6])> = Default::default();
+    let (mut sum_p, mut sum_r, mut n_track) = (0.0, 0.0, 0u64);
+    let mut last_truth = first_truth;
+    let mut last_ref = None;
+    let mut last_sp_ns = 0u64;
+    let mut was_running = false;
+    let mut bus_stop: Option<(u64, u32)> = None;
+    let t0 = Instant::now();
+    let result: Result<(), String> = loop {
+        std::thread::sleep(Duration::from_millis(5));
+        while let Ok(Some(sp)) = setpoints.receive() {
+            observer.setpoint(&sp);
+            sum.setpoints += 1;
+            last_sp_ns = last_sp_ns.max(sp.timestamp_ns);
+            if let Some(r) = recorder.as_mut() {
+                let m = (sp.cable_count as usize).min(crs_ipc::MAX_CABLES);
+                r.setpoint(sp.timestamp_ns, sp.pose, &sp.cable_length_m[..m]);
+            }
+            refs.push_back((sp.timestamp_ns, sp.pose));
+            last_ref = Some(sp.pose);
+            if refs.len() > 4000 {
+                refs.pop_front();
+            }
+        }
+        while let Ok(Some(t)) = truth.receive() {
+            observer.truth(&t);
+            sum.plant_samples += 1;
+            if t.converged == 0 {
+                sum.non_converged_plant_steps += 1;
+            }
+            for f in &t.force_n[..t.cable_count as usize] {
+                sum.force_min_n = sum.force_min_n.min(*f);
+                sum.force_max_n = sum.force_max_n.max(*f);
+            }
+            // Tracking error against the newest reference published before this plant state.
+            if let Some((_, x_ref)) = refs.iter().rev().find(|(ts, _)| *ts <= t.timestamp_ns) {
+                let (dp, dr) = Pose::from_array(t.pose).error_to(&Pose::from_array(*x_ref));
+                sum_p += dp;
+                sum_r += dr;
+                n_track += 1;
+                sum.tracking_position_max_mm = sum.tracking_position_max_mm.max(dp * 1e3);
+                sum.tracking_rotation_max_deg = sum.tracking_rotation_max_deg.max(dr.to_degrees());
+            }
+            if let Some(r) = recorder.as_mut() {
+                r.truth(t.timestamp_ns, t.pose);
+            }
+            last_truth = Some(t);
+        }
+        while let Ok(Some(tp)) = tracker.receive() {
+            if let Some(r) = recorder.as_mut() {
+                r.tracker(tp.timestamp_ns, tp.pose, tp.valid != 0);
+            }
+        }
+        while let Ok(Some(s)) = loop_stats.receive() {
+            observer.loop_stats(&s);
+            sum.loop_cycles = s.cycles;
+            sum.loop_overruns = s.overruns;
+            sum.loop_rejected = s.rejected;
+            sum.loop_lateness_p99_us = s.lateness_p99_ns as f64 * 1e-3;
+            sum.loop_lateness_max_us = s.lateness_max_ns as f64 * 1e-3;
+            sum.loop_compute_p99_us = s.compute_p99_ns as f64 * 1e-3;
+        }
+        while let Ok(Some(e)) = events.receive() {
+            observer.event(&e);
+            if let Ok(crs_ipc::Event::EStop { .. }) = e.decode() {
+                sum.estops += 1;
+                println!("  E-STOP from process {} (detail {})", e.source, e.detail);
+            }
+        }
+        while let Ok(Some(h)) = heartbeats.receive() {
+            if h.source == ProcessId::SafetyMonitor as u32 {
+                sum.monitor_heartbeats += 1;
+            }
+        }
+        while let Ok(Some(f)) = feedback.receive() {
+            if f.fault_code != 0 {
+                sum.drive_faults += 1;
+            }
+            was_running |= f.bus_state == crs_ipc::BusState::Running as u32;
+            if was_running && bus_stop.is_none() && f.bus_state != crs_ipc::BusState::Running as u32
+            {
+                bus_stop = Some((f.timestamp_ns, f.bus_state));
+            }
+            if let Some(r) = recorder.as_mut() {
+                let m = (f.cable_count as usize).min(crs_ipc::MAX_CABLES);
+                r.forces(f.timestamp_ns, &f.cable_force_n[..m]);
+            }
+        }
+        if supervisor::interrupted() {
+            break Err("interrupted (Ctrl-C): stopped all processes".into());
+        }
+        if let Some(e) = stack.exited() {
+            if e.name == "motion-core" && e.status.success() {
+                break Ok(());
+            }
+            break Err(format!(
+                "{} exited ({}); stopping the stack:\n{}",
+                e.name,
+                e.status,
+                supervisor::log_tail(&e.log, 20)
+            ));
+        }
+        if t0.elapsed().as_secs_f64() > a.timeout_s {
+            break Err(format!("timed out after {} s", a.timeout_s));
+        }
+    };
+    // Let the last plant states arrive, then stop everything.
+    std::thread::sleep(Duration::from_millis(50));
+    while let Ok(Some(t)) = truth.receive() {
+        last_truth = Some(t);
+    }
+    stack.stop_all();
+    if n_track > 0 {
+        sum.tracking_position_mean_mm = sum_p / n_track as f64 * 1e3;
+        sum.tracking_rotation_mean_deg = (sum_r / n_track as f64).to_degrees();
+    }
+    // The static error is only that after a completed run (motion-core ended its plan and
+    // held); an aborted run leaves it NaN ("not reached").
+    if let (Some(t), Some(r), Ok(())) = (last_truth, last_ref, &result) {
+        let (dp, dr) = Pose::from_array(t.pose).error_to(&Pose::from_array(r));
+        sum.static_position_mm = dp * 1e3;
+        sum.static_rotation_deg = dr.to_degrees();
+    }
+    sum.duration_s = t0.elapsed().as_secs_f64();
+    // A stop after the last setpoint is the normal end (motion-core exited, setpoints went
+    // stale); one while setpoints kept coming (50 ms later) interrupted the run.
+    if let Some((ts, state)) = bus_stop
+        && last_sp_ns > ts + 50_000_000
+    {
+        let name = crs_ipc::BusState::from_u32(state)
+            .map_or(format!("state {state}"), |b| format!("{b:?}"));
+        sum.bus_stopped_during_run = Some(format!(
+            "{name} {:.3} s before the last setpoint",
+            (last_sp_ns - ts) as f64 * 1e-9
+        ));
+    }
+    if let Some(r) = recorder.as_mut() {
+        r.finish();
+        sum.rest = rest_errors(&r.samples);
+        sum.rest_points_skipped = r.skipped.len();
+    }
+    print_summary(&sum);
+    if let (Some(path), Some(r), Ok(())) = (&a.record, &recorder, &result) {
+        let m = platform.model.m();
+        let campaign = a.campaign.clone().unwrap_or_else(|| {
+            waypoint_file
+                .as_ref()
+                .and_then(|f| f.file_stem())
+                .map_or("waypoints".into(), |n| n.to_string_lossy().into_owned())
+        });
+        let meta = vec![
+            (
+                "platform".to_string(),
+                format!("{} ({})", platform.name, daemon.platform.display()),
+            ),
+            (
+                "control_model".into(),
+                if daemon.surrogate.is_some() {
+                    "kinematic+surrogate".into()
+                } else {
+                    "kinematic".into()
+                },
+            ),
+            ("campaign".into(), campaign),
+            (
+                "recorded".into(),
+                format!(
+                    "crs sim on the running stack ({}): rest points after {} s settled, last tracker/force reading before the reference moved",
+                    transport, a.settle_s
+                ),
+            ),
+            ("force_limits_n".into(), format!("{f_min} {f_max}")),
+        ];
+        let ds = to_dataset(&r.samples, m, meta)?;
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)?;
+        }
+        crs_dataset::save_dataset(path, &ds).map_err(|e| format!("{}: {e}", path.display()))?;
+        println!(
+            "recorded {} rest points to {}",
+            r.samples.len(),
+            path.display()
+        );
+        sum.record = Some(path.clone());
+    }
+    let json = a.out.join("summary.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&sum)?)?;
+    println!("summary written to {}", json.display());
+    observer.finished(&a.out, &sum);
+    result?;
+    if sum.plant_samples == 0 || sum.setpoints == 0 {
+        return Err("the run produced no plant states or no setpoints".into());
+    }
+    Ok(sum)
+}
+
+fn print_summary(s: &Summary) {
+    println!("\n== crs sim summary ({})", s.transport);
+    println!(
+        "  setpoints {}, plant states {} ({} without equilibrium)",
+        s.setpoints, s.plant_samples, s.non_converged_plant_steps
+    );
+    println!(
+        "  tracked pose vs reference: position mean {:.2} mm, max {:.2} mm; rotation mean {:.3}°, max {:.3}°",
+        s.tracking_position_mean_mm,
+        s.tracking_position_max_mm,
+        s.tracking_rotation_mean_deg,
+        s.tracking_rotation_max_deg
+    );
+    if s.static_position_mm.is_nan() {
+        println!("  at rest after the trajectory: not reached (the run did not complete)");
+    } else {
+        println!(
+            "  at rest after the trajectory: position {:.2} mm, rotation {:.3}°",
+            s.static_position_mm, s.static_rotation_deg
+        );
+    }
+    if s.rest.rest_points > 0 || s.rest_points_skipped > 0 {
+        let r = &s.rest;
+        println!(
+            "  rest points: {} ({} skipped); measured (tracker) vs reference: position mean {:.2} mm, max {:.2} mm; rotation mean {:.3}°, max {:.3}° (true: {:.2} / {:.2} mm)",
+            r.rest_points,
+            s.rest_points_skipped,
+            r.position_mean_mm,
+            r.position_max_mm,
+            r.rotation_mean_deg,
+            r.rotation_max_deg,
+            r.true_position_mean_mm,
+            r.true_position_max_mm
+        );
+    }
+    let ok = s.force_min_n >= s.f_min_n && s.force_max_n <= s.f_max_n;
+    println!(
+        "  cable forces {:.0} … {:.0} N (limits {:.0} … {:.0} N): {}",
+        s.force_min_n,
+        s.force_max_n,
+        s.f_min_n,
+        s.f_max_n,
+        if ok { "within" } else { "OUTSIDE" }
+    );
+    println!(
+        "  loop: {} cycles, {} overruns, {} rejected; lateness p99 {:.1} µs, max {:.1} µs; compute p99 {:.1} µs",
+        s.loop_cycles,
+        s.loop_overruns,
+        s.loop_rejected,
+        s.loop_lateness_p99_us,
+        s.loop_lateness_max_us,
+        s.loop_compute_p99_us
+    );
+    println!(
+        "  safety monitor: {}; e-stops {}; drive faults reported {}",
+        if s.monitor {
+            format!("{} heartbeats", s.monitor_heartbeats)
+        } else {
+            "not running".into()
+        },
+        s.estops,
+        s.drive_faults
+    );
+    if let Some(b) = &s.bus_stopped_during_run {
+        println!("  DRIVE BUS STOPPED DURING THE RUN: {b}; the drives held from then on");
+    }
+}

@@ -1,0 +1,180 @@
+//! The dependency rules of docs/architecture.md, checked on the resolved graph
+//! (`cargo metadata`): transitive NORMAL dependencies only (dev/build dependencies may differ).
+//! A crate that gains a forbidden dependency, directly or through another crate, fails here.
+
+use serde_json::Value;
+use std::collections::{BTreeSet, HashMap};
+
+fn graph() -> (HashMap<String, Vec<String>>, HashMap<String, String>) {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    // The stack is Linux-only: resolve for this host's triple (other platforms' crates need
+    // not be downloaded).
+    let triple = format!("{}-unknown-linux-gnu", std::env::consts::ARCH);
+    let out = std::process::Command::new(cargo)
+        .args(["metadata", "--format-version", "1", "--offline"])
+        .args(["--filter-platform", &triple])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("running cargo metadata");
+    assert!(
+        out.status.success(),
+        "cargo metadata: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let m: Value = serde_json::from_slice(&out.stdout).expect("cargo metadata JSON");
+    let mut name_of = HashMap::new();
+    for p in m["packages"].as_array().unwrap() {
+        name_of.insert(
+            p["id"].as_str().unwrap().to_string(),
+            p["name"].as_str().unwrap().to_string(),
+        );
+    }
+    let mut deps = HashMap::new();
+    for n in m["resolve"]["nodes"].as_array().unwrap() {
+        let normal: Vec<String> = n["deps"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|d| {
+                d["dep_kinds"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|k| k["kind"].is_null())
+            })
+            .map(|d| d["pkg"].as_str().unwrap().to_string())
+            .collect();
+        deps.insert(n["id"].as_str().unwrap().to_string(), normal);
+    }
+    (deps, name_of)
+}
+
+/// Names of every crate `krate` pulls in through normal dependencies.
+fn closure(krate: &str) -> BTreeSet<String> {
+    let (deps, name_of) = graph();
+    let root = name_of
+        .iter()
+        .find(|(_, n)| n.as_str() == krate)
+        .map(|(id, _)| id.clone())
+        .unwrap_or_else(|| panic!("{krate} is not in the workspace graph"));
+    let mut seen = BTreeSet::new();
+    let mut todo = vec![root];
+    while let Some(id) = todo.pop() {
+        for d in deps.get(&id).into_iter().flatten() {
+            if seen.insert(name_of[d].clone()) {
+                todo.push(d.clone());
+            }
+        }
+    }
+    seen
+}
+
+fn forbid(krate: &str, forbidden: &[&str]) {
+    let c = closure(krate);
+    let hits: Vec<&&str> = forbidden.iter().filter(|f| c.contains(**f)).collect();
+    assert!(hits.is_empty(), "{krate} depends on {hits:?}");
+}
+
+/// IPC, real time, CAN and CLI crates.
+const RUNTIME: [&str; 7] = [
+    "iceoryx2",
+    "socketcan",
+    "clap",
+    "ruckig",
+    "crs-ipc",
+    "can-transport",
+    "tracing-subscriber",
+];
+
+#[test]
+fn the_model_library_and_the_data_format_pull_in_no_ipc_rt_can_or_cli() {
+    forbid("cdpr-model", &RUNTIME);
+    forbid("crs-dataset", &RUNTIME);
+    forbid("surrogate", &RUNTIME);
+}
+
+#[test]
+fn the_contract_crates_depend_on_no_other_layer() {
+    forbid(
+        "crs-ipc",
+        &[
+            "cdpr-model",
+            "motion-core",
+            "drive-io",
+            "sim-plant",
+            "crs-stack",
+        ],
+    );
+    forbid(
+        "can-transport",
+        &[
+            "cdpr-model",
+            "motion-core",
+            "crs-ipc",
+            "drive-io",
+            "sim-plant",
+        ],
+    );
+}
+
+#[test]
+fn the_closure_is_transitive() {
+    // motion-core → crs-ipc → iceoryx2: a rule on a transitive crate can fail.
+    let c = closure("motion-core");
+    assert!(c.contains("crs-ipc") && c.contains("iceoryx2"), "{c:?}");
+}
+
+#[test]
+fn the_daemon_does_not_link_the_bus_the_simulator_or_the_stack() {
+    forbid(
+        "motion-core",
+        &[
+            "drive-io",
+            "can-transport",
+            "socketcan",
+            "sim-plant",
+            "calibrate",
+            "crs-stack",
+        ],
+    );
+}
+
+#[test]
+fn the_safety_monitor_shares_no_code_with_the_controller() {
+    forbid(
+        "safety-monitor",
+        &[
+            "cdpr-model",
+            "motion-core",
+            "surrogate",
+            "sim-plant",
+            "drive-io",
+            "crs-stack",
+        ],
+    );
+}
+
+#[test]
+fn only_the_command_line_uses_the_stack_library() {
+    let (deps, name_of) = graph();
+    for (id, ds) in &deps {
+        let who = &name_of[id];
+        if who == "crs" {
+            continue;
+        }
+        assert!(
+            !ds.iter()
+                .any(|d| name_of[d] == "crs-stack" || name_of[d] == "crs"),
+            "{who} depends on the stack library or the CLI"
+        );
+    }
+}
+
+#[test]
+#[ignore = "holds once calibrate's bench binary stops linking sim-plant (issue 14 step 2, merged with helper i13's work)"]
+fn calibration_needs_neither_the_simulator_nor_the_bus() {
+    forbid(
+        "calibrate",
+        &["sim-plant", "drive-io", "iceoryx2", "socketcan"],
+    );
+}
