@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Times the 62-parameter elastostatic identification (spec eq. 4.38, 6.14) in Rust
-(crates/calibrate, bin calibrate-bench) next to scipy.optimize.least_squares on the same data
+(crates/calibrate, example calibrate_bench) next to scipy.optimize.least_squares on the same data
 and start point, in one run, and checks both reach the same optimum.
 
 Usage:  python3 benches/calibrate_vs_scipy.py   (from the workspace root; needs numpy, scipy)
@@ -18,7 +18,7 @@ from scipy.optimize import least_squares
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXPORT = "/tmp/calibrate_bench.json"
 
-subprocess.run(["cargo", "run", "--release", "-q", "-p", "calibrate", "--bin", "calibrate-bench", "--",
+subprocess.run(["cargo", "run", "--release", "-q", "-p", "calibrate", "--example", "calibrate_bench", "--",
                 "--export", EXPORT, "--repeat", "20"], check=True, cwd=ROOT)
 d = json.load(open(EXPORT))
 m = d["m"]

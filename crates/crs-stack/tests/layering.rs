@@ -171,7 +171,6 @@ fn only_the_command_line_uses_the_stack_library() {
 }
 
 #[test]
-#[ignore = "holds once calibrate's bench binary stops linking sim-plant (issue 14 step 2, merged with helper i13's work)"]
 fn calibration_needs_neither_the_simulator_nor_the_bus() {
     forbid(
         "calibrate",

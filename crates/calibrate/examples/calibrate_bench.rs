@@ -2,7 +2,7 @@
 //! the 91 pose samples of the CRS-like campaign (config/plant/campaign-91.toml), for the
 //! comparison with scipy.optimize.least_squares in benches/calibrate_vs_scipy.py.
 //!
-//! Usage: calibrate-bench [--export FILE.json] [--repeat N]
+//! Usage: cargo run --release -p calibrate --example calibrate_bench -- [--export FILE.json] [--repeat N]
 //! Writes the data, start point, scales, weights and the Rust optimum/timing to FILE.json.
 
 use calibrate::params::{Group, group};
