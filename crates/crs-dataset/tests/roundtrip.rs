@@ -126,9 +126,10 @@ fn malformed_files_are_rejected_with_line_numbers() {
     fields[2] = "7";
     let (_, msg) = err_of(&with(row, &fields.join(",")));
     assert!(msg.contains("phase"));
-    // no header at all
-    let (line, _) = err_of(&format!("# format: {FORMAT}\n# units: {UNITS}\n"));
-    assert_eq!(line, None);
+    // no header at all: the error points at the end of the file
+    let (line, msg) = err_of(&format!("# format: {FORMAT}\n# units: {UNITS}\n"));
+    assert_eq!(line, Some(2));
+    assert!(msg.contains("header"), "{msg}");
 }
 
 #[test]
