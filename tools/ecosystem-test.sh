@@ -67,17 +67,28 @@ grep -q 'pose.svg' "$OUT/sim/index.html"
 echo "  $(ls "$OUT"/sim/*.log | wc -l) logs without escapes; plots and index.html written"
 
 echo "-- man pages and completions"
-"$BIN/crs" --help | grep -q "console"
-"$BIN/crs" gen-man "$OUT/man" | grep -q "man pages"
+# Producers write to files and grep reads the files: `producer | grep -q` under pipefail fails
+# at random when grep exits before the producer has written everything (SIGPIPE / EPIPE).
+"$BIN/crs" --help > "$OUT/help.txt"
+grep -q "console" "$OUT/help.txt"
+"$BIN/crs" gen-man "$OUT/man" > "$OUT/gen-man.txt"
+grep -q "man pages" "$OUT/gen-man.txt"
 for p in crs crs-sim crs-console crs-model-ik; do
   [ -s "$OUT/man/$p.1" ] || { echo "missing man page $p.1"; exit 1; }
 done
-MANWIDTH=100 man -l "$OUT/man/crs-sim.1" 2>"$OUT/man-warnings.txt" | grep -q -- "--console"
+MANWIDTH=100 man -l "$OUT/man/crs-sim.1" >"$OUT/crs-sim.man.txt" 2>"$OUT/man-warnings.txt"
+grep -q -- "--console" "$OUT/crs-sim.man.txt"
 [ ! -s "$OUT/man-warnings.txt" ] || { cat "$OUT/man-warnings.txt"; exit 1; }
 "$BIN/crs" completions bash > "$OUT/crs.bash"
-bash -c "source '$OUT/crs.bash' && complete -p crs" | grep -q "crs"
-"$BIN/crs" completions zsh | grep -q "#compdef crs"
-"$BIN/crs" completions fish | grep -q "complete -c crs"
+bash -c "source '$OUT/crs.bash' && complete -p crs" > "$OUT/complete-p.txt"
+grep -q "crs" "$OUT/complete-p.txt"
+"$BIN/crs" completions zsh > "$OUT/crs.zsh"
+grep -q "#compdef crs" "$OUT/crs.zsh"
+"$BIN/crs" completions fish > "$OUT/crs.fish"
+grep -q "complete -c crs" "$OUT/crs.fish"
+# An early-closing reader is not a crash (clap_complete panics on a failed write; crs must not).
+"$BIN/crs" completions zsh 2>"$OUT/completions-pipe.err" | head -c 1 >/dev/null || true
+if grep -q "panicked" "$OUT/completions-pipe.err"; then cat "$OUT/completions-pipe.err"; exit 1; fi
 echo "  $(ls "$OUT"/man | wc -l) man pages render; bash/zsh/fish completions generated"
 
 echo "-- tools/install.sh into a DESTDIR"

@@ -30,7 +30,16 @@ pub fn gen_man(cmd: clap::Command, dir: &Path) -> Result<Vec<std::path::PathBuf>
     Ok(written)
 }
 
-/// Prints the completion script for `shell` to stdout.
-pub fn completions(mut cmd: clap::Command, shell: clap_complete::Shell) {
-    clap_complete::generate(shell, &mut cmd, "crs", &mut std::io::stdout());
+/// Prints the completion script for `shell` to stdout. A reader that closes the pipe early
+/// (`crs completions zsh | grep -q …`) is not an error: the script is rendered into memory first
+/// (clap_complete panics on a failed write) and a broken pipe ends the output quietly.
+pub fn completions(mut cmd: clap::Command, shell: clap_complete::Shell) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut buf = Vec::new();
+    clap_complete::generate(shell, &mut cmd, "crs", &mut buf);
+    let mut out = std::io::stdout().lock();
+    match out.write_all(&buf).and_then(|()| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => other,
+    }
 }

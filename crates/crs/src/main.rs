@@ -75,8 +75,7 @@ fn main() -> ExitCode {
             .map(|files| println!("wrote {} man pages to {}", files.len(), dir.display()))
             .map_err(Into::into),
         Command::Completions { shell } => {
-            gen_cmd::completions(Cli::command(), shell);
-            Ok(())
+            gen_cmd::completions(Cli::command(), shell).map_err(Into::into)
         }
     };
     match result {
