@@ -14,6 +14,11 @@ cargo clippy --workspace --all-targets -- -D warnings
 echo "== cargo test (host)"
 cargo test --workspace
 
+echo "== model analysis tools against scipy (HiGHS LP: exact wrench feasibility, eq. 3.29)"
+python3 -c "import numpy, scipy" 2>/dev/null || pip install -q numpy scipy >/dev/null 2>&1
+cargo build -q -p crs --bin crs
+python3 tools/feasibility_vs_scipy.py "${CARGO_TARGET_DIR:-target}/debug/crs" 40
+
 echo "== systemd units (systemd-analyze verify + the stack's unit policy)"
 bash tools/systemd-verify.sh
 

@@ -4,9 +4,9 @@
 
 use cdpr_model::config::load_platform;
 use cdpr_model::forward::{self, FkOptions};
-use cdpr_model::{Data, Pose, elastostatics, kinematics, statics};
+use cdpr_model::{Data, Pose, elastostatics, feasibility, kinematics, statics};
 use criterion::{Criterion, criterion_group, criterion_main};
-use nalgebra::Vector3;
+use nalgebra::{DVector, Vector3};
 use std::hint::black_box;
 
 fn platform(name: &str) -> cdpr_model::Model {
@@ -50,6 +50,16 @@ fn benches(c: &mut Criterion) {
                 kinematics::inverse(&model, &mut data, black_box(&pose)).unwrap();
                 statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut f).unwrap()
             })
+        });
+        // Exact wrench feasibility (eq. 3.29, issue 17): the dedicated vertex solver against
+        // microlp's simplex on the same pose; the closed form above is the hard loop's test.
+        let at = statics::structure_matrix(&data);
+        let w = DVector::from_column_slice(p.w_e.as_slice());
+        c.bench_function(&format!("feasibility_exact_vertex_{name}"), |b| {
+            b.iter(|| feasibility::exact_vertex(black_box(&at), &w, p.f_min, p.f_max).unwrap())
+        });
+        c.bench_function(&format!("feasibility_exact_simplex_{name}"), |b| {
+            b.iter(|| feasibility::exact_lp(black_box(&at), &w, p.f_min, p.f_max).unwrap())
         });
         kinematics::inverse(&model, &mut data, &pose).unwrap();
         let q = data.q.clone();

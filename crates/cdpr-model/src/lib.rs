@@ -12,6 +12,7 @@
 //! | elastostatics, stiffness | [`elastostatics`] | 2.33–2.41, 2.66–2.80 |
 //! | forward kinematics ν, ν_el | [`forward`] | 2.9–2.15, 2.42–2.43, 2.81 |
 //! | wrench-feasible workspace | [`workspace`] | 3.29 |
+//! | exact wrench feasibility (LP) | [`feasibility`] | 3.29, 2.38–2.40 |
 //! | operator TOML | [`config`] | tables 5.1, eq. 5.8, 5.12, 5.17, 6.1, 6.20 |
 //!
 //! This crate knows nothing of IPC, real time, CAN or command lines: the daemon (`motion-core`),
@@ -27,6 +28,7 @@
 
 pub mod config;
 pub mod elastostatics;
+pub mod feasibility;
 pub mod forward;
 pub mod kinematics;
 pub mod model;

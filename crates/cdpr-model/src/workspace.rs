@@ -1,12 +1,46 @@
 //! Wrench-feasible workspace (eq. 3.29): the per-pose check, a constant-orientation grid
 //! sampler (volume fraction and boundary points) and the workspace hull after Pott (2008):
 //! line searches from a feasible centre along the vertices of a subdivided icosahedron.
+//! Every sampler takes the test it applies: the closed form of eq. (3.41) (sufficient, the hard
+//! loop's test) or the exact LP of [`crate::feasibility`] (necessary and sufficient).
 
-use crate::kinematics;
+use crate::feasibility::{self, ExactFeasibility, FeasibilityError};
+use crate::kinematics::{self, KinematicsError};
 use crate::model::{Data, Model};
 use crate::pose::Pose;
-use crate::statics::{self, ForceDistribution};
-use nalgebra::Vector3;
+use crate::statics::{self, ForceDistribution, StaticsError};
+use nalgebra::{DVector, Vector3};
+
+/// Which wrench-feasibility test a workspace computation applies (eq. 3.29).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FeasibilityTest {
+    /// The closed-form distribution of eq. (3.41) inside the limits: sufficient, not necessary.
+    ClosedForm,
+    /// Some distribution inside the limits exists (max-margin LP): necessary and sufficient.
+    Exact,
+}
+
+impl FeasibilityTest {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::ClosedForm => "closed form (eq. 3.41)",
+            Self::Exact => "exact (LP, eq. 3.29)",
+        }
+    }
+}
+
+/// Why a pose could not be evaluated (counted as infeasible by the samplers).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum WorkspaceError {
+    #[error("inverse kinematics: {0}")]
+    Kinematics(#[from] KinematicsError),
+    #[error("statics: {0}")]
+    Statics(#[from] StaticsError),
+    #[error("exact feasibility: {0}")]
+    Exact(#[from] FeasibilityError),
+    #[error("the hull centre [{:.3}, {:.3}, {:.3}] m is not wrench feasible", .0.x, .0.y, .0.z)]
+    CentreInfeasible(Vector3<f64>),
+}
 
 /// Axis-aligned box of platform positions, m.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -33,17 +67,38 @@ pub fn check_pose(
     data: &mut Data,
     pose: &Pose,
     f_out: &mut [f64],
-) -> Result<ForceDistribution, String> {
-    kinematics::inverse(model, data, pose).map_err(|e| e.to_string())?;
+) -> Result<ForceDistribution, WorkspaceError> {
+    kinematics::inverse(model, data, pose)?;
     let p = model.params();
-    statics::force_distribution(data, &p.w_e, p.f_min, p.f_max, f_out).map_err(|e| e.to_string())
+    Ok(statics::force_distribution(
+        data, &p.w_e, p.f_min, p.f_max, f_out,
+    )?)
 }
 
-fn feasible(model: &Model, data: &mut Data, pose: &Pose) -> bool {
-    let mut f = std::mem::take(&mut data.scratch_a);
-    let ok = check_pose(model, data, pose, &mut f).is_ok_and(|fd| fd.feasible);
-    data.scratch_a = f;
-    ok
+/// Exact wrench feasibility of a pose (eq. 3.29, [`feasibility::exact`]): some distribution
+/// within [f_min, f_max] balances w_e. Analysis tool (allocates).
+pub fn check_pose_exact(
+    model: &Model,
+    data: &mut Data,
+    pose: &Pose,
+) -> Result<ExactFeasibility, WorkspaceError> {
+    kinematics::inverse(model, data, pose)?;
+    let p = model.params();
+    let at = statics::structure_matrix(data);
+    let w = DVector::from_column_slice(p.w_e.as_slice());
+    Ok(feasibility::exact(&at, &w, p.f_min, p.f_max)?)
+}
+
+fn feasible(model: &Model, data: &mut Data, pose: &Pose, test: FeasibilityTest) -> bool {
+    match test {
+        FeasibilityTest::ClosedForm => {
+            let mut f = std::mem::take(&mut data.scratch_a);
+            let ok = check_pose(model, data, pose, &mut f).is_ok_and(|fd| fd.feasible);
+            data.scratch_a = f;
+            ok
+        }
+        FeasibilityTest::Exact => check_pose_exact(model, data, pose).is_ok_and(|e| e.feasible),
+    }
 }
 
 /// Result of a grid sampling of the constant-orientation workspace.
@@ -64,12 +119,23 @@ pub struct GridResult {
 }
 
 /// Samples `bounds` on a regular grid (`resolution` points per axis, ≥ 2) at constant
-/// orientation `phi` (rad).
+/// orientation `phi` (rad) with the closed-form test.
 pub fn sample_grid(
     model: &Model,
     bounds: &PositionBox,
     phi: &Vector3<f64>,
     resolution: [usize; 3],
+) -> GridResult {
+    sample_grid_with(model, bounds, phi, resolution, FeasibilityTest::ClosedForm)
+}
+
+/// [`sample_grid`] with the chosen feasibility test.
+pub fn sample_grid_with(
+    model: &Model,
+    bounds: &PositionBox,
+    phi: &Vector3<f64>,
+    resolution: [usize; 3],
+    test: FeasibilityTest,
 ) -> GridResult {
     let mut data = Data::new(model);
     let [nx, ny, nz] = resolution.map(|n| n.max(2));
@@ -84,7 +150,7 @@ pub fn sample_grid(
                     k as f64 / (nz - 1) as f64,
                 );
                 let r = bounds.min + (bounds.max - bounds.min).component_mul(&t);
-                let ok = feasible(model, &mut data, &Pose::new(r, *phi));
+                let ok = feasible(model, &mut data, &Pose::new(r, *phi), test);
                 points.push((r, ok));
             }
         }
@@ -140,6 +206,7 @@ pub struct Hull {
 /// Computes the hull around `center` at orientation `phi`. `subdivisions` refines the
 /// icosahedron (0: 12 rays, 1: 42, 2: 162, 3: 642); `max_radius` bounds the ray search (m) and
 /// `tolerance` is the bisection tolerance (m). Errors if `center` itself is not feasible.
+/// Closed-form test.
 pub fn hull(
     model: &Model,
     center: &Vector3<f64>,
@@ -147,13 +214,31 @@ pub fn hull(
     subdivisions: usize,
     max_radius: f64,
     tolerance: f64,
-) -> Result<Hull, String> {
+) -> Result<Hull, WorkspaceError> {
+    hull_with(
+        model,
+        center,
+        phi,
+        subdivisions,
+        max_radius,
+        tolerance,
+        FeasibilityTest::ClosedForm,
+    )
+}
+
+/// [`hull`] with the chosen feasibility test.
+pub fn hull_with(
+    model: &Model,
+    center: &Vector3<f64>,
+    phi: &Vector3<f64>,
+    subdivisions: usize,
+    max_radius: f64,
+    tolerance: f64,
+    test: FeasibilityTest,
+) -> Result<Hull, WorkspaceError> {
     let mut data = Data::new(model);
-    if !feasible(model, &mut data, &Pose::new(*center, *phi)) {
-        return Err(format!(
-            "the hull centre [{:.3}, {:.3}, {:.3}] m is not wrench feasible",
-            center.x, center.y, center.z
-        ));
+    if !feasible(model, &mut data, &Pose::new(*center, *phi), test) {
+        return Err(WorkspaceError::CentreInfeasible(*center));
     }
     let (dirs, triangles) = icosphere(subdivisions);
     let mut vertices = Vec::with_capacity(dirs.len());
@@ -164,7 +249,7 @@ pub fn hull(
         let steps = 32;
         for s in 1..=steps {
             let t = max_radius * s as f64 / steps as f64;
-            if !feasible(model, &mut data, &Pose::new(center + d * t, *phi)) {
+            if !feasible(model, &mut data, &Pose::new(center + d * t, *phi), test) {
                 hi = t;
                 break;
             }
@@ -173,7 +258,7 @@ pub fn hull(
         if lo < hi {
             while hi - lo > tolerance {
                 let mid = 0.5 * (lo + hi);
-                if feasible(model, &mut data, &Pose::new(center + d * mid, *phi)) {
+                if feasible(model, &mut data, &Pose::new(center + d * mid, *phi), test) {
                     lo = mid;
                 } else {
                     hi = mid;

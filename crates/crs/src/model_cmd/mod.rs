@@ -1,0 +1,201 @@
+//! `crs model …`: inverse/forward kinematics, force distribution, stiffness and workspace of a
+//! platform TOML at a pose, as tables for people or JSON for scripts. Units on the command line
+//! are named in the flags: positions in m, angles in degrees, lengths in m, forces in N.
+
+mod kinematics;
+mod statics;
+mod workspace;
+
+use cdpr_model::Pose;
+use cdpr_model::config::{Platform, load_platform};
+use nalgebra::Vector3;
+use serde_json::json;
+use std::error::Error;
+use std::path::PathBuf;
+
+pub(crate) type Res = Result<(), Box<dyn Error>>;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct Common {
+    /// Platform TOML.
+    #[arg(long, default_value = "config/icosahedron.toml")]
+    pub(crate) platform: PathBuf,
+    /// Machine-readable JSON instead of tables.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct PoseArgs {
+    /// Platform position x,y,z in m (default: the platform's home pose).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    position_m: Option<Vec<f64>>,
+    /// Platform rotation φx,φy,φz in degrees, R = Rx Ry Rz (eq. 2.2).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    rotation_deg: Option<Vec<f64>>,
+}
+
+/// Three comma-separated numbers from a flag, or a clear error naming the flag.
+pub(crate) fn triple(flag: &str, v: &[f64]) -> Result<Vector3<f64>, Box<dyn Error>> {
+    if v.len() != 3 {
+        return Err(format!("{flag} takes 3 comma-separated values, got {}", v.len()).into());
+    }
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err(format!("{flag} values must be finite").into());
+    }
+    Ok(Vector3::new(v[0], v[1], v[2]))
+}
+
+impl PoseArgs {
+    pub(crate) fn pose(&self, pf: &Platform) -> Result<Pose, Box<dyn Error>> {
+        let r = match &self.position_m {
+            Some(v) => triple("--position-m", v)?,
+            None => pf.home.r,
+        };
+        let phi = match &self.rotation_deg {
+            Some(v) => triple("--rotation-deg", v)?.map(f64::to_radians),
+            None => pf.home.phi,
+        };
+        Ok(Pose::new(r, phi))
+    }
+}
+
+/// `--test` of `crs model workspace`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TestArg {
+    ClosedForm,
+    Exact,
+    Both,
+}
+
+#[derive(clap::Subcommand, Debug)]
+pub enum ModelCommand {
+    /// Inverse kinematics: cable lengths, directions, pulley wrap angles (eq. 2.3-2.8, 2.16-2.29).
+    Ik {
+        #[command(flatten)]
+        common: Common,
+        #[command(flatten)]
+        pose: PoseArgs,
+    },
+    /// Forward kinematics from cable lengths: least squares (eq. 2.11) or elastostatic (eq. 2.42).
+    Fk {
+        #[command(flatten)]
+        common: Common,
+        /// Controlled cable lengths q_θ, m (one per cable, comma separated).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            required = true,
+            allow_hyphen_values = true
+        )]
+        lengths_m: Vec<f64>,
+        /// Solve the elastostatic forward kinematics ν_el with the platform's stiffness and wrench.
+        #[arg(long)]
+        elastic: bool,
+        /// Initial guess (default: the platform's home pose).
+        #[command(flatten)]
+        guess: PoseArgs,
+    },
+    /// Closed-form force distribution (eq. 3.41), feasibility, internal/external split and section wrenches.
+    Forces {
+        #[command(flatten)]
+        common: Common,
+        #[command(flatten)]
+        pose: PoseArgs,
+    },
+    /// Stiffness at the reference force distribution: K_C, K_G, K_wx (eq. 2.67-2.78).
+    Stiffness {
+        #[command(flatten)]
+        common: Common,
+        #[command(flatten)]
+        pose: PoseArgs,
+    },
+    /// Wrench-feasible constant-orientation workspace (eq. 3.29): grid fraction and hull volume.
+    Workspace {
+        #[command(flatten)]
+        common: Common,
+        /// Box minimum x,y,z in m (default: the configured workspace region).
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+        min_m: Option<Vec<f64>>,
+        /// Box maximum x,y,z in m.
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+        max_m: Option<Vec<f64>>,
+        /// Constant orientation φx,φy,φz in degrees.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "0,0,0",
+            allow_hyphen_values = true
+        )]
+        rotation_deg: Vec<f64>,
+        /// Grid points per axis.
+        #[arg(long, default_value_t = 21)]
+        resolution: usize,
+        /// Also compute the workspace hull (Pott 2008) around the home position.
+        #[arg(long)]
+        hull: bool,
+        /// Feasibility test: the hard loop's closed form (eq. 3.41, sufficient), the exact LP
+        /// (eq. 3.29, necessary and sufficient), or both side by side.
+        #[arg(long, value_enum, default_value_t = TestArg::ClosedForm)]
+        test: TestArg,
+        /// Write every grid point with its verdict to this CSV file.
+        #[arg(long)]
+        csv: Option<PathBuf>,
+    },
+}
+
+pub fn run(cmd: ModelCommand) -> Res {
+    match cmd {
+        ModelCommand::Ik { common, pose } => kinematics::ik(&common, &pose),
+        ModelCommand::Fk {
+            common,
+            lengths_m,
+            elastic,
+            guess,
+        } => kinematics::fk(&common, &lengths_m, elastic, &guess),
+        ModelCommand::Forces { common, pose } => statics::forces(&common, &pose),
+        ModelCommand::Stiffness { common, pose } => statics::stiffness(&common, &pose),
+        ModelCommand::Workspace {
+            common,
+            min_m,
+            max_m,
+            rotation_deg,
+            resolution,
+            hull,
+            test,
+            csv,
+        } => workspace::workspace_cmd(
+            &common,
+            min_m,
+            max_m,
+            &rotation_deg,
+            resolution,
+            hull,
+            test,
+            csv,
+        ),
+    }
+}
+
+pub(crate) fn load(c: &Common) -> Result<Platform, Box<dyn Error>> {
+    Ok(load_platform(&c.platform)?)
+}
+
+pub(crate) fn pose_json(p: &Pose) -> serde_json::Value {
+    json!({
+        "position_m": [p.r.x, p.r.y, p.r.z],
+        "rotation_deg": [p.phi.x.to_degrees(), p.phi.y.to_degrees(), p.phi.z.to_degrees()],
+    })
+}
+
+pub(crate) fn fmt_pose(p: &Pose) -> String {
+    format!(
+        "r = [{:.4}, {:.4}, {:.4}] m, φ = [{:.4}, {:.4}, {:.4}]°",
+        p.r.x,
+        p.r.y,
+        p.r.z,
+        p.phi.x.to_degrees(),
+        p.phi.y.to_degrees(),
+        p.phi.z.to_degrees()
+    )
+}
