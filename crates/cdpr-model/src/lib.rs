@@ -13,6 +13,7 @@
 //! | forward kinematics ν, ν_el | [`forward`] | 2.9–2.15, 2.42–2.43, 2.81 |
 //! | wrench-feasible workspace | [`workspace`] | 3.29 |
 //! | exact wrench feasibility (LP) | [`feasibility`] | 3.29, 2.38–2.40 |
+//! | planar robots (n = 2, 3; any m > n): IK with pulleys, forces, W_WF, W_R, cond(J_qa) | [`planar`] | 2.3–2.8, 2.30, 2.42, 3.29, 3.33–3.41, 4.23 |
 //! | operator TOML | [`config`] | tables 5.1, eq. 5.8, 5.12, 5.17, 6.1, 6.20 |
 //!
 //! This crate knows nothing of IPC, real time, CAN or command lines: the daemon (`motion-core`),
@@ -33,6 +34,7 @@ pub mod forward;
 pub mod kinematics;
 pub mod model;
 pub mod offset_target;
+pub mod planar;
 pub mod pose;
 pub mod statics;
 pub mod workspace;

@@ -3,6 +3,7 @@
 //! are named in the flags: positions in m, angles in degrees, lengths in m, forces in N.
 
 mod kinematics;
+mod planar;
 mod statics;
 mod workspace;
 
@@ -110,6 +111,9 @@ pub enum ModelCommand {
         #[command(flatten)]
         pose: PoseArgs,
     },
+    /// The spec's planar 4-cable robot (eq. 3.40 / 4.24): condition numbers, initial tension,
+    /// physical and reachable areas and pulley influence of ch. 3-4, next to the spec's values.
+    Planar(planar::PlanarArgs),
     /// Wrench-feasible constant-orientation workspace (eq. 3.29): grid fraction and hull volume.
     Workspace {
         #[command(flatten)]
@@ -155,6 +159,7 @@ pub fn run(cmd: ModelCommand) -> Res {
         } => kinematics::fk(&common, &lengths_m, elastic, &guess),
         ModelCommand::Forces { common, pose } => statics::forces(&common, &pose),
         ModelCommand::Stiffness { common, pose } => statics::stiffness(&common, &pose),
+        ModelCommand::Planar(a) => planar::planar_cmd(&a),
         ModelCommand::Workspace {
             common,
             min_m,
