@@ -68,3 +68,32 @@ fn workspace_both_tests_side_by_side() {
         "top level keeps the first test"
     );
 }
+
+#[test]
+fn truss_worst_case_reports_the_rating_and_joint_loads_raise_it() {
+    let base = crs_json(&["model", "truss", "--worst-case", "--json"]);
+    let loaded = crs_json(&[
+        "model",
+        "truss",
+        "--worst-case",
+        "--json",
+        "--joint-load-n",
+        "10000",
+    ]);
+    assert_eq!(base["rating_n"].as_f64(), Some(151_000.0));
+    assert_eq!(base["member_forces_n"].as_array().unwrap().len(), 30);
+    let (u0, u1) = (
+        base["utilisation"].as_f64().unwrap(),
+        loaded["utilisation"].as_f64().unwrap(),
+    );
+    assert!(u0 > 0.0 && u0 < u1 && u1 < 1.0, "{u0} {u1}");
+    assert_eq!(base["poses_failed"].as_u64(), Some(0));
+    // Cable loads balance: the supports carry nothing; 12 × 10 kN come back as reaction.
+    let r0: f64 = base["reaction_sum_n"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap().abs())
+        .sum();
+    assert!(r0 < 1.0, "{r0}");
+}

@@ -5,6 +5,7 @@
 mod kinematics;
 mod planar;
 mod statics;
+mod truss;
 mod workspace;
 
 use cdpr_model::Pose;
@@ -114,6 +115,9 @@ pub enum ModelCommand {
     /// The spec's planar 4-cable robot (eq. 3.40 / 4.24): condition numbers, initial tension,
     /// physical and reachable areas and pulley influence of ch. 3-4, next to the spec's values.
     Planar(planar::PlanarArgs),
+    /// Icosahedron cabin space-frame truss check (eq. 5.2-5.7): rod forces for a pose or the
+    /// worst case over the operating region, against the 151 kN rod rating.
+    Truss(truss::TrussArgs),
     /// Wrench-feasible constant-orientation workspace (eq. 3.29): grid fraction and hull volume.
     Workspace {
         #[command(flatten)]
@@ -160,6 +164,7 @@ pub fn run(cmd: ModelCommand) -> Res {
         ModelCommand::Forces { common, pose } => statics::forces(&common, &pose),
         ModelCommand::Stiffness { common, pose } => statics::stiffness(&common, &pose),
         ModelCommand::Planar(a) => planar::planar_cmd(&a),
+        ModelCommand::Truss(a) => truss::truss_cmd(&a),
         ModelCommand::Workspace {
             common,
             min_m,
