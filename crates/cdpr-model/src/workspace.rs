@@ -38,6 +38,8 @@ pub enum WorkspaceError {
     Statics(#[from] StaticsError),
     #[error("exact feasibility: {0}")]
     Exact(#[from] FeasibilityError),
+    #[error("elastostatics: {0}")]
+    Elastostatics(#[from] crate::elastostatics::ElastostaticsError),
     #[error("the hull centre [{:.3}, {:.3}, {:.3}] m is not wrench feasible", .0.x, .0.y, .0.z)]
     CentreInfeasible(Vector3<f64>),
 }
@@ -347,4 +349,168 @@ fn icosphere(subdivisions: usize) -> (Vec<Vector3<f64>>, Vec<[usize; 3]>) {
         f = nf;
     }
     (v, f)
+}
+
+/// What happened at one reference pose of a reachable-workspace analysis.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Reach {
+    /// The elastic robot settled at `pose` with `forces`.
+    Settled {
+        pose: Pose,
+        forces: Vec<f64>,
+        /// f_min ≤ f ≤ f_max on every cable (eq. 3.34).
+        within_limits: bool,
+        /// |Δr| (m) the pose moves under the wrench step of the analysis, linear prediction
+        /// Δx = −K_wx⁻¹ Δw (eq. 2.76–2.78, 3.23) at the settled pose.
+        compliance_dr_m: f64,
+    },
+    /// The elastostatic forward kinematics did not converge (counted as not reachable).
+    FkFailed(String),
+}
+
+/// Reachable workspace W_R (eq. 3.33–3.35) of a controller commanding its model's lengths on an
+/// elastic robot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReachableAnalysis {
+    /// The tension state at the set-up pose (eq. 3.14, 3.19), N.
+    pub f_ini: Vec<f64>,
+    /// Per reference pose: its outcome.
+    pub points: Vec<(Pose, Reach)>,
+}
+
+impl ReachableAnalysis {
+    /// Reference poses whose emerging forces stay within the limits.
+    pub fn reachable(&self) -> usize {
+        self.points
+            .iter()
+            .filter(|(_, r)| {
+                matches!(
+                    r,
+                    Reach::Settled {
+                        within_limits: true,
+                        ..
+                    }
+                )
+            })
+            .count()
+    }
+    pub fn fk_failures(&self) -> usize {
+        self.points
+            .iter()
+            .filter(|(_, r)| matches!(r, Reach::FkFailed(_)))
+            .count()
+    }
+    /// Mean and largest position error |r_M − r| over the reachable poses, m (None if none).
+    pub fn position_error(&self) -> Option<(f64, f64)> {
+        let e: Vec<f64> = self
+            .points
+            .iter()
+            .filter_map(|(x, r)| match r {
+                Reach::Settled {
+                    pose,
+                    within_limits: true,
+                    ..
+                } => Some((pose.r - x.r).norm()),
+                _ => None,
+            })
+            .collect();
+        (!e.is_empty()).then(|| {
+            (
+                e.iter().sum::<f64>() / e.len() as f64,
+                e.iter().copied().fold(0.0, f64::max),
+            )
+        })
+    }
+}
+
+/// The set-up tension of the spatial robot: `f_ini` projected onto the equilibrium at `x_ini`
+/// (f_0 = −A^{+T} w_e + (I − A^{+T} A^T) f_ini, eq. 3.19), or the closed form of eq. (3.41)
+/// there when none is given.
+pub fn setup_tension(
+    model: &Model,
+    x_ini: &Pose,
+    f_ini: Option<&[f64]>,
+) -> Result<Vec<f64>, WorkspaceError> {
+    let mut data = Data::new(model);
+    kinematics::inverse(model, &mut data, x_ini)?;
+    let p = model.params();
+    let m = model.m();
+    let mut f = vec![0.0; m];
+    match f_ini {
+        Some(fi) => {
+            let (mut fe, mut fint) = (vec![0.0; m], vec![0.0; m]);
+            statics::split_internal_external(&data, &p.w_e, fi, &mut fe, &mut fint)?;
+            for i in 0..m {
+                f[i] = fe[i] + fint[i];
+            }
+        }
+        None => {
+            statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut f)?;
+        }
+    }
+    Ok(f)
+}
+
+/// W_R of eq. (3.33)–(3.35) with the full elastostatic forward kinematics (eq. 2.42): the
+/// controller commands the lengths of `control` (e.g. the standard kinematics φ), with the cable
+/// offsets set at `x_ini` so that `truth` holds `f_ini` there (eq. 3.14); at every reference pose
+/// x the truth robot settles at x_M with forces f_M (eq. 3.35 without linearisation), and x is
+/// reachable when f_min ≤ f_M ≤ f_max (eq. 3.34). `dw` is the wrench step whose linear pose
+/// response (eq. 3.23) is reported per pose as the sensitivity map.
+pub fn reachable_kinematic(
+    truth: &Model,
+    control: &Model,
+    x_ini: &Pose,
+    f_ini: &[f64],
+    references: &[Pose],
+    dw: &nalgebra::Vector6<f64>,
+) -> Result<ReachableAnalysis, WorkspaceError> {
+    use crate::elastostatics::{self, Stiffness};
+    use crate::forward::{self, FkOptions};
+    let m = truth.m();
+    let mut dt = Data::new(truth);
+    let mut dc = Data::new(control);
+    let mut qt_ini = vec![0.0; m];
+    elastostatics::inverse(truth, &mut dt, x_ini, f_ini, &mut qt_ini)?;
+    kinematics::inverse(control, &mut dc, x_ini)?;
+    let offset: Vec<f64> = (0..m).map(|i| dc.q[i] - qt_ini[i]).collect();
+    let p = truth.params();
+    let opts = FkOptions::default();
+    let mut q_theta = vec![0.0; m];
+    let mut points = Vec::with_capacity(references.len());
+    for x in references {
+        if let Err(e) = kinematics::inverse(control, &mut dc, x) {
+            points.push((*x, Reach::FkFailed(format!("control model: {e}"))));
+            continue;
+        }
+        for i in 0..m {
+            q_theta[i] = dc.q[i] - offset[i];
+        }
+        let outcome = match forward::elastostatic(truth, &mut dt, &q_theta, x, &opts) {
+            Ok(sol) => {
+                let forces = dt.f.clone();
+                let within_limits = forces.iter().all(|f| *f >= p.f_min && *f <= p.f_max);
+                // Δx = −K_wx⁻¹ Δw at the settled pose (data holds its forces and derivatives).
+                let s = Stiffness::at(truth, &dt);
+                let dr = s
+                    .k_wx
+                    .lu()
+                    .solve(&(-dw))
+                    .map(|dx| nalgebra::Vector3::new(dx[0], dx[1], dx[2]).norm())
+                    .unwrap_or(f64::NAN);
+                Reach::Settled {
+                    pose: sol.pose,
+                    forces,
+                    within_limits,
+                    compliance_dr_m: dr,
+                }
+            }
+            Err(e) => Reach::FkFailed(e.to_string()),
+        };
+        points.push((*x, outcome));
+    }
+    Ok(ReachableAnalysis {
+        f_ini: f_ini.to_vec(),
+        points,
+    })
 }

@@ -118,3 +118,45 @@ fn exact_workspace_contains_the_closed_form_workspace() {
         cf.feasible
     );
 }
+
+#[test]
+fn reachable_analysis_holds_f_ini_at_home_and_stiffer_cables_track_better() {
+    let pf = common::platform("icosahedron.toml");
+    let model = &pf.model;
+    let f_ini = workspace::setup_tension(model, &pf.home, None).unwrap();
+    let dw = nalgebra::Vector6::new(0.0, 0.0, -1000.0, 0.0, 0.0, 0.0);
+    let refs = vec![
+        pf.home,
+        Pose::new(pf.home.r + Vector3::new(0.6, -0.4, 0.2), Vector3::zeros()),
+        Pose::new(pf.home.r + Vector3::new(-0.8, 0.5, -0.4), Vector3::zeros()),
+    ];
+    let a = workspace::reachable_kinematic(model, model, &pf.home, &f_ini, &refs, &dw).unwrap();
+    match &a.points[0].1 {
+        workspace::Reach::Settled { pose, forces, .. } => {
+            assert!((pose.r - pf.home.r).norm() < 1e-7, "{pose:?}");
+            for (f, g) in forces.iter().zip(&f_ini) {
+                assert!((f - g).abs() < 1e-3, "{f} vs {g}");
+            }
+        }
+        other => panic!("{other:?}"),
+    }
+    let stiff = model
+        .with_params(|p| p.k_f.iter_mut().for_each(|k| *k *= 10.0))
+        .unwrap();
+    let b = workspace::reachable_kinematic(&stiff, &stiff, &pf.home, &f_ini, &refs, &dw).unwrap();
+    let err = |r: &workspace::ReachableAnalysis| {
+        r.points
+            .iter()
+            .map(|(x, o)| match o {
+                workspace::Reach::Settled { pose, .. } => (pose.r - x.r).norm(),
+                _ => f64::INFINITY,
+            })
+            .sum::<f64>()
+    };
+    assert!(
+        err(&b) < err(&a),
+        "stiffer cables: {} vs {}",
+        err(&b),
+        err(&a)
+    );
+}

@@ -97,3 +97,30 @@ fn truss_worst_case_reports_the_rating_and_joint_loads_raise_it() {
         .sum();
     assert!(r0 < 1.0, "{r0}");
 }
+
+#[test]
+fn reachable_workspace_prediction_matches_the_ideal_plant() {
+    // The ideal plant is the model's own elastostatics run by sim-plant's solver: prediction
+    // (model library) and measurement (plant) must agree almost everywhere, and W_R lies inside
+    // the exact W_WF (eq. 3.33 ⊂ 3.29).
+    let v = crs_json(&[
+        "model",
+        "workspace",
+        "--reachable",
+        "--json",
+        "--resolution",
+        "5",
+        "--plant",
+        "config/plant/icosahedron-ideal.toml",
+    ]);
+    let pred = v["reachable_predicted"].as_u64().unwrap();
+    let exact = v["exact_feasible"].as_u64().unwrap();
+    assert!(pred > 0 && pred < exact, "W_R {pred} of W_WF {exact}");
+    let plant = &v["plant"];
+    assert!(plant["agreement"].as_f64().unwrap() >= 0.97, "{plant}");
+    assert!(
+        plant["sensitivity_rel_error_median"].as_f64().unwrap() < 0.01,
+        "{plant}"
+    );
+    assert_eq!(v["predicted_fk_failures"].as_u64(), Some(0));
+}

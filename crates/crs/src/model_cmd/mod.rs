@@ -4,6 +4,7 @@
 
 mod kinematics;
 mod planar;
+mod reachable;
 mod statics;
 mod truss;
 mod workspace;
@@ -146,6 +147,16 @@ pub enum ModelCommand {
         /// (eq. 3.29, necessary and sufficient), or both side by side.
         #[arg(long, value_enum, default_value_t = TestArg::ClosedForm)]
         test: TestArg,
+        /// Reachable workspace of the kinematic controller (eq. 3.33-3.35) instead, with the
+        /// exact W_WF, a payload-sensitivity map and, with --plant, the plant's measurement.
+        #[arg(long)]
+        reachable: bool,
+        /// Plant TOML (sim-plant) that measures the reachable workspace (with --reachable).
+        #[arg(long, requires = "reachable")]
+        plant: Option<PathBuf>,
+        /// SVG map of the slice through the home position (with --reachable).
+        #[arg(long, requires = "reachable")]
+        svg: Option<PathBuf>,
         /// Write every grid point with its verdict to this CSV file.
         #[arg(long)]
         csv: Option<PathBuf>,
@@ -166,6 +177,31 @@ pub fn run(cmd: ModelCommand) -> Res {
         ModelCommand::Planar(a) => planar::planar_cmd(&a),
         ModelCommand::Truss(a) => truss::truss_cmd(&a),
         ModelCommand::Workspace {
+            reachable: true,
+            plant,
+            svg,
+            common,
+            min_m,
+            max_m,
+            rotation_deg,
+            resolution,
+            ..
+        } => {
+            let pf = load(&common)?;
+            let bounds = workspace::box_from_flags(&pf, min_m, max_m, resolution)?;
+            let phi = triple("--rotation-deg", &rotation_deg)?.map(f64::to_radians);
+            reachable::reachable_cmd(&reachable::ReachableRequest {
+                pf: &pf,
+                platform_path: &common.platform,
+                bounds,
+                phi,
+                resolution,
+                plant,
+                svg,
+                json: common.json,
+            })
+        }
+        ModelCommand::Workspace {
             common,
             min_m,
             max_m,
@@ -174,6 +210,7 @@ pub fn run(cmd: ModelCommand) -> Res {
             hull,
             test,
             csv,
+            ..
         } => workspace::workspace_cmd(
             &common,
             min_m,

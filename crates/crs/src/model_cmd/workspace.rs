@@ -3,7 +3,7 @@
 //! side (the closed form is sufficient only, so its workspace is a subset of the exact one).
 
 use super::{Common, Res, TestArg, load, triple};
-use cdpr_model::workspace::{self, FeasibilityTest, GridResult, Hull};
+use cdpr_model::workspace::{self, FeasibilityTest, GridResult, Hull, PositionBox};
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -11,6 +11,29 @@ struct Evaluated {
     test: FeasibilityTest,
     grid: GridResult,
     hull: Option<Hull>,
+}
+
+/// The box of `--min-m/--max-m` (default: the configured region), validated with the grid size.
+pub(super) fn box_from_flags(
+    pf: &cdpr_model::config::Platform,
+    min_m: Option<Vec<f64>>,
+    max_m: Option<Vec<f64>>,
+    resolution: usize,
+) -> Result<PositionBox, Box<dyn std::error::Error>> {
+    let mut bounds = pf.region.position;
+    if let Some(v) = min_m {
+        bounds.min = triple("--min-m", &v)?;
+    }
+    if let Some(v) = max_m {
+        bounds.max = triple("--max-m", &v)?;
+    }
+    if (0..3).any(|k| bounds.min[k] >= bounds.max[k]) {
+        return Err("--min-m must be below --max-m on every axis".into());
+    }
+    if resolution < 2 {
+        return Err("--resolution must be at least 2".into());
+    }
+    Ok(bounds)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -26,19 +49,7 @@ pub(super) fn workspace_cmd(
 ) -> Res {
     let pf = load(c)?;
     let model = &pf.model;
-    let mut bounds = pf.region.position;
-    if let Some(v) = min_m {
-        bounds.min = triple("--min-m", &v)?;
-    }
-    if let Some(v) = max_m {
-        bounds.max = triple("--max-m", &v)?;
-    }
-    if (0..3).any(|k| bounds.min[k] >= bounds.max[k]) {
-        return Err("--min-m must be below --max-m on every axis".into());
-    }
-    if resolution < 2 {
-        return Err("--resolution must be at least 2".into());
-    }
+    let bounds = box_from_flags(&pf, min_m, max_m, resolution)?;
     let phi = triple("--rotation-deg", rotation_deg)?.map(f64::to_radians);
     let tests: &[FeasibilityTest] = match test {
         TestArg::ClosedForm => &[FeasibilityTest::ClosedForm],
