@@ -363,6 +363,10 @@ pub enum Reach {
         /// |Δr| (m) the pose moves under the wrench step of the analysis, linear prediction
         /// Δx = −K_wx⁻¹ Δw (eq. 2.76–2.78, 3.23) at the settled pose.
         compliance_dr_m: f64,
+        /// The linear prediction of the pose error, Δx = C_xw (A^T f(q_θ) + w_e) at the
+        /// reference pose (eq. 3.16, 3.23–3.24), as a position vector (m); compare with
+        /// `pose.r − reference.r` for the linearisation error (fig. 3.11b).
+        linear_dr: Vector3<f64>,
     },
     /// The elastostatic forward kinematics did not converge (counted as not reachable).
     FkFailed(String),
@@ -400,6 +404,30 @@ impl ReachableAnalysis {
             .filter(|(_, r)| matches!(r, Reach::FkFailed(_)))
             .count()
     }
+    /// Linearisation error of eq. (3.24): mean and largest |Δr_linear − (r_M − r)| over the
+    /// reachable poses, m (None if none).
+    pub fn linearisation_error(&self) -> Option<(f64, f64)> {
+        let e: Vec<f64> = self
+            .points
+            .iter()
+            .filter_map(|(x, r)| match r {
+                Reach::Settled {
+                    pose,
+                    within_limits: true,
+                    linear_dr,
+                    ..
+                } => Some((linear_dr - (pose.r - x.r)).norm()),
+                _ => None,
+            })
+            .collect();
+        (!e.is_empty()).then(|| {
+            (
+                e.iter().sum::<f64>() / e.len() as f64,
+                e.iter().copied().fold(0.0, f64::max),
+            )
+        })
+    }
+
     /// Mean and largest position error |r_M − r| over the reachable poses, m (None if none).
     pub fn position_error(&self) -> Option<(f64, f64)> {
         let e: Vec<f64> = self
@@ -486,6 +514,24 @@ pub fn reachable_kinematic(
         for i in 0..m {
             q_theta[i] = dc.q[i] - offset[i];
         }
+        // Linear prediction (eq. 3.16, 3.23–3.24): residual wrench of the commanded lengths at
+        // the reference pose, mapped through the compliance there.
+        let linear_dr = match kinematics::inverse(truth, &mut dt, x) {
+            Ok(()) => {
+                elastostatics::cable_forces(&mut dt, &truth.linear_law(), &q_theta);
+                let mut dw_res = p.w_e;
+                for i in 0..m {
+                    dw_res += dt.at[i] * dt.f[i];
+                }
+                Stiffness::at(truth, &dt)
+                    .k_wx
+                    .lu()
+                    .solve(&(-dw_res))
+                    .map(|dx| Vector3::new(dx[0], dx[1], dx[2]))
+                    .unwrap_or(Vector3::repeat(f64::NAN))
+            }
+            Err(_) => Vector3::repeat(f64::NAN),
+        };
         let outcome = match forward::elastostatic(truth, &mut dt, &q_theta, x, &opts) {
             Ok(sol) => {
                 let forces = dt.f.clone();
@@ -503,6 +549,7 @@ pub fn reachable_kinematic(
                     forces,
                     within_limits,
                     compliance_dr_m: dr,
+                    linear_dr,
                 }
             }
             Err(e) => Reach::FkFailed(e.to_string()),

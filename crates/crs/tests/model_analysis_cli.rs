@@ -123,4 +123,13 @@ fn reachable_workspace_prediction_matches_the_ideal_plant() {
         "{plant}"
     );
     assert_eq!(v["predicted_fk_failures"].as_u64(), Some(0));
+    // The linear prediction of eq. (3.24) is close to the full FK inside the region (fig. 3.11b).
+    let (lin, err) = (
+        v["linearisation_error_mean_m"].as_f64().unwrap(),
+        v["predicted_mean_error_m"].as_f64().unwrap(),
+    );
+    assert!(
+        err > 1e-3 && lin < 0.1 * err,
+        "linearisation {lin} m vs error {err} m"
+    );
 }

@@ -200,6 +200,7 @@ pub(super) fn reachable_cmd(r: &ReachableRequest) -> Res {
         write_svg(path, r, &refs, &exact, &pred, measured.as_deref())?;
     }
     let (mean_e, max_e) = pred.position_error().unzip();
+    let (mean_lin, max_lin) = pred.linearisation_error().unzip();
     if r.json {
         let mut v = json!({
             "platform": pf.name, "resolution": n, "points": refs.len(),
@@ -209,6 +210,7 @@ pub(super) fn reachable_cmd(r: &ReachableRequest) -> Res {
             "reachable_predicted": n_pred, "reachable_predicted_volume_m3": n_pred as f64 * cell,
             "predicted_fk_failures": pred.fk_failures(),
             "predicted_mean_error_m": mean_e, "predicted_max_error_m": max_e,
+            "linearisation_error_mean_m": mean_lin, "linearisation_error_max_m": max_lin,
             "predict_seconds": t_pred,
         });
         if let Some((n_meas, agree, failed, rel, errs)) = &plant_summary {
@@ -252,6 +254,13 @@ pub(super) fn reachable_cmd(r: &ReachableRequest) -> Res {
             _ => String::new(),
         }
     );
+    if let (Some(a), Some(b)) = (mean_lin, max_lin) {
+        println!(
+            "  linear prediction of the pose error (eq. 3.24) vs the full FK: mean {:.2} / max {:.2} mm apart",
+            a * 1e3,
+            b * 1e3
+        );
+    }
     if pred.fk_failures() > 0 {
         println!(
             "  the elastostatic FK failed on {} of {} reference poses (counted as not reachable)",
