@@ -11,7 +11,8 @@
 //! | statics, force distribution | [`statics`] | 2.30–2.31, 2.38–2.40, 3.41, 5.11 |
 //! | elastostatics, stiffness | [`elastostatics`] | 2.33–2.41, 2.66–2.80 |
 //! | forward kinematics ν, ν_el | [`forward`] | 2.9–2.15, 2.42–2.43, 2.81 |
-//! | wrench-feasible workspace | [`workspace`] | 3.29 |
+//! | wrench-feasible workspace, reachable workspace W_R | [`workspace`] | 3.29, 3.33–3.35 |
+//! | pose sensitivity to parameter errors | [`sensitivity`] | 3.25–3.28 |
 //! | exact wrench feasibility (LP) | [`feasibility`] | 3.29, 2.38–2.40 |
 //! | planar robots (n = 2, 3; any m > n): IK with pulleys, forces, W_WF, W_R, cond(J_qa) | [`planar`] | 2.3–2.8, 2.30, 2.42, 3.29, 3.33–3.41, 4.23 |
 //! | icosahedron space-frame truss check (matrix stiffness method) | [`truss`] | 5.2–5.7 |
@@ -37,6 +38,7 @@ pub mod model;
 pub mod offset_target;
 pub mod planar;
 pub mod pose;
+pub mod sensitivity;
 pub mod statics;
 pub mod truss;
 pub mod workspace;

@@ -133,3 +133,81 @@ fn reachable_workspace_prediction_matches_the_ideal_plant() {
         "linearisation {lin} m vs error {err} m"
     );
 }
+
+#[test]
+fn sensitivity_report_is_linear_in_the_errors_and_its_groups_add_up() {
+    let base = [
+        "model",
+        "sensitivity",
+        "--json",
+        "--platform",
+        "config/crs-nominal.toml",
+    ];
+    let v = crs_json(&[&base[..], &["--map-resolution", "3"]].concat());
+    let rms = v["rms_position_m"].as_f64().unwrap();
+    let g = &v["groups_rms_position_m"];
+    let sum_sq: f64 = ["frame_anchors", "platform_anchors", "stiffness"]
+        .iter()
+        .map(|k| g[k].as_f64().unwrap().powi(2))
+        .sum();
+    // Independent groups: the variances add (E‖Δr‖² = Σ ‖∂r/∂p_j‖² σ_j²).
+    assert!(rms > 1e-4 && (sum_sq.sqrt() - rms).abs() < 1e-9 * rms.max(1.0));
+    assert_eq!(v["parameters"].as_array().unwrap().len(), 7 * 8);
+    let map = &v["map"];
+    assert_eq!(map["points"].as_u64(), Some(27));
+    assert_eq!(
+        map["estimated"].as_u64().unwrap()
+            + map["not_wrench_feasible"].as_u64().unwrap()
+            + map["failed"].as_u64().unwrap(),
+        27
+    );
+    // Doubling every σ doubles the expected error; no stiffness error removes its group.
+    let v2 = crs_json(
+        &[
+            &base[..],
+            &[
+                "--frame-anchor-sigma-mm",
+                "2",
+                "--platform-anchor-sigma-mm",
+                "2",
+                "--stiffness-sigma-pct",
+                "10",
+            ],
+        ]
+        .concat(),
+    );
+    assert!((v2["rms_position_m"].as_f64().unwrap() / rms - 2.0).abs() < 1e-9);
+    let v0 = crs_json(&[&base[..], &["--stiffness-sigma-pct", "0"]].concat());
+    assert_eq!(v0["groups_rms_position_m"]["stiffness"].as_f64(), Some(0.0));
+    assert!(v0["rms_position_m"].as_f64().unwrap() < rms);
+}
+
+#[test]
+fn sensitivity_refuses_bad_errors_and_infeasible_poses_by_name() {
+    for (args, needle) in [
+        (
+            vec!["model", "sensitivity", "--frame-anchor-sigma-mm", "-1"],
+            "--frame-anchor-sigma-mm",
+        ),
+        (
+            vec!["model", "sensitivity", "--position-m", "0,0,40"],
+            "not wrench feasible",
+        ),
+        (
+            vec!["model", "sensitivity", "--map-resolution", "1"],
+            "--map-resolution",
+        ),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_crs"))
+            .args(&args)
+            .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+            .output()
+            .expect("run crs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(needle),
+            "{args:?}: {err}"
+        );
+        assert!(out.stdout.is_empty(), "{args:?} printed a result");
+    }
+}

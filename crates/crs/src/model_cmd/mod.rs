@@ -5,6 +5,7 @@
 mod kinematics;
 mod planar;
 mod reachable;
+mod sensitivity;
 mod statics;
 mod truss;
 mod workspace;
@@ -119,6 +120,9 @@ pub enum ModelCommand {
     /// Icosahedron cabin space-frame truss check (eq. 5.2-5.7): rod forces for a pose or the
     /// worst case over the operating region, against the 151 kN rod rating.
     Truss(truss::TrussArgs),
+    /// Pose error caused by parameter errors (eq. 3.25-3.28): per parameter at a pose, and an
+    /// RMS error map over the operating region for given anchor and stiffness uncertainties.
+    Sensitivity(sensitivity::SensitivityArgs),
     /// Wrench-feasible constant-orientation workspace (eq. 3.29): grid fraction and hull volume.
     Workspace {
         #[command(flatten)]
@@ -176,6 +180,7 @@ pub fn run(cmd: ModelCommand) -> Res {
         ModelCommand::Stiffness { common, pose } => statics::stiffness(&common, &pose),
         ModelCommand::Planar(a) => planar::planar_cmd(&a),
         ModelCommand::Truss(a) => truss::truss_cmd(&a),
+        ModelCommand::Sensitivity(a) => sensitivity::sensitivity_cmd(&a),
         ModelCommand::Workspace {
             reachable: true,
             plant,

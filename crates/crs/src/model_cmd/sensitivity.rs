@@ -1,0 +1,390 @@
+//! `crs model sensitivity`: how far the platform lands from where the controller believes it is
+//! when the model's parameters are wrong (eq. 3.25–3.28) — per parameter at one pose, and as a
+//! map of the expected (RMS) position error over the operating region. It tells a designer how
+//! accurately the frame and platform anchors and the cable stiffness must be known.
+
+use super::{Common, PoseArgs, Res, fmt_pose, load, pose_json};
+use cdpr_model::config::Platform;
+use cdpr_model::sensitivity::{self, Parameter, ParameterErrors, ParameterSensitivity};
+use cdpr_model::{Data, Model, Pose, workspace};
+use nalgebra::Vector3;
+use serde_json::json;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct SensitivityArgs {
+    #[command(flatten)]
+    common: Common,
+    #[command(flatten)]
+    pose: PoseArgs,
+    /// Standard deviation of every frame-anchor coordinate a_i, mm.
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    frame_anchor_sigma_mm: f64,
+    /// Standard deviation of every platform-anchor coordinate b_i, mm.
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    platform_anchor_sigma_mm: f64,
+    /// Standard deviation of every cable's k_F, percent of its value.
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
+    stiffness_sigma_pct: f64,
+    /// Parameters listed in the per-parameter table.
+    #[arg(long, default_value_t = 10)]
+    top: usize,
+    /// Also map the expected position error over the operating region (level platform), with
+    /// this many grid points per axis.
+    #[arg(long)]
+    map_resolution: Option<usize>,
+    /// SVG of the map's slice through the home height (with --map-resolution).
+    #[arg(long, requires = "map_resolution")]
+    svg: Option<PathBuf>,
+}
+
+fn errors(a: &SensitivityArgs) -> Result<ParameterErrors, Box<dyn std::error::Error>> {
+    for (flag, v) in [
+        ("--frame-anchor-sigma-mm", a.frame_anchor_sigma_mm),
+        ("--platform-anchor-sigma-mm", a.platform_anchor_sigma_mm),
+        ("--stiffness-sigma-pct", a.stiffness_sigma_pct),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(format!("{flag} must be a finite number >= 0, got {v}").into());
+        }
+    }
+    Ok(ParameterErrors {
+        frame_anchor_m: a.frame_anchor_sigma_mm * 1e-3,
+        platform_anchor_m: a.platform_anchor_sigma_mm * 1e-3,
+        stiffness_rel: a.stiffness_sigma_pct * 1e-2,
+    })
+}
+
+/// RMS position error of one parameter group alone, m.
+fn group_rms(s: &ParameterSensitivity, model: &Model, e: &ParameterErrors, g: usize) -> f64 {
+    let only = ParameterErrors {
+        frame_anchor_m: if g == 0 { e.frame_anchor_m } else { 0.0 },
+        platform_anchor_m: if g == 1 { e.platform_anchor_m } else { 0.0 },
+        stiffness_rel: if g == 2 { e.stiffness_rel } else { 0.0 },
+    };
+    s.pose_error(model, &only).rms_position_m
+}
+
+/// Position gain of one parameter in the unit a reader thinks in: mm per mm of anchor error,
+/// mm per percent of k_F.
+fn gain(s: &ParameterSensitivity, model: &Model, j: usize) -> (f64, &'static str) {
+    let c = s.j_xp.column(j);
+    let g = Vector3::new(c[0], c[1], c[2]).norm();
+    match s.params[j] {
+        Parameter::Stiffness { cable } => (g * 1e3 * model.params().k_f[cable] * 1e-2, "mm/%"),
+        _ => (g, "mm/mm"),
+    }
+}
+
+enum MapPoint {
+    Estimated(f64),
+    NotFeasible,
+    Failed(String),
+}
+
+fn map(pf: &Platform, e: &ParameterErrors, n: usize) -> Vec<(Pose, MapPoint)> {
+    let model = &pf.model;
+    let b = pf.region.position;
+    let mut data = Data::new(model);
+    let mut f = vec![0.0; model.m()];
+    let mut out = Vec::with_capacity(n * n * n);
+    for ix in 0..n {
+        for iy in 0..n {
+            for iz in 0..n {
+                let t = |i: usize, k: usize| {
+                    b.min[k] + (b.max[k] - b.min[k]) * i as f64 / (n - 1) as f64
+                };
+                let x = Pose::new(Vector3::new(t(ix, 0), t(iy, 1), t(iz, 2)), Vector3::zeros());
+                let pt = match workspace::check_pose(model, &mut data, &x, &mut f) {
+                    Ok(fd) if fd.feasible => {
+                        match sensitivity::parameter_sensitivity(model, &x, &f) {
+                            Ok(s) => MapPoint::Estimated(s.pose_error(model, e).rms_position_m),
+                            Err(err) => MapPoint::Failed(err.to_string()),
+                        }
+                    }
+                    Ok(_) => MapPoint::NotFeasible,
+                    Err(err) => MapPoint::Failed(err.to_string()),
+                };
+                out.push((x, pt));
+            }
+        }
+    }
+    out
+}
+
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+}
+
+pub(super) fn sensitivity_cmd(a: &SensitivityArgs) -> Res {
+    let pf = load(&a.common)?;
+    let model = &pf.model;
+    let e = errors(a)?;
+    let x = a.pose.pose(&pf)?;
+    let mut data = Data::new(model);
+    let mut f = vec![0.0; model.m()];
+    let fd = workspace::check_pose(model, &mut data, &x, &mut f)?;
+    if !fd.feasible {
+        return Err(format!(
+            "the pose {} is not wrench feasible with the closed form (eq. 3.41): cable {} would need {:.0} N; \
+             the controller has no forces to command there",
+            fmt_pose(&x),
+            if fd.f_lo < model.params().f_min { fd.cable_lo } else { fd.cable_hi },
+            if fd.f_lo < model.params().f_min { fd.f_lo } else { fd.f_hi },
+        )
+        .into());
+    }
+    let s = sensitivity::parameter_sensitivity(model, &x, &f)?;
+    let est = s.pose_error(model, &e);
+    let groups = [0, 1, 2].map(|g| group_rms(&s, model, &e, g));
+    let mut order: Vec<usize> = (0..s.params.len()).collect();
+    // Rank by contribution to the expected error (gain × σ), the question a designer asks.
+    let contrib = |j: usize| {
+        let c = s.j_xp.column(j);
+        let sig = match s.params[j] {
+            Parameter::FrameAnchor { .. } => e.frame_anchor_m,
+            Parameter::PlatformAnchor { .. } => e.platform_anchor_m,
+            Parameter::Stiffness { cable } => e.stiffness_rel * model.params().k_f[cable],
+        };
+        Vector3::new(c[0], c[1], c[2]).norm() * sig
+    };
+    order.sort_by(|&i, &j| contrib(j).total_cmp(&contrib(i)));
+
+    let map_pts = a.map_resolution.map(|n| {
+        if n < 2 {
+            Err("--map-resolution must be at least 2".to_string())
+        } else {
+            Ok(map(&pf, &e, n))
+        }
+    });
+    let map_pts = match map_pts {
+        Some(Err(m)) => return Err(m.into()),
+        Some(Ok(v)) => Some(v),
+        None => None,
+    };
+    let map_stats = map_pts.as_ref().map(|pts| {
+        let mut vals: Vec<(f64, Pose)> = pts
+            .iter()
+            .filter_map(|(x, p)| match p {
+                MapPoint::Estimated(v) => Some((*v, *x)),
+                _ => None,
+            })
+            .collect();
+        vals.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let not_feasible = pts
+            .iter()
+            .filter(|(_, p)| matches!(p, MapPoint::NotFeasible))
+            .count();
+        let failed: Vec<&str> = pts
+            .iter()
+            .filter_map(|(_, p)| match p {
+                MapPoint::Failed(m) => Some(m.as_str()),
+                _ => None,
+            })
+            .collect();
+        (vals, not_feasible, failed, pts.len())
+    });
+
+    if let (Some(path), Some(pts)) = (&a.svg, &map_pts) {
+        write_svg(path, &pf, pts, &e)?;
+    }
+
+    if a.common.json {
+        let params: Vec<_> = order
+            .iter()
+            .map(|&j| {
+                let c = s.j_xp.column(j);
+                json!({
+                    "name": s.params[j].name(),
+                    "dr_dp": [c[0], c[1], c[2]],
+                    "dphi_dp": [c[3], c[4], c[5]],
+                    "contribution_m": contrib(j),
+                })
+            })
+            .collect();
+        let mut v = json!({
+            "platform": a.common.platform.display().to_string(),
+            "pose": pose_json(&x),
+            "forces_n": s.forces,
+            "errors": {
+                "frame_anchor_sigma_m": e.frame_anchor_m,
+                "platform_anchor_sigma_m": e.platform_anchor_m,
+                "stiffness_sigma_rel": e.stiffness_rel,
+            },
+            "rms_position_m": est.rms_position_m,
+            "rms_rotation_rad": est.rms_rotation_rad,
+            "groups_rms_position_m": {
+                "frame_anchors": groups[0],
+                "platform_anchors": groups[1],
+                "stiffness": groups[2],
+            },
+            "parameters": params,
+        });
+        if let Some((vals, nf, failed, total)) = &map_stats {
+            v["map"] = json!({
+                "points": total,
+                "estimated": vals.len(),
+                "not_wrench_feasible": nf,
+                "failed": failed.len(),
+                "failures": failed,
+                "median_rms_position_m": (!vals.is_empty()).then(|| quantile(&vals.iter().map(|v| v.0).collect::<Vec<_>>(), 0.5)),
+                "p95_rms_position_m": (!vals.is_empty()).then(|| quantile(&vals.iter().map(|v| v.0).collect::<Vec<_>>(), 0.95)),
+                "max_rms_position_m": vals.last().map(|v| v.0),
+                "max_at": vals.last().map(|v| pose_json(&v.1)),
+            });
+        }
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+
+    println!(
+        "Pose sensitivity to parameter errors (eq. 3.28) — {}",
+        a.common.platform.display()
+    );
+    println!(
+        "  pose {} with the closed-form forces of eq. 3.41",
+        fmt_pose(&x)
+    );
+    println!(
+        "  independent errors: σ(a_i) = {} mm, σ(b_i) = {} mm, σ(k_F) = {} %",
+        a.frame_anchor_sigma_mm, a.platform_anchor_sigma_mm, a.stiffness_sigma_pct
+    );
+    println!(
+        "  expected pose error: {:.2} mm RMS position, {:.3}° RMS rotation",
+        est.rms_position_m * 1e3,
+        est.rms_rotation_rad.to_degrees()
+    );
+    println!(
+        "  by group: frame anchors {:.2} mm, platform anchors {:.2} mm, cable stiffness {:.2} mm",
+        groups[0] * 1e3,
+        groups[1] * 1e3,
+        groups[2] * 1e3
+    );
+    println!("  largest contributions (|∂r/∂p| per unit, contribution at the σ above):");
+    for &j in order.iter().take(a.top) {
+        let (g, unit) = gain(&s, model, j);
+        println!(
+            "    {:<8} {:>8.3} {:<6} {:>7.3} mm",
+            s.params[j].name(),
+            g,
+            unit,
+            contrib(j) * 1e3
+        );
+    }
+    if let Some((vals, nf, failed, total)) = &map_stats {
+        println!("  map over the operating region (level platform, {total} grid points):");
+        if vals.is_empty() {
+            println!(
+                "    no point could be estimated ({nf} not wrench feasible, {} failed)",
+                failed.len()
+            );
+        } else {
+            let v: Vec<f64> = vals.iter().map(|v| v.0).collect();
+            let worst = vals.last().expect("non-empty");
+            println!(
+                "    RMS position error: median {:.2} mm, 95 % {:.2} mm, max {:.2} mm at [{:.2}, {:.2}, {:.2}] m",
+                quantile(&v, 0.5) * 1e3,
+                quantile(&v, 0.95) * 1e3,
+                worst.0 * 1e3,
+                worst.1.r.x,
+                worst.1.r.y,
+                worst.1.r.z
+            );
+            println!(
+                "    {} estimated, {nf} not wrench feasible (closed form){}",
+                vals.len(),
+                if failed.is_empty() {
+                    String::new()
+                } else {
+                    format!(", {} FAILED (first: {})", failed.len(), failed[0])
+                }
+            );
+        }
+    }
+    if let Some(p) = &a.svg {
+        println!("  map slice written to {}", p.display());
+    }
+    Ok(())
+}
+
+fn write_svg(path: &PathBuf, pf: &Platform, pts: &[(Pose, MapPoint)], e: &ParameterErrors) -> Res {
+    let b = pf.region.position;
+    let n = (pts.len() as f64).cbrt().round() as usize;
+    // The z layer nearest the home height.
+    let kz = (0..n)
+        .min_by(|&i, &j| {
+            let z = |k: usize| b.min.z + (b.max.z - b.min.z) * k as f64 / (n - 1) as f64;
+            (z(i) - pf.home.r.z)
+                .abs()
+                .total_cmp(&(z(j) - pf.home.r.z).abs())
+        })
+        .unwrap_or(0);
+    let (w, h) = (b.max.x - b.min.x, b.max.y - b.min.y);
+    let s = 560.0 / w.max(h);
+    let cw = w / (n - 1) as f64 * s;
+    let ch = h / (n - 1) as f64 * s;
+    let px = |x: f64| 20.0 + cw / 2.0 + (x - b.min.x) * s;
+    let py = |y: f64| 20.0 + ch / 2.0 + (b.max.y - y) * s;
+    let max = pts
+        .iter()
+        .filter_map(|(_, p)| match p {
+            MapPoint::Estimated(v) => Some(*v),
+            _ => None,
+        })
+        .fold(0.0, f64::max);
+    let mut svg = String::new();
+    writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{:.0}" height="{:.0}" font-family="sans-serif" font-size="12">"#,
+        (w * s + 40.0 + cw).max(640.0),
+        h * s + 90.0 + ch
+    )?;
+    for (idx, (x, p)) in pts.iter().enumerate() {
+        if idx % n != kz {
+            continue;
+        }
+        let (fill, opacity, label) = match p {
+            MapPoint::Estimated(v) => (
+                "#d95f02",
+                0.15 + 0.85 * v / max.max(1e-12),
+                format!("{:.1}", v * 1e3),
+            ),
+            MapPoint::NotFeasible => ("#b0b0b0", 1.0, String::new()),
+            MapPoint::Failed(_) => ("#000000", 1.0, "fail".into()),
+        };
+        writeln!(
+            svg,
+            r#"<rect x="{:.1}" y="{:.1}" width="{:.1}" height="{:.1}" fill="{fill}" fill-opacity="{opacity:.2}"/>"#,
+            px(x.r.x) - cw / 2.0,
+            py(x.r.y) - ch / 2.0,
+            cw * 0.94,
+            ch * 0.94
+        )?;
+        if !label.is_empty() && cw > 30.0 {
+            writeln!(
+                svg,
+                r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="10">{label}</text>"#,
+                px(x.r.x),
+                py(x.r.y) + 4.0
+            )?;
+        }
+    }
+    let y0 = h * s + 45.0 + ch;
+    let zk = b.min.z + (b.max.z - b.min.z) * kz as f64 / (n - 1) as f64;
+    writeln!(
+        svg,
+        r#"<text x="20" y="{y0:.0}">slice z = {zk:.2} m, level platform: RMS position error (mm, eq. 3.28) for σ(a) = {:.1} mm, σ(b) = {:.1} mm, σ(k_F) = {:.0} %; max {:.2} mm</text>"#,
+        e.frame_anchor_m * 1e3,
+        e.platform_anchor_m * 1e3,
+        e.stiffness_rel * 1e2,
+        max * 1e3
+    )?;
+    writeln!(
+        svg,
+        r#"<text x="20" y="{:.0}">grey: not wrench feasible with the closed form (eq. 3.41); black: computation failed</text></svg>"#,
+        y0 + 18.0
+    )?;
+    std::fs::write(path, svg)?;
+    Ok(())
+}
