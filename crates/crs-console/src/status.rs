@@ -190,6 +190,7 @@ fn fault_name(code: u32) -> String {
         UNEXPECTED_STATE => "unexpected drive state".into(),
         BUS_ERROR => "bus error".into(),
         PDO_TIMEOUT => "PDO timeout".into(),
+        FORCE_LIMIT => "cable force beyond the hard limit".into(),
         c => format!("fault code {c}"),
     }
 }

@@ -96,6 +96,8 @@ pub mod fault_code {
     pub const UNEXPECTED_STATE: u32 = 7;
     pub const BUS_ERROR: u32 = 8;
     pub const PDO_TIMEOUT: u32 = 9;
+    /// A drive's measured cable force beyond drive-io's hard limit.
+    pub const FORCE_LIMIT: u32 = 10;
 }
 
 /// Drive feedback of one SYNC cycle, published by drive-io.

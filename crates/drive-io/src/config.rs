@@ -52,6 +52,11 @@ pub struct BusConfig {
     /// Largest accepted cable speed implied by consecutive setpoints (m/s); faster = fault.
     #[serde(default = "d_vmax")]
     pub max_cable_speed_m_per_s: f64,
+    /// Hard limit of a drive's measured cable force (TPDO2 pulley force), N: one reading above
+    /// it (or below −limit, a broken sensor) quick-stops all drives — drive-io's own channel,
+    /// independent of the safety monitor's force supervision (the winches' rating, 14 kN).
+    #[serde(default = "d_force_limit")]
+    pub force_hard_limit_n: f64,
     /// Optional candump log of every frame.
     #[serde(default)]
     pub candump_log: Option<String>,
@@ -77,6 +82,9 @@ fn d_sdo() -> u32 {
 }
 fn d_vmax() -> f64 {
     5.0
+}
+fn d_force_limit() -> f64 {
+    14_000.0
 }
 
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
@@ -188,6 +196,9 @@ impl DrivesConfig {
                 "bus.boot_timeout_ms/sdo_timeout_ms",
                 "must be >= 1",
             ));
+        }
+        if !(b.force_hard_limit_n.is_finite() && b.force_hard_limit_n > 0.0) {
+            return Err(invalid("bus.force_hard_limit_n", "must be finite and > 0"));
         }
         if !(b.max_cable_speed_m_per_s.is_finite() && b.max_cable_speed_m_per_s > 0.0) {
             return Err(invalid(

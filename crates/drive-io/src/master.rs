@@ -93,6 +93,7 @@ pub struct Master {
     boot_timeout_ns: u64,
     sdo_timeout_ns: u64,
     max_step_counts: [f64; MAX_CABLES],
+    force_limit_mn: i64,
     drives: [DriveView; MAX_CABLES],
     phase: Phase,
     boot_start_ns: Option<u64>,
@@ -140,6 +141,7 @@ impl Master {
             boot_timeout_ns: u64::from(cfg.bus.boot_timeout_ms) * 1_000_000,
             sdo_timeout_ns: u64::from(cfg.bus.sdo_timeout_ms) * 1_000_000,
             max_step_counts,
+            force_limit_mn: (cfg.bus.force_hard_limit_n * 1000.0) as i64,
             drives,
             phase: Phase::Boot,
             boot_start_ns: None,
@@ -257,6 +259,16 @@ impl Master {
             } => {
                 d.velocity = velocity_counts_per_s;
                 d.force_mn = force_mn;
+                // Second, independent channel to the monitor's force supervision: beyond the
+                // winches' rating (or a sensor reading that large negative) stop at once.
+                if i64::from(force_mn).abs() > self.force_limit_mn && !booting {
+                    tracing::error!(
+                        node,
+                        force_n = f64::from(force_mn) * 1e-3,
+                        "cable force beyond the hard limit"
+                    );
+                    self.stop(BusState::Fault, fault_code::FORCE_LIMIT, node);
+                }
             }
             Message::Heartbeat { state, .. } => {
                 d.last_hb_ns = rx.rx_monotonic_ns;

@@ -14,6 +14,8 @@ struct Sim {
     now: u64,
     mute: Option<usize>,
     log: Vec<Message>,
+    /// Pulley force each drive reports in TPDO2, mN.
+    force_mn: Vec<i32>,
 }
 
 impl Sim {
@@ -36,6 +38,7 @@ impl Sim {
             now: 1_000_000_000,
             mute: None,
             log: Vec::new(),
+            force_mn: vec![1000; 8],
         };
         let mut out = FrameBuf::default();
         for (i, sl) in s.slaves.iter_mut().enumerate() {
@@ -82,7 +85,7 @@ impl Sim {
                     self.slaves[i].set_actual(
                         c,
                         w.m_per_s_to_counts_per_s(self.axes[i].velocity_m_per_s),
-                        1000,
+                        self.force_mn[i],
                     );
                     self.slaves[i].transmit_pdos(&mut s_out);
                 }
@@ -330,4 +333,47 @@ fn emcy_and_drive_fault_stop_all() {
         };
         assert_eq!(sl.ds402_state(), want);
     }
+}
+
+#[test]
+fn a_force_beyond_the_hard_limit_stops_all_drives_on_drive_ios_own() {
+    let mut s = Sim::new();
+    assert_eq!(s.cfg.bus.force_hard_limit_n, 14_000.0);
+    s.boot();
+    let l: Vec<f64> = s.axes.iter().map(|a| a.length_m).collect();
+    // Just below the rating on every cable, and a large sensor reading while booting: no fault.
+    s.force_mn = vec![13_999_000; 8];
+    for k in 1..20 {
+        let sp = s.setpoint(k, &l);
+        s.step(Some(&sp));
+    }
+    assert_eq!(s.master.state(), BusState::Running);
+    let n = s.slaves.len();
+    assert_eq!(
+        &s.master.feedback().cable_force_n[..n],
+        &vec![13_999.0; n][..],
+        "drive-io reports what the drives measure"
+    );
+    s.force_mn[2] = 14_000_001;
+    let sp = s.setpoint(20, &l);
+    s.step(Some(&sp));
+    s.step(None);
+    assert_eq!(s.master.state(), BusState::Fault);
+    let fb = s.master.feedback();
+    assert_eq!((fb.fault_code, fb.fault_node), (fault_code::FORCE_LIMIT, 3));
+    s.step(None);
+    assert!(
+        s.slaves
+            .iter()
+            .all(|sl| sl.ds402_state() == Ds402State::QuickStopActive),
+        "every drive quick-stopped"
+    );
+    // A broken sensor reading a huge negative force stops too.
+    let mut s = Sim::new();
+    s.boot();
+    s.force_mn[0] = -20_000_000;
+    let sp = s.setpoint(1, &l);
+    s.step(Some(&sp));
+    s.step(None);
+    assert_eq!(s.master.feedback().fault_code, fault_code::FORCE_LIMIT);
 }

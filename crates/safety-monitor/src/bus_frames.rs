@@ -6,6 +6,8 @@ use can_transport::CanFrame;
 pub const COB_NMT: u16 = 0x000;
 pub const COB_RPDO1_BASE: u16 = 0x200;
 pub const COB_HEARTBEAT_BASE: u16 = 0x700;
+/// TPDO2 of a drive: velocity actual (i32 counts/s) + pulley force sensor (i32 mN).
+pub const COB_TPDO2_BASE: u16 = 0x280;
 pub const NMT_START: u8 = 0x01;
 pub const NMT_STOP: u8 = 0x02;
 /// CiA 402 controlword "quick stop" (bits 1 = 1, 2 = 0).
@@ -41,6 +43,8 @@ pub enum Observed {
     },
     /// Heartbeat of `node` with its NMT state.
     Heartbeat { node: u8, state: u8 },
+    /// TPDO2 of drive `node`: its measured cable force, mN.
+    Force { node: u8, force_mn: i32 },
 }
 
 /// Decodes an RPDO1 or a heartbeat; anything else (or malformed) is `None`. Never panics.
@@ -63,6 +67,10 @@ pub fn observe(f: &CanFrame) -> Option<Observed> {
         COB_HEARTBEAT_BASE if d.len() == 1 => Some(Observed::Heartbeat {
             node,
             state: d[0] & 0x7F,
+        }),
+        COB_TPDO2_BASE if d.len() == 8 => Some(Observed::Force {
+            node,
+            force_mn: i32::from_le_bytes([d[4], d[5], d[6], d[7]]),
         }),
         _ => None,
     }
@@ -89,6 +97,18 @@ mod tests {
             Some(Observed::Heartbeat { node: 3, state: 5 })
         );
         assert_eq!(observe(&CanFrame::new(0x203, &[1, 2]).unwrap()), None);
+        // TPDO2 as drive-io's slave writes it: velocity, then force in mN.
+        let mut d = [0u8; 8];
+        d[..4].copy_from_slice(&123i32.to_le_bytes());
+        d[4..].copy_from_slice(&(-4_500_000i32).to_le_bytes());
+        assert_eq!(
+            observe(&CanFrame::new(0x286, &d).unwrap()),
+            Some(Observed::Force {
+                node: 6,
+                force_mn: -4_500_000
+            })
+        );
+        assert_eq!(observe(&CanFrame::new(0x286, &d[..7]).unwrap()), None);
         assert_eq!(observe(&CanFrame::new(0x200, &[0; 6]).unwrap()), None);
     }
 }

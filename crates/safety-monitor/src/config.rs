@@ -116,12 +116,39 @@ pub struct CanSection {
     pub reset_wait_ms: u32,
 }
 
+/// `[forces]`: the drives' measured cable forces (TPDO2 pulley force, read from the bus on the
+/// monitor's own socket) against the platform's limits (seed §5.1, table 5.1).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ForcesSection {
+    /// Supervise the measured forces of every operational drive.
+    #[serde(default = "d_true")]
+    pub check: bool,
+    /// Slack: f < f_min_n − slack_margin_n for longer than `filter_ms`.
+    #[serde(default = "d_slack_margin")]
+    pub slack_margin_n: f64,
+    /// Overload: f > f_max_n + overload_margin_n for longer than `filter_ms`.
+    #[serde(default = "d_overload_margin")]
+    pub overload_margin_n: f64,
+    /// How long a limit must be violated before it trips (sensor noise, short transients), ms.
+    #[serde(default = "d_force_filter")]
+    pub filter_ms: f64,
+    /// Any single reading above this trips at once: the winches' rating (seed: 14 kN).
+    #[serde(default = "d_hard_limit")]
+    pub hard_limit_n: f64,
+    /// An operational drive without a force reading for this many cycles => e-stop.
+    #[serde(default = "d_force_silence")]
+    pub silence_cycles: u32,
+}
+
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
     monitor: MonitorSection,
     #[serde(default = "d_feedback")]
     feedback: FeedbackSection,
+    #[serde(default = "d_forces")]
+    forces: ForcesSection,
     can: CanSection,
 }
 
@@ -166,6 +193,31 @@ fn d_cob() -> u16 {
 }
 fn d_reset_wait() -> u32 {
     1000
+}
+fn d_slack_margin() -> f64 {
+    500.0
+}
+fn d_overload_margin() -> f64 {
+    1000.0
+}
+fn d_force_filter() -> f64 {
+    45.0
+}
+fn d_hard_limit() -> f64 {
+    14_000.0
+}
+fn d_force_silence() -> u32 {
+    4
+}
+fn d_forces() -> ForcesSection {
+    ForcesSection {
+        check: true,
+        slack_margin_n: d_slack_margin(),
+        overload_margin_n: d_overload_margin(),
+        filter_ms: d_force_filter(),
+        hard_limit_n: d_hard_limit(),
+        silence_cycles: d_force_silence(),
+    }
 }
 fn d_feedback() -> FeedbackSection {
     FeedbackSection {
@@ -216,6 +268,7 @@ pub struct MonitorConfig {
     pub file: PathBuf,
     pub monitor: MonitorSection,
     pub feedback: FeedbackSection,
+    pub forces: ForcesSection,
     pub can: CanSection,
     pub platform_file: PathBuf,
     pub platform: PlatformParams,
@@ -342,6 +395,25 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             format!("must be in 1..={}", crate::monitor::HISTORY),
         ));
     }
+    let fo = &raw.forces;
+    for (key, v) in [
+        ("forces.slack_margin_n", fo.slack_margin_n),
+        ("forces.overload_margin_n", fo.overload_margin_n),
+        ("forces.filter_ms", fo.filter_ms),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(bad(key, format!("must be a number >= 0, got {v}")));
+        }
+    }
+    if !(fo.hard_limit_n.is_finite() && fo.hard_limit_n > 0.0) {
+        return Err(bad("forces.hard_limit_n", "must be a number > 0".into()));
+    }
+    if fo.check && fo.silence_cycles == 0 {
+        return Err(bad(
+            "forces.silence_cycles",
+            "must be >= 1: a drive without force readings must trip (fail closed)".into(),
+        ));
+    }
     let c = &raw.can;
     c.transport
         .parse::<can_transport::TransportSpec>()
@@ -377,10 +449,22 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             ),
         });
     }
+    if fo.check && fo.hard_limit_n < platform.f_max_n {
+        return Err(bad(
+            "forces.hard_limit_n",
+            format!(
+                "{} N is below the platform's f_max_n ({} N of {}): every allowed force would trip",
+                fo.hard_limit_n,
+                platform.f_max_n,
+                platform_file.display()
+            ),
+        ));
+    }
     Ok(MonitorConfig {
         file: path.to_path_buf(),
         monitor: raw.monitor,
         feedback: raw.feedback,
+        forces: raw.forces,
         can: raw.can,
         platform_file,
         platform,

@@ -349,6 +349,12 @@ pub fn run(
                     if let Some(i) = node_index(node) {
                         drive_state[i] = state;
                         drive_state_ns[i] = o.rx_ns;
+                        monitor.on_drive_state(i, state == bus_frames::NMT_STATE_OPERATIONAL);
+                    }
+                }
+                Observed::Force { node, force_mn } => {
+                    if let Some(i) = node_index(node) {
+                        monitor.on_force(i, f64::from(force_mn) * 1e-3, o.rx_ns);
                     }
                 }
             }

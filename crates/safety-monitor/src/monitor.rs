@@ -59,6 +59,23 @@ pub struct Limits {
     /// 0 = off.
     pub feedback_silence_cycles: u32,
     pub check_rpdo: bool,
+    pub forces: ForceLimits,
+}
+
+/// Thresholds of the measured-force supervision (seed §5.1, table 5.1), N.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForceLimits {
+    pub check: bool,
+    /// Slack below this (f_min − margin) ...
+    pub slack_below_n: f64,
+    /// ... overload above this (f_max + margin) ...
+    pub overload_above_n: f64,
+    /// ... for at least this long (by the readings' receive times).
+    pub filter_ns: u64,
+    /// A single reading above this trips at once (the winches' rating).
+    pub hard_limit_n: f64,
+    /// Cycles an operational drive may go without a force reading.
+    pub silence_cycles: u32,
 }
 
 impl Limits {
@@ -80,8 +97,32 @@ impl Limits {
             window_setpoints: c.feedback.window_setpoints.min(HISTORY as u32),
             feedback_silence_cycles: c.feedback.silence_cycles,
             check_rpdo: c.can.check_rpdo,
+            forces: ForceLimits {
+                check: c.forces.check,
+                slack_below_n: c.platform.f_min_n - c.forces.slack_margin_n,
+                overload_above_n: c.platform.f_max_n + c.forces.overload_margin_n,
+                filter_ns: (c.forces.filter_ms * 1e6) as u64,
+                hard_limit_n: c.forces.hard_limit_n,
+                silence_cycles: c.forces.silence_cycles,
+            },
         }
     }
+}
+
+/// Per-cable state of the force supervision.
+#[derive(Debug, Clone, Copy, Default)]
+struct ForceWatch {
+    /// The drive reports NMT operational (it runs and sends PDOs).
+    operational: bool,
+    /// Readings this cycle.
+    readings: u32,
+    /// Cycles in a row without a reading while operational.
+    silent: u32,
+    /// Receive time of the first reading of the current slack / overload episode.
+    slack_since_ns: Option<u64>,
+    over_since_ns: Option<u64>,
+    /// Last reading, N.
+    last_n: f64,
 }
 
 /// Latched state.
@@ -156,8 +197,13 @@ pub struct Stats {
     pub setpoints_missing: u64,
     pub feedback_checked: u64,
     pub rpdo_checked: u64,
+    /// Force readings checked.
+    pub forces_checked: u64,
     /// Largest |Δq| seen on any cable (m).
     pub max_abs_dq_m: f64,
+    /// Smallest and largest measured cable force of an operational drive, N.
+    pub min_force_n: f64,
+    pub max_force_n: f64,
 }
 
 /// The monitor core. Construct once (allocates the gap window), then per cycle: `on_*` for every
@@ -195,6 +241,7 @@ pub struct Monitor {
     hist_len: usize,
     hist_next: usize,
     q: [f64; MAX_CABLES],
+    force: [ForceWatch; MAX_CABLES],
 }
 
 impl Monitor {
@@ -210,7 +257,11 @@ impl Monitor {
             state: MonitorState::Armed,
             trip: None,
             log: TripLog::default(),
-            stats: Stats::default(),
+            stats: Stats {
+                min_force_n: f64::INFINITY,
+                max_force_n: f64::NEG_INFINITY,
+                ..Stats::default()
+            },
             faults: CauseSet::default(),
             first: None,
             new_setpoints: 0,
@@ -233,6 +284,7 @@ impl Monitor {
             hist_len: 0,
             hist_next: 0,
             q: [0.0; MAX_CABLES],
+            force: [ForceWatch::default(); MAX_CABLES],
         }
     }
 
@@ -494,6 +546,72 @@ impl Monitor {
         }
     }
 
+    /// NMT state of the drive of `cable` (from its heartbeat): only operational drives send
+    /// PDOs, so only their forces are supervised and their silence counted.
+    pub fn on_drive_state(&mut self, cable: usize, operational: bool) {
+        if let Some(w) = self.force.get_mut(cable) {
+            if !operational {
+                *w = ForceWatch {
+                    last_n: w.last_n,
+                    ..ForceWatch::default()
+                };
+            }
+            w.operational = operational;
+        }
+    }
+
+    /// A measured cable force (the drive's TPDO2 pulley force, N) received at `rx_ns`. Slack
+    /// and overload are timed by the monitor's receive clock, not by the sender.
+    pub fn on_force(&mut self, cable: usize, force_n: f64, rx_ns: u64) {
+        let fl = self.lim.forces;
+        if !fl.check || cable >= self.m {
+            return;
+        }
+        self.stats.forces_checked += 1;
+        let w = &mut self.force[cable];
+        w.readings += 1;
+        w.last_n = force_n;
+        if !w.operational {
+            return;
+        }
+        let at = |cause: Cause, limit: f64| Fault {
+            cable: Some(cable as u8),
+            value: force_n,
+            limit,
+            ..Fault::new(cause)
+        };
+        if !force_n.is_finite() {
+            self.fault(at(Cause::ForceSilence, f64::NAN));
+            return;
+        }
+        self.stats.min_force_n = self.stats.min_force_n.min(force_n);
+        self.stats.max_force_n = self.stats.max_force_n.max(force_n);
+        let mut fault = None;
+        if force_n < fl.slack_below_n {
+            let since = *w.slack_since_ns.get_or_insert(rx_ns);
+            if rx_ns.saturating_sub(since) >= fl.filter_ns {
+                fault = Some(at(Cause::ForceSlack, fl.slack_below_n));
+            }
+        } else {
+            w.slack_since_ns = None;
+        }
+        if force_n > fl.overload_above_n {
+            let since = *w.over_since_ns.get_or_insert(rx_ns);
+            if rx_ns.saturating_sub(since) >= fl.filter_ns {
+                fault = Some(at(Cause::ForceOverload, fl.overload_above_n));
+            }
+        } else {
+            w.over_since_ns = None;
+        }
+        // The hard limit needs no filter: one reading above the winches' rating trips.
+        if !within(force_n, fl.hard_limit_n) {
+            fault = Some(at(Cause::ForceOverload, fl.hard_limit_n));
+        }
+        if let Some(f) = fault {
+            self.fault(f);
+        }
+    }
+
     /// Closes the cycle at `now_ns`: the per-cycle checks, then the latch.
     pub fn end_cycle(&mut self, now_ns: u64) -> CycleReport {
         self.stats.cycles += 1;
@@ -555,6 +673,27 @@ impl Monitor {
                     limit: f64::from(self.lim.feedback_silence_cycles),
                     ..Fault::new(Cause::FeedbackSilence)
                 });
+            }
+        }
+        // Operational drives without force readings: the force check cannot be evaluated.
+        if self.lim.forces.check {
+            for i in 0..self.m {
+                let w = &mut self.force[i];
+                if !w.operational || w.readings > 0 {
+                    w.silent = 0;
+                } else {
+                    w.silent = w.silent.saturating_add(1);
+                }
+                w.readings = 0;
+                if w.silent >= self.lim.forces.silence_cycles {
+                    let silent = w.silent;
+                    self.fault(Fault {
+                        cable: Some(i as u8),
+                        value: f64::from(silent),
+                        limit: f64::from(self.lim.forces.silence_cycles),
+                        ..Fault::new(Cause::ForceSilence)
+                    });
+                }
             }
         }
         let mut new_trip = None;

@@ -33,10 +33,19 @@ pub enum Cause {
     SequenceRegression = 12,
     /// The process bus failed (receive error, foreign contract version): nothing can be checked.
     IpcError = 13,
+    /// A drive's measured cable force stayed below f_min − margin longer than the filter time
+    /// (slack cable; seed §5.1, table 5.1).
+    ForceSlack = 14,
+    /// A measured cable force stayed above f_max + margin longer than the filter time, or one
+    /// reading exceeded the absolute hard limit (the winches' rating).
+    ForceOverload = 15,
+    /// An operational drive sent no force reading (TPDO2) for N cycles, or a reading that is not
+    /// a number: the force check cannot be evaluated, so it fails closed.
+    ForceSilence = 16,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 13] = [
+    pub const ALL: [Cause; 16] = [
         Cause::DqLimit,
         Cause::NonFinite,
         Cause::OutsideWorkspace,
@@ -50,6 +59,9 @@ impl Cause {
         Cause::CableCount,
         Cause::SequenceRegression,
         Cause::IpcError,
+        Cause::ForceSlack,
+        Cause::ForceOverload,
+        Cause::ForceSilence,
     ];
 
     pub fn code(self) -> u8 {
@@ -78,6 +90,9 @@ impl Cause {
             Cause::CableCount => "cable_count",
             Cause::SequenceRegression => "sequence_regression",
             Cause::IpcError => "ipc_error",
+            Cause::ForceSlack => "force_slack",
+            Cause::ForceOverload => "force_overload",
+            Cause::ForceSilence => "force_silence",
         }
     }
 
@@ -125,8 +140,9 @@ pub struct Fault {
     pub cause: Cause,
     /// 0-based cable index, if the fault concerns one cable.
     pub cable: Option<u8>,
-    /// The offending value: Δq (m) for dq_limit / rpdo_mismatch / following_error, a count for
-    /// sequence_gaps / *_silence, NaN if not applicable.
+    /// The offending value: Δq (m) for dq_limit / rpdo_mismatch / following_error, the force (N)
+    /// for force_slack / force_overload, a count for sequence_gaps / *_silence, NaN if not
+    /// applicable.
     pub value: f64,
     /// The limit it was compared with (same unit), NaN if not applicable.
     pub limit: f64,

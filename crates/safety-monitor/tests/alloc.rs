@@ -74,6 +74,10 @@ fn a_cycle_allocates_nothing() {
             f.cable_length_m = s.cable_length_m;
             m.on_feedback(&f);
             m.on_rpdo(1, base.cable_length_m[1], s.timestamp_ns);
+            for i in 0..8 {
+                m.on_drive_state(i, true);
+                m.on_force(i, 4000.0, s.timestamp_ns);
+            }
         }
         m.end_cycle(cycle * 15_000_000);
         if cycle > 510 && m.state() == MonitorState::Tripped {

@@ -569,3 +569,220 @@ proptest! {
 fn history_is_large_enough_for_the_feedback_window() {
     assert!(cfg().feedback.window_setpoints as usize <= HISTORY);
 }
+
+// ---- measured-force supervision (issue 15: seed §5.1, table 5.1) -------------------------
+
+const MS: u64 = 1_000_000;
+
+/// One 15 ms cycle starting at `t0` with every drive operational and a force reading per ms,
+/// cable `cable` reading `f_n`, the others 4 kN.
+fn force_cycle(
+    m: &mut Monitor,
+    seq: u64,
+    t0: u64,
+    cable: usize,
+    f_n: f64,
+) -> (u64, safety_monitor::monitor::CycleReport) {
+    for k in 0..15 {
+        m.on_setpoint(&sp(seq + k, HOME, 0, 0.0));
+        for i in 0..8 {
+            m.on_drive_state(i, true);
+            m.on_force(i, if i == cable { f_n } else { 4000.0 }, t0 + k * MS);
+        }
+    }
+    (seq + 15, m.end_cycle(t0 + 15 * MS))
+}
+
+#[test]
+fn slack_and_overload_trip_after_the_filter_time_with_the_cable_and_force() {
+    let c = cfg();
+    let fl = Limits::from_config(c).forces;
+    assert!(fl.check, "the shipped configuration supervises forces");
+    assert_eq!(
+        fl.slack_below_n,
+        c.platform.f_min_n - c.forces.slack_margin_n
+    );
+    for (f_bad, cause, limit) in [
+        (fl.slack_below_n - 1.0, Cause::ForceSlack, fl.slack_below_n),
+        (0.0, Cause::ForceSlack, fl.slack_below_n),
+        (
+            fl.overload_above_n + 1.0,
+            Cause::ForceOverload,
+            fl.overload_above_n,
+        ),
+    ] {
+        for cable in [0, 5, 7] {
+            let mut m = monitor();
+            let (mut seq, mut t) = (1, 0);
+            let mut tripped_at = None;
+            for cyc in 0..10u64 {
+                let r;
+                (seq, r) = force_cycle(&mut m, seq, t, cable, f_bad);
+                t += 15 * MS;
+                if let Some(tr) = r.new_trip {
+                    tripped_at = Some((cyc, tr));
+                    break;
+                }
+            }
+            let (cyc, tr) =
+                tripped_at.unwrap_or_else(|| panic!("{f_bad} N on cable {cable} never tripped"));
+            assert_eq!(tr.fault.cause, cause);
+            assert_eq!(tr.fault.cable, Some(cable as u8));
+            assert_eq!(tr.fault.value, f_bad);
+            assert_eq!(tr.fault.limit, limit);
+            // 45 ms filter at one reading per ms: the fourth cycle at the latest, not the first.
+            let filter_cycles = fl.filter_ns.div_ceil(15 * MS);
+            assert!(
+                cyc >= filter_cycles - 1 && cyc <= filter_cycles,
+                "tripped in cycle {cyc}"
+            );
+        }
+    }
+}
+
+#[test]
+fn forces_inside_the_limits_and_short_transients_do_not_trip() {
+    let fl = Limits::from_config(cfg()).forces;
+    let mut m = monitor();
+    let (mut seq, mut t) = (1, 0);
+    for cyc in 0..40u64 {
+        // Every 5th cycle a 10 ms excursion (shorter than the 45 ms filter) below the slack
+        // limit, and the limits themselves otherwise.
+        let f = match cyc % 5 {
+            0 => fl.slack_below_n,
+            1 => fl.overload_above_n,
+            _ => 4000.0,
+        };
+        let r;
+        (seq, r) = force_cycle(&mut m, seq, t, 3, f);
+        assert!(r.faults.is_empty(), "cycle {cyc}: {:?}", r.faults);
+        for k in 0..10 {
+            m.on_force(2, fl.slack_below_n - 100.0, t + k * MS);
+        }
+        m.on_force(2, 4000.0, t + 11 * MS);
+        t += 15 * MS;
+    }
+    assert_eq!(m.state(), MonitorState::Armed);
+    assert!(m.stats().forces_checked > 0);
+}
+
+#[test]
+fn one_reading_above_the_hard_limit_trips_at_once() {
+    let fl = Limits::from_config(cfg()).forces;
+    let mut m = monitor();
+    let (seq, _) = force_cycle(&mut m, 1, 0, 2, 4000.0);
+    m.on_force(2, fl.hard_limit_n + 1.0, 15 * MS + 1);
+    let r = m.end_cycle(16 * MS);
+    let tr = r.new_trip.expect("hard limit");
+    assert_eq!(tr.fault.cause, Cause::ForceOverload);
+    assert_eq!(tr.fault.limit, fl.hard_limit_n);
+    assert_eq!(tr.fault.cable, Some(2));
+    let _ = seq;
+}
+
+#[test]
+fn a_silent_or_non_numeric_force_sensor_trips_fail_closed() {
+    let fl = Limits::from_config(cfg()).forces;
+    // Operational drive 4 stops sending force readings.
+    let mut m = monitor();
+    let (mut seq, _) = force_cycle(&mut m, 1, 0, 0, 4000.0);
+    let mut trip = None;
+    for cyc in 1..=fl.silence_cycles + 1 {
+        for k in 0..15 {
+            m.on_setpoint(&sp(seq + k, HOME, 0, 0.0));
+            for i in (0..8).filter(|&i| i != 4) {
+                m.on_force(i, 4000.0, u64::from(cyc) * 15 * MS + k * MS);
+            }
+        }
+        seq += 15;
+        if let Some(t) = m.end_cycle(u64::from(cyc + 1) * 15 * MS).new_trip {
+            trip = Some((cyc, t));
+            break;
+        }
+    }
+    let (cyc, t) = trip.expect("silent force sensor must trip");
+    assert_eq!(
+        (t.fault.cause, t.fault.cable),
+        (Cause::ForceSilence, Some(4))
+    );
+    assert_eq!(cyc, fl.silence_cycles);
+    // NaN reading: cannot be evaluated => trips in the same cycle.
+    let mut m = monitor();
+    force_cycle(&mut m, 1, 0, 0, 4000.0);
+    m.on_force(6, f64::NAN, 15 * MS + 1);
+    let t = m.end_cycle(16 * MS).new_trip.expect("NaN force");
+    assert_eq!(
+        (t.fault.cause, t.fault.cable),
+        (Cause::ForceSilence, Some(6))
+    );
+}
+
+#[test]
+fn drives_that_are_not_operational_are_not_force_supervised() {
+    // Before NMT start (pre-operational: no PDOs, cables may still be slack) and after a stop.
+    let mut m = monitor();
+    for cyc in 0..10u64 {
+        for k in 0..15 {
+            m.on_setpoint(&sp(1 + cyc * 15 + k, HOME, 0, 0.0));
+            m.on_force(1, 0.0, cyc * 15 * MS + k * MS);
+        }
+        assert!(m.end_cycle((cyc + 1) * 15 * MS).faults.is_empty());
+    }
+    // Operational: the same slack reading now trips.
+    m.on_drive_state(1, true);
+    let mut tripped = false;
+    for cyc in 10..20u64 {
+        for k in 0..15 {
+            m.on_setpoint(&sp(1 + cyc * 15 + k, HOME, 0, 0.0));
+            m.on_force(1, 0.0, cyc * 15 * MS + k * MS);
+            for i in (0..8).filter(|&i| i != 1) {
+                m.on_drive_state(i, true);
+                m.on_force(i, 4000.0, cyc * 15 * MS + k * MS);
+            }
+        }
+        tripped |= m.end_cycle((cyc + 1) * 15 * MS).new_trip.is_some();
+    }
+    assert!(tripped);
+    assert_eq!(m.trip().unwrap().fault.cause, Cause::ForceSlack);
+}
+
+#[test]
+fn force_config_errors_name_the_key() {
+    let dir = std::env::temp_dir().join(format!("sm-forces-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let base = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/safety-monitor.toml"),
+    )
+    .unwrap();
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config");
+    let base = base
+        .replace(
+            "platform = \"icosahedron.toml\"",
+            &format!("platform = {:?}", root.join("icosahedron.toml")),
+        )
+        .replace(
+            "drives = \"drives.toml\"",
+            &format!("drives = {:?}", root.join("drives.toml")),
+        );
+    for (forces, key) in [
+        ("[forces]\nhard_limit_n = 5000.0\n", "forces.hard_limit_n"),
+        ("[forces]\nsilence_cycles = 0\n", "forces.silence_cycles"),
+        ("[forces]\nfilter_ms = -1.0\n", "forces.filter_ms"),
+    ] {
+        let p = dir.join("sm.toml");
+        let text = if base.contains("[forces]") {
+            let i = base.find("[forces]").unwrap();
+            let j = base[i..]
+                .find("\n[")
+                .map(|j| i + j + 1)
+                .unwrap_or(base.len());
+            format!("{}{}\n{}", &base[..i], forces, &base[j..])
+        } else {
+            format!("{base}\n{forces}")
+        };
+        std::fs::write(&p, text).unwrap();
+        let e = config::load(&p).unwrap_err().to_string();
+        assert!(e.contains(key), "{forces}: {e}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -52,6 +52,7 @@ use can_transport::{CanBus, CanError, CanFrame};
 use cdpr_model::config::Platform;
 use cdpr_model::{Data, Pose, kinematics};
 use crs_ipc::{CONTRACT_VERSION, MAX_CABLES, PlantTruth, TrackerPose};
+use drive_io::canopen::Ds402State;
 use drive_io::config::{DrivesConfig, WinchConfig};
 use drive_io::slave::{DriveBank, MotionDemand};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -164,8 +165,19 @@ pub struct BusOptions {
     pub home_lengths_m: Option<Vec<f64>>,
     /// Heartbeat producer time before the master writes 0x1017, ms.
     pub default_heartbeat_ms: u16,
+    /// A drive whose measured cable force falls below this (a slack cable) raises a drive fault
+    /// (EMCY [`EMCY_CABLE_SLACK`], CiA 402 Fault) as a real winch's slack-rope detection does, N.
+    pub slack_fault_n: f64,
+    /// A drive whose measured cable force exceeds this (the winch's rating; the control
+    /// platform's `f_abs_max_n`) raises a drive fault (EMCY [`EMCY_CABLE_OVERLOAD`]), N.
+    pub overload_fault_n: f64,
     pub files: ConfigFiles,
 }
+
+/// EMCY error code of a drive that detected a slack cable (manufacturer-specific range).
+pub const EMCY_CABLE_SLACK: u16 = 0xFF10;
+/// EMCY error code of a drive whose cable force exceeded its rating.
+pub const EMCY_CABLE_OVERLOAD: u16 = 0xFF11;
 
 impl BusOptions {
     /// Defaults from the drives config (SYNC period, cable speed limit, heartbeat) and the
@@ -179,6 +191,8 @@ impl BusOptions {
             f_ini_n: None,
             home_lengths_m: None,
             default_heartbeat_ms: drives.bus.heartbeat_producer_ms,
+            slack_fault_n: 50.0,
+            overload_fault_n: control.f_abs_max,
             files: ConfigFiles::default(),
         }
     }
@@ -197,6 +211,16 @@ impl BusOptions {
         pos("sync_period_s", self.sync_period_s)?;
         pos("max_cable_speed_m_per_s", self.max_cable_speed_m_per_s)?;
         pos("max_cable_accel_m_per_s2", self.max_cable_accel_m_per_s2)?;
+        pos("overload_fault_n", self.overload_fault_n)?;
+        if !(self.slack_fault_n.is_finite() && self.slack_fault_n < self.overload_fault_n) {
+            return Err(BusPlantError::Option {
+                name: "slack_fault_n",
+                reason: format!(
+                    "must be finite and below overload_fault_n ({} N), got {}",
+                    self.overload_fault_n, self.slack_fault_n
+                ),
+            });
+        }
         if !(self.resolve_epsilon_m.is_finite() && self.resolve_epsilon_m >= 0.0) {
             return Err(BusPlantError::Option {
                 name: "resolve_epsilon_m",
@@ -227,6 +251,9 @@ pub struct BusStats {
     pub solves: u64,
     /// Solves without equilibrium.
     pub failed_solves: u64,
+    /// Drive faults raised for a slack cable / an overloaded cable.
+    pub slack_faults: u64,
+    pub overload_faults: u64,
 }
 
 /// The simulated plant answering as the drives (see the module docs).
@@ -544,6 +571,34 @@ impl PlantBus {
             let ax = &self.axes[i];
             let counts = counts_saturating(w, ax.length_m);
             self.measured_forces[i] = reading.forces[i];
+            // The drive supervises its own force sensor while it holds the cable under
+            // control: slack or beyond the rating => drive fault, visible on the bus as EMCY
+            // and the statusword's fault bit (drive-io stops all drives on either).
+            let enabled = self
+                .bank
+                .slave(i)
+                .is_some_and(|s| s.ds402_state() == Ds402State::OperationEnabled);
+            if enabled {
+                let f = reading.forces[i];
+                // (a NaN reading counts as slack: the drive cannot vouch for the cable)
+                if f.is_nan() || f < self.opts.slack_fault_n {
+                    tracing::error!(
+                        cable = i + 1,
+                        force_n = f,
+                        "plant: slack cable, drive fault"
+                    );
+                    self.stats.slack_faults += 1;
+                    self.bank.raise_fault(i, EMCY_CABLE_SLACK);
+                } else if f > self.opts.overload_fault_n {
+                    tracing::error!(
+                        cable = i + 1,
+                        force_n = f,
+                        "plant: cable overload, drive fault"
+                    );
+                    self.stats.overload_faults += 1;
+                    self.bank.raise_fault(i, EMCY_CABLE_OVERLOAD);
+                }
+            }
             let force_mn = (reading.forces[i] * 1000.0)
                 .round()
                 .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32;

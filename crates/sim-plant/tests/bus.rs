@@ -1099,3 +1099,82 @@ fn drives_with_a_safety_heartbeat_watch_stay_braked_without_the_monitor() {
     }
     assert_eq!(max_abs_diff(plant.plant_lengths(), &start), 0.0);
 }
+
+/// Ramps an offset on one cable's command (0.1 mm per SYNC, as the fault matrix's 0.1 m/s)
+/// from home until `target_m`, then holds 200 cycles; returns (offset at the first drive
+/// fault, the cable's largest and smallest measured force before it).
+fn ramp_offset(rig: &mut Rig, cable: usize, target_m: f64) -> (Option<f64>, f64, f64) {
+    let home = rig.control.home;
+    let (mut fmax, mut fmin) = (f64::NEG_INFINITY, f64::INFINITY);
+    let n = (target_m.abs() / 1e-4).round() as usize;
+    for k in 1..=n + 200 {
+        let off = target_m * (k.min(n) as f64 / n as f64);
+        let mut sp = rig.setpoint(&home);
+        sp.cable_length_m[cable] += off;
+        rig.step(Some(&sp));
+        if rig.master.state() == BusState::Fault {
+            rig.step(None); // drive-io assembles its feedback in the next cycle
+            return (Some(off), fmax, fmin);
+        }
+        let f = rig.feedback().cable_force_n[cable];
+        fmax = fmax.max(f);
+        fmin = fmin.min(f);
+    }
+    (None, fmax, fmin)
+}
+
+#[test]
+fn slack_and_overload_raise_drive_faults_that_drive_io_sees() {
+    // Lengthening one cable slackens its antagonists: the first drive whose measured force
+    // drops below slack_fault_n faults (EMCY 0xFF10), drive-io stops all drives.
+    let mut rig = Rig::new(plant_cfg("icosahedron-ideal.toml"));
+    rig.boot();
+    let (at, _, _) = ramp_offset(&mut rig, 5, 0.3);
+    let at = at.expect("a 300 mm longer cable makes a slack cable");
+    let fb = *rig.feedback();
+    assert_eq!(rig.master.state(), BusState::Fault);
+    assert_eq!(
+        (fb.fault_code, fb.last_emcy_code),
+        (
+            crs_ipc::fault_code::EMCY,
+            u32::from(sim_plant::bus::EMCY_CABLE_SLACK)
+        )
+    );
+    let node = fb.fault_node as usize;
+    // The TPDO2 of that cycle carries the slack reading that made the drive fault.
+    assert!(
+        fb.cable_force_n[node - 1] < rig.plant.options().slack_fault_n,
+        "node {node}: {:?}",
+        &fb.cable_force_n[..8]
+    );
+    assert_eq!(rig.plant.stats().slack_faults, 1);
+    eprintln!(
+        "+{:.1} mm on cable 6: slack drive fault on cable {node}, forces {:?} N",
+        at * 1e3,
+        fb.cable_force_n[..8]
+            .iter()
+            .map(|f| f.round())
+            .collect::<Vec<_>>()
+    );
+    // Shortening one cable overloads it beyond the 14 kN rating (EMCY 0xFF11).
+    let mut rig = Rig::new(plant_cfg("icosahedron-ideal.toml"));
+    rig.boot();
+    let (at, _, _) = ramp_offset(&mut rig, 5, -0.3);
+    let at = at.expect("a 300 mm shorter cable overloads");
+    let fb = *rig.feedback();
+    assert_eq!(
+        fb.last_emcy_code,
+        u32::from(sim_plant::bus::EMCY_CABLE_OVERLOAD)
+    );
+    let node = fb.fault_node as usize;
+    assert!(fb.cable_force_n[node - 1] > rig.plant.options().overload_fault_n);
+    assert_eq!(rig.plant.stats().overload_faults, 1);
+    eprintln!(
+        "{:.1} mm on cable 6: overload drive fault on cable {node}, forces {:?} N",
+        at * 1e3,
+        fb.cable_force_n[..8]
+            .iter()
+            .map(|f| f.round())
+            .collect::<Vec<_>>()
+    );
+}
