@@ -101,7 +101,8 @@ pub struct Master {
     toggle: bool,
     target: [i32; MAX_CABLES],
     last_seq: u64,
-    last_sp_timestamp_ns: u64,
+    /// drive-io's own clock (the cycle's now) when the last setpoint was applied.
+    last_apply_ns: u64,
     setpoint_age: u32,
     applied_seq: u64,
     applied_this_cycle: bool,
@@ -149,7 +150,7 @@ impl Master {
             toggle: false,
             target: [0; MAX_CABLES],
             last_seq: 0,
-            last_sp_timestamp_ns: 0,
+            last_apply_ns: 0,
             setpoint_age: 0,
             applied_seq: 0,
             applied_this_cycle: false,
@@ -471,7 +472,7 @@ impl Master {
                 self.check_drives(now_ns);
                 if let Some(sp) = setpoint.filter(|sp| sp.sequence > self.last_seq) {
                     self.last_seq = sp.sequence;
-                    if self.apply_setpoint(sp) {
+                    if self.apply_setpoint(sp, now_ns) {
                         self.setpoint_age = 0;
                         self.set_phase(Phase::Running);
                     }
@@ -532,7 +533,7 @@ impl Master {
     }
 
     /// Converts and checks a setpoint; on any invalid entry nothing is applied and the bus faults.
-    fn apply_setpoint(&mut self, sp: &JointSetpoint) -> bool {
+    fn apply_setpoint(&mut self, sp: &JointSetpoint, now_ns: u64) -> bool {
         if sp.version != crs_ipc::CONTRACT_VERSION || sp.cable_count as usize != self.m {
             tracing::error!(
                 count = sp.cable_count,
@@ -543,13 +544,20 @@ impl Master {
             return false;
         }
         let mut counts = [0i32; MAX_CABLES];
-        // The implied cable speed is judged on the setpoint stream's own clock (motion-core's
-        // timestamps), so a late drive-io cycle does not turn a valid stream into a fault. The
-        // first setpoint after enabling must start at the held position (one period of motion).
-        let periods = if self.phase == Phase::Running && sp.timestamp_ns > self.last_sp_timestamp_ns
-        {
-            ((sp.timestamp_ns - self.last_sp_timestamp_ns) as f64 / self.sync_period_ns as f64)
-                .clamp(1.0, 100.0)
+        // The implied cable speed is judged on drive-io's OWN clock, not on the sender's
+        // timestamps (a faulty producer could claim any interval): the stream advances one
+        // sequence number per period, so the step may cover as many periods as sequence numbers
+        // passed, but never more than drive-io's own time since it applied the previous
+        // setpoint plus one period (the phase slip of two unsynchronised 1 kHz loops: two
+        // setpoints may arrive within one SYNC) — and never more than the stale limit, beyond
+        // which the drives are quick-stopped anyway. The first setpoint after enabling must
+        // start at the held position (one period of motion).
+        let periods = if self.phase == Phase::Running {
+            let own = now_ns.saturating_sub(self.last_apply_ns) as f64 / self.sync_period_ns as f64;
+            let by_sequence = sp.sequence.saturating_sub(self.applied_seq) as f64;
+            by_sequence
+                .min(own + 1.0)
+                .clamp(1.0, f64::from(self.stale_cycles) + 2.0)
         } else {
             1.0
         };
@@ -580,7 +588,7 @@ impl Master {
         }
         self.target[..self.m].copy_from_slice(&counts[..self.m]);
         self.applied_seq = sp.sequence;
-        self.last_sp_timestamp_ns = sp.timestamp_ns;
+        self.last_apply_ns = now_ns;
         self.applied_this_cycle = true;
         true
     }

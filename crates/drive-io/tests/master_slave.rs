@@ -377,3 +377,53 @@ fn a_force_beyond_the_hard_limit_stops_all_drives_on_drive_ios_own() {
     s.step(None);
     assert_eq!(s.master.feedback().fault_code, fault_code::FORCE_LIMIT);
 }
+
+#[test]
+fn the_step_limit_runs_on_drive_ios_own_clock_not_the_senders_timestamps() {
+    let start = |s: &mut Sim| {
+        s.boot();
+        let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+        let sp = s.setpoint(1, &l0);
+        s.step(Some(&sp));
+        assert_eq!(s.master.state(), BusState::Running);
+        l0
+    };
+    // A setpoint claiming to be 100 ms newer (timestamp lies) with a 50 mm step: refused —
+    // before, the sender's timestamps allowed up to 100 periods (0.5 m) in one SYNC.
+    let mut s = Sim::new();
+    let l0 = start(&mut s);
+    let l: Vec<f64> = l0.iter().map(|x| x + 0.05).collect();
+    let mut sp = s.setpoint(2, &l);
+    sp.timestamp_ns += 100_000_000;
+    s.step(Some(&sp));
+    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    // Sequence numbers that jump by 100 do not buy more than drive-io's own time + 1 period.
+    let mut s = Sim::new();
+    let l0 = start(&mut s);
+    let mut sp = s.setpoint(101, &l);
+    sp.timestamp_ns += 100_000_000;
+    s.step(Some(&sp));
+    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    let _ = l0;
+    // Two setpoints within one SYNC (phase slip): 2 periods of motion (9 mm at 4.5 m/s) pass.
+    let mut s = Sim::new();
+    let l0 = start(&mut s);
+    let l: Vec<f64> = l0.iter().map(|x| x + 0.009).collect();
+    let sp = s.setpoint(3, &l);
+    s.step(Some(&sp));
+    assert_eq!(s.master.state(), BusState::Running);
+    // After 10 SYNCs without a new setpoint the drives held; a setpoint 10 periods of motion
+    // away (45 mm, sequence +10) passes on drive-io's own elapsed time.
+    for _ in 0..9 {
+        s.step(None);
+    }
+    let l: Vec<f64> = l0.iter().map(|x| x + 0.009 + 0.045).collect();
+    let sp = s.setpoint(13, &l);
+    s.step(Some(&sp));
+    assert_eq!(
+        s.master.state(),
+        BusState::Running,
+        "{:?}",
+        s.master.feedback().fault_code
+    );
+}
