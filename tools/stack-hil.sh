@@ -57,14 +57,19 @@ sed -i -e 's/^sync_period_us = [0-9]*/sync_period_us = 4000/' \
   -e 's/^sdo_timeout_ms = [0-9]*/sdo_timeout_ms = 500/' \
   -e 's/^validation_time_ms = [0-9]*/validation_time_ms = 150/' \
   -e 's/^pair_window_ms = [0-9]*/pair_window_ms = 75/' "$C/drives.toml"
-# [monitor] silence_cycles is the first, [feedback] silence_cycles the second occurrence.
+# [monitor] silence_cycles is the first, [feedback] and [forces] silence_cycles the later ones.
 awk '/^silence_cycles = /{n++; sub(/= [0-9]+/, n==1 ? "= 10" : "= 20")} {print}' \
   "$C/safety-monitor.toml" > "$C/sm.toml" && mv "$C/sm.toml" "$C/safety-monitor.toml"
-sed -i -e 's/^identity_grace_cycles = .*/identity_grace_cycles = 40/' "$C/safety-monitor.toml"
+sed -i -e 's/^identity_grace_cycles = .*/identity_grace_cycles = 40/' \
+  -e 's/^setpoint_period_ms = .*/setpoint_period_ms = 4.0/' "$C/safety-monitor.toml"
+# The guest is emulated: give the monitor's bus reader thread more slack before it counts as dead.
+sed -i -e 's/^reader_stall_cycles = .*/reader_stall_cycles = 40/' "$C/safety-monitor.toml"
 grep -q '^period_us = 4000' "$C/motion-core.toml" && grep -q '^velocity_scale = 0.1' "$C/motion-core.toml" &&
   grep -q '^waypoints = "hil-waypoints.csv"' "$C/motion-core.toml" && grep -q '^sync_period_us = 4000' "$C/drives.toml" &&
   grep -q '^validation_time_ms = 150' "$C/drives.toml" &&
-  [ "$(grep -c '^silence_cycles = \(10\|20\)$' "$C/safety-monitor.toml")" = 2 ] ||
+  [ "$(grep -c '^silence_cycles = \(10\|20\)$' "$C/safety-monitor.toml")" = 3 ] &&
+  grep -q '^setpoint_period_ms = 4.0' "$C/safety-monitor.toml" &&
+  grep -q '^reader_stall_cycles = 40' "$C/safety-monitor.toml" ||
   { echo "stack-hil: relaxing the guest configs failed (config keys changed?)" >&2; exit 1; }
 start=$(date +%s)
 (cd "$STAGE" && VCAN_EXTRA_BINS="$EXTRA" VCAN_DATA="config" VCAN_MEM=${VCAN_MEM:-1024} \

@@ -14,6 +14,13 @@ pub const NMT_STOP: u8 = 0x02;
 pub const CW_QUICK_STOP: u16 = 0x0002;
 /// CiA 402 controlword "enable operation": the only RPDOs that command motion.
 pub const CW_ENABLE_OPERATION: u16 = 0x000F;
+/// True for every controlword that commands CiA 402 "enable operation" (bits 0–3 set, fault
+/// reset bit 7 clear; bits 4–6 and 8–15 are mode- or manufacturer-specific and do not prevent
+/// the drive from following its target), so the RPDO check covers all of them, not only 0x000F.
+pub fn enables_operation(controlword: u16) -> bool {
+    controlword & 0x008F == 0x000F
+}
+
 /// NMT state "operational" in heartbeats.
 pub const NMT_STATE_OPERATIONAL: u8 = 0x05;
 /// NMT state "stopped" in heartbeats.
@@ -97,6 +104,12 @@ mod tests {
             Some(Observed::Heartbeat { node: 3, state: 5 })
         );
         assert_eq!(observe(&CanFrame::new(0x203, &[1, 2]).unwrap()), None);
+        for cw in [0x000F, 0x001F, 0x007F, 0x010F, 0xFF0F, 0x004F] {
+            assert!(enables_operation(cw), "{cw:#06x}");
+        }
+        for cw in [0x0000, 0x0002, 0x0006, 0x0007, 0x008F, 0x000B, 0x000E] {
+            assert!(!enables_operation(cw), "{cw:#06x}");
+        }
         // TPDO2 as drive-io's slave writes it: velocity, then force in mN.
         let mut d = [0u8; 8];
         d[..4].copy_from_slice(&123i32.to_le_bytes());

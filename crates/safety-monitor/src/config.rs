@@ -94,6 +94,11 @@ pub struct FeedbackSection {
     /// 0 = off.
     #[serde(default = "d_fb_silence")]
     pub silence_cycles: u32,
+    /// E-stop after this many cycles in a row in which feedback arrived but none of it could
+    /// be checked (its applied setpoint unknown to the monitor); must be >= 1 while the
+    /// following error is checked (fail closed).
+    #[serde(default = "d_unchecked")]
+    pub unchecked_cycles: u32,
 }
 
 /// `[can]`
@@ -114,6 +119,10 @@ pub struct CanSection {
     /// heartbeat before the Reset event is published (ms).
     #[serde(default = "d_reset_wait")]
     pub reset_wait_ms: u32,
+    /// Monitor cycles without a completed batch of the bus reader thread (it drains its socket
+    /// every 3 ms) before the reader counts as dead and the monitor trips.
+    #[serde(default = "d_reader_stall")]
+    pub reader_stall_cycles: u32,
 }
 
 /// `[forces]`: the drives' measured cable forces (TPDO2 pulley force, read from the bus on the
@@ -141,6 +150,22 @@ pub struct ForcesSection {
     pub silence_cycles: u32,
 }
 
+/// `[motion]`: plausibility of consecutive setpoint poses against the platform's `[limits]`
+/// (table 5.1), timed by the stream's sequence numbers and the monitor's own clock.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MotionSection {
+    #[serde(default = "d_true")]
+    pub check: bool,
+    /// Nominal period of the setpoint stream (motion-core's loop; sec. 5.6: 1 ms), ms: one
+    /// sequence number is this much time.
+    #[serde(default = "d_sp_period")]
+    pub setpoint_period_ms: f64,
+    /// Relative tolerance on the limits (finite differences of the trajectory, filter overshoot).
+    #[serde(default = "d_motion_margin")]
+    pub margin: f64,
+}
+
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
@@ -149,6 +174,8 @@ struct RawConfig {
     feedback: FeedbackSection,
     #[serde(default = "d_forces")]
     forces: ForcesSection,
+    #[serde(default = "d_motion")]
+    motion: MotionSection,
     can: CanSection,
 }
 
@@ -188,11 +215,30 @@ fn d_window() -> u32 {
 fn d_fb_silence() -> u32 {
     4
 }
+fn d_unchecked() -> u32 {
+    10
+}
 fn d_cob() -> u16 {
     can_transport::safety_frame::DEFAULT_COB_ID
 }
 fn d_reset_wait() -> u32 {
     1000
+}
+fn d_reader_stall() -> u32 {
+    10
+}
+fn d_sp_period() -> f64 {
+    1.0
+}
+fn d_motion_margin() -> f64 {
+    0.25
+}
+fn d_motion() -> MotionSection {
+    MotionSection {
+        check: true,
+        setpoint_period_ms: d_sp_period(),
+        margin: d_motion_margin(),
+    }
 }
 fn d_slack_margin() -> f64 {
     500.0
@@ -225,6 +271,7 @@ fn d_feedback() -> FeedbackSection {
         following_error_mm: d_following(),
         window_setpoints: d_window(),
         silence_cycles: d_fb_silence(),
+        unchecked_cycles: d_unchecked(),
     }
 }
 
@@ -269,6 +316,7 @@ pub struct MonitorConfig {
     pub monitor: MonitorSection,
     pub feedback: FeedbackSection,
     pub forces: ForcesSection,
+    pub motion: MotionSection,
     pub can: CanSection,
     pub platform_file: PathBuf,
     pub platform: PlatformParams,
@@ -389,6 +437,13 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             "must be a number > 0".into(),
         ));
     }
+    if f.check_following_error && f.unchecked_cycles == 0 {
+        return Err(bad(
+            "feedback.unchecked_cycles",
+            "must be >= 1 while check_following_error is on (an unverifiable check must trip)"
+                .into(),
+        ));
+    }
     if !(1..=crate::monitor::HISTORY as u32).contains(&f.window_setpoints) {
         return Err(bad(
             "feedback.window_setpoints",
@@ -412,6 +467,19 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         return Err(bad(
             "forces.silence_cycles",
             "must be >= 1: a drive without force readings must trip (fail closed)".into(),
+        ));
+    }
+    let mo = &raw.motion;
+    if !(mo.setpoint_period_ms.is_finite() && mo.setpoint_period_ms > 0.0) {
+        return Err(bad(
+            "motion.setpoint_period_ms",
+            "must be a number > 0".into(),
+        ));
+    }
+    if !(mo.margin.is_finite() && (0.0..=1.0).contains(&mo.margin)) {
+        return Err(bad(
+            "motion.margin",
+            "must be in 0..=1 (a fraction of the limit)".into(),
         ));
     }
     let c = &raw.can;
@@ -465,6 +533,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         monitor: raw.monitor,
         feedback: raw.feedback,
         forces: raw.forces,
+        motion: raw.motion,
         can: raw.can,
         platform_file,
         platform,

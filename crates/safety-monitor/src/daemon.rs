@@ -21,6 +21,7 @@
 //! `StateEvent { kind: Reset }`, which releases motion-core and drive-io.
 
 use crate::bus_frames::{self, Observed};
+use crate::bus_watch::{ReaderHealth, ReaderWatch};
 use crate::config::MonitorConfig;
 use crate::identity::platform_identity;
 use crate::kinematics::StandardKinematics;
@@ -142,7 +143,7 @@ fn bus_reader(
     mut bus: Box<dyn CanBus>,
     queue: Arc<ArrayQueue<Obs>>,
     stop: Arc<AtomicBool>,
-    dropped: Arc<std::sync::atomic::AtomicU64>,
+    health: Arc<ReaderHealth>,
 ) {
     let mut next = monotonic_ns();
     while !stop.load(Ordering::Relaxed) {
@@ -163,11 +164,15 @@ fn bus_reader(
                             })
                             .is_err()
                     {
-                        dropped.fetch_add(1, Ordering::Relaxed);
+                        health.dropped.fetch_add(1, Ordering::Relaxed);
                     }
                 }
-                Ok(None) => break,
+                Ok(None) => {
+                    health.batches.fetch_add(1, Ordering::Relaxed);
+                    break;
+                }
                 Err(e) => {
+                    health.errors.fetch_add(1, Ordering::Relaxed);
                     tracing::error!(error = %e, "bus reader: receive failed");
                     std::thread::sleep(Duration::from_millis(50));
                     break;
@@ -232,10 +237,11 @@ pub fn run(
     let mut tx = can_transport::open(transport)?;
     let queue = Arc::new(ArrayQueue::new(OBS_QUEUE));
     let reader_stop = Arc::new(AtomicBool::new(false));
-    let obs_dropped = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let health = Arc::new(ReaderHealth::default());
+    let mut reader_watch = ReaderWatch::new(cfg.can.reader_stall_cycles);
     let reader = {
         let rx = can_transport::open(transport)?;
-        let (q, s, d) = (queue.clone(), reader_stop.clone(), obs_dropped.clone());
+        let (q, s, d) = (queue.clone(), reader_stop.clone(), health.clone());
         std::thread::Builder::new()
             .name("safety-bus-rx".into())
             .spawn(move || bus_reader(rx, q, s, d))
@@ -339,7 +345,7 @@ pub fn run(
                 } => {
                     if let Some(i) = node_index(node) {
                         last_target[i] = Some(target_counts);
-                        if controlword == bus_frames::CW_ENABLE_OPERATION {
+                        if bus_frames::enables_operation(controlword) {
                             let l = winches[i].counts_to_length_m(target_counts);
                             monitor.on_rpdo(i, l, o.rx_ns);
                         }
@@ -360,6 +366,10 @@ pub fn run(
             }
         }
 
+        if let Some(f) = reader_watch.check(&health) {
+            tracing::error!(?f, "the monitor's own bus reader failed");
+            monitor.on_bus_observation_failed(f.value());
+        }
         let report = monitor.end_cycle(now);
         if let Some(rec) = report.new_trip {
             // Stop path first: quick stop to every drive, then NMT stop all.
@@ -481,7 +491,7 @@ pub fn run(
     sum.setpoints_missing = st.setpoints_missing;
     sum.rpdo_checked = st.rpdo_checked;
     sum.max_abs_dq_m = st.max_abs_dq_m;
-    let dropped = obs_dropped.load(Ordering::Relaxed);
+    let dropped = health.dropped.load(Ordering::Relaxed);
     if dropped > 0 {
         tracing::warn!(dropped, "bus observations dropped (queue full)");
     }

@@ -13,6 +13,7 @@
 //! | every check + the latched state machine | [`monitor`] |
 //! | trip causes and the trip log | [`trip`] |
 //! | the CANopen frames of the stop path | [`bus_frames`] |
+//! | health of the own bus reader thread (fail closed) | [`bus_watch`] |
 //! | the process: 15 ms cycle, iceoryx2, CAN stop, safety heartbeat, reset | [`daemon`] |
 //!
 //! Diverse redundancy: nothing here uses motion-core or nalgebra (motion-core is a
@@ -21,6 +22,7 @@
 //! `drive_io::safety_watch`. See docs/safety-monitor.md.
 
 pub mod bus_frames;
+pub mod bus_watch;
 pub mod config;
 pub mod daemon;
 pub mod identity;

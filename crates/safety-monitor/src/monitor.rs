@@ -30,6 +30,7 @@ use can_transport::safety_frame::{NO_CABLE, SafetyHeartbeat, SafetyState};
 use crs_ipc::{
     BusState, CONTRACT_VERSION, DriveFeedback, JointSetpoint, MAX_CABLES, PlatformIdentity,
 };
+use glam::{DMat3, DQuat, DVec3};
 
 /// `value <= limit`, false for NaN: every comparison with a limit is written so that a NaN
 /// fails the check (trips) instead of passing it.
@@ -58,8 +59,33 @@ pub struct Limits {
     pub window_setpoints: u32,
     /// 0 = off.
     pub feedback_silence_cycles: u32,
+    /// Cycles in a row with feedback but none of it checkable before the check trips.
+    pub unchecked_cycles: u32,
     pub check_rpdo: bool,
     pub forces: ForceLimits,
+    pub motion: MotionCheck,
+}
+
+/// Plausibility of consecutive setpoint poses (table 5.1 limits × (1 + margin)), SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionCheck {
+    pub check: bool,
+    /// Stream time per sequence number, s.
+    pub period_s: f64,
+    pub linear_velocity: f64,
+    pub angular_velocity: f64,
+    pub linear_acceleration: f64,
+    pub angular_acceleration: f64,
+}
+
+/// The previous setpoint's pose (for the step, velocity and acceleration checks).
+#[derive(Debug, Clone, Copy)]
+struct PrevPose {
+    sequence: u64,
+    r: DVec3,
+    rot: DMat3,
+    /// Linear and angular velocity of the step that led here (None: a hold, a gap or the first).
+    vel: Option<(DVec3, DVec3)>,
 }
 
 /// Thresholds of the measured-force supervision (seed §5.1, table 5.1), N.
@@ -96,6 +122,7 @@ impl Limits {
             following_error_m: c.feedback.following_error_mm * 1e-3,
             window_setpoints: c.feedback.window_setpoints.min(HISTORY as u32),
             feedback_silence_cycles: c.feedback.silence_cycles,
+            unchecked_cycles: c.feedback.unchecked_cycles,
             check_rpdo: c.can.check_rpdo,
             forces: ForceLimits {
                 check: c.forces.check,
@@ -104,6 +131,18 @@ impl Limits {
                 filter_ns: (c.forces.filter_ms * 1e6) as u64,
                 hard_limit_n: c.forces.hard_limit_n,
                 silence_cycles: c.forces.silence_cycles,
+            },
+            motion: {
+                let k = 1.0 + c.motion.margin;
+                let l = &c.platform.limits;
+                MotionCheck {
+                    check: c.motion.check,
+                    period_s: c.motion.setpoint_period_ms * 1e-3,
+                    linear_velocity: l.linear_velocity_m_per_s * k,
+                    angular_velocity: l.angular_velocity_rad_per_s * k,
+                    linear_acceleration: l.linear_acceleration_m_per_s2 * k,
+                    angular_acceleration: l.angular_acceleration_rad_per_s2 * k,
+                }
             },
         }
     }
@@ -242,6 +281,15 @@ pub struct Monitor {
     hist_next: usize,
     q: [f64; MAX_CABLES],
     force: [ForceWatch; MAX_CABLES],
+    /// Feedback samples of this cycle that were / could not be checked, and the streak of
+    /// cycles in which none could.
+    fb_checked: u32,
+    fb_unchecked: u32,
+    unchecked_streak: u32,
+    prev_pose: Option<PrevPose>,
+    /// Whether this cycle brought a setpoint pose, and the last pose of the previous cycle
+    /// that had one with the monitor's clock at its end (the own-clock velocity check).
+    cycle_ref: Option<(u64, DVec3, DMat3)>,
 }
 
 impl Monitor {
@@ -285,6 +333,11 @@ impl Monitor {
             hist_next: 0,
             q: [0.0; MAX_CABLES],
             force: [ForceWatch::default(); MAX_CABLES],
+            fb_checked: 0,
+            fb_unchecked: 0,
+            unchecked_streak: 0,
+            prev_pose: None,
+            cycle_ref: None,
         }
     }
 
@@ -419,6 +472,9 @@ impl Monitor {
         if !self.lim.workspace.contains(&sp.pose) {
             self.fault(at(Cause::OutsideWorkspace));
         }
+        if self.lim.motion.check {
+            self.check_motion(sp);
+        }
         self.kin.lengths(&sp.pose, &mut self.q);
         // The worst cable of this setpoint is the one reported.
         let mut worst: Option<(usize, f64)> = None;
@@ -447,6 +503,90 @@ impl Monitor {
         e.q_star[..m].copy_from_slice(&self.q[..m]);
         self.hist_next = (self.hist_next + 1) % HISTORY;
         self.hist_len = (self.hist_len + 1).min(HISTORY);
+    }
+
+    /// Velocity and acceleration implied by consecutive setpoints: one sequence number is one
+    /// stream period (the sender's timestamps are not used). A step to exactly the same pose
+    /// is a hold (motion-core holding after an e-stop or refusal; the drives decelerate on
+    /// their own), which ends the acceleration chain instead of counting as a deceleration.
+    fn check_motion(&mut self, sp: &JointSetpoint) {
+        let mc = self.lim.motion;
+        let p = &sp.pose;
+        let r = DVec3::new(p[0], p[1], p[2]);
+        let rot = StandardKinematics::rotation(p[3], p[4], p[5]);
+        let mut vel = None;
+        if let Some(prev) = self.prev_pose
+            && sp.sequence > prev.sequence
+        {
+            let n = sp.sequence - prev.sequence;
+            let dt = n as f64 * mc.period_s;
+            let dr = r - prev.r;
+            // World-frame incremental rotation R_k R_{k-1}^T as axis × angle.
+            let (axis, angle) = DQuat::from_mat3(&(rot * prev.rot.transpose())).to_axis_angle();
+            let (v, w) = (dr / dt, axis * (angle / dt));
+            let at = |value: f64, limit: f64, cause: Cause| Fault {
+                sequence: sp.sequence,
+                value,
+                limit,
+                ..Fault::new(cause)
+            };
+            if !within(v.length(), mc.linear_velocity) {
+                self.fault(at(v.length(), mc.linear_velocity, Cause::MotionVelocity));
+            } else if !within(w.length(), mc.angular_velocity) {
+                self.fault(at(w.length(), mc.angular_velocity, Cause::MotionVelocity));
+            }
+            let hold = dr == DVec3::ZERO && angle == 0.0;
+            if !hold && n == 1 {
+                vel = Some((v, w));
+                if let Some((pv, pw)) = prev.vel {
+                    let (a, alpha) = ((v - pv).length() / dt, (w - pw).length() / dt);
+                    if !within(a, mc.linear_acceleration) {
+                        self.fault(at(a, mc.linear_acceleration, Cause::MotionAcceleration));
+                    } else if !within(alpha, mc.angular_acceleration) {
+                        self.fault(at(
+                            alpha,
+                            mc.angular_acceleration,
+                            Cause::MotionAcceleration,
+                        ));
+                    }
+                }
+            }
+        }
+        self.prev_pose = Some(PrevPose {
+            sequence: sp.sequence,
+            r,
+            rot,
+            vel,
+        });
+    }
+
+    /// The pose may not move faster than the velocity limit in the MONITOR's time either: a
+    /// producer running fast (more setpoints than time allows, each step plausible) is caught
+    /// here. Allowance: the monitor's elapsed time plus two stream periods (the boundary
+    /// setpoints of the two cycles are not sampled at the cycle ends).
+    fn check_motion_own_clock(&mut self, now_ns: u64) {
+        let mc = self.lim.motion;
+        if !mc.check || self.new_setpoints == 0 {
+            return;
+        }
+        let Some(last) = self.prev_pose else { return };
+        if let Some((t0, r0, rot0)) = self.cycle_ref {
+            let elapsed = now_ns.saturating_sub(t0) as f64 * 1e-9 + 2.0 * mc.period_s;
+            let d = (last.r - r0).length();
+            let (_, angle) = DQuat::from_mat3(&(last.rot * rot0.transpose())).to_axis_angle();
+            let fault = |value: f64, limit: f64| Fault {
+                sequence: last.sequence,
+                value,
+                limit,
+                ..Fault::new(Cause::MotionVelocity)
+            };
+            if !within(d, mc.linear_velocity * elapsed) {
+                self.fault(fault(d / elapsed, mc.linear_velocity));
+            } else if !within(angle, mc.angular_velocity * elapsed) {
+                self.fault(fault(angle / elapsed, mc.angular_velocity));
+            }
+        }
+        self.cycle_ref = Some((now_ns, last.r, last.rot));
     }
 
     /// History entries, newest first.
@@ -495,8 +635,11 @@ impl Monitor {
                     }
                 }
             }
-            // Not enough history for this sample (e.g. the monitor just started): unchecked.
+            // The applied setpoint is not among those seen (the monitor just started, or
+            // drive-io applies setpoints the monitor never saw): counted, and N such cycles in
+            // a row trip (end_cycle) instead of skipping the check for good.
             if !any {
+                self.fb_unchecked += 1;
                 return;
             }
             if !within(best, self.lim.following_error_m) {
@@ -510,6 +653,16 @@ impl Monitor {
                 return;
             }
         }
+        self.fb_checked += 1;
+    }
+
+    /// The monitor's own bus observation failed (dead or stalled reader thread, receive
+    /// errors, dropped observations): the checks that read the bus would run blind.
+    pub fn on_bus_observation_failed(&mut self, value: f64) {
+        self.fault(Fault {
+            value,
+            ..Fault::new(Cause::BusObservation)
+        });
     }
 
     /// An RPDO1 target seen on the bus for cable `cable` (converted to metres), received at
@@ -675,6 +828,22 @@ impl Monitor {
                 });
             }
         }
+        self.check_motion_own_clock(now_ns);
+        // Feedback that arrives but cannot be checked, cycle after cycle, fails closed.
+        if self.fb_unchecked > 0 && self.fb_checked == 0 {
+            self.unchecked_streak = self.unchecked_streak.saturating_add(1);
+        } else if self.fb_checked > 0 {
+            self.unchecked_streak = 0;
+        }
+        if self.lim.unchecked_cycles > 0 && self.unchecked_streak >= self.lim.unchecked_cycles {
+            self.fault(Fault {
+                value: f64::from(self.unchecked_streak),
+                limit: f64::from(self.lim.unchecked_cycles),
+                ..Fault::new(Cause::FollowingUnchecked)
+            });
+        }
+        self.fb_checked = 0;
+        self.fb_unchecked = 0;
         // Operational drives without force readings: the force check cannot be evaluated.
         if self.lim.forces.check {
             for i in 0..self.m {
@@ -720,6 +889,8 @@ impl Monitor {
             self.last_sequence = None;
             self.identity_state = IdentityState::Unknown;
             self.unverified_cycles = 0;
+            self.prev_pose = None;
+            self.cycle_ref = None;
         }
         let report = CycleReport {
             state: self.state,

@@ -94,6 +94,17 @@ pub struct PlatformParams {
     pub f_min_n: f64,
     pub f_max_n: f64,
     pub workspace: WorkspaceBox,
+    /// Table 5.1 motion limits (the `[limits]` table), SI: m/s, rad/s, m/s², rad/s².
+    pub limits: MotionLimits,
+}
+
+/// Table 5.1: largest platform velocities and accelerations, SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionLimits {
+    pub linear_velocity_m_per_s: f64,
+    pub angular_velocity_rad_per_s: f64,
+    pub linear_acceleration_m_per_s2: f64,
+    pub angular_acceleration_rad_per_s2: f64,
 }
 
 impl PlatformParams {
@@ -112,6 +123,15 @@ struct Raw {
     load: RawLoad,
     forces: RawForces,
     workspace: RawWorkspace,
+    limits: RawLimits,
+}
+
+#[derive(Deserialize)]
+struct RawLimits {
+    linear_velocity_max_m_per_s: Spanned<f64>,
+    angular_velocity_max_deg_per_s: Spanned<f64>,
+    linear_acceleration_max_m_per_s2: Spanned<f64>,
+    angular_acceleration_max_deg_per_s2: Spanned<f64>,
 }
 
 #[derive(Deserialize)]
@@ -355,6 +375,41 @@ pub fn parse_platform(text: &str, file: &str) -> Result<PlatformParams, Platform
             );
         }
     }
+    let l = &raw.limits;
+    for (v, key) in [
+        (
+            &l.linear_velocity_max_m_per_s,
+            "limits.linear_velocity_max_m_per_s",
+        ),
+        (
+            &l.angular_velocity_max_deg_per_s,
+            "limits.angular_velocity_max_deg_per_s",
+        ),
+        (
+            &l.linear_acceleration_max_m_per_s2,
+            "limits.linear_acceleration_max_m_per_s2",
+        ),
+        (
+            &l.angular_acceleration_max_deg_per_s2,
+            "limits.angular_acceleration_max_deg_per_s2",
+        ),
+    ] {
+        let x = *v.get_ref();
+        if !(x.is_finite() && x > 0.0) {
+            return cx.err(
+                v.span(),
+                key,
+                format!("must be a finite number > 0, got {x}"),
+            );
+        }
+    }
+    let deg = std::f64::consts::PI / 180.0;
+    let limits = MotionLimits {
+        linear_velocity_m_per_s: *l.linear_velocity_max_m_per_s.get_ref(),
+        angular_velocity_rad_per_s: *l.angular_velocity_max_deg_per_s.get_ref() * deg,
+        linear_acceleration_m_per_s2: *l.linear_acceleration_max_m_per_s2.get_ref(),
+        angular_acceleration_rad_per_s2: *l.angular_acceleration_max_deg_per_s2.get_ref() * deg,
+    };
     let name = raw.platform.name.get_ref().trim().to_string();
     if name.is_empty() {
         return cx.err(
@@ -404,5 +459,6 @@ pub fn parse_platform(text: &str, file: &str) -> Result<PlatformParams, Platform
             rotation_min_rad: v3(ws.rotation_min_deg.get_ref()) * (std::f64::consts::PI / 180.0),
             rotation_max_rad: v3(ws.rotation_max_deg.get_ref()) * (std::f64::consts::PI / 180.0),
         },
+        limits,
     })
 }

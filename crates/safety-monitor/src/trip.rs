@@ -42,10 +42,23 @@ pub enum Cause {
     /// An operational drive sent no force reading (TPDO2) for N cycles, or a reading that is not
     /// a number: the force check cannot be evaluated, so it fails closed.
     ForceSilence = 16,
+    /// The pose moved faster than the platform's velocity limit (table 5.1): between two
+    /// consecutive setpoints (one stream period per sequence number), or between the last
+    /// setpoints of two monitor cycles timed by the monitor's own clock.
+    MotionVelocity = 17,
+    /// The velocity of consecutive setpoint steps changed faster than the acceleration limit.
+    MotionAcceleration = 18,
+    /// drive-io's feedback could not be checked for N cycles in a row (the setpoint it reports
+    /// as applied is not among those the monitor saw): the following-error check fails closed.
+    FollowingUnchecked = 19,
+    /// The monitor's own bus observation failed: reader thread dead or stalled, receive
+    /// errors, or observations dropped (queue overflow) — RPDO, heartbeat and force checks
+    /// would run blind.
+    BusObservation = 20,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 16] = [
+    pub const ALL: [Cause; 20] = [
         Cause::DqLimit,
         Cause::NonFinite,
         Cause::OutsideWorkspace,
@@ -62,6 +75,10 @@ impl Cause {
         Cause::ForceSlack,
         Cause::ForceOverload,
         Cause::ForceSilence,
+        Cause::MotionVelocity,
+        Cause::MotionAcceleration,
+        Cause::FollowingUnchecked,
+        Cause::BusObservation,
     ];
 
     pub fn code(self) -> u8 {
@@ -93,6 +110,10 @@ impl Cause {
             Cause::ForceSlack => "force_slack",
             Cause::ForceOverload => "force_overload",
             Cause::ForceSilence => "force_silence",
+            Cause::MotionVelocity => "motion_velocity",
+            Cause::MotionAcceleration => "motion_acceleration",
+            Cause::FollowingUnchecked => "following_unchecked",
+            Cause::BusObservation => "bus_observation",
         }
     }
 
@@ -141,8 +162,8 @@ pub struct Fault {
     /// 0-based cable index, if the fault concerns one cable.
     pub cable: Option<u8>,
     /// The offending value: Δq (m) for dq_limit / rpdo_mismatch / following_error, the force (N)
-    /// for force_slack / force_overload, a count for sequence_gaps / *_silence, NaN if not
-    /// applicable.
+    /// for force_slack / force_overload, m/s or rad/s (m/s², rad/s²) for motion_velocity
+    /// (motion_acceleration), a count for sequence_gaps / *_silence, NaN if not applicable.
     pub value: f64,
     /// The limit it was compared with (same unit), NaN if not applicable.
     pub limit: f64,

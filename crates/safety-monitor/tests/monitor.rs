@@ -786,3 +786,177 @@ fn force_config_errors_name_the_key() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+// ---- pose plausibility with the monitor's own clock (issue 15, item 2) -------------------
+
+/// Feeds `poses` as consecutive setpoints (consistent lengths), `per_cycle` per 15 ms monitor
+/// cycle; returns the first trip.
+fn run_poses(
+    m: &mut Monitor,
+    poses: &[[f64; 6]],
+    per_cycle: usize,
+) -> Option<safety_monitor::TripRecord> {
+    let mut t = 0;
+    for (k, chunk) in poses.chunks(per_cycle).enumerate() {
+        for (j, p) in chunk.iter().enumerate() {
+            m.on_setpoint(&sp((k * per_cycle + j + 1) as u64, *p, 0, 0.0));
+        }
+        t += 15 * MS;
+        if let Some(tr) = m.end_cycle(t).new_trip {
+            return Some(tr);
+        }
+    }
+    None
+}
+
+/// A rest-to-rest move along x: constant acceleration `a` up to `v`, cruise, then hold.
+fn ramp_path(v: f64, a: f64, n: usize) -> Vec<[f64; 6]> {
+    let dt = 1e-3;
+    let (mut x, mut vel) = (0.0, 0.0);
+    let mut out = Vec::with_capacity(n);
+    for _ in 0..n {
+        vel = (vel + a * dt).min(v);
+        x += vel * dt;
+        let mut p = HOME;
+        p[0] = x - 0.5;
+        out.push(p);
+    }
+    out
+}
+
+#[test]
+fn motion_within_the_limits_and_a_hold_do_not_trip() {
+    let mc = Limits::from_config(cfg()).motion;
+    assert!(mc.check);
+    // 95 % of table 5.1 (5 m/s, 14 m/s²) before the margin, then an abrupt hold (same pose).
+    let l = &cfg().platform.limits;
+    let mut poses = ramp_path(
+        0.95 * l.linear_velocity_m_per_s,
+        0.95 * l.linear_acceleration_m_per_s2,
+        300,
+    );
+    let last = *poses.last().unwrap();
+    poses.extend(std::iter::repeat_n(last, 60));
+    let mut m = monitor();
+    assert_eq!(run_poses(&mut m, &poses, 15), None);
+}
+
+#[test]
+fn a_consistent_pose_jump_inside_the_box_trips_motion_velocity() {
+    // Lengths agree with the pose (Δq check passes) but the pose jumps 20 cm in one period.
+    let mut poses = ramp_path(0.5, 2.0, 100);
+    let mut jump = *poses.last().unwrap();
+    jump[1] += 0.2;
+    poses.push(jump);
+    let mut m = monitor();
+    let tr = run_poses(&mut m, &poses, 15).expect("a 200 m/s step must trip");
+    assert_eq!(tr.fault.cause, Cause::MotionVelocity);
+    assert_eq!(tr.fault.sequence, 101);
+    assert!(tr.fault.value > 100.0 && tr.fault.limit < 10.0, "{tr}");
+    // The same stream without the motion check passes the Δq check: this is what it adds.
+    let mut m = monitor_with(|l| l.motion.check = false);
+    assert_eq!(run_poses(&mut m, &poses, 15), None);
+}
+
+#[test]
+fn an_acceleration_beyond_the_limit_trips() {
+    let mc = Limits::from_config(cfg()).motion;
+    // 1 m/s, then 2 m/s from one period to the next: 1000 m/s².
+    let mut poses = ramp_path(1.0, 10.0, 150);
+    let mut p = *poses.last().unwrap();
+    for _ in 0..5 {
+        p[0] += 0.002;
+        poses.push(p);
+    }
+    let mut m = monitor();
+    let tr = run_poses(&mut m, &poses, 15).expect("must trip");
+    assert_eq!(tr.fault.cause, Cause::MotionAcceleration);
+    assert_eq!(tr.fault.limit, mc.linear_acceleration);
+    assert!((tr.fault.value - 1000.0).abs() < 1.0, "{tr}");
+}
+
+#[test]
+fn rotation_faster_than_the_angular_limit_trips() {
+    // 150 °/s about z (limit 100 °/s × 1.25) — steady, so no acceleration beyond the first step.
+    let w = 150f64.to_radians();
+    let poses: Vec<[f64; 6]> = (0..100)
+        .map(|k| {
+            let mut p = HOME;
+            p[5] = w * 1e-3 * k as f64;
+            p
+        })
+        .collect();
+    let mut m = monitor_with(|l| l.motion.angular_acceleration = f64::INFINITY);
+    let tr = run_poses(&mut m, &poses, 15).expect("must trip");
+    assert_eq!(tr.fault.cause, Cause::MotionVelocity);
+    assert!((tr.fault.value - w).abs() < 1e-6, "{tr}");
+}
+
+#[test]
+fn a_producer_faster_than_real_time_trips_on_the_monitors_clock() {
+    // Each step implies 4 m/s on the stream's clock (plausible), but 30 setpoints arrive per
+    // 15 ms monitor cycle: 8 m/s in the monitor's time, beyond 5 m/s × 1.25.
+    let poses: Vec<[f64; 6]> = (0..300)
+        .map(|k| {
+            let mut p = HOME;
+            p[0] = -0.6 + 0.004 * k as f64;
+            p
+        })
+        .collect();
+    let mut m = monitor_with(|l| l.motion.linear_acceleration = f64::INFINITY);
+    let tr = run_poses(&mut m, &poses, 30).expect("must trip");
+    assert_eq!(tr.fault.cause, Cause::MotionVelocity);
+    assert!(tr.fault.value > 7.0 && tr.fault.value < 8.0, "{tr}");
+    // The same stream at its real rate (15 per cycle) passes.
+    let mut m = monitor_with(|l| l.motion.linear_acceleration = f64::INFINITY);
+    assert_eq!(run_poses(&mut m, &poses, 15), None);
+}
+
+// ---- checks that cannot be evaluated fail closed (issue 15, item 3) ----------------------
+
+#[test]
+fn feedback_whose_applied_setpoint_is_unknown_trips_after_n_cycles() {
+    let n = Limits::from_config(cfg()).unchecked_cycles;
+    assert!(n >= 1);
+    let q = sp(1, HOME, 0, 0.0).cable_length_m[..8].to_vec();
+    let mut m = monitor();
+    let mut seq = good_cycle(&mut m, 1, 0);
+    // drive-io reports an applied sequence the monitor never saw (far ahead of its history).
+    let mut trip = None;
+    for k in 1..=n + 1 {
+        m.on_feedback(&feedback(1_000_000 + u64::from(k), &q));
+        seq = good_cycle(&mut m, seq, u64::from(k) * 15 * MS);
+        if let Some(t) = m.trip() {
+            trip = Some((k, *t));
+            break;
+        }
+    }
+    let (k, t) = trip.expect("unverifiable feedback must trip");
+    assert_eq!(t.fault.cause, Cause::FollowingUnchecked);
+    assert_eq!(k, n);
+    // A checkable sample in between resets the streak (the monitor just started, say).
+    let mut m = monitor();
+    let mut seq = good_cycle(&mut m, 1, 0);
+    for k in 0..3 * n {
+        let applied = if k % (n - 1).max(1) == 0 {
+            seq - 1
+        } else {
+            9_999_999
+        };
+        m.on_feedback(&feedback(applied, &q));
+        seq = good_cycle(&mut m, seq, u64::from(k + 1) * 15 * MS);
+    }
+    assert_eq!(m.state(), MonitorState::Armed, "{:?}", m.trip());
+}
+
+#[test]
+fn bus_observation_failures_trip() {
+    let mut m = monitor();
+    good_cycle(&mut m, 1, 0);
+    m.on_bus_observation_failed(3.0);
+    let t = m
+        .end_cycle(15 * MS)
+        .new_trip
+        .expect("blind bus checks must trip");
+    assert_eq!((t.fault.cause, t.fault.value), (Cause::BusObservation, 3.0));
+}

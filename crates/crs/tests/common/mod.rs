@@ -78,10 +78,15 @@ pub fn relaxed_configs(dir: &Path) -> [PathBuf; 3] {
                 ("pair_window_ms", "75"),
             ],
         ),
-        // Both silence_cycles keys ([monitor] and [feedback]) become 10; identity grace 40.
+        // Both silence_cycles keys ([monitor] and [feedback]) become 10; identity grace 40;
+        // the monitor's stream period follows motion-core's 4 ms.
         edit(
             "safety-monitor.toml",
-            &[("silence_cycles", "10"), ("identity_grace_cycles", "40")],
+            &[
+                ("silence_cycles", "10"),
+                ("identity_grace_cycles", "40"),
+                ("setpoint_period_ms", "4.0"),
+            ],
         ),
     ]
 }
