@@ -2,8 +2,11 @@
 //! benches/RESULTS.md ("Safety monitor"):
 //! * `phi_star_8_cables`: the monitor's own standard inverse kinematics (glam);
 //! * `cycle_15_setpoints`: one cycle at 1 kHz input: 15 setpoints checked + end of cycle;
-//! * `cycle_full`: 15 setpoints + 15 drive feedback samples + 120 RPDO targets (8 drives x 15)
-//!   + end of cycle, i.e. everything the monitor computes per cycle on the default config;
+//! * `cycle_full`: 15 setpoints, 15 drive feedback samples, 120 RPDO targets (8 drives x 15),
+//!   120 force readings and the end of cycle, i.e. everything the monitor computes per cycle on
+//!   the default config (Δq, box, motion plausibility, following error, RPDO, forces);
+//! * `cycle_full_without_force_and_motion`: the same input with the force and motion checks
+//!   off (the monitor's scope before issue 15), side by side;
 //! * `safety_pair_encode_decode`: the doubled heartbeat, producer + consumer side.
 
 use can_transport::safety_frame::{self, PairReceiver, SafetyHeartbeat, SafetyState};
@@ -32,27 +35,31 @@ fn bench(c: &mut Criterion) {
         })
     });
 
-    let mut sps = Vec::new();
-    for k in 0..15u64 {
-        let p = [0.3 + 1e-4 * k as f64, -0.2, 2.1, 0.02, -0.01, 0.03];
-        let mut s = JointSetpoint {
-            cable_count: 8,
-            pose: p,
-            timestamp_ns: k * 1_000_000,
-            ..JointSetpoint::default()
-        };
-        kin.lengths(&p, &mut s.cable_length_m);
-        sps.push(s);
-    }
+    // A continuous periodic path (0.05 m sine in x, 2 s period: 0.16 m/s, 0.5 m/s²), so the
+    // ring of setpoints wraps without a jump the motion checks would (rightly) trip on.
+    const RING: usize = 2000;
+    let ring: Vec<JointSetpoint> = (0..RING)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / RING as f64;
+            let p = [0.3 + 0.05 * a.sin(), -0.2, 2.1, 0.02, -0.01, 0.03];
+            let mut s = JointSetpoint {
+                cable_count: 8,
+                pose: p,
+                ..JointSetpoint::default()
+            };
+            kin.lengths(&p, &mut s.cable_length_m);
+            s
+        })
+        .collect();
     let mut m = Monitor::new(Limits::from_config(&cfg), kin, id);
     m.on_identity(&PlatformIdentity::new(id, 8));
     let mut seq = 0u64;
     let mut now = 0u64;
     c.bench_function("cycle_15_setpoints", |b| {
         b.iter(|| {
-            for s in &sps {
+            for _ in 0..15 {
+                let mut s = ring[seq as usize % RING];
                 seq += 1;
-                let mut s = *s;
                 s.sequence = seq;
                 m.on_setpoint(&s);
             }
@@ -62,32 +69,53 @@ fn bench(c: &mut Criterion) {
     });
 
     let winches = cfg.winches.clone();
-    c.bench_function("cycle_full", |b| {
-        b.iter(|| {
-            for s in &sps {
-                seq += 1;
-                let mut s = *s;
-                s.sequence = seq;
-                s.timestamp_ns = now;
-                m.on_setpoint(&s);
-                let mut f = DriveFeedback {
-                    cable_count: 8,
-                    applied_setpoint_sequence: seq,
-                    bus_state: BusState::Running as u32,
-                    ..DriveFeedback::default()
-                };
-                f.cable_length_m = s.cable_length_m;
-                m.on_feedback(&f);
-                for (i, w) in winches.iter().enumerate() {
-                    let counts = (s.cable_length_m[i] * w.counts_per_m * w.sign + w.offset_counts)
-                        .round() as i32;
-                    m.on_rpdo(i, w.counts_to_length_m(counts), now + 1);
+    for (name, checks) in [
+        ("cycle_full", true),
+        ("cycle_full_without_force_and_motion", false),
+    ] {
+        let mut lim = Limits::from_config(&cfg);
+        lim.forces.check = checks;
+        lim.motion.check = checks;
+        let mut m = Monitor::new(lim, kin, id);
+        m.on_identity(&PlatformIdentity::new(id, 8));
+        let (mut seq, mut now) = (0u64, 0u64);
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                for _ in 0..15 {
+                    let mut s = ring[seq as usize % RING];
+                    seq += 1;
+                    s.sequence = seq;
+                    s.timestamp_ns = now;
+                    m.on_setpoint(&s);
+                    let mut f = DriveFeedback {
+                        cable_count: 8,
+                        applied_setpoint_sequence: seq,
+                        bus_state: BusState::Running as u32,
+                        ..DriveFeedback::default()
+                    };
+                    f.cable_length_m = s.cable_length_m;
+                    m.on_feedback(&f);
+                    for (i, w) in winches.iter().enumerate() {
+                        let counts = (s.cable_length_m[i] * w.counts_per_m * w.sign
+                            + w.offset_counts)
+                            .round() as i32;
+                        m.on_rpdo(i, w.counts_to_length_m(counts), now + 1);
+                        if checks {
+                            m.on_drive_state(i, true);
+                            m.on_force(i, 4000.0 + i as f64, now + 1);
+                        }
+                    }
+                    now += 1_000_000;
                 }
-            }
-            now += 15_000_000;
-            black_box(m.end_cycle(now))
-        })
-    });
+                black_box(m.end_cycle(now))
+            })
+        });
+        assert_eq!(
+            m.trip_log().total(),
+            0,
+            "{name}: the bench input must not trip"
+        );
+    }
 
     let mut rx = PairReceiver::new(safety_frame::DEFAULT_COB_ID, 10_000_000);
     let mut counter = 0u32;
