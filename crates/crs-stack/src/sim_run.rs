@@ -274,6 +274,9 @@ pub fn execute_observed(
     // The controller's command at home (the drives are homed to it) and, with --dwell-s, the
     // waypoints timed for a rest at each.
     let mut configured = lifecycle::configure(&daemon, &platform)?;
+    if with_monitor {
+        check_monitor_period(&a.monitor_config, &a.config, configured.period_s())?;
+    }
     let home_q = configured
         .home_command()
         .map_err(|e| format!("the controller refuses the home pose: {e}"))?;
@@ -742,4 +745,26 @@ fn print_summary(s: &Summary) {
     if let Some(b) = &s.bus_stopped_during_run {
         println!("  DRIVE BUS STOPPED DURING THE RUN: {b}; the drives held from then on");
     }
+}
+
+/// The monitor judges pose velocities per sequence number with its configured stream period:
+/// refuse a run whose motion-core loop has another period before anything starts (a shorter
+/// configured period would trip every move, a longer one loosen the per-step check).
+fn check_monitor_period(
+    monitor_config: &std::path::Path,
+    daemon_config: &std::path::Path,
+    loop_period_s: f64,
+) -> Result<(), String> {
+    let mon = safety_monitor::config::load(monitor_config).map_err(|e| e.to_string())?;
+    let (sp_ms, loop_ms) = (mon.motion.setpoint_period_ms, loop_period_s * 1e3);
+    if mon.motion.check && (sp_ms - loop_ms).abs() > 1e-6 * loop_ms {
+        return Err(format!(
+            "{}: [motion] setpoint_period_ms = {sp_ms} but motion-core ({}) runs its loop every \
+             {loop_ms} ms; set setpoint_period_ms = {loop_ms} (the monitor times the pose's \
+             velocity by it)",
+            monitor_config.display(),
+            daemon_config.display()
+        ));
+    }
+    Ok(())
 }

@@ -182,3 +182,44 @@ fn ctrl_c_stops_every_process() {
         assert!(!alive(*pid), "{name} (pid {pid}) still runs after Ctrl-C");
     }
 }
+
+#[test]
+fn a_monitor_timed_for_another_loop_period_is_refused_before_anything_starts() {
+    let crs = PathBuf::from(env!("CARGO_BIN_EXE_crs"));
+    stack_bin_dir(&crs);
+    let out = std::env::temp_dir().join(format!("crs-sim-period-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let cfg = relaxed_configs(&out.join("cfg"));
+    // motion-core runs at 4 ms (relaxed); the monitor is told 1 ms.
+    let text = std::fs::read_to_string(&cfg[2]).unwrap();
+    assert!(text.contains("setpoint_period_ms = 4.0"));
+    std::fs::write(
+        &cfg[2],
+        text.replace("setpoint_period_ms = 4.0", "setpoint_period_ms = 1.0"),
+    )
+    .unwrap();
+    let o = Command::new(&crs)
+        .current_dir(root())
+        .args(["sim", "--transport", "udpbus:239.255.70.12:20999"])
+        .arg("--config")
+        .arg(&cfg[0])
+        .arg("--drives")
+        .arg(&cfg[1])
+        .arg("--monitor-config")
+        .arg(&cfg[2])
+        .arg("--out")
+        .arg(out.join("run"))
+        .output()
+        .expect("run crs sim");
+    let (so, se) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(!o.status.success());
+    assert!(
+        se.contains("setpoint_period_ms = 1") && se.contains("every 4 ms"),
+        "{se}"
+    );
+    assert!(!so.contains("started"), "nothing may start: {so}");
+    let _ = std::fs::remove_dir_all(&out);
+}
