@@ -6,7 +6,7 @@ use crs_ipc::{
     PlantTruth, ProcessId, StateEvent, motion_state,
 };
 use safety_monitor::Cause;
-use safety_monitor::daemon::{RESET_ACCEPTED, RESET_NOT_TRIPPED, RESET_REFUSED};
+use safety_monitor::daemon::{RESET_ACCEPTED, RESET_NOT_READY, RESET_NOT_TRIPPED, RESET_REFUSED};
 use serde::Serialize;
 use std::collections::VecDeque;
 
@@ -169,6 +169,7 @@ fn monitor_state_name(code: u32) -> String {
     match code {
         1 => "armed".into(),
         2 => "TRIPPED".into(),
+        3 => "not ready".into(),
         c => format!("state {c}"),
     }
 }
@@ -250,6 +251,7 @@ fn describe_event(e: &StateEvent) -> Option<(String, String)> {
         return match e.detail {
             RESET_ACCEPTED => Some(("reset request".into(), "accepted".into())),
             RESET_NOT_TRIPPED => Some(("reset request".into(), "not tripped".into())),
+            RESET_NOT_READY => Some(("reset request".into(), "REFUSED: monitor not ready".into())),
             RESET_REFUSED => Some((
                 "reset request".into(),
                 format!("REFUSED: {} persists", cause_name(e.detail_node)),

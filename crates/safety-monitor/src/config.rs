@@ -68,6 +68,10 @@ pub struct MonitorSection {
     /// Optional file every trip is appended to (one line per trip); empty = none.
     #[serde(default)]
     pub trip_log: String,
+    /// Begin in a not-ready state (STOP heartbeat, motion not permitted) until every drive is
+    /// operational and sends force readings.
+    #[serde(default = "d_true")]
+    pub require_ready: bool,
     /// SCHED_FIFO priority of the cycle thread (1..=99; 0 = SCHED_OTHER). Degrades with a
     /// warning when not permitted.
     #[serde(default)]

@@ -43,6 +43,8 @@ pub const RESET_REQUEST: u32 = 0x5AFE_0001;
 pub const RESET_ACCEPTED: u32 = 0x5AFE_0002;
 pub const RESET_REFUSED: u32 = 0x5AFE_0003;
 pub const RESET_NOT_TRIPPED: u32 = 0x5AFE_0004;
+/// Refused because the monitor has not verified its start-up conditions yet.
+pub const RESET_NOT_READY: u32 = 0x5AFE_0005;
 /// `StateEvent::state` with which motion-core announces a graceful end of its setpoint stream
 /// (source MotionCore, kind StateChanged, published AFTER its last setpoint): the contract's
 /// `crs_ipc::motion_state::STOPPING`.
@@ -263,7 +265,7 @@ pub fn run(
         dq_limit_mm = cfg.monitor.dq_limit_mm,
         transport = %transport,
         safety_cob_id = format_args!("{cob:#05x}"),
-        "safety monitor armed"
+        "safety monitor started"
     );
 
     let mut sum = Summary::default();
@@ -370,7 +372,22 @@ pub fn run(
             tracing::error!(?f, "the monitor's own bus reader failed");
             monitor.on_bus_observation_failed(f.value());
         }
+        let readiness = monitor.readiness();
         let report = monitor.end_cycle(now);
+        if report.became_ready {
+            tracing::info!(
+                identity_verified = readiness.identity_verified,
+                "ready: every drive operational with live feedback; permitting motion (RUN)"
+            );
+        } else if report.state == MonitorState::NotReady && counter.is_multiple_of(67) {
+            tracing::info!(
+                identity_verified = readiness.identity_verified,
+                not_operational = format_args!("{:#x}", readiness.not_operational),
+                no_feedback = format_args!("{:#x}", readiness.no_feedback),
+                "not ready: motion not permitted (STOP) until every drive (bit = cable) is \
+                 operational and sends force readings"
+            );
+        }
         if let Some(rec) = report.new_trip {
             // Stop path first: quick stop to every drive, then NMT stop all.
             for (i, w) in winches.iter().enumerate() {
@@ -420,6 +437,7 @@ pub fn run(
                 ResetDecision::Accepted => (RESET_ACCEPTED, 0),
                 ResetDecision::NotTripped => (RESET_NOT_TRIPPED, 0),
                 ResetDecision::Refused(c) => (RESET_REFUSED, u32::from(c.code())),
+                ResetDecision::NotReady => (RESET_NOT_READY, 0),
             };
             let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::StateChanged, req);
             ev.state = monitor.state().code();
@@ -429,6 +447,9 @@ pub fn run(
             match decision {
                 ResetDecision::Refused(c) => {
                     tracing::warn!(cause = %c, "reset REFUSED: the cause persists")
+                }
+                ResetDecision::NotReady => {
+                    tracing::warn!(readiness = ?monitor.readiness(), "reset REFUSED: not ready yet")
                 }
                 ResetDecision::Accepted | ResetDecision::NotTripped => {
                     tracing::info!(?decision, "reset accepted: NMT start, releasing the stack");
@@ -514,6 +535,8 @@ pub enum ResetReply {
     Accepted,
     NotTripped,
     Refused(Option<Cause>),
+    /// The monitor is still in its start-up state (identity / drives not verified).
+    NotReady,
 }
 
 /// Operator side: publishes a reset request and waits up to `timeout` for the monitor's answer.
@@ -536,6 +559,7 @@ pub fn request_reset(ipc: &IpcNode, timeout: Duration) -> Result<ResetReply, Dae
                 return Ok(match r.detail {
                     RESET_ACCEPTED => ResetReply::Accepted,
                     RESET_NOT_TRIPPED => ResetReply::NotTripped,
+                    RESET_NOT_READY => ResetReply::NotReady,
                     _ => ResetReply::Refused(Cause::from_code(r.detail_node)),
                 });
             }

@@ -62,6 +62,8 @@ pub struct Limits {
     /// Cycles in a row with feedback but none of it checkable before the check trips.
     pub unchecked_cycles: u32,
     pub check_rpdo: bool,
+    /// Start in [`MonitorState::NotReady`] (STOP) until [`Readiness::ready`].
+    pub require_ready: bool,
     pub forces: ForceLimits,
     pub motion: MotionCheck,
 }
@@ -124,6 +126,7 @@ impl Limits {
             feedback_silence_cycles: c.feedback.silence_cycles,
             unchecked_cycles: c.feedback.unchecked_cycles,
             check_rpdo: c.can.check_rpdo,
+            require_ready: c.monitor.require_ready,
             forces: ForceLimits {
                 check: c.forces.check,
                 slack_below_n: c.platform.f_min_n - c.forces.slack_margin_n,
@@ -167,6 +170,13 @@ struct ForceWatch {
 /// Latched state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MonitorState {
+    /// Start-up: no fault, but motion is not yet permitted (the safety heartbeat says STOP)
+    /// until every drive is operational with live force readings (see
+    /// [`Monitor::readiness`]); the configuration was verified when it was loaded. Every check
+    /// runs; a fault trips. The platform identity is not a start-up condition: the stack
+    /// starts motion-core only after the drives are enabled, which needs this RUN; a setpoint
+    /// without a verified identity still trips after `identity_grace_cycles`.
+    NotReady,
     /// No fault latched: the safety heartbeat says RUN.
     Armed,
     /// E-stop latched until an accepted reset: the safety heartbeat says STOP.
@@ -179,6 +189,7 @@ impl MonitorState {
         match self {
             MonitorState::Armed => 1,
             MonitorState::Tripped => 2,
+            MonitorState::NotReady => 3,
         }
     }
 }
@@ -215,6 +226,26 @@ pub struct CycleReport {
     pub faults: CauseSet,
     pub setpoints: u32,
     pub missing: u32,
+    /// Set in the cycle that left [`MonitorState::NotReady`] for `Armed`.
+    pub became_ready: bool,
+}
+
+/// What the monitor still waits for before it permits motion (bit i = cable i).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Readiness {
+    pub identity_verified: bool,
+    /// Drives whose heartbeat does not say operational.
+    pub not_operational: u32,
+    /// Drives that sent no force reading (TPDO2) in the last cycle.
+    pub no_feedback: u32,
+}
+
+impl Readiness {
+    /// Every drive operational with live feedback (the identity is reported, not required:
+    /// see [`MonitorState::NotReady`]).
+    pub fn ready(&self) -> bool {
+        self.not_operational == 0 && self.no_feedback == 0
+    }
 }
 
 /// Answer to a reset request.
@@ -226,6 +257,8 @@ pub enum ResetDecision {
     Accepted,
     /// Refused: this cause was seen within the last `reset_clear_cycles` cycles.
     Refused(Cause),
+    /// Nothing to reset: the monitor has not verified its start-up conditions yet.
+    NotReady,
 }
 
 /// Running statistics (for the heartbeat, logs and the bench).
@@ -302,7 +335,11 @@ impl Monitor {
             lim,
             kin,
             identity,
-            state: MonitorState::Armed,
+            state: if lim.require_ready {
+                MonitorState::NotReady
+            } else {
+                MonitorState::Armed
+            },
             trip: None,
             log: TripLog::default(),
             stats: Stats {
@@ -377,6 +414,12 @@ impl Monitor {
                 cable: t.fault.cable.unwrap_or(NO_CABLE),
             },
             (MonitorState::Tripped, None) => SafetyHeartbeat {
+                state: SafetyState::Stop,
+                cause: 0,
+                counter,
+                cable: NO_CABLE,
+            },
+            (MonitorState::NotReady, _) => SafetyHeartbeat {
                 state: SafetyState::Stop,
                 cause: 0,
                 counter,
@@ -717,16 +760,17 @@ impl Monitor {
     /// and overload are timed by the monitor's receive clock, not by the sender.
     pub fn on_force(&mut self, cable: usize, force_n: f64, rx_ns: u64) {
         let fl = self.lim.forces;
-        if !fl.check || cable >= self.m {
+        if cable >= self.m {
+            return;
+        }
+        let w = &mut self.force[cable];
+        // Counted also with the check off: a live reading is a start-up condition.
+        w.readings += 1;
+        w.last_n = force_n;
+        if !fl.check || !w.operational {
             return;
         }
         self.stats.forces_checked += 1;
-        let w = &mut self.force[cable];
-        w.readings += 1;
-        w.last_n = force_n;
-        if !w.operational {
-            return;
-        }
         let at = |cause: Cause, limit: f64| Fault {
             cable: Some(cable as u8),
             value: force_n,
@@ -844,6 +888,8 @@ impl Monitor {
         }
         self.fb_checked = 0;
         self.fb_unchecked = 0;
+        // Start-up conditions, from this cycle's drive states and readings.
+        let readiness = self.readiness();
         // Operational drives without force readings: the force check cannot be evaluated.
         if self.lim.forces.check {
             for i in 0..self.m {
@@ -853,7 +899,6 @@ impl Monitor {
                 } else {
                     w.silent = w.silent.saturating_add(1);
                 }
-                w.readings = 0;
                 if w.silent >= self.lim.forces.silence_cycles {
                     let silent = w.silent;
                     self.fault(Fault {
@@ -865,10 +910,14 @@ impl Monitor {
                 }
             }
         }
+        for w in &mut self.force[..self.m] {
+            w.readings = 0;
+        }
         let mut new_trip = None;
+        let mut became_ready = false;
         if let Some(first) = self.first {
             self.clear_streak = 0;
-            if self.state == MonitorState::Armed {
+            if self.state != MonitorState::Tripped {
                 let rec = TripRecord {
                     fault: first,
                     detected_ns: now_ns,
@@ -881,6 +930,10 @@ impl Monitor {
             }
         } else {
             self.clear_streak = self.clear_streak.saturating_add(1);
+            if self.state == MonitorState::NotReady && readiness.ready() {
+                self.state = MonitorState::Armed;
+                became_ready = true;
+            }
         }
         if ending {
             // Clean end of the stream: disarm until the next setpoint.
@@ -898,6 +951,7 @@ impl Monitor {
             faults: self.faults,
             setpoints: self.new_setpoints,
             missing: self.missing,
+            became_ready,
         };
         self.last_faults = self.faults;
         self.faults.clear();
@@ -908,9 +962,30 @@ impl Monitor {
         report
     }
 
+    /// The start-up conditions as of the readings of the current cycle (call before
+    /// [`Monitor::end_cycle`]): every drive operational and sending forces (and, for the log,
+    /// whether the identity is verified yet).
+    pub fn readiness(&self) -> Readiness {
+        let (mut not_operational, mut no_feedback) = (0u32, 0u32);
+        for (i, w) in self.force[..self.m].iter().enumerate() {
+            if !w.operational {
+                not_operational |= 1 << i;
+            }
+            if w.readings == 0 {
+                no_feedback |= 1 << i;
+            }
+        }
+        Readiness {
+            identity_verified: self.identity_state == IdentityState::Verified,
+            not_operational,
+            no_feedback,
+        }
+    }
+
     /// Operator reset: accepted only if no fault was seen for `reset_clear_cycles` cycles.
     pub fn request_reset(&mut self) -> ResetDecision {
         match self.state {
+            MonitorState::NotReady => ResetDecision::NotReady,
             MonitorState::Armed => ResetDecision::NotTripped,
             MonitorState::Tripped if self.clear_streak >= self.lim.reset_clear_cycles => {
                 self.state = MonitorState::Armed;

@@ -36,6 +36,10 @@ struct Rig {
     last_pair: Option<(SafetyState, Instant)>,
     invalid_pairs: u32,
     nmt: Vec<(u8, Instant)>,
+    /// Play the drives too: NMT-operational heartbeats and a TPDO2 force reading per drive
+    /// every millisecond (the monitor's start-up conditions and force supervision need them).
+    drives: bool,
+    node_ids: Vec<u8>,
 }
 
 impl Rig {
@@ -49,6 +53,7 @@ impl Rig {
         cfg.can.reset_wait_ms = 200;
         let kin = StandardKinematics::new(&cfg.platform);
         let id = platform_identity(&cfg.platform);
+        let node_ids: Vec<u8> = cfg.winches.iter().map(|w| w.node_id).collect();
         let bus = can_transport::open(&transport).unwrap();
         let ipc = IpcNode::with_prefix("sm-test", &prefix).unwrap();
         let setpoints = ipc.publisher::<JointSetpoint>().unwrap();
@@ -80,6 +85,23 @@ impl Rig {
             last_pair: None,
             invalid_pairs: 0,
             nmt: Vec::new(),
+            drives: true,
+            node_ids,
+        }
+    }
+
+    /// One millisecond of the drives' traffic: heartbeat (operational) and TPDO2 (4 kN).
+    fn drive_frames(&mut self) {
+        if !self.drives {
+            return;
+        }
+        for &n in &self.node_ids {
+            let hb = can_transport::CanFrame::new(0x700 + u16::from(n), &[0x05]).unwrap();
+            let mut d = [0u8; 8];
+            d[4..].copy_from_slice(&4_000_000i32.to_le_bytes());
+            let tpdo2 = can_transport::CanFrame::new(0x280 + u16::from(n), &d).unwrap();
+            self.bus.send(&hb).unwrap();
+            self.bus.send(&tpdo2).unwrap();
         }
     }
 
@@ -129,6 +151,7 @@ impl Rig {
             }
             let s = self.setpoint(2, offset, nan_pose);
             self.setpoints.publish(&s).unwrap();
+            self.drive_frames();
             self.poll_bus();
             std::thread::sleep(Duration::from_millis(1));
         }
@@ -292,5 +315,32 @@ fn a_foreign_reset_while_tripped_is_countered() {
         n += r.estop_events().len();
         n >= 1
     });
+    rig.finish();
+}
+
+#[test]
+fn the_monitor_permits_motion_only_after_every_drives_feedback() {
+    let mut rig = Rig::start("startup", 21_304);
+    rig.drives = false;
+    // Identity and setpoints flow, but no drive is heard: STOP pairs, never RUN.
+    rig.until(Duration::from_secs(3), 0.0, false, |r| {
+        matches!(r.last_pair, Some((SafetyState::Stop, _)))
+    });
+    rig.run_for(Duration::from_millis(300), 0.0, false);
+    assert!(
+        matches!(rig.last_pair, Some((SafetyState::Stop, t)) if t.elapsed() < Duration::from_millis(100)),
+        "not ready must send STOP: {:?}",
+        rig.last_pair
+    );
+    // A reset cannot skip the start-up conditions.
+    assert_eq!(reset(&mut rig, 0.0, false), ResetReply::NotReady);
+    // The drives appear (operational, sending forces): RUN within a few cycles, no trip.
+    rig.drives = true;
+    let took = rig.until(Duration::from_secs(3), 0.0, false, |r| {
+        matches!(r.last_pair, Some((SafetyState::Run, _)))
+    });
+    println!("RUN {took:?} after the drives appeared");
+    assert!(rig.estop_events().is_empty());
+    assert!(rig.nmt.is_empty(), "no NMT stop at start-up: {:?}", rig.nmt);
     rig.finish();
 }

@@ -30,9 +30,11 @@ fn mc() -> &'static cdpr_model::Model {
     })
 }
 
+/// A monitor for the checks: started ready (the start-up state has its own tests below).
 fn monitor_with(f: impl FnOnce(&mut Limits)) -> Monitor {
     let c = cfg();
     let mut lim = Limits::from_config(c);
+    lim.require_ready = false;
     f(&mut lim);
     let mut m = Monitor::new(
         lim,
@@ -268,7 +270,8 @@ fn an_announced_end_of_stream_disarms_silence_and_a_new_stream_rearms() {
 #[test]
 fn identity_mismatch_and_missing_identity_trip() {
     let c = cfg();
-    let lim = Limits::from_config(c);
+    let mut lim = Limits::from_config(c);
+    lim.require_ready = false;
     let own = platform_identity(&c.platform);
     let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
     let mut other = own;
@@ -959,4 +962,81 @@ fn bus_observation_failures_trip() {
         .new_trip
         .expect("blind bus checks must trip");
     assert_eq!((t.fault.cause, t.fault.value), (Cause::BusObservation, 3.0));
+}
+
+// ---- start-up: not ready until identity and every drive's feedback (issue 15, item 4) ----
+
+#[test]
+fn the_monitor_starts_not_ready_and_arms_only_when_every_drive_is_verified() {
+    use can_transport::safety_frame::SafetyState;
+    let c = cfg();
+    let lim = Limits::from_config(c);
+    assert!(
+        lim.require_ready,
+        "the shipped configuration starts not ready"
+    );
+    let mut m = Monitor::new(
+        lim,
+        StandardKinematics::new(&c.platform),
+        platform_identity(&c.platform),
+    );
+    assert_eq!(m.state(), MonitorState::NotReady);
+    assert_eq!(m.heartbeat(1).state, SafetyState::Stop);
+    assert_eq!(m.request_reset(), ResetDecision::NotReady);
+    let mut t = 0;
+    let mut cycle = |m: &mut Monitor, drives: usize, operational: bool| {
+        for k in 0..15 {
+            for i in 0..drives {
+                m.on_drive_state(i, operational);
+                m.on_force(i, 4000.0, t + k * MS);
+            }
+        }
+        t += 15 * MS;
+        m.end_cycle(t)
+    };
+    // Nothing heard from the drives yet: not ready.
+    for _ in 0..5 {
+        assert_eq!(cycle(&mut m, 0, true).state, MonitorState::NotReady);
+    }
+    // One drive silent: not ready.
+    assert_eq!(cycle(&mut m, 7, true).state, MonitorState::NotReady);
+    // Drives pre-operational (heartbeat, no NMT start yet): not ready.
+    assert_eq!(cycle(&mut m, 8, false).state, MonitorState::NotReady);
+    // The identity is reported but not required (motion-core starts after the drives enable).
+    assert!(!m.readiness().identity_verified);
+    // Everything verified: armed, RUN.
+    let r = cycle(&mut m, 8, true);
+    assert!(r.became_ready);
+    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.heartbeat(2).state, SafetyState::Run);
+}
+
+#[test]
+fn a_fault_while_not_ready_latches_and_readiness_names_what_is_missing() {
+    let c = cfg();
+    let mut m = Monitor::new(
+        Limits::from_config(c),
+        StandardKinematics::new(&c.platform),
+        platform_identity(&c.platform),
+    );
+    m.on_identity(&PlatformIdentity::new(platform_identity(&c.platform), 8));
+    for i in 0..8 {
+        if i != 3 {
+            m.on_drive_state(i, true);
+        }
+        if i != 5 {
+            m.on_force(i, 4000.0, 1);
+        }
+    }
+    let r = m.readiness();
+    assert_eq!((r.not_operational, r.no_feedback), (1 << 3, 1 << 5));
+    assert!(r.identity_verified && !r.ready());
+    // A 101 mm setpoint while not ready trips (the checks run from the start).
+    m.on_setpoint(&sp(1, HOME, 2, 0.101));
+    let t = m
+        .end_cycle(15 * MS)
+        .new_trip
+        .expect("trips while not ready");
+    assert_eq!(t.fault.cause, Cause::DqLimit);
+    assert_eq!(m.state(), MonitorState::Tripped);
 }

@@ -487,9 +487,11 @@ impl Stack {
             st.prefix.clone(),
         ];
         st.spawn("safety-monitor", &mon_args)?;
-        // The drives release only after valid RUN heartbeats: drive-io can then enable them.
+        // The monitor starts not ready (STOP) until every drive is operational and sends forces
+        // (after drive-io's NMT start): the drives release only after its RUN pairs, then
+        // drive-io can enable them.
         st.wait("the monitor's heartbeat", 20.0, |s| {
-            Ok(s.monitor_state == Some(1))
+            Ok(s.monitor_state.is_some())
         })?;
         let dio_args = vec![
             "--config".into(),
@@ -650,6 +652,22 @@ impl Stack {
             }
         }
         Ok(b.drives.iter().map(|d| d.left_follow_ns).max().unwrap_or(0))
+    }
+
+    /// The monitor's e-stop with one of `causes`.
+    fn monitor_trip_any(&mut self, causes: &[Cause], secs: f64) -> Res<StateEvent> {
+        self.wait(&format!("the monitor's e-stop ({causes:?})"), secs, |s| {
+            Ok(!s.monitor_estops.is_empty())
+        })?;
+        let e = self.monitor_estops[0];
+        if !causes.iter().any(|c| e.detail == u32::from(c.code())) {
+            return Err(format!(
+                "monitor tripped with cause {:?} (cable {}), expected one of {causes:?}",
+                Cause::from_code(e.detail),
+                e.detail_node
+            ));
+        }
+        Ok(e)
     }
 
     fn monitor_trip(&mut self, cause: Cause, secs: f64) -> Res<StateEvent> {
@@ -851,14 +869,18 @@ fn kill_drive_io(st: &mut Stack) -> Res<Outcome> {
     let t0 = monotonic_ns();
     st.signal("drive-io", libc::SIGKILL)?;
     st.reap("drive-io");
-    let ev = st.monitor_trip(Cause::FeedbackSilence, 10.0)?;
+    // Two independent detections race: drive-io's feedback topic goes silent, and without its
+    // SYNC the drives stop sending TPDO2, so the force readings go silent too. Whichever of
+    // the two silence limits is shorter trips first (on the host both are 4 cycles and the
+    // feedback check runs first; the guest's feedback limit is 20).
+    let ev = st.monitor_trip_any(&[Cause::FeedbackSilence, Cause::ForceSilence], 10.0)?;
     let stopped = st.require_braked()?;
     let e = st.emu()?;
     if e.drives.iter().any(|d| d.nmt != 4) {
         return Err("the drives should be NMT-stopped by the monitor".into());
     }
     Ok(Outcome {
-        cause: "feedback_silence".into(),
+        cause: Cause::from_code(ev.detail).map_or("?".into(), |c| c.to_string()),
         detect_ms: ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: "drives NMT-stopped by the monitor's own socket".into(),

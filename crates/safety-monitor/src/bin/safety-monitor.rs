@@ -81,6 +81,13 @@ fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
                     println!("reset accepted: nothing was latched (stack released)");
                     Ok(ExitCode::SUCCESS)
                 }
+                ResetReply::NotReady => {
+                    println!(
+                        "reset REFUSED: the monitor is not ready yet (platform identity and every \
+                         drive's feedback not verified; see its log)"
+                    );
+                    Ok(ExitCode::FAILURE)
+                }
                 ResetReply::Refused(c) => {
                     println!(
                         "reset REFUSED: the cause persists ({})",
