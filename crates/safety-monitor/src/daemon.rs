@@ -51,6 +51,19 @@ pub const RESET_NOT_READY: u32 = 0x5AFE_0005;
 pub const MOTION_CORE_STOPPING: u32 = crs_ipc::motion_state::STOPPING;
 /// Requests older than this are stale (e.g. history of a previous run) and ignored.
 pub const RESET_REQUEST_MAX_AGE_NS: u64 = 5_000_000_000;
+/// How far in the monitor's future an event's timestamp may lie (same CLOCK_MONOTONIC host;
+/// covers the sender taking its timestamp just after the monitor's cycle started).
+pub const EVENT_FUTURE_TOLERANCE_NS: u64 = 50_000_000;
+
+/// A state event is fresh when its (sender's) timestamp lies within the last
+/// [`RESET_REQUEST_MAX_AGE_NS`] of the monitor's clock — and NOT in its future beyond
+/// [`EVENT_FUTURE_TOLERANCE_NS`]: a future timestamp would otherwise be "fresh" forever (a
+/// replayed or forged request, issue 16).
+pub fn is_fresh(now_ns: u64, event_ns: u64) -> bool {
+    event_ns <= now_ns.saturating_add(EVENT_FUTURE_TOLERANCE_NS)
+        && now_ns.saturating_sub(event_ns) <= RESET_REQUEST_MAX_AGE_NS
+}
+
 /// RUN heartbeats sent after an accepted reset before the Reset event (the drives' and
 /// drive-io's watches need `release_pairs` (default 3) consecutive RUN pairs to release).
 pub const RESET_MIN_RUN_CYCLES: u32 = 4;
@@ -309,7 +322,7 @@ pub fn run(
             tracing::warn!(error = %e, "state event ignored");
             None
         }) {
-            let fresh = now.saturating_sub(ev.timestamp_ns) <= RESET_REQUEST_MAX_AGE_NS;
+            let fresh = is_fresh(now, ev.timestamp_ns);
             if ev.source == ProcessId::Operator as u32
                 && ev.kind == EventKind::StateChanged as u32
                 && ev.state == RESET_REQUEST
@@ -570,4 +583,21 @@ pub fn request_reset(ipc: &IpcNode, timeout: Duration) -> Result<ResetReply, Dae
         "no answer from the safety monitor within {} ms (is it running with the same --ipc-prefix?)",
         timeout.as_millis()
     )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn events_from_the_future_or_too_old_are_not_fresh() {
+        let now = 100_000_000_000;
+        assert!(is_fresh(now, now));
+        assert!(is_fresh(now, now - RESET_REQUEST_MAX_AGE_NS));
+        assert!(!is_fresh(now, now - RESET_REQUEST_MAX_AGE_NS - 1));
+        assert!(is_fresh(now, now + EVENT_FUTURE_TOLERANCE_NS));
+        // Before: saturating_sub made any future timestamp fresh.
+        assert!(!is_fresh(now, now + EVENT_FUTURE_TOLERANCE_NS + 1));
+        assert!(!is_fresh(now, u64::MAX));
+    }
 }
