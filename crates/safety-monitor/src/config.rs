@@ -434,6 +434,53 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             "must be -1 (none) or a CPU index".into(),
         ));
     }
+    // Upper bounds (issue 16): a setting beyond them would switch its check off in practice
+    // (a silence of minutes, a margin of metres). Cycles are monitor cycles (15 ms: 67 ≈ 1 s).
+    let fo = &raw.forces;
+    let counts: [(&str, u32, u32); 8] = [
+        ("monitor.silence_cycles", m.silence_cycles, 67),
+        (
+            "monitor.max_missing_setpoints",
+            m.max_missing_setpoints,
+            100,
+        ),
+        (
+            "monitor.identity_grace_cycles",
+            m.identity_grace_cycles,
+            200,
+        ),
+        ("monitor.reset_clear_cycles", m.reset_clear_cycles, 1000),
+        ("feedback.silence_cycles", raw.feedback.silence_cycles, 67),
+        (
+            "feedback.unchecked_cycles",
+            raw.feedback.unchecked_cycles,
+            67,
+        ),
+        ("forces.silence_cycles", fo.silence_cycles, 67),
+        ("can.reader_stall_cycles", raw.can.reader_stall_cycles, 67),
+    ];
+    for (key, v, max) in counts {
+        if v > max {
+            return Err(bad(key, format!("{v} is above the bound {max}: refused")));
+        }
+    }
+    let reals: [(&str, f64, f64); 6] = [
+        ("monitor.workspace_margin_m", m.workspace_margin_m, 0.5),
+        ("monitor.workspace_margin_deg", m.workspace_margin_deg, 5.0),
+        (
+            "feedback.following_error_mm",
+            raw.feedback.following_error_mm,
+            100.0,
+        ),
+        ("forces.overload_margin_n", fo.overload_margin_n, 5000.0),
+        ("forces.filter_ms", fo.filter_ms, 200.0),
+        ("motion.margin", raw.motion.margin, 1.0),
+    ];
+    for (key, v, max) in reals {
+        if v > max {
+            return Err(bad(key, format!("{v} is above the bound {max}: refused")));
+        }
+    }
     let f = &raw.feedback;
     if !(f.following_error_mm.is_finite() && f.following_error_mm > 0.0) {
         return Err(bad(
@@ -520,6 +567,15 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
                 platform.cables()
             ),
         });
+    }
+    if fo.slack_margin_n > platform.f_min_n {
+        return Err(bad(
+            "forces.slack_margin_n",
+            format!(
+                "{} N is above the platform's f_min_n ({} N): the slack limit would be below 0 N",
+                fo.slack_margin_n, platform.f_min_n
+            ),
+        ));
     }
     if fo.check && fo.hard_limit_n < platform.f_max_n {
         return Err(bad(

@@ -1040,3 +1040,73 @@ fn a_fault_while_not_ready_latches_and_readiness_names_what_is_missing() {
     assert_eq!(t.fault.cause, Cause::DqLimit);
     assert_eq!(m.state(), MonitorState::Tripped);
 }
+
+/// The shipped config with `key` of `[section]` set to `value` (platform and drives paths
+/// made absolute), loaded from a temporary file.
+fn load_with(section: &str, key: &str, value: &str) -> Result<MonitorConfig, String> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config");
+    let text = std::fs::read_to_string(root.join("safety-monitor.toml")).unwrap();
+    let mut out = Vec::new();
+    let (mut cur, mut done) = (String::new(), false);
+    for line in text.lines() {
+        let t = line.trim();
+        if t.starts_with('[') {
+            if cur == section && !done {
+                out.push(format!("{key} = {value}"));
+                done = true;
+            }
+            cur = t.trim_matches(|c| c == '[' || c == ']').to_string();
+        }
+        let line = if cur == section && !done && t.starts_with(&format!("{key} =")) {
+            done = true;
+            format!("{key} = {value}")
+        } else if t.starts_with("platform = ") {
+            format!("platform = {:?}", root.join("icosahedron.toml"))
+        } else if t.starts_with("drives = ") {
+            format!("drives = {:?}", root.join("drives.toml"))
+        } else {
+            line.to_string()
+        };
+        out.push(line);
+    }
+    if !done {
+        out.push(format!("[{section}]\n{key} = {value}"));
+    }
+    let dir =
+        std::env::temp_dir().join(format!("sm-bounds-{}-{section}-{key}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("sm.toml");
+    std::fs::write(&p, out.join("\n") + "\n").unwrap();
+    let r = config::load(&p).map_err(|e| e.to_string());
+    std::fs::remove_dir_all(&dir).ok();
+    r
+}
+
+#[test]
+fn settings_beyond_their_bounds_are_refused_by_name() {
+    // At the bound: accepted (the relaxed guest configs use up to 40 / 20 cycles).
+    for (section, key, ok, too_big) in [
+        ("monitor", "silence_cycles", "67", "68"),
+        ("monitor", "max_missing_setpoints", "100", "101"),
+        ("monitor", "identity_grace_cycles", "200", "201"),
+        ("monitor", "reset_clear_cycles", "1000", "1001"),
+        ("monitor", "workspace_margin_m", "0.5", "0.6"),
+        ("monitor", "workspace_margin_deg", "5.0", "5.5"),
+        ("feedback", "silence_cycles", "67", "68"),
+        ("feedback", "unchecked_cycles", "67", "68"),
+        ("feedback", "following_error_mm", "100.0", "100.5"),
+        ("forces", "silence_cycles", "67", "68"),
+        ("forces", "overload_margin_n", "5000.0", "5001.0"),
+        ("forces", "filter_ms", "200.0", "201.0"),
+        ("forces", "slack_margin_n", "1000.0", "1001.0"),
+        ("motion", "margin", "1.0", "1.01"),
+        ("can", "reader_stall_cycles", "67", "68"),
+    ] {
+        let full = format!("{section}.{key}");
+        if let Err(e) = load_with(section, key, ok) {
+            panic!("{full} = {ok} must be accepted: {e}");
+        }
+        let e = load_with(section, key, too_big).expect_err(&full);
+        assert!(e.contains(&full), "{full} = {too_big}: {e}");
+    }
+}
