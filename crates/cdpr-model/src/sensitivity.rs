@@ -94,7 +94,8 @@ pub struct PoseErrorEstimate {
 }
 
 impl ParameterSensitivity {
-    fn sigma(&self, j: usize, e: &ParameterErrors, model: &Model) -> f64 {
+    /// σ of parameter `j` under `e`, in its own unit (m, or N for k_F).
+    pub fn sigma(&self, j: usize, e: &ParameterErrors, model: &Model) -> f64 {
         match self.params[j] {
             Parameter::FrameAnchor { .. } => e.frame_anchor_m,
             Parameter::PlatformAnchor { .. } => e.platform_anchor_m,
@@ -102,15 +103,22 @@ impl ParameterSensitivity {
         }
     }
 
+    /// ‖∂r/∂p_j‖ σ_j and ‖∂φ/∂p_j‖ σ_j: what parameter `j` alone contributes, m and rad.
+    pub fn contribution(&self, j: usize, e: &ParameterErrors, model: &Model) -> (f64, f64) {
+        let s = self.sigma(j, e, model);
+        let col = self.j_xp.column(j);
+        (
+            Vector3::new(col[0], col[1], col[2]).norm() * s,
+            Vector3::new(col[3], col[4], col[5]).norm() * s,
+        )
+    }
+
     /// E‖Δx‖² = Σ_j ‖J_xp[:, j]‖² σ_j² for independent zero-mean errors.
     pub fn pose_error(&self, model: &Model, e: &ParameterErrors) -> PoseErrorEstimate {
         let (mut sr, mut sphi) = (0.0, 0.0);
         let mut dominant: Option<(Parameter, f64)> = None;
         for j in 0..self.params.len() {
-            let s = self.sigma(j, e, model);
-            let col = self.j_xp.column(j);
-            let gr = Vector3::new(col[0], col[1], col[2]).norm() * s;
-            let gphi = Vector3::new(col[3], col[4], col[5]).norm() * s;
+            let (gr, gphi) = self.contribution(j, e, model);
             sr += gr * gr;
             sphi += gphi * gphi;
             if dominant.is_none_or(|(_, g)| gr > g) {

@@ -66,7 +66,10 @@ impl ReaderWatch {
             h.dropped.load(Ordering::Relaxed),
             h.errors.load(Ordering::Relaxed),
         );
-        let (new_d, new_e) = (d - self.last_dropped.min(d), e - self.last_errors.min(e));
+        let (new_d, new_e) = (
+            d.saturating_sub(self.last_dropped),
+            e.saturating_sub(self.last_errors),
+        );
         if b == self.last_batches {
             self.stalled = self.stalled.saturating_add(1);
         } else {

@@ -501,7 +501,6 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             format!("must be in 1..={}", crate::monitor::HISTORY),
         ));
     }
-    let fo = &raw.forces;
     for (key, v) in [
         ("forces.slack_margin_n", fo.slack_margin_n),
         ("forces.overload_margin_n", fo.overload_margin_n),

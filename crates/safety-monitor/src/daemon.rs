@@ -385,8 +385,8 @@ pub fn run(
             tracing::error!(?f, "the monitor's own bus reader failed");
             monitor.on_bus_observation_failed(f.value());
         }
-        let readiness = monitor.readiness();
         let report = monitor.end_cycle(now);
+        let readiness = report.readiness;
         if report.became_ready {
             tracing::info!(
                 identity_verified = readiness.identity_verified,
@@ -462,7 +462,7 @@ pub fn run(
                     tracing::warn!(cause = %c, "reset REFUSED: the cause persists")
                 }
                 ResetDecision::NotReady => {
-                    tracing::warn!(readiness = ?monitor.readiness(), "reset REFUSED: not ready yet")
+                    tracing::warn!(?readiness, "reset REFUSED: not ready yet")
                 }
                 ResetDecision::Accepted | ResetDecision::NotTripped => {
                     tracing::info!(?decision, "reset accepted: NMT start, releasing the stack");
@@ -548,7 +548,7 @@ pub enum ResetReply {
     Accepted,
     NotTripped,
     Refused(Option<Cause>),
-    /// The monitor is still in its start-up state (identity / drives not verified).
+    /// The monitor is still in its start-up state (not every drive verified yet).
     NotReady,
 }
 

@@ -163,8 +163,6 @@ struct ForceWatch {
     /// Receive time of the first reading of the current slack / overload episode.
     slack_since_ns: Option<u64>,
     over_since_ns: Option<u64>,
-    /// Last reading, N.
-    last_n: f64,
 }
 
 /// Latched state.
@@ -228,6 +226,8 @@ pub struct CycleReport {
     pub missing: u32,
     /// Set in the cycle that left [`MonitorState::NotReady`] for `Armed`.
     pub became_ready: bool,
+    /// The start-up conditions as this cycle saw them (what a not-ready monitor waits for).
+    pub readiness: Readiness,
 }
 
 /// What the monitor still waits for before it permits motion (bit i = cable i).
@@ -273,9 +273,6 @@ pub struct Stats {
     pub forces_checked: u64,
     /// Largest |Δq| seen on any cable (m).
     pub max_abs_dq_m: f64,
-    /// Smallest and largest measured cable force of an operational drive, N.
-    pub min_force_n: f64,
-    pub max_force_n: f64,
 }
 
 /// The monitor core. Construct once (allocates the gap window), then per cycle: `on_*` for every
@@ -320,8 +317,8 @@ pub struct Monitor {
     fb_unchecked: u32,
     unchecked_streak: u32,
     prev_pose: Option<PrevPose>,
-    /// Whether this cycle brought a setpoint pose, and the last pose of the previous cycle
-    /// that had one with the monitor's clock at its end (the own-clock velocity check).
+    /// The monitor's clock at the end of the last cycle that brought setpoints, and the last
+    /// pose of that cycle (the own-clock velocity check).
     cycle_ref: Option<(u64, DVec3, DMat3)>,
 }
 
@@ -342,11 +339,7 @@ impl Monitor {
             },
             trip: None,
             log: TripLog::default(),
-            stats: Stats {
-                min_force_n: f64::INFINITY,
-                max_force_n: f64::NEG_INFINITY,
-                ..Stats::default()
-            },
+            stats: Stats::default(),
             faults: CauseSet::default(),
             first: None,
             new_setpoints: 0,
@@ -747,10 +740,7 @@ impl Monitor {
     pub fn on_drive_state(&mut self, cable: usize, operational: bool) {
         if let Some(w) = self.force.get_mut(cable) {
             if !operational {
-                *w = ForceWatch {
-                    last_n: w.last_n,
-                    ..ForceWatch::default()
-                };
+                *w = ForceWatch::default();
             }
             w.operational = operational;
         }
@@ -766,7 +756,6 @@ impl Monitor {
         let w = &mut self.force[cable];
         // Counted also with the check off: a live reading is a start-up condition.
         w.readings += 1;
-        w.last_n = force_n;
         if !fl.check || !w.operational {
             return;
         }
@@ -781,8 +770,6 @@ impl Monitor {
             self.fault(at(Cause::ForceSilence, f64::NAN));
             return;
         }
-        self.stats.min_force_n = self.stats.min_force_n.min(force_n);
-        self.stats.max_force_n = self.stats.max_force_n.max(force_n);
         let mut fault = None;
         if force_n < fl.slack_below_n {
             let since = *w.slack_since_ns.get_or_insert(rx_ns);
@@ -952,6 +939,7 @@ impl Monitor {
             setpoints: self.new_setpoints,
             missing: self.missing,
             became_ready,
+            readiness,
         };
         self.last_faults = self.faults;
         self.faults.clear();

@@ -121,6 +121,9 @@ pub(super) fn sensitivity_cmd(a: &SensitivityArgs) -> Res {
     let pf = load(&a.common)?;
     let model = &pf.model;
     let e = errors(a)?;
+    if a.map_resolution.is_some_and(|n| n < 2) {
+        return Err("--map-resolution must be at least 2".into());
+    }
     let x = a.pose.pose(&pf)?;
     let mut data = Data::new(model);
     let mut f = vec![0.0; model.m()];
@@ -140,29 +143,10 @@ pub(super) fn sensitivity_cmd(a: &SensitivityArgs) -> Res {
     let groups = [0, 1, 2].map(|g| group_rms(&s, model, &e, g));
     let mut order: Vec<usize> = (0..s.params.len()).collect();
     // Rank by contribution to the expected error (gain × σ), the question a designer asks.
-    let contrib = |j: usize| {
-        let c = s.j_xp.column(j);
-        let sig = match s.params[j] {
-            Parameter::FrameAnchor { .. } => e.frame_anchor_m,
-            Parameter::PlatformAnchor { .. } => e.platform_anchor_m,
-            Parameter::Stiffness { cable } => e.stiffness_rel * model.params().k_f[cable],
-        };
-        Vector3::new(c[0], c[1], c[2]).norm() * sig
-    };
+    let contrib = |j: usize| s.contribution(j, &e, model).0;
     order.sort_by(|&i, &j| contrib(j).total_cmp(&contrib(i)));
 
-    let map_pts = a.map_resolution.map(|n| {
-        if n < 2 {
-            Err("--map-resolution must be at least 2".to_string())
-        } else {
-            Ok(map(&pf, &e, n))
-        }
-    });
-    let map_pts = match map_pts {
-        Some(Err(m)) => return Err(m.into()),
-        Some(Ok(v)) => Some(v),
-        None => None,
-    };
+    let map_pts = a.map_resolution.map(|n| map(&pf, &e, n));
     let map_stats = map_pts.as_ref().map(|pts| {
         let mut vals: Vec<(f64, Pose)> = pts
             .iter()
@@ -222,14 +206,15 @@ pub(super) fn sensitivity_cmd(a: &SensitivityArgs) -> Res {
             "parameters": params,
         });
         if let Some((vals, nf, failed, total)) = &map_stats {
+            let rms: Vec<f64> = vals.iter().map(|v| v.0).collect();
             v["map"] = json!({
                 "points": total,
                 "estimated": vals.len(),
                 "not_wrench_feasible": nf,
                 "failed": failed.len(),
                 "failures": failed,
-                "median_rms_position_m": (!vals.is_empty()).then(|| quantile(&vals.iter().map(|v| v.0).collect::<Vec<_>>(), 0.5)),
-                "p95_rms_position_m": (!vals.is_empty()).then(|| quantile(&vals.iter().map(|v| v.0).collect::<Vec<_>>(), 0.95)),
+                "median_rms_position_m": (!rms.is_empty()).then(|| quantile(&rms, 0.5)),
+                "p95_rms_position_m": (!rms.is_empty()).then(|| quantile(&rms, 0.95)),
                 "max_rms_position_m": vals.last().map(|v| v.0),
                 "max_at": vals.last().map(|v| pose_json(&v.1)),
             });

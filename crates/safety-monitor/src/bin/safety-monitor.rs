@@ -83,8 +83,8 @@ fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
                 }
                 ResetReply::NotReady => {
                     println!(
-                        "reset REFUSED: the monitor is not ready yet (platform identity and every \
-                         drive's feedback not verified; see its log)"
+                        "reset REFUSED: the monitor is not ready yet (not every drive is operational \
+                         with live force readings; see its log)"
                     );
                     Ok(ExitCode::FAILURE)
                 }
