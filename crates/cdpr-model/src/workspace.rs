@@ -361,12 +361,14 @@ pub enum Reach {
         /// f_min ≤ f ≤ f_max on every cable (eq. 3.34).
         within_limits: bool,
         /// |Δr| (m) the pose moves under the wrench step of the analysis, linear prediction
-        /// Δx = −K_wx⁻¹ Δw (eq. 2.76–2.78, 3.23) at the settled pose.
-        compliance_dr_m: f64,
+        /// Δx = −K_wx⁻¹ Δw (eq. 2.76–2.78, 3.23) at the settled pose; None if K_wx is
+        /// singular there.
+        compliance_dr_m: Option<f64>,
         /// The linear prediction of the pose error, Δx = C_xw (A^T f(q_θ) + w_e) at the
         /// reference pose (eq. 3.16, 3.23–3.24), as a position vector (m); compare with
-        /// `pose.r − reference.r` for the linearisation error (fig. 3.11b).
-        linear_dr: Vector3<f64>,
+        /// `pose.r − reference.r` for the linearisation error (fig. 3.11b). None if the
+        /// inverse kinematics or K_wx failed at the reference pose.
+        linear_dr: Option<Vector3<f64>>,
     },
     /// The elastostatic forward kinematics did not converge (counted as not reachable).
     FkFailed(String),
@@ -404,8 +406,27 @@ impl ReachableAnalysis {
             .filter(|(_, r)| matches!(r, Reach::FkFailed(_)))
             .count()
     }
+    /// Reachable poses where the linear prediction of eq. (3.24) could not be computed
+    /// (singular K_wx or failed inverse kinematics at the reference pose).
+    pub fn linear_failures(&self) -> usize {
+        self.points
+            .iter()
+            .filter(|(_, r)| {
+                matches!(
+                    r,
+                    Reach::Settled {
+                        within_limits: true,
+                        linear_dr: None,
+                        ..
+                    }
+                )
+            })
+            .count()
+    }
+
     /// Linearisation error of eq. (3.24): mean and largest |Δr_linear − (r_M − r)| over the
-    /// reachable poses, m (None if none).
+    /// reachable poses whose prediction exists ([`Self::linear_failures`] counts the others),
+    /// m (None if none).
     pub fn linearisation_error(&self) -> Option<(f64, f64)> {
         let e: Vec<f64> = self
             .points
@@ -414,9 +435,9 @@ impl ReachableAnalysis {
                 Reach::Settled {
                     pose,
                     within_limits: true,
-                    linear_dr,
+                    linear_dr: Some(dr),
                     ..
-                } => Some((linear_dr - (pose.r - x.r)).norm()),
+                } => Some((dr - (pose.r - x.r)).norm()),
                 _ => None,
             })
             .collect();
@@ -528,9 +549,8 @@ pub fn reachable_kinematic(
                     .lu()
                     .solve(&(-dw_res))
                     .map(|dx| Vector3::new(dx[0], dx[1], dx[2]))
-                    .unwrap_or(Vector3::repeat(f64::NAN))
             }
-            Err(_) => Vector3::repeat(f64::NAN),
+            Err(_) => None,
         };
         let outcome = match forward::elastostatic(truth, &mut dt, &q_theta, x, &opts) {
             Ok(sol) => {
@@ -542,8 +562,7 @@ pub fn reachable_kinematic(
                     .k_wx
                     .lu()
                     .solve(&(-dw))
-                    .map(|dx| nalgebra::Vector3::new(dx[0], dx[1], dx[2]).norm())
-                    .unwrap_or(f64::NAN);
+                    .map(|dx| nalgebra::Vector3::new(dx[0], dx[1], dx[2]).norm());
                 Reach::Settled {
                     pose: sol.pose,
                     forces,

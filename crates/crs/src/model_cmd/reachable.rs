@@ -176,7 +176,7 @@ pub(super) fn reachable_cmd(r: &ReachableRequest) -> Res {
             if let (
                 Reach::Settled {
                     within_limits: true,
-                    compliance_dr_m,
+                    compliance_dr_m: Some(compliance_dr_m),
                     ..
                 },
                 Measured::Reachable { dr_m, .. },
@@ -211,6 +211,7 @@ pub(super) fn reachable_cmd(r: &ReachableRequest) -> Res {
             "predicted_fk_failures": pred.fk_failures(),
             "predicted_mean_error_m": mean_e, "predicted_max_error_m": max_e,
             "linearisation_error_mean_m": mean_lin, "linearisation_error_max_m": max_lin,
+            "linear_prediction_failures": pred.linear_failures(),
             "predict_seconds": t_pred,
         });
         if let Some((n_meas, agree, failed, rel, errs)) = &plant_summary {
@@ -259,6 +260,12 @@ pub(super) fn reachable_cmd(r: &ReachableRequest) -> Res {
             "  linear prediction of the pose error (eq. 3.24) vs the full FK: mean {:.2} / max {:.2} mm apart",
             a * 1e3,
             b * 1e3
+        );
+    }
+    if pred.linear_failures() > 0 {
+        println!(
+            "  the linear prediction (eq. 3.24) failed (singular K_wx) on {} reachable poses: left out of the figure above",
+            pred.linear_failures()
         );
     }
     if pred.fk_failures() > 0 {
@@ -343,10 +350,10 @@ fn write_svg(
         .iter()
         .filter_map(|(_, o)| match o {
             Reach::Settled {
-                compliance_dr_m,
+                compliance_dr_m: Some(dr),
                 within_limits: true,
                 ..
-            } => Some(*compliance_dr_m),
+            } => Some(*dr),
             _ => None,
         })
         .fold(0.0, f64::max);
@@ -359,7 +366,11 @@ fn write_svg(
                 within_limits: true,
                 compliance_dr_m,
                 ..
-            } => ("#1f6fbf", 0.25 + 0.75 * compliance_dr_m / max_dr.max(1e-12)),
+            } => (
+                "#1f6fbf",
+                // No compliance (singular K_wx): the lightest shade, not a number.
+                0.25 + 0.75 * compliance_dr_m.unwrap_or(0.0) / max_dr.max(1e-12),
+            ),
             _ if exact[idx] => ("#b0b0b0", 1.0),
             _ => continue,
         };
