@@ -164,14 +164,17 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
             let names: Vec<&str> = sel.chosen.iter().map(|e| e.name()).collect();
             let _ = writeln!(s, "Chosen effects, in order: **{}**.\n", names.join(", "));
         }
-        s.push_str("A candidate is added when its score (signature) statistic exceeds the χ² critical value, the BIC on the training rows drops, and the held-out RMS of the weighted residual drops by at least ");
+        let c = &rep.config.select;
         let _ = writeln!(
             s,
-            "{:.0} %; the best such candidate per round is chosen.\n",
-            rep.config.select.min_gain * 100.0
+            "A candidate is judged on what a user cares about: the held-out position and force errors through the model's forward kinematics. It is added when, in the channel where its effect must show (drum: position; force sensors: force; the others: either), the mean error drops by at least {:.0} % (position) or {:.0} % (force) with a paired z ≥ {:.2} over the held-out samples, neither error gets worse by more than {:.0} % (position) / {:.0} % (force), the FK converges on every held-out sample, and no parameter is pressed against a physical range limit away from zero. Among those that pass, the largest combined gain (position + force) is chosen, one per round. The score statistic and the BIC on the training rows are evidence, not gates: the training residual takes the measured forces as inputs, so effects on the predicted forces (hysteresis, sag, pulleys) barely move it. Thresholds from baseline data: docs/calibration.md.\n",
+            c.min_gain_pos * 100.0,
+            c.min_gain_force * 100.0,
+            c.z_gain,
+            c.max_loss_pos * 100.0,
+            c.max_loss_force * 100.0
         );
-        s.push_str("A candidate must also keep the forward kinematics converging on every held-out sample, not make the held-out position error worse (> 2 %), and keep its parameters inside their physical ranges; among those that pass, the lowest held-out position error through the FK wins.\n\n");
-        s.push_str("| round | effect | k | score | χ² crit | held-out RMS before → after | held-out position (mm) before → after, FK | held-out force (N) before → after, FK | BIC before → after | fitted parameters (±1σ) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
+        s.push_str("| round | effect | k | score | χ² crit | held-out position (mm) before → after, FK | gain (paired z) | held-out force (N) before → after, FK | gain (paired z) | BIC before → after | fitted parameters (±1σ) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for (r, round) in sel.rounds.iter().enumerate() {
             for c in round {
                 let params: Vec<String> = c
@@ -190,20 +193,24 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
                     (Some(t), _) => t.clone(),
                     (None, v) => fmt_opt(v, prec),
                 };
+                let gain = |g: Option<f64>, z: Option<f64>| match (g, z) {
+                    (Some(g), Some(z)) => format!("{:+.1} % ({z:.1})", 100.0 * g),
+                    _ => "–".into(),
+                };
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {} | {:.3e} | {:.1} | {:.4e} → {:.4e} | {} → {} | {} → {} | {:.1} → {:.1} | {} | {} |",
+                    "| {} | {} | {} | {:.3e} | {:.1} | {} → {} | {} | {} → {} | {} | {:.1} → {:.1} | {} | {} |",
                     r + 1,
                     c.effect.name(),
                     c.n_params,
                     c.score,
                     c.score_critical,
-                    c.holdout_rms_before,
-                    c.holdout_rms_after,
                     fmt_opt(c.holdout_pos_mm_before, 2),
                     fk_after(c.holdout_pos_mm_after, 2),
+                    gain(c.gain_pos, c.z_pos),
                     fmt_opt(c.holdout_force_n_before, 1),
                     fk_after(c.holdout_force_n_after, 1),
+                    gain(c.gain_force, c.z_force),
                     c.bic_before,
                     c.bic_after,
                     params.join("; "),
@@ -679,17 +686,21 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
     if let Some(r0) = rep.selection.as_ref().and_then(|sel| sel.rounds.first()) {
         {
             let names: Vec<String> = r0.iter().map(|c| c.effect.name().to_string()).collect();
-            let gain: Vec<f64> = r0
-                .iter()
-                .map(|c| (1.0 - c.holdout_rms_after / c.holdout_rms_before).max(0.0) * 100.0)
-                .collect();
+            // The chart shows reductions only: a worse error or one that could not be measured
+            // (FK failed) is drawn as 0; the report's table has the signed values.
+            let pct = |g: Option<f64>| g.map_or(0.0, |g| (100.0 * g).max(0.0));
+            let pos: Vec<f64> = r0.iter().map(|c| pct(c.gain_pos)).collect();
+            let force: Vec<f64> = r0.iter().map(|c| pct(c.gain_force)).collect();
             out.push((
                 "candidates.svg".into(),
                 bar_chart(
-                    "Candidate effects, round 1: held-out RMS reduction",
+                    "Candidate effects, round 1: held-out error reduction through the FK (≤ 0 drawn as 0)",
                     "%",
                     &names,
-                    &[("gain".into(), "#2ca02c", gain)],
+                    &[
+                        ("position".into(), "#1f77b4", pos),
+                        ("force".into(), "#2ca02c", force),
+                    ],
                 ),
             ));
         }

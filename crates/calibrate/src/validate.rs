@@ -27,6 +27,57 @@ pub struct Errors {
     /// Mean and max over samples of ‖f_P − f_M‖₂, N (elastostatic models with forces).
     pub force_mean_n: Option<f64>,
     pub force_max_n: Option<f64>,
+    /// Per sample, in the order evaluated: position error (mm) and force error ‖f_P − f_M‖
+    /// (N) through the FK, `None` where the FK failed. For paired comparisons of two models
+    /// on the same samples ([`paired_gain`]); not part of the report.
+    #[serde(skip)]
+    pub per_sample: Vec<Option<(f64, Option<f64>)>>,
+}
+
+/// The held-out error channel of a paired comparison.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ErrorChannel {
+    Position,
+    Force,
+}
+
+/// Paired comparison of two models on the same samples: the relative reduction of the mean
+/// error (1 − after/before) and its z statistic, mean(d)/(sd(d)/√n) over the per-sample
+/// reductions d_j = e_before,j − e_after,j (a paired t-test; n ≥ 30 held-out samples make t ≈ z).
+/// A reduction that a few samples carry, or that the sample-to-sample spread swamps, has a small
+/// z even when its relative size is large. `None` when fewer than 3 samples pair up.
+pub fn paired_gain(before: &Errors, after: &Errors, channel: ErrorChannel) -> Option<(f64, f64)> {
+    let pick = |v: &Option<(f64, Option<f64>)>| match channel {
+        ErrorChannel::Position => v.map(|(p, _)| p),
+        ErrorChannel::Force => v.and_then(|(_, f)| f),
+    };
+    let pairs: Vec<(f64, f64)> = before
+        .per_sample
+        .iter()
+        .zip(&after.per_sample)
+        .filter_map(|(b, a)| Some((pick(b)?, pick(a)?)))
+        .collect();
+    let n = pairs.len();
+    if n < 3 {
+        return None;
+    }
+    let mean_b = pairs.iter().map(|p| p.0).sum::<f64>() / n as f64;
+    let mean_a = pairs.iter().map(|p| p.1).sum::<f64>() / n as f64;
+    if mean_b <= 0.0 {
+        return None;
+    }
+    let d: Vec<f64> = pairs.iter().map(|(b, a)| b - a).collect();
+    let md = d.iter().sum::<f64>() / n as f64;
+    let var = d.iter().map(|x| (x - md).powi(2)).sum::<f64>() / (n - 1) as f64;
+    let se = (var / n as f64).sqrt();
+    let z = if se > 0.0 {
+        md / se
+    } else if md == 0.0 {
+        0.0
+    } else {
+        md.signum() * f64::INFINITY
+    };
+    Some((1.0 - mean_a / mean_b, z))
 }
 
 impl Errors {
@@ -209,6 +260,7 @@ pub fn evaluate(kind: Kind, cal: &CalModel, obs: &[Observation]) -> Errors {
         match predict(kind, cal, o) {
             Ok(p) => {
                 let (dp, dr) = p.pose.error_to(&o.pose);
+                let mut fe = None;
                 sp += dp;
                 sr += dr;
                 e.pos_max_mm = e.pos_max_mm.max(dp * 1e3);
@@ -224,9 +276,14 @@ pub fn evaluate(kind: Kind, cal: &CalModel, obs: &[Observation]) -> Errors {
                     sf += d;
                     fmax = fmax.max(d);
                     nf += 1;
+                    fe = Some(d);
                 }
+                e.per_sample.push(Some((dp * 1e3, fe)));
             }
-            Err(_) => e.fk_failures += 1,
+            Err(_) => {
+                e.fk_failures += 1;
+                e.per_sample.push(None);
+            }
         }
     }
     if e.n > 0 {
@@ -272,4 +329,46 @@ pub fn length_errors(kind: Kind, cal: &CalModel, obs: &[Observation]) -> Vec<Vec
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn errors(pos: &[f64], force: &[f64]) -> Errors {
+        Errors {
+            per_sample: pos
+                .iter()
+                .zip(force)
+                .map(|(p, f)| Some((*p, Some(*f))))
+                .collect(),
+            ..Errors::default()
+        }
+    }
+
+    #[test]
+    fn paired_gain_is_the_relative_reduction_and_the_paired_t_statistic() {
+        // d = before − after = [1, 2, 3, 2]: mean 2, sd √(2/3), se √(2/3)/2 → z = 2/(√(2/3)/2).
+        let before = errors(&[4.0, 5.0, 6.0, 5.0], &[100.0, 100.0, 100.0, 100.0]);
+        let after = errors(&[3.0, 3.0, 3.0, 3.0], &[100.0, 110.0, 90.0, 100.0]);
+        let (g, z) = paired_gain(&before, &after, ErrorChannel::Position).unwrap();
+        assert!((g - 0.4).abs() < 1e-12, "{g}");
+        let z_ref = 2.0 / ((2.0f64 / 3.0).sqrt() / 2.0);
+        assert!((z - z_ref).abs() < 1e-12, "{z} vs {z_ref}");
+        // Force: the mean does not move, the spread is large: gain 0, z 0.
+        let (g, z) = paired_gain(&before, &after, ErrorChannel::Force).unwrap();
+        assert!(g.abs() < 1e-12 && z.abs() < 1e-12, "{g} {z}");
+    }
+
+    #[test]
+    fn a_sample_whose_fk_failed_in_either_model_is_left_out_of_the_pairs() {
+        let mut before = errors(&[4.0, 5.0, 6.0, 5.0], &[1.0; 4]);
+        let after = errors(&[3.0, 3.0, 3.0, 100.0], &[1.0; 4]);
+        before.per_sample[3] = None;
+        let (g, _) = paired_gain(&before, &after, ErrorChannel::Position).unwrap();
+        assert!((g - 0.4).abs() < 1e-12, "{g}");
+        before.per_sample[2] = None;
+        before.per_sample[1] = None;
+        assert!(paired_gain(&before, &after, ErrorChannel::Position).is_none());
+    }
 }

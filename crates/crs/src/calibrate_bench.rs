@@ -45,10 +45,28 @@ pub struct BenchArgs {
     /// Scenarios (comma separated): baseline and catalogue effect names; default all.
     #[arg(long, value_delimiter = ',')]
     scenarios: Option<Vec<String>>,
-    /// A scenario's effect "matters" when the true-effect model cuts the held-out position or
-    /// force error of the base model by at least this fraction.
-    #[arg(long, default_value_t = 0.10)]
-    matters: f64,
+    /// A scenario's effect "matters" when the true-effect model cuts the held-out mean
+    /// position error of the base model by at least this fraction ...
+    #[arg(long, default_value_t = 0.05)]
+    matters_pos: f64,
+    /// ... or its held-out mean force error by at least this fraction. Both sit above what a
+    /// catalogue candidate gains on data without any effect (≤ 1.3 % position, ≤ 12.1 % force
+    /// on 20 baseline sets), so "matters" means "can be told from the noise of the fit".
+    #[arg(long, default_value_t = 0.15)]
+    matters_force: f64,
+    /// Seeds of the baseline scenario (no effect): the false-addition rate needs more than the
+    /// effect scenarios' seeds to be a rate.
+    #[arg(long, default_value_t = 20)]
+    baseline_seeds: u64,
+    /// First seed: another value draws other magnitudes, poses and noise (the selection's
+    /// thresholds were set on seeds 0–19 of the baseline, so a run from another first seed is
+    /// an out-of-sample check of them).
+    #[arg(long, default_value_t = 0)]
+    first_seed: u64,
+    /// Print every candidate's evidence (round, held-out gains, verdict) of runs where the
+    /// true effect matters but was not chosen, or where another effect was chosen.
+    #[arg(long)]
+    explain_misses: bool,
 }
 
 /// splitmix64: reproducible magnitudes without a dependency.
@@ -205,7 +223,12 @@ pub fn run(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
     let cfg = PipelineConfig::default();
     let mut rows = Vec::new();
     for (si, truth) in scenarios.iter().enumerate() {
-        for seed in 0..a.seeds {
+        let seeds = if truth.is_none() {
+            a.baseline_seeds
+        } else {
+            a.seeds
+        };
+        for seed in a.first_seed..a.first_seed + seeds {
             let s = 1000 * (si as u64 + 1) + seed;
             let u = 0.25 * 8f64.powf(unit(s));
             let fx = scenario_effects(*truth, &reference, u);
@@ -256,9 +279,10 @@ pub fn run(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
                 }
             };
             let matters = truth.is_some()
-                && (true_pos.is_some_and(|p| p <= (1.0 - a.matters) * base.holdout.pos_mean_mm)
+                && (true_pos
+                    .is_some_and(|p| p <= (1.0 - a.matters_pos) * base.holdout.pos_mean_mm)
                     || match (true_force, base.holdout.force_mean_n) {
-                        (Some(t), Some(b)) => t <= (1.0 - a.matters) * b,
+                        (Some(t), Some(b)) => t <= (1.0 - a.matters_force) * b,
                         _ => false,
                     });
             let chosen = rep
@@ -283,6 +307,42 @@ pub fn run(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
                 true_pos.map_or("FK failed".into(), |p| format!("{p:.2} mm")),
                 seconds
             );
+            let missed = matters && truth.is_some_and(|t| !chosen.contains(&t));
+            let wrong = chosen.iter().any(|c| Some(*c) != *truth);
+            if a.explain_misses
+                && (missed || wrong)
+                && let Some(sel) = &rep.selection
+            {
+                for (r, round) in sel.rounds.iter().enumerate() {
+                    for c in round {
+                        let pct = |g: Option<f64>| {
+                            g.map_or("–".into(), |g| format!("{:+.1} %", 100.0 * g))
+                        };
+                        eprintln!(
+                            "    round {} {:<13} pos {} (z {}) force {} (z {}) score {:.1}/{:.1} BIC {:.1} → {:.1}: {}",
+                            r + 1,
+                            c.effect.name(),
+                            pct(c.gain_pos),
+                            c.z_pos.map_or("–".into(), |z| format!("{z:.1}")),
+                            pct(c.gain_force),
+                            c.z_force.map_or("–".into(), |z| format!("{z:.1}")),
+                            c.score,
+                            c.score_critical,
+                            c.bic_before,
+                            c.bic_after,
+                            c.verdict
+                        );
+                        if c.verdict.contains("bound") {
+                            let v: Vec<String> = c
+                                .params
+                                .iter()
+                                .map(|(n, v, _)| format!("{n}={v:.3}"))
+                                .collect();
+                            eprintln!("        {}", v.join(" "));
+                        }
+                    }
+                }
+            }
             rows.push(Row {
                 truth: *truth,
                 u,
@@ -311,8 +371,9 @@ fn print_summary(rows: &[Row], scenarios: &[Option<Effect>], a: &BenchArgs) {
         a.poses
     );
     println!(
-        "Confusion matrix: true effect (rows) × first chosen effect (columns; `none` = nothing added). In brackets: scenarios where the effect matters (true-effect model ≥ {:.0} % better held out).\n",
-        a.matters * 100.0
+        "Confusion matrix: true effect (rows) × first chosen effect (columns; `none` = nothing added). In brackets: scenarios where the effect matters (true-effect model ≥ {:.0} % better in held-out position or ≥ {:.0} % in force).\n",
+        a.matters_pos * 100.0,
+        a.matters_force * 100.0
     );
     let mut hdr = "| true \\ chosen |".to_string();
     for c in &cols {

@@ -81,9 +81,13 @@ pub struct Opts {
     /// load_cog, force_sensors.
     #[arg(long, value_delimiter = ',')]
     pub(crate) candidates: Option<Vec<String>>,
-    /// Minimum held-out RMS reduction for an effect to be added (fraction).
-    #[arg(long, default_value_t = 0.05)]
-    pub(crate) min_gain: f64,
+    /// Minimum reduction of the held-out mean position error (through the FK) for an effect
+    /// to be added (fraction); default from baseline data, see docs/calibration.md.
+    #[arg(long, default_value_t = calibrate::effects::SelectConfig::default().min_gain_pos)]
+    pub(crate) min_gain_pos: f64,
+    /// The same for the held-out mean force error ‖f_P − f_M‖ (fraction).
+    #[arg(long, default_value_t = calibrate::effects::SelectConfig::default().min_gain_force)]
+    pub(crate) min_gain_force: f64,
     /// Skip the residual diagnosis / model extension.
     #[arg(long)]
     pub(crate) no_extension: bool,
@@ -105,7 +109,8 @@ fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Error>> {
     cfg.ridge_kf = o.ridge_kf;
     cfg.no_extension = o.no_extension;
     cfg.cartesian = o.cartesian;
-    cfg.select.min_gain = o.min_gain;
+    cfg.select.min_gain_pos = o.min_gain_pos;
+    cfg.select.min_gain_force = o.min_gain_force;
     if let Some(c) = &o.candidates {
         cfg.select.candidates = c
             .iter()

@@ -16,6 +16,8 @@ fn bench_diagnosis_smoke() {
             "1",
             "--poses",
             "10",
+            "--baseline-seeds",
+            "1",
             "--scenarios",
             "baseline,drum",
         ])
