@@ -13,6 +13,7 @@
 //! | validation through the forward kinematics | [`validate`] | 3.3–3.8, 2.42 |
 //! | candidate effects, signature tests, selection | [`effects`] | 2.1, Fig. 1.4 |
 //! | the spec's steps end to end | [`pipeline`] | ch. 6.2–6.5 |
+//! | multi-start, second run, bootstrap of the chosen effects | [`repeatability`] | 6.8, 6.10 |
 //! | Markdown / JSON / SVG report, platform TOML | [`report`] | |
 
 #![allow(clippy::needless_range_loop)]
@@ -23,6 +24,7 @@ pub mod lm;
 pub mod observation;
 pub mod params;
 pub mod pipeline;
+pub mod repeatability;
 pub mod report;
 pub mod residual;
 pub mod validate;

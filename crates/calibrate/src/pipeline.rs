@@ -74,6 +74,8 @@ pub struct PipelineReport {
     pub config: PipelineConfig,
     pub stages: Vec<Stage>,
     pub selection: Option<Selection>,
+    /// Multi-start, second run and bootstrap ([`crate::repeatability`]), when asked for.
+    pub repeatability: Option<crate::repeatability::Repeatability>,
 }
 
 impl PipelineReport {
@@ -125,6 +127,35 @@ pub fn estimate_offsets(
         cal.offset[i] = sum[i] / obs.len() as f64;
     }
     Ok(())
+}
+
+/// The optimal elastostatic step's fit (eq. 4.38): p = (a, b, k_F, w_e) + offsets with the
+/// configured ridge/lasso penalties.
+pub fn elastostatic_spec(cfg: &PipelineConfig, m: usize) -> FitSpec {
+    let free: Vec<ParamId> = [Group::A, Group::B, Group::KF, Group::We, Group::Offset]
+        .iter()
+        .flat_map(|g| group(*g, m))
+        .collect();
+    let mut spec_e = FitSpec::new(Kind::Elastostatic, free);
+    spec_e.weights = cfg.weights;
+    if cfg.ridge_b > 0.0 {
+        spec_e.ridge = group(Group::B, m)
+            .into_iter()
+            .map(|p| (p, cfg.ridge_b))
+            .collect();
+    }
+    if cfg.ridge_kf > 0.0 {
+        spec_e
+            .ridge
+            .extend(group(Group::KF, m).into_iter().map(|p| (p, cfg.ridge_kf)));
+    }
+    if cfg.lasso_b > 0.0 {
+        spec_e.lasso = group(Group::B, m)
+            .into_iter()
+            .map(|p| (p, cfg.lasso_b))
+            .collect();
+    }
+    spec_e
 }
 
 /// Runs the steps on `train`, reporting on `holdout` (the training set if empty).
@@ -198,6 +229,7 @@ pub fn run(
             config: cfg.clone(),
             stages,
             selection: None,
+            repeatability: None,
         });
     }
     // 3. Nominal elastostatic model: k_F, w_e of the platform, offsets from the tension (6.24).
@@ -211,29 +243,7 @@ pub fn run(
         fit: None,
     });
     // 4. Optimal elastostatic model (eq. 4.38) with p = (a, b, k_F, w_e) + offsets.
-    let free: Vec<ParamId> = [Group::A, Group::B, Group::KF, Group::We, Group::Offset]
-        .iter()
-        .flat_map(|g| group(*g, m))
-        .collect();
-    let mut spec_e = FitSpec::new(Kind::Elastostatic, free);
-    spec_e.weights = cfg.weights;
-    if cfg.ridge_b > 0.0 {
-        spec_e.ridge = group(Group::B, m)
-            .into_iter()
-            .map(|p| (p, cfg.ridge_b))
-            .collect();
-    }
-    if cfg.ridge_kf > 0.0 {
-        spec_e
-            .ridge
-            .extend(group(Group::KF, m).into_iter().map(|p| (p, cfg.ridge_kf)));
-    }
-    if cfg.lasso_b > 0.0 {
-        spec_e.lasso = group(Group::B, m)
-            .into_iter()
-            .map(|p| (p, cfg.lasso_b))
-            .collect();
-    }
+    let spec_e = elastostatic_spec(cfg, m);
     let fit_e = identify::fit(&nom_e, train, &spec_e, &mut |it, c| {
         progress("elastostatic", it, c)
     })?;
@@ -274,5 +284,6 @@ pub fn run(
         config: cfg.clone(),
         stages,
         selection,
+        repeatability: None,
     })
 }

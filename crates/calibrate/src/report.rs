@@ -219,6 +219,9 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
             }
         }
     }
+    if let Some(r) = &rep.repeatability {
+        repeatability_section(&mut s, r);
+    }
     let fin = rep.final_stage();
     if let Some(f) = &fin.fit {
         s.push_str("\n## Parameter changes of the final model (nominal → identified, ±1σ)\n\n| parameter | nominal | identified | change | 1σ |\n|---|---|---|---|---|\n");
@@ -707,4 +710,86 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
     }
     let _ = Kind::Kinematic;
     out
+}
+
+/// "Repeatability" (issue 13, item 5): multi-start, second run, bootstrap. A test that failed
+/// says so and how often; it never prints a number for it.
+fn repeatability_section(s: &mut String, r: &crate::repeatability::Repeatability) {
+    s.push_str("\n## Repeatability\n\n");
+    if let Some(ms) = &r.multi_start {
+        let _ = writeln!(
+            s,
+            "**Multi-start** (eq. 6.8: frame anchors a_N + U(−0.5, 0.5) m, optimal elastostatic fit, {} starts): {} reached the pipeline's optimum (cost within 1e-6, anchors within 1 mm), {} ended at a lower cost, {} failed; largest anchor distance from the optimum {}, lowest cost ratio {}.{}\n",
+            ms.starts,
+            ms.same_optimum,
+            ms.lower_cost,
+            ms.failed,
+            ms.max_anchor_distance_mm
+                .map_or("– (no start converged)".into(), |d| format!("{d:.2} mm")),
+            ms.best_cost_ratio.map_or("–".into(), |c| format!("{c:.6}")),
+            if ms.lower_cost > 0 {
+                " **A start found a better optimum than the pipeline: its parameters are a local optimum.**"
+            } else {
+                ""
+            }
+        );
+    }
+    if let Some(sr) = &r.second_run {
+        match &sr.failure {
+            Some(e) => {
+                let _ = writeln!(
+                    s,
+                    "**Second run** (eq. 6.10, the same fit on the held-out set): failed: {e}.\n"
+                );
+            }
+            None => {
+                let _ = writeln!(
+                    s,
+                    "**Second run** (eq. 6.10, the same fit on the held-out set): frame anchors moved by {} mean, {} max; largest |Δa₂| / (√2 σ) = {} (≈ 1–3 when both runs agree within their statistics; the spec's second run moved anchors by up to 87 mm at an unchanged accuracy level).\n",
+                    sr.mean_anchor_change_mm
+                        .map_or("–".into(), |v| format!("{v:.1} mm")),
+                    sr.max_anchor_change_mm
+                        .map_or("–".into(), |v| format!("{v:.1} mm")),
+                    sr.max_change_over_sigma
+                        .map_or("– (no finite 1σ)".into(), |v| format!("{v:.1}"))
+                );
+            }
+        }
+    }
+    if let Some(b) = &r.bootstrap {
+        let ok = b.runs - b.failed;
+        let _ = writeln!(
+            s,
+            "**Bootstrap** ({} resamples of the training poses, the whole pipeline each, validated on the same held-out set): {} failed (pipeline error or final step not validated); of the {ok} others, {} chose exactly the same effects as this run. Largest bootstrap sd of a frame-anchor coordinate: {}.\n",
+            b.runs,
+            b.failed,
+            b.same_effects,
+            b.max_anchor_sd_mm
+                .map_or("–".into(), |v| format!("{v:.1} mm"))
+        );
+        s.push_str("| effect | chosen in runs |\n|---|---|\n");
+        for (e, n) in &b.effect_counts {
+            let _ = writeln!(s, "| {} | {n}/{ok} |", e.name());
+        }
+        if !b.params.is_empty() {
+            s.push_str("\n| parameter | this run ± 1σ | bootstrap runs | bootstrap mean ± sd |\n|---|---|---|---|\n");
+            for p in &b.params {
+                let this = if p.value.is_finite() {
+                    if p.sigma.is_finite() && p.sigma > 0.0 {
+                        format!("{:.4e} ± {:.1e}", p.value, p.sigma)
+                    } else {
+                        format!("{:.4e} (no 1σ)", p.value)
+                    }
+                } else {
+                    "not in this run's model".into()
+                };
+                let boot = if p.sd.is_finite() {
+                    format!("{:.4e} ± {:.1e}", p.mean, p.sd)
+                } else {
+                    format!("{:.4e} (one run)", p.mean)
+                };
+                let _ = writeln!(s, "| {} | {this} | {} | {boot} |", p.name, p.runs);
+            }
+        }
+    }
 }

@@ -88,6 +88,17 @@ pub struct Opts {
     /// The same for the held-out mean force error ‖f_P − f_M‖ (fraction).
     #[arg(long, default_value_t = calibrate::effects::SelectConfig::default().min_gain_force)]
     pub(crate) min_gain_force: f64,
+    /// Repeatability: the optimal elastostatic fit again from K random frame-anchor starts
+    /// (eq. 6.8) and once on the held-out set (eq. 6.10); 0 = off.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) multi_start: usize,
+    /// Repeatability: the whole pipeline on B bootstrap resamples of the training poses (how
+    /// often each effect is chosen, spread of k_F and the extension parameters); 0 = off.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) bootstrap: usize,
+    /// Seed of the random starts and resamples.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) repeat_seed: u64,
     /// Skip the residual diagnosis / model extension.
     #[arg(long)]
     pub(crate) no_extension: bool,
@@ -203,7 +214,7 @@ pub(crate) fn calibrate_and_report(
 ) -> Result<PipelineReport, Box<dyn std::error::Error>> {
     let cfg = config(opts)?;
     let bar = spinner("identifying");
-    let rep: PipelineReport =
+    let mut rep: PipelineReport =
         pipeline::run(&base.model, train, holdout, &cfg, &mut |stage, it, cost| {
             if cost.is_finite() {
                 bar.set_message(format!("{stage}: iteration {it}, cost {cost:.4e}"));
@@ -211,6 +222,22 @@ pub(crate) fn calibrate_and_report(
                 bar.set_message(stage.to_string());
             }
         })?;
+    if opts.multi_start > 0 || opts.bootstrap > 0 {
+        let rc = calibrate::repeatability::RepeatabilityConfig {
+            multi_starts: opts.multi_start,
+            bootstrap: opts.bootstrap,
+            seed: opts.repeat_seed,
+        };
+        rep.repeatability = Some(calibrate::repeatability::assess(
+            &base.model,
+            train,
+            holdout,
+            &cfg,
+            &rep,
+            &rc,
+            &mut |what, k| bar.set_message(format!("{what} {}", k + 1)),
+        ));
+    }
     bar.finish_and_clear();
     std::fs::create_dir_all(&opts.out)?;
     let eval = if holdout.is_empty() { train } else { holdout };

@@ -1,0 +1,358 @@
+//! How far to trust one calibration run (issue 13, item 5): does the optimiser land on the same
+//! optimum from other starts, does a second data set give the same geometry, and do the chosen
+//! effects and key parameters survive resampling of the training poses?
+//!
+//! 1. **Multi-start** (eq. 6.8): the optimal elastostatic fit again from frame anchors
+//!    a_ini = a_N + U(−0.5, 0.5) m per coordinate; the optimum is "the same" when its cost is
+//!    within 1e-6 (relative) of the pipeline's and no frame anchor moved by more than 1 mm. A
+//!    lower cost found from another start is a better local optimum the pipeline missed.
+//! 2. **Second run** (eq. 6.10): the same fit on the held-out set; Δa₂ = a_opt₂ − a_opt against
+//!    the pipeline's 1σ (the spec found |Δa₂| up to 87 mm at an unchanged accuracy level: the
+//!    geometry of a CDPR is weakly determined by its cable lengths, Fig. 6.11–6.12).
+//! 3. **Bootstrap**: the whole pipeline (fit, diagnosis, extension) on B resamples of the
+//!    training *poses* with replacement (the rows of a pose's tension test stay together),
+//!    validated on the same held-out set: how often each effect is chosen, whether the chosen
+//!    set is the pipeline's, and the spread of k_F and of every extension parameter.
+//!
+//! Off by default (it costs B pipeline runs); `crs calibrate run --multi-start K --bootstrap B`.
+
+use crate::effects::Effect;
+use crate::identify::{self, FitSpec};
+use crate::observation::Observation;
+use crate::params::{CalModel, ParamId};
+use crate::pipeline::{self, PipelineConfig, PipelineReport};
+use cdpr_model::Model;
+use nalgebra::Vector3;
+use serde::Serialize;
+
+/// What to run.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct RepeatabilityConfig {
+    /// Starts of the multi-start test (0 = off).
+    pub multi_starts: usize,
+    /// Bootstrap resamples (0 = off).
+    pub bootstrap: usize,
+    /// Seed of the random starts and resamples (reproducible).
+    pub seed: u64,
+}
+
+/// Multi-start result (eq. 6.8).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MultiStart {
+    pub starts: usize,
+    /// Starts whose fit failed (an error, not a number).
+    pub failed: usize,
+    /// Starts that reached the pipeline's optimum (cost within 1e-6, anchors within 1 mm).
+    pub same_optimum: usize,
+    /// Starts that ended at a lower cost than the pipeline's (by more than 1e-6 relative).
+    pub lower_cost: usize,
+    /// Largest frame-anchor distance (mm) from the pipeline's optimum over the converged starts.
+    pub max_anchor_distance_mm: Option<f64>,
+    /// Lowest cost found relative to the pipeline's (≤ 1 when a start did better).
+    pub best_cost_ratio: Option<f64>,
+}
+
+/// Second optimisation run on the held-out set (eq. 6.10).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SecondRun {
+    /// `None` when the fit failed (`failure` says why).
+    pub max_anchor_change_mm: Option<f64>,
+    pub mean_anchor_change_mm: Option<f64>,
+    /// Largest |Δa₂| / (√2 σ) over the frame-anchor coordinates with a finite 1σ: ≈ 1–3 when
+    /// both runs agree within their statistics.
+    pub max_change_over_sigma: Option<f64>,
+    pub failure: Option<String>,
+}
+
+/// Spread of one parameter over the bootstrap runs that identified it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ParamSpread {
+    pub name: String,
+    /// The pipeline's value and 1σ (NaN when it has none, e.g. not in its final model).
+    pub value: f64,
+    pub sigma: f64,
+    /// Bootstrap runs that had it free, their mean and standard deviation.
+    pub runs: usize,
+    pub mean: f64,
+    pub sd: f64,
+}
+
+/// Bootstrap result.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Bootstrap {
+    pub runs: usize,
+    /// Runs whose pipeline failed or whose final step did not validate.
+    pub failed: usize,
+    /// Runs that chose exactly the pipeline's set of effects (in any order).
+    pub same_effects: usize,
+    /// How often each catalogue effect was chosen.
+    pub effect_counts: Vec<(Effect, usize)>,
+    /// k_F per cable and every extension parameter of any run.
+    pub params: Vec<ParamSpread>,
+    /// Largest bootstrap standard deviation of a frame-anchor coordinate, mm.
+    pub max_anchor_sd_mm: Option<f64>,
+}
+
+/// Everything item 5 reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Repeatability {
+    pub config: RepeatabilityConfig,
+    pub multi_start: Option<MultiStart>,
+    pub second_run: Option<SecondRun>,
+    pub bootstrap: Option<Bootstrap>,
+}
+
+/// splitmix64 → uniform [0, 1): reproducible without a dependency.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+fn max_anchor_distance_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).norm() * 1e3)
+        .fold(0.0, f64::max)
+}
+
+/// Runs the configured tests for a pipeline report `rep` made from `train` / `holdout`.
+pub fn assess(
+    nominal: &Model,
+    train: &[Observation],
+    holdout: &[Observation],
+    cfg: &PipelineConfig,
+    rep: &PipelineReport,
+    rc: &RepeatabilityConfig,
+    progress: &mut dyn FnMut(&str, usize),
+) -> Repeatability {
+    let mut rng = Rng(rc.seed);
+    let base = rep
+        .stage("optimal elastostatic")
+        .and_then(|s| s.fit.as_ref());
+    let start = rep.stage("nominal elastostatic").map(|s| &s.model);
+    let spec = pipeline::elastostatic_spec(cfg, nominal.m());
+    let multi_start = match (base, start) {
+        (Some(base), Some(start)) if rc.multi_starts > 0 => {
+            let mut ms = MultiStart {
+                starts: rc.multi_starts,
+                failed: 0,
+                same_optimum: 0,
+                lower_cost: 0,
+                max_anchor_distance_mm: None,
+                best_cost_ratio: None,
+            };
+            for k in 0..rc.multi_starts {
+                progress("multi-start", k);
+                let mut s: CalModel = start.clone();
+                for a in s.a.iter_mut() {
+                    for c in 0..3 {
+                        a[c] += rng.next() - 0.5; // eq. 6.8: U(−0.5, 0.5) m
+                    }
+                }
+                match identify::fit(&s, train, &spec, &mut |_, _| {}) {
+                    Ok(f) => {
+                        let d = max_anchor_distance_mm(&f.model.a, &base.model.a);
+                        let ratio = f.cost / base.cost;
+                        ms.max_anchor_distance_mm =
+                            Some(ms.max_anchor_distance_mm.map_or(d, |m| m.max(d)));
+                        ms.best_cost_ratio =
+                            Some(ms.best_cost_ratio.map_or(ratio, |m| m.min(ratio)));
+                        if (ratio - 1.0).abs() <= 1e-6 && d <= 1.0 {
+                            ms.same_optimum += 1;
+                        } else if ratio < 1.0 - 1e-6 {
+                            ms.lower_cost += 1;
+                        }
+                    }
+                    Err(_) => ms.failed += 1,
+                }
+            }
+            Some(ms)
+        }
+        _ => None,
+    };
+    let second_run = match (base, start) {
+        (Some(base), Some(start)) if !holdout.is_empty() && rc.multi_starts > 0 => {
+            progress("second run", 0);
+            Some(second_run(base, start, holdout, &spec))
+        }
+        _ => None,
+    };
+    let bootstrap = (rc.bootstrap > 0)
+        .then(|| bootstrap(nominal, train, holdout, cfg, rep, rc, &mut rng, progress));
+    Repeatability {
+        config: *rc,
+        multi_start,
+        second_run,
+        bootstrap,
+    }
+}
+
+fn second_run(
+    base: &identify::Fit,
+    start: &CalModel,
+    holdout: &[Observation],
+    spec: &FitSpec,
+) -> SecondRun {
+    match identify::fit(start, holdout, spec, &mut |_, _| {}) {
+        Ok(f2) => {
+            let d: Vec<f64> = f2
+                .model
+                .a
+                .iter()
+                .zip(&base.model.a)
+                .map(|(x, y)| (x - y).norm() * 1e3)
+                .collect();
+            let mut ratio: Option<f64> = None;
+            for (c, p) in base.free.iter().enumerate() {
+                if let ParamId::A(i, k) = p {
+                    let sd = base.std[c];
+                    if sd.is_finite() && sd > 0.0 {
+                        let r = (f2.model.a[*i][*k] - base.model.a[*i][*k]).abs()
+                            / (std::f64::consts::SQRT_2 * sd);
+                        ratio = Some(ratio.map_or(r, |m| m.max(r)));
+                    }
+                }
+            }
+            SecondRun {
+                max_anchor_change_mm: d.iter().copied().reduce(f64::max),
+                mean_anchor_change_mm: (!d.is_empty())
+                    .then(|| d.iter().sum::<f64>() / d.len() as f64),
+                max_change_over_sigma: ratio,
+                failure: None,
+            }
+        }
+        Err(e) => SecondRun {
+            max_anchor_change_mm: None,
+            mean_anchor_change_mm: None,
+            max_change_over_sigma: None,
+            failure: Some(e.to_string()),
+        },
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn bootstrap(
+    nominal: &Model,
+    train: &[Observation],
+    holdout: &[Observation],
+    cfg: &PipelineConfig,
+    rep: &PipelineReport,
+    rc: &RepeatabilityConfig,
+    rng: &mut Rng,
+    progress: &mut dyn FnMut(&str, usize),
+) -> Bootstrap {
+    let mut poses: Vec<u64> = train.iter().map(|o| o.pose_index).collect();
+    poses.dedup();
+    poses.sort_unstable();
+    poses.dedup();
+    let main_effects: Vec<Effect> = rep
+        .selection
+        .as_ref()
+        .map(|s| s.chosen.clone())
+        .unwrap_or_default();
+    let same_set =
+        |c: &[Effect]| c.len() == main_effects.len() && c.iter().all(|e| main_effects.contains(e));
+    let main_fit = rep.final_stage().fit.as_ref();
+    let mut out = Bootstrap {
+        runs: rc.bootstrap,
+        failed: 0,
+        same_effects: 0,
+        effect_counts: Effect::ALL.iter().map(|e| (*e, 0)).collect(),
+        params: Vec::new(),
+        max_anchor_sd_mm: None,
+    };
+    // Values per parameter name over the runs, and the anchors of every run.
+    let mut values: Vec<(ParamId, Vec<f64>)> = Vec::new();
+    let mut anchors: Vec<Vec<Vector3<f64>>> = Vec::new();
+    let mut quiet = cfg.clone();
+    quiet.cartesian = false;
+    for b in 0..rc.bootstrap {
+        progress("bootstrap", b);
+        let mut sample = Vec::with_capacity(train.len());
+        for _ in 0..poses.len() {
+            let p = poses[((rng.next() * poses.len() as f64) as usize).min(poses.len() - 1)];
+            sample.extend(train.iter().filter(|o| o.pose_index == p).cloned());
+        }
+        let r = match pipeline::run(nominal, &sample, holdout, &quiet, &mut |_, _, _| {}) {
+            Ok(r) if !r.final_stage().failed() => r,
+            _ => {
+                out.failed += 1;
+                continue;
+            }
+        };
+        let chosen: Vec<Effect> = r
+            .selection
+            .as_ref()
+            .map(|s| s.chosen.clone())
+            .unwrap_or_default();
+        if same_set(&chosen) {
+            out.same_effects += 1;
+        }
+        for (e, n) in out.effect_counts.iter_mut() {
+            if chosen.contains(e) {
+                *n += 1;
+            }
+        }
+        if let Some(f) = r.final_stage().fit.as_ref() {
+            for p in &f.free {
+                if matches!(p, ParamId::KF(_)) || !p.is_base() {
+                    let v = f.model.get(*p);
+                    match values.iter_mut().find(|(q, _)| q == p) {
+                        Some((_, vs)) => vs.push(v),
+                        None => values.push((*p, vec![v])),
+                    }
+                }
+            }
+            anchors.push(f.model.a.clone());
+        }
+    }
+    for (p, vs) in values {
+        let n = vs.len();
+        let mean = vs.iter().sum::<f64>() / n as f64;
+        let sd = if n > 1 {
+            (vs.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
+        } else {
+            f64::NAN
+        };
+        let (value, sigma) = main_fit
+            .and_then(|f| {
+                f.free
+                    .iter()
+                    .position(|q| *q == p)
+                    .map(|c| (f.model.get(p), f.std[c]))
+            })
+            .unwrap_or((f64::NAN, f64::NAN));
+        out.params.push(ParamSpread {
+            name: p.name(),
+            value,
+            sigma,
+            runs: n,
+            mean,
+            sd,
+        });
+    }
+    if anchors.len() > 1 {
+        let n = anchors.len() as f64;
+        let m = anchors[0].len();
+        let mut worst = 0.0f64;
+        for i in 0..m {
+            for k in 0..3 {
+                let mean = anchors.iter().map(|a| a[i][k]).sum::<f64>() / n;
+                let var = anchors
+                    .iter()
+                    .map(|a| (a[i][k] - mean).powi(2))
+                    .sum::<f64>()
+                    / (n - 1.0);
+                worst = worst.max(var.sqrt() * 1e3);
+            }
+        }
+        out.max_anchor_sd_mm = Some(worst);
+    }
+    out
+}
