@@ -87,6 +87,8 @@ pub struct SimOptions {
 /// What a run measured (printed, and written to <out>/summary.json).
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct Summary {
+    /// The platform the daemon ran (its TOML `[platform] name`).
+    pub platform: String,
     pub transport: String,
     pub monitor: bool,
     pub plant_samples: u64,
@@ -276,6 +278,12 @@ pub fn execute_observed(
     let mut configured = lifecycle::configure(&daemon, &platform)?;
     if with_monitor {
         check_monitor_period(&a.monitor_config, &a.config, configured.period_s())?;
+        crate::platforms::check_monitor_platform(
+            &a.monitor_config,
+            &a.config,
+            &daemon.platform,
+            &platform,
+        )?;
     }
     let home_q = configured
         .home_command()
@@ -473,6 +481,7 @@ pub fn execute_observed(
 
     // Follow the run.
     let mut sum = Summary {
+        platform: platform.name.clone(),
         transport: transport.clone(),
         monitor: with_monitor,
         force_min_n: f64::INFINITY,
@@ -680,7 +689,7 @@ pub fn execute_observed(
 }
 
 fn print_summary(s: &Summary) {
-    println!("\n== crs sim summary ({})", s.transport);
+    println!("\n== crs sim summary ({}, {})", s.platform, s.transport);
     println!(
         "  setpoints {}, plant states {} ({} without equilibrium)",
         s.setpoints, s.plant_samples, s.non_converged_plant_steps
