@@ -2,9 +2,10 @@
 //! calibration loop), as a user runs it.
 //!
 //! sim-plant (the winches + platform physics on the bus), safety-monitor (when built),
-//! drive-io (CiA 402 master) and motion-core (the 1 ms loop) start in that order on the default
-//! icosahedron configuration, over vcan0 when the kernel has it and over the CAN-over-UDP
-//! loopback bus otherwise (the launcher says which). motion-core runs the demo trajectory; the
+//! drive-io (CiA 402 master) and motion-core (the 1 ms loop) start in that order on one
+//! platform's set of configs ([`crate::platforms`]: the icosahedron or the helicopter cabin),
+//! over vcan0 when the kernel has it and over the CAN-over-UDP loopback bus otherwise (the
+//! launcher says which). motion-core runs the demo trajectory; the
 //! launcher listens on iceoryx2 (its own service prefix per run) and prints the tracked-pose
 //! error against the reference, the cable forces against the limits, the loop statistics and the
 //! monitor state. Ctrl-C stops all children cleanly; a child that dies stops the rest.
