@@ -27,9 +27,11 @@ fn vertex_and_simplex_agree_and_bound_the_closed_form_from_above() {
         let b = pf.region.position;
         let (mut n_exact_only, mut n_checked) = (0, 0);
         for _ in 0..300 {
-            // Sample a box 40 % larger than the operating region so the border is crossed.
+            // Sample a box 40 % larger than the operating region (and at least 1.5 m wide: the
+            // helicopter's region is only 0.5 m high and lies inside the closed form's
+            // workspace) so the border is crossed.
             let c = (b.min + b.max) * 0.5;
-            let h = (b.max - b.min) * 0.7;
+            let h = ((b.max - b.min) * 0.7).map(|x| x.max(0.75));
             let r = Vector3::from_fn(|k, _| c[k] + h[k] * rng.random_range(-1.0..1.0));
             let phi = Vector3::from_fn(|_, _| rng.random_range(-0.15..0.15));
             let pose = Pose::new(r, phi);

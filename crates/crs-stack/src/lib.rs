@@ -11,12 +11,15 @@
 //! - [`rest_recording`]: rest points of a run from the live topics → a `crs-dataset 1` file.
 //! - [`campaign`]: calibration-campaign generation and waypoint timing/writing, checked with
 //!   motion-core's own [`configure`](motion_core::daemon::lifecycle::configure) step.
+//! - [`platforms`]: the platforms the stack runs (`crs sim --platform icosahedron|helicopter`)
+//!   and the consistent set of daemon, plant, monitor and drives configs of each.
 //! - [`sim_run`]: one run of the whole simulated stack (`crs sim`), its summary and verdict.
 //! - [`surrogate_evaluation`]: the surrogate fit of a platform and its evaluation on the plant.
 //! - [`transport`]: which CAN transport a run uses (vcan0 or the UDP loopback bus).
 
 pub mod calibration_loop;
 pub mod campaign;
+pub mod platforms;
 pub mod rest_recording;
 pub mod sim_run;
 pub mod supervisor;

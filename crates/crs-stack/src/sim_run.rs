@@ -2,9 +2,10 @@
 //! calibration loop), as a user runs it.
 //!
 //! sim-plant (the winches + platform physics on the bus), safety-monitor (when built),
-//! drive-io (CiA 402 master) and motion-core (the 1 ms loop) start in that order on the default
-//! icosahedron configuration, over vcan0 when the kernel has it and over the CAN-over-UDP
-//! loopback bus otherwise (the launcher says which). motion-core runs the demo trajectory; the
+//! drive-io (CiA 402 master) and motion-core (the 1 ms loop) start in that order on one
+//! platform's set of configs ([`crate::platforms`]: the icosahedron or the helicopter cabin),
+//! over vcan0 when the kernel has it and over the CAN-over-UDP loopback bus otherwise (the
+//! launcher says which). motion-core runs the demo trajectory; the
 //! launcher listens on iceoryx2 (its own service prefix per run) and prints the tracked-pose
 //! error against the reference, the cable forces against the limits, the loop statistics and the
 //! monitor state. Ctrl-C stops all children cleanly; a child that dies stops the rest.
@@ -87,6 +88,8 @@ pub struct SimOptions {
 /// What a run measured (printed, and written to <out>/summary.json).
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct Summary {
+    /// The platform the daemon ran (its TOML `[platform] name`).
+    pub platform: String,
     pub transport: String,
     pub monitor: bool,
     pub plant_samples: u64,
@@ -276,6 +279,12 @@ pub fn execute_observed(
     let mut configured = lifecycle::configure(&daemon, &platform)?;
     if with_monitor {
         check_monitor_period(&a.monitor_config, &a.config, configured.period_s())?;
+        crate::platforms::check_monitor_platform(
+            &a.monitor_config,
+            &a.config,
+            &daemon.platform,
+            &platform,
+        )?;
     }
     let home_q = configured
         .home_command()
@@ -473,6 +482,7 @@ pub fn execute_observed(
 
     // Follow the run.
     let mut sum = Summary {
+        platform: platform.name.clone(),
         transport: transport.clone(),
         monitor: with_monitor,
         force_min_n: f64::INFINITY,
@@ -680,7 +690,7 @@ pub fn execute_observed(
 }
 
 fn print_summary(s: &Summary) {
-    println!("\n== crs sim summary ({})", s.transport);
+    println!("\n== crs sim summary ({}, {})", s.platform, s.transport);
     println!(
         "  setpoints {}, plant states {} ({} without equilibrium)",
         s.setpoints, s.plant_samples, s.non_converged_plant_steps

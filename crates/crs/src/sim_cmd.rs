@@ -4,22 +4,33 @@
 
 use crate::console_cmd::SimConsoleArgs;
 use crate::sim_plots::RunRecord;
+use cdpr_model::config::load_platform;
 use crs_ipc::{JointSetpoint, LoopStatsSample, PlantTruth, StateEvent};
+use crs_stack::platforms;
 use crs_stack::sim_run::{RunObserver, RunStart, SimOptions, Summary, execute_observed};
 use std::path::Path;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct SimArgs {
-    /// motion-core daemon TOML (platform, surrogate, realtime, trajectory).
-    #[arg(long, default_value = "config/motion-core.toml")]
-    pub(crate) config: PathBuf,
-    /// Drive bus TOML.
-    #[arg(long, default_value = "config/drives.toml")]
-    pub(crate) drives: PathBuf,
-    /// Plant TOML (must be the platform of the daemon TOML).
-    #[arg(long, default_value = "config/plant/icosahedron.toml")]
-    pub(crate) plant: PathBuf,
+    /// The cabin: `icosahedron` or `helicopter`, or the path of one of their platform TOML
+    /// files. Picks that platform's daemon, plant, safety-monitor and drives configs (config/;
+    /// crs_stack::platforms); --config, --plant, --monitor-config and --drives replace single
+    /// files of the set. Default: the platform of --config if it is one of these, else the
+    /// icosahedron.
+    #[arg(long)]
+    pub(crate) platform: Option<String>,
+    /// motion-core daemon TOML (platform, surrogate, realtime, trajectory) [default: the
+    /// platform's, config/motion-core.toml for the icosahedron].
+    #[arg(long)]
+    pub(crate) config: Option<PathBuf>,
+    /// Drive bus TOML [default: the platform's, config/drives.toml].
+    #[arg(long)]
+    pub(crate) drives: Option<PathBuf>,
+    /// Plant TOML [default: the platform's, config/plant/icosahedron.toml for the icosahedron].
+    /// A plant of another platform than the daemon's is run with a note.
+    #[arg(long)]
+    pub(crate) plant: Option<PathBuf>,
     /// `auto` (vcan0 if present, else the UDP loopback bus), or a transport such as
     /// `socketcan:vcan0` / `udpbus:239.255.70.9:20900`.
     #[arg(long, default_value = "auto")]
@@ -50,9 +61,10 @@ pub struct SimArgs {
     /// Static (at rest) position error bound for --check, mm.
     #[arg(long, default_value_t = 20.0)]
     pub(crate) max_static_error_mm: f64,
-    /// Safety-monitor TOML (its [monitor] platform must be the daemon's platform).
-    #[arg(long, default_value = "config/safety-monitor.toml")]
-    pub(crate) monitor_config: PathBuf,
+    /// Safety-monitor TOML (its [monitor] platform must be the daemon's platform) [default:
+    /// the platform's, config/safety-monitor.toml for the icosahedron].
+    #[arg(long)]
+    pub(crate) monitor_config: Option<PathBuf>,
     /// Rest this long at every waypoint (s): the waypoint times are recomputed with the
     /// daemon's planner limits (written to <out>/waypoints-timed.csv). Default: the CSV's times.
     #[arg(long)]
@@ -133,11 +145,49 @@ impl RunObserver for SimObserver<'_> {
 }
 
 impl SimArgs {
-    pub(crate) fn options(&self) -> SimOptions {
-        SimOptions {
-            config: self.config.clone(),
-            drives: self.drives.clone(),
-            plant: self.plant.clone(),
+    /// The platform's set of configs: `--platform`'s; without it the set of the platform the
+    /// `--config` daemon runs (if it is a known one), else the default (icosahedron).
+    fn platform_set(&self) -> Result<platforms::StackConfigs, Box<dyn std::error::Error>> {
+        let dir = Path::new(platforms::CONFIG_DIR);
+        if let Some(p) = &self.platform {
+            let set = platforms::resolve(p, dir)?;
+            if let Some(config) = &self.config {
+                // A daemon TOML given next to --platform must run that platform.
+                let daemon =
+                    motion_core::daemon::config::load(config).map_err(|e| e.to_string())?;
+                let runs = load_platform(&daemon.platform)?;
+                if runs.model.identity() != load_platform(&set.platform)?.model.identity() {
+                    return Err(format!(
+                        "--platform {p} is {}, but --config {} runs {} ({}): leave one out",
+                        set.platform.display(),
+                        config.display(),
+                        runs.name,
+                        daemon.platform.display()
+                    )
+                    .into());
+                }
+            }
+            return Ok(set);
+        }
+        if let Some(config) = &self.config {
+            let daemon = motion_core::daemon::config::load(config).map_err(|e| e.to_string())?;
+            if let Ok(set) = platforms::resolve(&daemon.platform.display().to_string(), dir) {
+                return Ok(set);
+            }
+        }
+        Ok(platforms::KNOWN[0].configs(dir))
+    }
+
+    /// The run's options: the files of the platform's set, single files replaced by the flags.
+    pub(crate) fn options(&self) -> Result<SimOptions, Box<dyn std::error::Error>> {
+        let set = self.platform_set()?;
+        let pick = |flag: &Option<PathBuf>, default: &PathBuf| {
+            flag.clone().unwrap_or_else(|| default.clone())
+        };
+        Ok(SimOptions {
+            config: pick(&self.config, &set.daemon),
+            drives: pick(&self.drives, &set.drives),
+            plant: pick(&self.plant, &set.plant),
             transport: self.transport.clone(),
             waypoints: self.waypoints.clone(),
             hold_s: self.hold_s,
@@ -147,14 +197,26 @@ impl SimArgs {
             no_monitor: self.no_monitor,
             check: self.check,
             max_static_error_mm: self.max_static_error_mm,
-            monitor_config: self.monitor_config.clone(),
+            monitor_config: pick(&self.monitor_config, &set.monitor),
             dwell_s: self.dwell_s,
             record: self.record.clone(),
             settle_s: self.settle_s,
             campaign: self.campaign.clone(),
             rt_priority: self.rt_priority,
-        }
+        })
     }
+}
+
+/// A plant of another platform than the daemon's runs, with a note (a plant with undeclared
+/// errors is built on the nominal platform, so this only notes a real mix-up or a deliberate
+/// experiment).
+fn note_plant_platform(o: &SimOptions) -> Result<(), Box<dyn std::error::Error>> {
+    let daemon = motion_core::daemon::config::load(&o.config).map_err(|e| e.to_string())?;
+    let platform = load_platform(&daemon.platform)?;
+    if let Some(note) = platforms::plant_platform_note(&o.plant, &daemon.platform, &platform)? {
+        println!("  {note}");
+    }
+    Ok(())
 }
 
 pub fn run(a: SimArgs) -> Result<(), Box<dyn std::error::Error>> {
@@ -163,7 +225,9 @@ pub fn run(a: SimArgs) -> Result<(), Box<dyn std::error::Error>> {
         console: None,
         plots: None,
     };
-    let sum = execute_observed(&a.options(), &mut observer)?;
+    let options = a.options()?;
+    note_plant_platform(&options)?;
+    let sum = execute_observed(&options, &mut observer)?;
     drop(observer.console.take());
     if a.check {
         let fails = sum.check_failures(a.max_static_error_mm);

@@ -31,8 +31,19 @@ pub fn stack_bin_dir(crs: &Path) -> PathBuf {
 /// shared 2-core host, where the spec's 1 ms / 50 ms watchdogs trip on scheduling stalls (seen:
 /// the drives' safety-heartbeat timeout, then sequence gaps). It asserts what calibration does
 /// on the running stack, not timing: timing is the benches' job (benches/RESULTS.md). Returns
-/// [daemon, drives, monitor].
+/// [daemon, drives, monitor] (of the default platform, the icosahedron).
 pub fn relaxed_configs(dir: &Path) -> [PathBuf; 3] {
+    relaxed_configs_of(
+        dir,
+        "motion-core.toml",
+        "drives.toml",
+        "safety-monitor.toml",
+    )
+}
+
+/// [`relaxed_configs`] of another platform's daemon, drives and monitor TOML in config/ (e.g.
+/// the helicopter's `motion-core-helicopter.toml`, `safety-monitor-helicopter.toml`).
+pub fn relaxed_configs_of(dir: &Path, daemon: &str, drives: &str, monitor: &str) -> [PathBuf; 3] {
     std::fs::create_dir_all(dir).unwrap();
     let edit = |name: &str, rules: &[(&str, &str)]| -> PathBuf {
         let text = std::fs::read_to_string(root().join("config").join(name)).unwrap();
@@ -66,9 +77,9 @@ pub fn relaxed_configs(dir: &Path) -> [PathBuf; 3] {
         path
     };
     [
-        edit("motion-core.toml", &[("period_us", "4000")]),
+        edit(daemon, &[("period_us", "4000")]),
         edit(
-            "drives.toml",
+            drives,
             &[
                 ("sync_period_us", "4000"),
                 ("stale_setpoint_cycles", "100"),
@@ -81,7 +92,7 @@ pub fn relaxed_configs(dir: &Path) -> [PathBuf; 3] {
         // Both silence_cycles keys ([monitor] and [feedback]) become 10; identity grace 40;
         // the monitor's stream period follows motion-core's 4 ms.
         edit(
-            "safety-monitor.toml",
+            monitor,
             &[
                 ("silence_cycles", "10"),
                 ("identity_grace_cycles", "40"),

@@ -1,0 +1,237 @@
+//! The platforms the simulated stack runs (`crs sim --platform`): for each cabin a consistent
+//! set of configuration files — the daemon (motion-core), the plant (sim-plant), the safety
+//! monitor and the drives — that all name the same platform TOML.
+//!
+//! | name | platform | daemon | plant | monitor | drives |
+//! |---|---|---|---|---|---|
+//! | `icosahedron` (default) | `icosahedron.toml` | `motion-core.toml` | `plant/icosahedron.toml` | `safety-monitor.toml` | `drives.toml` |
+//! | `helicopter` | `helicopter.toml` | `motion-core-helicopter.toml` | `plant/helicopter.toml` | `safety-monitor-helicopter.toml` | `drives.toml` |
+//!
+//! (paths relative to the configuration directory, `config/` of the repository). Both cabins
+//! hang in the same 8 winches, so they share the drives config. A platform can also be chosen
+//! by its platform TOML path: the set whose platform file that is.
+//!
+//! [`check_monitor_platform`] refuses a run whose safety monitor would read another platform
+//! than the daemon (it would trip on the identity check the moment motion-core announces its
+//! platform); [`plant_platform_note`] says when the plant simulates another platform than the
+//! controller's model (legitimate: a plant with undeclared errors, but worth a line).
+
+use cdpr_model::config::Platform;
+use std::path::{Path, PathBuf};
+
+/// One platform's configuration files, relative to the configuration directory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct KnownPlatform {
+    /// What `--platform` takes.
+    pub name: &'static str,
+    pub platform: &'static str,
+    pub daemon: &'static str,
+    pub plant: &'static str,
+    pub monitor: &'static str,
+    pub drives: &'static str,
+}
+
+/// The platforms of the repository's `config/`; the first is the default.
+pub const KNOWN: [KnownPlatform; 2] = [
+    KnownPlatform {
+        name: "icosahedron",
+        platform: "icosahedron.toml",
+        daemon: "motion-core.toml",
+        plant: "plant/icosahedron.toml",
+        monitor: "safety-monitor.toml",
+        drives: "drives.toml",
+    },
+    KnownPlatform {
+        name: "helicopter",
+        platform: "helicopter.toml",
+        daemon: "motion-core-helicopter.toml",
+        plant: "plant/helicopter.toml",
+        monitor: "safety-monitor-helicopter.toml",
+        drives: "drives.toml",
+    },
+];
+
+/// The configuration directory `crs sim` reads by default (relative to the working directory,
+/// as its other default paths).
+pub const CONFIG_DIR: &str = "config";
+
+/// A resolved platform: the files of one run of the stack.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StackConfigs {
+    pub name: &'static str,
+    pub platform: PathBuf,
+    pub daemon: PathBuf,
+    pub plant: PathBuf,
+    pub monitor: PathBuf,
+    pub drives: PathBuf,
+}
+
+impl KnownPlatform {
+    pub fn configs(&self, dir: &Path) -> StackConfigs {
+        StackConfigs {
+            name: self.name,
+            platform: dir.join(self.platform),
+            daemon: dir.join(self.daemon),
+            plant: dir.join(self.plant),
+            monitor: dir.join(self.monitor),
+            drives: dir.join(self.drives),
+        }
+    }
+}
+
+fn names() -> String {
+    KNOWN.iter().map(|k| k.name).collect::<Vec<_>>().join(", ")
+}
+
+/// `choice` is a platform name of [`KNOWN`] or the path of one of their platform TOML files
+/// (any spelling of the path: compared after resolving it); `dir` is the configuration
+/// directory. Anything else is an error that lists what is known.
+pub fn resolve(choice: &str, dir: &Path) -> Result<StackConfigs, String> {
+    if let Some(k) = KNOWN.iter().find(|k| k.name == choice) {
+        return Ok(k.configs(dir));
+    }
+    let path = Path::new(choice);
+    let looks_like_path = choice.ends_with(".toml") || choice.contains('/');
+    if !looks_like_path {
+        return Err(format!(
+            "--platform {choice}: unknown platform (known: {}; or the path of one of their platform TOML files)",
+            names()
+        ));
+    }
+    let wanted = path
+        .canonicalize()
+        .map_err(|e| format!("--platform {choice}: {e}"))?;
+    for k in &KNOWN {
+        let c = k.configs(dir);
+        if c.platform.canonicalize().is_ok_and(|p| p == wanted) {
+            return Ok(c);
+        }
+    }
+    Err(format!(
+        "--platform {choice}: no stack configuration is set up for this platform TOML (known: {}, \
+         with {}); give its daemon, plant and monitor configs with --config, --plant and \
+         --monitor-config instead",
+        names(),
+        KNOWN
+            .iter()
+            .map(|k| dir.join(k.platform).display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    ))
+}
+
+/// The safety monitor must supervise the daemon's platform: its own parser's identity of the
+/// monitor config's `[monitor] platform` against the identity of the daemon's platform
+/// (`daemon_platform`, read from `[daemon] platform` of `daemon_config`).
+pub fn check_monitor_platform(
+    monitor_config: &Path,
+    daemon_config: &Path,
+    daemon_platform_file: &Path,
+    daemon_platform: &Platform,
+) -> Result<(), String> {
+    let mon = safety_monitor::config::load(monitor_config).map_err(|e| e.to_string())?;
+    let monitor_id = safety_monitor::identity::platform_identity(&mon.platform);
+    if monitor_id != daemon_platform.model.identity() {
+        return Err(format!(
+            "{}: [monitor] platform = {} is not the platform motion-core runs ({}: [daemon] \
+             platform = {}); the monitor would trip on the platform identity. Use the monitor \
+             config of that platform (crs sim --platform {})",
+            monitor_config.display(),
+            mon.platform_file.display(),
+            daemon_config.display(),
+            daemon_platform_file.display(),
+            names().replace(", ", "|")
+        ));
+    }
+    Ok(())
+}
+
+/// A note when the plant simulates another platform than the controller's (None when the
+/// parameters are the same).
+pub fn plant_platform_note(
+    plant: &Path,
+    daemon_platform_file: &Path,
+    daemon_platform: &Platform,
+) -> Result<Option<String>, String> {
+    let cfg = sim_plant::load_plant(plant).map_err(|e| format!("{}: {e}", plant.display()))?;
+    if cfg.platform.model.identity() == daemon_platform.model.identity() {
+        return Ok(None);
+    }
+    Ok(Some(format!(
+        "note: the plant {} simulates {} ({}), the controller runs {} ({})",
+        plant.display(),
+        cfg.platform.name,
+        cfg.platform_path.display(),
+        daemon_platform.name,
+        daemon_platform_file.display()
+    )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config_dir() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config")
+    }
+
+    #[test]
+    fn names_and_platform_paths_resolve_to_the_same_set() {
+        let dir = config_dir();
+        for k in &KNOWN {
+            let by_name = resolve(k.name, &dir).unwrap();
+            let path = dir.join(k.platform);
+            let by_path = resolve(path.to_str().unwrap(), &dir).unwrap();
+            assert_eq!(by_name, by_path);
+            for f in [
+                &by_name.platform,
+                &by_name.daemon,
+                &by_name.plant,
+                &by_name.monitor,
+                &by_name.drives,
+            ] {
+                assert!(f.is_file(), "{} missing", f.display());
+            }
+        }
+    }
+
+    #[test]
+    fn unknown_platforms_are_refused_listing_the_known_ones() {
+        let dir = config_dir();
+        let e = resolve("zeppelin", &dir).unwrap_err();
+        assert!(e.contains("icosahedron, helicopter"), "{e}");
+        let other = dir.join("crs-nominal.toml");
+        let e = resolve(other.to_str().unwrap(), &dir).unwrap_err();
+        assert!(e.contains("no stack configuration"), "{e}");
+        let e = resolve("config/nope.toml", &dir).unwrap_err();
+        assert!(e.contains("nope.toml"), "{e}");
+    }
+
+    #[test]
+    fn every_set_is_consistent_and_crossing_them_is_refused() {
+        let dir = config_dir();
+        let sets: Vec<StackConfigs> = KNOWN.iter().map(|k| k.configs(&dir)).collect();
+        for s in &sets {
+            let daemon = motion_core::daemon::config::load(&s.daemon).unwrap();
+            let pf = cdpr_model::config::load_platform(&daemon.platform).unwrap();
+            assert_eq!(
+                daemon.platform.canonicalize().unwrap(),
+                s.platform.canonicalize().unwrap(),
+                "{}: the daemon runs another platform",
+                s.name
+            );
+            check_monitor_platform(&s.monitor, &s.daemon, &daemon.platform, &pf).unwrap();
+            assert_eq!(
+                plant_platform_note(&s.plant, &daemon.platform, &pf),
+                Ok(None)
+            );
+            for o in sets.iter().filter(|o| o.name != s.name) {
+                let e = check_monitor_platform(&o.monitor, &s.daemon, &daemon.platform, &pf)
+                    .unwrap_err();
+                assert!(e.contains("[monitor] platform"), "{e}");
+                let note = plant_platform_note(&o.plant, &daemon.platform, &pf).unwrap();
+                assert!(note.is_some_and(|n| n.contains(&pf.name)));
+            }
+        }
+    }
+}
