@@ -14,6 +14,7 @@
 //! | candidate effects, signature tests, selection | [`effects`] | 2.1, Fig. 1.4 |
 //! | the spec's steps end to end | [`pipeline`] | ch. 6.2–6.5 |
 //! | multi-start, second run, bootstrap of the chosen effects | [`repeatability`] | 6.8, 6.10 |
+//! | structure the final model leaves in the held-out residuals | [`structure`] | |
 //! | Markdown / JSON / SVG report, platform TOML | [`report`] | |
 
 #![allow(clippy::needless_range_loop)]
@@ -27,6 +28,7 @@ pub mod pipeline;
 pub mod repeatability;
 pub mod report;
 pub mod residual;
+pub mod structure;
 pub mod validate;
 
 pub use identify::{Fit, FitError, FitSpec, fit};

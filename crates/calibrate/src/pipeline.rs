@@ -24,6 +24,9 @@ pub struct PipelineConfig {
     /// Ridge λ on the cable stiffnesses k_F (towards the nominal, in units of 1e6 N) in the
     /// elastostatic fit, 0 = off: k_F is the weakest-determined group on short campaigns.
     pub ridge_kf: f64,
+    /// Choose the k_F ridge from [`RIDGE_KF_GRID`] by the held-out errors (needs a held-out
+    /// set; `ridge_kf` is then ignored).
+    pub ridge_kf_auto: bool,
     /// Identify b in the kinematic step too (the spec's sec. 6.2 identifies a only).
     pub kinematic_b: bool,
     pub select: SelectConfig,
@@ -41,6 +44,7 @@ impl Default for PipelineConfig {
             ridge_b: 0.0,
             lasso_b: 0.0,
             ridge_kf: 0.0,
+            ridge_kf_auto: false,
             kinematic_b: false,
             select: SelectConfig::default(),
             no_extension: false,
@@ -76,6 +80,13 @@ pub struct PipelineReport {
     pub selection: Option<Selection>,
     /// Multi-start, second run and bootstrap ([`crate::repeatability`]), when asked for.
     pub repeatability: Option<crate::repeatability::Repeatability>,
+    /// The k_F ridge the elastostatic steps used, and the sweep that chose it (empty when it
+    /// was configured).
+    pub ridge_kf: f64,
+    pub ridge_kf_sweep: Vec<RidgePoint>,
+    /// Structure left in the final model's held-out length residuals ([`crate::structure`]);
+    /// `None` when there was no separate held-out set.
+    pub structure: Option<crate::structure::StructureReport>,
 }
 
 impl PipelineReport {
@@ -158,6 +169,31 @@ pub fn elastostatic_spec(cfg: &PipelineConfig, m: usize) -> FitSpec {
     spec_e
 }
 
+/// Ridge λ on k_F (units of 1e6 N, eq. 4.32) tried by `ridge_kf_auto`, ascending.
+pub const RIDGE_KF_GRID: &[f64] = &[0.0, 10.0, 100.0, 1000.0, 10000.0];
+
+/// One λ of the k_F ridge sweep: held-out mean position / force error through the FK, or why
+/// it is not a number.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RidgePoint {
+    pub lambda: f64,
+    pub pos_mm: Option<f64>,
+    pub force_n: Option<f64>,
+    pub failure: Option<String>,
+}
+
+/// Family-wise level of the unexplained-structure test (Bonferroni over the cables).
+pub const STRUCTURE_ALPHA: f64 = 0.001;
+
+fn structure_of(
+    last: Option<&Stage>,
+    holdout: &[Observation],
+) -> Option<crate::structure::StructureReport> {
+    let st = last?;
+    (!holdout.is_empty() && !st.failed())
+        .then(|| crate::structure::test(st.kind, &st.model, holdout, &st.name, STRUCTURE_ALPHA))
+}
+
 /// Runs the steps on `train`, reporting on `holdout` (the training set if empty).
 pub fn run(
     nominal: &Model,
@@ -227,9 +263,12 @@ pub fn run(
             n_train: train.len(),
             n_holdout: holdout.len(),
             config: cfg.clone(),
+            structure: structure_of(stages.last(), holdout),
             stages,
             selection: None,
             repeatability: None,
+            ridge_kf: cfg.ridge_kf,
+            ridge_kf_sweep: Vec::new(),
         });
     }
     // 3. Nominal elastostatic model: k_F, w_e of the platform, offsets from the tension (6.24).
@@ -242,11 +281,69 @@ pub fn run(
         model: nom_e.clone(),
         fit: None,
     });
-    // 4. Optimal elastostatic model (eq. 4.38) with p = (a, b, k_F, w_e) + offsets.
-    let spec_e = elastostatic_spec(cfg, m);
-    let fit_e = identify::fit(&nom_e, train, &spec_e, &mut |it, c| {
-        progress("elastostatic", it, c)
-    })?;
+    // 4. Optimal elastostatic model (eq. 4.38) with p = (a, b, k_F, w_e) + offsets. The ridge
+    // on k_F towards the nominal (eq. 4.32) — k_F is the weakest-determined group on short
+    // campaigns — is either the configured λ or, with `ridge_kf_auto` and a held-out set,
+    // chosen from RIDGE_KF_GRID by the held-out position and force errors through the FK.
+    let mut ridge_kf_sweep = Vec::new();
+    let (spec_e, fit_e, ridge_kf) = if cfg.ridge_kf_auto && !holdout.is_empty() {
+        let mut best: Option<(f64, FitSpec, Fit, f64)> = None;
+        let mut reference: Option<(f64, f64)> = None;
+        for &lambda in RIDGE_KF_GRID {
+            let mut c = cfg.clone();
+            c.ridge_kf = lambda;
+            let spec = elastostatic_spec(&c, m);
+            let fit = match identify::fit(&nom_e, train, &spec, &mut |it, c| {
+                progress("elastostatic", it, c)
+            }) {
+                Ok(f) => f,
+                Err(e) => {
+                    ridge_kf_sweep.push(RidgePoint {
+                        lambda,
+                        pos_mm: None,
+                        force_n: None,
+                        failure: Some(e.to_string()),
+                    });
+                    continue;
+                }
+            };
+            let h = validate::evaluate(Kind::Elastostatic, &fit.model, holdout);
+            let point = RidgePoint {
+                lambda,
+                pos_mm: (!h.failed()).then_some(h.pos_mean_mm),
+                force_n: if h.failed() { None } else { h.force_mean_n },
+                failure: h.failure_text(),
+            };
+            ridge_kf_sweep.push(point.clone());
+            let (Some(p), Some(f)) = (point.pos_mm, point.force_n) else {
+                continue;
+            };
+            let (p0, f0) = *reference.get_or_insert((p, f));
+            // Combined relative held-out error; a penalty must pay by 1 % to replace a
+            // smaller one (parsimony: the grid is ascending from λ = 0).
+            let score = p / p0 + f / f0;
+            if best.as_ref().is_none_or(|b| score < 0.99 * b.0) {
+                best = Some((score, spec, fit, lambda));
+            }
+        }
+        match best {
+            Some((_, spec, fit, lambda)) => (spec, fit, lambda),
+            None => {
+                // No λ validated: the fixed configuration, whose failure the stage reports.
+                let spec = elastostatic_spec(cfg, m);
+                let fit = identify::fit(&nom_e, train, &spec, &mut |it, c| {
+                    progress("elastostatic", it, c)
+                })?;
+                (spec, fit, cfg.ridge_kf)
+            }
+        }
+    } else {
+        let spec = elastostatic_spec(cfg, m);
+        let fit = identify::fit(&nom_e, train, &spec, &mut |it, c| {
+            progress("elastostatic", it, c)
+        })?;
+        (spec, fit, cfg.ridge_kf)
+    };
     stages.push(Stage {
         name: "optimal elastostatic".into(),
         kind: Kind::Elastostatic,
@@ -282,8 +379,11 @@ pub fn run(
         n_train: train.len(),
         n_holdout: holdout.len(),
         config: cfg.clone(),
+        structure: structure_of(stages.last(), holdout),
         stages,
         selection,
         repeatability: None,
+        ridge_kf,
+        ridge_kf_sweep,
     })
 }

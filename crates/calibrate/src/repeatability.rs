@@ -136,7 +136,11 @@ pub fn assess(
         .stage("optimal elastostatic")
         .and_then(|s| s.fit.as_ref());
     let start = rep.stage("nominal elastostatic").map(|s| &s.model);
-    let spec = pipeline::elastostatic_spec(cfg, nominal.m());
+    // The same fit as the pipeline's step, with the k_F ridge it used (configured or chosen).
+    let mut fixed = cfg.clone();
+    fixed.ridge_kf = rep.ridge_kf;
+    fixed.ridge_kf_auto = false;
+    let spec = pipeline::elastostatic_spec(&fixed, nominal.m());
     let multi_start = match (base, start) {
         (Some(base), Some(start)) if rc.multi_starts > 0 => {
             let mut ms = MultiStart {

@@ -156,6 +156,37 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
             );
         }
     }
+    if rep.ridge_kf_sweep.is_empty() {
+        if rep.ridge_kf > 0.0 {
+            let _ = writeln!(
+                s,
+                "\nRidge on k_F towards the nominal (eq. 4.32): λ = {} (configured).",
+                rep.ridge_kf
+            );
+        }
+    } else {
+        let _ = writeln!(
+            s,
+            "\nRidge on k_F towards the nominal (eq. 4.32), chosen on the held-out set (combined relative position + force error through the FK; a larger λ must pay by 1 %): **λ = {}**.\n\n| λ | held-out position (mm) | held-out force (N) |\n|---|---|---|",
+            rep.ridge_kf
+        );
+        for p in &rep.ridge_kf_sweep {
+            match &p.failure {
+                Some(f) => {
+                    let _ = writeln!(s, "| {} | {f} | {f} |", p.lambda);
+                }
+                None => {
+                    let _ = writeln!(
+                        s,
+                        "| {} | {} | {} |",
+                        p.lambda,
+                        fmt_opt(p.pos_mm, 2),
+                        fmt_opt(p.force_n, 1)
+                    );
+                }
+            }
+        }
+    }
     if let Some(sel) = &rep.selection {
         s.push_str("\n## Residual diagnosis and model extension\n\n");
         if sel.chosen.is_empty() {
@@ -218,6 +249,9 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
                 );
             }
         }
+    }
+    if let Some(st) = &rep.structure {
+        structure_section(&mut s, st);
     }
     if let Some(r) = &rep.repeatability {
         repeatability_section(&mut s, r);
@@ -708,6 +742,29 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
             ));
         }
     }
+    if let Some(st) = &rep.structure {
+        let names: Vec<String> = st.cables.iter().map(|c| format!("{}", c.cable)).collect();
+        out.push((
+            "structure.svg".into(),
+            bar_chart(
+                "Held-out cable-length residual per cable and its structured part",
+                "mm RMS",
+                &names,
+                &[
+                    (
+                        "residual".into(),
+                        "#1f77b4",
+                        st.cables.iter().map(|c| c.residual_rms_mm).collect(),
+                    ),
+                    (
+                        "structured part (regression)".into(),
+                        "#d62728",
+                        st.cables.iter().map(|c| c.structured_rms_mm).collect(),
+                    ),
+                ],
+            ),
+        ));
+    }
     let _ = Kind::Kinematic;
     out
 }
@@ -791,5 +848,63 @@ fn repeatability_section(s: &mut String, r: &crate::repeatability::Repeatability
                 let _ = writeln!(s, "| {} | {this} | {} | {boot} |", p.name, p.runs);
             }
         }
+    }
+}
+
+/// "Unexplained structure" (issue 13, item 4).
+fn structure_section(s: &mut String, st: &crate::structure::StructureReport) {
+    s.push_str("\n## Unexplained structure\n\n");
+    let flagged: Vec<&crate::structure::CableStructure> =
+        st.cables.iter().filter(|c| c.significant).collect();
+    if flagged.is_empty() {
+        let _ = writeln!(
+            s,
+            "No structure left in the held-out cable-length residuals of \"{}\" (F test per cable against position, orientation, cable length, force and direction of motion, family-wise level {}).\n",
+            st.model, st.alpha
+        );
+    } else {
+        let where_: Vec<String> = flagged
+            .iter()
+            .map(|c| {
+                format!(
+                    "cable {} along {}",
+                    c.cable,
+                    c.dominant.as_deref().unwrap_or("several variables")
+                )
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "**Unexplained structure** remains in the held-out cable-length residuals of \"{}\": {}. The catalogue's chosen effects do not explain it; this names where the model is wrong, not a physical cause (family-wise level {}).\n",
+            st.model,
+            where_.join("; "),
+            st.alpha
+        );
+    }
+    s.push_str("| cable | samples | residual RMS (mm) | structured part RMS (mm) | F | F crit | dominant variable (share) | verdict |\n|---|---|---|---|---|---|---|---|\n");
+    for c in &st.cables {
+        let verdict = match (c.f_stat, c.significant) {
+            (None, _) => "not tested (too few samples or a residual could not be evaluated)",
+            (Some(_), true) => "unexplained structure",
+            (Some(_), false) => "noise",
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.2} | {} | {} | {} | {} | {verdict} |",
+            c.cable,
+            c.n,
+            c.residual_rms_mm,
+            if c.f_stat.is_some() {
+                format!("{:.2}", c.structured_rms_mm)
+            } else {
+                "–".into()
+            },
+            fmt_opt(c.f_stat, 2),
+            fmt_opt(c.f_critical, 2),
+            match (&c.dominant, c.dominant_share) {
+                (Some(d), Some(sh)) => format!("{d} ({:.0} %)", sh * 100.0),
+                _ => "–".into(),
+            }
+        );
     }
 }

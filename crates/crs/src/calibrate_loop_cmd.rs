@@ -145,7 +145,7 @@ impl LoopTools for CliTools {
             w_length: 1e4,
             ridge_b: 0.0,
             lasso_b: 0.0,
-            ridge_kf,
+            ridge_kf: Some(ridge_kf),
             candidates: None,
             min_gain_pos: calibrate::effects::SelectConfig::default().min_gain_pos,
             min_gain_force: calibrate::effects::SelectConfig::default().min_gain_force,
