@@ -15,10 +15,14 @@
 //! Reset protocol (operator CLI `safety-monitor reset`): a `StateEvent { source: Operator,
 //! kind: StateChanged, state: RESET_REQUEST }`; the monitor answers with `StateEvent { source:
 //! SafetyMonitor, kind: StateChanged, detail: RESET_ACCEPTED | RESET_REFUSED |
-//! RESET_NOT_TRIPPED, detail_node: persisting cause, sequence: the request's }`. When accepted it
-//! sends NMT start to all drives, RUN heartbeats, and once every drive reports operational (and
-//! the drives' watches had [`RESET_MIN_RUN_CYCLES`] RUN pairs to release) publishes
-//! `StateEvent { kind: Reset }`, which releases motion-core and drive-io.
+//! RESET_NOT_TRIPPED, detail_node: persisting cause, sequence: the request's }`. When accepted
+//! (every latched cause shown cleared, issue 16) the reset epoch advances; the monitor sends NMT
+//! start to all drives, RUN heartbeats carrying the new epoch, and once every drive reports
+//! operational (and the drives' watches had [`RESET_MIN_RUN_CYCLES`] RUN pairs of the new epoch
+//! to release) publishes `StateEvent { kind: Reset, detail: epoch }`, which releases motion-core
+//! and drive-io (drive-io only if its watch verified that epoch on CAN). A request while armed
+//! changes nothing (no NMT start, no Reset event). A Reset event from any other process is
+//! ignored and logged (rate-limited); while tripped the e-stop is re-asserted.
 
 use crate::bus_frames::{self, Observed};
 use crate::bus_watch::{ReaderHealth, ReaderWatch};
@@ -67,6 +71,18 @@ pub fn is_fresh(now_ns: u64, event_ns: u64) -> bool {
 /// RUN heartbeats sent after an accepted reset before the Reset event (the drives' and
 /// drive-io's watches need `release_pairs` (default 3) consecutive RUN pairs to release).
 pub const RESET_MIN_RUN_CYCLES: u32 = 4;
+/// The initial reset epoch of this monitor instance: CLOCK_REALTIME in seconds, so a restarted
+/// monitor's epoch is newer than its previous run's (watches that inhibited when the old one
+/// died may then release — a restart is an operator/systemd action; drive-io and motion-core
+/// still stay latched until an accepted reset). Failure modes (clock set back, more than one
+/// reset per second in the previous run) only keep the drives inhibited.
+pub fn initial_reset_epoch() -> u32 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs() as u32)
+        .unwrap_or(1)
+}
+
 /// Bus observations buffered between two cycles.
 const OBS_QUEUE: usize = 8192;
 
@@ -234,7 +250,8 @@ pub fn run(
 ) -> Result<Summary, DaemonError> {
     let identity = platform_identity(&cfg.platform);
     let kin = StandardKinematics::new(&cfg.platform);
-    let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity);
+    let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity)
+        .with_reset_epoch(initial_reset_epoch());
     let m = cfg.platform.cables();
     let winches = cfg.winches.clone();
     let cob = cfg.can.safety_cob_id;
@@ -278,11 +295,13 @@ pub fn run(
         dq_limit_mm = cfg.monitor.dq_limit_mm,
         transport = %transport,
         safety_cob_id = format_args!("{cob:#05x}"),
+        reset_epoch = monitor.reset_epoch(),
         "safety monitor started"
     );
 
     let mut sum = Summary::default();
-    let mut counter: u32 = 0;
+    let mut counter: u16 = 0;
+    let mut ignored_resets: u64 = 0;
     let mut event_seq: u64 = 0;
     let mut last_target = [None::<i32>; MAX_CABLES];
     let mut drive_state = [0u8; MAX_CABLES];
@@ -340,7 +359,17 @@ pub fn run(
                 && ev.source != ProcessId::SafetyMonitor as u32
                 && fresh
             {
+                // Only this monitor mints resets (issue 16): anyone else's is ignored, logged
+                // (rate-limited) and, while tripped, answered with the e-stop again.
                 foreign_reset = true;
+                ignored_resets += 1;
+                if ignored_resets.is_power_of_two() {
+                    tracing::warn!(
+                        source = ev.source,
+                        ignored = ignored_resets,
+                        "a Reset event from another process IGNORED: only the monitor resets"
+                    );
+                }
             }
         }
         if let Err(e) = setpoints.drain(|sp| monitor.on_setpoint(sp)) {
@@ -370,7 +399,11 @@ pub fn run(
                     if let Some(i) = node_index(node) {
                         drive_state[i] = state;
                         drive_state_ns[i] = o.rx_ns;
-                        monitor.on_drive_state(i, state == bus_frames::NMT_STATE_OPERATIONAL);
+                        monitor.on_drive_report(
+                            i,
+                            state == bus_frames::NMT_STATE_OPERATIONAL,
+                            o.rx_ns,
+                        );
                     }
                 }
                 Observed::Force { node, force_mn } => {
@@ -447,7 +480,7 @@ pub fn run(
         if let Some(req) = reset_request {
             let decision = monitor.request_reset();
             let (detail, cause) = match decision {
-                ResetDecision::Accepted => (RESET_ACCEPTED, 0),
+                ResetDecision::Accepted { .. } => (RESET_ACCEPTED, 0),
                 ResetDecision::NotTripped => (RESET_NOT_TRIPPED, 0),
                 ResetDecision::Refused(c) => (RESET_REFUSED, u32::from(c.code())),
                 ResetDecision::NotReady => (RESET_NOT_READY, 0),
@@ -459,13 +492,21 @@ pub fn run(
             let _ = event_pub.publish(&ev);
             match decision {
                 ResetDecision::Refused(c) => {
-                    tracing::warn!(cause = %c, "reset REFUSED: the cause persists")
+                    tracing::warn!(cause = %c, "reset REFUSED: the cause persists or is not shown cleared")
                 }
                 ResetDecision::NotReady => {
                     tracing::warn!(?readiness, "reset REFUSED: not ready yet")
                 }
-                ResetDecision::Accepted | ResetDecision::NotTripped => {
-                    tracing::info!(?decision, "reset accepted: NMT start, releasing the stack");
+                // Armed: nothing is latched here, so nothing changes anywhere (issue 16: no NMT
+                // start, no Reset event that would clear latches the monitor never evaluated).
+                ResetDecision::NotTripped => {
+                    tracing::info!("reset request while armed: nothing to reset, nothing changed")
+                }
+                ResetDecision::Accepted { epoch } => {
+                    tracing::info!(
+                        epoch,
+                        "reset ACCEPTED: new reset epoch, NMT start, releasing the stack"
+                    );
                     send(
                         tx.as_mut(),
                         &bus_frames::nmt(bus_frames::NMT_START, 0),
@@ -488,7 +529,10 @@ pub fn run(
                     );
                 }
                 event_seq += 1;
-                let ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, event_seq);
+                let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, event_seq);
+                // The epoch this reset minted; drive-io acts on it only once its watch has
+                // verified the same epoch in the doubled heartbeat on CAN.
+                ev.detail = monitor.reset_epoch();
                 let _ = event_pub.publish(&ev);
                 resetting = None;
             }

@@ -971,13 +971,13 @@ fn corrupted_safety_frame(st: &mut Stack) -> Res<Outcome> {
     let _ = st.fake()?.clone();
     st.wait_following(false)?;
     let mut bus = open_bus(st)?;
-    use can_transport::safety_frame::{NO_CABLE, SafetyHeartbeat, SafetyState, encode};
+    use can_transport::safety_frame::{SafetyHeartbeat, SafetyState, encode};
     let [a, b] = encode(
         &SafetyHeartbeat {
             state: SafetyState::Run,
             cause: 0,
             counter: 0x1234,
-            cable: NO_CABLE,
+            epoch: 0,
         },
         0x101,
     );
