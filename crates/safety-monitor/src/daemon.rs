@@ -355,6 +355,14 @@ pub fn run(
             {
                 tracing::info!("motion-core announced the end of its setpoint stream");
                 monitor.on_stream_end();
+            } else if ev.kind == EventKind::EStop as u32
+                && ev.source != ProcessId::SafetyMonitor as u32
+                && fresh
+            {
+                // Anyone may stop; the monitor latches it so that only its verified reset ends
+                // the stop in motion-core and drive-io (issue 16).
+                tracing::warn!(source = ev.source, "e-stop from another process: latched");
+                monitor.on_estop_event(ev.source);
             } else if ev.kind == EventKind::Reset as u32
                 && ev.source != ProcessId::SafetyMonitor as u32
                 && fresh

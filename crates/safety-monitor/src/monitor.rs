@@ -333,7 +333,9 @@ pub mod authority {
 ///   this cycle (drives NMT-stopped send no forces: their forces are checked again, within the
 ///   filter time, after the NMT start that follows an accepted reset);
 /// * process-bus and bus-observation causes: this cycle's receives and the reader's batches
-///   completed without error.
+///   completed without error; an e-stop event of another process: it is a one-shot command,
+///   acknowledged by the operator's reset itself (the stop it caused is verified through the
+///   other classes' evidence).
 pub mod evidence {
     use super::Cause;
 
@@ -347,7 +349,7 @@ pub mod evidence {
             IdentityMismatch | IdentityMissing => Class::Identity,
             FollowingError | FeedbackSilence | RpdoMismatch | FollowingUnchecked => Class::Feedback,
             ForceSlack | ForceOverload | ForceSilence => Class::Forces,
-            IpcError | BusObservation => Class::Receive,
+            IpcError | BusObservation | EStopEvent => Class::Receive,
         }
     }
 
@@ -565,6 +567,15 @@ impl Monitor {
     /// re-arms them. A frozen or killed producer cannot announce, so it still trips.
     pub fn on_stream_end(&mut self) {
         self.stream_end = true;
+    }
+
+    /// Another process published an e-stop (operator console, e-stop input): latched like
+    /// every fault, so only the monitor's verified reset ends the stop everywhere.
+    pub fn on_estop_event(&mut self, source: u32) {
+        self.fault(Fault {
+            value: f64::from(source),
+            ..Fault::new(Cause::EStopEvent)
+        });
     }
 
     /// A process-bus failure (receive error, foreign contract version).

@@ -55,10 +55,14 @@ pub enum Cause {
     /// errors, or observations dropped (queue overflow) — RPDO, heartbeat and force checks
     /// would run blind.
     BusObservation = 20,
+    /// Another process (the operator console's stop button, an e-stop input) published an
+    /// e-stop. The monitor latches it too, so that the stop it caused in motion-core and
+    /// drive-io ends only with the monitor's verified reset (ISO 13849-1 §5.2.2; issue 16).
+    EStopEvent = 21,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 20] = [
+    pub const ALL: [Cause; 21] = [
         Cause::DqLimit,
         Cause::NonFinite,
         Cause::OutsideWorkspace,
@@ -79,6 +83,7 @@ impl Cause {
         Cause::MotionAcceleration,
         Cause::FollowingUnchecked,
         Cause::BusObservation,
+        Cause::EStopEvent,
     ];
 
     pub fn code(self) -> u8 {
@@ -114,6 +119,7 @@ impl Cause {
             Cause::MotionAcceleration => "motion_acceleration",
             Cause::FollowingUnchecked => "following_unchecked",
             Cause::BusObservation => "bus_observation",
+            Cause::EStopEvent => "estop_event",
         }
     }
 

@@ -1234,3 +1234,21 @@ fn settings_beyond_their_bounds_are_refused_by_name() {
         assert!(e.contains(&full), "{full} = {too_big}: {e}");
     }
 }
+
+/// An e-stop published by another process (the console's stop button) latches the monitor, so
+/// the stop it caused in motion-core and drive-io ends only with the monitor's reset.
+#[test]
+fn an_estop_event_of_another_process_latches_until_the_reset() {
+    let mut m = monitor();
+    let mut seq = good_cycle(&mut m, 1, 0);
+    m.on_estop_event(crs_ipc::ProcessId::Operator as u32);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    seq += 1;
+    let t = m.end_cycle(0).new_trip.expect("e-stop event");
+    assert_eq!(t.fault.cause, Cause::EStopEvent);
+    assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+    for _ in 0..3 {
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    assert!(matches!(m.request_reset(), ResetDecision::Accepted { .. }));
+}
