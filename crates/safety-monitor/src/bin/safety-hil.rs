@@ -1376,12 +1376,18 @@ fn replayed_heartbeat_after_monitor_death(st: &mut Stack) -> Res<Outcome> {
         Ok(s.bus_state() == Some(BusState::EStop))
     })?;
     let stopped = st.require_braked()?;
-    // 1. The recorded frames verbatim, one pair per monitor cycle.
+    // A release would show as the watch permitting during the replay, and afterwards as one
+    // more Permit -> Inhibit transition (the replay ends, the validation time runs out).
+    let trips0 = st.emu()?.safety_trips;
+    let mut released = 0u32;
+    // 1. The recorded frames verbatim, one pair per monitor cycle (the stimulus is paced like
+    //    the monitor; the observations below are paced by the emulator's status time).
     let cycle = Duration::from_millis(15);
     for f in &spy.recorded {
         bus.send(f).map_err(|e| e.to_string())?;
         if f.id() == 0x102 {
             std::thread::sleep(cycle);
+            released += u32::from(!st.emu()?.inhibit);
         }
     }
     // 2. The last pair continued: fresh counters, the same epoch, RUN.
@@ -1393,6 +1399,7 @@ fn replayed_heartbeat_after_monitor_death(st: &mut Stack) -> Res<Outcome> {
             bus.send(&f).map_err(|e| e.to_string())?;
         }
         std::thread::sleep(cycle);
+        released += u32::from(!st.emu()?.inhibit);
     }
     let t_sent = monotonic_ns();
     // The emulator handled every frame sent before its status time.
@@ -1400,6 +1407,14 @@ fn replayed_heartbeat_after_monitor_death(st: &mut Stack) -> Res<Outcome> {
         Ok(s.emu()?.time_ns > t_sent)
     })?;
     require_still_latched(st, "replayed heartbeat")?;
+    let trips1 = st.emu()?.safety_trips;
+    if released > 0 || trips1 != trips0 {
+        return Err(format!(
+            "the replay released the drives' safety watch ({released} samples permitting, \
+             {} more trips)",
+            trips1 - trips0
+        ));
+    }
     Ok(Outcome {
         cause: "drives: safety heartbeat timeout; replay ignored".into(),
         detect_ms: None,
