@@ -1204,11 +1204,14 @@ fn spy_pairs(
 /// still be latched (not Ready/Running), the watch inhibiting, the drives braked.
 fn require_still_latched(st: &mut Stack, what: &str) -> Res<()> {
     // drive-io reads the state events every SYNC cycle before it publishes its feedback:
-    // 1200 more samples cover its 1 s window for a reset waiting for the watch's epoch.
+    // 1.2 s worth of samples cover its 1 s window for a reset waiting for the watch's epoch.
     let n0 = st.feedback_count;
-    st.wait("1200 drive-io cycles after the forgery", 60.0, |s| {
-        Ok(s.feedback_count >= n0 + 1200)
-    })?;
+    let n = 1_200_000 / u64::from(st.period_us.max(1)) + 1;
+    st.wait(
+        &format!("{n} drive-io cycles after the forgery"),
+        60.0,
+        |s| Ok(s.feedback_count >= n0 + n),
+    )?;
     if matches!(st.bus_state(), Some(BusState::Ready | BusState::Running)) {
         return Err(format!(
             "{what}: drive-io left its latch ({:?})",
