@@ -83,6 +83,50 @@ pub fn initial_reset_epoch() -> u32 {
         .unwrap_or(1)
 }
 
+/// The monitor's own recently published state events (kind, sequence, detail): a received
+/// event that claims the monitor's source but is not among them was published by another
+/// process (iceoryx2 0.10 does not authenticate publishers; whatever of its own events the
+/// monitor's subscriber delivers back matches). The monitor publishes a few events per reset
+/// or trip, so 32 cover far more than one cycle's worth.
+#[derive(Debug)]
+pub struct OwnEvents {
+    ring: [(u32, u64, u32); 32],
+    len: usize,
+    next: usize,
+}
+
+impl Default for OwnEvents {
+    fn default() -> Self {
+        Self {
+            ring: [(0, 0, 0); 32],
+            len: 0,
+            next: 0,
+        }
+    }
+}
+
+impl OwnEvents {
+    pub fn record(&mut self, ev: &StateEvent) {
+        self.ring[self.next] = (ev.kind, ev.sequence, ev.detail);
+        self.next = (self.next + 1) % self.ring.len();
+        self.len = (self.len + 1).min(self.ring.len());
+    }
+
+    pub fn contains(&self, ev: &StateEvent) -> bool {
+        self.ring[..self.len].contains(&(ev.kind, ev.sequence, ev.detail))
+    }
+}
+
+/// Publishes one of the monitor's own events and remembers it ([`OwnEvents`]).
+fn publish_own(
+    publisher: &crs_ipc::TopicPublisher<StateEvent>,
+    own: &mut OwnEvents,
+    ev: &StateEvent,
+) -> Result<(), IpcError> {
+    own.record(ev);
+    publisher.publish(ev)
+}
+
 /// Bus observations buffered between two cycles.
 const OBS_QUEUE: usize = 8192;
 
@@ -302,6 +346,9 @@ pub fn run(
     let mut sum = Summary::default();
     let mut counter: u16 = 0;
     let mut ignored_resets: u64 = 0;
+    let mut own = OwnEvents::default();
+    let mut forged: u64 = 0;
+    let started_ns = monotonic_ns();
     let mut event_seq: u64 = 0;
     let mut last_target = [None::<i32>; MAX_CABLES];
     let mut drive_state = [0u8; MAX_CABLES];
@@ -342,6 +389,28 @@ pub fn run(
             None
         }) {
             let fresh = is_fresh(now, ev.timestamp_ns);
+            if ev.source == ProcessId::SafetyMonitor as u32 {
+                // Our own events come back through our subscriber; anything else claiming our
+                // source (stamped after this monitor started, also in its future: older ones
+                // are a previous instance's history) is a second publisher impersonating the
+                // monitor.
+                if ev.timestamp_ns >= started_ns && !own.contains(&ev) {
+                    forged += 1;
+                    if forged.is_power_of_two() {
+                        tracing::error!(
+                            kind = ev.kind,
+                            sequence = ev.sequence,
+                            detail = ev.detail,
+                            forged,
+                            "an event claiming the monitor's source that it did not publish: \
+                             forged, e-stop"
+                        );
+                    }
+                    monitor.on_forged_event(ev.kind);
+                    foreign_reset |= ev.kind == EventKind::Reset as u32;
+                }
+                continue;
+            }
             if ev.source == ProcessId::Operator as u32
                 && ev.kind == EventKind::StateChanged as u32
                 && ev.state == RESET_REQUEST
@@ -461,7 +530,7 @@ pub fn run(
             resetting = None;
             event_seq += 1;
             let ev = estop_event(&rec, event_seq);
-            if let Err(e) = event_pub.publish(&ev) {
+            if let Err(e) = publish_own(&event_pub, &mut own, &ev) {
                 tracing::error!(error = %e, "publishing the e-stop failed");
             }
             let _ = wakeup.notify();
@@ -479,7 +548,7 @@ pub fn run(
             if foreign_reset && let Some(rec) = monitor.trip() {
                 event_seq += 1;
                 let ev = estop_event(rec, event_seq);
-                let _ = event_pub.publish(&ev);
+                let _ = publish_own(&event_pub, &mut own, &ev);
                 let _ = wakeup.notify();
                 tracing::warn!("a Reset from another process while tripped: e-stop re-asserted");
             }
@@ -497,7 +566,7 @@ pub fn run(
             ev.state = monitor.state().code();
             ev.detail = detail;
             ev.detail_node = cause;
-            let _ = event_pub.publish(&ev);
+            let _ = publish_own(&event_pub, &mut own, &ev);
             match decision {
                 ResetDecision::Refused(c) => {
                     tracing::warn!(cause = %c, "reset REFUSED: the cause persists or is not shown cleared")
@@ -541,7 +610,7 @@ pub fn run(
                 // The epoch this reset minted; drive-io acts on it only once its watch has
                 // verified the same epoch in the doubled heartbeat on CAN.
                 ev.detail = monitor.reset_epoch();
-                let _ = event_pub.publish(&ev);
+                let _ = publish_own(&event_pub, &mut own, &ev);
                 resetting = None;
             }
         }
@@ -640,6 +709,30 @@ pub fn request_reset(ipc: &IpcNode, timeout: Duration) -> Result<ResetReply, Dae
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn own_events_are_recognised_and_others_are_not() {
+        let mut own = OwnEvents::default();
+        let mut mine = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, 7);
+        mine.detail = 42;
+        own.record(&mine);
+        assert!(own.contains(&mine));
+        let mut forged = mine;
+        forged.detail = 43;
+        assert!(!own.contains(&forged));
+        forged = mine;
+        forged.sequence = 8;
+        assert!(!own.contains(&forged));
+        // The ring keeps the last 32.
+        for k in 100..132 {
+            own.record(&StateEvent::new(
+                ProcessId::SafetyMonitor,
+                EventKind::EStop,
+                k,
+            ));
+        }
+        assert!(!own.contains(&mine));
+    }
 
     #[test]
     fn events_from_the_future_or_too_old_are_not_fresh() {

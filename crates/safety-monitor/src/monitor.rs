@@ -349,7 +349,7 @@ pub mod evidence {
             IdentityMismatch | IdentityMissing => Class::Identity,
             FollowingError | FeedbackSilence | RpdoMismatch | FollowingUnchecked => Class::Feedback,
             ForceSlack | ForceOverload | ForceSilence => Class::Forces,
-            IpcError | BusObservation | EStopEvent => Class::Receive,
+            IpcError | BusObservation | EStopEvent | ForgedEvent => Class::Receive,
         }
     }
 
@@ -575,6 +575,14 @@ impl Monitor {
         self.fault(Fault {
             value: f64::from(source),
             ..Fault::new(Cause::EStopEvent)
+        });
+    }
+
+    /// A state event claiming the monitor's source that this monitor did not publish.
+    pub fn on_forged_event(&mut self, kind: u32) {
+        self.fault(Fault {
+            value: f64::from(kind),
+            ..Fault::new(Cause::ForgedEvent)
         });
     }
 

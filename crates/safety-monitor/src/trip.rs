@@ -59,10 +59,14 @@ pub enum Cause {
     /// e-stop. The monitor latches it too, so that the stop it caused in motion-core and
     /// drive-io ends only with the monitor's verified reset (ISO 13849-1 §5.2.2; issue 16).
     EStopEvent = 21,
+    /// A state event claiming the monitor's own source that this monitor did not publish (a
+    /// second publisher impersonating the monitor, e.g. a forged Reset): the process bus can
+    /// no longer be trusted (issue 16).
+    ForgedEvent = 22,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 21] = [
+    pub const ALL: [Cause; 22] = [
         Cause::DqLimit,
         Cause::NonFinite,
         Cause::OutsideWorkspace,
@@ -84,6 +88,7 @@ impl Cause {
         Cause::FollowingUnchecked,
         Cause::BusObservation,
         Cause::EStopEvent,
+        Cause::ForgedEvent,
     ];
 
     pub fn code(self) -> u8 {
@@ -120,6 +125,7 @@ impl Cause {
             Cause::FollowingUnchecked => "following_unchecked",
             Cause::BusObservation => "bus_observation",
             Cause::EStopEvent => "estop_event",
+            Cause::ForgedEvent => "forged_event",
         }
     }
 

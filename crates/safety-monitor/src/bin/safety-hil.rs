@@ -1283,10 +1283,28 @@ fn forged_reset_ignored(st: &mut Stack) -> Res<Outcome> {
         ));
     }
     // The monitor's source claimed, with a newer epoch: not on the bus, so drive-io and the
-    // drives stay stopped.
+    // drives stay stopped; the monitor recognises an event it did not publish and re-asserts
+    // its e-stop, which latches motion-core again.
+    let n_estops = st.monitor_estops.len();
     publ.publish(&forged(ProcessId::SafetyMonitor, 200))
         .map_err(|e| e.to_string())?;
+    st.wait(
+        "the monitor re-asserting its e-stop on the impersonation",
+        10.0,
+        |s| Ok(s.monitor_estops.len() > n_estops),
+    )?;
     require_still_latched(st, "reset forged with the monitor's source")?;
+    let h0 = st.monitor_heartbeats;
+    st.motion_state = None;
+    st.wait("motion-core's heartbeat", 10.0, |s| {
+        Ok(s.motion_state.is_some() && s.monitor_heartbeats > h0)
+    })?;
+    if st.motion_state != Some(crs_ipc::motion_state::ESTOPPED) {
+        return Err(format!(
+            "motion-core should be e-stopped again after the monitor's answer (state {:?})",
+            st.motion_state
+        ));
+    }
     spy_pairs(st, bus.as_mut(), &mut spy, 3)?;
     let on_bus = spy.last.map(|h| h.epoch);
     if on_bus != Some(epoch) || spy.nmt_starts > 0 {
@@ -1295,17 +1313,18 @@ fn forged_reset_ignored(st: &mut Stack) -> Res<Outcome> {
             spy.nmt_starts
         ));
     }
-    let mc = match st.motion_state {
-        Some(crs_ipc::motion_state::ESTOPPED) => "still e-stopped",
-        _ => "released (unauthenticated iceoryx2 source, documented)",
-    };
+    let trips = std::fs::read_to_string(st.dir.join("safety-monitor.log")).unwrap_or_default();
+    if !trips.contains("did not publish") {
+        return Err("the monitor did not log the impersonation".into());
+    }
     Ok(Outcome {
         cause: "estop_event; forged resets ignored".into(),
         detect_ms: None,
         stop_ms: None,
         note: format!(
             "Operator/Test/DriveIo/MotionCore resets: all latched; 'SafetyMonitor' reset with \
-             epoch {}: drive-io latched, drives braked, motion-core {mc}",
+             epoch {}: recognised by the monitor (e-stop re-asserted, motion-core e-stopped \
+             again), drive-io latched, drives braked",
             epoch.wrapping_add(1)
         ),
     })
