@@ -88,21 +88,11 @@ pub fn initial_reset_epoch() -> u32 {
 /// process (iceoryx2 0.10 does not authenticate publishers; whatever of its own events the
 /// monitor's subscriber delivers back matches). The monitor publishes a few events per reset
 /// or trip, so 32 cover far more than one cycle's worth.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 pub struct OwnEvents {
     ring: [(u32, u64, u32); 32],
     len: usize,
     next: usize,
-}
-
-impl Default for OwnEvents {
-    fn default() -> Self {
-        Self {
-            ring: [(0, 0, 0); 32],
-            len: 0,
-            next: 0,
-        }
-    }
 }
 
 impl OwnEvents {
