@@ -24,7 +24,12 @@ use crate::safety_watch::VerifiedEpoch;
 use can_transport::safety_frame::epoch_newer;
 use crs_ipc::{EventKind, ProcessId, StateEvent};
 
-/// The right to leave the master's latch. Made only by [`ResetGate`] (private field).
+/// The right to leave the master's latch. Made only by [`ResetGate`] (private field): outside
+/// this module it cannot be constructed.
+///
+/// ```compile_fail
+/// let forged = drive_io::reset::ResetGrant { epoch: 1 };
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ResetGrant {
     epoch: u32,

@@ -128,6 +128,10 @@ pub enum InhibitReason {
 /// watch permits: the only authenticated statement of "the monitor accepted reset number N"
 /// on this side of the bus. It has no public constructor; only [`SafetyWatch::verified_epoch`]
 /// makes one (type-state for drive-io's reset authority, issue 16).
+///
+/// ```compile_fail
+/// let forged = drive_io::safety_watch::VerifiedEpoch(7);
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VerifiedEpoch(u32);
 

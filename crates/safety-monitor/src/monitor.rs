@@ -277,6 +277,10 @@ pub mod authority {
 
     /// Proof that the monitor's verification accepted an operator reset; carries the new
     /// epoch. No public constructor (private field), not `Clone`: used once.
+    ///
+    /// ```compile_fail
+    /// let forged = safety_monitor::monitor::authority::ResetToken { epoch: 1 };
+    /// ```
     #[derive(Debug, PartialEq, Eq)]
     pub struct ResetToken {
         epoch: u32,

@@ -39,6 +39,10 @@ pub enum Command {
 /// constructor: [`ResetGate::check`] is the single place that decides which events may reset
 /// the loop (issue 16: only the safety monitor's reset, with a reset epoch newer than the last
 /// one this loop accepted).
+///
+/// ```compile_fail
+/// let forged = motion_core::daemon::ResetAuthority(());
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ResetAuthority(());
 
