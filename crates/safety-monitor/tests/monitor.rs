@@ -1252,3 +1252,58 @@ fn an_estop_event_of_another_process_latches_until_the_reset() {
     }
     assert!(matches!(m.request_reset(), ResetDecision::Accepted { .. }));
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+    /// The reset authority over random sequences of clean cycles, faulty cycles and reset
+    /// requests: the epoch changes only with an accepted reset, by exactly one; a reset is
+    /// accepted only while tripped and only after `reset_clear_cycles` clean cycles with
+    /// evidence since the last fault; a request while armed changes nothing.
+    #[test]
+    fn the_epoch_advances_only_with_an_accepted_reset(ops in proptest::collection::vec(0u8..4, 1..40)) {
+        let mut m = monitor().with_reset_epoch(1000);
+        let mut seq = 1;
+        let mut clean_since_fault = u32::MAX;
+        for op in ops {
+            let before = (m.state(), m.reset_epoch());
+            match op {
+                0 | 1 => {
+                    seq = good_cycle(&mut m, seq, 0);
+                    clean_since_fault = clean_since_fault.saturating_add(1);
+                }
+                2 => {
+                    let mut s = sp(seq, HOME, 0, 0.0);
+                    s.pose[1] = f64::NAN;
+                    m.on_setpoint(&s);
+                    seq += 1;
+                    m.end_cycle(0);
+                    clean_since_fault = 0;
+                }
+                _ => {
+                    let d = m.request_reset();
+                    match d {
+                        ResetDecision::Accepted { epoch } => {
+                            prop_assert_eq!(before.0, MonitorState::Tripped);
+                            prop_assert!(clean_since_fault >= 3);
+                            prop_assert_eq!(epoch, before.1 + 1);
+                            prop_assert_eq!(m.reset_epoch(), epoch);
+                            prop_assert_eq!(m.state(), MonitorState::Armed);
+                            prop_assert_eq!(m.heartbeat(0).epoch, epoch);
+                        }
+                        ResetDecision::NotTripped => {
+                            prop_assert_eq!(before.0, MonitorState::Armed);
+                            prop_assert_eq!((m.state(), m.reset_epoch()), before);
+                        }
+                        _ => {
+                            prop_assert_eq!((m.state(), m.reset_epoch()), before);
+                            prop_assert!(before.0 == MonitorState::Tripped && clean_since_fault < 3);
+                        }
+                    }
+                    continue;
+                }
+            }
+            // Cycles never change the epoch.
+            prop_assert_eq!(m.reset_epoch(), before.1);
+        }
+    }
+}
