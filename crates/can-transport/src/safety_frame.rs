@@ -9,15 +9,19 @@
 //! arrived within the validation time (CiA 304's SCT, safety cycle time; e.g. 50 ms), so a dead
 //! or hung monitor stops the robot.
 //!
-//! Payload (both frames, little endian; the inverted frame carries `!byte` for every byte):
+//! Payload (both frames, little endian; the inverted frame carries `!byte` for every byte),
+//! protocol version 2 (issue 16: the reset epoch):
 //!
-//! | byte | content                                                        |
-//! |------|----------------------------------------------------------------|
-//! | 0    | state: 0x01 = RUN (motion permitted), 0x02 = STOP (e-stop)     |
-//! | 1    | cause code of the latched trip (0 = none)                      |
-//! | 2..6 | counter u32, +1 per pair sent (stuck/repeated data is detected)|
-//! | 6    | cable index of the trip (0xFF = none)                          |
-//! | 7    | protocol version ([`PROTOCOL_VERSION`])                        |
+//! | byte | content                                                                  |
+//! |------|--------------------------------------------------------------------------|
+//! | 0    | protocol version (high nibble, [`PROTOCOL_VERSION`]) and state (low nibble: 0x1 = RUN, motion permitted; 0x2 = STOP, e-stop) |
+//! | 1    | cause code of the latched trip (0 = none)                                |
+//! | 2..4 | counter u16, +1 per pair sent, wrapping (stuck/repeated data is detected)|
+//! | 4..8 | reset epoch u32: +1 for every operator reset the monitor verified and accepted (ISO 13849-1 §5.2.2 manual reset); consumers leave an inhibit only on a newer epoch |
+//!
+//! Version 1 (state in byte 0 as 0x01/0x02, u32 counter, cable, version in byte 7) is refused:
+//! its byte 0 has version nibble 0. The cable of a trip is no longer on the wire (the monitor's
+//! trip log and its iceoryx2 e-stop event carry it).
 //!
 //! Default COB-IDs: 0x101 / 0x102, the CiA 304 default pair of SRDO 1 (0x0FF + 2n - 1 and
 //! 0x100 + 2n); they do not collide with the CiA 301 predefined connection set (EMCY 0x081..0x0FF,
@@ -29,10 +33,8 @@ use crate::frame::CanFrame;
 
 /// COB-ID of the normal (non-inverted) frame of the default pair (SRDO 1).
 pub const DEFAULT_COB_ID: u16 = 0x101;
-/// Protocol version carried in byte 7.
-pub const PROTOCOL_VERSION: u8 = 1;
-/// Cable byte value meaning "no cable".
-pub const NO_CABLE: u8 = 0xFF;
+/// Protocol version carried in the high nibble of byte 0.
+pub const PROTOCOL_VERSION: u8 = 2;
 
 const STATE_RUN: u8 = 0x01;
 const STATE_STOP: u8 = 0x02;
@@ -53,37 +55,47 @@ pub struct SafetyHeartbeat {
     /// Cause code of the latched trip (monitor-specific; 0 = none).
     pub cause: u8,
     /// +1 for every pair the producer sends (wrapping).
-    pub counter: u32,
-    /// Cable index of the trip, [`NO_CABLE`] if none.
-    pub cable: u8,
+    pub counter: u16,
+    /// The monitor's reset epoch: +1 for every accepted operator reset (wrapping; compare with
+    /// [`epoch_newer`]).
+    pub epoch: u32,
+}
+
+/// True if `epoch` is newer than `than` in wrapping (serial number) arithmetic: the difference
+/// is in 1..2^31. Epochs advance by one per accepted reset, so wrapping is not reached in
+/// practice; the comparison still never treats an old epoch as new across a wrap.
+pub fn epoch_newer(epoch: u32, than: u32) -> bool {
+    let d = epoch.wrapping_sub(than);
+    d != 0 && d < 0x8000_0000
 }
 
 impl SafetyHeartbeat {
     /// The 8 data bytes of the normal frame.
     pub fn to_bytes(&self) -> [u8; 8] {
         let c = self.counter.to_le_bytes();
+        let e = self.epoch.to_le_bytes();
         let s = match self.state {
             SafetyState::Run => STATE_RUN,
             SafetyState::Stop => STATE_STOP,
         };
         [
-            s,
+            (PROTOCOL_VERSION << 4) | s,
             self.cause,
             c[0],
             c[1],
-            c[2],
-            c[3],
-            self.cable,
-            PROTOCOL_VERSION,
+            e[0],
+            e[1],
+            e[2],
+            e[3],
         ]
     }
 
     /// Parses the 8 data bytes of a normal frame.
     pub fn from_bytes(d: &[u8; 8]) -> Result<Self, PairError> {
-        if d[7] != PROTOCOL_VERSION {
-            return Err(PairError::Version(d[7]));
+        if d[0] >> 4 != PROTOCOL_VERSION {
+            return Err(PairError::Version(d[0] >> 4));
         }
-        let state = match d[0] {
+        let state = match d[0] & 0x0F {
             STATE_RUN => SafetyState::Run,
             STATE_STOP => SafetyState::Stop,
             other => return Err(PairError::UnknownState(other)),
@@ -91,8 +103,8 @@ impl SafetyHeartbeat {
         Ok(Self {
             state,
             cause: d[1],
-            counter: u32::from_le_bytes([d[2], d[3], d[4], d[5]]),
-            cable: d[6],
+            counter: u16::from_le_bytes([d[2], d[3]]),
+            epoch: u32::from_le_bytes([d[4], d[5], d[6], d[7]]),
         })
     }
 }
@@ -250,12 +262,12 @@ impl PairReceiver {
 mod tests {
     use super::*;
 
-    fn hb(counter: u32) -> SafetyHeartbeat {
+    fn hb(counter: u16) -> SafetyHeartbeat {
         SafetyHeartbeat {
             state: SafetyState::Run,
             cause: 0,
             counter,
-            cable: NO_CABLE,
+            epoch: 7,
         }
     }
 
@@ -264,8 +276,8 @@ mod tests {
         let msg = SafetyHeartbeat {
             state: SafetyState::Stop,
             cause: 7,
-            counter: 0xDEAD_BEEF,
-            cable: 3,
+            counter: 0xBEEF,
+            epoch: 0xDEAD_0003,
         };
         let [a, b] = encode(&msg, DEFAULT_COB_ID);
         assert_eq!(a.id(), 0x101);
@@ -325,14 +337,27 @@ mod tests {
     #[test]
     fn unknown_state_and_version_are_rejected() {
         let mut d = hb(5).to_bytes();
-        d[0] = 0x03;
+        d[0] = 0x23;
         assert_eq!(
             SafetyHeartbeat::from_bytes(&d),
             Err(PairError::UnknownState(3))
         );
         let mut d = hb(5).to_bytes();
-        d[7] = 9;
+        d[0] = 0x91;
         assert_eq!(SafetyHeartbeat::from_bytes(&d), Err(PairError::Version(9)));
+        // A version-1 frame (state 0x01 in byte 0) is refused.
+        let v1 = [0x01, 0, 5, 0, 0, 0, 0xFF, 1];
+        assert_eq!(SafetyHeartbeat::from_bytes(&v1), Err(PairError::Version(0)));
+    }
+
+    #[test]
+    fn epoch_order_is_serial_number_arithmetic() {
+        assert!(epoch_newer(1, 0));
+        assert!(!epoch_newer(0, 0));
+        assert!(!epoch_newer(0, 1));
+        assert!(epoch_newer(0, u32::MAX));
+        assert!(epoch_newer(0x7FFF_FFFF, 0));
+        assert!(!epoch_newer(0x8000_0000, 0));
     }
 
     mod props {
@@ -371,12 +396,12 @@ mod tests {
             }
 
             #[test]
-            fn any_message_round_trips(state in any::<bool>(), cause in any::<u8>(), counter in any::<u32>(), cable in any::<u8>()) {
+            fn any_message_round_trips(state in any::<bool>(), cause in any::<u8>(), counter in any::<u16>(), epoch in any::<u32>()) {
                 let msg = SafetyHeartbeat {
                     state: if state { SafetyState::Run } else { SafetyState::Stop },
                     cause,
                     counter,
-                    cable,
+                    epoch,
                 };
                 let [a, b] = encode(&msg, DEFAULT_COB_ID);
                 prop_assert_eq!(decode_pair(&a, &b, DEFAULT_COB_ID), Ok(msg));
@@ -386,8 +411,8 @@ mod tests {
 
             /// Any corruption of any byte of either frame is detected.
             #[test]
-            fn any_corruption_is_detected(counter in any::<u32>(), which in 0usize..2, byte in 0usize..8, xor in 1u8..=255) {
-                let msg = SafetyHeartbeat { state: SafetyState::Run, cause: 0, counter, cable: NO_CABLE };
+            fn any_corruption_is_detected(counter in any::<u16>(), epoch in any::<u32>(), which in 0usize..2, byte in 0usize..8, xor in 1u8..=255) {
+                let msg = SafetyHeartbeat { state: SafetyState::Run, cause: 0, counter, epoch };
                 let [a, b] = encode(&msg, DEFAULT_COB_ID);
                 let (mut da, mut db) = ([0u8; 8], [0u8; 8]);
                 da.copy_from_slice(a.data());

@@ -599,9 +599,11 @@ pub fn scenario_estop(transport: &str, prefix: &str) -> Res<String> {
     all_in(&rig, Ds402State::QuickStopActive, Duration::from_secs(5))?;
     assert_holds(&mut rig, BusState::EStop)?;
     // Reset: drives are walked back to Operation Enabled holding their position -> Ready.
-    rig.events
-        .publish(&StateEvent::new(ProcessId::Test, EventKind::Reset, 2))
-        .map_err(|e| e.to_string())?;
+    // Only the safety monitor's reset counts (issue 16); this rig runs without the safety
+    // heartbeat, so drive-io checks the event's source and a newer epoch (in `detail`).
+    let mut reset = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, 2);
+    reset.detail = 1;
+    rig.events.publish(&reset).map_err(|e| e.to_string())?;
     rig.wait_state(
         BusState::Ready,
         Duration::from_secs(30),

@@ -12,6 +12,7 @@ pub mod config;
 pub mod emulator;
 pub mod hil;
 pub mod master;
+pub mod reset;
 pub mod runner;
 pub mod safety_watch;
 pub mod slave;

@@ -5,11 +5,12 @@
 //! producer time, 0x6060 = 8 (CSP), read back 0x6061 -> NMT start -> SYNC every period, RPDO
 //! controlword walks each drive to Operation Enabled holding its actual position -> Ready ->
 //! Running on the first new setpoint. Any of: stale setpoints, e-stop event, heartbeat loss,
-//! EMCY, drive fault bit, invalid setpoint => quick stop ALL drives and hold (latched until a
-//! Reset event).
+//! EMCY, drive fault bit, invalid setpoint => quick stop ALL drives and hold (latched until the
+//! safety monitor's reset, [`Master::reset`] with a [`ResetGrant`]).
 
 use crate::canopen::*;
 use crate::config::{DrivesConfig, WinchConfig};
+use crate::reset::ResetGrant;
 use can_transport::RxFrame;
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, JointSetpoint, MAX_CABLES, StateEvent, fault_code,
@@ -342,20 +343,33 @@ impl Master {
         }
     }
 
-    /// Handles an e-stop / reset event from the process bus.
-    pub fn on_event(&mut self, ev: &StateEvent, now_ns: u64) {
+    /// Handles an e-stop event from the process bus (anyone may stop). A Reset event does
+    /// nothing here: leaving the latch needs a [`ResetGrant`] ([`Master::reset`], issue 16).
+    pub fn on_event(&mut self, ev: &StateEvent, _now_ns: u64) {
         if ev.kind == EventKind::EStop as u32 {
             self.stop(BusState::EStop, fault_code::NONE, 0);
-        } else if ev.kind == EventKind::Reset as u32
-            && matches!(self.phase, Phase::Stopped(_))
-            && self.heartbeats_fresh(now_ns)
-        {
-            tracing::info!("reset: re-enabling drives");
-            self.fault_code = fault_code::NONE;
-            self.fault_node = 0;
-            self.set_phase(Phase::Enable);
-            self.boot_start_ns = Some(now_ns);
         }
+    }
+
+    /// True while a stop is latched (e-stop, stale stop, fault).
+    pub fn is_latched(&self) -> bool {
+        matches!(self.phase, Phase::Stopped(_))
+    }
+
+    /// Leaves the latch with the safety monitor's reset ([`ResetGrant`], made only by
+    /// [`crate::reset::ResetGate`]): re-runs the enable sequence (holding the actual
+    /// positions) if every drive's heartbeat is fresh. False (nothing changed) when not latched
+    /// or a heartbeat is stale.
+    pub fn reset(&mut self, grant: ResetGrant, now_ns: u64) -> bool {
+        if !self.is_latched() || !self.heartbeats_fresh(now_ns) {
+            return false;
+        }
+        tracing::info!(epoch = grant.epoch(), "reset: re-enabling drives");
+        self.fault_code = fault_code::NONE;
+        self.fault_node = 0;
+        self.set_phase(Phase::Enable);
+        self.boot_start_ns = Some(now_ns);
+        true
     }
 
     fn heartbeats_fresh(&self, now_ns: u64) -> bool {

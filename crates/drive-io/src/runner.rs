@@ -3,6 +3,7 @@
 use crate::canopen::FrameBuf;
 use crate::config::DrivesConfig;
 use crate::master::Master;
+use crate::reset::{Ignored, ResetGate, is_reset_event};
 use crate::safety_watch::SafetyWatch;
 use can_transport::{CanBus, CanError};
 use crs_ipc::{
@@ -22,6 +23,24 @@ pub enum RunError {
 
 /// Frames handled at most between the tick and the cycle computation.
 const MAX_DRAIN_PER_CYCLE: usize = 512;
+
+/// How long the monitor's reset event may wait for the safety watch to verify its epoch on
+/// the bus (the watch needs `release_pairs` RUN pairs of the new epoch, 45 ms by default).
+const RESET_VERIFY_WINDOW_NS: u64 = 1_000_000_000;
+
+/// Logs an ignored reset, rate-limited (the 1st, 2nd, 4th, 8th, ... occurrence): a flood of
+/// forged events cannot flood the log or the loop.
+fn log_ignored(count: &mut u64, why: Ignored, source: u32) {
+    *count += 1;
+    if count.is_power_of_two() {
+        tracing::warn!(
+            ?why,
+            source,
+            ignored = *count,
+            "reset event IGNORED: only the safety monitor's verified reset epoch releases drive-io"
+        );
+    }
+}
 
 /// Summary returned when the loop ends.
 #[derive(Debug, Clone, Copy)]
@@ -102,7 +121,17 @@ pub fn run(
     let mut watch = cfg.safety_heartbeat.map(SafetyWatch::new);
     if let Some(w) = &watch {
         tracing::info!(config = ?w.config(), "validating the safety monitor's heartbeat");
+    } else {
+        tracing::warn!(
+            "no [safety_heartbeat]: resets are checked against the monitor's event only \
+             (source and epoch, not authenticated; bench setups only)"
+        );
     }
+    // Reset authority (issue 16): the latch is left only with the monitor's reset event whose
+    // epoch the watch verified on CAN, newer than the epoch in force.
+    let mut gate = ResetGate::new();
+    let mut pending_reset: Option<(StateEvent, u64)> = None;
+    let mut ignored_resets = 0u64;
     while !stop.load(Ordering::Relaxed) {
         // Wait for the tick, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
         let mut now = monotonic_ns();
@@ -153,6 +182,10 @@ pub fn run(
                 "safety heartbeat invalid or missing: e-stop"
             );
         }
+        gate.note(
+            watch.as_ref().and_then(SafetyWatch::verified_epoch),
+            master.is_latched(),
+        );
         while let Some(ev) = events.receive().unwrap_or_else(|e| {
             tracing::warn!(error = %e, "bad state event ignored");
             None
@@ -160,11 +193,40 @@ pub fn run(
             if ev.source == ProcessId::DriveIo as u32 {
                 continue;
             }
-            if !permit && ev.kind == EventKind::Reset as u32 {
-                tracing::warn!("reset refused: no valid safety heartbeat");
+            if is_reset_event(&ev) {
+                if ev.source == ProcessId::SafetyMonitor as u32 {
+                    pending_reset = Some((ev, cycle_now));
+                } else {
+                    log_ignored(&mut ignored_resets, Ignored::Source(ev.source), ev.source);
+                }
                 continue;
             }
             master.on_event(&ev, cycle_now);
+        }
+        if let Some((ev, t0)) = pending_reset {
+            let verdict = match &watch {
+                Some(w) => gate.check(&ev, w.verified_epoch()),
+                None => gate.check_unauthenticated(&ev),
+            };
+            match verdict {
+                Ok(grant) if master.reset(grant, cycle_now) => {
+                    gate.granted(grant);
+                    pending_reset = None;
+                }
+                Ok(_) if !master.is_latched() => pending_reset = None,
+                // Latched but a heartbeat is stale, or the watch has not verified the epoch
+                // yet: retry within the window.
+                Ok(_) | Err(Ignored::NotVerified { .. })
+                    if cycle_now.saturating_sub(t0) < RESET_VERIFY_WINDOW_NS => {}
+                Ok(_) => {
+                    tracing::warn!("reset not applied: a drive heartbeat is stale");
+                    pending_reset = None;
+                }
+                Err(why) => {
+                    log_ignored(&mut ignored_resets, why, ev.source);
+                    pending_reset = None;
+                }
+            }
         }
         if !permit && !grace && matches!(master.state(), BusState::Ready | BusState::Running) {
             let ev = StateEvent::new(ProcessId::DriveIo, EventKind::EStop, 0);

@@ -11,10 +11,19 @@
 //! * the counter repeats or jumps backwards / too far (a stuck or replaying producer);
 //! * the monitor says STOP (its latched e-stop).
 //!
-//! It starts inhibited (nothing received yet) and releases only after `release_pairs`
-//! consecutive valid RUN pairs with consecutive counters. Releasing never moves anything: a drive
-//! that was stopped stays in Quick Stop Active until the master re-enables it after an operator
-//! reset (see docs/safety-monitor.md).
+//! It starts inhibited (nothing received yet) and the FIRST release (power-on) needs
+//! `release_pairs` consecutive valid RUN pairs of one reset epoch. After it has permitted once,
+//! an inhibit is never left by itself (issue 16, no self-release): only `release_pairs`
+//! consecutive valid RUN pairs carrying a reset epoch NEWER than the one in force when it
+//! inhibited release it. The monitor advances its epoch only when its verification accepts an
+//! operator reset (ISO 13849-1 §5.2.2: a manual reset, not the return of a signal, ends a
+//! stop), or when it is restarted (its epoch starts at its wall clock in seconds). A replay of
+//! recorded heartbeats after the monitor died, or a second producer repeating its frames,
+//! carries an old epoch and releases nothing. While permitted, a pair with another epoch (a
+//! second producer) inhibits. Releasing never moves anything: a drive that was stopped stays in
+//! Quick Stop Active until the master re-enables it, and drive-io's master leaves its latch
+//! only with the monitor's reset of the epoch this watch verified ([`VerifiedEpoch`]; see
+//! docs/safety-monitor.md).
 //!
 //! Used by the drive side ([`crate::slave::DriveBank::enable_safety_watch`], the
 //! `winch-emulator`) and by drive-io's master loop ([`crate::runner`]) when `drives.toml` has a
@@ -22,12 +31,14 @@
 //! allocation.
 
 use can_transport::CanFrame;
-use can_transport::safety_frame::{DEFAULT_COB_ID, PairError, PairReceiver, SafetyState};
+use can_transport::safety_frame::{
+    DEFAULT_COB_ID, PairError, PairReceiver, SafetyState, epoch_newer,
+};
 use serde::Deserialize;
 
 /// Largest accepted counter step between consecutive valid pairs (a few lost frames are
 /// tolerated within the validation time; 0 = repeat and backwards steps are not).
-pub const MAX_COUNTER_STEP: u32 = 16;
+pub const MAX_COUNTER_STEP: u16 = 16;
 
 /// `[safety_heartbeat]` table of drives.toml. Absent = no watch (the default).
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
@@ -42,7 +53,8 @@ pub struct SafetyWatchConfig {
     /// Pair window (CiA 304 SRVT): the inverse must follow the normal frame within this (ms).
     #[serde(default = "d_window")]
     pub pair_window_ms: u32,
-    /// Consecutive valid RUN pairs needed to release an inhibit.
+    /// Consecutive valid RUN pairs (of one epoch, newer than the one in force at the inhibit
+    /// once the watch has permitted) needed to release an inhibit.
     #[serde(default = "d_release")]
     pub release_pairs: u32,
 }
@@ -104,9 +116,29 @@ pub enum InhibitReason {
     /// An invalid frame/pair on the safety COB-IDs.
     Invalid(PairError),
     /// The counter repeated, went backwards or jumped more than [`MAX_COUNTER_STEP`].
-    Counter { last: u32, got: u32 },
+    Counter { last: u16, got: u16 },
     /// The monitor commands STOP (cause code of its trip).
-    Stop { cause: u8, cable: u8 },
+    Stop { cause: u8 },
+    /// While permitted, a RUN pair carried another reset epoch than the one in force (a
+    /// second producer, or a reset the watch did not see the STOP of).
+    Epoch { in_force: u32, got: u32 },
+}
+
+/// A reset epoch read from a valid, complete RUN pair on the monitor's own COB-IDs while the
+/// watch permits: the only authenticated statement of "the monitor accepted reset number N"
+/// on this side of the bus. It has no public constructor; only [`SafetyWatch::verified_epoch`]
+/// makes one (type-state for drive-io's reset authority, issue 16).
+///
+/// ```compile_fail
+/// let forged = drive_io::safety_watch::VerifiedEpoch(7);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VerifiedEpoch(u32);
+
+impl VerifiedEpoch {
+    pub fn get(self) -> u32 {
+        self.0
+    }
 }
 
 /// Watch state.
@@ -127,8 +159,12 @@ pub struct SafetyWatch {
     last_valid_ns: u64,
     /// First time the watch was asked (start of the start-up grace), 0 = not yet.
     started_ns: u64,
-    last_counter: Option<u32>,
+    last_counter: Option<u16>,
     consecutive: u32,
+    /// Epoch of the consecutive RUN pairs being counted towards a release.
+    candidate: Option<u32>,
+    /// Epoch in force: of the pairs that released the watch last (None = never permitted).
+    epoch: Option<u32>,
     /// Time of the last Permit -> Inhibit transition (0 = never).
     tripped_ns: u64,
     trips: u64,
@@ -147,6 +183,8 @@ impl SafetyWatch {
             started_ns: 0,
             last_counter: None,
             consecutive: 0,
+            candidate: None,
+            epoch: None,
             tripped_ns: 0,
             trips: 0,
             unreported: None,
@@ -171,6 +209,21 @@ impl SafetyWatch {
         self.tripped_ns
     }
 
+    /// The epoch in force (that of the pairs the watch last released on), None before the
+    /// first release.
+    pub fn epoch_in_force(&self) -> Option<u32> {
+        self.epoch
+    }
+
+    /// The monitor's reset epoch, only while the watch permits (valid RUN pairs of that epoch
+    /// keep arriving): see [`VerifiedEpoch`].
+    pub fn verified_epoch(&self) -> Option<VerifiedEpoch> {
+        match (self.state, self.epoch) {
+            (WatchState::Permit, Some(e)) => Some(VerifiedEpoch(e)),
+            _ => None,
+        }
+    }
+
     /// The last trip (reason, time) once, for logging outside the hot path.
     pub fn take_trip(&mut self) -> Option<(InhibitReason, u64)> {
         self.unreported.take()
@@ -191,6 +244,7 @@ impl SafetyWatch {
             WatchState::Inhibit(_) => {}
         }
         self.consecutive = 0;
+        self.candidate = None;
     }
 
     /// Feeds one received frame (frames on other ids are ignored cheaply). Returns the new
@@ -227,28 +281,45 @@ impl SafetyWatch {
                 self.last_counter = Some(msg.counter);
                 match msg.state {
                     SafetyState::Stop => {
-                        self.inhibit(
-                            InhibitReason::Stop {
-                                cause: msg.cause,
-                                cable: msg.cable,
-                            },
-                            now_ns,
-                        );
+                        self.inhibit(InhibitReason::Stop { cause: msg.cause }, now_ns);
                         // A STOP pair is valid: it refreshes nothing that permits motion.
                     }
-                    SafetyState::Run => {
-                        self.last_valid_ns = now_ns;
-                        self.consecutive = self.consecutive.saturating_add(1);
-                        if self.state != WatchState::Permit
-                            && self.consecutive >= self.cfg.release_pairs
-                        {
-                            self.state = WatchState::Permit;
-                        }
-                    }
+                    SafetyState::Run => self.on_run(msg.epoch, now_ns),
                 }
             }
         }
         self.state
+    }
+
+    fn on_run(&mut self, epoch: u32, now_ns: u64) {
+        if self.state == WatchState::Permit {
+            if self.epoch == Some(epoch) {
+                self.last_valid_ns = now_ns;
+            } else {
+                let in_force = self.epoch.unwrap_or(0);
+                self.inhibit(
+                    InhibitReason::Epoch {
+                        in_force,
+                        got: epoch,
+                    },
+                    now_ns,
+                );
+            }
+            return;
+        }
+        if self.candidate != Some(epoch) {
+            self.candidate = Some(epoch);
+            self.consecutive = 0;
+        }
+        self.consecutive = self.consecutive.saturating_add(1);
+        // No self-release (issue 16): once permitted, only a newer epoch (an accepted operator
+        // reset, or a restarted monitor) may end an inhibit; the first release is the power-on.
+        let may_release = self.epoch.is_none_or(|e| epoch_newer(epoch, e));
+        if may_release && self.consecutive >= self.cfg.release_pairs {
+            self.state = WatchState::Permit;
+            self.epoch = Some(epoch);
+            self.last_valid_ns = now_ns;
+        }
     }
 
     /// True while nothing has ever been valid and less than the validation time has passed
@@ -278,26 +349,40 @@ impl SafetyWatch {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use can_transport::safety_frame::{NO_CABLE, SafetyHeartbeat, encode};
+    use can_transport::safety_frame::{SafetyHeartbeat, encode};
 
     const MS: u64 = 1_000_000;
 
-    fn pair(counter: u32, state: SafetyState) -> [CanFrame; 2] {
+    fn pair_e(counter: u16, state: SafetyState, epoch: u32) -> [CanFrame; 2] {
         encode(
             &SafetyHeartbeat {
                 state,
                 cause: if state == SafetyState::Stop { 1 } else { 0 },
                 counter,
-                cable: NO_CABLE,
+                epoch,
             },
             DEFAULT_COB_ID,
         )
     }
 
-    fn feed(w: &mut SafetyWatch, counter: u32, state: SafetyState, t: u64) -> WatchState {
-        let [a, b] = pair(counter, state);
+    fn pair(counter: u16, state: SafetyState) -> [CanFrame; 2] {
+        pair_e(counter, state, 1)
+    }
+
+    fn feed_e(
+        w: &mut SafetyWatch,
+        counter: u16,
+        state: SafetyState,
+        epoch: u32,
+        t: u64,
+    ) -> WatchState {
+        let [a, b] = pair_e(counter, state, epoch);
         w.on_frame(&a, t);
         w.on_frame(&b, t + 10_000)
+    }
+
+    fn feed(w: &mut SafetyWatch, counter: u16, state: SafetyState, t: u64) -> WatchState {
+        feed_e(w, counter, state, 1, t)
     }
 
     #[test]
@@ -382,24 +467,68 @@ mod tests {
             w.state(),
             WatchState::Inhibit(InhibitReason::Counter { last: 12, got: 12 })
         );
-        // Recovers only after release_pairs consecutive valid RUN pairs.
-        for k in 13..16 {
+        // No self-release: valid RUN pairs of the same epoch do not end the inhibit...
+        for k in 13..23 {
             feed(&mut w, k, SafetyState::Run, (k as u64 + 10) * MS);
         }
-        assert!(w.permits(26 * MS));
-        feed(&mut w, 16, SafetyState::Stop, 27 * MS);
-        assert!(!w.permits(27 * MS));
+        assert!(!w.permits(33 * MS));
+        assert!(w.verified_epoch().is_none());
+        // ... only release_pairs pairs of a NEWER epoch (an accepted reset) do.
+        for k in 23..25 {
+            feed_e(&mut w, k, SafetyState::Run, 2, (k as u64 + 10) * MS);
+        }
+        assert!(!w.permits(35 * MS));
+        feed_e(&mut w, 25, SafetyState::Run, 2, 35 * MS);
+        assert!(w.permits(36 * MS));
+        assert_eq!(w.verified_epoch().map(VerifiedEpoch::get), Some(2));
+        feed_e(&mut w, 26, SafetyState::Stop, 2, 37 * MS);
+        assert!(!w.permits(37 * MS));
         assert!(matches!(
             w.state(),
-            WatchState::Inhibit(InhibitReason::Stop { cause: 1, .. })
+            WatchState::Inhibit(InhibitReason::Stop { cause: 1 })
         ));
-        // STOP pairs keep it inhibited; RUN pairs release it again.
-        feed(&mut w, 17, SafetyState::Stop, 28 * MS);
-        assert!(!w.permits(28 * MS));
-        for k in 18..21 {
-            feed(&mut w, k, SafetyState::Run, (k as u64 + 20) * MS);
+        // STOP pairs keep it inhibited; RUN pairs of the same epoch too; a newer epoch releases.
+        feed_e(&mut w, 27, SafetyState::Stop, 2, 38 * MS);
+        for k in 28..31 {
+            feed_e(&mut w, k, SafetyState::Run, 2, (k as u64 + 20) * MS);
         }
-        assert!(w.permits(41 * MS));
+        assert!(!w.permits(51 * MS));
+        for k in 31..34 {
+            feed_e(&mut w, k, SafetyState::Run, 3, (k as u64 + 20) * MS);
+        }
+        assert!(w.permits(54 * MS));
+        // While permitted, a pair of another epoch (a second producer) inhibits.
+        feed_e(&mut w, 34, SafetyState::Run, 4, 55 * MS);
+        assert_eq!(
+            w.state(),
+            WatchState::Inhibit(InhibitReason::Epoch {
+                in_force: 3,
+                got: 4
+            })
+        );
+    }
+
+    /// A replay of recorded heartbeats after the monitor died (counter continued, same epoch)
+    /// never releases; neither does an older epoch or a mix of epochs.
+    #[test]
+    fn replay_after_monitor_death_stays_inhibited() {
+        let mut w = SafetyWatch::new(SafetyWatchConfig::default());
+        for k in 0..5u16 {
+            feed_e(&mut w, k, SafetyState::Run, 9, u64::from(k) * 15 * MS);
+        }
+        assert!(w.permits(70 * MS));
+        // The monitor dies: timeout.
+        assert!(!w.permits(200 * MS));
+        for k in 5..200u16 {
+            let t = 200 * MS + u64::from(k) * 15 * MS;
+            feed_e(&mut w, k, SafetyState::Run, 9, t);
+            assert!(!w.permits(t + MS));
+        }
+        for k in 200..300u16 {
+            let t = 200 * MS + u64::from(k) * 15 * MS;
+            feed_e(&mut w, k, SafetyState::Run, 9 - u32::from(k % 3), t);
+            assert!(!w.permits(t + MS));
+        }
     }
 
     #[test]
@@ -444,7 +573,7 @@ mod tests {
             assert_eq!(bank.demand(i), MotionDemand::Hold);
         }
         // Valid heartbeats: the watch releases, now the master can enable.
-        for k in 0..3u32 {
+        for k in 0..3u16 {
             for f in pair(k, SafetyState::Run) {
                 bank.handle_frame(&f, (2 + u64::from(k)) * MS);
             }
@@ -483,10 +612,25 @@ mod tests {
             bank.slave(1).unwrap().ds402_state(),
             Ds402State::QuickStopActive
         );
-        // Heartbeats back: released, but the drives stay stopped until the master enables.
-        for k in 10..13u32 {
+        // The same epoch back (a replay, or the monitor's frames resuming without a reset):
+        // no self-release.
+        for k in 10..13u16 {
             for f in pair(k, SafetyState::Run) {
                 bank.handle_frame(&f, (60 + u64::from(k)) * MS);
+            }
+        }
+        for node in [1, 2] {
+            bank.handle_frame(&rpdo1(node, CW_ENABLE_OPERATION, 0), 74 * MS);
+        }
+        assert_eq!(
+            bank.slave(1).unwrap().ds402_state(),
+            Ds402State::QuickStopActive
+        );
+        // A newer epoch (the monitor accepted a reset): released, but the drives stay stopped
+        // until the master enables.
+        for k in 13..16u16 {
+            for f in pair_e(k, SafetyState::Run, 2) {
+                bank.handle_frame(&f, (62 + u64::from(k)) * MS);
             }
         }
         assert_eq!(
@@ -494,11 +638,93 @@ mod tests {
             Ds402State::QuickStopActive
         );
         for node in [1, 2] {
-            bank.handle_frame(&rpdo1(node, CW_ENABLE_OPERATION, 0), 80 * MS);
+            bank.handle_frame(&rpdo1(node, CW_ENABLE_OPERATION, 0), 78 * MS);
         }
         assert_eq!(
             bank.slave(0).unwrap().ds402_state(),
             Ds402State::OperationEnabled
         );
+    }
+
+    mod props {
+        use super::*;
+        use proptest::prelude::*;
+
+        #[derive(Debug, Clone)]
+        enum Ev {
+            /// A valid pair: counter step, RUN?, epoch delta from the current producer epoch.
+            Pair {
+                step: u16,
+                run: bool,
+                epoch_delta: i8,
+            },
+            /// A corrupted pair.
+            Corrupt,
+            /// Time passes without frames (ms).
+            Silence(u16),
+        }
+
+        fn ev() -> impl Strategy<Value = Ev> {
+            prop_oneof![
+                8 => (0u16..20, any::<bool>(), -2i8..=2).prop_map(|(step, run, epoch_delta)| Ev::Pair { step, run, epoch_delta }),
+                1 => Just(Ev::Corrupt),
+                1 => (0u16..200).prop_map(Ev::Silence),
+            ]
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(2000))]
+            /// The watch's invariants over random heartbeat streams: it permits only after a valid
+            /// RUN pair within the validation time; once it has permitted, every release from an
+            /// inhibit is on an epoch newer than the one in force before (no self-release); the
+            /// verified epoch is the epoch of the pairs it permits on.
+            #[test]
+            fn never_self_releases(events in proptest::collection::vec(ev(), 0..200)) {
+                let cfg = SafetyWatchConfig::default();
+                let mut w = SafetyWatch::new(cfg);
+                let (mut t, mut counter, mut epoch) = (0u64, 0u16, 100u32);
+                let mut last_valid: Option<u64> = None;
+                for e in events {
+                    let before = w.state();
+                    let epoch_before = w.epoch_in_force();
+                    match e {
+                        Ev::Pair { step, run, epoch_delta } => {
+                            counter = counter.wrapping_add(step);
+                            let ep = epoch.wrapping_add_signed(i32::from(epoch_delta));
+                            if epoch_delta > 0 { epoch = ep; }
+                            let st = if run { SafetyState::Run } else { SafetyState::Stop };
+                            feed_e(&mut w, counter, st, ep, t);
+                            if run { last_valid = Some(t + 10_000); }
+                        }
+                        Ev::Corrupt => {
+                            let [a, b] = pair_e(counter, SafetyState::Run, epoch);
+                            let mut d = [0u8; 8];
+                            d.copy_from_slice(b.data());
+                            d[0] ^= 1;
+                            w.on_frame(&a, t);
+                            w.on_frame(&CanFrame::new(b.id() as u16, &d).unwrap(), t + 10_000);
+                        }
+                        Ev::Silence(ms) => t += u64::from(ms) * MS,
+                    }
+                    t += 15 * MS;
+                    let permits = w.permits(t);
+                    if permits {
+                        // A valid RUN pair within the validation time.
+                        let lv = last_valid.expect("permit without any RUN pair");
+                        prop_assert!(t.saturating_sub(lv) <= 50 * MS);
+                        let v = w.verified_epoch().expect("permit without a verified epoch");
+                        prop_assert_eq!(Some(v.get()), w.epoch_in_force());
+                        if before != WatchState::Permit && let Some(old) = epoch_before {
+                            prop_assert!(
+                                epoch_newer(v.get(), old),
+                                "released from {:?} on epoch {} (in force {})", before, v.get(), old
+                            );
+                        }
+                    } else {
+                        prop_assert!(w.verified_epoch().is_none());
+                    }
+                }
+            }
+        }
     }
 }

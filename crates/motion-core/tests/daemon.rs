@@ -11,7 +11,8 @@ use motion_core::daemon::outbox::{
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::trajectory::{self, PlannerLimits, Waypoint};
 use motion_core::daemon::{
-    Command, CommandSource, HardLoop, LoopState, ResetAuthority, SetpointSink, config, lifecycle,
+    Command, CommandSource, HardLoop, LoopState, ResetAuthority, ResetGate, ResetIgnored,
+    SetpointSink, config, lifecycle,
 };
 use nalgebra::Vector3;
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -49,14 +50,17 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-/// A reset minted the one way there is: from a reset event.
+/// A reset minted the one way there is: the gate, from the monitor's reset event.
 fn reset() -> ResetAuthority {
-    let ev = crs_ipc::StateEvent::new(
+    let mut ev = crs_ipc::StateEvent::new(
         crs_ipc::ProcessId::SafetyMonitor,
         crs_ipc::EventKind::Reset,
         1,
     );
-    ResetAuthority::from_event(&ev).expect("a reset event carries a reset")
+    ev.detail = 1;
+    ResetGate::new()
+        .check(&ev)
+        .expect("the monitor's reset event carries a reset")
 }
 
 fn limits() -> PlannerLimits {
@@ -538,7 +542,11 @@ fn only_a_reset_event_mints_a_reset_and_other_commands_do_not_clear_the_latch() 
         crs_ipc::EventKind::Fault,
     ] {
         let ev = crs_ipc::StateEvent::new(crs_ipc::ProcessId::SafetyMonitor, kind, 1);
-        assert_eq!(ResetAuthority::from_event(&ev), None, "{kind:?}");
+        assert_eq!(
+            ResetGate::new().check(&ev),
+            Err(ResetIgnored::NotAReset),
+            "{kind:?}"
+        );
     }
     let mut foreign = crs_ipc::StateEvent::new(
         crs_ipc::ProcessId::SafetyMonitor,
@@ -547,10 +555,42 @@ fn only_a_reset_event_mints_a_reset_and_other_commands_do_not_clear_the_latch() 
     );
     foreign.version = crs_ipc::CONTRACT_VERSION + 1;
     assert_eq!(
-        ResetAuthority::from_event(&foreign),
-        None,
+        ResetGate::new().check(&foreign),
+        Err(ResetIgnored::NotAReset),
         "other contract version"
     );
+    // Issue 16: only the safety monitor's reset, and only with a newer epoch.
+    let mut gate = ResetGate::new();
+    for src in [
+        crs_ipc::ProcessId::Operator,
+        crs_ipc::ProcessId::DriveIo,
+        crs_ipc::ProcessId::MotionCore,
+        crs_ipc::ProcessId::Test,
+    ] {
+        let mut ev = crs_ipc::StateEvent::new(src, crs_ipc::EventKind::Reset, 1);
+        ev.detail = 5;
+        assert_eq!(gate.check(&ev), Err(ResetIgnored::Source(src as u32)));
+    }
+    let mut ev = crs_ipc::StateEvent::new(
+        crs_ipc::ProcessId::SafetyMonitor,
+        crs_ipc::EventKind::Reset,
+        1,
+    );
+    ev.detail = 5;
+    assert!(gate.check(&ev).is_ok());
+    // The same event again (a replay), or an older epoch: ignored.
+    assert_eq!(
+        gate.check(&ev),
+        Err(ResetIgnored::NotNewer { epoch: 5, last: 5 })
+    );
+    ev.detail = 4;
+    assert_eq!(
+        gate.check(&ev),
+        Err(ResetIgnored::NotNewer { epoch: 4, last: 5 })
+    );
+    ev.detail = 6;
+    assert!(gate.check(&ev).is_ok());
+    assert_eq!(gate.last_epoch(), Some(6));
     let mut hl = setup(tour());
     let mut sink = Ring(vec![JointSetpoint::default(); 1], 0);
     let stats = LoopStats::default();

@@ -118,7 +118,7 @@ fn bench(c: &mut Criterion) {
     }
 
     let mut rx = PairReceiver::new(safety_frame::DEFAULT_COB_ID, 10_000_000);
-    let mut counter = 0u32;
+    let mut counter = 0u16;
     c.bench_function("safety_pair_encode_decode", |b| {
         b.iter(|| {
             counter = counter.wrapping_add(1);
@@ -127,7 +127,7 @@ fn bench(c: &mut Criterion) {
                     state: SafetyState::Run,
                     cause: 0,
                     counter,
-                    cable: safety_frame::NO_CABLE,
+                    epoch: 1,
                 },
                 safety_frame::DEFAULT_COB_ID,
             );

@@ -15,10 +15,14 @@
 //! Reset protocol (operator CLI `safety-monitor reset`): a `StateEvent { source: Operator,
 //! kind: StateChanged, state: RESET_REQUEST }`; the monitor answers with `StateEvent { source:
 //! SafetyMonitor, kind: StateChanged, detail: RESET_ACCEPTED | RESET_REFUSED |
-//! RESET_NOT_TRIPPED, detail_node: persisting cause, sequence: the request's }`. When accepted it
-//! sends NMT start to all drives, RUN heartbeats, and once every drive reports operational (and
-//! the drives' watches had [`RESET_MIN_RUN_CYCLES`] RUN pairs to release) publishes
-//! `StateEvent { kind: Reset }`, which releases motion-core and drive-io.
+//! RESET_NOT_TRIPPED, detail_node: persisting cause, sequence: the request's }`. When accepted
+//! (every latched cause shown cleared, issue 16) the reset epoch advances; the monitor sends NMT
+//! start to all drives, RUN heartbeats carrying the new epoch, and once every drive reports
+//! operational (and the drives' watches had [`RESET_MIN_RUN_CYCLES`] RUN pairs of the new epoch
+//! to release) publishes `StateEvent { kind: Reset, detail: epoch }`, which releases motion-core
+//! and drive-io (drive-io only if its watch verified that epoch on CAN). A request while armed
+//! changes nothing (no NMT start, no Reset event). A Reset event from any other process is
+//! ignored and logged (rate-limited); while tripped the e-stop is re-asserted.
 
 use crate::bus_frames::{self, Observed};
 use crate::bus_watch::{ReaderHealth, ReaderWatch};
@@ -67,6 +71,52 @@ pub fn is_fresh(now_ns: u64, event_ns: u64) -> bool {
 /// RUN heartbeats sent after an accepted reset before the Reset event (the drives' and
 /// drive-io's watches need `release_pairs` (default 3) consecutive RUN pairs to release).
 pub const RESET_MIN_RUN_CYCLES: u32 = 4;
+/// The initial reset epoch of this monitor instance: CLOCK_REALTIME in seconds, so a restarted
+/// monitor's epoch is newer than its previous run's (watches that inhibited when the old one
+/// died may then release — a restart is an operator/systemd action; drive-io and motion-core
+/// still stay latched until an accepted reset). Failure modes (clock set back, more than one
+/// reset per second in the previous run) only keep the drives inhibited.
+pub fn initial_reset_epoch() -> u32 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs() as u32)
+        .unwrap_or(1)
+}
+
+/// The monitor's own recently published state events (kind, sequence, detail): a received
+/// event that claims the monitor's source but is not among them was published by another
+/// process (iceoryx2 0.10 does not authenticate publishers; whatever of its own events the
+/// monitor's subscriber delivers back matches). The monitor publishes a few events per reset
+/// or trip, so 32 cover far more than one cycle's worth.
+#[derive(Debug, Default)]
+pub struct OwnEvents {
+    ring: [(u32, u64, u32); 32],
+    len: usize,
+    next: usize,
+}
+
+impl OwnEvents {
+    pub fn record(&mut self, ev: &StateEvent) {
+        self.ring[self.next] = (ev.kind, ev.sequence, ev.detail);
+        self.next = (self.next + 1) % self.ring.len();
+        self.len = (self.len + 1).min(self.ring.len());
+    }
+
+    pub fn contains(&self, ev: &StateEvent) -> bool {
+        self.ring[..self.len].contains(&(ev.kind, ev.sequence, ev.detail))
+    }
+}
+
+/// Publishes one of the monitor's own events and remembers it ([`OwnEvents`]).
+fn publish_own(
+    publisher: &crs_ipc::TopicPublisher<StateEvent>,
+    own: &mut OwnEvents,
+    ev: &StateEvent,
+) -> Result<(), IpcError> {
+    own.record(ev);
+    publisher.publish(ev)
+}
+
 /// Bus observations buffered between two cycles.
 const OBS_QUEUE: usize = 8192;
 
@@ -234,7 +284,8 @@ pub fn run(
 ) -> Result<Summary, DaemonError> {
     let identity = platform_identity(&cfg.platform);
     let kin = StandardKinematics::new(&cfg.platform);
-    let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity);
+    let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity)
+        .with_reset_epoch(initial_reset_epoch());
     let m = cfg.platform.cables();
     let winches = cfg.winches.clone();
     let cob = cfg.can.safety_cob_id;
@@ -278,11 +329,16 @@ pub fn run(
         dq_limit_mm = cfg.monitor.dq_limit_mm,
         transport = %transport,
         safety_cob_id = format_args!("{cob:#05x}"),
+        reset_epoch = monitor.reset_epoch(),
         "safety monitor started"
     );
 
     let mut sum = Summary::default();
-    let mut counter: u32 = 0;
+    let mut counter: u16 = 0;
+    let mut ignored_resets: u64 = 0;
+    let mut own = OwnEvents::default();
+    let mut forged: u64 = 0;
+    let started_ns = monotonic_ns();
     let mut event_seq: u64 = 0;
     let mut last_target = [None::<i32>; MAX_CABLES];
     let mut drive_state = [0u8; MAX_CABLES];
@@ -323,6 +379,28 @@ pub fn run(
             None
         }) {
             let fresh = is_fresh(now, ev.timestamp_ns);
+            if ev.source == ProcessId::SafetyMonitor as u32 {
+                // Our own events come back through our subscriber; anything else claiming our
+                // source (stamped after this monitor started, also in its future: older ones
+                // are a previous instance's history) is a second publisher impersonating the
+                // monitor.
+                if ev.timestamp_ns >= started_ns && !own.contains(&ev) {
+                    forged += 1;
+                    if forged.is_power_of_two() {
+                        tracing::error!(
+                            kind = ev.kind,
+                            sequence = ev.sequence,
+                            detail = ev.detail,
+                            forged,
+                            "an event claiming the monitor's source that it did not publish: \
+                             forged, e-stop"
+                        );
+                    }
+                    monitor.on_forged_event(ev.kind);
+                    foreign_reset |= ev.kind == EventKind::Reset as u32;
+                }
+                continue;
+            }
             if ev.source == ProcessId::Operator as u32
                 && ev.kind == EventKind::StateChanged as u32
                 && ev.state == RESET_REQUEST
@@ -336,11 +414,29 @@ pub fn run(
             {
                 tracing::info!("motion-core announced the end of its setpoint stream");
                 monitor.on_stream_end();
+            } else if ev.kind == EventKind::EStop as u32
+                && ev.source != ProcessId::SafetyMonitor as u32
+                && fresh
+            {
+                // Anyone may stop; the monitor latches it so that only its verified reset ends
+                // the stop in motion-core and drive-io (issue 16).
+                tracing::warn!(source = ev.source, "e-stop from another process: latched");
+                monitor.on_estop_event(ev.source);
             } else if ev.kind == EventKind::Reset as u32
                 && ev.source != ProcessId::SafetyMonitor as u32
                 && fresh
             {
+                // Only this monitor mints resets (issue 16): anyone else's is ignored, logged
+                // (rate-limited) and, while tripped, answered with the e-stop again.
                 foreign_reset = true;
+                ignored_resets += 1;
+                if ignored_resets.is_power_of_two() {
+                    tracing::warn!(
+                        source = ev.source,
+                        ignored = ignored_resets,
+                        "a Reset event from another process IGNORED: only the monitor resets"
+                    );
+                }
             }
         }
         if let Err(e) = setpoints.drain(|sp| monitor.on_setpoint(sp)) {
@@ -370,7 +466,11 @@ pub fn run(
                     if let Some(i) = node_index(node) {
                         drive_state[i] = state;
                         drive_state_ns[i] = o.rx_ns;
-                        monitor.on_drive_state(i, state == bus_frames::NMT_STATE_OPERATIONAL);
+                        monitor.on_drive_report(
+                            i,
+                            state == bus_frames::NMT_STATE_OPERATIONAL,
+                            o.rx_ns,
+                        );
                     }
                 }
                 Observed::Force { node, force_mn } => {
@@ -420,7 +520,7 @@ pub fn run(
             resetting = None;
             event_seq += 1;
             let ev = estop_event(&rec, event_seq);
-            if let Err(e) = event_pub.publish(&ev) {
+            if let Err(e) = publish_own(&event_pub, &mut own, &ev) {
                 tracing::error!(error = %e, "publishing the e-stop failed");
             }
             let _ = wakeup.notify();
@@ -438,7 +538,7 @@ pub fn run(
             if foreign_reset && let Some(rec) = monitor.trip() {
                 event_seq += 1;
                 let ev = estop_event(rec, event_seq);
-                let _ = event_pub.publish(&ev);
+                let _ = publish_own(&event_pub, &mut own, &ev);
                 let _ = wakeup.notify();
                 tracing::warn!("a Reset from another process while tripped: e-stop re-asserted");
             }
@@ -447,7 +547,7 @@ pub fn run(
         if let Some(req) = reset_request {
             let decision = monitor.request_reset();
             let (detail, cause) = match decision {
-                ResetDecision::Accepted => (RESET_ACCEPTED, 0),
+                ResetDecision::Accepted { .. } => (RESET_ACCEPTED, 0),
                 ResetDecision::NotTripped => (RESET_NOT_TRIPPED, 0),
                 ResetDecision::Refused(c) => (RESET_REFUSED, u32::from(c.code())),
                 ResetDecision::NotReady => (RESET_NOT_READY, 0),
@@ -456,16 +556,24 @@ pub fn run(
             ev.state = monitor.state().code();
             ev.detail = detail;
             ev.detail_node = cause;
-            let _ = event_pub.publish(&ev);
+            let _ = publish_own(&event_pub, &mut own, &ev);
             match decision {
                 ResetDecision::Refused(c) => {
-                    tracing::warn!(cause = %c, "reset REFUSED: the cause persists")
+                    tracing::warn!(cause = %c, "reset REFUSED: the cause persists or is not shown cleared")
                 }
                 ResetDecision::NotReady => {
                     tracing::warn!(?readiness, "reset REFUSED: not ready yet")
                 }
-                ResetDecision::Accepted | ResetDecision::NotTripped => {
-                    tracing::info!(?decision, "reset accepted: NMT start, releasing the stack");
+                // Armed: nothing is latched here, so nothing changes anywhere (issue 16: no NMT
+                // start, no Reset event that would clear latches the monitor never evaluated).
+                ResetDecision::NotTripped => {
+                    tracing::info!("reset request while armed: nothing to reset, nothing changed")
+                }
+                ResetDecision::Accepted { epoch } => {
+                    tracing::info!(
+                        epoch,
+                        "reset ACCEPTED: new reset epoch, NMT start, releasing the stack"
+                    );
                     send(
                         tx.as_mut(),
                         &bus_frames::nmt(bus_frames::NMT_START, 0),
@@ -488,8 +596,11 @@ pub fn run(
                     );
                 }
                 event_seq += 1;
-                let ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, event_seq);
-                let _ = event_pub.publish(&ev);
+                let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, event_seq);
+                // The epoch this reset minted; drive-io acts on it only once its watch has
+                // verified the same epoch in the doubled heartbeat on CAN.
+                ev.detail = monitor.reset_epoch();
+                let _ = publish_own(&event_pub, &mut own, &ev);
                 resetting = None;
             }
         }
@@ -588,6 +699,30 @@ pub fn request_reset(ipc: &IpcNode, timeout: Duration) -> Result<ResetReply, Dae
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn own_events_are_recognised_and_others_are_not() {
+        let mut own = OwnEvents::default();
+        let mut mine = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, 7);
+        mine.detail = 42;
+        own.record(&mine);
+        assert!(own.contains(&mine));
+        let mut forged = mine;
+        forged.detail = 43;
+        assert!(!own.contains(&forged));
+        forged = mine;
+        forged.sequence = 8;
+        assert!(!own.contains(&forged));
+        // The ring keeps the last 32.
+        for k in 100..132 {
+            own.record(&StateEvent::new(
+                ProcessId::SafetyMonitor,
+                EventKind::EStop,
+                k,
+            ));
+        }
+        assert!(!own.contains(&mine));
+    }
 
     #[test]
     fn events_from_the_future_or_too_old_are_not_fresh() {

@@ -19,14 +19,20 @@
 //! farther than the limit from φ*(x) of every recent setpoint.
 //!
 //! The first fault latches [`MonitorState::Tripped`] and is logged ([`TripLog`]); the checks keep
-//! running while tripped, and [`Monitor::request_reset`] is refused until no fault was seen for
-//! `reset_clear_cycles` consecutive cycles.
+//! running while tripped, and every cause seen while tripped is latched too (per-cause latches).
+//! [`Monitor::request_reset`] (the operator's manual reset, ISO 13849-1 §5.2.2) is accepted
+//! only when no fault was seen for `reset_clear_cycles` consecutive cycles AND every latched
+//! cause was POSITIVELY shown cleared for as many cycles (see [`evidence`]): absence of a fault
+//! is not enough for causes that cannot recur while stopped. Only the acceptance mints a
+//! [`authority::ResetToken`], the one value that leaves the latch, and advances the reset
+//! epoch carried in the safety heartbeat (drives and drive-io leave their inhibit/latch only on
+//! a newer epoch).
 
 use crate::config::MonitorConfig;
 use crate::kinematics::StandardKinematics;
 use crate::platform::WorkspaceBox;
 use crate::trip::{Cause, CauseSet, Fault, TripLog, TripRecord};
-use can_transport::safety_frame::{NO_CABLE, SafetyHeartbeat, SafetyState};
+use can_transport::safety_frame::{SafetyHeartbeat, SafetyState};
 use crs_ipc::{
     BusState, CONTRACT_VERSION, DriveFeedback, JointSetpoint, MAX_CABLES, PlatformIdentity,
 };
@@ -251,15 +257,118 @@ impl Readiness {
 /// Answer to a reset request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ResetDecision {
-    /// Nothing was latched.
+    /// Nothing was latched: nothing changes anywhere (no epoch, no NMT start, no Reset event).
     NotTripped,
-    /// The latch is released.
-    Accepted,
-    /// Refused: this cause was seen within the last `reset_clear_cycles` cycles.
+    /// The latch is released; the reset epoch advanced to this value.
+    Accepted { epoch: u32 },
+    /// Refused: this cause was seen, or not positively shown cleared, within the last
+    /// `reset_clear_cycles` cycles.
     Refused(Cause),
     /// Nothing to reset: the monitor has not verified its start-up conditions yet.
     NotReady,
 }
+
+/// The reset authority (issue 16, type-state): the latch of [`Monitor`] is left only with a
+/// [`authority::ResetToken`], and the only code that can make one is [`authority::verify`],
+/// the monitor's check of the per-cause evidence. Minting a token advances the reset epoch.
+pub mod authority {
+    use super::{Cause, CauseSet};
+    use can_transport::safety_frame::epoch_newer;
+
+    /// Proof that the monitor's verification accepted an operator reset; carries the new
+    /// epoch. No public constructor (private field), not `Clone`: used once.
+    ///
+    /// ```compile_fail
+    /// let forged = safety_monitor::monitor::authority::ResetToken { epoch: 1 };
+    /// ```
+    #[derive(Debug, PartialEq, Eq)]
+    pub struct ResetToken {
+        epoch: u32,
+    }
+
+    impl ResetToken {
+        pub fn epoch(&self) -> u32 {
+            self.epoch
+        }
+    }
+
+    /// Per-cause evidence streaks (cycles in a row a latched cause was positively shown
+    /// cleared), indexed by cause code.
+    pub type Streaks = [u16; 32];
+
+    /// Accepts the reset if no fault was seen for `need` cycles (`clean`) and every latched
+    /// cause was shown cleared for `need` cycles; then advances `epoch` and mints the token.
+    /// Otherwise the cause that blocks it.
+    pub(super) fn verify(
+        latched: CauseSet,
+        streaks: &Streaks,
+        clean: u32,
+        need: u32,
+        epoch: &mut u32,
+    ) -> Result<ResetToken, Cause> {
+        if let Some(c) = latched
+            .iter()
+            .find(|c| u32::from(streaks[usize::from(c.code())]) < need)
+        {
+            return Err(c);
+        }
+        if clean < need {
+            return Err(latched.first().unwrap_or(Cause::IpcError));
+        }
+        let next = epoch.wrapping_add(1);
+        debug_assert!(epoch_newer(next, *epoch));
+        *epoch = next;
+        Ok(ResetToken { epoch: next })
+    }
+}
+
+/// Which causes this cycle's inputs POSITIVELY show cleared (not merely absent), for the
+/// per-cause reset evidence (issue 16). Evaluated while tripped (drives NMT-stopped and
+/// braked, motion-core holding):
+/// * setpoint stream causes (Δq, NaN, box, cable count, sequence, gaps, silence, motion):
+///   setpoints arrived this cycle and all passed, or the stream is ended (no producer);
+/// * identity: the announced identity is verified, or the stream is ended (a new stream must
+///   announce it before its grace);
+/// * drive-io causes (following error, feedback silence/unchecked, RPDO mismatch): drive-io's
+///   feedback arrived this cycle and every measured length is finite and within the
+///   following-error bound of the newest (held) setpoint;
+/// * force causes: every drive reported its NMT state within the last second and the
+///   readings of the operational ones are finite and within [f_min − margin, f_max + margin]
+///   this cycle (drives NMT-stopped send no forces: their forces are checked again, within the
+///   filter time, after the NMT start that follows an accepted reset);
+/// * process-bus and bus-observation causes: this cycle's receives and the reader's batches
+///   completed without error; an e-stop event of another process: it is a one-shot command,
+///   acknowledged by the operator's reset itself (the stop it caused is verified through the
+///   other classes' evidence).
+pub mod evidence {
+    use super::Cause;
+
+    pub fn class(c: Cause) -> Class {
+        use Cause::*;
+        match c {
+            DqLimit | NonFinite | OutsideWorkspace | SequenceGaps | SetpointSilence
+            | CableCount | SequenceRegression | MotionVelocity | MotionAcceleration => {
+                Class::Stream
+            }
+            IdentityMismatch | IdentityMissing => Class::Identity,
+            FollowingError | FeedbackSilence | RpdoMismatch | FollowingUnchecked => Class::Feedback,
+            ForceSlack | ForceOverload | ForceSilence => Class::Forces,
+            IpcError | BusObservation | EStopEvent | ForgedEvent => Class::Receive,
+        }
+    }
+
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum Class {
+        Stream,
+        Identity,
+        Feedback,
+        Forces,
+        Receive,
+    }
+}
+
+/// A drive's heartbeat older than this is not evidence of a reporting drive (ns).
+const DRIVE_REPORT_MAX_AGE_NS: u64 = 1_000_000_000;
 
 /// Running statistics (for the heartbeat, logs and the bench).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -295,6 +404,17 @@ pub struct Monitor {
     // Across cycles.
     last_faults: CauseSet,
     clear_streak: u32,
+    /// Every cause seen since the trip (per-cause latches) and their evidence streaks.
+    latched: CauseSet,
+    evidence: authority::Streaks,
+    /// The reset epoch (heartbeat bytes 4..8): advanced only by [`authority::verify`].
+    epoch: u32,
+    /// This cycle's evidence inputs: drive-io feedback following the held setpoint, force
+    /// readings out of range, drives' last NMT report (receive clock).
+    fb_following: bool,
+    fb_not_following: bool,
+    force_out_of_range: bool,
+    drive_report_ns: [u64; MAX_CABLES],
     last_sequence: Option<u64>,
     seen_setpoint: bool,
     silent_cycles: u32,
@@ -347,6 +467,13 @@ impl Monitor {
             feedback_count: 0,
             last_faults: CauseSet::default(),
             clear_streak: 0,
+            latched: CauseSet::default(),
+            evidence: [0; 32],
+            epoch: 0,
+            fb_following: false,
+            fb_not_following: false,
+            force_out_of_range: false,
+            drive_report_ns: [0; MAX_CABLES],
             last_sequence: None,
             seen_setpoint: false,
             silent_cycles: 0,
@@ -369,6 +496,25 @@ impl Monitor {
             prev_pose: None,
             cycle_ref: None,
         }
+    }
+
+    /// Sets the initial reset epoch (construction only). The daemon starts from its wall clock
+    /// in seconds, so a restarted monitor's epoch is newer than the last one of its previous
+    /// run (unless that run accepted more than one reset per second on average: then the
+    /// watches stay inhibited until enough resets, which fails safe).
+    pub fn with_reset_epoch(mut self, epoch: u32) -> Self {
+        self.epoch = epoch;
+        self
+    }
+
+    /// The current reset epoch.
+    pub fn reset_epoch(&self) -> u32 {
+        self.epoch
+    }
+
+    /// The causes latched since the trip (empty while not tripped).
+    pub fn latched(&self) -> CauseSet {
+        self.latched
     }
 
     pub fn state(&self) -> MonitorState {
@@ -397,33 +543,18 @@ impl Monitor {
         self.identity_state == IdentityState::Verified
     }
 
-    /// The safety heartbeat to send this cycle.
-    pub fn heartbeat(&self, counter: u32) -> SafetyHeartbeat {
-        match (self.state, &self.trip) {
-            (MonitorState::Tripped, Some(t)) => SafetyHeartbeat {
-                state: SafetyState::Stop,
-                cause: t.fault.cause.code(),
-                counter,
-                cable: t.fault.cable.unwrap_or(NO_CABLE),
-            },
-            (MonitorState::Tripped, None) => SafetyHeartbeat {
-                state: SafetyState::Stop,
-                cause: 0,
-                counter,
-                cable: NO_CABLE,
-            },
-            (MonitorState::NotReady, _) => SafetyHeartbeat {
-                state: SafetyState::Stop,
-                cause: 0,
-                counter,
-                cable: NO_CABLE,
-            },
-            (MonitorState::Armed, _) => SafetyHeartbeat {
-                state: SafetyState::Run,
-                cause: 0,
-                counter,
-                cable: NO_CABLE,
-            },
+    /// The safety heartbeat to send this cycle (`counter` +1 per pair sent).
+    pub fn heartbeat(&self, counter: u16) -> SafetyHeartbeat {
+        let (state, cause) = match (self.state, &self.trip) {
+            (MonitorState::Tripped, Some(t)) => (SafetyState::Stop, t.fault.cause.code()),
+            (MonitorState::Tripped | MonitorState::NotReady, _) => (SafetyState::Stop, 0),
+            (MonitorState::Armed, _) => (SafetyState::Run, 0),
+        };
+        SafetyHeartbeat {
+            state,
+            cause,
+            counter,
+            epoch: self.epoch,
         }
     }
 
@@ -440,6 +571,23 @@ impl Monitor {
     /// re-arms them. A frozen or killed producer cannot announce, so it still trips.
     pub fn on_stream_end(&mut self) {
         self.stream_end = true;
+    }
+
+    /// Another process published an e-stop (operator console, e-stop input): latched like
+    /// every fault, so only the monitor's verified reset ends the stop everywhere.
+    pub fn on_estop_event(&mut self, source: u32) {
+        self.fault(Fault {
+            value: f64::from(source),
+            ..Fault::new(Cause::EStopEvent)
+        });
+    }
+
+    /// A state event claiming the monitor's source that this monitor did not publish.
+    pub fn on_forged_event(&mut self, kind: u32) {
+        self.fault(Fault {
+            value: f64::from(kind),
+            ..Fault::new(Cause::ForgedEvent)
+        });
     }
 
     /// A process-bus failure (receive error, foreign contract version).
@@ -635,6 +783,9 @@ impl Monitor {
         self.feedback_count += 1;
         self.seen_feedback = true;
         self.stats.feedback_checked += 1;
+        if self.state == MonitorState::Tripped {
+            self.reset_evidence_feedback(fb);
+        }
         if !self.lim.check_following_error
             || BusState::from_u32(fb.bus_state) != Some(BusState::Running)
         {
@@ -692,6 +843,22 @@ impl Monitor {
         self.fb_checked += 1;
     }
 
+    /// Reset evidence: drive-io's measured lengths follow the newest (held) setpoint.
+    fn reset_evidence_feedback(&mut self, fb: &DriveFeedback) {
+        let m = self.m;
+        let newest = self.recent().next().map(|e| e.q_cmd);
+        let ok = fb.cable_count as usize == m
+            && fb.cable_length_m[..m].iter().enumerate().all(|(i, l)| {
+                l.is_finite()
+                    && newest.is_none_or(|q| within((l - q[i]).abs(), self.lim.following_error_m))
+            });
+        if ok {
+            self.fb_following = true;
+        } else {
+            self.fb_not_following = true;
+        }
+    }
+
     /// The monitor's own bus observation failed (dead or stalled reader thread, receive
     /// errors, dropped observations): the checks that read the bus would run blind.
     pub fn on_bus_observation_failed(&mut self, value: f64) {
@@ -738,6 +905,15 @@ impl Monitor {
     /// NMT state of the drive of `cable` (from its heartbeat): only operational drives send
     /// PDOs, so only their forces are supervised and their silence counted.
     pub fn on_drive_state(&mut self, cable: usize, operational: bool) {
+        self.on_drive_report(cable, operational, 0);
+    }
+
+    /// As [`Monitor::on_drive_state`], with the receive time of the heartbeat (reset evidence:
+    /// the drive is reporting).
+    pub fn on_drive_report(&mut self, cable: usize, operational: bool, rx_ns: u64) {
+        if let Some(t) = self.drive_report_ns.get_mut(cable) {
+            *t = rx_ns;
+        }
         if let Some(w) = self.force.get_mut(cable) {
             if !operational {
                 *w = ForceWatch::default();
@@ -767,8 +943,12 @@ impl Monitor {
             ..Fault::new(cause)
         };
         if !force_n.is_finite() {
+            self.force_out_of_range = true;
             self.fault(at(Cause::ForceSilence, f64::NAN));
             return;
+        }
+        if force_n < fl.slack_below_n || force_n > fl.overload_above_n {
+            self.force_out_of_range = true;
         }
         let mut fault = None;
         if force_n < fl.slack_below_n {
@@ -902,6 +1082,9 @@ impl Monitor {
         }
         let mut new_trip = None;
         let mut became_ready = false;
+        if self.state == MonitorState::Tripped {
+            self.update_evidence(now_ns, &readiness);
+        }
         if let Some(first) = self.first {
             self.clear_streak = 0;
             if self.state != MonitorState::Tripped {
@@ -914,6 +1097,8 @@ impl Monitor {
                 self.trip = Some(rec);
                 self.log.push(rec);
                 new_trip = Some(rec);
+                self.latched = self.faults;
+                self.evidence = [0; 32];
             }
         } else {
             self.clear_streak = self.clear_streak.saturating_add(1);
@@ -947,7 +1132,42 @@ impl Monitor {
         self.new_setpoints = 0;
         self.missing = 0;
         self.feedback_count = 0;
+        self.fb_following = false;
+        self.fb_not_following = false;
+        self.force_out_of_range = false;
         report
+    }
+
+    /// While tripped: latch this cycle's causes and advance / reset each latched cause's
+    /// evidence streak (see [`evidence`]).
+    fn update_evidence(&mut self, now_ns: u64, readiness: &Readiness) {
+        use evidence::Class;
+        for c in self.faults.iter() {
+            self.latched.insert(c);
+        }
+        let stream_ended = !self.seen_setpoint;
+        let stream_clean = self.new_setpoints > 0;
+        let identity_ok = self.identity_state == IdentityState::Verified
+            || (stream_ended && self.identity_state != IdentityState::Mismatch);
+        let feedback_ok = self.fb_following && !self.fb_not_following;
+        let reporting = self.drive_report_ns[..self.m]
+            .iter()
+            .all(|&t| t > 0 && now_ns.saturating_sub(t) <= DRIVE_REPORT_MAX_AGE_NS);
+        let operational = !0u32 >> (32 - self.m.max(1) as u32) & !readiness.not_operational;
+        let forces_ok =
+            reporting && !self.force_out_of_range && (operational & readiness.no_feedback) == 0;
+        for c in self.latched.iter() {
+            let shown = !self.faults.contains(c)
+                && match evidence::class(c) {
+                    Class::Stream => stream_ended || stream_clean,
+                    Class::Identity => identity_ok,
+                    Class::Feedback => feedback_ok,
+                    Class::Forces => forces_ok,
+                    Class::Receive => true,
+                };
+            let s = &mut self.evidence[usize::from(c.code())];
+            *s = if shown { s.saturating_add(1) } else { 0 };
+        }
     }
 
     /// The start-up conditions as of the readings of the current cycle (call before
@@ -970,22 +1190,46 @@ impl Monitor {
         }
     }
 
-    /// Operator reset: accepted only if no fault was seen for `reset_clear_cycles` cycles.
+    /// Operator reset (ISO 13849-1 §5.2.2 manual reset): accepted only if no fault was seen for
+    /// `reset_clear_cycles` cycles and every latched cause was positively shown cleared for as
+    /// many cycles ([`authority::verify`]). Accepting advances the reset epoch. While armed or
+    /// not ready nothing changes.
     pub fn request_reset(&mut self) -> ResetDecision {
         match self.state {
             MonitorState::NotReady => ResetDecision::NotReady,
             MonitorState::Armed => ResetDecision::NotTripped,
-            MonitorState::Tripped if self.clear_streak >= self.lim.reset_clear_cycles => {
-                self.state = MonitorState::Armed;
-                self.trip = None;
-                ResetDecision::Accepted
+            MonitorState::Tripped => {
+                let need = self.lim.reset_clear_cycles;
+                match authority::verify(
+                    self.latched,
+                    &self.evidence,
+                    self.clear_streak,
+                    need,
+                    &mut self.epoch,
+                ) {
+                    Ok(token) => {
+                        let epoch = token.epoch();
+                        self.release(token);
+                        ResetDecision::Accepted { epoch }
+                    }
+                    Err(c) => ResetDecision::Refused(
+                        self.last_faults
+                            .first()
+                            .or(Some(c))
+                            .or(self.trip.map(|t| t.fault.cause))
+                            .unwrap_or(Cause::IpcError),
+                    ),
+                }
             }
-            MonitorState::Tripped => ResetDecision::Refused(
-                self.last_faults
-                    .first()
-                    .or(self.trip.map(|t| t.fault.cause))
-                    .unwrap_or(Cause::IpcError),
-            ),
         }
+    }
+
+    /// Leaves the latch: the only transition out of [`MonitorState::Tripped`], and it needs the
+    /// token only [`authority::verify`] mints.
+    fn release(&mut self, _token: authority::ResetToken) {
+        self.state = MonitorState::Armed;
+        self.trip = None;
+        self.latched.clear();
+        self.evidence = [0; 32];
     }
 }

@@ -55,10 +55,18 @@ pub enum Cause {
     /// errors, or observations dropped (queue overflow) — RPDO, heartbeat and force checks
     /// would run blind.
     BusObservation = 20,
+    /// Another process (the operator console's stop button, an e-stop input) published an
+    /// e-stop. The monitor latches it too, so that the stop it caused in motion-core and
+    /// drive-io ends only with the monitor's verified reset (ISO 13849-1 §5.2.2; issue 16).
+    EStopEvent = 21,
+    /// A state event claiming the monitor's own source that this monitor did not publish (a
+    /// second publisher impersonating the monitor, e.g. a forged Reset): the process bus can
+    /// no longer be trusted (issue 16).
+    ForgedEvent = 22,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 20] = [
+    pub const ALL: [Cause; 22] = [
         Cause::DqLimit,
         Cause::NonFinite,
         Cause::OutsideWorkspace,
@@ -79,6 +87,8 @@ impl Cause {
         Cause::MotionAcceleration,
         Cause::FollowingUnchecked,
         Cause::BusObservation,
+        Cause::EStopEvent,
+        Cause::ForgedEvent,
     ];
 
     pub fn code(self) -> u8 {
@@ -114,6 +124,8 @@ impl Cause {
             Cause::MotionAcceleration => "motion_acceleration",
             Cause::FollowingUnchecked => "following_unchecked",
             Cause::BusObservation => "bus_observation",
+            Cause::EStopEvent => "estop_event",
+            Cause::ForgedEvent => "forged_event",
         }
     }
 

@@ -390,7 +390,11 @@ fn reset_is_refused_while_the_cause_persists_and_accepted_after() {
         assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
     }
     seq = good_cycle(&mut m, seq, 0);
-    assert_eq!(m.request_reset(), ResetDecision::Accepted);
+    let e0 = m.reset_epoch();
+    assert_eq!(m.heartbeat(1).epoch, e0);
+    assert_eq!(m.request_reset(), ResetDecision::Accepted { epoch: e0 + 1 });
+    assert_eq!(m.reset_epoch(), e0 + 1);
+    assert_eq!(m.heartbeat(2).epoch, e0 + 1);
     assert_eq!(m.state(), MonitorState::Armed);
     assert!(m.trip().is_none());
     good_cycle(&mut m, seq, 0);
@@ -417,7 +421,127 @@ fn the_latch_holds_the_first_cause_and_logs_every_trip() {
     let hb = m.heartbeat(3);
     assert_eq!(hb.state, can_transport::safety_frame::SafetyState::Stop);
     assert_eq!(hb.cause, Cause::DqLimit.code());
-    assert_eq!(hb.cable, 5);
+    // Per-cause latches: both causes stay latched.
+    assert!(m.latched().contains(Cause::DqLimit));
+    assert!(m.latched().contains(Cause::NonFinite));
+}
+
+/// Issue 16: a reset request while armed (or not ready) changes nothing, not even the epoch;
+/// refused requests do not advance it; only an accepted one does, by exactly one.
+#[test]
+fn only_an_accepted_reset_advances_the_epoch() {
+    let mut m = monitor().with_reset_epoch(41);
+    let mut seq = good_cycle(&mut m, 1, 0);
+    for _ in 0..5 {
+        assert_eq!(m.request_reset(), ResetDecision::NotTripped);
+    }
+    assert_eq!(m.reset_epoch(), 41);
+    assert_eq!(m.heartbeat(0).epoch, 41);
+    let mut s = sp(seq, HOME, 0, 0.0);
+    s.pose[0] = f64::NAN;
+    m.on_setpoint(&s);
+    seq += 1;
+    m.end_cycle(0);
+    for _ in 0..3 {
+        assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+    }
+    assert_eq!(m.reset_epoch(), 41);
+    for _ in 0..3 {
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    assert_eq!(m.request_reset(), ResetDecision::Accepted { epoch: 42 });
+    assert_eq!(m.request_reset(), ResetDecision::NotTripped);
+    assert_eq!(m.reset_epoch(), 42);
+    // Not ready: nothing either.
+    let c = cfg();
+    let mut n = Monitor::new(
+        Limits::from_config(c),
+        StandardKinematics::new(&c.platform),
+        platform_identity(&c.platform),
+    )
+    .with_reset_epoch(7);
+    assert_eq!(n.request_reset(), ResetDecision::NotReady);
+    assert_eq!(n.reset_epoch(), 7);
+}
+
+/// Issue 16: clean cycles are not enough for a cause that cannot recur while stopped: a
+/// following-error latch needs drive-io's feedback following the held setpoint, a feedback
+/// silence needs feedback back; a force latch needs every drive reporting.
+#[test]
+fn a_latched_cause_must_be_positively_shown_cleared() {
+    let mut m = monitor();
+    let mut seq = good_cycle(&mut m, 1, 0);
+    let q = sp(10, HOME, 0, 0.0).cable_length_m;
+    let mut meas = q[..8].to_vec();
+    meas[3] += 0.15;
+    m.on_feedback(&feedback(10, &meas));
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    seq += 1;
+    assert_eq!(
+        m.end_cycle(0).new_trip.map(|t| t.fault.cause),
+        Some(Cause::FollowingError)
+    );
+    // drive-io silent after the trip (it is e-stopped, its lengths unknown): clean cycles for
+    // the setpoint checks, but no evidence for the following error. (feedback_silence latches
+    // too after its count.)
+    for _ in 0..10 {
+        seq = good_cycle(&mut m, seq, 0);
+        assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+    }
+    assert!(m.latched().contains(Cause::FeedbackSilence));
+    // Feedback back, but its lengths do not follow the held setpoint: still refused.
+    for _ in 0..5 {
+        let mut fb = feedback(seq - 1, &meas);
+        fb.bus_state = BusState::EStop as u32;
+        m.on_feedback(&fb);
+        seq = good_cycle(&mut m, seq, 0);
+        assert_eq!(
+            m.request_reset(),
+            ResetDecision::Refused(Cause::FollowingError)
+        );
+    }
+    // Feedback following the held setpoint for reset_clear_cycles (3) cycles: accepted.
+    for k in 0..3 {
+        let mut fb = feedback(seq - 1, &q[..8]);
+        fb.bus_state = BusState::EStop as u32;
+        m.on_feedback(&fb);
+        seq = good_cycle(&mut m, seq, 0);
+        if k < 2 {
+            assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+        }
+    }
+    assert!(matches!(m.request_reset(), ResetDecision::Accepted { .. }));
+
+    // A force latch: drives that stopped reporting give no evidence.
+    let mut m = monitor();
+    let (mut seq, _) = force_cycle(&mut m, 1, 0, 0, 4000.0);
+    let (s2, r) = force_cycle(&mut m, seq, 15 * MS, 2, 20_000.0);
+    seq = s2;
+    assert_eq!(
+        r.new_trip.map(|t| t.fault.cause),
+        Some(Cause::ForceOverload)
+    );
+    let mut t = 30 * MS;
+    // NMT-stopped drives, but cable 8's drive stopped reporting (its last word: operational,
+    // so its force silence latches too): refused for 100 clean-looking cycles.
+    for _ in 0..100 {
+        for i in 0..7 {
+            m.on_drive_report(i, false, t);
+        }
+        seq = good_cycle(&mut m, seq, t);
+        t += 15 * MS;
+        assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+    }
+    assert!(m.latched().contains(Cause::ForceOverload));
+    assert!(m.latched().contains(Cause::ForceSilence));
+    for _ in 0..3 {
+        for i in 0..8 {
+            m.on_drive_report(i, false, t);
+        }
+        seq = good_cycle(&mut m, seq, t);
+        t += 15 * MS;
+    }
+    assert!(matches!(m.request_reset(), ResetDecision::Accepted { .. }));
 }
 
 #[test]
@@ -1108,5 +1232,78 @@ fn settings_beyond_their_bounds_are_refused_by_name() {
         }
         let e = load_with(section, key, too_big).expect_err(&full);
         assert!(e.contains(&full), "{full} = {too_big}: {e}");
+    }
+}
+
+/// An e-stop published by another process (the console's stop button) latches the monitor, so
+/// the stop it caused in motion-core and drive-io ends only with the monitor's reset.
+#[test]
+fn an_estop_event_of_another_process_latches_until_the_reset() {
+    let mut m = monitor();
+    let mut seq = good_cycle(&mut m, 1, 0);
+    m.on_estop_event(crs_ipc::ProcessId::Operator as u32);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    seq += 1;
+    let t = m.end_cycle(0).new_trip.expect("e-stop event");
+    assert_eq!(t.fault.cause, Cause::EStopEvent);
+    assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+    for _ in 0..3 {
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    assert!(matches!(m.request_reset(), ResetDecision::Accepted { .. }));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+    /// The reset authority over random sequences of clean cycles, faulty cycles and reset
+    /// requests: the epoch changes only with an accepted reset, by exactly one; a reset is
+    /// accepted only while tripped and only after `reset_clear_cycles` clean cycles with
+    /// evidence since the last fault; a request while armed changes nothing.
+    #[test]
+    fn the_epoch_advances_only_with_an_accepted_reset(ops in proptest::collection::vec(0u8..4, 1..40)) {
+        let mut m = monitor().with_reset_epoch(1000);
+        let mut seq = 1;
+        let mut clean_since_fault = u32::MAX;
+        for op in ops {
+            let before = (m.state(), m.reset_epoch());
+            match op {
+                0 | 1 => {
+                    seq = good_cycle(&mut m, seq, 0);
+                    clean_since_fault = clean_since_fault.saturating_add(1);
+                }
+                2 => {
+                    let mut s = sp(seq, HOME, 0, 0.0);
+                    s.pose[1] = f64::NAN;
+                    m.on_setpoint(&s);
+                    seq += 1;
+                    m.end_cycle(0);
+                    clean_since_fault = 0;
+                }
+                _ => {
+                    let d = m.request_reset();
+                    match d {
+                        ResetDecision::Accepted { epoch } => {
+                            prop_assert_eq!(before.0, MonitorState::Tripped);
+                            prop_assert!(clean_since_fault >= 3);
+                            prop_assert_eq!(epoch, before.1 + 1);
+                            prop_assert_eq!(m.reset_epoch(), epoch);
+                            prop_assert_eq!(m.state(), MonitorState::Armed);
+                            prop_assert_eq!(m.heartbeat(0).epoch, epoch);
+                        }
+                        ResetDecision::NotTripped => {
+                            prop_assert_eq!(before.0, MonitorState::Armed);
+                            prop_assert_eq!((m.state(), m.reset_epoch()), before);
+                        }
+                        _ => {
+                            prop_assert_eq!((m.state(), m.reset_epoch()), before);
+                            prop_assert!(before.0 == MonitorState::Tripped && clean_since_fault < 3);
+                        }
+                    }
+                    continue;
+                }
+            }
+            // Cycles never change the epoch.
+            prop_assert_eq!(m.reset_epoch(), before.1);
+        }
     }
 }

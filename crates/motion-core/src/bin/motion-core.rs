@@ -11,12 +11,13 @@ use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::trajectory::{self, Waypoint};
 use motion_core::daemon::{
-    self, Command, CommandSource, LoopState, ResetAuthority, config, lifecycle, outbox, realtime,
+    self, Command, CommandSource, LoopState, ResetGate, ResetIgnored, config, lifecycle, outbox,
+    realtime,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::time::Duration;
 
 #[derive(Parser, Debug)]
@@ -126,17 +127,29 @@ impl StagePorts for IoxPorts {
     }
 }
 
-/// E-stop / reset events from any process (the safety monitor, the operator CLI, drive-io).
-struct IoxCommands(TopicSubscriber<StateEvent>);
+/// Reset events the gate ignored (forged source, epoch not newer), and the source of the last
+/// one: counted in the 1 ms loop (no allocation, no logging there), logged by the reporter
+/// thread at most once per tick.
+static IGNORED_RESETS: AtomicU64 = AtomicU64::new(0);
+static IGNORED_RESET_SOURCE: AtomicU32 = AtomicU32::new(0);
+
+/// E-stop events from any process (anyone may stop); resets only through the [`ResetGate`]
+/// (the safety monitor's, with a newer reset epoch; issue 16).
+struct IoxCommands(TopicSubscriber<StateEvent>, ResetGate);
 impl CommandSource for IoxCommands {
     #[inline]
     fn poll(&mut self) -> Option<Command> {
         loop {
             match self.0.receive() {
                 Ok(Some(ev)) if ev.kind == EventKind::EStop as u32 => return Some(Command::EStop),
-                Ok(Some(ev)) => match ResetAuthority::from_event(&ev) {
-                    Some(r) => return Some(Command::Reset(r)),
-                    None => continue,
+                Ok(Some(ev)) => match self.1.check(&ev) {
+                    Ok(r) => return Some(Command::Reset(r)),
+                    Err(ResetIgnored::NotAReset) => continue,
+                    Err(_) => {
+                        IGNORED_RESETS.fetch_add(1, Ordering::Relaxed);
+                        IGNORED_RESET_SOURCE.store(ev.source, Ordering::Relaxed);
+                        continue;
+                    }
                 },
                 _ => return None,
             }
@@ -345,7 +358,7 @@ fn run(args: Args) -> Result<(), String> {
         tracing::info!("reference input: motion-cueing stream (crs/v1/cueing_pose)");
     }
     let mut sink = OutboxSink(&outbox);
-    let mut cmds = IoxCommands(commands);
+    let mut cmds = IoxCommands(commands, ResetGate::new());
     let mut plan_done_at: Option<u64> = None;
     let exit_after = args.exit_after_plan_s.map(|s| (s * 1e9) as u64);
     daemon::run_timed(
@@ -401,10 +414,21 @@ fn report_loop(
 ) {
     let tick = Duration::from_millis(100);
     let mut last_cycles = 0;
+    let mut ignored_logged = 0u64;
     let mut since = Duration::ZERO;
     while !STOP.load(Ordering::Relaxed) {
         std::thread::sleep(tick);
         since += tick;
+        let ignored = IGNORED_RESETS.load(Ordering::Relaxed);
+        if ignored != ignored_logged {
+            ignored_logged = ignored;
+            tracing::warn!(
+                ignored,
+                last_source = IGNORED_RESET_SOURCE.load(Ordering::Relaxed),
+                "reset event(s) IGNORED: only the safety monitor's reset with a newer epoch \
+                 releases the loop"
+            );
+        }
         let cycles = stats.cycles.load(Ordering::Relaxed);
         // Watchdog only while the loop makes progress: a frozen loop lets systemd kill us.
         if cycles > last_cycles {

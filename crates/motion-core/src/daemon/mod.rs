@@ -36,17 +36,73 @@ pub enum Command {
 }
 
 /// The right to clear the loop's latch (e-stop or refused reference). It has no public
-/// constructor: [`ResetAuthority::from_event`] is the single place that decides which events
-/// may reset the loop (today any `EventKind::Reset` event, from the monitor, the operator CLI
-/// or drive-io; issue 16 narrows this to the monitor's verified reset here and only here).
+/// constructor: [`ResetGate::check`] is the single place that decides which events may reset
+/// the loop (issue 16: only the safety monitor's reset, with a reset epoch newer than the last
+/// one this loop accepted).
+///
+/// ```compile_fail
+/// let forged = motion_core::daemon::ResetAuthority(());
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ResetAuthority(());
 
-impl ResetAuthority {
-    /// The reset a state event carries, if it is one. Strict: only a well-formed reset event of
-    /// this contract version (an e-stop, by contrast, is honoured on its kind code alone).
-    pub fn from_event(ev: &crs_ipc::StateEvent) -> Option<Self> {
-        matches!(ev.decode(), Ok(crs_ipc::Event::Reset { .. })).then_some(Self(()))
+/// Why a state event did not yield a [`ResetAuthority`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ResetIgnored {
+    /// Not a well-formed reset event of this contract version.
+    NotAReset,
+    /// A reset event from another process than the safety monitor (raw source code).
+    Source(u32),
+    /// The monitor's reset epoch (`detail`) does not advance past the last one accepted: a
+    /// replay, or a copy of an old event.
+    NotNewer { epoch: u32, last: u32 },
+}
+
+/// motion-core's reset gate (ISO 13849-1 §5.2.2: only the safety function's manual reset ends
+/// a stop). Accepts only `StateEvent { kind: Reset, source: SafetyMonitor, detail: epoch }`
+/// whose epoch is newer (serial-number order) than the last accepted one.
+///
+/// What this does NOT authenticate: iceoryx2 0.10 does not tell a subscriber which process
+/// published a sample, and `source` is self-declared, so a local process that forges the
+/// monitor's source with a newer epoch passes here (see docs/safety-monitor.md, threat model).
+/// The loop's release alone moves nothing: it holds its position, and the drives stay braked
+/// until drive-io leaves its latch, which needs the same epoch verified in the monitor's
+/// doubled heartbeat on CAN.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ResetGate {
+    last_epoch: Option<u32>,
+}
+
+impl ResetGate {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The last accepted epoch.
+    pub fn last_epoch(&self) -> Option<u32> {
+        self.last_epoch
+    }
+
+    /// The reset a state event carries, if it is the monitor's and advances the epoch. Strict:
+    /// only a well-formed reset event of this contract version (an e-stop, by contrast, is
+    /// honoured on its kind code alone). Allocation-free (called in the 1 ms loop).
+    pub fn check(&mut self, ev: &crs_ipc::StateEvent) -> Result<ResetAuthority, ResetIgnored> {
+        match ev.decode() {
+            Ok(crs_ipc::Event::Reset {
+                source: crs_ipc::ProcessId::SafetyMonitor,
+            }) => {}
+            Ok(crs_ipc::Event::Reset { .. }) => return Err(ResetIgnored::Source(ev.source)),
+            _ => return Err(ResetIgnored::NotAReset),
+        }
+        let epoch = ev.detail;
+        if let Some(last) = self.last_epoch {
+            let d = epoch.wrapping_sub(last);
+            if d == 0 || d >= 0x8000_0000 {
+                return Err(ResetIgnored::NotNewer { epoch, last });
+            }
+        }
+        self.last_epoch = Some(epoch);
+        Ok(ResetAuthority(()))
     }
 }
 

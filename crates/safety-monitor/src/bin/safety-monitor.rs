@@ -78,7 +78,7 @@ fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
                     Ok(ExitCode::SUCCESS)
                 }
                 ResetReply::NotTripped => {
-                    println!("reset accepted: nothing was latched (stack released)");
+                    println!("reset not needed: nothing was latched, nothing changed");
                     Ok(ExitCode::SUCCESS)
                 }
                 ResetReply::NotReady => {
