@@ -104,7 +104,7 @@ fn frame_seeds(_: &Path) -> Vec<Vec<u8>> {
         state: SafetyState::Run,
         cause: 0,
         counter: 7,
-        cable: safety_frame::NO_CABLE,
+        epoch: 1,
     };
     let mut v: Vec<CanFrame> = vec![
         co::nmt(1, 0),
@@ -383,8 +383,8 @@ fn watch_seed() -> Vec<u8> {
         let hb = SafetyHeartbeat {
             state: SafetyState::Run,
             cause: 0,
-            counter: c,
-            cable: safety_frame::NO_CABLE,
+            counter: c as u16,
+            epoch: 1,
         };
         let [n, i] = safety_frame::encode(&hb, safety_frame::DEFAULT_COB_ID);
         v.push(15);
