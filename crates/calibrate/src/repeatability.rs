@@ -187,8 +187,14 @@ pub fn assess(
         }
         _ => None,
     };
-    let bootstrap = (rc.bootstrap > 0)
-        .then(|| bootstrap(nominal, train, holdout, cfg, rep, rc, &mut rng, progress));
+    let run = Run {
+        nominal,
+        train,
+        holdout,
+        cfg,
+        rep,
+    };
+    let bootstrap = (rc.bootstrap > 0).then(|| bootstrap(&run, rc.bootstrap, &mut rng, progress));
     Repeatability {
         config: *rc,
         multi_start,
@@ -240,17 +246,28 @@ fn second_run(
     }
 }
 
-#[allow(clippy::too_many_arguments)]
+/// The pipeline run under test: its inputs and its report.
+struct Run<'a> {
+    nominal: &'a Model,
+    train: &'a [Observation],
+    holdout: &'a [Observation],
+    cfg: &'a PipelineConfig,
+    rep: &'a PipelineReport,
+}
+
 fn bootstrap(
-    nominal: &Model,
-    train: &[Observation],
-    holdout: &[Observation],
-    cfg: &PipelineConfig,
-    rep: &PipelineReport,
-    rc: &RepeatabilityConfig,
+    run: &Run,
+    resamples: usize,
     rng: &mut Rng,
     progress: &mut dyn FnMut(&str, usize),
 ) -> Bootstrap {
+    let Run {
+        nominal,
+        train,
+        holdout,
+        cfg,
+        rep,
+    } = *run;
     let mut poses: Vec<u64> = train.iter().map(|o| o.pose_index).collect();
     poses.dedup();
     poses.sort_unstable();
@@ -264,7 +281,7 @@ fn bootstrap(
         |c: &[Effect]| c.len() == main_effects.len() && c.iter().all(|e| main_effects.contains(e));
     let main_fit = rep.final_stage().fit.as_ref();
     let mut out = Bootstrap {
-        runs: rc.bootstrap,
+        runs: resamples,
         failed: 0,
         same_effects: 0,
         effect_counts: Effect::ALL.iter().map(|e| (*e, 0)).collect(),
@@ -276,7 +293,7 @@ fn bootstrap(
     let mut anchors: Vec<Vec<Vector3<f64>>> = Vec::new();
     let mut quiet = cfg.clone();
     quiet.cartesian = false;
-    for b in 0..rc.bootstrap {
+    for b in 0..resamples {
         progress("bootstrap", b);
         let mut sample = Vec::with_capacity(train.len());
         for _ in 0..poses.len() {

@@ -7,7 +7,7 @@ use sha2::{Digest, Sha256};
 /// Smallest number of cables for a fully constrained spatial robot with n = 6 (m ≥ n + 1).
 pub const MIN_CABLES: usize = 7;
 /// Largest number of cables the fixed-capacity IPC payloads carry.
-pub const MAX_CABLES: usize = 16;
+pub use crs_limits::MAX_CABLES;
 
 /// Pulley parameters of eq. (2.18): radius r_p and swivel axis u_Az per cable.
 ///

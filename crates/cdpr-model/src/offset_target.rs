@@ -11,8 +11,18 @@
 //! −f_ref,i q_i / k_F per cable: tens of mm on the CRS, inside the 100 mm bound (eq. 5.27).
 
 use crate::config::Region;
-use crate::statics::{self, ForceDistribution};
+use crate::kinematics::KinematicsError;
+use crate::statics::{self, ForceDistribution, StaticsError};
 use crate::{Data, Model, Pose, elastostatics, kinematics};
+
+/// Why q_off(x) or f_ref(x) could not be evaluated at a pose.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum OffsetTargetError {
+    #[error("inverse kinematics: {0}")]
+    Kinematics(#[from] KinematicsError),
+    #[error("force distribution (eq. 3.41): {0}")]
+    Statics(#[from] StaticsError),
+}
 
 /// Evaluates q_off(x) and f_ref(x) for one model. Preallocated; `offset` does not allocate.
 pub struct OffsetTarget {
@@ -38,20 +48,26 @@ impl OffsetTarget {
     }
 
     /// f_ref(x) (eq. 3.41) with its feasibility verdict (eq. 3.29).
-    pub fn reference_forces(&mut self, pose: &Pose) -> Result<(&[f64], ForceDistribution), String> {
-        kinematics::inverse(&self.model, &mut self.data, pose).map_err(|e| e.to_string())?;
+    pub fn reference_forces(
+        &mut self,
+        pose: &Pose,
+    ) -> Result<(&[f64], ForceDistribution), OffsetTargetError> {
+        kinematics::inverse(&self.model, &mut self.data, pose)?;
         let p = self.model.params();
-        let fd = statics::force_distribution(&self.data, &p.w_e, p.f_min, p.f_max, &mut self.f_ref)
-            .map_err(|e| e.to_string())?;
+        let fd =
+            statics::force_distribution(&self.data, &p.w_e, p.f_min, p.f_max, &mut self.f_ref)?;
         Ok((&self.f_ref, fd))
     }
 
     /// q_off(x) = φ_el(x, f_ref(x)) − φ(x), m per cable, into `out` (length m).
-    pub fn offset(&mut self, pose: &Pose, out: &mut [f64]) -> Result<ForceDistribution, String> {
+    pub fn offset(
+        &mut self,
+        pose: &Pose,
+        out: &mut [f64],
+    ) -> Result<ForceDistribution, OffsetTargetError> {
         let (_, fd) = self.reference_forces(pose)?;
         let f = std::mem::take(&mut self.f_ref);
-        let r = elastostatics::inverse(&self.model, &mut self.data, pose, &f, &mut self.q_theta)
-            .map_err(|e| e.to_string());
+        let r = elastostatics::inverse(&self.model, &mut self.data, pose, &f, &mut self.q_theta);
         self.f_ref = f;
         r?;
         for i in 0..self.model.m() {

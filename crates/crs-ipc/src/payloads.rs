@@ -7,7 +7,7 @@ use iceoryx2::prelude::ZeroCopySend;
 /// Version of this contract; bump on any layout or meaning change (also part of the type names).
 pub const CONTRACT_VERSION: u32 = 1;
 /// Capacity of every per-cable array.
-pub const MAX_CABLES: usize = 16;
+pub use crs_limits::MAX_CABLES;
 
 /// Pose vector x = [x, y, z, phi_x, phi_y, phi_z] in m / rad.
 pub type Pose6 = [f64; 6];

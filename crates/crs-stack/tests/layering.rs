@@ -177,3 +177,23 @@ fn calibration_needs_neither_the_simulator_nor_the_bus() {
         &["sim-plant", "drive-io", "iceoryx2", "socketcan"],
     );
 }
+
+#[test]
+fn the_shared_limits_depend_on_nothing() {
+    // crs-limits is named by the model library, the contract and the independent monitor
+    // alike: any dependency it gained would link them together.
+    let c = closure("crs-limits");
+    assert!(c.is_empty(), "crs-limits depends on {c:?}");
+    for user in [
+        "cdpr-model",
+        "surrogate",
+        "crs-ipc",
+        "safety-monitor",
+        "motion-core",
+    ] {
+        assert!(
+            closure(user).contains("crs-limits"),
+            "{user} should take MAX_CABLES / the |Δq| limit from crs-limits"
+        );
+    }
+}

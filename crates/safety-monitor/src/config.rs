@@ -7,7 +7,7 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
 /// The spec's limit for |Δq| (sec. 5.6: 100 mm). A configuration above it is refused.
-pub const DQ_LIMIT_MAX_M: f64 = 0.100;
+pub use crs_limits::DELTA_Q_LIMIT_M;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -393,7 +393,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
     if !(m.dq_limit_mm.is_finite() && m.dq_limit_mm > 0.0) {
         return Err(bad("monitor.dq_limit_mm", "must be a number > 0".into()));
     }
-    if m.dq_limit_mm > DQ_LIMIT_MAX_M * 1e3 {
+    if m.dq_limit_mm > DELTA_Q_LIMIT_M * 1e3 {
         return Err(bad(
             "monitor.dq_limit_mm",
             format!(

@@ -11,7 +11,7 @@ use std::fmt;
 
 /// Safety controller threshold on the joint-signal misalignment, `Delta q_theta_lim = 100 mm`
 /// (sec. 5.6); the default for [`FitOptions::bound_m`].
-pub const DELTA_Q_LIM_M: f64 = 0.100;
+pub use crs_limits::DELTA_Q_LIMIT_M;
 
 /// Condition number of the scaled design above which an un-regularised fit is refused.
 const MAX_CONDITION_UNREGULARISED: f64 = 1e12;
@@ -61,7 +61,7 @@ impl Default for FitOptions {
             fit_samples: None,
             validation_samples: 10_000,
             ridge: 0.0,
-            bound_m: DELTA_Q_LIM_M,
+            bound_m: DELTA_Q_LIMIT_M,
             margin_m: 0.010,
             max_fit_error_m: None,
             require_certified_bound: false,

@@ -75,6 +75,6 @@ mod region;
 
 pub use basis::{Basis, MAX_DEGREE, n_basis};
 pub use file::{FORMAT_NAME, FORMAT_VERSION, FileError};
-pub use fit::{DELTA_Q_LIM_M, FitError, FitOptions, FitReport, Location, fit};
+pub use fit::{DELTA_Q_LIMIT_M, FitError, FitOptions, FitReport, Location, fit};
 pub use model::{EvalError, MAX_CABLES, Surrogate};
 pub use region::{COORD_NAMES, N_COORDS, Region, RegionError};

@@ -6,7 +6,7 @@ use crate::fit::{FitOptions, FitReport};
 use crate::region::{N_COORDS, Normalisation, Region};
 
 /// Maximum number of cables a surrogate can serve.
-pub const MAX_CABLES: usize = 16;
+pub use crs_limits::MAX_CABLES;
 
 /// Coefficients are packed in groups of 4 cables so the inner accumulation is a fixed-width
 /// multiply-add the compiler vectorises.

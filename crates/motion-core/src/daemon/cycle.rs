@@ -92,7 +92,7 @@ pub struct Cycle {
 }
 
 /// ≤ 100 mm: the safety monitor's threshold (sec. 5.6, eq. 5.27).
-pub const DELTA_Q_LIMIT_M: f64 = 0.100;
+pub use crs_limits::DELTA_Q_LIMIT_M;
 
 impl Cycle {
     pub fn new(
