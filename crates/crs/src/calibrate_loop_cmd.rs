@@ -4,7 +4,7 @@
 //! refitted surrogate, re-run the same campaign and report the MEASURED pose error at the rest
 //! points before and after. `crs calibrate campaign` makes the campaign file.
 
-use crate::calibrate_cmd::{Opts, calibrate_and_report, spinner};
+use crate::calibrate_report::{Opts, calibrate_and_report, spinner};
 use calibrate::Observation;
 use calibrate::pipeline::PipelineReport;
 use cdpr_model::config::{Platform, load_platform};

@@ -3,6 +3,7 @@
 mod calibrate_bench;
 mod calibrate_cmd;
 mod calibrate_loop_cmd;
+mod calibrate_report;
 mod console_cmd;
 mod gen_cmd;
 mod model_cmd;
