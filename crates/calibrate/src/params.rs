@@ -54,6 +54,45 @@ pub enum ParamId {
     ForceGain(usize),
     /// Force-sensor offset β_i (N).
     ForceOffset(usize),
+    /// Flexible per-cable length correction (m), NOT a physical effect: coefficient k of
+    /// δq_i = β_i0 u + β_i1 u² + β_i2 v + β_i3 v², u = f_i/f_s − 1, v = q_i/(10 m)
+    /// ([`flex_basis`]).
+    Flex(usize, usize),
+}
+
+/// Number of terms of the flexible per-cable length correction.
+pub const FLEX_TERMS: usize = 4;
+
+/// Length of the flexible correction's normalisation, m.
+pub const FLEX_LENGTH_M: f64 = 10.0;
+/// Range of a flexible coefficient, m: it corrects mm-level structure (and a larger one could
+/// make the elongation decrease with the force, dφ_el/df > 0, which no cable does).
+pub const FLEX_MAX_M: f64 = 0.005;
+
+/// Basis of the flexible per-cable length correction at force f and geometric length q, and
+/// its derivatives by f and q: ([u, u², v, v²], [∂/∂f], [∂/∂q]) with u = f/f_s − 1,
+/// v = q/(10 m). Force-linear (a series compliance, eq. 6.18's c_s), force-quadratic,
+/// length-linear and length-quadratic terms. Together with the base model's compliance, drum
+/// and offset some of them are nearly collinear: the correction is fitted for accuracy, its
+/// coefficients are not meant to be interpreted (their 1σ says so).
+#[inline]
+pub fn flex_basis(f: f64, q: f64) -> ([f64; FLEX_TERMS], [f64; FLEX_TERMS], [f64; FLEX_TERMS]) {
+    let fs = STIFFNESS_REFERENCE_FORCE_N;
+    let u = f / fs - 1.0;
+    let v = q / FLEX_LENGTH_M;
+    (
+        [u, u * u, v, v * v],
+        [1.0 / fs, 2.0 * u / fs, 0.0, 0.0],
+        [0.0, 0.0, 1.0 / FLEX_LENGTH_M, 2.0 * v / FLEX_LENGTH_M],
+    )
+}
+
+/// Σ_k c_k b_k for the flexible correction (value and both derivatives).
+#[inline]
+pub fn flex_eval(c: &[f64; FLEX_TERMS], f: f64, q: f64) -> (f64, f64, f64) {
+    let (b, bf, bq) = flex_basis(f, q);
+    let dot = |x: &[f64; FLEX_TERMS]| c.iter().zip(x).map(|(a, b)| a * b).sum::<f64>();
+    (dot(&b), dot(&bf), dot(&bq))
 }
 
 impl ParamId {
@@ -73,6 +112,7 @@ impl ParamId {
             ParamId::Cog(_) => 0.1,
             ParamId::ForceGain(_) => 0.01,
             ParamId::ForceOffset(_) => 10.0,
+            ParamId::Flex(..) => 1e-3,
         }
     }
 
@@ -105,6 +145,7 @@ impl ParamId {
             // Force-sensor gain error: a load cell off by more than 30 % is broken, not
             // miscalibrated.
             ParamId::ForceGain(_) => Some((-0.3, 0.3)),
+            ParamId::Flex(..) => Some((-FLEX_MAX_M, FLEX_MAX_M)),
             ParamId::A(..)
             | ParamId::B(..)
             | ParamId::We(_)
@@ -132,6 +173,7 @@ impl ParamId {
             ParamId::Cog(k) => format!("cog.{}", XYZ[k]),
             ParamId::ForceGain(i) => format!("force_gain_{}", i + 1),
             ParamId::ForceOffset(i) => format!("force_offset_{}", i + 1),
+            ParamId::Flex(i, k) => format!("flex_{}.{}", i + 1, ["u", "u2", "v", "v2"][k]),
         }
     }
 
@@ -168,6 +210,8 @@ pub struct CalModel {
     /// Force-sensor gain errors γ_i and offsets β_i (N): f = (1 + γ_i) f_M + β_i.
     pub force_gain: Vec<f64>,
     pub force_offset: Vec<f64>,
+    /// Flexible per-cable length correction β_ik (m), [`ParamId::Flex`]; zero = off.
+    pub flex: Vec<[f64; FLEX_TERMS]>,
 }
 
 impl CalModel {
@@ -203,6 +247,7 @@ impl CalModel {
             cog: Vector3::zeros(),
             force_gain: vec![0.0; m],
             force_offset: vec![0.0; m],
+            flex: vec![[0.0; FLEX_TERMS]; m],
         }
     }
 
@@ -242,6 +287,7 @@ impl CalModel {
             ParamId::Cog(k) => self.cog[k],
             ParamId::ForceGain(i) => self.force_gain[i],
             ParamId::ForceOffset(i) => self.force_offset[i],
+            ParamId::Flex(i, k) => self.flex[i][k],
         }
     }
 
@@ -261,7 +307,15 @@ impl CalModel {
             ParamId::Cog(k) => self.cog[k] = v,
             ParamId::ForceGain(i) => self.force_gain[i] = v,
             ParamId::ForceOffset(i) => self.force_offset[i] = v,
+            ParamId::Flex(i, k) => self.flex[i][k] = v,
         }
+    }
+
+    /// The flexible correction of cable i at force f, geometric length q (m), and its
+    /// derivatives by f and q.
+    #[inline]
+    pub fn flex_term(&self, i: usize, f: f64, q: f64) -> (f64, f64, f64) {
+        flex_eval(&self.flex[i], f, q)
     }
 
     /// Physical controlled length from the command: q_θ = (1 + ε_i) q_cmd + δ_i.

@@ -30,6 +30,9 @@ pub struct PipelineConfig {
     /// Identify b in the kinematic step too (the spec's sec. 6.2 identifies a only).
     pub kinematic_b: bool,
     pub select: SelectConfig,
+    /// After the diagnosis, also fit the flexible per-cable length correction
+    /// ([`crate::params::ParamId::Flex`]) as its own, clearly labelled stage.
+    pub flexible: bool,
     /// Skip the diagnosis/extension loop.
     pub no_extension: bool,
     /// Also fit the kinematic parameters on the Cartesian residual through the forward
@@ -48,6 +51,7 @@ impl Default for PipelineConfig {
             kinematic_b: false,
             select: SelectConfig::default(),
             no_extension: false,
+            flexible: false,
             cartesian: false,
         }
     }
@@ -87,6 +91,8 @@ pub struct PipelineReport {
     /// Structure left in the final model's held-out length residuals ([`crate::structure`]);
     /// `None` when there was no separate held-out set.
     pub structure: Option<crate::structure::StructureReport>,
+    /// Why the optional flexible correction could not be fitted (`None`: fitted or not asked).
+    pub flexible_failure: Option<String>,
 }
 
 impl PipelineReport {
@@ -264,6 +270,7 @@ pub fn run(
             n_holdout: holdout.len(),
             config: cfg.clone(),
             structure: structure_of(stages.last(), holdout),
+            flexible_failure: None,
             stages,
             selection: None,
             repeatability: None,
@@ -375,11 +382,46 @@ pub fn run(
         }
         Some(sel)
     };
+    // The structure test judges the catalogue's best model, before any flexible correction.
+    let structure = structure_of(stages.last(), holdout);
+    // 6. Optional flexible correction (issue 13, item 4): for when accuracy matters more than
+    // explanation. Never a diagnosis: its stage name says so and the selection never adds it.
+    let mut flexible_failure = None;
+    if cfg.flexible
+        && let Some(last) = stages.last().and_then(|st| st.fit.clone())
+    {
+        let mut spec = spec_e.clone();
+        spec.free = last
+            .free
+            .iter()
+            .copied()
+            .chain(
+                (0..m)
+                    .flat_map(|i| (0..crate::params::FLEX_TERMS).map(move |k| ParamId::Flex(i, k))),
+            )
+            .collect();
+        match identify::fit(&last.model, train, &spec, &mut |it, c| {
+            progress("flexible correction", it, c)
+        }) {
+            Ok(f) => stages.push(Stage {
+                name: format!(
+                    "{} + flexible length correction (not a physical effect)",
+                    stages.last().map_or("", |st| st.name.as_str())
+                ),
+                kind: Kind::Elastostatic,
+                holdout: validate::evaluate(Kind::Elastostatic, &f.model, eval),
+                model: f.model.clone(),
+                fit: Some(f),
+            }),
+            Err(e) => flexible_failure = Some(e.to_string()),
+        }
+    }
     Ok(PipelineReport {
         n_train: train.len(),
         n_holdout: holdout.len(),
         config: cfg.clone(),
-        structure: structure_of(stages.last(), holdout),
+        structure,
+        flexible_failure,
         stages,
         selection,
         repeatability: None,

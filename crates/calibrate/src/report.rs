@@ -253,6 +253,14 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
     if let Some(st) = &rep.structure {
         structure_section(&mut s, st);
     }
+    if let Some(e) = &rep.flexible_failure {
+        let _ = writeln!(
+            s,
+            "\nThe flexible length correction (--flexible) could not be fitted: {e}.\n"
+        );
+    } else if rep.config.flexible {
+        s.push_str("\nThe last step adds the **flexible per-cable length correction** (`--flexible`): δq_i = c_i0 u + c_i1 u² + c_i2 v + c_i3 v², u = f_i/f_s − 1, v = q_i/10 m, |c| ≤ 5 mm. It is fitted for accuracy, not as an explanation: it is **not a physical diagnosis**; its coefficients are in the side file.\n");
+    }
     if let Some(r) = &rep.repeatability {
         repeatability_section(&mut s, r);
     }
@@ -418,6 +426,19 @@ pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
         "center_of_gravity_m = [{:?}, {:?}, {:?}]",
         cal.cog.x, cal.cog.y, cal.cog.z
     );
+    if cal
+        .flex
+        .iter()
+        .any(|c| *c != [0.0; crate::params::FLEX_TERMS])
+    {
+        s.push_str("\n# Flexible per-cable length correction (NOT a physical effect; --flexible):\n# delta_q_i = c_i0 u + c_i1 u^2 + c_i2 v + c_i3 v^2, u = f_i/5000 N - 1, v = q_i/10 m (m).\n");
+        let rows: Vec<String> = cal
+            .flex
+            .iter()
+            .map(|c| format!("[{:?}, {:?}, {:?}, {:?}]", c[0], c[1], c[2], c[3]))
+            .collect();
+        let _ = writeln!(s, "flexible_correction_m = [{}]", rows.join(", "));
+    }
     s
 }
 

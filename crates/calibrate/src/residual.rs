@@ -129,12 +129,13 @@ fn key(p: ParamId) -> usize {
         ParamId::Cog(k) => 10 * MC + 10 + k,
         ParamId::ForceGain(i) => 10 * MC + 13 + i,
         ParamId::ForceOffset(i) => 11 * MC + 13 + i,
+        ParamId::Flex(i, k) => 12 * MC + 13 + crate::params::FLEX_TERMS * i + k,
     }
 }
 
 impl Columns {
     pub fn new(free: &[ParamId]) -> Self {
-        let mut table = vec![None; 12 * MC + 13];
+        let mut table = vec![None; (12 + crate::params::FLEX_TERMS) * MC + 13];
         for (c, p) in free.iter().enumerate() {
             table[key(*p)] = Some(c);
         }
@@ -343,11 +344,13 @@ impl<'a> Evaluator<'a> {
             let load = g - o.direction[i] * cal.hysteresis;
             let c = (q + cal.extra_length[i]) / cal.k_f[i];
             let sag = cal.sag_w2 * cos2 * q.powi(3) / (24.0 * fi * fi);
-            let phi = q + sag - c * load;
+            // The flexible correction (not a physical effect; zero unless fitted).
+            let (flex, dflex_df, dflex_dq) = cal.flex_term(i, fi, q);
+            let phi = q + sag - c * load + flex;
             r[6 + i] = wq * (phi - cal.q_theta(i, o.q_cmd[i]));
-            dphi_dq[i] = 1.0 + 3.0 * sag / q - load / cal.k_f[i];
+            dphi_dq[i] = 1.0 + 3.0 * sag / q - load / cal.k_f[i] + dflex_dq;
             let dg = 1.0 + cal.stiffness_kappa * (fi - fs) / fs;
-            dphi_df[i] = -2.0 * sag / fi - c * dg;
+            dphi_df[i] = -2.0 * sag / fi - c * dg + dflex_df;
         }
         let Some((j, cols)) = jac else { return };
         // Wrench rows.
@@ -461,6 +464,12 @@ impl<'a> Evaluator<'a> {
                 ParamId::SagW2,
                 wq * cos2 * q.powi(3) / (24.0 * fi * fi),
             );
+            if cols.get(ParamId::Flex(i, 0)).is_some() {
+                let (b, _, _) = crate::params::flex_basis(fi, q);
+                for (k, bk) in b.iter().enumerate() {
+                    put(j, cols, ri, ParamId::Flex(i, k), wq * bk);
+                }
+            }
             // Force-sensor candidate: ∂f/∂γ_i = f_M, ∂f/∂β_i = 1 (wrench and length rows).
             if cols.get(ParamId::ForceGain(i)).is_some()
                 || cols.get(ParamId::ForceOffset(i)).is_some()

@@ -13,8 +13,8 @@
 //! part is (RMS of the fitted values) next to the residual RMS. This names *where* the model
 //! is wrong; it does not name a physical cause and it never picks the nearest catalogue entry.
 //!
-//! Not built: a generic flexible extension fitted to such structure (e.g. a per-cable length
-//! correction polynomial in force and length).
+//! For when accuracy matters more than explanation, `PipelineConfig::flexible` fits a generic
+//! per-cable length correction ([`crate::params::ParamId::Flex`]) as its own, labelled step.
 
 use crate::observation::Observation;
 use crate::params::CalModel;

@@ -112,6 +112,8 @@ pub struct ExtendedLaw {
     pub cos2: Vec<f64>,
     /// Direction of motion per cable (hysteresis), ±1 or 0.
     pub direction: Vec<f64>,
+    /// Flexible per-cable length correction β_ik ([`crate::params::ParamId::Flex`]).
+    pub flex: Vec<[f64; crate::params::FLEX_TERMS]>,
 }
 
 impl ExtendedLaw {
@@ -124,7 +126,13 @@ impl ExtendedLaw {
             sag_w2: cal.sag_w2,
             cos2: vec![0.0; cal.m()],
             direction: direction.to_vec(),
+            flex: cal.flex.clone(),
         }
+    }
+
+    /// The flexible correction of cable i and its derivatives by f and q.
+    fn flex(&self, i: usize, q: f64, f: f64) -> (f64, f64, f64) {
+        crate::params::flex_eval(&self.flex[i], f, q)
     }
 
     fn parts(&self, i: usize, q: f64, f: f64) -> (f64, f64, f64) {
@@ -141,7 +149,10 @@ impl CableLaw for ExtendedLaw {
         let c = (q + self.extra[i]) / self.k_f[i];
         let dh = self.direction[i] * self.hysteresis;
         let lin = (q - q_theta) / c + dh;
-        if self.kappa == 0.0 && (self.sag_w2 == 0.0 || self.cos2[i] == 0.0) {
+        if self.kappa == 0.0
+            && (self.sag_w2 == 0.0 || self.cos2[i] == 0.0)
+            && self.flex[i] == [0.0; crate::params::FLEX_TERMS]
+        {
             return CableForce {
                 f: lin,
                 df_dq: (1.0 - (lin - dh) / self.k_f[i]) / c,
@@ -153,11 +164,28 @@ impl CableLaw for ExtendedLaw {
             let (load, dg, s) = self.parts(i, q, f);
             let sag = if s > 0.0 { s / (f * f) } else { 0.0 };
             let dsag = if s > 0.0 { -2.0 * s / (f * f * f) } else { 0.0 };
-            (q + sag - c * load - q_theta, dsag - c * dg)
+            let (fl, dfl, _) = self.flex(i, q, f);
+            (q + sag - c * load + fl - q_theta, dsag - c * dg + dfl)
         };
         let sagging = self.sag_w2 > 0.0 && self.cos2[i] > 0.0;
-        let (mut lo, mut hi) = if sagging { (1e-9, 1e8) } else { (-1e8, 1e8) };
-        let mut f = if sagging { lin.max(1.0) } else { lin };
+        // The flexible correction is a polynomial in f: far outside the operating forces its
+        // u² term would dominate and h would not be monotone. Its bracket is the physical one,
+        // a taut cable below 100 kN (a root outside it is an FK failure, reported as such).
+        let flexed = self.flex[i] != [0.0; crate::params::FLEX_TERMS];
+        let (mut lo, mut hi) = if sagging {
+            (1e-9, 1e8)
+        } else if flexed {
+            (0.0, 1e5)
+        } else {
+            (-1e8, 1e8)
+        };
+        let mut f = if sagging {
+            lin.max(1.0)
+        } else if flexed {
+            lin.clamp(1.0, 0.99e5)
+        } else {
+            lin
+        };
         for _ in 0..100 {
             let (v, dv) = h(f);
             if v > 0.0 {
@@ -180,8 +208,10 @@ impl CableLaw for ExtendedLaw {
             }
         }
         let (load, dg, s) = self.parts(i, q, f);
-        let dphi_df = if sagging { -2.0 * s / (f * f * f) } else { 0.0 } - c * dg;
-        let dphi_dq = 1.0 + if sagging { 3.0 * s / (q * f * f) } else { 0.0 } - load / self.k_f[i];
+        let (_, dfl_df, dfl_dq) = self.flex(i, q, f);
+        let dphi_df = if sagging { -2.0 * s / (f * f * f) } else { 0.0 } - c * dg + dfl_df;
+        let dphi_dq =
+            1.0 + if sagging { 3.0 * s / (q * f * f) } else { 0.0 } - load / self.k_f[i] + dfl_dq;
         CableForce {
             f,
             df_dq: -dphi_dq / dphi_df,
@@ -193,7 +223,7 @@ impl CableLaw for ExtendedLaw {
         let c = (q + self.extra[i]) / self.k_f[i];
         let (load, _, s) = self.parts(i, q, f);
         let sag = if s > 0.0 && f > 0.0 { s / (f * f) } else { 0.0 };
-        q + sag - c * load
+        q + sag - c * load + self.flex(i, q, f).0
     }
 }
 
@@ -334,6 +364,36 @@ pub fn length_errors(kind: Kind, cal: &CalModel, obs: &[Observation]) -> Vec<Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_extended_law_with_a_flexible_correction_inverts_its_controlled_length() {
+        let mut cal_law = ExtendedLaw {
+            k_f: vec![2e6],
+            extra: vec![0.0],
+            kappa: 0.0,
+            hysteresis: 0.0,
+            sag_w2: 0.0,
+            cos2: vec![0.0],
+            direction: vec![0.0],
+            flex: vec![[0.002, -0.003, 0.001, 0.0015]],
+        };
+        for &(q, f) in &[(4.0, 800.0), (8.0, 5000.0), (12.0, 11000.0)] {
+            let qt = cal_law.controlled_length(0, q, f);
+            let cf = cal_law.force(0, q, qt);
+            assert!((cf.f - f).abs() < 1e-6, "q {q}: f {f} → {}", cf.f);
+            // df/dq_θ against a central difference.
+            let h = 1e-7;
+            let num = (cal_law.force(0, q, qt + h).f - cal_law.force(0, q, qt - h).f) / (2.0 * h);
+            assert!(
+                (cf.df_dqt / num - 1.0).abs() < 1e-5,
+                "{} vs {num}",
+                cf.df_dqt
+            );
+        }
+        cal_law.flex = vec![[0.0; crate::params::FLEX_TERMS]];
+        let qt = cal_law.controlled_length(0, 8.0, 5000.0);
+        assert!((cal_law.force(0, 8.0, qt).f - 5000.0).abs() < 1e-6);
+    }
 
     fn errors(pos: &[f64], force: &[f64]) -> Errors {
         Errors {

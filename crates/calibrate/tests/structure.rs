@@ -91,3 +91,51 @@ fn a_drum_error_outside_the_allowed_catalogue_is_flagged_and_goes_with_the_drum(
         flagged(&without)
     );
 }
+
+#[test]
+fn the_flexible_correction_takes_up_what_the_allowed_catalogue_leaves_and_says_what_it_is() {
+    // A tension-dependent stiffness (the CRS-like plant's, no tracker noise, as the stiffness
+    // case of tests/effects.rs) with the stiffness candidate not allowed: the force-quadratic
+    // term of the correction can take it up.
+    let fx = crs_like_effects();
+    let effects = Effects {
+        stiffness: fx.stiffness,
+        ..Effects::default()
+    };
+    let train = campaign(effects.clone(), 30, 21, true);
+    let held = campaign(effects, 30, 22, true);
+    let mut cfg = PipelineConfig::default();
+    cfg.select.candidates = vec![Effect::Hysteresis];
+    cfg.flexible = true;
+    let rep =
+        pipeline::run(&nominal().model, &train, &held, &cfg, &mut |_, _, _| {}).expect("pipeline");
+    assert!(rep.flexible_failure.is_none(), "{:?}", rep.flexible_failure);
+    let fin = rep.final_stage();
+    assert!(
+        fin.name
+            .ends_with("flexible length correction (not a physical effect)"),
+        "{}",
+        fin.name
+    );
+    assert!(!fin.failed(), "{:?}", fin.holdout.failure_text());
+    let before = &rep.stages[rep.stages.len() - 2];
+    assert!(
+        fin.holdout.len_mean_mm < 0.5 * before.holdout.len_mean_mm,
+        "held-out cable-length error {:.3} → {:.3} mm",
+        before.holdout.len_mean_mm,
+        fin.holdout.len_mean_mm
+    );
+    // Never a diagnosis: the chosen effects do not name it.
+    assert!(
+        rep.selection
+            .as_ref()
+            .unwrap()
+            .chosen
+            .iter()
+            .all(|e| Effect::ALL.contains(e))
+    );
+    let md = calibrate::report::markdown(&rep, "test", &[]);
+    assert!(md.contains("not a physical diagnosis"), "{md}");
+    let side = calibrate::report::side_file(&fin.model, &[]);
+    assert!(side.contains("flexible_correction_m = [["), "{side}");
+}

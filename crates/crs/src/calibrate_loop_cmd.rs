@@ -150,6 +150,7 @@ impl LoopTools for CliTools {
             min_gain_pos: calibrate::effects::SelectConfig::default().min_gain_pos,
             min_gain_force: calibrate::effects::SelectConfig::default().min_gain_force,
             no_extension: true,
+            flexible: false,
             multi_start: 0,
             bootstrap: 0,
             repeat_seed: 1,

@@ -58,6 +58,11 @@ pub struct Opts {
     /// Seed of the random starts and resamples.
     #[arg(long, default_value_t = 1)]
     pub(crate) repeat_seed: u64,
+    /// After the diagnosis, also fit a flexible per-cable length correction (polynomial in
+    /// force and length, not a physical effect) as its own, labelled step: for when accuracy
+    /// matters more than explanation.
+    #[arg(long)]
+    pub(crate) flexible: bool,
     /// Skip the residual diagnosis / model extension.
     #[arg(long)]
     pub(crate) no_extension: bool,
@@ -84,6 +89,7 @@ pub(crate) fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Err
         None => cfg.ridge_kf_auto = true,
     }
     cfg.no_extension = o.no_extension;
+    cfg.flexible = o.flexible;
     cfg.cartesian = o.cartesian;
     cfg.select.min_gain_pos = o.min_gain_pos;
     cfg.select.min_gain_force = o.min_gain_force;
