@@ -160,13 +160,6 @@ pub struct SelectConfig {
     pub max_loss_force: f64,
     /// Paired z statistic a held-out gain must reach (2.33 ≈ one-sided 0.99).
     pub z_gain: f64,
-    /// Also require a significant score statistic (off: reported as evidence only).
-    pub score_gate: bool,
-    /// Also require a lower BIC on the training rows (off: reported as evidence only). The
-    /// training residual takes the measured forces as inputs, so an effect that acts on the
-    /// forces the model predicts (hysteresis, sag, pulleys) barely moves it: only the
-    /// held-out forward kinematics sees such an effect (docs/calibration.md).
-    pub bic_gate: bool,
 }
 
 impl Default for SelectConfig {
@@ -181,8 +174,6 @@ impl Default for SelectConfig {
             max_loss_pos: 0.02,
             max_loss_force: 0.10,
             z_gain: 2.33,
-            score_gate: false,
-            bic_gate: false,
         }
     }
 }
@@ -463,18 +454,18 @@ pub fn select(
                             })
                         })
                         .count();
-                    let physical = pressed == 0 || 2 * pressed < effect_params.len();
-                    let gate_score = !cfg.score_gate || significant;
-                    let bic_gate_ok = !cfg.bic_gate || bic_ok;
-                    cs.verdict = match (gate_score, bic_gate_ok, gain_ok, worse_ok, physical) {
+                    let physical = 2 * pressed < effect_params.len();
+                    // The score statistic and the BIC are evidence, not gates: the training
+                    // residual takes the measured forces as inputs, so an effect on the forces
+                    // the model predicts (hysteresis, sag, pulleys) barely moves them; they
+                    // count only on the weighted-residual route above (docs/calibration.md).
+                    cs.verdict = match (gain_ok, worse_ok, physical) {
                         _ if cs.fk_failure.is_some() => format!(
                             "{} with it: refused",
                             cs.fk_failure.as_deref().unwrap_or("FK failed")
                         ),
-                        (true, true, true, true, true) => "passes".into(),
-                        (false, ..) => "signature not significant".into(),
-                        (_, false, ..) => "BIC does not improve".into(),
-                        (_, _, false, ..) => format!(
+                        (true, true, true) => "passes".into(),
+                        (false, ..) => format!(
                             "held-out gain below {} or not carried by the samples (paired z < {:.2}), and not a significant score with a lower BIC and −{:.0} % weighted RMS",
                             match effect.channel() {
                                 Channel::Pose => format!(
@@ -493,7 +484,7 @@ pub fn select(
                             cfg.z_gain,
                             cfg.min_gain_rms * 100.0
                         ),
-                        (_, _, _, false, _) => format!(
+                        (_, false, _) => format!(
                             "held-out position (> {:.0} %) or force (> {:.0} %) error gets worse, carried by the samples",
                             cfg.max_loss_pos * 100.0,
                             cfg.max_loss_force * 100.0
@@ -502,13 +493,7 @@ pub fn select(
                             "a parameter ends at its physical bound (the effect's shape does not fit)".into()
                         }
                     };
-                    if cs.fk_failure.is_none()
-                        && gate_score
-                        && bic_gate_ok
-                        && gain_ok
-                        && worse_ok
-                        && physical
-                    {
+                    if cs.fk_failure.is_none() && gain_ok && worse_ok && physical {
                         // Rank by the combined held-out gain (position + force + weighted
                         // residual): an effect that explains pose and force together beats one
                         // that moves only one of them by the same amount.

@@ -293,6 +293,13 @@ pub fn run(
     // campaigns — is either the configured λ or, with `ridge_kf_auto` and a held-out set,
     // chosen from RIDGE_KF_GRID by the held-out position and force errors through the FK.
     let mut ridge_kf_sweep = Vec::new();
+    let fit_configured = |progress: &mut dyn FnMut(&str, usize, f64)| {
+        let spec = elastostatic_spec(cfg, m);
+        identify::fit(&nom_e, train, &spec, &mut |it, c| {
+            progress("elastostatic", it, c)
+        })
+        .map(|fit| (spec, fit, cfg.ridge_kf))
+    };
     let (spec_e, fit_e, ridge_kf) = if cfg.ridge_kf_auto && !holdout.is_empty() {
         let mut best: Option<(f64, FitSpec, Fit, f64)> = None;
         let mut reference: Option<(f64, f64)> = None;
@@ -335,21 +342,11 @@ pub fn run(
         }
         match best {
             Some((_, spec, fit, lambda)) => (spec, fit, lambda),
-            None => {
-                // No λ validated: the fixed configuration, whose failure the stage reports.
-                let spec = elastostatic_spec(cfg, m);
-                let fit = identify::fit(&nom_e, train, &spec, &mut |it, c| {
-                    progress("elastostatic", it, c)
-                })?;
-                (spec, fit, cfg.ridge_kf)
-            }
+            // No λ validated: the configured fit, whose failure the stage reports.
+            None => fit_configured(progress)?,
         }
     } else {
-        let spec = elastostatic_spec(cfg, m);
-        let fit = identify::fit(&nom_e, train, &spec, &mut |it, c| {
-            progress("elastostatic", it, c)
-        })?;
-        (spec, fit, cfg.ridge_kf)
+        fit_configured(progress)?
     };
     stages.push(Stage {
         name: "optimal elastostatic".into(),

@@ -114,11 +114,9 @@ impl Rng {
     }
 }
 
-fn max_anchor_distance_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).norm() * 1e3)
-        .fold(0.0, f64::max)
+/// Distance of each frame anchor of `a` from the same anchor of `b`, mm.
+fn anchor_distances_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Vec<f64> {
+    a.iter().zip(b).map(|(x, y)| (x - y).norm() * 1e3).collect()
 }
 
 /// Runs the configured tests for a pipeline report `rep` made from `train` / `holdout`.
@@ -161,7 +159,9 @@ pub fn assess(
                 }
                 match identify::fit(&s, train, &spec, &mut |_, _| {}) {
                     Ok(f) => {
-                        let d = max_anchor_distance_mm(&f.model.a, &base.model.a);
+                        let d = anchor_distances_mm(&f.model.a, &base.model.a)
+                            .into_iter()
+                            .fold(0.0, f64::max);
                         let ratio = f.cost / base.cost;
                         ms.max_anchor_distance_mm =
                             Some(ms.max_anchor_distance_mm.map_or(d, |m| m.max(d)));
@@ -211,13 +211,7 @@ fn second_run(
 ) -> SecondRun {
     match identify::fit(start, holdout, spec, &mut |_, _| {}) {
         Ok(f2) => {
-            let d: Vec<f64> = f2
-                .model
-                .a
-                .iter()
-                .zip(&base.model.a)
-                .map(|(x, y)| (x - y).norm() * 1e3)
-                .collect();
+            let d = anchor_distances_mm(&f2.model.a, &base.model.a);
             let mut ratio: Option<f64> = None;
             for (c, p) in base.free.iter().enumerate() {
                 if let ParamId::A(i, k) = p {
@@ -269,7 +263,6 @@ fn bootstrap(
         rep,
     } = *run;
     let mut poses: Vec<u64> = train.iter().map(|o| o.pose_index).collect();
-    poses.dedup();
     poses.sort_unstable();
     poses.dedup();
     let main_effects: Vec<Effect> = rep

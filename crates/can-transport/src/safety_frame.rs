@@ -61,13 +61,8 @@ pub struct SafetyHeartbeat {
     pub epoch: u32,
 }
 
-/// True if `epoch` is newer than `than` in wrapping (serial number) arithmetic: the difference
-/// is in 1..2^31. Epochs advance by one per accepted reset, so wrapping is not reached in
-/// practice; the comparison still never treats an old epoch as new across a wrap.
-pub fn epoch_newer(epoch: u32, than: u32) -> bool {
-    let d = epoch.wrapping_sub(than);
-    d != 0 && d < 0x8000_0000
-}
+/// The reset-epoch order, shared with motion-core's IPC reset gate (one home: `crs-limits`).
+pub use crs_limits::epoch_newer;
 
 impl SafetyHeartbeat {
     /// The 8 data bytes of the normal frame.
@@ -348,16 +343,6 @@ mod tests {
         // A version-1 frame (state 0x01 in byte 0) is refused.
         let v1 = [0x01, 0, 5, 0, 0, 0, 0xFF, 1];
         assert_eq!(SafetyHeartbeat::from_bytes(&v1), Err(PairError::Version(0)));
-    }
-
-    #[test]
-    fn epoch_order_is_serial_number_arithmetic() {
-        assert!(epoch_newer(1, 0));
-        assert!(!epoch_newer(0, 0));
-        assert!(!epoch_newer(0, 1));
-        assert!(epoch_newer(0, u32::MAX));
-        assert!(epoch_newer(0x7FFF_FFFF, 0));
-        assert!(!epoch_newer(0x8000_0000, 0));
     }
 
     mod props {

@@ -14,11 +14,7 @@
 //! noise and the reference geometry deviation are on in every scenario.
 
 use calibrate::effects::Effect;
-use calibrate::identify;
-use calibrate::params::ParamId;
 use calibrate::pipeline::{self, PipelineConfig};
-use calibrate::residual::Kind;
-use calibrate::validate;
 use calibrate::{Observation, from_dataset};
 use cdpr_model::config::{Platform, load_platform};
 use clap::Args;
@@ -260,32 +256,28 @@ pub fn run(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
                     non_physical.push(format!("k_F{} = {k:.3e}", i + 1));
                 }
             }
-            // The model that carries the true effect: the base fit plus that effect.
-            let (true_pos, true_force) = match truth {
-                None => (Some(base.holdout.pos_mean_mm), base.holdout.force_mean_n),
-                Some(e) => {
-                    let f0 = base.fit.as_ref().ok_or("base step without a fit")?;
-                    let mut start = f0.model.clone();
-                    e.enable(&mut start);
-                    // The pipeline's base fit (with the k_F ridge it chose) plus the effect.
-                    let mut fixed = cfg.clone();
-                    fixed.ridge_kf = rep.ridge_kf;
-                    fixed.ridge_kf_auto = false;
-                    let mut spec = pipeline::elastostatic_spec(&fixed, start.m());
-                    spec.free = f0
-                        .free
-                        .iter()
-                        .copied()
-                        .chain(e.params(start.m()))
-                        .collect::<Vec<ParamId>>();
-                    let f = identify::fit(&start, &train, &spec, &mut |_, _| {})?;
-                    let h = validate::evaluate(Kind::Elastostatic, &f.model, &held);
-                    if h.failed() {
-                        (None, None)
-                    } else {
-                        (Some(h.pos_mean_mm), h.force_mean_n)
-                    }
-                }
+            // The model that carries the true effect: the base fit plus that effect, which is
+            // exactly the diagnosis' first-round candidate for it (same start, parameters,
+            // ridge and held-out set), so its figures are read from there, not fitted again.
+            let (true_pos, true_force, true_failure) = match truth {
+                None => (
+                    Some(base.holdout.pos_mean_mm),
+                    base.holdout.force_mean_n,
+                    String::new(),
+                ),
+                Some(e) => match rep
+                    .selection
+                    .as_ref()
+                    .and_then(|sel| sel.rounds.first())
+                    .and_then(|r| r.iter().find(|c| c.effect == *e))
+                {
+                    Some(c) => (
+                        c.holdout_pos_mm_after,
+                        c.holdout_force_n_after,
+                        c.fk_failure.clone().unwrap_or_else(|| c.verdict.clone()),
+                    ),
+                    None => (None, None, "not evaluated".into()),
+                },
             };
             let matters = truth.is_some()
                 && (true_pos
@@ -313,7 +305,7 @@ pub fn run(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
                 fin.holdout
                     .failure_text()
                     .unwrap_or_else(|| format!("{:.2} mm", fin.holdout.pos_mean_mm)),
-                true_pos.map_or("FK failed".into(), |p| format!("{p:.2} mm")),
+                true_pos.map_or(true_failure, |p| format!("{p:.2} mm")),
                 seconds
             );
             let missed = matters && truth.is_some_and(|t| !chosen.contains(&t));

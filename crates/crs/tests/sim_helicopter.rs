@@ -9,7 +9,7 @@
 //! before anything starts.
 mod common;
 use cdpr_model::config::load_platform;
-use common::{relaxed_configs_of, root, stack_bin_dir};
+use common::{relaxed_configs_of, root, sim_command, stack_bin_dir};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -31,26 +31,15 @@ fn crs_sim_platform_helicopter_runs_its_tour_clean() {
     );
     let port = 20000 + (std::process::id() % 20000);
     // The plant is not given: --platform helicopter must pick config/plant/helicopter.toml.
-    let o = Command::new(&crs)
-        .current_dir(root())
-        .args([
-            "sim",
-            "--platform",
-            "helicopter",
-            "--check",
-            "--transport",
-            &format!("udpbus:239.255.70.13:{port}"),
-        ])
-        .arg("--config")
-        .arg(&cfg[0])
-        .arg("--drives")
-        .arg(&cfg[1])
-        .arg("--monitor-config")
-        .arg(&cfg[2])
-        .arg("--out")
-        .arg(out.join("run"))
-        .output()
-        .expect("run crs sim");
+    let o = sim_command(
+        &crs,
+        &format!("udpbus:239.255.70.13:{port}"),
+        &cfg,
+        &out.join("run"),
+    )
+    .args(["--platform", "helicopter", "--check"])
+    .output()
+    .expect("run crs sim");
     let text = format!(
         "{}\n{}",
         String::from_utf8_lossy(&o.stdout),

@@ -3,10 +3,10 @@
 //! the real binaries on the CAN-over-UDP loopback bus, with the relaxed timing of the other
 //! stack tests (debug builds on a shared host; see tests/common).
 mod common;
-use common::{relaxed_configs, root, stack_bin_dir};
+use common::{relaxed_configs, sim_command, stack_bin_dir};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -26,25 +26,16 @@ impl Sim {
         let _ = std::fs::remove_dir_all(&out);
         let cfg = relaxed_configs(&out.join("cfg"));
         let port = 20000 + (std::process::id() % 20000) + if tag == "kill" { 0 } else { 1 };
-        let mut child = Command::new(&crs)
-            .current_dir(root())
-            .args([
-                "sim",
-                "--transport",
-                &format!("udpbus:239.255.70.11:{port}"),
-            ])
-            .arg("--config")
-            .arg(&cfg[0])
-            .arg("--drives")
-            .arg(&cfg[1])
-            .arg("--monitor-config")
-            .arg(&cfg[2])
-            .arg("--out")
-            .arg(out.join("run"))
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("spawn crs sim");
+        let mut child = sim_command(
+            &crs,
+            &format!("udpbus:239.255.70.11:{port}"),
+            &cfg,
+            &out.join("run"),
+        )
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn crs sim");
         let (tx, lines) = mpsc::channel();
         for stream in [
             Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
@@ -198,17 +189,7 @@ fn a_monitor_timed_for_another_loop_period_is_refused_before_anything_starts() {
         text.replace("setpoint_period_ms = 4.0", "setpoint_period_ms = 1.0"),
     )
     .unwrap();
-    let o = Command::new(&crs)
-        .current_dir(root())
-        .args(["sim", "--transport", "udpbus:239.255.70.12:20999"])
-        .arg("--config")
-        .arg(&cfg[0])
-        .arg("--drives")
-        .arg(&cfg[1])
-        .arg("--monitor-config")
-        .arg(&cfg[2])
-        .arg("--out")
-        .arg(out.join("run"))
+    let o = sim_command(&crs, "udpbus:239.255.70.12:20999", &cfg, &out.join("run"))
         .output()
         .expect("run crs sim");
     let (so, se) = (

@@ -2,6 +2,7 @@
 //! Shared by the tests that run the whole simulated stack (sim-plant, safety-monitor, drive-io,
 //! motion-core as separate processes on the CAN-over-UDP loopback bus).
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 pub fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -22,6 +23,24 @@ pub fn stack_bin_dir(crs: &Path) -> PathBuf {
         bin_dir.display()
     );
     bin_dir
+}
+
+/// `crs sim` from the repository root on the CAN-over-UDP bus `transport`, with the daemon,
+/// drives and monitor configs `cfg` (from [`relaxed_configs`]) and its output in `out`; the
+/// caller adds its own arguments and runs it.
+pub fn sim_command(crs: &Path, transport: &str, cfg: &[PathBuf; 3], out: &Path) -> Command {
+    let mut c = Command::new(crs);
+    c.current_dir(root())
+        .args(["sim", "--transport", transport])
+        .arg("--config")
+        .arg(&cfg[0])
+        .arg("--drives")
+        .arg(&cfg[1])
+        .arg("--monitor-config")
+        .arg(&cfg[2])
+        .arg("--out")
+        .arg(out);
+    c
 }
 
 /// Copies of the stack's daemon, drives and monitor TOML with the timing relaxed for this test

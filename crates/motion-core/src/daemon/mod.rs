@@ -95,11 +95,10 @@ impl ResetGate {
             _ => return Err(ResetIgnored::NotAReset),
         }
         let epoch = ev.detail;
-        if let Some(last) = self.last_epoch {
-            let d = epoch.wrapping_sub(last);
-            if d == 0 || d >= 0x8000_0000 {
-                return Err(ResetIgnored::NotNewer { epoch, last });
-            }
+        if let Some(last) = self.last_epoch
+            && !crs_limits::epoch_newer(epoch, last)
+        {
+            return Err(ResetIgnored::NotNewer { epoch, last });
         }
         self.last_epoch = Some(epoch);
         Ok(ResetAuthority(()))
