@@ -21,7 +21,7 @@
 //! parameters fit inside their physical ranges. The one with the largest combined gain is
 //! added; then the remaining candidates are scored again, while one passes.
 
-use crate::identify::{self, Fit, FitSpec};
+use crate::identify::{self, Fit, FitError, FitSpec};
 use crate::observation::Observation;
 use crate::params::{CalModel, ParamId};
 use crate::residual::Kind;
@@ -241,22 +241,28 @@ fn chi2_critical(k: usize, z: f64) -> f64 {
 }
 
 /// Score (LM) statistic of adding `extra` to the fit.
+/// Why a score statistic could not be computed.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ScoreError {
+    #[error(transparent)]
+    Fit(#[from] FitError),
+    /// The projected normal equations are singular (the effect is not identifiable here).
+    #[error("singular normal equations: {0}")]
+    Singular(&'static str),
+}
+
 pub fn score_test(
     fit: &Fit,
     obs: &[Observation],
     spec: &FitSpec,
     effect: Effect,
-) -> Result<f64, String> {
+) -> Result<f64, ScoreError> {
     let mut cal = fit.model.clone();
     effect.enable(&mut cal);
     let extra = effect.params(cal.m());
-    let jb = identify::jacobian(fit.kind, &cal, obs, spec.weights, &fit.free)
-        .map_err(|e| e.to_string())?;
-    let je =
-        identify::jacobian(fit.kind, &cal, obs, spec.weights, &extra).map_err(|e| e.to_string())?;
-    let r = DVector::from_vec(
-        identify::residual(fit.kind, &cal, obs, spec.weights).map_err(|e| e.to_string())?,
-    );
+    let jb = identify::jacobian(fit.kind, &cal, obs, spec.weights, &fit.free)?;
+    let je = identify::jacobian(fit.kind, &cal, obs, spec.weights, &extra)?;
+    let r = DVector::from_vec(identify::residual(fit.kind, &cal, obs, spec.weights)?);
     let n = r.len() as f64;
     let sigma2 = r.norm_squared() / (n - fit.free.len() as f64).max(1.0);
     // P J_e = J_e − J_b (J_b^+ J_e), J_b^+ by the (column-equilibrated) normal equations.
@@ -275,13 +281,13 @@ pub fn score_test(
         None => n_mat
             .svd(true, true)
             .solve(&rhs, 1e-14)
-            .map_err(|e| e.to_string())?,
+            .map_err(ScoreError::Singular)?,
     };
     let pje: DMatrix<f64> = &je - &jbs * coef;
     let g = pje.tr_mul(&r);
     let m = pje.transpose() * &pje;
     let svd = m.svd(true, true);
-    let x = svd.solve(&g, 1e-12).map_err(|e| e.to_string())?;
+    let x = svd.solve(&g, 1e-12).map_err(ScoreError::Singular)?;
     Ok(g.dot(&x) / sigma2.max(1e-300))
 }
 

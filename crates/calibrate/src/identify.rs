@@ -6,7 +6,7 @@
 use crate::lm::{self, LmOptions, LsqProblem};
 use crate::observation::Observation;
 use crate::params::{CalModel, ParamId};
-use crate::residual::{Columns, Evaluator, Kind, Weights};
+use crate::residual::{Columns, Evaluator, Kind, ResidualError, Weights};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
@@ -89,8 +89,21 @@ pub enum FitError {
     NoParameters,
     #[error("no samples")]
     NoSamples,
-    #[error("{0}")]
-    Residual(String),
+    #[error(transparent)]
+    Eval(#[from] EvalError),
+    #[error(transparent)]
+    Solver(#[from] lm::LmError<EvalError>),
+}
+
+/// Why the identification's residual cannot be evaluated at a parameter vector.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum EvalError {
+    /// A bounded parameter left its physical range (LM treats the step as uphill).
+    #[error("{} = {value:.4e} outside its physical range", param.name())]
+    OutOfRange { param: ParamId, value: f64 },
+    /// The model or a sample cannot be evaluated there.
+    #[error(transparent)]
+    Residual(#[from] ResidualError),
 }
 
 struct Problem<'a> {
@@ -126,27 +139,26 @@ impl Problem<'_> {
 }
 
 impl LsqProblem for Problem<'_> {
+    type Error = EvalError;
+
     fn n_residuals(&self) -> usize {
         self.ev.rows + self.ridge.len() + self.lasso.len()
     }
 
-    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), String> {
+    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), EvalError> {
         // Bounded identification: a step that leaves a parameter's physical range is treated
         // like one outside the model's valid region, so LM damps it back inside.
         if let Some(k) =
             (0..z.len()).find(|&k| !(z[k] >= self.bounds[k].0 && z[k] <= self.bounds[k].1))
         {
-            return Err(format!(
-                "{} = {:.4e} outside its physical range",
-                self.free[k].name(),
-                z[k] * self.scale[k]
-            ));
+            return Err(EvalError::OutOfRange {
+                param: self.free[k],
+                value: z[k] * self.scale[k],
+            });
         }
         let c = self.model_at(z);
         let nd = self.n_data();
-        self.ev
-            .eval(&c, &mut self.buf, None)
-            .map_err(|e| e.to_string())?;
+        self.ev.eval(&c, &mut self.buf, None)?;
         r.rows_mut(0, nd).copy_from_slice(&self.buf);
         for (k, (col, lam)) in self.ridge.iter().enumerate() {
             r[nd + k] = lam.sqrt() * (z[*col] - self.z_start[*col]);
@@ -158,21 +170,18 @@ impl LsqProblem for Problem<'_> {
         Ok(())
     }
 
-    fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), String> {
+    fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), EvalError> {
         let c = self.model_at(z);
         let nd = self.n_data();
         let mut jd = DMatrix::zeros(nd, self.free.len());
         self.ev
-            .eval(&c, &mut self.buf, Some((&mut jd, &self.cols)))
-            .map_err(|e| e.to_string())?;
+            .eval(&c, &mut self.buf, Some((&mut jd, &self.cols)))?;
         // The pulley radius enters through the pulley kinematics: forward difference.
         if let Some(col) = self.cols.get(ParamId::PulleyRadius) {
             let h = 1e-7;
             let mut c2 = c.clone();
             c2.pulley_radius += h;
-            self.ev
-                .eval(&c2, &mut self.buf2, None)
-                .map_err(|e| e.to_string())?;
+            self.ev.eval(&c2, &mut self.buf2, None)?;
             for row in 0..nd {
                 jd[(row, col)] = (self.buf2[row] - self.buf[row]) / h;
             }
@@ -215,8 +224,8 @@ pub fn jacobian(
     let z = p.z_start.clone();
     let mut j = DMatrix::zeros(p.n_residuals(), free.len());
     let mut r = DVector::zeros(p.n_residuals());
-    p.residual(&z, &mut r).map_err(FitError::Residual)?;
-    p.jacobian(&z, &mut j).map_err(FitError::Residual)?;
+    p.residual(&z, &mut r)?;
+    p.jacobian(&z, &mut j)?;
     Ok(j)
 }
 
@@ -229,8 +238,7 @@ pub fn residual(
 ) -> Result<Vec<f64>, FitError> {
     let ev = Evaluator::new(kind, obs, cal.m(), weights);
     let mut r = vec![0.0; ev.rows];
-    ev.eval(cal, &mut r, None)
-        .map_err(|e| FitError::Residual(e.to_string()))?;
+    ev.eval(cal, &mut r, None).map_err(EvalError::from)?;
     Ok(r)
 }
 
@@ -437,16 +445,15 @@ pub fn fit(
         spec.precondition,
     );
     let z0 = prob.z_start.clone();
-    let res = lm::solve(&mut prob, z0, &spec.lm, on_iteration).map_err(FitError::Residual)?;
+    let res = lm::solve(&mut prob, z0, &spec.lm, on_iteration)?;
     let model = prob.model_at(&res.z);
     let nd = prob.n_data();
     let data_r = res.residual.rows(0, nd);
     let cost = 0.5 * data_r.norm_squared();
     let mut j = DMatrix::zeros(prob.n_residuals(), free.len());
     let mut rbuf = DVector::zeros(prob.n_residuals());
-    prob.residual(&res.z, &mut rbuf)
-        .map_err(FitError::Residual)?;
-    prob.jacobian(&res.z, &mut j).map_err(FitError::Residual)?;
+    prob.residual(&res.z, &mut rbuf)?;
+    prob.jacobian(&res.z, &mut j)?;
     let jd = j.rows(0, nd).into_owned();
     let (cond_end, sv) = condition(&jd);
     // Covariance from the full (regularised) normal matrix.

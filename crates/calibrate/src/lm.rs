@@ -6,11 +6,13 @@ use nalgebra::{DMatrix, DVector};
 
 /// A least-squares problem in the (preconditioned) variables z.
 pub trait LsqProblem {
+    /// Why the residual or Jacobian cannot be evaluated at some z.
+    type Error;
     fn n_residuals(&self) -> usize;
     /// Residual at z; `Err` marks z as outside the model's valid region (treated as uphill).
-    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), String>;
+    fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), Self::Error>;
     /// Jacobian ∂r/∂z at z (the residual at z was the last one evaluated).
-    fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), String>;
+    fn jacobian(&mut self, z: &DVector<f64>, j: &mut DMatrix<f64>) -> Result<(), Self::Error>;
     /// Called at the start of every iteration (e.g. to update IRLS weights); returns true if
     /// the objective changed (the cost is then re-evaluated).
     fn start_iteration(&mut self, _z: &DVector<f64>) -> bool {
@@ -57,19 +59,33 @@ pub struct LmResult {
     pub converged: bool,
 }
 
+/// Why a run failed.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum LmError<E> {
+    /// The start point itself is outside the model's valid region.
+    #[error("residual at the start point: {0}")]
+    AtStart(E),
+    /// The residual could not be re-evaluated at an accepted point (the problem changed it,
+    /// e.g. new IRLS weights).
+    #[error("residual at an accepted point: {0}")]
+    AtAccepted(E),
+    /// The Jacobian could not be evaluated at an accepted point.
+    #[error("Jacobian: {0}")]
+    Jacobian(E),
+}
+
 /// Runs Levenberg–Marquardt from `z0`. `on_iteration(iteration, cost)` reports progress.
-pub fn solve(
-    p: &mut impl LsqProblem,
+pub fn solve<P: LsqProblem>(
+    p: &mut P,
     z0: DVector<f64>,
     opts: &LmOptions,
     on_iteration: &mut dyn FnMut(usize, f64),
-) -> Result<LmResult, String> {
+) -> Result<LmResult, LmError<P::Error>> {
     let n = z0.len();
     let nr = p.n_residuals();
     let mut z = z0;
     let mut r = DVector::zeros(nr);
-    p.residual(&z, &mut r)
-        .map_err(|e| format!("residual at the start point: {e}"))?;
+    p.residual(&z, &mut r).map_err(LmError::AtStart)?;
     let mut cost = 0.5 * r.norm_squared();
     let mut history = vec![cost];
     let mut j = DMatrix::zeros(nr, n);
@@ -81,7 +97,7 @@ pub fn solve(
     for it in 1..=opts.max_iterations {
         iterations = it;
         if p.start_iteration(&z) {
-            p.residual(&z, &mut r)?;
+            p.residual(&z, &mut r).map_err(LmError::AtAccepted)?;
             cost = 0.5 * r.norm_squared();
         }
         if cost == 0.0 {
@@ -89,8 +105,8 @@ pub fn solve(
             break;
         }
         j.fill(0.0);
-        p.residual(&z, &mut r)?;
-        p.jacobian(&z, &mut j)?;
+        p.residual(&z, &mut r).map_err(LmError::AtAccepted)?;
+        p.jacobian(&z, &mut j).map_err(LmError::Jacobian)?;
         // gemm (matrixmultiply) is much faster than tr_mul's column dots for tall J.
         let jtj = j.transpose() * &j;
         let g = j.tr_mul(&r);
@@ -148,7 +164,7 @@ pub fn solve(
             break;
         }
     }
-    p.residual(&z, &mut r)?;
+    p.residual(&z, &mut r).map_err(LmError::AtAccepted)?;
     cost = 0.5 * r.norm_squared();
     Ok(LmResult {
         z,

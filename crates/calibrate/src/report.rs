@@ -7,6 +7,7 @@ use crate::params::{CalModel, ParamId};
 use crate::pipeline::{PipelineReport, Stage};
 use crate::residual::Kind;
 use crate::validate;
+use cdpr_model::ModelError;
 use cdpr_model::config::Platform;
 use std::fmt::Write as _;
 
@@ -295,104 +296,26 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
     s
 }
 
-/// Writes the identified model as a platform TOML in the schema of config/*.toml, taking the
-/// non-identified sections (limits, winch, workspace, home, sections) from `base`.
-pub fn platform_toml(base: &Platform, cal: &CalModel, name: &str) -> String {
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "# Identified by `crs calibrate` from {} (spec ch. 4).",
-        base.name
-    );
-    let _ = writeln!(
-        s,
-        "# Effects the platform schema cannot express are in the side file named in the report.\n"
-    );
-    let _ = writeln!(
-        s,
-        "[platform]\nname = {:?}\ndescription = {:?}\n",
-        name,
-        format!("calibrated from {}", base.name)
-    );
-    let v3 = |v: &nalgebra::Vector3<f64>| format!("[{:?}, {:?}, {:?}]", v.x, v.y, v.z);
-    s.push_str("[geometry]\nframe_anchors_m = [\n");
-    for a in &cal.a {
-        let _ = writeln!(s, "  {},", v3(a));
-    }
-    s.push_str("]\nplatform_anchors_m = [\n");
-    for b in &cal.b {
-        let _ = writeln!(s, "  {},", v3(b));
-    }
-    s.push_str("]\n\n");
-    if cal.pulleys {
-        let _ = writeln!(
-            s,
-            "[pulleys]\nradius_m = {:?}\nswivel_axes = [",
-            cal.pulley_radius
-        );
-        for ax in &cal.pulley_axis {
-            let _ = writeln!(s, "  {},", v3(ax));
-        }
-        s.push_str("]\n\n");
-    }
-    let kf: Vec<String> = cal.k_f.iter().map(|k| format!("{k:?}")).collect();
-    let _ = writeln!(s, "[elasticity]\nk_f_n = [{}]\n", kf.join(", "));
-    let w: Vec<String> = cal.w_e.iter().map(|k| format!("{k:?}")).collect();
-    let _ = writeln!(s, "[load]\nwrench_n_nm = [{}]\n", w.join(", "));
-    let _ = writeln!(
-        s,
-        "[forces]\nf_min_n = {:?}\nf_max_n = {:?}\nf_abs_max_n = {:?}\n",
-        cal.f_min, cal.f_max, base.f_abs_max
-    );
-    let l = &base.limits;
-    let _ = writeln!(
-        s,
-        "[limits]\nlinear_velocity_max_m_per_s = {:?}\nangular_velocity_max_deg_per_s = {:?}\nlinear_acceleration_max_m_per_s2 = {:?}\nangular_acceleration_max_deg_per_s2 = {:?}\n",
-        l.linear_velocity_max,
-        l.angular_velocity_max.to_degrees(),
-        l.linear_acceleration_max,
-        l.angular_acceleration_max.to_degrees()
-    );
-    let _ = writeln!(
-        s,
-        "[winch]\ndrum_diameter_m = {:?}\nrope_diameter_m = {:?}\n",
-        base.winch.drum_diameter, base.winch.rope_diameter
-    );
-    let r = &base.region;
-    let deg = |v: &nalgebra::Vector3<f64>| {
-        format!(
-            "[{:?}, {:?}, {:?}]",
-            v.x.to_degrees(),
-            v.y.to_degrees(),
-            v.z.to_degrees()
-        )
+/// The identified platform as platform TOML: `base` with the calibrated geometry, pulleys,
+/// k_F, w_e and force limits of `cal`, named `name`. The text is written by the model crate's
+/// writer ([`cdpr_model::config_writer::platform_toml`]), next to the reader the daemon uses.
+pub fn platform_toml(base: &Platform, cal: &CalModel, name: &str) -> Result<String, ModelError> {
+    let p = Platform {
+        name: name.to_string(),
+        description: format!("calibrated from {}", base.name),
+        model: cal.model()?,
+        ..base.clone()
     };
-    let _ = writeln!(
-        s,
-        "[workspace]\nposition_min_m = {}\nposition_max_m = {}\nrotation_min_deg = {}\nrotation_max_deg = {}\n",
-        v3(&r.position.min),
-        v3(&r.position.max),
-        deg(&r.rotation_min),
-        deg(&r.rotation_max)
-    );
-    let _ = writeln!(
-        s,
-        "[home]\nposition_m = {}\nrotation_deg = {}",
-        v3(&base.home.r),
-        deg(&base.home.phi)
-    );
-    if let Some(f) = &base.f_ini {
-        let fs: Vec<String> = f.iter().map(|v| format!("{v:?}")).collect();
-        let _ = writeln!(s, "f_ini_n = [{}]", fs.join(", "));
-    }
-    if !base.sections.is_empty() {
-        s.push_str("\n[sections]\n");
-        for sec in &base.sections {
-            let c: Vec<String> = sec.cables.iter().map(|c| (c + 1).to_string()).collect();
-            let _ = writeln!(s, "{} = [{}]", sec.name, c.join(", "));
-        }
-    }
-    s
+    Ok(cdpr_model::config_writer::platform_toml(
+        &p,
+        &[
+            &format!(
+                "Identified by `crs calibrate` from {} (spec ch. 4).",
+                base.name
+            ),
+            "Effects the platform schema cannot express are in the side file named in the report.",
+        ],
+    ))
 }
 
 /// Side file (TOML) with the cable offsets and every extension parameter of the model.

@@ -234,9 +234,23 @@ pub struct Prediction {
     pub forces: Option<Vec<f64>>,
 }
 
+/// Why a sample's pose could not be predicted.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum PredictError {
+    #[error("invalid model: {0}")]
+    Model(#[from] cdpr_model::ModelError),
+    #[error(transparent)]
+    Kinematics(#[from] cdpr_model::kinematics::KinematicsError),
+    #[error(transparent)]
+    Forward(#[from] cdpr_model::forward::FkError),
+    /// The pose-dependent load / sag fixed point did not settle in its iterations.
+    #[error("pose-dependent load/sag iteration did not settle")]
+    LoadIteration,
+}
+
 /// Predicts the pose (and forces) of sample `o` from its command with the model.
-pub fn predict(kind: Kind, cal: &CalModel, o: &Observation) -> Result<Prediction, String> {
-    let model = cal.model().map_err(|e| e.to_string())?;
+pub fn predict(kind: Kind, cal: &CalModel, o: &Observation) -> Result<Prediction, PredictError> {
+    let model = cal.model()?;
     let mut data = Data::new(&model);
     let m = cal.m();
     let q_theta: Vec<f64> = (0..m).map(|i| cal.q_theta(i, o.q_cmd[i])).collect();
@@ -248,8 +262,7 @@ pub fn predict(kind: Kind, cal: &CalModel, o: &Observation) -> Result<Prediction
     match kind {
         // A model fitted on the Cartesian residual is a kinematic model.
         Kind::Kinematic | Kind::Cartesian => {
-            let sol = least_squares(&model, &mut data, &q_theta, &guess, &opts)
-                .map_err(|e| e.to_string())?;
+            let sol = least_squares(&model, &mut data, &q_theta, &guess, &opts)?;
             Ok(Prediction {
                 pose: sol.pose,
                 forces: None,
@@ -260,13 +273,12 @@ pub fn predict(kind: Kind, cal: &CalModel, o: &Observation) -> Result<Prediction
             let dependent = cal.sag_w2 != 0.0 || cal.cog != nalgebra::Vector3::zeros();
             let mut x = guess;
             for _ in 0..30 {
-                kinematics::inverse(&model, &mut data, &x).map_err(|e| e.to_string())?;
+                kinematics::inverse(&model, &mut data, &x)?;
                 for i in 0..m {
                     law.cos2[i] = (1.0 - data.u[i].z * data.u[i].z).max(0.0);
                 }
                 let w = cal.wrench_at(&x.rotation());
-                let sol = elastostatic_with_law(&model, &mut data, &law, &w, &q_theta, &x, &opts)
-                    .map_err(|e| e.to_string())?;
+                let sol = elastostatic_with_law(&model, &mut data, &law, &w, &q_theta, &x, &opts)?;
                 let dx = (sol.pose.to_vector() - x.to_vector()).amax();
                 x = sol.pose;
                 if !dependent || dx < 1e-11 {
@@ -276,7 +288,7 @@ pub fn predict(kind: Kind, cal: &CalModel, o: &Observation) -> Result<Prediction
                     });
                 }
             }
-            Err("pose-dependent load/sag iteration did not settle".into())
+            Err(PredictError::LoadIteration)
         }
     }
 }

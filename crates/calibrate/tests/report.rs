@@ -18,7 +18,7 @@ fn platform_toml_round_trips_through_load_platform() {
     cal.w_e[4] = -512.25;
     cal.pulleys = true;
     cal.pulley_radius = 0.161;
-    let text = report::platform_toml(&base, &cal, "roundtrip");
+    let text = report::platform_toml(&base, &cal, "roundtrip").expect("valid model");
     let p = parse_platform(&text, "roundtrip.toml").expect("written platform must load");
     let model = cal.model().unwrap();
     assert_eq!(

@@ -30,6 +30,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod config;
+pub mod config_writer;
 pub mod elastostatics;
 pub mod feasibility;
 pub mod forward;

@@ -5,23 +5,31 @@
 //!
 //! - [`calibration_loop`]: the closed calibration loop (`crs calibrate loop`): before run,
 //!   identification, after run, report.
+//! - [`calibration_output`]: report, plots, calibrated.toml and side file of an identification.
 //! - [`supervisor`]: ONE process supervisor — start the daemons in order with their logs and
 //!   IPC prefix, notice the first child that dies, stop all (SIGTERM, then SIGKILL) in reverse
 //!   order, Ctrl-C handling.
 //! - [`rest_recording`]: rest points of a run from the live topics → a `crs-dataset 1` file.
 //! - [`campaign`]: calibration-campaign generation and waypoint timing/writing, checked with
 //!   motion-core's own [`configure`](motion_core::daemon::lifecycle::configure) step.
+//! - [`diagnosis_bench`]: the residual diagnosis benchmark (`crs calibrate bench-diagnosis`).
 //! - [`platforms`]: the platforms the stack runs (`crs sim --platform icosahedron|helicopter`)
 //!   and the consistent set of daemon, plant, monitor and drives configs of each.
+//! - [`run_plots`]: the plots and index.html of every `crs sim` run.
 //! - [`sim_run`]: one run of the whole simulated stack (`crs sim`), its summary and verdict.
 //! - [`surrogate_evaluation`]: the surrogate fit of a platform and its evaluation on the plant.
+//! - [`surrogate_report`]: report.md/json and tracking.svg of a surrogate evaluation.
 //! - [`transport`]: which CAN transport a run uses (vcan0 or the UDP loopback bus).
 
 pub mod calibration_loop;
+pub mod calibration_output;
 pub mod campaign;
+pub mod diagnosis_bench;
 pub mod platforms;
 pub mod rest_recording;
+pub mod run_plots;
 pub mod sim_run;
 pub mod supervisor;
 pub mod surrogate_evaluation;
+pub mod surrogate_report;
 pub mod transport;

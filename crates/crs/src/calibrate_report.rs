@@ -6,8 +6,9 @@
 use calibrate::effects::Effect;
 use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
 use calibrate::{Observation, report};
-use cdpr_model::config::{Platform, load_platform};
+use cdpr_model::config::Platform;
 use clap::Args;
+use crs_stack::calibration_output;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 
@@ -152,67 +153,23 @@ pub(crate) fn calibrate_and_report(
         ));
     }
     bar.finish_and_clear();
-    std::fs::create_dir_all(&opts.out)?;
     let eval = if holdout.is_empty() { train } else { holdout };
-    let plots = report::plots(&rep, eval);
-    let mut names = Vec::new();
-    for (name, svg) in &plots {
-        std::fs::write(opts.out.join(name), svg)?;
-        names.push(name.clone());
-    }
-    let fin = rep.final_stage();
-    let toml_path = opts.out.join("calibrated.toml");
-    let side_path = opts.out.join("calibrated-effects.toml");
-    // Never deploy a model that did not validate: write the last step whose FK converged on
-    // every held-out sample, or nothing (issue 13). Stale outputs of an earlier run go too.
-    let _ = std::fs::remove_file(&toml_path);
-    let _ = std::fs::remove_file(&side_path);
-    let written = rep.last_validated_stage();
-    let mut md = report::markdown(&rep, command, &names);
-    if let Some(st) = written {
-        // The chosen effects belong to the final step only.
-        let chosen = if std::ptr::eq(st, fin) {
-            rep.selection
-                .as_ref()
-                .map(|s| s.chosen.clone())
-                .unwrap_or_default()
-        } else {
-            Vec::new()
-        };
-        std::fs::write(
-            &toml_path,
-            report::platform_toml(base, &st.model, &format!("{}-calibrated", base.name)),
-        )?;
-        std::fs::write(&side_path, report::side_file(&st.model, &chosen))?;
-        // The written platform must load with the daemon's loader.
-        load_platform(&toml_path).map_err(|e| format!("written platform does not load: {e}"))?;
-        md.push_str(&format!(
-            "\n## Output\n\n* Identified platform (step \"{}\"): `{}` (loads with `cdpr_model::config::load_platform`).\n* Side file (cable offsets and extension parameters the platform schema cannot express): `{}`.\n",
-            st.name,
-            toml_path.display(),
-            side_path.display()
-        ));
-    } else {
-        md.push_str("\n## Output\n\n* No step validated: no calibrated platform was written.\n");
-    }
-    std::fs::write(opts.out.join("report.md"), &md)?;
-    let json = serde_json::to_string_pretty(&rep)?;
-    std::fs::write(opts.out.join("report.json"), &json)?;
+    let out = calibration_output::write(base, &rep, eval, &opts.out, command)?;
     if opts.json {
-        println!("{json}");
+        println!("{}", out.json);
     } else {
         println!("{}", report::stage_table(&rep));
-        println!("report: {}", opts.out.join("report.md").display());
+        println!("report: {}", out.report.display());
     }
     for (name, text) in rep.failed_stages() {
         eprintln!("calibration step \"{name}\" failed: {text} held-out samples");
     }
+    let fin = rep.final_stage();
     if fin.failed() {
-        let what = match written {
+        let what = match &out.written_step {
             Some(st) => format!(
-                "{} holds the last validated step, \"{}\"",
-                toml_path.display(),
-                st.name
+                "{} holds the last validated step, \"{st}\"",
+                out.platform.display()
             ),
             None => "no calibrated platform was written".into(),
         };

@@ -9,7 +9,6 @@ mod gen_cmd;
 mod model_cmd;
 mod plant_cmd;
 mod sim_cmd;
-mod sim_plots;
 mod surrogate_cmd;
 
 use clap::{CommandFactory, Parser, Subcommand};

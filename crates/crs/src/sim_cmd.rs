@@ -3,10 +3,10 @@
 //! writes the summary) plus the `--check` verdict.
 
 use crate::console_cmd::SimConsoleArgs;
-use crate::sim_plots::RunRecord;
 use cdpr_model::config::load_platform;
 use crs_ipc::{JointSetpoint, LoopStatsSample, PlantTruth, StateEvent};
 use crs_stack::platforms;
+use crs_stack::run_plots::{self, RunRecord};
 use crs_stack::sim_run::{RunObserver, RunStart, SimOptions, Summary, execute_observed};
 use std::path::Path;
 use std::path::PathBuf;
@@ -136,7 +136,7 @@ impl RunObserver for SimObserver<'_> {
         };
         let written = serde_json::to_value(summary)
             .map_err(|e| e.to_string())
-            .and_then(|v| crate::sim_plots::write(out, plots, &v).map_err(|e| e.to_string()));
+            .and_then(|v| run_plots::write(out, plots, &v).map_err(|e| e.to_string()));
         match written {
             Ok(index) => println!("plots written to {}", index.display()),
             Err(e) => println!("plots NOT written: {e}"),

@@ -2,38 +2,15 @@
 //! decision) allocates nothing: a counting global allocator observes a whole run of cycles.
 
 use crs_ipc::{BusState, DriveFeedback, JointSetpoint, PlatformIdentity};
+use crs_test_support::alloc::{CountingAlloc, count_allocations};
 use safety_monitor::config;
 use safety_monitor::identity::platform_identity;
 use safety_monitor::kinematics::StandardKinematics;
 use safety_monitor::{Limits, Monitor, MonitorState};
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
-
-struct Counting;
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-thread_local! {
-    // Only the thread running the cycles counts: the test harness's own thread may still be
-    // printing when counting starts on a loaded machine. const, no destructor: never allocates.
-    static COUNTING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        if COUNTING.with(std::cell::Cell::get) {
-            ALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.dealloc(p, l) }
-    }
-}
 
 #[global_allocator]
-static A: Counting = Counting;
+static A: CountingAlloc = CountingAlloc;
 
 #[test]
 fn a_cycle_allocates_nothing() {
@@ -51,41 +28,39 @@ fn a_cycle_allocates_nothing() {
         ..JointSetpoint::default()
     };
     kin.lengths(&base.pose, &mut base.cable_length_m);
-    COUNTING.with(|c| c.set(true));
-    let before = ALLOCS.load(Ordering::Relaxed);
     let mut seq = 0;
-    for cycle in 0..1000u64 {
-        m.on_identity(&ident);
-        for _ in 0..15 {
-            seq += 1;
-            let mut s = base;
-            s.sequence = seq;
-            s.timestamp_ns = seq * 1_000_000;
-            if cycle == 500 {
-                s.cable_length_m[2] += 0.2; // one trip in the middle
+    let ((), n) = count_allocations(|| {
+        for cycle in 0..1000u64 {
+            m.on_identity(&ident);
+            for _ in 0..15 {
+                seq += 1;
+                let mut s = base;
+                s.sequence = seq;
+                s.timestamp_ns = seq * 1_000_000;
+                if cycle == 500 {
+                    s.cable_length_m[2] += 0.2; // one trip in the middle
+                }
+                m.on_setpoint(&s);
+                let mut f = DriveFeedback {
+                    cable_count: 8,
+                    applied_setpoint_sequence: seq,
+                    bus_state: BusState::Running as u32,
+                    ..DriveFeedback::default()
+                };
+                f.cable_length_m = s.cable_length_m;
+                m.on_feedback(&f);
+                m.on_rpdo(1, base.cable_length_m[1], s.timestamp_ns);
+                for i in 0..8 {
+                    m.on_drive_state(i, true);
+                    m.on_force(i, 4000.0, s.timestamp_ns);
+                }
             }
-            m.on_setpoint(&s);
-            let mut f = DriveFeedback {
-                cable_count: 8,
-                applied_setpoint_sequence: seq,
-                bus_state: BusState::Running as u32,
-                ..DriveFeedback::default()
-            };
-            f.cable_length_m = s.cable_length_m;
-            m.on_feedback(&f);
-            m.on_rpdo(1, base.cable_length_m[1], s.timestamp_ns);
-            for i in 0..8 {
-                m.on_drive_state(i, true);
-                m.on_force(i, 4000.0, s.timestamp_ns);
+            m.end_cycle(cycle * 15_000_000);
+            if cycle > 510 && m.state() == MonitorState::Tripped {
+                m.request_reset();
             }
         }
-        m.end_cycle(cycle * 15_000_000);
-        if cycle > 510 && m.state() == MonitorState::Tripped {
-            m.request_reset();
-        }
-    }
-    let n = ALLOCS.load(Ordering::Relaxed) - before;
-    COUNTING.with(|c| c.set(false));
+    });
     assert_eq!(m.trip_log().total(), 1);
     assert_eq!(m.state(), MonitorState::Armed);
     assert_eq!(n, 0, "{n} allocations in 1000 cycles");

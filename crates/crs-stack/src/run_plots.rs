@@ -3,7 +3,7 @@
 //! loop's setpoint period and motion-core's lateness quantiles), `<out>/events.svg` (monitor and
 //! process events on the time axis) and `<out>/index.html` showing them with the summary.
 //!
-//! [`RunRecord`] is fed from the launcher's follow loop (a few lines in `sim_cmd.rs`); it keeps
+//! [`RunRecord`] is fed from the launcher's follow loop (a few lines in the `crs` binary's `sim_cmd.rs`); it keeps
 //! the streams decimated to [`KEEP_EVERY`] (100 Hz of a 1 kHz stream) so a long run stays small.
 
 use crs_ipc::{
@@ -12,14 +12,14 @@ use crs_ipc::{
 use std::path::{Path, PathBuf};
 
 /// Keep every n-th sample of the 1 kHz streams.
-pub(crate) const KEEP_EVERY: u64 = 10;
+pub const KEEP_EVERY: u64 = 10;
 /// Setpoint-period histogram: bin width and range (µs).
 const BIN_US: f64 = 20.0;
 const HIST_MAX_US: f64 = 3000.0;
 
 /// What a run's plots are made of.
 #[derive(Default)]
-pub(crate) struct RunRecord {
+pub struct RunRecord {
     t0_ns: Option<u64>,
     f_min: f64,
     f_max: f64,
@@ -40,7 +40,7 @@ pub(crate) struct RunRecord {
 }
 
 impl RunRecord {
-    pub(crate) fn new(f_min: f64, f_max: f64) -> Self {
+    pub fn new(f_min: f64, f_max: f64) -> Self {
         Self {
             f_min,
             f_max,
@@ -54,7 +54,7 @@ impl RunRecord {
         (ns as f64 - t0 as f64) * 1e-9
     }
 
-    pub(crate) fn setpoint(&mut self, sp: &JointSetpoint) {
+    pub fn setpoint(&mut self, sp: &JointSetpoint) {
         if let Some(prev) = self.last_sp_ns {
             let us = sp.timestamp_ns.saturating_sub(prev) as f64 * 1e-3;
             let k = ((us / BIN_US) as usize).min(self.period_hist.len() - 1);
@@ -69,7 +69,7 @@ impl RunRecord {
         self.n_sp += 1;
     }
 
-    pub(crate) fn truth(&mut self, p: &PlantTruth) {
+    pub fn truth(&mut self, p: &PlantTruth) {
         if self.n_truth.is_multiple_of(KEEP_EVERY) {
             let t = self.t(p.timestamp_ns);
             let m = (p.cable_count as usize).min(MAX_CABLES);
@@ -78,7 +78,7 @@ impl RunRecord {
         self.n_truth += 1;
     }
 
-    pub(crate) fn loop_stats(&mut self, s: &LoopStatsSample) {
+    pub fn loop_stats(&mut self, s: &LoopStatsSample) {
         let t = self.t(s.timestamp_ns);
         self.lateness.push((
             t,
@@ -88,7 +88,7 @@ impl RunRecord {
         ));
     }
 
-    pub(crate) fn event(&mut self, e: &StateEvent) {
+    pub fn event(&mut self, e: &StateEvent) {
         let source = match e.source {
             x if x == ProcessId::MotionCore as u32 => "motion-core",
             x if x == ProcessId::DriveIo as u32 => "drive-io",
@@ -404,7 +404,7 @@ fn html_escape(s: &str) -> String {
 }
 
 /// Writes the four SVGs and index.html into `out`; returns the index path.
-pub(crate) fn write(
+pub fn write(
     out: &Path,
     r: &RunRecord,
     summary: &serde_json::Value,

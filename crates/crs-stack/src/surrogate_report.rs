@@ -1,0 +1,147 @@
+//! The report of a surrogate evaluation on the plant (`crs surrogate fit --plant`, `crs surrogate
+//! evaluate`): report.md (the table of both controllers), report.json and tracking.svg.
+
+use crate::surrogate_evaluation::{Evaluation, stats};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+type BoxErr = Box<dyn std::error::Error>;
+
+/// What [`write`] wrote: the Markdown table (also in report.md) and the files.
+pub struct Written {
+    pub markdown: String,
+    pub files: Vec<PathBuf>,
+}
+
+/// Write report.md, report.json and tracking.svg of `ev` (and the fit's figures) into `dir`.
+pub fn write(
+    ev: &Evaluation,
+    dir: &Path,
+    fit: Option<&surrogate::FitReport>,
+) -> Result<Written, BoxErr> {
+    std::fs::create_dir_all(dir)?;
+    let mut md = String::new();
+    writeln!(
+        md,
+        "Surrogate evaluation on plant `{}` (platform `{}`): {} poses, {} wrench feasible (eq. 3.29/3.41)\n",
+        ev.plant, ev.platform, ev.poses, ev.wrench_feasible
+    )?;
+    if let Some(r) = fit {
+        writeln!(
+            md,
+            "Fit: degree {}, {} coefficients/cable, condition {:.2}; error vs full model max {:.4} mm, mean {:.4} mm; max |φ_sg| {:.2} mm\n",
+            r.degree,
+            r.n_coeffs_per_cable,
+            r.condition_number,
+            r.max_fit_error_mm,
+            r.mean_fit_error_mm,
+            r.max_abs_offset_mm
+        )?;
+    }
+    writeln!(
+        md,
+        "| controller | force error mean / p95 / max (N) | position error mean / max (mm) | orientation error mean / max (deg) | reachable (eq. 3.33) | no equilibrium |"
+    )?;
+    writeln!(md, "|---|---|---|---|---|---|")?;
+    for (name, t) in [
+        (
+            "kinematics, set up with f_ini (eq. 3.14, 6.22)",
+            &ev.kinematic,
+        ),
+        (
+            "kinematics + surrogate (eq. 5.26), set up with f_ref(home)",
+            &ev.surrogate,
+        ),
+    ] {
+        let f = stats(&t.force_error_n);
+        let p = stats(&t.position_error_mm);
+        let o = stats(&t.orientation_error_deg);
+        let pct = if ev.wrench_feasible > 0 {
+            100.0 * t.reachable as f64 / ev.wrench_feasible as f64
+        } else {
+            f64::NAN
+        };
+        writeln!(
+            md,
+            "| {name} | {:.0} / {:.0} / {:.0} | {:.3} / {:.3} | {:.4} / {:.4} | {} of {} ({pct:.1} %) | {} |",
+            f.0, f.1, f.2, p.0, p.2, o.0, o.2, t.reachable, ev.wrench_feasible, t.failed
+        )?;
+    }
+    std::fs::write(dir.join("report.md"), &md)?;
+    std::fs::write(dir.join("report.json"), serde_json::to_string_pretty(ev)?)?;
+    let svg = dir.join("tracking.svg");
+    plot(ev, &svg).map_err(|e| format!("{}: {e}", svg.display()))?;
+    Ok(Written {
+        markdown: md,
+        files: vec![dir.join("report.md"), dir.join("report.json"), svg],
+    })
+}
+
+/// Two panels: sorted force error and sorted position error of both controllers.
+fn plot(ev: &Evaluation, path: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    let root = SVGBackend::new(path, (1000, 420)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let panels = root.split_evenly((1, 2));
+    let series = |v: &[f64]| {
+        let mut s: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+        s.sort_by(f64::total_cmp);
+        s
+    };
+    for (area, (title, unit, kin, sg)) in panels.iter().zip([
+        (
+            "max cable force error |f̂ − f_ref|",
+            "N",
+            series(&ev.kinematic.force_error_n),
+            series(&ev.surrogate.force_error_n),
+        ),
+        (
+            "position error |r̂ − r|",
+            "mm",
+            series(&ev.kinematic.position_error_mm),
+            series(&ev.surrogate.position_error_mm),
+        ),
+    ]) {
+        let y_max = kin
+            .iter()
+            .chain(sg.iter())
+            .copied()
+            .fold(0.0f64, f64::max)
+            .max(1e-9)
+            * 1.05;
+        let mut chart = ChartBuilder::on(area)
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0f64..100f64, 0f64..y_max)?;
+        chart
+            .configure_mesh()
+            .x_desc("poses, sorted (%)")
+            .y_desc(unit)
+            .draw()?;
+        let line = |s: &[f64]| {
+            let len = s.len().max(2) as f64 - 1.0;
+            s.iter()
+                .enumerate()
+                .map(move |(i, v)| (100.0 * i as f64 / len, *v))
+                .collect::<Vec<_>>()
+        };
+        chart
+            .draw_series(LineSeries::new(line(&kin), RED.stroke_width(2)))?
+            .label("kinematics + set-up offsets")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], RED));
+        chart
+            .draw_series(LineSeries::new(line(&sg), BLUE.stroke_width(2)))?
+            .label("kinematics + surrogate")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLUE));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
+    }
+    root.present()?;
+    Ok(())
+}
