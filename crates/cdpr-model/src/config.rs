@@ -9,38 +9,13 @@ use crate::pose::Pose;
 use crate::workspace::PositionBox;
 use nalgebra::{Vector3, Vector6};
 use serde::Deserialize;
-use std::fmt;
 use std::ops::Range;
 use std::path::Path;
 use toml::Spanned;
 
-/// A configuration error with its location.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ConfigError {
-    pub file: String,
-    /// 1-based line and column, when known.
-    pub line: Option<usize>,
-    pub column: Option<usize>,
-    /// Dotted key path, e.g. `geometry.frame_anchors_m[3]`.
-    pub key: String,
-    pub message: String,
-}
-
-impl fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.file)?;
-        if let (Some(l), Some(c)) = (self.line, self.column) {
-            write!(f, ":{l}:{c}")?;
-        }
-        if self.key.is_empty() {
-            write!(f, ": {}", self.message)
-        } else {
-            write!(f, ": `{}`: {}", self.key, self.message)
-        }
-    }
-}
-
-impl std::error::Error for ConfigError {}
+/// A configuration error with its location (`file:line:column: `key`: message`): the stack's
+/// one type for it, from `config-diagnostics`.
+pub use config_diagnostics::ConfigError;
 
 /// Table 5.1 motion limits, SI.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -217,7 +192,10 @@ pub fn load_platform(path: impl AsRef<Path>) -> Result<Platform, ConfigError> {
 pub fn parse_platform(text: &str, file: &str) -> Result<Platform, ConfigError> {
     let loc = Locator { text, file };
     let raw: RawPlatform = toml::from_str(text).map_err(|e| {
-        let (line, column) = e.span().map(|s| loc.line_col(s.start)).unzip();
+        let (line, column) = e
+            .span()
+            .map(|s| config_diagnostics::line_col(loc.text, s.start))
+            .unzip();
         ConfigError {
             file: file.to_string(),
             line,
@@ -229,33 +207,21 @@ pub fn parse_platform(text: &str, file: &str) -> Result<Platform, ConfigError> {
     build(raw, &loc)
 }
 
+/// The platform loader's checks over one file's text; locating an error is
+/// `config_diagnostics`' job (one implementation for every loader).
 struct Locator<'a> {
     text: &'a str,
     file: &'a str,
 }
 
 impl Locator<'_> {
-    fn line_col(&self, offset: usize) -> (usize, usize) {
-        let before = &self.text[..offset.min(self.text.len())];
-        let line = before.matches('\n').count() + 1;
-        let column = before.len() - before.rfind('\n').map_or(0, |p| p + 1) + 1;
-        (line, column)
-    }
-
     fn err(
         &self,
         span: Range<usize>,
         key: impl Into<String>,
         message: impl Into<String>,
     ) -> ConfigError {
-        let (line, column) = self.line_col(span.start);
-        ConfigError {
-            file: self.file.to_string(),
-            line: Some(line),
-            column: Some(column),
-            key: key.into(),
-            message: message.into(),
-        }
+        config_diagnostics::Locator::new(self.text, self.file).err(span, key, message)
     }
 
     fn finite<T>(&self, v: &Spanned<T>, key: &str, values: &[f64]) -> Result<(), ConfigError> {

@@ -19,6 +19,8 @@
 //! - [`sim_run`]: one run of the whole simulated stack (`crs sim`), its summary and verdict.
 //! - [`surrogate_evaluation`]: the surrogate fit of a platform and its evaluation on the plant.
 //! - [`surrogate_report`]: report.md/json and tracking.svg of a surrogate evaluation.
+//! - [`timing`]: the timing profiles of a run (spec, relaxed for loaded hosts, emulated for the
+//!   QEMU guest): the relaxed copies of the daemon, drives and monitor configs.
 //! - [`transport`]: which CAN transport a run uses (vcan0 or the UDP loopback bus).
 
 pub mod calibration_loop;
@@ -32,4 +34,5 @@ pub mod sim_run;
 pub mod supervisor;
 pub mod surrogate_evaluation;
 pub mod surrogate_report;
+pub mod timing;
 pub mod transport;

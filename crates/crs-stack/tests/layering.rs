@@ -197,3 +197,18 @@ fn the_shared_limits_depend_on_nothing() {
         );
     }
 }
+
+#[test]
+fn the_test_support_is_a_dev_dependency_only() {
+    // The counting allocator replaces the global allocator: linked into a daemon it would
+    // count every allocation of the hard loop's process. No library or binary may need it.
+    let (deps, name_of) = graph();
+    for (id, ds) in &deps {
+        assert!(
+            !ds.iter().any(|d| name_of[d] == "crs-test-support"),
+            "{} has crs-test-support as a normal dependency",
+            name_of[id]
+        );
+    }
+    assert!(closure("crs-test-support").is_empty());
+}

@@ -8,6 +8,7 @@ use crs_ipc::{JointSetpoint, LoopStatsSample, PlantTruth, StateEvent};
 use crs_stack::platforms;
 use crs_stack::run_plots::{self, RunRecord};
 use crs_stack::sim_run::{RunObserver, RunStart, SimOptions, Summary, execute_observed};
+use crs_stack::timing::{self, TimedConfigs, TimingProfile};
 use std::path::Path;
 use std::path::PathBuf;
 
@@ -85,6 +86,12 @@ pub struct SimArgs {
     /// the SYNCs going on a loaded host (needs root; ignored with a note otherwise).
     #[arg(long, value_parser = clap::value_parser!(i32).range(6..=99))]
     pub(crate) rt_priority: Option<i32>,
+    /// Timing profile: `spec` (the configs as shipped), `relaxed` (debug builds on a loaded
+    /// host: 4 ms loop and SYNC, longer watchdogs) or `emulated` (the QEMU guest: relaxed, no
+    /// SCHED_FIFO, 0.1 of the demo speed). Non-spec profiles run relaxed copies of the daemon,
+    /// drives and monitor configs written to <out>/timing-<profile>/ (crs_stack::timing).
+    #[arg(long, default_value = "spec", value_parser = TimingProfile::NAMES)]
+    pub(crate) timing: String,
     #[command(flatten)]
     pub(crate) console: SimConsoleArgs,
 }
@@ -184,9 +191,19 @@ impl SimArgs {
         let pick = |flag: &Option<PathBuf>, default: &PathBuf| {
             flag.clone().unwrap_or_else(|| default.clone())
         };
+        let profile: TimingProfile = self.timing.parse()?;
+        let timed = timing::write_profile(
+            profile,
+            &TimedConfigs {
+                daemon: pick(&self.config, &set.daemon),
+                drives: pick(&self.drives, &set.drives),
+                monitor: pick(&self.monitor_config, &set.monitor),
+            },
+            &self.out.join(format!("timing-{}", profile.name())),
+        )?;
         Ok(SimOptions {
-            config: pick(&self.config, &set.daemon),
-            drives: pick(&self.drives, &set.drives),
+            config: timed.daemon,
+            drives: timed.drives,
             plant: pick(&self.plant, &set.plant),
             transport: self.transport.clone(),
             waypoints: self.waypoints.clone(),
@@ -197,7 +214,7 @@ impl SimArgs {
             no_monitor: self.no_monitor,
             check: self.check,
             max_static_error_mm: self.max_static_error_mm,
-            monitor_config: pick(&self.monitor_config, &set.monitor),
+            monitor_config: timed.monitor,
             dwell_s: self.dwell_s,
             record: self.record.clone(),
             settle_s: self.settle_s,

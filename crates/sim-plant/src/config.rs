@@ -319,14 +319,7 @@ pub(crate) struct Locator<'a> {
 
 impl Locator<'_> {
     pub fn line_col(&self, offset: usize) -> (usize, usize) {
-        let mut o = offset.min(self.text.len());
-        while !self.text.is_char_boundary(o) {
-            o -= 1;
-        }
-        let before = &self.text[..o];
-        let line = before.matches('\n').count() + 1;
-        let column = before.len() - before.rfind('\n').map_or(0, |p| p + 1) + 1;
-        (line, column)
+        config_diagnostics::line_col(self.text, offset)
     }
 
     pub fn err(
@@ -335,25 +328,11 @@ impl Locator<'_> {
         key: impl Into<String>,
         message: impl Into<String>,
     ) -> ConfigError {
-        let (line, column) = self.line_col(span.start);
-        ConfigError {
-            file: self.file.to_string(),
-            line: Some(line),
-            column: Some(column),
-            key: key.into(),
-            message: message.into(),
-        }
+        config_diagnostics::Locator::new(self.text, self.file).err(span, key, message)
     }
 
     pub fn toml_err(&self, e: toml::de::Error) -> ConfigError {
-        let (line, column) = e.span().map(|s| self.line_col(s.start)).unzip();
-        ConfigError {
-            file: self.file.to_string(),
-            line,
-            column,
-            key: String::new(),
-            message: e.message().trim().to_string(),
-        }
+        config_diagnostics::Locator::new(self.text, self.file).toml(&e)
     }
 
     /// A finite scalar within [lo, hi] (bounds inclusive unless `open_lo`).

@@ -106,41 +106,19 @@ fn err(
     key: &str,
     msg: String,
 ) -> ConfigError {
-    let before = &text[..span.start.min(text.len())];
-    let line = before.matches('\n').count() + 1;
-    let column = before.len() - before.rfind('\n').map_or(0, |p| p + 1) + 1;
-    ConfigError {
-        file: file.into(),
-        line: Some(line),
-        column: Some(column),
-        key: key.into(),
-        message: msg,
-    }
+    config_diagnostics::Locator::new(text, file).err(span, key, msg)
 }
 
 pub fn load(path: &Path) -> Result<DaemonConfig, ConfigError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
-        file: file.clone(),
-        line: None,
-        column: None,
-        key: String::new(),
-        message: format!("cannot read: {e}"),
-    })?;
+    let text = config_diagnostics::read(path)?;
     let base = path.parent().unwrap_or(Path::new("."));
     parse(&text, &file, base)
 }
 
 pub fn parse(text: &str, file: &str, base: &Path) -> Result<DaemonConfig, ConfigError> {
-    let raw: Raw = toml::from_str(text).map_err(|e| {
-        let span = e.span().unwrap_or(0..0);
-        let mut ce = err(text, file, span, "", e.message().trim().to_string());
-        if e.span().is_none() {
-            ce.line = None;
-            ce.column = None;
-        }
-        ce
-    })?;
+    let raw: Raw =
+        toml::from_str(text).map_err(|e| config_diagnostics::Locator::new(text, file).toml(&e))?;
     let rt = &raw.realtime;
     let period_us = *rt.period_us.get_ref();
     if !(100..=100_000).contains(&period_us) {

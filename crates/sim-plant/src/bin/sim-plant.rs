@@ -154,7 +154,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     let heartbeat_pub = ipc.publisher::<Heartbeat>()?;
     let mut bus = can_transport::open(&spec).map_err(|e| format!("transport {spec}: {e}"))?;
     if let Some(p) = args.rt_priority {
-        drive_io::runner::make_realtime(p, args.cpu)?;
+        crs_rt::make_realtime(p, args.cpu)?;
         tracing::info!(priority = p, cpu = ?args.cpu, "SCHED_FIFO + mlockall");
     }
     tracing::info!(

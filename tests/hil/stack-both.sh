@@ -1,0 +1,10 @@
+#!/bin/sh
+# Runs inside the vcan guest (tools/stack-hil.sh): both cabins in one boot, each with the
+# `emulated` timing profile (crs_stack::timing) and its inner tour.
+rc=0
+for p in icosahedron helicopter; do
+  echo "== STACK-HIL platform $p"
+  crs sim --platform "$p" --timing emulated --waypoints "tests/hil/waypoints-$p.csv" \
+    --transport socketcan:vcan0 --bin-dir /bin --out "/tmp/sim-$p" --check --timeout-s 400 || rc=1
+done
+exit $rc
