@@ -12,7 +12,9 @@
 //! - [`rest_recording`]: rest points of a run from the live topics → a `crs-dataset 1` file.
 //! - [`campaign`]: calibration-campaign generation and waypoint timing/writing, checked with
 //!   motion-core's own [`configure`](motion_core::daemon::lifecycle::configure) step.
+//! - [`commission`]: commissioning and the pre-ride check (`crs commission`, eq. 6.21–6.24, 3.42).
 //! - [`diagnosis_bench`]: the residual diagnosis benchmark (`crs calibrate bench-diagnosis`).
+//! - [`load_experiment`]: the seed's walking-subject load tracking (sec. 5.3) on the plant.
 //! - [`platforms`]: the platforms the stack runs (`crs sim --platform icosahedron|helicopter`)
 //!   and the consistent set of daemon, plant, monitor and drives configs of each.
 //! - [`run_plots`]: the plots and index.html of every `crs sim` run.
@@ -26,7 +28,9 @@
 pub mod calibration_loop;
 pub mod calibration_output;
 pub mod campaign;
+pub mod commission;
 pub mod diagnosis_bench;
+pub mod load_experiment;
 pub mod platforms;
 pub mod rest_recording;
 pub mod run_plots;

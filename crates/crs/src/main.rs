@@ -6,6 +6,7 @@ mod calibrate_loop_cmd;
 mod calibrate_report;
 mod console_cmd;
 mod gen_cmd;
+mod load_cmd;
 mod model_cmd;
 mod plant_cmd;
 mod sim_cmd;
@@ -50,6 +51,15 @@ enum Command {
         #[command(subcommand)]
         cmd: calibrate_cmd::CalibrateCommand,
     },
+    /// Load tracking from the cable forces (eq. 5.9–5.10): the walking-subject experiment.
+    Load {
+        #[command(subcommand)]
+        cmd: load_cmd::LoadCommand,
+    },
+    /// Commissioning and pre-ride check on the running stack: set-up wrench, payload mass and
+    /// COG, cable offsets, initial tension (eq. 6.21–6.24, 3.42); refuses (exit 1) when the
+    /// payload is out of tolerance. Writes <out>/commission.toml for review.
+    Commission(load_cmd::CommissionArgs),
     /// The operator console: a web page with the running stack's live state and a stop button
     /// (no reset), JSON at /api/status and /api/trips. Binds 127.0.0.1 unless given a token.
     Console(console_cmd::ConsoleArgs),
@@ -70,6 +80,8 @@ fn main() -> ExitCode {
         Command::Plant { cmd } => plant_cmd::run(cmd),
         Command::Surrogate { cmd } => surrogate_cmd::run(cmd),
         Command::Calibrate { cmd } => calibrate_cmd::run(cmd),
+        Command::Load { cmd } => load_cmd::run(cmd),
+        Command::Commission(a) => load_cmd::commission(a),
         Command::Console(a) => console_cmd::run(a),
         Command::GenMan { dir } => gen_cmd::gen_man(Cli::command(), &dir)
             .map(|files| println!("wrote {} man pages to {}", files.len(), dir.display()))
