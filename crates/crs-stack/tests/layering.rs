@@ -91,6 +91,10 @@ fn the_model_library_and_the_data_format_pull_in_no_ipc_rt_can_or_cli() {
     forbid("cdpr-model", &RUNTIME);
     forbid("crs-dataset", &RUNTIME);
     forbid("surrogate", &RUNTIME);
+    forbid("load-tracking", &RUNTIME);
+    forbid("config-diagnostics", &RUNTIME);
+    // The load estimator reads forces; it needs neither the simulator nor the bus.
+    forbid("load-tracking", &["sim-plant", "drive-io", "crs-stack"]);
 }
 
 #[test]
