@@ -9,6 +9,7 @@
 //! - [`supervisor`]: ONE process supervisor — start the daemons in order with their logs and
 //!   IPC prefix, notice the first child that dies, stop all (SIGTERM, then SIGKILL) in reverse
 //!   order, Ctrl-C handling.
+//! - [`reachable_on_plant`]: the kinematic controller's reachable workspace measured on the plant.
 //! - [`rest_recording`]: rest points of a run from the live topics → a `crs-dataset 1` file.
 //! - [`campaign`]: calibration-campaign generation and waypoint timing/writing, checked with
 //!   motion-core's own [`configure`](motion_core::daemon::lifecycle::configure) step.
@@ -32,6 +33,7 @@ pub mod commission;
 pub mod diagnosis_bench;
 pub mod load_experiment;
 pub mod platforms;
+pub mod reachable_on_plant;
 pub mod rest_recording;
 pub mod run_plots;
 pub mod sim_run;

@@ -9,96 +9,12 @@
 use super::Res;
 use cdpr_model::config::Platform;
 use cdpr_model::workspace::{self, PositionBox, Reach, ReachableAnalysis};
-use cdpr_model::{Data, Pose, kinematics};
-use nalgebra::{Vector3, Vector6};
+use cdpr_model::{Data, Pose};
+use crs_stack::reachable_on_plant::{Measured, measure_with_plant, payload_step};
+use nalgebra::Vector3;
 use serde_json::json;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-
-/// What the plant did at one reference pose.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Measured {
-    /// Forces within the limits; position error |r_M − r| (m) and the measured |Δr| (m) under the
-    /// payload step.
-    Reachable {
-        error_m: f64,
-        dr_m: f64,
-    },
-    OutOfLimits,
-    Failed,
-}
-
-/// The wrench step of the sensitivity map: 1 kN more payload.
-fn payload_step() -> Vector6<f64> {
-    Vector6::new(0.0, 0.0, -1000.0, 0.0, 0.0, 0.0)
-}
-
-fn measure_with_plant(
-    plant_path: &Path,
-    platform_path: &Path,
-    pf: &Platform,
-    refs: &[Pose],
-    f_ini: &[f64],
-) -> Result<Vec<Measured>, Box<dyn std::error::Error>> {
-    let cfg = sim_plant::load_plant(plant_path)?;
-    if let (Ok(a), Ok(b)) = (
-        cfg.platform_path.canonicalize(),
-        platform_path.canonicalize(),
-    ) && a != b
-    {
-        eprintln!(
-            "note: the plant {} is built on {}, the controller uses {}",
-            plant_path.display(),
-            cfg.platform_path.display(),
-            platform_path.display()
-        );
-    }
-    let mut loaded_cfg = cfg.clone();
-    loaded_cfg.platform.model = cfg
-        .platform
-        .model
-        .with_params(|p| p.w_e += payload_step())?;
-    let mut plant = sim_plant::Plant::new(cfg)?;
-    let mut loaded = sim_plant::Plant::new(loaded_cfg)?;
-    let home = pf.home;
-    let setup = plant.setup_tension(&home, f_ini)?;
-    loaded.setup_tension(&home, f_ini)?;
-    let (s0, s1) = (plant.state(), loaded.state());
-    let model = &pf.model;
-    let mut data = Data::new(model);
-    kinematics::inverse(model, &mut data, &home)?;
-    let q_home = data.q.clone();
-    let lim = model.params();
-    let mut out = Vec::with_capacity(refs.len());
-    let mut cmd = vec![0.0; model.m()];
-    for x in refs {
-        // The kinematic controller: home command plus the model's length change (eq. 3.24).
-        if kinematics::inverse(model, &mut data, x).is_err() {
-            out.push(Measured::Failed);
-            continue;
-        }
-        for i in 0..cmd.len() {
-            cmd[i] = setup.q_cmd[i] + data.q[i] - q_home[i];
-        }
-        plant.restore(&s0);
-        loaded.restore(&s1);
-        let m = match (plant.step(&cmd), loaded.step(&cmd)) {
-            (Ok(eq), Ok(eq1)) => {
-                if eq.forces.iter().all(|f| *f >= lim.f_min && *f <= lim.f_max) {
-                    Measured::Reachable {
-                        error_m: (eq.pose.r - x.r).norm(),
-                        dr_m: (eq1.pose.r - eq.pose.r).norm(),
-                    }
-                } else {
-                    Measured::OutOfLimits
-                }
-            }
-            _ => Measured::Failed,
-        };
-        out.push(m);
-    }
-    Ok(out)
-}
 
 pub(super) struct ReachableRequest<'a> {
     pub pf: &'a Platform,
@@ -141,7 +57,13 @@ pub(super) fn reachable_cmd(r: &ReachableRequest) -> Res {
         .collect();
     let t1 = std::time::Instant::now();
     let measured = match &r.plant {
-        Some(p) => Some(measure_with_plant(p, r.platform_path, pf, &refs, &f_ini)?),
+        Some(p) => {
+            let (ms, note) = measure_with_plant(p, r.platform_path, pf, &refs, &f_ini)?;
+            if let Some(n) = note {
+                eprintln!("{n}");
+            }
+            Some(ms)
+        }
         None => None,
     };
     let t_plant = t1.elapsed().as_secs_f64();

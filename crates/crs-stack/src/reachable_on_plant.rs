@@ -1,0 +1,100 @@
+//! The reachable workspace of the kinematic controller measured on the simulated plant
+//! (`crs model workspace --reachable --plant`): at each reference pose the kinematic controller
+//! commands the home lengths plus the model's length change (eq. 3.24) and the plant — its own
+//! cable laws and effects — says whether the forces stay within [f_min, f_max] (eq. 3.33), how
+//! far from the reference it settles, and how far a 1 kN payload step moves it (the measured
+//! side of the sensitivity map, eq. 2.76 / 3.23).
+
+use cdpr_model::config::Platform;
+use cdpr_model::{Data, Pose, kinematics};
+use nalgebra::Vector6;
+use std::path::Path;
+
+/// What the plant did at one reference pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Measured {
+    /// Forces within the limits; position error |r_M − r| (m) and the measured |Δr| (m) under the
+    /// payload step.
+    Reachable {
+        error_m: f64,
+        dr_m: f64,
+    },
+    OutOfLimits,
+    Failed,
+}
+
+/// The wrench step of the sensitivity map: 1 kN more payload.
+pub fn payload_step() -> Vector6<f64> {
+    Vector6::new(0.0, 0.0, -1000.0, 0.0, 0.0, 0.0)
+}
+
+/// Measures `refs` on the plant `plant_path`; returns the measurements and, when the plant is
+/// built on another platform file than the controller's `platform_path`, a note saying so.
+pub fn measure_with_plant(
+    plant_path: &Path,
+    platform_path: &Path,
+    pf: &Platform,
+    refs: &[Pose],
+    f_ini: &[f64],
+) -> Result<(Vec<Measured>, Option<String>), Box<dyn std::error::Error>> {
+    let cfg = sim_plant::load_plant(plant_path)?;
+    let note = if let (Ok(a), Ok(b)) = (
+        cfg.platform_path.canonicalize(),
+        platform_path.canonicalize(),
+    ) && a != b
+    {
+        Some(format!(
+            "note: the plant {} is built on {}, the controller uses {}",
+            plant_path.display(),
+            cfg.platform_path.display(),
+            platform_path.display()
+        ))
+    } else {
+        None
+    };
+    let mut loaded_cfg = cfg.clone();
+    loaded_cfg.platform.model = cfg
+        .platform
+        .model
+        .with_params(|p| p.w_e += payload_step())?;
+    let mut plant = sim_plant::Plant::new(cfg)?;
+    let mut loaded = sim_plant::Plant::new(loaded_cfg)?;
+    let home = pf.home;
+    let setup = plant.setup_tension(&home, f_ini)?;
+    loaded.setup_tension(&home, f_ini)?;
+    let (s0, s1) = (plant.state(), loaded.state());
+    let model = &pf.model;
+    let mut data = Data::new(model);
+    kinematics::inverse(model, &mut data, &home)?;
+    let q_home = data.q.clone();
+    let lim = model.params();
+    let mut out = Vec::with_capacity(refs.len());
+    let mut cmd = vec![0.0; model.m()];
+    for x in refs {
+        // The kinematic controller: home command plus the model's length change (eq. 3.24).
+        if kinematics::inverse(model, &mut data, x).is_err() {
+            out.push(Measured::Failed);
+            continue;
+        }
+        for i in 0..cmd.len() {
+            cmd[i] = setup.q_cmd[i] + data.q[i] - q_home[i];
+        }
+        plant.restore(&s0);
+        loaded.restore(&s1);
+        let m = match (plant.step(&cmd), loaded.step(&cmd)) {
+            (Ok(eq), Ok(eq1)) => {
+                if eq.forces.iter().all(|f| *f >= lim.f_min && *f <= lim.f_max) {
+                    Measured::Reachable {
+                        error_m: (eq.pose.r - x.r).norm(),
+                        dr_m: (eq1.pose.r - eq.pose.r).norm(),
+                    }
+                } else {
+                    Measured::OutOfLimits
+                }
+            }
+            _ => Measured::Failed,
+        };
+        out.push(m);
+    }
+    Ok((out, note))
+}
