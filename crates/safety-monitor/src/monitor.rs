@@ -353,7 +353,7 @@ pub mod evidence {
             IdentityMismatch | IdentityMissing => Class::Identity,
             FollowingError | FeedbackSilence | RpdoMismatch | FollowingUnchecked => Class::Feedback,
             ForceSlack | ForceOverload | ForceSilence => Class::Forces,
-            IpcError | BusObservation | EStopEvent | ForgedEvent => Class::Receive,
+            IpcError | BusObservation | EStopEvent | ForgedEvent | CanBusError => Class::Receive,
         }
     }
 
@@ -866,6 +866,27 @@ impl Monitor {
             value,
             ..Fault::new(Cause::BusObservation)
         });
+    }
+
+    /// An error frame of the drive bus's controller (the monitor's own socket subscribes to
+    /// them): bus-off and error-passive trip (`can_bus_error`, value = the condition's code);
+    /// an RX/TX overflow lost frames, so the bus checks ran blind (`bus_observation`). Other
+    /// conditions (warning level, protocol errors, missing ACK, tx timeout) are counted by the
+    /// process, not tripped on.
+    pub fn on_bus_error(&mut self, condition: can_transport::BusCondition) {
+        use can_transport::BusCondition;
+        let value = f64::from(condition.code());
+        match condition {
+            BusCondition::BusOff | BusCondition::ErrorPassive => self.fault(Fault {
+                value,
+                ..Fault::new(Cause::CanBusError)
+            }),
+            BusCondition::Overflow => self.fault(Fault {
+                value,
+                ..Fault::new(Cause::BusObservation)
+            }),
+            BusCondition::TxTimeout | BusCondition::Other => {}
+        }
     }
 
     /// An RPDO1 target seen on the bus for cable `cable` (converted to metres), received at

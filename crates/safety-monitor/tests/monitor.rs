@@ -1307,3 +1307,32 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn bus_off_and_error_passive_trip_overflow_is_a_blind_reader_warnings_pass() {
+    use can_transport::BusCondition;
+    for (cond, cause) in [
+        (BusCondition::BusOff, Some(Cause::CanBusError)),
+        (BusCondition::ErrorPassive, Some(Cause::CanBusError)),
+        (BusCondition::Overflow, Some(Cause::BusObservation)),
+        (BusCondition::TxTimeout, None),
+        (BusCondition::Other, None),
+    ] {
+        let mut m = monitor();
+        let seq = good_cycle(&mut m, 1, 15_000_000);
+        for k in 0..15 {
+            m.on_setpoint(&sp(seq + k, HOME, 0, 0.0));
+        }
+        m.on_bus_error(cond);
+        let r = m.end_cycle(30_000_000);
+        match cause {
+            Some(c) => {
+                let t = r.new_trip.expect("trip");
+                assert_eq!(t.fault.cause, c, "{cond:?}");
+                assert_eq!(t.fault.value, f64::from(cond.code()));
+                assert!(t.to_string().contains(c.name()), "trip log names the cause");
+            }
+            None => assert!(r.new_trip.is_none(), "{cond:?}"),
+        }
+    }
+}
