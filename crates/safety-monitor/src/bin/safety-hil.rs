@@ -485,16 +485,21 @@ impl Stack {
             format!("{}", home_length()),
             "--status-file".into(),
             status,
+            "--control-file".into(),
+            st.dir.join("emulator.control").display().to_string(),
         ];
         st.spawn("winch-emulator", &emu_args)?;
-        let mon_args = vec![
+        let mon_args: Vec<String> = vec![
             "--config".into(),
             c("safety-monitor.toml"),
             "--transport".into(),
             st.transport.clone(),
             "--ipc-prefix".into(),
             st.prefix.clone(),
-        ];
+        ]
+        .into_iter()
+        .chain(monitor_fault_injection(name).iter().map(|a| a.to_string()))
+        .collect();
         st.spawn("safety-monitor", &mon_args)?;
         // The monitor starts not ready (STOP) until every drive is operational and sends forces
         // (after drive-io's NMT start): the drives release only after its RUN pairs, then
@@ -1450,6 +1455,175 @@ fn replayed_heartbeat_after_monitor_death(st: &mut Stack) -> Res<Outcome> {
 }
 
 /// utime + stime of `pid` from /proc (s).
+// ---------------------------------------------------------------------------------------------
+// Issue 15 scenarios: measured forces, unknown applied sequence, CAN error frames, a lost stop
+// frame.
+
+/// Extra monitor arguments of a scenario (fault injection inside the monitor process).
+fn monitor_fault_injection(scenario: &str) -> &'static [&'static str] {
+    match scenario {
+        "stop_frame_lost" => &["--inject-nmt-stop-unsent"],
+        _ => &[],
+    }
+}
+
+/// The winch emulator reports `force_n` as cable `cable`'s (1-based) measured force from its
+/// next SYNC on (its `--control-file`; the emulator has no physics, its force is a constant
+/// pretension otherwise).
+fn inject_force(st: &Stack, cable: usize, force_n: f64) -> Res<()> {
+    let p = st.dir.join("emulator.control");
+    let tmp = st.dir.join("emulator.control.tmp");
+    std::fs::write(&tmp, format!("force {cable} {force_n}\n"))
+        .and_then(|_| std::fs::rename(&tmp, &p))
+        .map_err(|e| format!("{}: {e}", p.display()))
+}
+
+/// One cable's measured force leaves [f_min − 500 N, f_max + 1000 N] (test cabin: 1000 /
+/// 9000 N) and stays there: the monitor's filtered force check (45 ms) trips on that cable.
+fn force_fault(st: &mut Stack, cable: usize, force_n: f64, cause: Cause) -> Res<Outcome> {
+    let _ = st.fake()?.clone();
+    st.wait_following(false)?;
+    let t0 = monotonic_ns();
+    inject_force(st, cable, force_n)?;
+    let ev = st.monitor_trip(cause, 10.0)?;
+    if ev.detail_node as usize != cable {
+        return Err(format!(
+            "tripped on cable {}, expected {cable}",
+            ev.detail_node
+        ));
+    }
+    let stopped = st.require_braked()?;
+    Ok(Outcome {
+        cause: format!("{cause} cable {cable}"),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: format!(
+            "emulated drive reports {force_n} N (t0 = control file written; filter 45 ms)"
+        ),
+    })
+}
+
+fn overload_one_cable(st: &mut Stack) -> Res<Outcome> {
+    // Above f_max + margin (10 kN), below drive-io's own hard limit (14 kN): the monitor's
+    // filtered overload check is what stops it.
+    force_fault(st, 4, 10_500.0, Cause::ForceOverload)
+}
+
+fn slack_one_cable(st: &mut Stack) -> Res<Outcome> {
+    force_fault(st, 2, 200.0, Cause::ForceSlack)
+}
+
+/// drive-io dies and a faulty adapter takes its place at once: it keeps the drives
+/// synchronised (SYNC, so they keep sending forces) and publishes Running feedback whose
+/// applied setpoint the monitor never saw. The following-error check cannot be evaluated:
+/// after `unchecked_cycles` (10) it trips instead of skipping.
+fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
+    let c = st.fake()?.clone();
+    st.wait_following(false)?;
+    let fb0 = st.last_feedback.ok_or("no drive-io feedback")?;
+    let mut bus = open_bus(st)?;
+    // The feedback topic has one publisher: the replacement can take it only once drive-io's
+    // is gone (a new node removes a dead node's resources).
+    st.signal("drive-io", libc::SIGKILL)?;
+    st.reap("drive-io");
+    let t0 = monotonic_ns();
+    let node = IpcNode::with_prefix("shil-faulty-drive-io", &st.prefix).map_err(|e| e.to_string())?;
+    let fb_pub = node
+        .publisher::<DriveFeedback>()
+        .map_err(|e| e.to_string())?;
+    let period = u64::from(st.period_us) * 1000;
+    let mut next = t0;
+    let sync = can_transport::CanFrame::new(0x080, &[]).map_err(|e| e.to_string())?;
+    let mut cycle = fb0.cycle;
+    let r = loop {
+        next += period;
+        safety_monitor::daemon::sleep_until(next);
+        let _ = bus.send(&sync);
+        cycle += 1;
+        let mut fb = fb0;
+        fb.cycle = cycle;
+        fb.timestamp_ns = monotonic_ns();
+        fb.bus_state = BusState::Running as u32;
+        fb.applied_setpoint_sequence = c.published.load(Ordering::Relaxed) + 1_000_000;
+        let _ = fb_pub.publish(&fb);
+        st.poll()?;
+        if !st.monitor_estops.is_empty() {
+            break st.monitor_trip(Cause::FollowingUnchecked, 1.0);
+        }
+        if monotonic_ns() - t0 > 10_000_000_000 {
+            break Err("no trip within 10 s".into());
+        }
+    };
+    let ev = r?;
+    let stopped = st.require_braked()?;
+    Ok(Outcome {
+        cause: "following_unchecked".into(),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: "drive-io replaced: Running feedback, applied sequence never published".into(),
+    })
+}
+
+/// The bus controller reports `error` (injected: an error frame with CAN_ERR_FLAG, which
+/// vcan and the UDP bus forward to every subscribed socket, as cansend would send it): the
+/// monitor trips `can_bus_error`, drive-io stops every drive on its own (Fault BUS_ERROR).
+fn can_bus_error(st: &mut Stack, error: can_transport::BusErrorFrame) -> Res<Outcome> {
+    let _ = st.fake()?.clone();
+    st.wait_following(false)?;
+    let mut bus = open_bus(st)?;
+    let t0 = monotonic_ns();
+    bus.send_bus_error(&error).map_err(|e| e.to_string())?;
+    let ev = st.monitor_trip(Cause::CanBusError, 10.0)?;
+    st.wait("drive-io stopped on the error frame (Fault BUS_ERROR)", 10.0, |s| {
+        Ok(s.last_feedback.map(|f| f.fault_code) == Some(crs_ipc::fault_code::BUS_ERROR))
+    })?;
+    let stopped = st.require_braked()?;
+    Ok(Outcome {
+        cause: format!("can_bus_error ({}); drive-io BUS_ERROR", error.condition().name()),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: format!("injected error frame {error}"),
+    })
+}
+
+fn can_bus_off(st: &mut Stack) -> Res<Outcome> {
+    can_bus_error(st, can_transport::BusErrorFrame::bus_off())
+}
+
+fn can_error_passive(st: &mut Stack) -> Res<Outcome> {
+    can_bus_error(st, can_transport::BusErrorFrame::error_passive(128, 0))
+}
+
+/// The monitor's NMT stop cannot be sent (its process runs with the injected ENOBUFS on every
+/// NMT frame): the stop escalates to the safety heartbeat's STOP, and the drives brake through
+/// their watch, NOT through NMT (they stay NMT operational).
+fn stop_frame_lost(st: &mut Stack) -> Res<Outcome> {
+    let c = st.fake()?.clone();
+    c.cable.store(2, Ordering::Relaxed);
+    st.wait_following(false)?;
+    c.offset_target_um.store(101_000, Ordering::Relaxed);
+    let ev = st.monitor_trip(Cause::DqLimit, 10.0)?;
+    let t_cross = c.crossed_ns.load(Ordering::Relaxed);
+    let stopped = st.require_braked()?;
+    let e = st.emu()?;
+    if e.drives.iter().any(|d| d.nmt == 4) {
+        return Err("a drive is NMT-stopped: the NMT stop was not lost".into());
+    }
+    if e.safety_trips == 0 {
+        return Err("the drives' safety watch did not trip".into());
+    }
+    let log = std::fs::read_to_string(st.dir.join("safety-monitor.log")).unwrap_or_default();
+    if !log.contains("stop path ESCALATED") {
+        return Err("the monitor did not log the escalation".into());
+    }
+    Ok(Outcome {
+        cause: "dq_limit; NMT stop unsent → heartbeat inhibit".into(),
+        detect_ms: ms(t_cross, ev.timestamp_ns),
+        stop_ms: ms(t_cross, stopped),
+        note: "every NMT frame of the monitor fails (ENOBUFS injected); drives stay NMT operational, brake on the STOP pair".into(),
+    })
+}
+
 fn proc_cpu_s(pid: i32) -> Res<f64> {
     let t = std::fs::read_to_string(format!("/proc/{pid}/stat")).map_err(|e| e.to_string())?;
     // Fields after the command name (which may contain spaces) start after the last ')'.
@@ -1566,7 +1740,7 @@ fn cpu_share(args: &Args, secs: f64) -> Res<String> {
 
 type Scenario = (&'static str, fn(&mut Stack) -> Res<Outcome>);
 
-const SCENARIOS: [Scenario; 18] = [
+const SCENARIOS: [Scenario; 24] = [
     ("offset_101mm_trips", offset_101mm),
     ("offset_99mm_no_trip", offset_99mm),
     ("frozen_motion_core", frozen_motion_core),
@@ -1594,6 +1768,12 @@ const SCENARIOS: [Scenario; 18] = [
         "replayed_heartbeat_after_monitor_death",
         replayed_heartbeat_after_monitor_death,
     ),
+    ("overload_one_cable", overload_one_cable),
+    ("slack_one_cable", slack_one_cable),
+    ("unknown_applied_sequence", unknown_applied_sequence),
+    ("can_bus_off", can_bus_off),
+    ("can_error_passive", can_error_passive),
+    ("stop_frame_lost", stop_frame_lost),
 ];
 
 fn main() -> ExitCode {
