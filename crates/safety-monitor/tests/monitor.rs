@@ -299,6 +299,32 @@ fn identity_mismatch_and_missing_identity_trip() {
     assert_eq!(m.trip().unwrap().fault.cause, Cause::IdentityMissing);
 }
 
+#[test]
+fn motion_needs_a_verified_identity_holding_does_not() {
+    let c = cfg();
+    let own = platform_identity(&c.platform);
+    let mut lim = Limits::from_config(c);
+    lim.require_ready = false;
+    let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
+    // Holding setpoints without an identity: within the grace, no trip.
+    let seq = good_cycle(&mut m, 1, 15_000_000);
+    assert_eq!(m.state(), MonitorState::Armed);
+    // The first setpoint that moves (1 mm in x) trips in this very cycle, not after the grace.
+    let mut moved = HOME;
+    moved[0] += 0.001;
+    m.on_setpoint(&sp(seq, moved, 0, 0.0));
+    let t = m.end_cycle(30_000_000).new_trip.expect("trip");
+    assert_eq!(t.fault.cause, Cause::IdentityMissing);
+    assert_eq!(t.fault.sequence, seq);
+    // With the identity announced before (motion-core announces before its first setpoint,
+    // the daemon drains identities before setpoints) the same motion passes.
+    let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
+    let seq = good_cycle(&mut m, 1, 15_000_000);
+    m.on_identity(&PlatformIdentity::new(own, 8));
+    m.on_setpoint(&sp(seq, moved, 0, 0.0));
+    assert!(m.end_cycle(30_000_000).new_trip.is_none());
+}
+
 fn feedback(applied: u64, lengths: &[f64]) -> DriveFeedback {
     let mut f = DriveFeedback {
         cable_count: 8,

@@ -1454,7 +1454,6 @@ fn replayed_heartbeat_after_monitor_death(st: &mut Stack) -> Res<Outcome> {
     })
 }
 
-/// utime + stime of `pid` from /proc (s).
 // ---------------------------------------------------------------------------------------------
 // Issue 15 scenarios: measured forces, unknown applied sequence, CAN error frames, a lost stop
 // frame.
@@ -1527,7 +1526,8 @@ fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
     st.signal("drive-io", libc::SIGKILL)?;
     st.reap("drive-io");
     let t0 = monotonic_ns();
-    let node = IpcNode::with_prefix("shil-faulty-drive-io", &st.prefix).map_err(|e| e.to_string())?;
+    let node =
+        IpcNode::with_prefix("shil-faulty-drive-io", &st.prefix).map_err(|e| e.to_string())?;
     let fb_pub = node
         .publisher::<DriveFeedback>()
         .map_err(|e| e.to_string())?;
@@ -1574,12 +1574,17 @@ fn can_bus_error(st: &mut Stack, error: can_transport::BusErrorFrame) -> Res<Out
     let t0 = monotonic_ns();
     bus.send_bus_error(&error).map_err(|e| e.to_string())?;
     let ev = st.monitor_trip(Cause::CanBusError, 10.0)?;
-    st.wait("drive-io stopped on the error frame (Fault BUS_ERROR)", 10.0, |s| {
-        Ok(s.last_feedback.map(|f| f.fault_code) == Some(crs_ipc::fault_code::BUS_ERROR))
-    })?;
+    st.wait(
+        "drive-io stopped on the error frame (Fault BUS_ERROR)",
+        10.0,
+        |s| Ok(s.last_feedback.map(|f| f.fault_code) == Some(crs_ipc::fault_code::BUS_ERROR)),
+    )?;
     let stopped = st.require_braked()?;
     Ok(Outcome {
-        cause: format!("can_bus_error ({}); drive-io BUS_ERROR", error.condition().name()),
+        cause: format!(
+            "can_bus_error ({}); drive-io BUS_ERROR",
+            error.condition().name()
+        ),
         detect_ms: ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!("injected error frame {error}"),
@@ -1624,6 +1629,7 @@ fn stop_frame_lost(st: &mut Stack) -> Res<Outcome> {
     })
 }
 
+/// utime + stime of `pid` from /proc (s).
 fn proc_cpu_s(pid: i32) -> Res<f64> {
     let t = std::fs::read_to_string(format!("/proc/{pid}/stat")).map_err(|e| e.to_string())?;
     // Fields after the command name (which may contain spaces) start after the last ')'.
