@@ -1520,25 +1520,47 @@ fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
     let c = st.fake()?.clone();
     st.wait_following(false)?;
     let fb0 = st.last_feedback.ok_or("no drive-io feedback")?;
+    // Everything that takes time is prepared before drive-io dies: the node (its creation
+    // sweeps dead nodes) and the SYNC thread that keeps the drives sending forces.
+    let node =
+        IpcNode::with_prefix("shil-faulty-drive-io", &st.prefix).map_err(|e| e.to_string())?;
     let mut bus = open_bus(st)?;
-    // The feedback topic has one publisher: the replacement can take it only once drive-io's
-    // is gone (a new node removes a dead node's resources).
+    let period = u64::from(st.period_us) * 1000;
+    let sync_stop = Arc::new(AtomicBool::new(false));
+    let sync = {
+        let stop = sync_stop.clone();
+        std::thread::spawn(move || {
+            let f = can_transport::CanFrame::new_std_lossy(0x080, &[]);
+            let mut next = monotonic_ns();
+            while !stop.load(Ordering::Relaxed) {
+                next += period;
+                safety_monitor::daemon::sleep_until(next);
+                let _ = bus.send(&f);
+            }
+        })
+    };
+    // The feedback topic has one publisher: the replacement takes it once drive-io's is gone.
     st.signal("drive-io", libc::SIGKILL)?;
     st.reap("drive-io");
     let t0 = monotonic_ns();
-    let node =
-        IpcNode::with_prefix("shil-faulty-drive-io", &st.prefix).map_err(|e| e.to_string())?;
-    let fb_pub = node
-        .publisher::<DriveFeedback>()
-        .map_err(|e| e.to_string())?;
-    let period = u64::from(st.period_us) * 1000;
-    let mut next = t0;
-    let sync = can_transport::CanFrame::new(0x080, &[]).map_err(|e| e.to_string())?;
+    let fb_pub = loop {
+        match node.publisher::<DriveFeedback>() {
+            Ok(p) => break p,
+            Err(e) if monotonic_ns() - t0 > 5_000_000_000 => {
+                sync_stop.store(true, Ordering::Relaxed);
+                return Err(format!("replacing drive-io's feedback publisher: {e}"));
+            }
+            Err(_) => {
+                crs_ipc::cleanup_dead_nodes(&crs_ipc::iceoryx_config());
+            }
+        }
+    };
+    let t_replaced = monotonic_ns();
+    let mut next = t_replaced;
     let mut cycle = fb0.cycle;
     let r = loop {
         next += period;
         safety_monitor::daemon::sleep_until(next);
-        let _ = bus.send(&sync);
         cycle += 1;
         let mut fb = fb0;
         fb.cycle = cycle;
@@ -1554,13 +1576,18 @@ fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
             break Err("no trip within 10 s".into());
         }
     };
+    sync_stop.store(true, Ordering::Relaxed);
+    let _ = sync.join();
     let ev = r?;
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "following_unchecked".into(),
         detect_ms: ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
-        note: "drive-io replaced: Running feedback, applied sequence never published".into(),
+        note: format!(
+            "drive-io replaced ({:.0} ms gap): Running feedback, applied sequence never published",
+            (t_replaced - t0) as f64 * 1e-6
+        ),
     })
 }
 
