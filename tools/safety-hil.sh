@@ -6,7 +6,10 @@
 #   the vcan QEMU guest (tools/vcan-vm.sh). Every process runs separately (iceoryx2 + CAN);
 #   each scenario injects one fault (101 mm / 99 mm offsets, frozen and killed motion-core,
 #   killed drive-io, killed monitor, sequence gaps, NaN pose, wrong identity, corrupted safety
-#   frame, forged RPDO, reset refused/accepted) and must end in braked drives with no motion.
+#   frame, forged RPDO, reset refused/accepted, ...; issue 15: overload and slack on one cable
+#   (winch-emulator --control-file), unknown applied sequence, bus-off and error-passive (an
+#   error frame with CAN_ERR_FLAG written to vcan, which forwards it to subscribed sockets), a
+#   lost NMT stop) and must end in braked drives with no motion.
 #   Prints the measured detection/stop times (emulated guest: NOT real time, not asserted) and
 #   "SAFETY-HIL: PASS" or "SAFETY-HIL: FAIL"; exit status 0 iff PASS.
 # Env: HIL_PROFILE (dev|release, default release: the emulated guest is slow; shares the build

@@ -59,6 +59,30 @@ pub fn write_line(
     writeln!(w)
 }
 
+/// Writes an error frame as `candump -l` does: the id word with `CAN_ERR_FLAG` as 8 hex
+/// digits, 8 data bytes (python-can's canutils reader and `canplayer` read it back as an error
+/// frame; [`parse_line`] refuses it: data frames only).
+pub fn write_error_line(
+    w: &mut impl Write,
+    t: SystemTime,
+    iface: &str,
+    error: &crate::BusErrorFrame,
+) -> std::io::Result<()> {
+    let d = t.duration_since(UNIX_EPOCH).unwrap_or(Duration::ZERO);
+    write!(
+        w,
+        "({}.{:06}) {} {:08X}#",
+        d.as_secs(),
+        d.subsec_micros(),
+        iface,
+        error.class() | 0x2000_0000
+    )?;
+    for b in error.data() {
+        write!(w, "{b:02X}")?;
+    }
+    writeln!(w)
+}
+
 /// Parses one log line (what `candump -l` writes; trailing ` T`/` R` direction flags are ignored).
 pub fn parse_line(line: &str) -> Result<LogLine, ParseError> {
     let line = line.trim();
@@ -176,5 +200,34 @@ impl<B: CanBus> CanBus for LoggingBus<B> {
     }
     fn rx_errors(&self) -> u64 {
         self.inner.rx_errors()
+    }
+    fn subscribe_bus_errors(&mut self) -> Result<(), CanError> {
+        self.inner.subscribe_bus_errors()
+    }
+    fn recv_event_timeout(
+        &mut self,
+        timeout: Duration,
+    ) -> Result<Option<crate::RxEvent>, CanError> {
+        let r = self.inner.recv_event_timeout(timeout)?;
+        match &r {
+            Some(crate::RxEvent::Frame(rx)) => self.log(&rx.frame),
+            Some(crate::RxEvent::BusError(e)) => {
+                if let Some(w) = self.out.as_mut()
+                    && let Err(err) =
+                        write_error_line(w, SystemTime::now(), self.inner.interface(), &e.error)
+                {
+                    tracing::error!(error = %err, "candump log write failed; logging disabled");
+                    self.out = None;
+                }
+            }
+            None => {}
+        }
+        Ok(r)
+    }
+    fn send_bus_error(&mut self, error: &crate::BusErrorFrame) -> Result<(), CanError> {
+        self.inner.send_bus_error(error)
+    }
+    fn bus_errors(&self) -> u64 {
+        self.inner.bus_errors()
     }
 }

@@ -5,7 +5,12 @@
 //! frames, each `can_id:u32 BE (Linux can_id with EFF 0x8000_0000 / RTR 0x4000_0000 / ERR
 //! 0x2000_0000 flags) | len:u8 (bit 0x80 = CAN FD, followed by a flags byte) | data[len]`
 //! (no data bytes for RTR frames).
+//!
+//! Error frames (`CAN_ERR_FLAG`, as cannelloni forwards a subscribed SocketCAN's error frames:
+//! class bits in the id, 8 data bytes) are refused by [`decode`] (data frames only) and
+//! delivered by [`decode_items`] as [`Item::BusError`].
 
+use crate::bus_error::BusErrorFrame;
 use crate::frame::{CanFrame, EFF_MAX, SFF_MAX};
 
 pub const VERSION: u8 = 2;
@@ -32,7 +37,7 @@ pub enum DecodeError {
     CanFd { index: u16 },
     #[error("frame {index}: data length {len} > 8")]
     Length { index: u16, len: u8 },
-    #[error("frame {index}: error frame (flag 0x20000000) not supported")]
+    #[error("frame {index}: error frame (flag 0x20000000) on a data-frame-only decode")]
     ErrorFrame { index: u16 },
     #[error("frame {index}: id {id:#x} out of range")]
     Id { index: u16, id: u32 },
@@ -84,15 +89,60 @@ pub fn encode(seq: u8, frames: &[CanFrame], out: &mut [u8]) -> Result<usize, Enc
     Ok(p)
 }
 
+/// One frame of a packet: a data/remote frame or an error frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Item {
+    Frame(CanFrame),
+    BusError(BusErrorFrame),
+}
+
+/// Encodes one error frame (class bits | `CAN_ERR_FLAG`, len 8) into `out`; returns the
+/// packet length.
+pub fn encode_bus_error(
+    seq: u8,
+    error: &BusErrorFrame,
+    out: &mut [u8],
+) -> Result<usize, EncodeError> {
+    let need = HEADER_LEN + MAX_FRAME_LEN;
+    if out.len() < need {
+        return Err(EncodeError {
+            have: out.len(),
+            need,
+        });
+    }
+    out[0] = VERSION;
+    out[1] = OP_DATA;
+    out[2] = seq;
+    out[3..5].copy_from_slice(&1u16.to_be_bytes());
+    out[5..9].copy_from_slice(&(error.class() | ERR_FLAG).to_be_bytes());
+    out[9] = 8;
+    out[10..18].copy_from_slice(error.data());
+    Ok(need)
+}
+
+/// Like [`decode`], but error frames are delivered as [`Item::BusError`] instead of refusing
+/// the packet. Validates the whole packet before delivering anything.
+pub fn decode_items(packet: &[u8], mut sink: impl FnMut(Item)) -> Result<(u8, u16), DecodeError> {
+    let count = header(packet)?;
+    walk(packet, count, true, &mut |_| {})?;
+    walk(packet, count, true, &mut |i| sink(i)).map(|_| (packet[2], count))
+}
+
 /// Decodes a packet, calling `sink` for every frame in order. Validates the WHOLE packet before
 /// delivering anything, so a malformed packet delivers no frame (nothing half-applied).
 /// Returns `(seq_no, frame count)`.
 pub fn decode(packet: &[u8], mut sink: impl FnMut(CanFrame)) -> Result<(u8, u16), DecodeError> {
-    let count = validate(packet)?;
-    walk(packet, count, &mut |f| sink(f)).map(|_| (packet[2], count))
+    let count = header(packet)?;
+    walk(packet, count, false, &mut |_| {})?;
+    walk(packet, count, false, &mut |i| {
+        if let Item::Frame(f) = i {
+            sink(f)
+        }
+    })
+    .map(|_| (packet[2], count))
 }
 
-fn validate(packet: &[u8]) -> Result<u16, DecodeError> {
+fn header(packet: &[u8]) -> Result<u16, DecodeError> {
     if packet.len() < HEADER_LEN {
         return Err(DecodeError::ShortHeader(packet.len()));
     }
@@ -102,12 +152,15 @@ fn validate(packet: &[u8]) -> Result<u16, DecodeError> {
     if packet[1] != OP_DATA {
         return Err(DecodeError::OpCode(packet[1]));
     }
-    let count = u16::from_be_bytes([packet[3], packet[4]]);
-    walk(packet, count, &mut |_| {})?;
-    Ok(count)
+    Ok(u16::from_be_bytes([packet[3], packet[4]]))
 }
 
-fn walk(packet: &[u8], count: u16, sink: &mut dyn FnMut(CanFrame)) -> Result<(), DecodeError> {
+fn walk(
+    packet: &[u8],
+    count: u16,
+    errors: bool,
+    sink: &mut dyn FnMut(Item),
+) -> Result<(), DecodeError> {
     let mut p = HEADER_LEN;
     for index in 0..count {
         let Some(hdr) = packet.get(p..p + 5) else {
@@ -129,7 +182,18 @@ fn walk(packet: &[u8], count: u16, sink: &mut dyn FnMut(CanFrame)) -> Result<(),
             });
         }
         if raw & ERR_FLAG != 0 {
-            return Err(DecodeError::ErrorFrame { index });
+            if !errors || raw & RTR_FLAG != 0 {
+                return Err(DecodeError::ErrorFrame { index });
+            }
+            let Some(d) = packet.get(p..p + len_byte as usize) else {
+                return Err(DecodeError::Truncated {
+                    index,
+                    offset: packet.len(),
+                });
+            };
+            p += len_byte as usize;
+            sink(Item::BusError(BusErrorFrame::new(raw & EFF_MAX, d)));
+            continue;
         }
         let extended = raw & EFF_FLAG != 0;
         let rtr = raw & RTR_FLAG != 0;
@@ -151,7 +215,7 @@ fn walk(packet: &[u8], count: u16, sink: &mut dyn FnMut(CanFrame)) -> Result<(),
         };
         // Ranges were checked above, so construction cannot fail; map defensively anyway.
         let frame = frame.map_err(|_| DecodeError::Id { index, id })?;
-        sink(frame);
+        sink(Item::Frame(frame));
     }
     if p != packet.len() {
         return Err(DecodeError::Trailing {

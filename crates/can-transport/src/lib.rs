@@ -12,6 +12,7 @@
 //!
 //! [`candump`] formats/parses can-utils log lines and [`LoggingBus`] logs every frame.
 
+pub mod bus_error;
 pub mod candump;
 pub mod cannelloni;
 mod frame;
@@ -21,6 +22,7 @@ mod socketcan_bus;
 mod spec;
 mod udp;
 
+pub use bus_error::{BusCondition, BusErrorFrame, RxBusError, RxEvent};
 pub use candump::LoggingBus;
 pub use frame::{CanFrame, FrameError, RxFrame};
 pub use socketcan_bus::SocketCanBus;
@@ -51,6 +53,8 @@ pub enum CanError {
     },
     #[error("transmit queue of {iface:?} full (frame dropped)")]
     TxFull { iface: String },
+    #[error("{iface:?} cannot carry CAN error frames")]
+    NoErrorFrames { iface: String },
     #[error("invalid frame: {0}")]
     Frame(#[from] FrameError),
 }
@@ -72,6 +76,34 @@ pub trait CanBus: Send {
     fn rx_errors(&self) -> u64 {
         0
     }
+    /// Subscribes to the bus's error frames (SocketCAN: `CAN_RAW_ERR_FILTER` = every class;
+    /// the UDP bus carries them as cannelloni frames with `CAN_ERR_FLAG`). They are delivered
+    /// by [`CanBus::recv_event_timeout`] only; [`CanBus::recv_timeout`] never returns them.
+    fn subscribe_bus_errors(&mut self) -> Result<(), CanError> {
+        Err(CanError::NoErrorFrames {
+            iface: self.interface().to_string(),
+        })
+    }
+    /// Like [`CanBus::recv_timeout`], but also delivers error frames (after
+    /// [`CanBus::subscribe_bus_errors`]).
+    fn recv_event_timeout(&mut self, timeout: Duration) -> Result<Option<RxEvent>, CanError> {
+        Ok(self.recv_timeout(timeout)?.map(RxEvent::Frame))
+    }
+    /// Non-blocking [`CanBus::recv_event_timeout`].
+    fn try_recv_event(&mut self) -> Result<Option<RxEvent>, CanError> {
+        self.recv_event_timeout(Duration::ZERO)
+    }
+    /// Sends an error frame (fault injection: vcan and the UDP bus forward it to every
+    /// subscribed member, as a controller's report would arrive).
+    fn send_bus_error(&mut self, _error: &BusErrorFrame) -> Result<(), CanError> {
+        Err(CanError::NoErrorFrames {
+            iface: self.interface().to_string(),
+        })
+    }
+    /// Error frames received so far (subscribed or not).
+    fn bus_errors(&self) -> u64 {
+        0
+    }
 }
 
 impl<B: CanBus + ?Sized> CanBus for Box<B> {
@@ -89,6 +121,18 @@ impl<B: CanBus + ?Sized> CanBus for Box<B> {
     }
     fn rx_errors(&self) -> u64 {
         (**self).rx_errors()
+    }
+    fn subscribe_bus_errors(&mut self) -> Result<(), CanError> {
+        (**self).subscribe_bus_errors()
+    }
+    fn recv_event_timeout(&mut self, timeout: Duration) -> Result<Option<RxEvent>, CanError> {
+        (**self).recv_event_timeout(timeout)
+    }
+    fn send_bus_error(&mut self, error: &BusErrorFrame) -> Result<(), CanError> {
+        (**self).send_bus_error(error)
+    }
+    fn bus_errors(&self) -> u64 {
+        (**self).bus_errors()
     }
 }
 

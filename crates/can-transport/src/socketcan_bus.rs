@@ -1,11 +1,10 @@
 //! SocketCAN raw socket (real CAN or vcan) through the `socketcan` crate.
 
+use crate::bus_error::{BusErrorFrame, RxBusError, RxEvent};
 use crate::frame::{CanFrame, RxFrame};
 use crate::poll::wait_readable;
 use crate::{CanBus, CanError, monotonic_ns};
-use socketcan::{
-    CanSocket, EmbeddedFrame, ExtendedId, Frame, Id, Socket, SocketOptions, StandardId,
-};
+use socketcan::{CanSocket, EmbeddedFrame, ExtendedId, Id, Socket, SocketOptions, StandardId};
 use std::os::fd::AsRawFd;
 use std::time::{Duration, UNIX_EPOCH};
 
@@ -13,6 +12,7 @@ pub struct SocketCanBus {
     sock: CanSocket,
     iface: String,
     rx_errors: u64,
+    bus_errors: u64,
 }
 
 impl SocketCanBus {
@@ -52,6 +52,7 @@ impl SocketCanBus {
             sock,
             iface: iface.to_string(),
             rx_errors: 0,
+            bus_errors: 0,
         })
     }
 }
@@ -70,9 +71,6 @@ fn to_socketcan(f: &CanFrame) -> Option<socketcan::CanFrame> {
 }
 
 fn from_socketcan(f: &socketcan::CanFrame) -> Option<CanFrame> {
-    if f.is_error_frame() {
-        return None;
-    }
     let (id, ext) = match f.id() {
         Id::Standard(s) => (u32::from(s.as_raw()), false),
         Id::Extended(e) => (e.as_raw(), true),
@@ -112,7 +110,27 @@ impl CanBus for SocketCanBus {
         let deadline =
             monotonic_ns().saturating_add(timeout.as_nanos().min(u64::MAX as u128) as u64);
         loop {
+            let left = Duration::from_nanos(deadline.saturating_sub(monotonic_ns()));
+            match self.recv_event_timeout(left)? {
+                Some(RxEvent::Frame(f)) => return Ok(Some(f)),
+                Some(RxEvent::BusError(_)) => continue,
+                None => return Ok(None),
+            }
+        }
+    }
+
+    fn recv_event_timeout(&mut self, timeout: Duration) -> Result<Option<RxEvent>, CanError> {
+        let deadline =
+            monotonic_ns().saturating_add(timeout.as_nanos().min(u64::MAX as u128) as u64);
+        loop {
             match self.sock.read_frame_with_timestamp() {
+                Ok((socketcan::CanFrame::Error(e), _)) => {
+                    self.bus_errors += 1;
+                    return Ok(Some(RxEvent::BusError(RxBusError {
+                        error: BusErrorFrame::new(e.error_bits(), e.data()),
+                        rx_monotonic_ns: monotonic_ns(),
+                    })));
+                }
                 Ok((f, ts)) => {
                     let rx_monotonic_ns = monotonic_ns();
                     match from_socketcan(&f) {
@@ -121,11 +139,11 @@ impl CanBus for SocketCanBus {
                                 .duration_since(UNIX_EPOCH)
                                 .ok()
                                 .map(|d| d.as_nanos() as u64);
-                            return Ok(Some(RxFrame {
+                            return Ok(Some(RxEvent::Frame(RxFrame {
                                 frame,
                                 rx_monotonic_ns,
                                 kernel_rx_realtime_ns: kernel,
-                            }));
+                            })));
                         }
                         None => {
                             self.rx_errors += 1;
@@ -154,6 +172,51 @@ impl CanBus for SocketCanBus {
                 },
             )?;
         }
+    }
+
+    /// `CAN_RAW_ERR_FILTER` with every class (`CAN_ERR_MASK`): the kernel delivers the
+    /// controller's error frames (and, on vcan, any error frame another socket sends).
+    fn subscribe_bus_errors(&mut self) -> Result<(), CanError> {
+        self.sock
+            .set_error_filter_accept_all()
+            .map_err(|source| CanError::Io {
+                iface: self.iface.clone(),
+                op: "CAN_RAW_ERR_FILTER",
+                source,
+            })
+    }
+
+    /// Writes a raw frame with `CAN_ERR_FLAG` (what `cansend vcan0 20000040#...` does): a
+    /// real controller's driver would not send it onto the wire, vcan forwards it to every
+    /// subscribed socket (fault injection).
+    fn send_bus_error(&mut self, error: &BusErrorFrame) -> Result<(), CanError> {
+        let f = socketcan::CanErrorFrame::new_error(error.class(), error.data()).map_err(|e| {
+            CanError::Io {
+                iface: self.iface.clone(),
+                op: "error frame",
+                source: std::io::Error::other(e.to_string()),
+            }
+        })?;
+        match self.sock.write_frame(&socketcan::CanFrame::Error(f)) {
+            Ok(()) => Ok(()),
+            Err(e)
+                if e.kind() == std::io::ErrorKind::WouldBlock
+                    || e.raw_os_error() == Some(libc::ENOBUFS) =>
+            {
+                Err(CanError::TxFull {
+                    iface: self.iface.clone(),
+                })
+            }
+            Err(e) => Err(CanError::Io {
+                iface: self.iface.clone(),
+                op: "write",
+                source: e,
+            }),
+        }
+    }
+
+    fn bus_errors(&self) -> u64 {
+        self.bus_errors
     }
 
     fn interface(&self) -> &str {

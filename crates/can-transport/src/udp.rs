@@ -1,6 +1,7 @@
 //! CAN over UDP with cannelloni framing: a loopback multicast "bus" or a point-to-point link.
 
-use crate::cannelloni;
+use crate::bus_error::{BusErrorFrame, RxBusError, RxEvent};
+use crate::cannelloni::{self, Item};
 use crate::frame::{CanFrame, RxFrame};
 use crate::poll::wait_readable;
 use crate::{CanBus, CanError, monotonic_ns};
@@ -20,11 +21,12 @@ pub struct UdpBus {
     own_src: Option<SocketAddr>,
     name: String,
     seq: u8,
-    pending: [CanFrame; PENDING],
+    pending: [Item; PENDING],
     pending_len: usize,
     pending_pos: usize,
     pending_ts: u64,
     rx_errors: u64,
+    bus_errors: u64,
     buf: [u8; 2048],
 }
 
@@ -94,12 +96,32 @@ impl UdpBus {
             own_src,
             name,
             seq: 0,
-            pending: [CanFrame::default(); PENDING],
+            pending: [Item::Frame(CanFrame::default()); PENDING],
             pending_len: 0,
             pending_pos: 0,
             pending_ts: 0,
             rx_errors: 0,
+            bus_errors: 0,
             buf: [0; 2048],
+        }
+    }
+
+    fn send_datagram(&mut self, packet: &[u8]) -> Result<(), CanError> {
+        match self.tx.send_to(packet, self.dest) {
+            Ok(_) => Ok(()),
+            Err(e)
+                if e.kind() == std::io::ErrorKind::WouldBlock
+                    || e.raw_os_error() == Some(libc::ENOBUFS) =>
+            {
+                Err(CanError::TxFull {
+                    iface: self.name.clone(),
+                })
+            }
+            Err(e) => Err(CanError::Io {
+                iface: self.name.clone(),
+                op: "send",
+                source: e,
+            }),
         }
     }
 
@@ -122,7 +144,7 @@ impl UdpBus {
         let ts = monotonic_ns();
         let mut len = 0;
         let pending = &mut self.pending;
-        let r = cannelloni::decode(&self.buf[..n], |f| {
+        let r = cannelloni::decode_items(&self.buf[..n], |f| {
             if len < PENDING {
                 pending[len] = f;
                 len += 1;
@@ -158,35 +180,43 @@ impl CanBus for UdpBus {
                 }
             })?;
         self.seq = self.seq.wrapping_add(1);
-        match self.tx.send_to(&out[..n], self.dest) {
-            Ok(_) => Ok(()),
-            Err(e)
-                if e.kind() == std::io::ErrorKind::WouldBlock
-                    || e.raw_os_error() == Some(libc::ENOBUFS) =>
-            {
-                Err(CanError::TxFull {
-                    iface: self.name.clone(),
-                })
-            }
-            Err(e) => Err(CanError::Io {
-                iface: self.name.clone(),
-                op: "send",
-                source: e,
-            }),
-        }
+        self.send_datagram(&out[..n])
     }
 
     fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<RxFrame>, CanError> {
         let deadline =
             monotonic_ns().saturating_add(timeout.as_nanos().min(u64::MAX as u128) as u64);
         loop {
+            let left = Duration::from_nanos(deadline.saturating_sub(monotonic_ns()));
+            match self.recv_event_timeout(left)? {
+                Some(RxEvent::Frame(f)) => return Ok(Some(f)),
+                Some(RxEvent::BusError(_)) => continue,
+                None => return Ok(None),
+            }
+        }
+    }
+
+    fn recv_event_timeout(&mut self, timeout: Duration) -> Result<Option<RxEvent>, CanError> {
+        let deadline =
+            monotonic_ns().saturating_add(timeout.as_nanos().min(u64::MAX as u128) as u64);
+        loop {
             if self.pending_pos < self.pending_len {
-                let f = self.pending[self.pending_pos];
+                let item = self.pending[self.pending_pos];
                 self.pending_pos += 1;
-                return Ok(Some(RxFrame {
-                    frame: f,
-                    rx_monotonic_ns: self.pending_ts,
-                    kernel_rx_realtime_ns: None,
+                let rx_monotonic_ns = self.pending_ts;
+                return Ok(Some(match item {
+                    Item::Frame(frame) => RxEvent::Frame(RxFrame {
+                        frame,
+                        rx_monotonic_ns,
+                        kernel_rx_realtime_ns: None,
+                    }),
+                    Item::BusError(error) => {
+                        self.bus_errors += 1;
+                        RxEvent::BusError(RxBusError {
+                            error,
+                            rx_monotonic_ns,
+                        })
+                    }
                 }));
             }
             if self.read_datagram()? {
@@ -204,6 +234,27 @@ impl CanBus for UdpBus {
                 },
             )?;
         }
+    }
+
+    /// Error frames travel on the UDP bus like any other frame: always "subscribed".
+    fn subscribe_bus_errors(&mut self) -> Result<(), CanError> {
+        Ok(())
+    }
+
+    fn send_bus_error(&mut self, error: &BusErrorFrame) -> Result<(), CanError> {
+        let mut out = [0u8; cannelloni::HEADER_LEN + cannelloni::MAX_FRAME_LEN];
+        let n =
+            cannelloni::encode_bus_error(self.seq, error, &mut out).map_err(|e| CanError::Io {
+                iface: self.name.clone(),
+                op: "encode",
+                source: std::io::Error::other(e),
+            })?;
+        self.seq = self.seq.wrapping_add(1);
+        self.send_datagram(&out[..n])
+    }
+
+    fn bus_errors(&self) -> u64 {
+        self.bus_errors
     }
 
     fn interface(&self) -> &str {

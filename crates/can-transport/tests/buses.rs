@@ -102,3 +102,65 @@ fn socketcan_open_reports_missing_can_support_or_works() {
         Err(e) => panic!("unexpected error kind: {e}"),
     }
 }
+
+#[test]
+fn error_frames_travel_on_the_udp_bus_as_typed_events() {
+    use can_transport::{BusCondition, BusErrorFrame, RxEvent};
+    let spec: TransportSpec = format!("udpbus:239.255.70.1:{}", port(3)).parse().unwrap();
+    let mut a = open(&spec).unwrap();
+    let mut b = open(&spec).unwrap();
+    let mut c = open(&spec).unwrap();
+    b.subscribe_bus_errors().unwrap();
+    let f = CanFrame::new(0x181, &[1]).unwrap();
+    a.send_bus_error(&BusErrorFrame::bus_off()).unwrap();
+    a.send(&f).unwrap();
+    // A subscribed member gets the error frame typed, then the data frame, in order.
+    match b.recv_event_timeout(Duration::from_secs(1)).unwrap() {
+        Some(RxEvent::BusError(e)) => {
+            assert_eq!(e.error.condition(), BusCondition::BusOff);
+            assert!(e.rx_monotonic_ns > 0);
+        }
+        other => panic!("expected the bus-off error frame, got {other:?}"),
+    }
+    match b.recv_event_timeout(Duration::from_secs(1)).unwrap() {
+        Some(RxEvent::Frame(rx)) => assert_eq!(rx.frame, f),
+        other => panic!("expected the data frame, got {other:?}"),
+    }
+    // recv_timeout never returns an error frame (nor counts it as malformed).
+    assert_eq!(
+        c.recv_timeout(Duration::from_secs(1))
+            .unwrap()
+            .unwrap()
+            .frame,
+        f
+    );
+    assert_eq!((c.rx_errors(), c.bus_errors(), b.bus_errors()), (0, 1, 1));
+}
+
+#[test]
+fn socketcan_error_frames_pass_vcan_when_subscribed() {
+    // Inside the vcan VM (tools/hil-run.sh): a raw frame with CAN_ERR_FLAG, as `cansend vcan0
+    // 20000040#0000000000000000` sends it, reaches a socket with CAN_RAW_ERR_FILTER set and no
+    // other. Without CAN support (the host) there is nothing to test.
+    use can_transport::{BusCondition, BusErrorFrame, RxEvent};
+    let spec: TransportSpec = "socketcan:vcan0".parse().unwrap();
+    let Ok(mut a) = open(&spec) else { return };
+    let mut b = open(&spec).unwrap();
+    let mut c = open(&spec).unwrap();
+    b.subscribe_bus_errors().unwrap();
+    a.send_bus_error(&BusErrorFrame::error_passive(128, 3))
+        .unwrap();
+    match b.recv_event_timeout(Duration::from_secs(1)).unwrap() {
+        Some(RxEvent::BusError(e)) => {
+            assert_eq!(e.error.condition(), BusCondition::ErrorPassive);
+            assert_eq!(e.error.counters(), Some((128, 3)));
+        }
+        other => panic!("expected the error frame, got {other:?}"),
+    }
+    assert!(
+        c.recv_event_timeout(Duration::from_millis(200))
+            .unwrap()
+            .is_none(),
+        "an unsubscribed socket must not see error frames"
+    );
+}

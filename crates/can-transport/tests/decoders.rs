@@ -138,3 +138,40 @@ fn spec_errors_are_clear() {
     assert!(e.to_string().contains("multicast"), "{e}");
     assert!("can:vcan0".parse::<TransportSpec>().is_err());
 }
+
+#[test]
+fn cannelloni_error_frames() {
+    use can_transport::BusErrorFrame;
+    use can_transport::cannelloni::Item;
+    // Bus-off as cannelloni forwards a subscribed SocketCAN's error frame: id word with
+    // CAN_ERR_FLAG (0x20000000) | CAN_ERR_BUSOFF (0x40), len 8, 8 data bytes.
+    let e = BusErrorFrame::bus_off();
+    let mut buf = [0u8; 32];
+    let n = cannelloni::encode_bus_error(9, &e, &mut buf).unwrap();
+    assert_eq!(
+        &buf[..n],
+        &[2, 0, 9, 0, 1, 0x20, 0, 0, 0x40, 8, 0, 0, 0, 0, 0, 0, 0, 0]
+    );
+    // The data-frame decoder refuses it (as before); the item decoder delivers it typed.
+    assert_eq!(
+        cannelloni::decode(&buf[..n], |_| {}),
+        Err(DecodeError::ErrorFrame { index: 0 })
+    );
+    let mut items = Vec::new();
+    cannelloni::decode_items(&buf[..n], |i| items.push(i)).unwrap();
+    assert_eq!(items, vec![Item::BusError(e)]);
+    // Mixed with data frames in one packet, in order; a truncated packet delivers nothing.
+    let f = CanFrame::new(0x181, &[1, 2]).unwrap();
+    let mut pkt = vec![2, 0, 0, 0, 2];
+    pkt.extend_from_slice(&[0, 0, 0x01, 0x81, 2, 1, 2]);
+    let p = BusErrorFrame::error_passive(130, 7);
+    pkt.extend_from_slice(&[0x20, 0, 0x02, 0x04, 8]);
+    pkt.extend_from_slice(p.data());
+    let mut items = Vec::new();
+    cannelloni::decode_items(&pkt, |i| items.push(i)).unwrap();
+    assert_eq!(items, vec![Item::Frame(f), Item::BusError(p)]);
+    assert!(p.is_error_passive() && p.counters() == Some((130, 7)));
+    let mut n = 0;
+    assert!(cannelloni::decode_items(&pkt[..pkt.len() - 1], |_| n += 1).is_err());
+    assert_eq!(n, 0);
+}

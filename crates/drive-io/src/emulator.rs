@@ -9,7 +9,9 @@ use crate::slave::{DriveBank, MotionDemand, WinchAxis};
 use can_transport::CanBus;
 use crs_ipc::MAX_CABLES;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU16, AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{
+    AtomicBool, AtomicI32, AtomicU8, AtomicU16, AtomicU32, AtomicU64, Ordering,
+};
 use std::time::Duration;
 
 /// Emulator parameters (SI).
@@ -64,6 +66,11 @@ pub struct EmulatorControl {
     pub safety_inhibit: AtomicBool,
     pub safety_trips: AtomicU64,
     pub safety_tripped_ns: AtomicU64,
+    /// Fault injection: bit i set = winch i reports `force_override_mn[i]` as its measured
+    /// force (TPDO2) instead of the pretension stand-in (a slack or overloaded cable, as the
+    /// safety HIL matrix needs; the emulator has no physics).
+    force_override_mask: AtomicU32,
+    force_override_mn: [AtomicI32; MAX_CABLES],
 }
 
 /// Motion demand codes in [`EmulatorControl::demand_code`].
@@ -95,6 +102,31 @@ impl EmulatorControl {
     /// CLOCK_MONOTONIC ns when winch `i` last stopped following (0 = never).
     pub fn left_follow_ns(&self, i: usize) -> u64 {
         self.left_follow_ns[i].load(Ordering::Acquire)
+    }
+    /// Makes winch `i` report `force_n` (None: the normal stand-in) from its next SYNC on.
+    pub fn set_force_override(&self, i: usize, force_n: Option<f64>) {
+        if i >= MAX_CABLES {
+            return;
+        }
+        match force_n {
+            Some(f) => {
+                let mn = (f * 1000.0).clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32;
+                self.force_override_mn[i].store(mn, Ordering::Release);
+                self.force_override_mask.fetch_or(1 << i, Ordering::AcqRel);
+            }
+            None => {
+                self.force_override_mask
+                    .fetch_and(!(1 << i), Ordering::AcqRel);
+            }
+        }
+    }
+    /// The measured force winch `i` reports (mN), given the stand-in's.
+    fn reported_force_mn(&self, i: usize, stand_in_mn: i32) -> i32 {
+        if self.force_override_mask.load(Ordering::Acquire) & (1 << i) != 0 {
+            self.force_override_mn[i].load(Ordering::Acquire)
+        } else {
+            stand_in_mn
+        }
     }
     pub fn mute_heartbeat(&self, i: usize) {
         self.heartbeat_mute_mask.fetch_or(1 << i, Ordering::AcqRel);
@@ -170,7 +202,7 @@ pub fn run(
                     i,
                     pos,
                     w.m_per_s_to_counts_per_s(ax.velocity_m_per_s),
-                    (force * 1000.0) as i32,
+                    control.reported_force_mn(i, (force * 1000.0) as i32),
                 );
             }
             bank.transmit_pdos();

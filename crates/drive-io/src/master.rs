@@ -343,6 +343,20 @@ impl Master {
         }
     }
 
+    /// Handles an error frame of the bus controller (the runner subscribes to them): bus-off
+    /// and error-passive mean that RPDOs and SYNC may no longer reach the drives (and their
+    /// TPDOs no longer reach us), so every drive is stopped (quick stop; latched `Fault`,
+    /// `fault_code::BUS_ERROR`, reset only through the monitor). Other conditions are logged.
+    pub fn on_bus_error(&mut self, error: &can_transport::BusErrorFrame) {
+        let c = error.condition();
+        if c.is_loss_of_communication() {
+            tracing::error!(%error, "CAN bus {}: stopping every drive", c.name());
+            self.stop(BusState::Fault, fault_code::BUS_ERROR, 0);
+        } else {
+            tracing::warn!(%error, "CAN error frame");
+        }
+    }
+
     /// Handles an e-stop event from the process bus (anyone may stop). A Reset event does
     /// nothing here: leaving the latch needs a [`ResetGrant`] ([`Master::reset`], issue 16).
     pub fn on_event(&mut self, ev: &StateEvent, _now_ns: u64) {

@@ -5,7 +5,7 @@ use crate::config::DrivesConfig;
 use crate::master::Master;
 use crate::reset::{Ignored, ResetGate, is_reset_event};
 use crate::safety_watch::SafetyWatch;
-use can_transport::{CanBus, CanError};
+use can_transport::{CanBus, CanError, RxEvent};
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, ProcessId,
     StateEvent, monotonic_ns,
@@ -132,15 +132,23 @@ pub fn run(
     let mut gate = ResetGate::new();
     let mut pending_reset: Option<(StateEvent, u64)> = None;
     let mut ignored_resets = 0u64;
+    // Bus-off / error-passive stop every drive (Master::on_bus_error).
+    if let Err(e) = bus.subscribe_bus_errors() {
+        tracing::warn!(error = %e, "CAN error frames not available on this transport");
+    }
     while !stop.load(Ordering::Relaxed) {
         // Wait for the tick, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
         let mut now = monotonic_ns();
         while now < next {
-            if let Some(rx) = bus.recv_timeout(Duration::from_nanos(next - now))? {
-                if let Some(w) = watch.as_mut() {
-                    w.on_frame(&rx.frame, rx.rx_monotonic_ns);
+            match bus.recv_event_timeout(Duration::from_nanos(next - now))? {
+                Some(RxEvent::Frame(rx)) => {
+                    if let Some(w) = watch.as_mut() {
+                        w.on_frame(&rx.frame, rx.rx_monotonic_ns);
+                    }
+                    master.on_frame(&rx);
                 }
-                master.on_frame(&rx);
+                Some(RxEvent::BusError(e)) => master.on_bus_error(&e.error),
+                None => {}
             }
             now = monotonic_ns();
         }
@@ -148,13 +156,14 @@ pub fn run(
         // judging heartbeats/TPDOs before reading them would fault on our own lateness.
         // Bounded so a flooded bus cannot stall the cycle.
         for _ in 0..MAX_DRAIN_PER_CYCLE {
-            match bus.try_recv()? {
-                Some(rx) => {
+            match bus.try_recv_event()? {
+                Some(RxEvent::Frame(rx)) => {
                     if let Some(w) = watch.as_mut() {
                         w.on_frame(&rx.frame, rx.rx_monotonic_ns);
                     }
                     master.on_frame(&rx)
                 }
+                Some(RxEvent::BusError(e)) => master.on_bus_error(&e.error),
                 None => break,
             }
         }

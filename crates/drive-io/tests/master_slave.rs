@@ -427,3 +427,42 @@ fn the_step_limit_runs_on_drive_ios_own_clock_not_the_senders_timestamps() {
         s.master.feedback().fault_code
     );
 }
+
+#[test]
+fn bus_off_or_error_passive_stops_every_drive_and_latches() {
+    use can_transport::BusErrorFrame;
+    use can_transport::bus_error::{class, crtl};
+    for (what, e) in [
+        ("bus-off", BusErrorFrame::bus_off()),
+        ("error-passive", BusErrorFrame::error_passive(128, 0)),
+    ] {
+        let mut s = Sim::new();
+        s.boot();
+        let l: Vec<f64> = s.axes.iter().map(|a| a.length_m).collect();
+        for k in 1..5 {
+            let sp = s.setpoint(k, &l);
+            s.step(Some(&sp));
+        }
+        assert_eq!(s.master.state(), BusState::Running);
+        // A warning level is only logged.
+        s.master
+            .on_bus_error(&BusErrorFrame::new(class::CRTL, &[0, crtl::TX_WARNING]));
+        let sp = s.setpoint(5, &l);
+        s.step(Some(&sp));
+        assert_eq!(s.master.state(), BusState::Running, "{what}");
+        s.master.on_bus_error(&e);
+        for k in 6..10 {
+            let sp = s.setpoint(k, &l);
+            s.step(Some(&sp));
+        }
+        assert_eq!(s.master.state(), BusState::Fault, "{what}");
+        assert!(s.master.is_latched());
+        assert_eq!(s.master.feedback().fault_code, fault_code::BUS_ERROR);
+        assert!(
+            s.slaves
+                .iter()
+                .all(|sl| sl.ds402_state() == Ds402State::QuickStopActive),
+            "{what}: every drive quick-stopped"
+        );
+    }
+}

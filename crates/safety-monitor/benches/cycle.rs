@@ -4,7 +4,8 @@
 //! * `cycle_15_setpoints`: one cycle at 1 kHz input: 15 setpoints checked + end of cycle;
 //! * `cycle_full`: 15 setpoints, 15 drive feedback samples, 120 RPDO targets (8 drives x 15),
 //!   120 force readings and the end of cycle, i.e. everything the monitor computes per cycle on
-//!   the default config (Δq, box, motion plausibility, following error, RPDO, forces);
+//!   the default config (Δq, box, motion plausibility, identity before motion, following
+//!   error, RPDO, forces) plus one CAN error frame of warning level (reported, no trip);
 //! * `cycle_full_without_force_and_motion`: the same input with the force and motion checks
 //!   off (the monitor's scope before issue 15), side by side;
 //! * `safety_pair_encode_decode`: the doubled heartbeat, producer + consumer side.
@@ -106,6 +107,9 @@ fn bench(c: &mut Criterion) {
                         }
                     }
                     now += 1_000_000;
+                }
+                if checks {
+                    m.on_bus_error(black_box(can_transport::BusCondition::Other));
                 }
                 black_box(m.end_cycle(now))
             })

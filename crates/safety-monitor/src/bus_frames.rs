@@ -52,6 +52,8 @@ pub enum Observed {
     Heartbeat { node: u8, state: u8 },
     /// TPDO2 of drive `node`: its measured cable force, mN.
     Force { node: u8, force_mn: i32 },
+    /// An error frame of the bus controller (the reader's socket subscribes to them).
+    BusError(can_transport::BusCondition),
 }
 
 /// Decodes an RPDO1 or a heartbeat; anything else (or malformed) is `None`. Never panics.

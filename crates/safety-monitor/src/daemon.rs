@@ -30,8 +30,9 @@ use crate::config::MonitorConfig;
 use crate::identity::platform_identity;
 use crate::kinematics::StandardKinematics;
 use crate::monitor::{Limits, Monitor, MonitorState, ResetDecision};
+use crate::stop_path::{StopCounts, StopPath, StopStage};
 use crate::trip::{Cause, TripRecord};
-use can_transport::{CanBus, CanError, CanFrame, TransportSpec, safety_frame};
+use can_transport::{CanBus, CanError, RxEvent, TransportSpec, safety_frame};
 use crossbeam::queue::ArrayQueue;
 use crs_ipc::{
     DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, MAX_CABLES,
@@ -139,7 +140,11 @@ pub struct Summary {
     pub setpoints_checked: u64,
     pub setpoints_missing: u64,
     pub rpdo_checked: u64,
+    /// Frames not sent after every retry (all kinds) and the stop path's counts.
     pub can_send_errors: u64,
+    pub stop: StopCounts,
+    /// CAN error frames received from the bus controller.
+    pub bus_errors: u64,
     pub max_abs_dq_m: f64,
     pub max_lateness_ns: u64,
 }
@@ -203,7 +208,8 @@ struct Obs {
 /// monitor ~16 % of a core, see benches/RESULTS.md ("Safety monitor")).
 const READER_BATCH: Duration = Duration::from_millis(3);
 
-/// Reads the bus on its own socket and queues RPDO targets and drive heartbeats.
+/// Reads the bus on its own socket and queues RPDO targets, drive heartbeats, forces and the
+/// controller's error frames (subscribed when the socket was opened).
 fn bus_reader(
     mut bus: Box<dyn CanBus>,
     queue: Arc<ArrayQueue<Obs>>,
@@ -219,18 +225,13 @@ fn bus_reader(
             next = now;
         }
         loop {
-            match bus.try_recv() {
-                Ok(Some(rx)) => {
-                    if let Some(what) = bus_frames::observe(&rx.frame)
-                        && queue
-                            .push(Obs {
-                                what,
-                                rx_ns: rx.rx_monotonic_ns,
-                            })
-                            .is_err()
-                    {
-                        health.dropped.fetch_add(1, Ordering::Relaxed);
-                    }
+            let (what, rx_ns) = match bus.try_recv_event() {
+                Ok(Some(RxEvent::Frame(rx))) => match bus_frames::observe(&rx.frame) {
+                    Some(what) => (what, rx.rx_monotonic_ns),
+                    None => continue,
+                },
+                Ok(Some(RxEvent::BusError(e))) => {
+                    (Observed::BusError(e.error.condition()), e.rx_monotonic_ns)
                 }
                 Ok(None) => {
                     health.batches.fetch_add(1, Ordering::Relaxed);
@@ -242,29 +243,41 @@ fn bus_reader(
                     std::thread::sleep(Duration::from_millis(50));
                     break;
                 }
+            };
+            if queue.push(Obs { what, rx_ns }).is_err() {
+                health.dropped.fetch_add(1, Ordering::Relaxed);
             }
         }
     }
 }
 
-/// Sends one frame; counts (never propagates) failures: the cycle must go on, and a monitor that
-/// cannot send its heartbeat stops the drives by itself.
-fn send(bus: &mut dyn CanBus, f: &CanFrame, errors: &mut u64) {
-    if let Err(e) = bus.send(f) {
-        *errors += 1;
-        if errors.is_power_of_two() {
-            tracing::error!(error = %e, errors = *errors, "CAN send failed");
-        }
-    }
+/// One line in the trip log when the stop path escalated (NMT stop unsent, or nothing sent).
+fn append_stop_log(path: &std::path::Path, stage: StopStage, c: &StopCounts) {
+    append_line(
+        path,
+        &format!(
+            "stop_path={} nmt_stop_unsent={} quick_stop_unsent={} heartbeat_unsent={} \
+             retried_ok={}",
+            stage.name(),
+            c.nmt_stop_unsent,
+            c.quick_stop_unsent,
+            c.heartbeat_unsent,
+            c.retried_ok
+        ),
+    );
 }
 
 fn append_trip_log(path: &std::path::Path, rec: &TripRecord) {
+    append_line(path, &rec.to_string());
+}
+
+fn append_line(path: &std::path::Path, text: &str) {
     use std::io::Write;
     let unix = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_secs_f64())
         .unwrap_or(0.0);
-    let line = format!("t_unix_s={unix:.3} {rec}\n");
+    let line = format!("t_unix_s={unix:.3} {text}\n");
     let r = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
@@ -282,6 +295,25 @@ pub fn run(
     ipc: &IpcNode,
     stop: &AtomicBool,
 ) -> Result<Summary, DaemonError> {
+    let tx = can_transport::open(transport)?;
+    let rx = can_transport::open(transport)?;
+    run_on(cfg, tx, rx, ipc, stop)
+}
+
+/// [`run`] on given sockets: `tx` sends the stop frames and the heartbeat, `rx` is the bus
+/// reader's (it subscribes to the controller's error frames). Tests and the HIL matrix pass
+/// a failing `tx` ([`crate::stop_path::FailingSends`]).
+pub fn run_on(
+    cfg: &MonitorConfig,
+    mut tx: Box<dyn CanBus>,
+    mut rx: Box<dyn CanBus>,
+    ipc: &IpcNode,
+    stop: &AtomicBool,
+) -> Result<Summary, DaemonError> {
+    // Error frames (bus-off, error-passive) are a trip cause: without the subscription the
+    // monitor could not see them, so a transport that cannot carry them is refused.
+    rx.subscribe_bus_errors()?;
+    let transport = tx.interface().to_string();
     let identity = platform_identity(&cfg.platform);
     let kin = StandardKinematics::new(&cfg.platform);
     let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity)
@@ -300,13 +332,11 @@ pub fn run(
     let heartbeat_pub = ipc.publisher::<Heartbeat>()?;
     let wakeup = ipc.wakeup_notifier()?;
 
-    let mut tx = can_transport::open(transport)?;
     let queue = Arc::new(ArrayQueue::new(OBS_QUEUE));
     let reader_stop = Arc::new(AtomicBool::new(false));
     let health = Arc::new(ReaderHealth::default());
     let mut reader_watch = ReaderWatch::new(cfg.can.reader_stall_cycles);
     let reader = {
-        let rx = can_transport::open(transport)?;
         let (q, s, d) = (queue.clone(), reader_stop.clone(), health.clone());
         std::thread::Builder::new()
             .name("safety-bus-rx".into())
@@ -334,6 +364,9 @@ pub fn run(
     );
 
     let mut sum = Summary::default();
+    let mut stops = StopPath::new();
+    let mut last_stage: Option<StopStage> = None;
+    let mut bus_errors: u64 = 0;
     let mut counter: u16 = 0;
     let mut ignored_resets: u64 = 0;
     let mut own = OwnEvents::default();
@@ -478,6 +511,17 @@ pub fn run(
                         monitor.on_force(i, f64::from(force_mn) * 1e-3, o.rx_ns);
                     }
                 }
+                Observed::BusError(condition) => {
+                    bus_errors += 1;
+                    if condition.is_loss_of_communication() || bus_errors.is_power_of_two() {
+                        tracing::error!(
+                            condition = condition.name(),
+                            bus_errors,
+                            "CAN error frame from the bus controller"
+                        );
+                    }
+                    monitor.on_bus_error(condition);
+                }
             }
         }
 
@@ -502,21 +546,14 @@ pub fn run(
             );
         }
         if let Some(rec) = report.new_trip {
-            // Stop path first: quick stop to every drive, then NMT stop all.
+            // Stop path first: quick stop to every drive, then NMT stop all (retried and
+            // escalated when unsent: stop_path).
             for (i, w) in winches.iter().enumerate() {
                 if let Some(t) = last_target[i] {
-                    send(
-                        tx.as_mut(),
-                        &bus_frames::rpdo1(w.node_id, bus_frames::CW_QUICK_STOP, t),
-                        &mut sum.can_send_errors,
-                    );
+                    stops.quick_stop(tx.as_mut(), w.node_id, t);
                 }
             }
-            send(
-                tx.as_mut(),
-                &bus_frames::nmt(bus_frames::NMT_STOP, 0),
-                &mut sum.can_send_errors,
-            );
+            stops.nmt_stop(tx.as_mut());
             resetting = None;
             event_seq += 1;
             let ev = estop_event(&rec, event_seq);
@@ -530,11 +567,7 @@ pub fn run(
                 append_trip_log(p, &rec);
             }
         } else if report.state == MonitorState::Tripped {
-            send(
-                tx.as_mut(),
-                &bus_frames::nmt(bus_frames::NMT_STOP, 0),
-                &mut sum.can_send_errors,
-            );
+            stops.nmt_stop(tx.as_mut());
             if foreign_reset && let Some(rec) = monitor.trip() {
                 event_seq += 1;
                 let ev = estop_event(rec, event_seq);
@@ -574,11 +607,7 @@ pub fn run(
                         epoch,
                         "reset ACCEPTED: new reset epoch, NMT start, releasing the stack"
                     );
-                    send(
-                        tx.as_mut(),
-                        &bus_frames::nmt(bus_frames::NMT_START, 0),
-                        &mut sum.can_send_errors,
-                    );
+                    stops.other(tx.as_mut(), &bus_frames::nmt(bus_frames::NMT_START, 0));
                     resetting = Some((now, 0));
                 }
             }
@@ -606,8 +635,21 @@ pub fn run(
         }
 
         // The fail-safe heartbeat: every cycle, STOP while tripped.
-        for f in safety_frame::encode(&monitor.heartbeat(counter), cob) {
-            send(tx.as_mut(), &f, &mut sum.can_send_errors);
+        let tripped = monitor.state() == MonitorState::Tripped;
+        let stage = stops.heartbeat(
+            tx.as_mut(),
+            &safety_frame::encode(&monitor.heartbeat(counter), cob),
+            tripped,
+        );
+        if let Some(st) = stage
+            && last_stage != Some(st)
+        {
+            if st != StopStage::NmtStop
+                && let Some(p) = &trip_log
+            {
+                append_stop_log(p, st, &stops.counts());
+            }
+            last_stage = Some(st);
         }
         counter = counter.wrapping_add(1);
         let mut hb = Heartbeat::new(
@@ -636,6 +678,9 @@ pub fn run(
     sum.setpoints_missing = st.setpoints_missing;
     sum.rpdo_checked = st.rpdo_checked;
     sum.max_abs_dq_m = st.max_abs_dq_m;
+    sum.stop = stops.counts();
+    sum.can_send_errors = sum.stop.total_unsent();
+    sum.bus_errors = bus_errors;
     let dropped = health.dropped.load(Ordering::Relaxed);
     if dropped > 0 {
         tracing::warn!(dropped, "bus observations dropped (queue full)");

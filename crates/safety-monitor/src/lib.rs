@@ -14,6 +14,7 @@
 //! | trip causes and the trip log | [`trip`] |
 //! | the CANopen frames of the stop path | [`bus_frames`] |
 //! | health of the own bus reader thread (fail closed) | [`bus_watch`] |
+//! | stop frames with retry and escalation (NMT stop → heartbeat inhibit) | [`stop_path`] |
 //! | the process: 15 ms cycle, iceoryx2, CAN stop, safety heartbeat, reset | [`daemon`] |
 //!
 //! Diverse redundancy: nothing here uses motion-core or nalgebra (motion-core is a
@@ -29,6 +30,7 @@ pub mod identity;
 pub mod kinematics;
 pub mod monitor;
 pub mod platform;
+pub mod stop_path;
 pub mod trip;
 
 pub use monitor::{Limits, Monitor, MonitorState, ResetDecision};

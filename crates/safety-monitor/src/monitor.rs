@@ -174,14 +174,16 @@ struct ForceWatch {
 /// Latched state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MonitorState {
-    /// Start-up: no fault, but motion is not yet permitted (the safety heartbeat says STOP)
+    /// Start-up: no fault, but the drives may not be enabled (the safety heartbeat says STOP)
     /// until every drive is operational with live force readings (see
     /// [`Monitor::readiness`]); the configuration was verified when it was loaded. Every check
-    /// runs; a fault trips. The platform identity is not a start-up condition: the stack
-    /// starts motion-core only after the drives are enabled, which needs this RUN; a setpoint
-    /// without a verified identity still trips after `identity_grace_cycles`.
+    /// runs; a fault trips.
     NotReady,
-    /// No fault latched: the safety heartbeat says RUN.
+    /// No fault latched: the safety heartbeat says RUN, the drives may enable and hold.
+    /// MOTION is permitted only once the platform identity is verified as well: a setpoint
+    /// that moves the pose without it trips `identity_missing` at once (the stack starts
+    /// motion-core after the drives are enabled, which needs this RUN, so the identity cannot
+    /// be a condition of RUN itself without a deadlock; docs/safety-monitor.md "Start-up").
     Armed,
     /// E-stop latched until an accepted reset: the safety heartbeat says STOP.
     Tripped,
@@ -353,7 +355,7 @@ pub mod evidence {
             IdentityMismatch | IdentityMissing => Class::Identity,
             FollowingError | FeedbackSilence | RpdoMismatch | FollowingUnchecked => Class::Feedback,
             ForceSlack | ForceOverload | ForceSilence => Class::Forces,
-            IpcError | BusObservation | EStopEvent | ForgedEvent => Class::Receive,
+            IpcError | BusObservation | EStopEvent | ForgedEvent | CanBusError => Class::Receive,
         }
     }
 
@@ -437,6 +439,8 @@ pub struct Monitor {
     fb_unchecked: u32,
     unchecked_streak: u32,
     prev_pose: Option<PrevPose>,
+    /// The last setpoint's pose of this stream (start-up: motion needs a verified identity).
+    last_pose: Option<[f64; 6]>,
     /// The monitor's clock at the end of the last cycle that brought setpoints, and the last
     /// pose of that cycle (the own-clock velocity check).
     cycle_ref: Option<(u64, DVec3, DMat3)>,
@@ -494,6 +498,7 @@ impl Monitor {
             fb_unchecked: 0,
             unchecked_streak: 0,
             prev_pose: None,
+            last_pose: None,
             cycle_ref: None,
         }
     }
@@ -656,6 +661,21 @@ impl Monitor {
         if !self.lim.workspace.contains(&sp.pose) {
             self.fault(at(Cause::OutsideWorkspace));
         }
+        // Motion is permitted only with a verified platform identity (start-up, issue 15):
+        // the RUN heartbeat lets the drives enable and HOLD; a setpoint that moves the pose
+        // while the identity is not verified trips at once. Holding setpoints are tolerated
+        // for `identity_grace_cycles` (the identity of a producer the monitor subscribed to
+        // late arrives with its next announcement).
+        if self.identity_state != IdentityState::Verified
+            && self.last_pose.is_some_and(|p| p != sp.pose)
+        {
+            self.fault(Fault {
+                value: f64::from(self.unverified_cycles),
+                limit: 0.0,
+                ..at(Cause::IdentityMissing)
+            });
+        }
+        self.last_pose = Some(sp.pose);
         if self.lim.motion.check {
             self.check_motion(sp);
         }
@@ -866,6 +886,27 @@ impl Monitor {
             value,
             ..Fault::new(Cause::BusObservation)
         });
+    }
+
+    /// An error frame of the drive bus's controller (the monitor's own socket subscribes to
+    /// them): bus-off and error-passive trip (`can_bus_error`, value = the condition's code);
+    /// an RX/TX overflow lost frames, so the bus checks ran blind (`bus_observation`). Other
+    /// conditions (warning level, protocol errors, missing ACK, tx timeout) are counted by the
+    /// process, not tripped on.
+    pub fn on_bus_error(&mut self, condition: can_transport::BusCondition) {
+        use can_transport::BusCondition;
+        let value = f64::from(condition.code());
+        match condition {
+            BusCondition::BusOff | BusCondition::ErrorPassive => self.fault(Fault {
+                value,
+                ..Fault::new(Cause::CanBusError)
+            }),
+            BusCondition::Overflow => self.fault(Fault {
+                value,
+                ..Fault::new(Cause::BusObservation)
+            }),
+            BusCondition::TxTimeout | BusCondition::Other => {}
+        }
     }
 
     /// An RPDO1 target seen on the bus for cable `cable` (converted to metres), received at
@@ -1115,6 +1156,7 @@ impl Monitor {
             self.identity_state = IdentityState::Unknown;
             self.unverified_cycles = 0;
             self.prev_pose = None;
+            self.last_pose = None;
             self.cycle_ref = None;
         }
         let report = CycleReport {

@@ -63,10 +63,14 @@ pub enum Cause {
     /// second publisher impersonating the monitor, e.g. a forged Reset): the process bus can
     /// no longer be trusted (issue 16).
     ForgedEvent = 22,
+    /// The drive bus's controller reported bus-off or error-passive (a CAN error frame on the
+    /// monitor's own socket; value = 1 bus-off, 2 error-passive): frames to and from the drives,
+    /// the monitor's stop frames among them, may no longer get through (issue 15).
+    CanBusError = 23,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 22] = [
+    pub const ALL: [Cause; 23] = [
         Cause::DqLimit,
         Cause::NonFinite,
         Cause::OutsideWorkspace,
@@ -89,6 +93,7 @@ impl Cause {
         Cause::BusObservation,
         Cause::EStopEvent,
         Cause::ForgedEvent,
+        Cause::CanBusError,
     ];
 
     pub fn code(self) -> u8 {
@@ -126,6 +131,7 @@ impl Cause {
             Cause::BusObservation => "bus_observation",
             Cause::EStopEvent => "estop_event",
             Cause::ForgedEvent => "forged_event",
+            Cause::CanBusError => "can_bus_error",
         }
     }
 

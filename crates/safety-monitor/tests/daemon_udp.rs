@@ -44,6 +44,12 @@ struct Rig {
 
 impl Rig {
     fn start(name: &str, port: u16) -> Rig {
+        Self::start_with(name, port, false)
+    }
+
+    /// `fail_nmt`: the monitor's sending socket fails every NMT frame with a full TX queue
+    /// (ENOBUFS), as `safety-monitor --inject-nmt-stop-unsent` does.
+    fn start_with(name: &str, port: u16, fail_nmt: bool) -> Rig {
         let prefix = format!("sm-test-{}-{name}/", std::process::id());
         let transport: TransportSpec = format!("udpbus:239.255.71.7:{port}").parse().unwrap();
         let cfg_path =
@@ -66,7 +72,14 @@ impl Rig {
             std::thread::spawn(move || {
                 let ipc =
                     IpcNode::with_prefix("safety-monitor", &prefix).map_err(|e| e.to_string())?;
-                daemon::run(&cfg, &t, &ipc, &stop).map_err(|e| e.to_string())
+                if fail_nmt {
+                    let tx = can_transport::open(&t).map_err(|e| e.to_string())?;
+                    let rx = can_transport::open(&t).map_err(|e| e.to_string())?;
+                    let tx = Box::new(safety_monitor::stop_path::FailingSends::new(tx, 0));
+                    daemon::run_on(&cfg, tx, rx, &ipc, &stop).map_err(|e| e.to_string())
+                } else {
+                    daemon::run(&cfg, &t, &ipc, &stop).map_err(|e| e.to_string())
+                }
             })
         };
         Rig {
@@ -343,4 +356,78 @@ fn the_monitor_permits_motion_only_after_every_drives_feedback() {
     assert!(rig.estop_events().is_empty());
     assert!(rig.nmt.is_empty(), "no NMT stop at start-up: {:?}", rig.nmt);
     rig.finish();
+}
+
+#[test]
+fn bus_off_and_error_passive_trip_warnings_do_not() {
+    use can_transport::BusErrorFrame;
+    use can_transport::bus_error::{class, crtl};
+    for (k, e) in [
+        BusErrorFrame::bus_off(),
+        BusErrorFrame::error_passive(128, 0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let mut rig = Rig::start(&format!("buserr{k}"), 21_305 + k as u16);
+        rig.until(Duration::from_secs(3), 0.0, false, |r| {
+            matches!(r.last_pair, Some((SafetyState::Run, _)))
+        });
+        // A warning level and a missing ACK are reported, not tripped on.
+        rig.bus
+            .send_bus_error(&BusErrorFrame::new(class::CRTL, &[0, crtl::RX_WARNING]))
+            .unwrap();
+        rig.bus
+            .send_bus_error(&BusErrorFrame::new(class::ACK, &[]))
+            .unwrap();
+        rig.run_for(Duration::from_millis(100), 0.0, false);
+        assert!(rig.estop_events().is_empty());
+        let t0 = Instant::now();
+        rig.bus.send_bus_error(&e).unwrap();
+        rig.until(Duration::from_secs(2), 0.0, false, |r| {
+            r.nmt.iter().any(|(c, _)| *c == 0x02)
+        });
+        let ev = rig.estop_events();
+        assert_eq!(ev[0].detail, u32::from(Cause::CanBusError.code()), "{e}");
+        println!(
+            "{e}: NMT stop after {:.1} ms",
+            t0.elapsed().as_secs_f64() * 1e3
+        );
+        rig.run_for(Duration::from_millis(50), 0.0, false);
+        assert!(matches!(rig.last_pair, Some((SafetyState::Stop, _))));
+        let s = rig.finish();
+        assert_eq!(s.bus_errors, 3, "{s:?}");
+    }
+}
+
+#[test]
+fn an_unsent_nmt_stop_escalates_to_the_heartbeat_inhibit() {
+    let mut rig = Rig::start_with("nmtfail", 21_307, true);
+    rig.until(Duration::from_secs(3), 0.0, false, |r| {
+        matches!(r.last_pair, Some((SafetyState::Run, _)))
+    });
+    // Trip (101 mm): the NMT stop cannot be sent; the STOP pairs must go out instead.
+    rig.until(Duration::from_secs(2), 0.101, false, |r| {
+        matches!(r.last_pair, Some((SafetyState::Stop, _)))
+    });
+    rig.run_for(Duration::from_millis(100), 0.101, false);
+    assert_eq!(
+        rig.estop_events()[0].detail,
+        u32::from(Cause::DqLimit.code())
+    );
+    assert!(
+        rig.nmt.is_empty(),
+        "the injected failure must keep every NMT frame off the bus: {:?}",
+        rig.nmt
+    );
+    assert!(
+        matches!(rig.last_pair, Some((SafetyState::Stop, t)) if t.elapsed() < Duration::from_millis(50))
+    );
+    assert_eq!(rig.invalid_pairs, 0);
+    let s = rig.finish();
+    // On the trip and every tripped cycle after it (>= 6 in 100 ms), each counted once after
+    // its retries, and each cycle escalated to the heartbeat's inhibit.
+    assert!(s.stop.nmt_stop_unsent >= 6, "{s:?}");
+    assert_eq!(s.stop.escalated_heartbeat, s.stop.nmt_stop_unsent, "{s:?}");
+    assert_eq!((s.stop.heartbeat_unsent, s.stop.escalated_watch), (0, 0));
 }

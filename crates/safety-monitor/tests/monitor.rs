@@ -299,6 +299,32 @@ fn identity_mismatch_and_missing_identity_trip() {
     assert_eq!(m.trip().unwrap().fault.cause, Cause::IdentityMissing);
 }
 
+#[test]
+fn motion_needs_a_verified_identity_holding_does_not() {
+    let c = cfg();
+    let own = platform_identity(&c.platform);
+    let mut lim = Limits::from_config(c);
+    lim.require_ready = false;
+    let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
+    // Holding setpoints without an identity: within the grace, no trip.
+    let seq = good_cycle(&mut m, 1, 15_000_000);
+    assert_eq!(m.state(), MonitorState::Armed);
+    // The first setpoint that moves (1 mm in x) trips in this very cycle, not after the grace.
+    let mut moved = HOME;
+    moved[0] += 0.001;
+    m.on_setpoint(&sp(seq, moved, 0, 0.0));
+    let t = m.end_cycle(30_000_000).new_trip.expect("trip");
+    assert_eq!(t.fault.cause, Cause::IdentityMissing);
+    assert_eq!(t.fault.sequence, seq);
+    // With the identity announced before (motion-core announces before its first setpoint,
+    // the daemon drains identities before setpoints) the same motion passes.
+    let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
+    let seq = good_cycle(&mut m, 1, 15_000_000);
+    m.on_identity(&PlatformIdentity::new(own, 8));
+    m.on_setpoint(&sp(seq, moved, 0, 0.0));
+    assert!(m.end_cycle(30_000_000).new_trip.is_none());
+}
+
 fn feedback(applied: u64, lengths: &[f64]) -> DriveFeedback {
     let mut f = DriveFeedback {
         cable_count: 8,
@@ -1304,6 +1330,35 @@ proptest! {
             }
             // Cycles never change the epoch.
             prop_assert_eq!(m.reset_epoch(), before.1);
+        }
+    }
+}
+
+#[test]
+fn bus_off_and_error_passive_trip_overflow_is_a_blind_reader_warnings_pass() {
+    use can_transport::BusCondition;
+    for (cond, cause) in [
+        (BusCondition::BusOff, Some(Cause::CanBusError)),
+        (BusCondition::ErrorPassive, Some(Cause::CanBusError)),
+        (BusCondition::Overflow, Some(Cause::BusObservation)),
+        (BusCondition::TxTimeout, None),
+        (BusCondition::Other, None),
+    ] {
+        let mut m = monitor();
+        let seq = good_cycle(&mut m, 1, 15_000_000);
+        for k in 0..15 {
+            m.on_setpoint(&sp(seq + k, HOME, 0, 0.0));
+        }
+        m.on_bus_error(cond);
+        let r = m.end_cycle(30_000_000);
+        match cause {
+            Some(c) => {
+                let t = r.new_trip.expect("trip");
+                assert_eq!(t.fault.cause, c, "{cond:?}");
+                assert_eq!(t.fault.value, f64::from(cond.code()));
+                assert!(t.to_string().contains(c.name()), "trip log names the cause");
+            }
+            None => assert!(r.new_trip.is_none(), "{cond:?}"),
         }
     }
 }

@@ -28,6 +28,12 @@ struct Args {
     /// multi-process tests: lengths, velocities, NMT/CiA 402 state, motion demand, safety watch.
     #[arg(long)]
     status_file: Option<PathBuf>,
+    /// FAULT INJECTION (the safety HIL matrix): re-read this file every 5 ms; lines
+    /// `force <cable 1-based> <newtons>|off` make that winch report the given measured force
+    /// (TPDO2) instead of the pretension stand-in. A bad line is logged (naming the line) and
+    /// ignored; a missing file means no override.
+    #[arg(long)]
+    control_file: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -75,6 +81,11 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         let m = cfg.winches.len();
         std::thread::spawn(move || write_status_loop(&path, &c, m));
     }
+    if let Some(path) = args.control_file.clone() {
+        let c = control.clone();
+        let m = cfg.winches.len();
+        std::thread::spawn(move || read_control_loop(&path, &c, m));
+    }
     tracing::info!(
         drives = cfg.winches.len(),
         safety_watch = ?ecfg.safety_watch,
@@ -120,5 +131,87 @@ fn write_status_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
             let _ = std::fs::rename(&tmp, path);
         }
         std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// One line of the control file: `force <cable 1-based> <newtons>|off`.
+fn parse_control_line(line: &str, m: usize) -> Result<Option<(usize, Option<f64>)>, String> {
+    let f: Vec<&str> = line.split_whitespace().collect();
+    match f.as_slice() {
+        [] => Ok(None),
+        [c, ..] if c.starts_with('#') => Ok(None),
+        ["force", cable, value] => {
+            let i: usize = cable
+                .parse()
+                .ok()
+                .filter(|&i| (1..=m).contains(&i))
+                .ok_or_else(|| format!("cable {cable:?} is not in 1..={m}"))?;
+            let v = match *value {
+                "off" => None,
+                v => Some(
+                    v.parse::<f64>()
+                        .ok()
+                        .filter(|x| x.is_finite())
+                        .ok_or_else(|| format!("force {v:?} is not a finite number (N)"))?,
+                ),
+            };
+            Ok(Some((i - 1, v)))
+        }
+        _ => Err("expected `force <cable> <newtons>|off`".into()),
+    }
+}
+
+fn read_control_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
+    let mut last = String::new();
+    while !c.stop.load(Ordering::Acquire) {
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        if text != last {
+            let mut set = vec![None; m];
+            for (n, line) in text.lines().enumerate() {
+                match parse_control_line(line, m) {
+                    Ok(Some((i, v))) => set[i] = v,
+                    Ok(None) => {}
+                    Err(e) => tracing::error!("{}:{}: {e}", path.display(), n + 1),
+                }
+            }
+            for (i, v) in set.into_iter().enumerate() {
+                if v.is_some() {
+                    tracing::warn!(
+                        cable = i + 1,
+                        force_n = v,
+                        "measured force overridden (fault injection)"
+                    );
+                }
+                c.set_force_override(i, v);
+            }
+            last = text;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_control_line;
+
+    #[test]
+    fn control_lines() {
+        assert_eq!(
+            parse_control_line("force 3 10500", 8),
+            Ok(Some((2, Some(10500.0))))
+        );
+        assert_eq!(parse_control_line("force 8 off", 8), Ok(Some((7, None))));
+        assert_eq!(parse_control_line("  # x", 8), Ok(None));
+        assert!(
+            parse_control_line("force 9 1", 8)
+                .unwrap_err()
+                .contains("cable")
+        );
+        assert!(
+            parse_control_line("force 1 NaN", 8)
+                .unwrap_err()
+                .contains("finite")
+        );
+        assert!(parse_control_line("forc 1 1", 8).is_err());
     }
 }

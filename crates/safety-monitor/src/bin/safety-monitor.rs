@@ -29,6 +29,11 @@ struct Args {
     /// iceoryx2 service-name prefix (default: $CRS_IPC_PREFIX or none).
     #[arg(long, global = true)]
     ipc_prefix: Option<String>,
+    /// FAULT INJECTION (the HIL matrix's `stop_frame_lost`): every send of the monitor's NMT
+    /// stop fails as on a full TX queue (ENOBUFS), so the stop must escalate to the safety
+    /// heartbeat's inhibit. Never in operation; logged as an error at start.
+    #[arg(long, hide = true)]
+    inject_nmt_stop_unsent: bool,
 }
 
 #[derive(Subcommand)]
@@ -118,7 +123,20 @@ fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
                 libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
             }
             let ipc = node("safety-monitor", &args.ipc_prefix)?;
-            let s = daemon::run(&cfg, &spec, &ipc, &STOP)?;
+            let tx = can_transport::open(&spec)?;
+            let rx = can_transport::open(&spec)?;
+            let tx: Box<dyn can_transport::CanBus> = if args.inject_nmt_stop_unsent {
+                tracing::error!(
+                    "FAULT INJECTION: every NMT stop of this monitor fails to send (test only)"
+                );
+                Box::new(safety_monitor::stop_path::FailingSends::new(
+                    tx,
+                    u32::from(safety_monitor::bus_frames::COB_NMT),
+                ))
+            } else {
+                tx
+            };
+            let s = daemon::run_on(&cfg, tx, rx, &ipc, &STOP)?;
             tracing::info!(
                 ?s,
                 "safety monitor stopped (the drives brake without its heartbeat)"
