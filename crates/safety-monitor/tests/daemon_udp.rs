@@ -275,9 +275,17 @@ fn offset_101_mm_trips_and_stops_the_bus_99_mm_does_not() {
         saw_reset
     });
     assert_eq!(rig.invalid_pairs, 0);
+    // Every setpoint the rig published was checked or counted missing (up to the subscriber
+    // buffer of 32 still queued at shutdown): how MANY were published depends on how the host
+    // schedules the rig's 1 ms pacing, so that is not asserted.
+    let published = rig.seq;
     let s = rig.finish();
     assert_eq!(s.trips, 1);
-    assert!(s.setpoints_checked > 500, "{s:?}");
+    assert!(published > 100, "the rig published only {published} setpoints");
+    assert!(
+        s.setpoints_checked + s.setpoints_missing + 32 >= published,
+        "published {published}: {s:?}"
+    );
     println!("summary: {s:?}");
 }
 
