@@ -21,7 +21,7 @@ struct Sim {
 impl Sim {
     fn new() -> Self {
         let cfg = hil::hil_config("udpbus:239.255.0.1:1");
-        let master = Master::new(&cfg);
+        let master = Master::new(&cfg).unwrap();
         let slaves = cfg
             .winches
             .iter()
@@ -124,9 +124,15 @@ impl Sim {
 fn boot_sequence_uses_nmt_sdo_and_ds402() {
     let mut s = Sim::new();
     s.boot();
-    // NMT reset comm first, SDO writes of 0x1017 and 0x6060=8, NMT start, then RPDO/SYNC.
+    // NMT reset comm first (after drive-io's own heartbeat), the SDO start-up script from the
+    // EDS (PDO mapping, 0x1017, 0x6060=8, read-backs), NMT start, then RPDO/SYNC.
+    let first = s
+        .log
+        .iter()
+        .find(|m| !matches!(m, Message::Heartbeat { node: 0x7F, .. }))
+        .unwrap();
     assert!(matches!(
-        s.log[0],
+        first,
         Message::Nmt {
             command: canopen::NMT_RESET_COMM,
             node: 0
@@ -134,6 +140,19 @@ fn boot_sequence_uses_nmt_sdo_and_ds402() {
     ));
     let sdo_mode = s.log.iter().filter(|m| matches!(m, Message::SdoRequest { data, .. } if data[0] == 0x2F && data[1] == 0x60 && data[2] == 0x60 && data[4] == 8)).count();
     assert_eq!(sdo_mode, 4, "one 0x6060 = 8 write per drive");
+    // TPDO2 mapping entry 2 = 0x2110 (pulley force, 32 bit) written and read back per drive.
+    let map_write = s.log.iter().filter(|m| matches!(m, Message::SdoRequest { data, .. } if data[0] == 0x23 && data[1..4] == [0x01, 0x1A, 2] && data[4..8] == [0x20, 0, 0x10, 0x21])).count();
+    let map_read = s.log.iter().filter(|m| matches!(m, Message::SdoRequest { data, .. } if data[0] == 0x40 && data[1..4] == [0x01, 0x1A, 2])).count();
+    assert_eq!((map_write, map_read), (4, 4));
+    for sl in &s.slaves {
+        assert_eq!(sl.od_value(0x6007, 0), Some(2), "0x6007 = disable voltage");
+        assert_eq!(
+            sl.od_value(0x605A, 0),
+            Some(6),
+            "0x605A = stay in quick stop"
+        );
+        assert_eq!(sl.od_value(0x1016, 1), Some((0x7F << 16) | 100));
+    }
     let start = s
         .log
         .iter()

@@ -82,12 +82,36 @@ fn enable_sequence_and_csp_latching_on_sync() {
 }
 
 #[test]
-fn nmt_stop_holds_and_silences_pdos() {
+fn nmt_stop_acts_per_0x6007() {
+    // EDS default 0x6007 = 0 (no action): the drive keeps following its last target, no brake.
     let mut s = operational(1);
     let mut out = FrameBuf::default();
     for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
         s.handle_frame(&rpdo1(1, cw, 0), 0, &mut out);
     }
+    s.handle_frame(&nmt(NMT_STOP, 0), 0, &mut out);
+    assert_eq!(s.demand(), MotionDemand::Follow { target_counts: 0 });
+    // 3 = quick stop.
+    let mut s = operational(1);
+    s.handle_frame(&sdo_download(1, 0x6007, 0, 3, 2), 0, &mut out);
+    for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
+        s.handle_frame(&rpdo1(1, cw, 0), 0, &mut out);
+    }
+    s.handle_frame(&nmt(NMT_STOP, 0), 0, &mut out);
+    assert_eq!(s.ds402_state(), Ds402State::QuickStopActive);
+    assert_eq!(s.demand(), MotionDemand::QuickStop);
+}
+
+#[test]
+fn nmt_stop_holds_and_silences_pdos() {
+    let mut s = operational(1);
+    let mut out = FrameBuf::default();
+    // 0x6007 = 2 (disable voltage: the brake holds), what drive-io configures.
+    s.handle_frame(&sdo_download(1, 0x6007, 0, 2, 2), 0, &mut out);
+    for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
+        s.handle_frame(&rpdo1(1, cw, 0), 0, &mut out);
+    }
+    out.clear();
     s.handle_frame(&nmt(NMT_STOP, 0), 0, &mut out);
     assert_eq!(s.demand(), MotionDemand::Hold);
     out.clear();

@@ -94,7 +94,7 @@ impl Rig {
     }
 
     fn with_plant(control: Platform, mut plant: PlantBus) -> Self {
-        let master = Master::new(&drives());
+        let master = Master::new(&drives()).unwrap();
         let now = 1_000_000_000;
         plant.start(now);
         let mut r = Self {
