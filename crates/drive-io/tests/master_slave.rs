@@ -4,6 +4,7 @@ use can_transport::RxFrame;
 use crs_ipc::{BusState, JointSetpoint, fault_code};
 use drive_io::canopen::{self, Ds402State, FrameBuf, Message};
 use drive_io::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
+use drive_io::eds::{BUILTIN_WINCH_EDS, Eds};
 use drive_io::{DrivesConfig, Master, hil};
 
 struct Sim {
@@ -20,12 +21,17 @@ struct Sim {
 
 impl Sim {
     fn new() -> Self {
+        Self::with_eds(Eds::builtin_winch().clone(), Eds::builtin_winch())
+    }
+
+    /// drive-io configured from `master_eds`, drives implementing `drive_eds`.
+    fn with_eds(master_eds: Eds, drive_eds: &Eds) -> Self {
         let cfg = hil::hil_config("udpbus:239.255.0.1:1");
-        let master = Master::new(&cfg).unwrap();
+        let master = Master::with_eds(&cfg, master_eds).unwrap();
         let slaves = cfg
             .winches
             .iter()
-            .map(|w| DriveSlave::new(w.node_id, 20))
+            .map(|w| DriveSlave::with_eds(w.node_id, drive_eds, 20))
             .collect();
         let axes = (0..cfg.winches.len())
             .map(|i| WinchAxis::new(3.0 + i as f64, 5.0, 14.0))
@@ -151,7 +157,7 @@ fn boot_sequence_uses_nmt_sdo_and_ds402() {
             Some(6),
             "0x605A = stay in quick stop"
         );
-        assert_eq!(sl.od_value(0x1016, 1), Some((0x7F << 16) | 100));
+        assert_eq!(sl.od_value(0x1016, 1), Some((0x7F << 16) | 600));
     }
     let start = s
         .log
@@ -444,5 +450,93 @@ fn the_step_limit_runs_on_drive_ios_own_clock_not_the_senders_timestamps() {
         BusState::Running,
         "{:?}",
         s.master.feedback().fault_code
+    );
+}
+
+/// A vendor EDS whose defaults differ from drive-io's layout: RPDO1 maps the controlword only,
+/// TPDO1 the statusword only, TPDO2 is disabled and maps the error code; no heartbeat.
+fn other_vendor_defaults() -> Eds {
+    let text = BUILTIN_WINCH_EDS
+        .replace(
+            "[1600sub0]\nParameterName=Number of mapped objects\nObjectType=0x7\nDataType=0x0005\nAccessType=rw\nDefaultValue=2",
+            "[1600sub0]\nParameterName=Number of mapped objects\nObjectType=0x7\nDataType=0x0005\nAccessType=rw\nDefaultValue=1",
+        )
+        .replace(
+            "[1A00sub0]\nParameterName=Number of mapped objects\nObjectType=0x7\nDataType=0x0005\nAccessType=rw\nDefaultValue=2",
+            "[1A00sub0]\nParameterName=Number of mapped objects\nObjectType=0x7\nDataType=0x0005\nAccessType=rw\nDefaultValue=1",
+        )
+        .replace("DefaultValue=$NODEID+0x280", "DefaultValue=$NODEID+0x80000280")
+        .replace("DefaultValue=0x606C0020", "DefaultValue=0x603F0010");
+    assert_ne!(text, BUILTIN_WINCH_EDS);
+    Eds::parse(&text, "other-vendor.eds").unwrap()
+}
+
+#[test]
+fn drives_with_other_default_mappings_are_configured_from_the_eds_and_run() {
+    let eds = other_vendor_defaults();
+    // Unconfigured, such a drive sends a 2-byte TPDO1 and no TPDO2: useless to drive-io.
+    let mut raw = DriveSlave::with_eds(1, &eds, 0);
+    let mut out = FrameBuf::default();
+    raw.start(0, &mut out);
+    raw.handle_frame(&canopen::nmt(canopen::NMT_START, 0), 0, &mut out);
+    out.clear();
+    raw.transmit_pdos(&mut out);
+    assert_eq!(out.len(), 1);
+    assert_eq!(out.as_slice()[0].data().len(), 2);
+
+    let mut s = Sim::with_eds(eds.clone(), &eds);
+    s.boot();
+    for sl in &s.slaves {
+        assert_eq!(sl.od_value(0x1A01, 1), Some(0x606C_0020));
+        assert_eq!(sl.od_value(0x1801, 1), Some(0x280 + u32::from(sl.node_id())));
+    }
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    for k in 1..=200u64 {
+        let l: Vec<f64> = l0.iter().map(|x| x + 0.05 * (k as f64 / 200.0)).collect();
+        let sp = s.setpoint(k, &l);
+        s.step(Some(&sp));
+        assert_eq!(s.master.state(), BusState::Running);
+    }
+    for k in 201..=250u64 {
+        let l: Vec<f64> = l0.iter().map(|x| x + 0.05).collect();
+        let sp = s.setpoint(k, &l);
+        s.step(Some(&sp));
+    }
+    for i in 0..4 {
+        let fb = s.master.feedback().cable_length_m[i];
+        assert!((fb - (l0[i] + 0.05)).abs() < 1e-6, "winch {i}: {fb} l0 {} axis {} {:?} {:?}", l0[i], s.axes[i].length_m, s.master.state(), s.master.feedback().fault_code);
+        // Velocity and force arrive through the TPDO2 drive-io mapped.
+        assert_eq!(s.master.feedback().cable_force_n[i], 1.0);
+    }
+}
+
+#[test]
+fn a_drive_refusing_an_object_stops_start_up_naming_drive_object_and_abort_code() {
+    // drive-io's EDS lists the following error window; the drives do not implement it.
+    let drive_eds = Eds::parse(
+        &BUILTIN_WINCH_EDS.replace("[6065]", "[2065]"),
+        "drive-without-6065.eds",
+    )
+    .unwrap();
+    let mut s = Sim::with_eds(Eds::builtin_winch().clone(), &drive_eds);
+    for _ in 0..300 {
+        s.step(None);
+    }
+    assert_eq!(s.master.state(), BusState::Fault);
+    let msg = s.master.describe_commissioning_fault().unwrap();
+    for want in [
+        "drive node 1",
+        "0x6065sub0 (Following error window)",
+        "0x06020000",
+        "object does not exist in the object dictionary",
+        "write",
+    ] {
+        assert!(msg.contains(want), "`{want}` missing in: {msg}");
+    }
+    assert!(
+        !s.log
+            .iter()
+            .any(|m| matches!(m, Message::Nmt { command: canopen::NMT_START, .. })),
+        "start-up went on"
     );
 }
