@@ -3,8 +3,8 @@
 use can_transport::RxFrame;
 use crs_ipc::{BusState, JointSetpoint, fault_code};
 use drive_io::canopen::{self, Ds402State, FrameBuf, Message};
-use drive_io::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
 use drive_io::eds::{BUILTIN_WINCH_EDS, Eds};
+use drive_io::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
 use drive_io::{DrivesConfig, Master, hil};
 
 struct Sim {
@@ -488,7 +488,10 @@ fn drives_with_other_default_mappings_are_configured_from_the_eds_and_run() {
     s.boot();
     for sl in &s.slaves {
         assert_eq!(sl.od_value(0x1A01, 1), Some(0x606C_0020));
-        assert_eq!(sl.od_value(0x1801, 1), Some(0x280 + u32::from(sl.node_id())));
+        assert_eq!(
+            sl.od_value(0x1801, 1),
+            Some(0x280 + u32::from(sl.node_id()))
+        );
     }
     let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
     for k in 1..=200u64 {
@@ -504,7 +507,14 @@ fn drives_with_other_default_mappings_are_configured_from_the_eds_and_run() {
     }
     for i in 0..4 {
         let fb = s.master.feedback().cable_length_m[i];
-        assert!((fb - (l0[i] + 0.05)).abs() < 1e-6, "winch {i}: {fb} l0 {} axis {} {:?} {:?}", l0[i], s.axes[i].length_m, s.master.state(), s.master.feedback().fault_code);
+        assert!(
+            (fb - (l0[i] + 0.05)).abs() < 1e-6,
+            "winch {i}: {fb} l0 {} axis {} {:?} {:?}",
+            l0[i],
+            s.axes[i].length_m,
+            s.master.state(),
+            s.master.feedback().fault_code
+        );
         // Velocity and force arrive through the TPDO2 drive-io mapped.
         assert_eq!(s.master.feedback().cable_force_n[i], 1.0);
     }
@@ -534,9 +544,13 @@ fn a_drive_refusing_an_object_stops_start_up_naming_drive_object_and_abort_code(
         assert!(msg.contains(want), "`{want}` missing in: {msg}");
     }
     assert!(
-        !s.log
-            .iter()
-            .any(|m| matches!(m, Message::Nmt { command: canopen::NMT_START, .. })),
+        !s.log.iter().any(|m| matches!(
+            m,
+            Message::Nmt {
+                command: canopen::NMT_START,
+                ..
+            }
+        )),
         "start-up went on"
     );
 }

@@ -603,7 +603,13 @@ fn drives_not_enabled_or_nmt_stopped_hold_the_cables() {
     // What drive-io configures at start-up (docs/can-protocol.md): 0x6007 = 2, NMT stop =>
     // disable voltage (the brake holds). The EDS default 0 would keep following.
     for node in 1..=8 {
-        raw.send(canopen::sdo_download(node, canopen::OD_ABORT_CONNECTION, 0, 2, 2));
+        raw.send(canopen::sdo_download(
+            node,
+            canopen::OD_ABORT_CONNECTION,
+            0,
+            2,
+            2,
+        ));
     }
     for _ in 0..50 {
         raw.rpdo_all(0x0F, |_| 0);
