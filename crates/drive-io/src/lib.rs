@@ -14,6 +14,7 @@ pub mod config;
 pub mod eds;
 pub mod emulator;
 pub mod hil;
+pub mod interop;
 pub mod master;
 pub mod reset;
 pub mod runner;
