@@ -28,9 +28,17 @@ struct Args {
     /// The node the python side faults (emcy, heartbeat, reboot).
     #[arg(long, default_value_t = 2)]
     node: u8,
-    /// The EMCY code the python side sends (emcy).
-    #[arg(long, default_value_t = 0x2310)]
+    /// The EMCY code the python side sends (emcy), e.g. 0x2310.
+    #[arg(long, default_value = "0x2310", value_parser = parse_u16)]
     code: u16,
+}
+
+fn parse_u16(s: &str) -> Result<u16, String> {
+    match s.strip_prefix("0x") {
+        Some(h) => u16::from_str_radix(h, 16),
+        None => s.parse(),
+    }
+    .map_err(|e| format!("{s}: {e}"))
 }
 
 fn config(a: &Args) -> Result<drive_io::DrivesConfig, String> {
