@@ -70,7 +70,7 @@ impl Rig {
     pub fn start(transport: &str, prefix: &str) -> Res<Rig> {
         let cfg = hil_config(transport);
         let spec = cfg.transport().map_err(|e| e.to_string())?;
-        let mut ecfg = EmulatorConfig::from_drives(&cfg, 5.0);
+        let mut ecfg = EmulatorConfig::from_drives(&cfg, 5.0).map_err(|e| e.to_string())?;
         ecfg.initial_length_m = (0..HIL_WINCHES).map(|i| 4.0 + 0.5 * i as f64).collect();
         let control = EmulatorControl::new();
         // Both ends open their bus before either thread runs: no frame is lost to a late join.

@@ -121,6 +121,14 @@ pub struct Master {
     next_master_hb_ns: u64,
     /// Escalation: drive-io's own heartbeat is withheld (the drives act per 0x6007).
     hb_inhibit: bool,
+    quick_stop_timeout_ns: u64,
+    /// When the current stop was first commanded on the bus (set by the next cycle).
+    qs_since_ns: Option<u64>,
+    /// Quick stop supervision: 0 waiting, 1 NMT stop sent, 2 heartbeat withheld, 3 acknowledged.
+    qs_stage: u8,
+    /// The drives were NMT-stopped by an escalation: the next reset starts them again.
+    nmt_stopped: bool,
+    restart_nmt: bool,
     winches: [WinchConfig; MAX_CABLES],
     m: usize,
     sync_period_ns: u64,
@@ -190,6 +198,11 @@ impl Master {
             master_hb_ns: u64::from(cfg.bus.master_heartbeat_ms) * 1_000_000,
             next_master_hb_ns: 0,
             hb_inhibit: false,
+            quick_stop_timeout_ns: u64::from(cfg.bus.quick_stop_timeout_ms) * 1_000_000,
+            qs_since_ns: None,
+            qs_stage: 0,
+            nmt_stopped: false,
+            restart_nmt: false,
             winches,
             m,
             sync_period_ns: cfg.sync_period_ns(),
@@ -336,6 +349,10 @@ impl Master {
             return;
         }
         if state == BusState::Fault || !matches!(self.phase, Phase::Stopped(_)) {
+            if !matches!(self.phase, Phase::Stopped(_)) {
+                self.qs_since_ns = None;
+                self.qs_stage = 0;
+            }
             self.fault_code = code;
             self.fault_node = u32::from(node);
             tracing::error!(
@@ -404,6 +421,10 @@ impl Master {
                     d.booted = true;
                 } else if state == NmtState::BootUp.code() && !booting {
                     // A drive rebooted under us: it lost its configuration and enable state.
+                    tracing::error!(
+                        node,
+                        "drive booted mid-run (boot-up message): its configuration is lost; fault"
+                    );
                     self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, node);
                 }
             }
@@ -538,6 +559,8 @@ impl Master {
             return false;
         }
         tracing::info!(epoch = grant.epoch(), "reset: re-enabling drives");
+        self.hb_inhibit = false;
+        self.restart_nmt = std::mem::take(&mut self.nmt_stopped);
         self.fault_code = fault_code::NONE;
         self.fault_node = 0;
         self.set_phase(Phase::Enable);
@@ -650,11 +673,17 @@ impl Master {
                 }
             }
             Phase::Enable => {
+                if std::mem::take(&mut self.restart_nmt) {
+                    out.push(nmt(NMT_START, 0));
+                }
                 let mut all_enabled = true;
                 for i in 0..self.m {
                     let d = self.drives[i];
                     let st = Ds402State::from_statusword(d.statusword);
-                    all_enabled &= d.have_tpdo1 && st == Ds402State::OperationEnabled;
+                    // After an NMT restart, wait for the heartbeat to say operational too.
+                    all_enabled &= d.have_tpdo1
+                        && st == Ds402State::OperationEnabled
+                        && (!d.seen_operational || d.last_hb_state == NmtState::Operational.code());
                     if d.have_tpdo1 {
                         // Enable while holding the actual position: the drive must not jump.
                         self.target[i] = d.position;
@@ -695,9 +724,82 @@ impl Master {
                     self.push_quick_stop(out);
                 }
             }
-            Phase::Stopped(_) => self.push_quick_stop(out),
+            Phase::Stopped(_) => {
+                self.push_quick_stop(out);
+                self.supervise_quick_stop(now_ns, out);
+            }
         }
         self.update_feedback(now_ns);
+    }
+
+    /// CiA 402 quick stop supervision: every drive must acknowledge the stop in a TPDO sent
+    /// after it was commanded (Quick Stop Active, or a state in which the brake holds:
+    /// switched on and below, Fault) with velocity actual 0, within `bus.quick_stop_timeout_ms`.
+    /// Otherwise escalate: NMT stop all (the drives act per 0x6007: disable voltage, the brake
+    /// holds), and if the heartbeats do not report NMT stopped within another timeout, withhold
+    /// drive-io's heartbeat (their 0x1016 consumers time out and act per 0x6007 again).
+    fn supervise_quick_stop(&mut self, now_ns: u64, out: &mut FrameBuf) {
+        if self.qs_stage == 3 || self.m == 0 {
+            return;
+        }
+        let since = *self.qs_since_ns.get_or_insert(now_ns);
+        let at_rest = |d: &DriveView| {
+            use Ds402State::*;
+            d.have_tpdo1
+                && d.rx_ns > since
+                && d.velocity == 0
+                && matches!(
+                    Ds402State::from_statusword(d.statusword),
+                    QuickStopActive
+                        | SwitchOnDisabled
+                        | ReadyToSwitchOn
+                        | SwitchedOn
+                        | Fault
+                        | NotReadyToSwitchOn
+                )
+        };
+        let elapsed = now_ns.saturating_sub(since);
+        if self.qs_stage == 0 && self.drives[..self.m].iter().all(at_rest) {
+            tracing::info!(
+                ms = elapsed as f64 * 1e-6,
+                "quick stop acknowledged: every drive stopped (statusword) at velocity 0"
+            );
+            self.qs_stage = 3;
+            return;
+        }
+        if self.qs_stage == 0 && elapsed > self.quick_stop_timeout_ns {
+            for d in self.drives[..self.m].iter().filter(|d| !at_rest(d)) {
+                tracing::error!(
+                    node = d.node,
+                    statusword = format_args!("{:#06x}", d.statusword),
+                    velocity_counts_per_s = d.velocity,
+                    "quick stop not acknowledged in time: escalating to NMT stop (0x6007 action)"
+                );
+            }
+            out.push(nmt(NMT_STOP, 0));
+            self.nmt_stopped = true;
+            self.qs_stage = 1;
+        } else if self.qs_stage == 1 && elapsed > 2 * self.quick_stop_timeout_ns {
+            let all_stopped = self.drives[..self.m]
+                .iter()
+                .all(|d| d.last_hb_state == NmtState::Stopped.code() && d.last_hb_ns > since);
+            if all_stopped {
+                self.qs_stage = 3;
+            } else {
+                tracing::error!(
+                    "drives do not report NMT stopped: withholding drive-io's heartbeat \
+                     (the drives' consumer timeout acts per 0x6007)"
+                );
+                self.hb_inhibit = true;
+                self.qs_stage = 2;
+            }
+        }
+    }
+
+    /// Stage of the quick stop supervision (0 waiting, 1 NMT stop sent, 2 heartbeat withheld,
+    /// 3 done), for tests and diagnostics.
+    pub fn quick_stop_stage(&self) -> u8 {
+        self.qs_stage
     }
 
     fn push_quick_stop(&mut self, out: &mut FrameBuf) {

@@ -898,10 +898,14 @@ pub struct DriveBank {
 impl DriveBank {
     /// One [`DriveSlave`] per node id (cable order), default heartbeat period `heartbeat_ms`.
     pub fn new(node_ids: &[u8], heartbeat_ms: u16) -> Self {
+        Self::with_eds(node_ids, Eds::builtin_winch(), heartbeat_ms)
+    }
+    /// Drives implementing the object dictionary of `eds` (drives.toml `bus.eds`).
+    pub fn with_eds(node_ids: &[u8], eds: &Eds, heartbeat_ms: u16) -> Self {
         Self {
             slaves: node_ids
                 .iter()
-                .map(|&n| DriveSlave::new(n, heartbeat_ms))
+                .map(|&n| DriveSlave::with_eds(n, eds, heartbeat_ms))
                 .collect(),
             out: FrameBuf::default(),
             watch: None,

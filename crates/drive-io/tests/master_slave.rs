@@ -14,6 +14,8 @@ struct Sim {
     axes: Vec<WinchAxis>,
     now: u64,
     mute: Option<usize>,
+    /// A drive that neither receives nor sends (dead controller).
+    dead: Option<usize>,
     log: Vec<Message>,
     /// Pulley force each drive reports in TPDO2, mN.
     force_mn: Vec<i32>,
@@ -43,6 +45,7 @@ impl Sim {
             axes,
             now: 1_000_000_000,
             mute: None,
+            dead: None,
             log: Vec::new(),
             force_mn: vec![1000; 8],
         };
@@ -78,6 +81,9 @@ impl Sim {
         for f in m_out.as_slice() {
             self.log.push(canopen::decode(f));
             for i in 0..self.slaves.len() {
+                if self.dead == Some(i) {
+                    continue;
+                }
                 if self.slaves[i].handle_frame(f, self.now, &mut s_out) == SlaveEvent::Sync {
                     let w = self.cfg.winches[i];
                     match self.slaves[i].demand() {
@@ -98,6 +104,9 @@ impl Sim {
             }
         }
         for (i, sl) in self.slaves.iter_mut().enumerate() {
+            if self.dead == Some(i) {
+                continue;
+            }
             sl.set_heartbeat_muted(self.mute == Some(i));
             sl.poll(self.now, &mut s_out);
         }
@@ -553,4 +562,155 @@ fn a_drive_refusing_an_object_stops_start_up_naming_drive_object_and_abort_code(
         )),
         "start-up went on"
     );
+}
+
+fn estop(s: &mut Sim) {
+    let ev = crs_ipc::StateEvent::new(crs_ipc::ProcessId::Test, crs_ipc::EventKind::EStop, 1);
+    s.master.on_event(&ev, s.now);
+}
+
+fn count(log: &[Message], f: impl Fn(&Message) -> bool) -> usize {
+    log.iter().filter(|m| f(m)).count()
+}
+
+#[test]
+fn quick_stop_acknowledged_by_statusword_and_rest_needs_no_escalation() {
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    for k in 1..=100u64 {
+        let l: Vec<f64> = l0.iter().map(|x| x + 0.025 * (k as f64 / 100.0)).collect();
+        let sp = s.setpoint(k, &l);
+        s.step(Some(&sp));
+    }
+    estop(&mut s);
+    s.log.clear();
+    for _ in 0..3000 {
+        s.step(None);
+    }
+    assert_eq!(s.master.quick_stop_stage(), 3, "acknowledged");
+    for sl in &s.slaves {
+        assert_eq!(sl.ds402_state(), Ds402State::QuickStopActive);
+    }
+    assert_eq!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Nmt {
+                command: canopen::NMT_STOP,
+                ..
+            }
+        )),
+        0
+    );
+    // drive-io's heartbeat keeps coming.
+    assert!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Heartbeat { node: 0x7F, .. }
+        )) >= 290
+    );
+}
+
+#[test]
+fn an_unacknowledged_quick_stop_escalates_to_nmt_stop_then_heartbeat_inhibit() {
+    let mut s = Sim::new();
+    s.boot();
+    s.dead = Some(1); // drive 2 stops answering (no TPDO, no heartbeat)
+    estop(&mut s);
+    s.log.clear();
+    let timeout = u64::from(s.cfg.bus.quick_stop_timeout_ms);
+    for _ in 0..timeout - 5 {
+        s.step(None);
+    }
+    assert_eq!(s.master.quick_stop_stage(), 0);
+    for _ in 0..10 {
+        s.step(None);
+    }
+    // Stage 1: NMT stop of all drives; the live ones act per 0x6007 = 2 (disable voltage).
+    assert_eq!(s.master.quick_stop_stage(), 1);
+    assert_eq!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Nmt {
+                command: canopen::NMT_STOP,
+                node: 0
+            }
+        )),
+        1
+    );
+    assert_eq!(s.slaves[0].nmt_state(), canopen::NmtState::Stopped);
+    assert_eq!(s.slaves[0].ds402_state(), Ds402State::SwitchOnDisabled);
+    assert_eq!(s.slaves[0].demand(), MotionDemand::Hold);
+    // Stage 2: drive 2 never reports NMT stopped => drive-io withholds its heartbeat.
+    for _ in 0..timeout + 10 {
+        s.step(None);
+    }
+    assert_eq!(s.master.quick_stop_stage(), 2);
+    s.log.clear();
+    for _ in 0..100 {
+        s.step(None);
+    }
+    assert_eq!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Heartbeat { node: 0x7F, .. }
+        )),
+        0
+    );
+}
+
+#[test]
+fn reset_after_an_escalation_restarts_the_drives_and_the_heartbeat() {
+    let mut s = Sim::new();
+    s.boot();
+    // A drive that does not acknowledge (muted TPDOs would be the same): its TPDO is stale.
+    s.dead = Some(3);
+    estop(&mut s);
+    for _ in 0..2 * s.cfg.bus.quick_stop_timeout_ms + 20 {
+        s.step(None);
+    }
+    assert_eq!(s.master.quick_stop_stage(), 2);
+    // The drive comes back; the monitor's reset (a grant) re-enables everything.
+    s.dead = None;
+    for _ in 0..50 {
+        s.step(None);
+    }
+    s.log.clear();
+    let mut ev = crs_ipc::StateEvent::new(
+        crs_ipc::ProcessId::SafetyMonitor,
+        crs_ipc::EventKind::Reset,
+        2,
+    );
+    ev.detail = 1;
+    let grant = drive_io::reset::ResetGate::new()
+        .check_unauthenticated(&ev)
+        .unwrap();
+    assert!(s.master.reset(grant, s.now));
+    for _ in 0..200 {
+        s.step(None);
+        if s.master.state() == BusState::Ready {
+            break;
+        }
+    }
+    assert_eq!(s.master.state(), BusState::Ready);
+    assert_eq!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Nmt {
+                command: canopen::NMT_START,
+                node: 0
+            }
+        )),
+        1
+    );
+    assert!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Heartbeat { node: 0x7F, .. }
+        )) > 0
+    );
+    for sl in &s.slaves {
+        assert_eq!(sl.ds402_state(), Ds402State::OperationEnabled);
+        assert_eq!(sl.nmt_state(), canopen::NmtState::Operational);
+    }
 }
