@@ -7,7 +7,8 @@
 //!   like a CSP drive (velocity feed-forward from consecutive targets, dead-beat per SYNC
 //!   period) within the winch limits (cable speed ≤ `bus.max_cable_speed_m_per_s`,
 //!   acceleration ≤ the platform's table 5.1 limit), decelerates on quick stop and is held by
-//!   its brake otherwise (not Operation Enabled, NMT stopped, fault);
+//!   its brake otherwise (not Operation Enabled, fault; NMT stopped as 0x6007 says: drive-io
+//!   configures 2, disable voltage);
 //! * with `[safety_heartbeat]` in the drives config the drives validate the safety monitor's
 //!   heartbeat (drive-io's safety watch) and quick-stop without it;
 //! * the platform settles in the equilibrium of the [`Plant`] for the lengths the winches hold
