@@ -419,7 +419,7 @@ impl Eds {
                 let fits = entry.check_range(v).is_ok()
                     || (entry.data_type.is_signed()
                         && entry.data_type.range().is_some_and(|(lo, _)| {
-                            v >= 0 && v <= (-lo) * 2 - 1 && entry.check_range(v + 2 * lo).is_ok()
+                            v >= 0 && v < (-lo) * 2 && entry.check_range(v + 2 * lo).is_ok()
                         }));
                 if !fits {
                     return Err(err(

@@ -207,12 +207,12 @@ pub fn scenario_run(cfg: DrivesConfig, prefix: &str) -> Res<String> {
             BusState::from_u32(f.bus_state)
         ));
     }
-    for i in 0..x.m() {
-        let e = (f.cable_length_m[i] - goal[i]).abs();
+    for (i, g) in goal.iter().enumerate() {
+        let e = (f.cable_length_m[i] - g).abs();
         if e > 1e-6 {
             return Err(format!(
                 "drive {i}: feedback {} m, goal {} m",
-                f.cable_length_m[i], goal[i]
+                f.cable_length_m[i], g
             ));
         }
     }

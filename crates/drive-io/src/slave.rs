@@ -458,24 +458,15 @@ impl DriveSlave {
     fn abort_connection(&mut self, out: &mut FrameBuf) {
         use Ds402State::*;
         match self.abort_option {
-            1 => {
-                if self.state != Fault {
-                    self.raise_fault(EMCY_HEARTBEAT, out);
-                }
+            1 if self.state != Fault => self.raise_fault(EMCY_HEARTBEAT, out),
+            2 if matches!(
+                self.state,
+                OperationEnabled | QuickStopActive | SwitchedOn | ReadyToSwitchOn
+            ) =>
+            {
+                self.state = SwitchOnDisabled
             }
-            2 => {
-                if matches!(
-                    self.state,
-                    OperationEnabled | QuickStopActive | SwitchedOn | ReadyToSwitchOn
-                ) {
-                    self.state = SwitchOnDisabled;
-                }
-            }
-            3 => {
-                if self.state == OperationEnabled {
-                    self.state = QuickStopActive;
-                }
-            }
+            3 if self.state == OperationEnabled => self.state = QuickStopActive,
             _ => {}
         }
     }
@@ -564,11 +555,9 @@ impl DriveSlave {
     fn nmt_command(&mut self, command: u8, now_ns: u64, out: &mut FrameBuf) {
         match command {
             NMT_START => self.nmt = NmtState::Operational,
-            NMT_STOP => {
-                if self.nmt != NmtState::Stopped {
-                    self.nmt = NmtState::Stopped;
-                    self.abort_connection(out);
-                }
+            NMT_STOP if self.nmt != NmtState::Stopped => {
+                self.nmt = NmtState::Stopped;
+                self.abort_connection(out);
             }
             NMT_ENTER_PREOP => self.nmt = NmtState::PreOperational,
             NMT_RESET_NODE => {

@@ -514,12 +514,12 @@ fn drives_with_other_default_mappings_are_configured_from_the_eds_and_run() {
         let sp = s.setpoint(k, &l);
         s.step(Some(&sp));
     }
-    for i in 0..4 {
+    for (i, l) in l0.iter().enumerate() {
         let fb = s.master.feedback().cable_length_m[i];
         assert!(
-            (fb - (l0[i] + 0.05)).abs() < 1e-6,
+            (fb - (l + 0.05)).abs() < 1e-6,
             "winch {i}: {fb} l0 {} axis {} {:?} {:?}",
-            l0[i],
+            l,
             s.axes[i].length_m,
             s.master.state(),
             s.master.feedback().fault_code
