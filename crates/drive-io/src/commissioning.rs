@@ -209,9 +209,9 @@ pub fn plan(eds: &Eds, w: &WinchConfig, bus: &BusConfig) -> Result<Vec<SdoOp>, P
     // SYNC consumer (bit 30 clear: the drive does not produce SYNC).
     b.write_optional(0x1005, 0, i64::from(COB_SYNC))?;
     b.write_optional(0x1006, 0, i64::from(bus.sync_period_us))?;
-    if bus.drive_heartbeat_consumer_ms > 0 {
+    if bus.drive_consumer_ms() > 0 {
         // The drive watches drive-io's heartbeat: lost => 0x6007 action (CiA 301 §7.2.8.3.2.2).
-        let v = (u32::from(bus.master_node_id) << 16) | u32::from(bus.drive_heartbeat_consumer_ms);
+        let v = (u32::from(bus.master_node_id) << 16) | u32::from(bus.drive_consumer_ms());
         b.write(0x1016, 1, i64::from(v), true)?;
     }
     b.write(
@@ -313,7 +313,8 @@ mod tests {
         assert!(writes.contains(&(0x1401, 1, 0x8000_0303)));
         assert!(writes.contains(&(0x6007, 0, 2)));
         assert!(writes.contains(&(0x605A, 0, 6)));
-        assert!(writes.contains(&(0x1016, 1, (0x7F << 16) | 100)));
+        // Default consumer time: twice heartbeat_timeout_ms (default 100 ms).
+        assert!(writes.contains(&(0x1016, 1, (0x7F << 16) | 200)));
         // sign -1: the limits swap; the length range maps to [-max, 0] counts.
         let max = c.winches[0].length_to_counts(20.0).unwrap();
         assert!(writes.contains(&(0x607D, 1, max as u32)));

@@ -74,9 +74,11 @@ pub struct BusConfig {
     #[serde(default = "d_master_hb")]
     pub master_heartbeat_ms: u16,
     /// Written to each drive's 0x1016 sub 1: the drive acts per 0x6007 when drive-io's
-    /// heartbeat is silent this long (ms). 0 = not configured.
-    #[serde(default = "d_consumer")]
-    pub drive_heartbeat_consumer_ms: u16,
+    /// heartbeat is silent this long (ms). 0 = not configured; absent = twice
+    /// `heartbeat_timeout_ms` (the drives are as patient with drive-io as it is with them,
+    /// plus the producer's jitter) — see [`BusConfig::drive_consumer_ms`].
+    #[serde(default)]
+    pub drive_heartbeat_consumer_ms: Option<u16>,
     /// Written to each drive's 0x6007 (CiA 402 abort connection option code: 0 no action,
     /// 1 fault, 2 disable voltage (the brake holds), 3 quick stop). Acts on NMT stop (the
     /// safety monitor's e-stop) and on the loss of drive-io's heartbeat.
@@ -98,9 +100,6 @@ fn d_master_id() -> u8 {
 fn d_master_hb() -> u16 {
     10
 }
-fn d_consumer() -> u16 {
-    100
-}
 fn d_abort() -> i16 {
     2
 }
@@ -109,6 +108,15 @@ fn d_following() -> f64 {
 }
 fn d_qs_timeout() -> u32 {
     1000
+}
+
+impl BusConfig {
+    /// The consumer heartbeat time written to the drives' 0x1016 (ms; 0 = none).
+    pub fn drive_consumer_ms(&self) -> u16 {
+        self.drive_heartbeat_consumer_ms.unwrap_or_else(|| {
+            u16::try_from(self.heartbeat_timeout_ms.saturating_mul(2)).unwrap_or(u16::MAX)
+        })
+    }
 }
 
 fn d_sync() -> u32 {
@@ -288,9 +296,7 @@ impl DrivesConfig {
         if b.master_heartbeat_ms == 0 {
             return Err(invalid("bus.master_heartbeat_ms", "must be >= 1"));
         }
-        if b.drive_heartbeat_consumer_ms != 0
-            && b.drive_heartbeat_consumer_ms <= b.master_heartbeat_ms
-        {
+        if b.drive_consumer_ms() != 0 && b.drive_consumer_ms() <= b.master_heartbeat_ms {
             return Err(invalid(
                 "bus.drive_heartbeat_consumer_ms",
                 "must exceed bus.master_heartbeat_ms (or be 0 = off)",
