@@ -362,6 +362,16 @@ impl Eds {
                 .get("parametername")
                 .map(|(v, _)| v.clone())
                 .ok_or_else(|| err(s.line, format!("[{}] has no ParameterName", s.name)))?;
+            if num("compactsubobj")?.is_some_and(|v| v.value != 0) {
+                return Err(err(
+                    s.line,
+                    format!(
+                        "[{}] uses CompactSubObj, which this parser does not expand: list the \
+                         sub-indices as [{}subN] sections",
+                        s.name, s.name
+                    ),
+                ));
+            }
             let object_type = num("objecttype")?.map_or(7, |v| v.value);
             if !(0..=9).contains(&object_type) {
                 return Err(err(
@@ -613,6 +623,12 @@ mod tests {
         )
         .unwrap_err();
         assert_eq!((e.line, e.file.as_str()), (3, "a.eds"));
+        let e = Eds::parse(
+            "[1016]\nParameterName=x\nObjectType=0x8\nCompactSubObj=2\n",
+            "a.eds",
+        )
+        .unwrap_err();
+        assert!(e.reason.contains("CompactSubObj"), "{e}");
         let e = Eds::parse("x=1\n", "a.eds").unwrap_err();
         assert_eq!(e.line, 1);
         let e = Eds::parse("[1000\n", "a.eds").unwrap_err();
