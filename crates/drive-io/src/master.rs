@@ -880,6 +880,9 @@ impl Master {
                 tracing::error!(
                     node,
                     length = sp.cable_length_m[i],
+                    target_counts = c,
+                    previous_counts = self.target[i],
+                    periods,
                     "setpoint step exceeds max cable speed"
                 );
                 self.stop(BusState::Fault, fault_code::SETPOINT_STEP, node);
