@@ -104,7 +104,9 @@ fn d_abort() -> i16 {
     2
 }
 fn d_following() -> f64 {
-    0.02
+    // 100 mm: far beyond a healthy CSP drive's lag (one period of motion, ≤ 5 mm at 5 m/s),
+    // tolerant of irregular setpoint arrival on a non-real-time host.
+    0.1
 }
 fn d_qs_timeout() -> u32 {
     1000

@@ -29,7 +29,8 @@ pub fn hil_config(transport: &str) -> DrivesConfig {
         "[bus]\ntransport = \"{transport}\"\nsync_period_us = 1000\nstale_setpoint_cycles = 50\n\
          heartbeat_producer_ms = 20\nheartbeat_timeout_ms = 300\nboot_timeout_ms = 20000\n\
          sdo_timeout_ms = 500\nmax_cable_speed_m_per_s = 5.0\n\
-         drive_heartbeat_consumer_ms = 600\n"
+         drive_heartbeat_consumer_ms = 600\n\
+         following_error_window_m = 0.5\n"
     );
     for i in 0..HIL_WINCHES {
         let sign = if i % 2 == 0 { 1 } else { -1 };
