@@ -282,6 +282,46 @@ pub fn all() -> Vec<Target> {
             },
         },
         Target {
+            name: "eds",
+            what: "CiA 306 EDS/DCF (drive_io::eds::Eds::parse)",
+            locate: Locate::LineOrKey,
+            seeds: |d| read(d, &["eds/crs-winch.eds"]),
+            run: |b, _| match text(b) {
+                Some(t) => verdict(drive_io::eds::Eds::parse(t, "fuzz.eds")),
+                None => Verdict::Rejected("not UTF-8 (line 1)".into()),
+            },
+        },
+        Target {
+            name: "pycan-udp",
+            what: "python-can udp_multicast datagram (can_transport::pycan_udp::decode)",
+            locate: Locate::No,
+            seeds: |d| {
+                frame_seeds(d)
+                    .iter()
+                    .flat_map(|b| frames_from(b))
+                    .map(|f| {
+                        let mut out = Vec::new();
+                        can_transport::pycan_udp::encode(&f, 1.5, &mut out);
+                        out
+                    })
+                    .collect()
+            },
+            run: |b, _| {
+                // A decoded frame re-encodes to a datagram that decodes to the same frame.
+                match can_transport::pycan_udp::decode(b) {
+                    Ok(m) if !m.is_error_frame && !m.is_fd => {
+                        let mut out = Vec::new();
+                        can_transport::pycan_udp::encode(&m.frame, m.timestamp_s, &mut out);
+                        match can_transport::pycan_udp::decode(&out) {
+                            Ok(m2) if m2.frame == m.frame => Verdict::Accepted,
+                            r => Verdict::Violation(format!("round trip: {r:?} != {m:?}")),
+                        }
+                    }
+                    r => verdict(r),
+                }
+            },
+        },
+        Target {
             name: "cannelloni",
             what: "CAN-over-UDP datagram (can_transport::cannelloni::decode)",
             locate: Locate::No,

@@ -17,6 +17,7 @@ pub mod candump;
 pub mod cannelloni;
 mod frame;
 mod poll;
+pub mod pycan_udp;
 pub mod safety_frame;
 mod socketcan_bus;
 mod spec;
@@ -142,6 +143,9 @@ pub fn open(spec: &TransportSpec) -> Result<Box<dyn CanBus>, CanError> {
         TransportSpec::SocketCan { iface } => Box::new(SocketCanBus::open(iface)?),
         TransportSpec::UdpMulticast { group, port } => Box::new(UdpBus::multicast(*group, *port)?),
         TransportSpec::UdpPeer { local, remote } => Box::new(UdpBus::peer(*local, *remote)?),
+        TransportSpec::PyCanUdp { group, port } => {
+            Box::new(pycan_udp::PyCanUdpBus::open(*group, *port)?)
+        }
     })
 }
 

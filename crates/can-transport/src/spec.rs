@@ -10,6 +10,9 @@ pub enum TransportSpec {
     SocketCan { iface: String },
     /// `udpbus:<multicast group>:<port>`: shared loopback bus, all members see each other.
     UdpMulticast { group: Ipv4Addr, port: u16 },
+    /// `pycan-udp:<group>:<port>`: python-can's `udp_multicast` bus (msgpack framing), shared
+    /// with python-can / python `canopen` processes (interoperability tests).
+    PyCanUdp { group: Ipv4Addr, port: u16 },
     /// `udp:<local>-><remote>`: point-to-point cannelloni link (bridge to a real bus).
     UdpPeer {
         local: SocketAddrV4,
@@ -20,7 +23,7 @@ pub enum TransportSpec {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
     "invalid transport {input:?}: {reason}. Expected \"socketcan:<iface>\", \
-         \"udpbus:<239.x.y.z>:<port>\" or \"udp:<ip:port>-><ip:port>\""
+         \"udpbus:<239.x.y.z>:<port>\", \"pycan-udp:<239.x.y.z>:<port>\" or \"udp:<ip:port>-><ip:port>\""
 )]
 pub struct SpecError {
     pub input: String,
@@ -55,7 +58,7 @@ impl FromStr for TransportSpec {
                     iface: rest.to_string(),
                 })
             }
-            "udpbus" => {
+            "udpbus" | "pycan-udp" => {
                 let a: SocketAddrV4 = rest
                     .parse()
                     .map_err(|_| err("expected <ipv4 multicast group>:<port>"))?;
@@ -65,9 +68,11 @@ impl FromStr for TransportSpec {
                 if a.port() == 0 {
                     return Err(err("port must not be 0"));
                 }
-                Ok(Self::UdpMulticast {
-                    group: *a.ip(),
-                    port: a.port(),
+                let (group, port) = (*a.ip(), a.port());
+                Ok(if kind == "udpbus" {
+                    Self::UdpMulticast { group, port }
+                } else {
+                    Self::PyCanUdp { group, port }
                 })
             }
             "udp" => {
@@ -89,6 +94,7 @@ impl fmt::Display for TransportSpec {
             Self::SocketCan { iface } => write!(f, "socketcan:{iface}"),
             Self::UdpMulticast { group, port } => write!(f, "udpbus:{group}:{port}"),
             Self::UdpPeer { local, remote } => write!(f, "udp:{local}->{remote}"),
+            Self::PyCanUdp { group, port } => write!(f, "pycan-udp:{group}:{port}"),
         }
     }
 }

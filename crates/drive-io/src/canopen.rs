@@ -62,6 +62,20 @@ pub const OD_VELOCITY_ACTUAL: u16 = 0x606C;
 pub const OD_TARGET_POSITION: u16 = 0x607A;
 /// Manufacturer-specific: pulley force sensor, i32 in mN.
 pub const OD_PULLEY_FORCE_MN: u16 = 0x2110;
+pub const OD_ERROR_REGISTER: u16 = 0x1001;
+pub const OD_COB_ID_SYNC: u16 = 0x1005;
+pub const OD_COMM_CYCLE_PERIOD_US: u16 = 0x1006;
+pub const OD_CONSUMER_HEARTBEAT: u16 = 0x1016;
+pub const OD_ERROR_CODE: u16 = 0x603F;
+/// CiA 402: action on NMT stop / heartbeat loss (0 none, 1 fault, 2 disable voltage, 3 quick stop).
+pub const OD_ABORT_CONNECTION: u16 = 0x6007;
+/// CiA 402: quick stop option code (2: ramp then switch on disabled, 6: ramp and stay in QSA).
+pub const OD_QUICK_STOP_OPTION: u16 = 0x605A;
+pub const OD_FOLLOWING_ERROR_WINDOW: u16 = 0x6065;
+pub const OD_FOLLOWING_ERROR_TIMEOUT_MS: u16 = 0x6066;
+/// Software position limit: sub 1 min, sub 2 max (counts).
+pub const OD_SOFTWARE_POSITION_LIMIT: u16 = 0x607D;
+pub const OD_MAX_PROFILE_VELOCITY: u16 = 0x607F;
 /// Cyclic synchronous position mode.
 pub const MODE_CSP: i8 = 8;
 /// CiA 402 device type (servo drive) reported in 0x1000.
@@ -355,6 +369,66 @@ pub const SDO_ABORT_READ_ONLY: u32 = 0x0601_0002;
 pub const SDO_ABORT_VALUE_RANGE: u32 = 0x0609_0030;
 pub const SDO_ABORT_COMMAND: u32 = 0x0504_0001;
 pub const SDO_ABORT_LENGTH: u32 = 0x0607_0010;
+pub const SDO_ABORT_UNSUPPORTED_ACCESS: u32 = 0x0601_0000;
+pub const SDO_ABORT_WRITE_ONLY: u32 = 0x0601_0001;
+pub const SDO_ABORT_NO_SUB: u32 = 0x0609_0011;
+pub const SDO_ABORT_VALUE_HIGH: u32 = 0x0609_0031;
+pub const SDO_ABORT_VALUE_LOW: u32 = 0x0609_0032;
+pub const SDO_ABORT_NOT_MAPPABLE: u32 = 0x0604_0041;
+pub const SDO_ABORT_PDO_LENGTH: u32 = 0x0604_0042;
+pub const SDO_ABORT_DEVICE_STATE: u32 = 0x0800_0022;
+
+// ---- EMCY error codes (CiA 301 table 21, CiA 402 §"error code") ----
+pub const EMCY_HEARTBEAT: u16 = 0x8130;
+pub const EMCY_PDO_LENGTH: u16 = 0x8210;
+pub const EMCY_FOLLOWING_ERROR: u16 = 0x8611;
+pub const EMCY_SLACK_CABLE: u16 = 0xFF10;
+pub const EMCY_OVERLOAD: u16 = 0xFF11;
+
+/// The name of an EMCY error code (CiA 301 table 21 / CiA 402 error codes; the 0xFFxx codes
+/// are this project's winch drives'), for logs.
+pub fn emcy_name(code: u16) -> &'static str {
+    match code {
+        0x0000 => "error reset or no error",
+        0x1000 => "generic error",
+        0x2310 => "continuous over-current",
+        0x2320 => "short circuit / earth leakage",
+        0x3210 => "DC link over-voltage",
+        0x3220 => "DC link under-voltage",
+        0x4310 => "drive temperature too high",
+        0x5000 => "device hardware",
+        0x5530 => "data storage (non-volatile memory)",
+        0x6000 => "device software",
+        0x6320 => "parameter error",
+        0x7300 => "sensor error",
+        0x7305 => "incremental sensor 1 fault",
+        0x8100 => "communication: generic",
+        0x8110 => "CAN overrun (objects lost)",
+        0x8120 => "CAN in error passive mode",
+        EMCY_HEARTBEAT => "life guard error or heartbeat error",
+        0x8140 => "recovered from bus off",
+        0x8150 => "CAN-ID collision",
+        EMCY_PDO_LENGTH => "PDO not processed due to length error",
+        0x8220 => "PDO length exceeded",
+        0x8250 => "RPDO timeout",
+        0x8400 => "velocity speed controller: deviation",
+        EMCY_FOLLOWING_ERROR => "position controller: following error",
+        0x8612 => "reference limit",
+        0x9000 => "external error",
+        EMCY_SLACK_CABLE => "winch: slack cable (force below minimum)",
+        EMCY_OVERLOAD => "winch: cable overload (force above maximum)",
+        c if c & 0xFF00 == 0x2300 => "current, device output side",
+        c if c & 0xF000 == 0x2000 => "current",
+        c if c & 0xF000 == 0x3000 => "voltage",
+        c if c & 0xF000 == 0x4000 => "temperature",
+        c if c & 0xF000 == 0x5000 => "device hardware",
+        c if c & 0xF000 == 0x6000 => "device software",
+        c if c & 0xF000 == 0x7000 => "additional modules",
+        c if c & 0xF000 == 0x8000 => "monitoring",
+        c if c & 0xFF00 == 0xFF00 => "manufacturer specific",
+        _ => "unknown error code",
+    }
+}
 
 /// Expedited download (write) request of `len` (1, 2 or 4) bytes.
 pub fn sdo_download(node: u8, index: u16, sub: u8, value: u32, len: u8) -> CanFrame {

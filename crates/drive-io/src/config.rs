@@ -60,6 +60,65 @@ pub struct BusConfig {
     /// Optional candump log of every frame.
     #[serde(default)]
     pub candump_log: Option<String>,
+    /// The drives' EDS (CiA 306), one model for all winches of the bus; relative to the
+    /// drives TOML's directory. Absent = the simulated winch's (config/eds/crs-winch.eds).
+    #[serde(default)]
+    pub eds: Option<String>,
+    /// Optional directory for the DCF of every configured drive (`node<NN>.dcf`).
+    #[serde(default)]
+    pub dcf_dir: Option<String>,
+    /// drive-io's own node id: its heartbeat (0x700 + id) is what the drives consume.
+    #[serde(default = "d_master_id")]
+    pub master_node_id: u8,
+    /// drive-io's heartbeat producer period (ms).
+    #[serde(default = "d_master_hb")]
+    pub master_heartbeat_ms: u16,
+    /// Written to each drive's 0x1016 sub 1: the drive acts per 0x6007 when drive-io's
+    /// heartbeat is silent this long (ms). 0 = not configured; absent = twice
+    /// `heartbeat_timeout_ms` (the drives are as patient with drive-io as it is with them,
+    /// plus the producer's jitter) — see [`BusConfig::drive_consumer_ms`].
+    #[serde(default)]
+    pub drive_heartbeat_consumer_ms: Option<u16>,
+    /// Written to each drive's 0x6007 (CiA 402 abort connection option code: 0 no action,
+    /// 1 fault, 2 disable voltage (the brake holds), 3 quick stop). Acts on NMT stop (the
+    /// safety monitor's e-stop) and on the loss of drive-io's heartbeat.
+    #[serde(default = "d_abort")]
+    pub abort_connection_option: i16,
+    /// Written to each drive's 0x6065 (following error window), in metres of cable.
+    #[serde(default = "d_following")]
+    pub following_error_window_m: f64,
+    /// A commanded quick stop must be acknowledged (statusword Quick Stop Active) and the
+    /// drives at rest within this time (ms), else drive-io escalates (NMT stop, then stops
+    /// its heartbeat).
+    #[serde(default = "d_qs_timeout")]
+    pub quick_stop_timeout_ms: u32,
+}
+
+fn d_master_id() -> u8 {
+    0x7F
+}
+fn d_master_hb() -> u16 {
+    10
+}
+fn d_abort() -> i16 {
+    2
+}
+fn d_following() -> f64 {
+    // 100 mm: far beyond a healthy CSP drive's lag (one period of motion, ≤ 5 mm at 5 m/s),
+    // tolerant of irregular setpoint arrival on a non-real-time host.
+    0.1
+}
+fn d_qs_timeout() -> u32 {
+    1000
+}
+
+impl BusConfig {
+    /// The consumer heartbeat time written to the drives' 0x1016 (ms; 0 = none).
+    pub fn drive_consumer_ms(&self) -> u16 {
+        self.drive_heartbeat_consumer_ms.unwrap_or_else(|| {
+            u16::try_from(self.heartbeat_timeout_ms.saturating_mul(2)).unwrap_or(u16::MAX)
+        })
+    }
 }
 
 fn d_sync() -> u32 {
@@ -148,6 +207,9 @@ pub struct DrivesConfig {
     /// without it (see [`crate::safety_watch`]). Absent = no watch.
     #[serde(default)]
     pub safety_heartbeat: Option<crate::safety_watch::SafetyWatchConfig>,
+    /// Directory of the TOML file (set by [`DrivesConfig::load`]): relative paths resolve here.
+    #[serde(skip)]
+    pub base_dir: Option<std::path::PathBuf>,
 }
 
 impl DrivesConfig {
@@ -156,7 +218,26 @@ impl DrivesConfig {
             path: path.display().to_string(),
             source,
         })?;
-        Self::parse(&text)
+        let mut cfg = Self::parse(&text)?;
+        cfg.base_dir = path.parent().map(std::path::Path::to_path_buf);
+        Ok(cfg)
+    }
+
+    /// A path from the TOML, relative to the TOML's directory.
+    pub fn resolve(&self, p: &str) -> std::path::PathBuf {
+        let p = std::path::Path::new(p);
+        match &self.base_dir {
+            Some(d) if p.is_relative() => d.join(p),
+            _ => p.to_path_buf(),
+        }
+    }
+
+    /// The drives' EDS (`bus.eds`, else the simulated winch's built-in one).
+    pub fn load_eds(&self) -> Result<crate::eds::Eds, crate::eds::EdsError> {
+        match &self.bus.eds {
+            Some(p) => crate::eds::Eds::load(&self.resolve(p)),
+            None => Ok(crate::eds::Eds::builtin_winch().clone()),
+        }
     }
 
     /// Parses and validates; nothing is returned unless everything is valid.
@@ -205,6 +286,38 @@ impl DrivesConfig {
                 "bus.max_cable_speed_m_per_s",
                 "must be finite and > 0",
             ));
+        }
+        if !(1..=127).contains(&b.master_node_id)
+            || self.winches.iter().any(|w| w.node_id == b.master_node_id)
+        {
+            return Err(invalid(
+                "bus.master_node_id",
+                "must be in 1..=127 and not a winch's node id",
+            ));
+        }
+        if b.master_heartbeat_ms == 0 {
+            return Err(invalid("bus.master_heartbeat_ms", "must be >= 1"));
+        }
+        if b.drive_consumer_ms() != 0 && b.drive_consumer_ms() <= b.master_heartbeat_ms {
+            return Err(invalid(
+                "bus.drive_heartbeat_consumer_ms",
+                "must exceed bus.master_heartbeat_ms (or be 0 = off)",
+            ));
+        }
+        if !(0..=3).contains(&b.abort_connection_option) {
+            return Err(invalid(
+                "bus.abort_connection_option",
+                "must be 0 (no action), 1 (fault), 2 (disable voltage) or 3 (quick stop)",
+            ));
+        }
+        if !(b.following_error_window_m.is_finite() && b.following_error_window_m > 0.0) {
+            return Err(invalid(
+                "bus.following_error_window_m",
+                "must be finite and > 0",
+            ));
+        }
+        if b.quick_stop_timeout_ms == 0 {
+            return Err(invalid("bus.quick_stop_timeout_ms", "must be >= 1"));
         }
         if self.winches.is_empty() || self.winches.len() > MAX_CABLES {
             return Err(invalid(

@@ -4,6 +4,7 @@
 
 use crate::canopen::{Ds402State, NmtState};
 use crate::config::{DrivesConfig, WinchConfig};
+use crate::eds::{Eds, EdsError};
 use crate::safety_watch::SafetyWatchConfig;
 use crate::slave::{DriveBank, MotionDemand, WinchAxis};
 use can_transport::CanBus;
@@ -30,11 +31,14 @@ pub struct EmulatorConfig {
     pub damping_n_per_m_per_s: f64,
     /// Validate the safety monitor's heartbeat (drives.toml `[safety_heartbeat]`); None = off.
     pub safety_watch: Option<SafetyWatchConfig>,
+    /// The drives' EDS (drives.toml `bus.eds`, else the simulated winch's).
+    pub eds: Eds,
 }
 
 impl EmulatorConfig {
-    pub fn from_drives(cfg: &DrivesConfig, initial_length_m: f64) -> Self {
-        Self {
+    /// Fails only if `bus.eds` cannot be read.
+    pub fn from_drives(cfg: &DrivesConfig, initial_length_m: f64) -> Result<Self, EdsError> {
+        Ok(Self {
             winches: cfg.winches.clone(),
             initial_length_m: vec![initial_length_m; cfg.winches.len()],
             sync_period_s: f64::from(cfg.bus.sync_period_us) * 1e-6,
@@ -44,7 +48,8 @@ impl EmulatorConfig {
             pretension_n: 2000.0,
             damping_n_per_m_per_s: 100.0,
             safety_watch: cfg.safety_heartbeat,
-        }
+            eds: cfg.load_eds()?,
+        })
     }
 }
 
@@ -141,7 +146,7 @@ pub fn run(
 ) -> Result<(), can_transport::CanError> {
     let m = cfg.winches.len().min(MAX_CABLES);
     let ids: Vec<u8> = cfg.winches.iter().take(m).map(|w| w.node_id).collect();
-    let mut bank = DriveBank::new(&ids, cfg.default_heartbeat_ms);
+    let mut bank = DriveBank::with_eds(&ids, &cfg.eds, cfg.default_heartbeat_ms);
     if let Some(sw) = cfg.safety_watch {
         bank.enable_safety_watch(sw);
         control.safety_inhibit.store(true, Ordering::Release);

@@ -28,7 +28,9 @@ pub fn hil_config(transport: &str) -> DrivesConfig {
     let mut text = format!(
         "[bus]\ntransport = \"{transport}\"\nsync_period_us = 1000\nstale_setpoint_cycles = 50\n\
          heartbeat_producer_ms = 20\nheartbeat_timeout_ms = 300\nboot_timeout_ms = 20000\n\
-         sdo_timeout_ms = 500\nmax_cable_speed_m_per_s = 5.0\n"
+         sdo_timeout_ms = 500\nmax_cable_speed_m_per_s = 5.0\n\
+         drive_heartbeat_consumer_ms = 600\n\
+         following_error_window_m = 0.5\n"
     );
     for i in 0..HIL_WINCHES {
         let sign = if i % 2 == 0 { 1 } else { -1 };
@@ -69,7 +71,7 @@ impl Rig {
     pub fn start(transport: &str, prefix: &str) -> Res<Rig> {
         let cfg = hil_config(transport);
         let spec = cfg.transport().map_err(|e| e.to_string())?;
-        let mut ecfg = EmulatorConfig::from_drives(&cfg, 5.0);
+        let mut ecfg = EmulatorConfig::from_drives(&cfg, 5.0).map_err(|e| e.to_string())?;
         ecfg.initial_length_m = (0..HIL_WINCHES).map(|i| 4.0 + 0.5 * i as f64).collect();
         let control = EmulatorControl::new();
         // Both ends open their bus before either thread runs: no frame is lost to a late join.
@@ -227,7 +229,7 @@ impl Rig {
         mut profile: impl FnMut(f64) -> [f64; HIL_WINCHES],
     ) -> Res<Vec<JointSetpoint>> {
         let dur = duration.as_nanos() as u64;
-        let mut sent = Vec::with_capacity(duration.as_millis() as usize + 8);
+        let mut sent: Vec<JointSetpoint> = Vec::with_capacity(duration.as_millis() as usize + 8);
         let mut start = None;
         loop {
             // One clock reading gives both the profile time and the stamp: a stall between
@@ -239,6 +241,13 @@ impl Rig {
                 break;
             }
             let t = (now - start) as f64 * 1e-9;
+            // A 1 kHz producer numbers one setpoint per millisecond: when this thread was not
+            // scheduled for k ms, the k - 1 samples in between are lost, not renumbered
+            // (drive-io judges the step by the sequence numbers that passed).
+            if let Some(prev) = sent.last() {
+                let lost = (now.saturating_sub(prev.timestamp_ns) / 1_000_000).saturating_sub(1);
+                self.seq += lost;
+            }
             sent.push(self.publish_at(&profile(t), now)?);
             std::thread::sleep(Duration::from_micros(900));
         }
@@ -417,6 +426,20 @@ pub fn scenario_follow_timed(transport: &str, prefix: &str, timing: Timing) -> R
                 // For the next cycle: profile time and stamp both one period after cycle f.
                 let c0 = *c0.get_or_insert(f.cycle);
                 elapsed_cycles = f.cycle - c0;
+                // One sequence number per SYNC period, as a phase-locked motion core numbers
+                // them: samples for cycles this thread missed are lost, not renumbered (kept in
+                // `sent` unpublished, so sequence numbers still index it).
+                while (sent.len() as u64) < elapsed_cycles {
+                    let t = (sent.len() + 1) as f64 * 1e-3;
+                    rig.seq += 1;
+                    let mut lost = JointSetpoint {
+                        cable_count: HIL_WINCHES as u32,
+                        sequence: rig.seq,
+                        ..Default::default()
+                    };
+                    lost.cable_length_m[..HIL_WINCHES].copy_from_slice(&profile(t));
+                    sent.push(lost);
+                }
                 let t = (elapsed_cycles + 1) as f64 * 1e-3;
                 sent.push(rig.publish_at(&profile(t), f.timestamp_ns + 1_000_000)?);
             }

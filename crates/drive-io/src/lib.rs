@@ -4,13 +4,17 @@
 //!
 //! * [`config`]: config/drives.toml (transport, timing, per-winch length <-> counts scaling).
 //! * [`canopen`]: COB-IDs, objects, PDO/SDO/NMT encoding (docs/can-protocol.md).
+//! * [`eds`]: CiA 306 EDS/DCF files; [`commissioning`]: the SDO start-up script from the EDS.
 //! * [`master`]: pure master logic; [`runner`]: the 1 ms process loop with iceoryx2.
 //! * [`hil`]: hardware-in-the-loop scenarios run on the host (UDP bus) and in the vcan VM.
 
 pub mod canopen;
+pub mod commissioning;
 pub mod config;
+pub mod eds;
 pub mod emulator;
 pub mod hil;
+pub mod interop;
 pub mod master;
 pub mod reset;
 pub mod runner;

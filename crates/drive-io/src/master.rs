@@ -9,7 +9,9 @@
 //! safety monitor's reset, [`Master::reset`] with a [`ResetGrant`]).
 
 use crate::canopen::*;
+use crate::commissioning::SdoOp;
 use crate::config::{DrivesConfig, WinchConfig};
+use crate::eds::{Eds, sdo_abort_text};
 use crate::reset::ResetGrant;
 use can_transport::RxFrame;
 use crs_ipc::{
@@ -18,12 +20,36 @@ use crs_ipc::{
 
 const SDO_RETRIES: u8 = 3;
 
+/// Why a drive's start-up configuration failed (what, where, the drive's answer).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum SdoStep {
-    WriteHeartbeat,
-    WriteMode,
-    ReadMode,
-    Done,
+pub enum CommissioningFault {
+    /// The drive refused an SDO transfer (CiA 301 abort code).
+    Abort {
+        node: u8,
+        index: u16,
+        sub: u8,
+        write: bool,
+        code: u32,
+    },
+    /// A value read back differs from the one written.
+    Readback {
+        node: u8,
+        index: u16,
+        sub: u8,
+        wrote: u32,
+        read: u32,
+    },
+    /// No answer after the retries.
+    Timeout { node: u8, index: u16, sub: u8 },
+}
+
+/// Master construction failed: the EDS cannot be read or does not suit the configuration.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    #[error("EDS: {0}")]
+    Eds(#[from] crate::eds::EdsError),
+    #[error(transparent)]
+    Plan(#[from] crate::commissioning::PlanError),
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -42,7 +68,8 @@ struct DriveView {
     velocity: i32,
     force_mn: i32,
     rx_ns: u64,
-    sdo: SdoStep,
+    /// Next step of the drive's start-up script ([`crate::commissioning::plan`]).
+    sdo: usize,
     sdo_outstanding: bool,
     sdo_sent_ns: u64,
     sdo_tries: u8,
@@ -64,7 +91,7 @@ impl DriveView {
             velocity: 0,
             force_mn: 0,
             rx_ns: 0,
-            sdo: SdoStep::WriteHeartbeat,
+            sdo: 0,
             sdo_outstanding: false,
             sdo_sent_ns: 0,
             sdo_tries: 0,
@@ -85,11 +112,27 @@ enum Phase {
 /// The master's per-bus state. Create once (allocates), then call [`Master::on_frame`],
 /// [`Master::on_event`] and [`Master::cycle`]; none of these allocate.
 pub struct Master {
+    eds: Eds,
+    /// Per drive (cable order): the SDO start-up script.
+    plans: Vec<Vec<SdoOp>>,
+    commissioning_fault: Option<CommissioningFault>,
+    master_node_id: u8,
+    master_hb_ns: u64,
+    next_master_hb_ns: u64,
+    /// Escalation: drive-io's own heartbeat is withheld (the drives act per 0x6007).
+    hb_inhibit: bool,
+    quick_stop_timeout_ns: u64,
+    /// When the current stop was first commanded on the bus (set by the next cycle).
+    qs_since_ns: Option<u64>,
+    /// Quick stop supervision: 0 waiting, 1 NMT stop sent, 2 heartbeat withheld, 3 acknowledged.
+    qs_stage: u8,
+    /// The drives were NMT-stopped by an escalation: the next reset starts them again.
+    nmt_stopped: bool,
+    restart_nmt: bool,
     winches: [WinchConfig; MAX_CABLES],
     m: usize,
     sync_period_ns: u64,
     stale_cycles: u32,
-    hb_producer_ms: u16,
     hb_timeout_ns: u64,
     boot_timeout_ns: u64,
     sdo_timeout_ns: u64,
@@ -116,7 +159,21 @@ pub struct Master {
 }
 
 impl Master {
-    pub fn new(cfg: &DrivesConfig) -> Self {
+    /// A master for `cfg`'s drives, configured from the EDS `cfg.bus.eds` (else the simulated
+    /// winch's); fails if the EDS cannot be read or lacks what the configuration needs.
+    pub fn new(cfg: &DrivesConfig) -> Result<Self, SetupError> {
+        let eds = cfg.load_eds()?;
+        Self::with_eds(cfg, eds)
+    }
+
+    /// A master whose drives are described by `eds`.
+    pub fn with_eds(cfg: &DrivesConfig, eds: Eds) -> Result<Self, SetupError> {
+        let plans = cfg
+            .winches
+            .iter()
+            .take(MAX_CABLES)
+            .map(|w| crate::commissioning::plan(&eds, w, &cfg.bus))
+            .collect::<Result<Vec<_>, _>>()?;
         let m = cfg.winches.len().min(MAX_CABLES);
         let mut winches = [cfg.winches[0]; MAX_CABLES];
         winches[..m].copy_from_slice(&cfg.winches[..m]);
@@ -133,12 +190,23 @@ impl Master {
             cable_count: m as u32,
             ..Default::default()
         };
-        Self {
+        Ok(Self {
+            eds,
+            plans,
+            commissioning_fault: None,
+            master_node_id: cfg.bus.master_node_id,
+            master_hb_ns: u64::from(cfg.bus.master_heartbeat_ms) * 1_000_000,
+            next_master_hb_ns: 0,
+            hb_inhibit: false,
+            quick_stop_timeout_ns: u64::from(cfg.bus.quick_stop_timeout_ms) * 1_000_000,
+            qs_since_ns: None,
+            qs_stage: 0,
+            nmt_stopped: false,
+            restart_nmt: false,
             winches,
             m,
             sync_period_ns: cfg.sync_period_ns(),
             stale_cycles: cfg.bus.stale_setpoint_cycles,
-            hb_producer_ms: cfg.bus.heartbeat_producer_ms,
             hb_timeout_ns: u64::from(cfg.bus.heartbeat_timeout_ms) * 1_000_000,
             boot_timeout_ns: u64::from(cfg.bus.boot_timeout_ms) * 1_000_000,
             sdo_timeout_ns: u64::from(cfg.bus.sdo_timeout_ms) * 1_000_000,
@@ -161,7 +229,75 @@ impl Master {
             state_changed: true,
             overruns: 0,
             feedback,
+        })
+    }
+
+    /// The EDS the drives were configured from.
+    pub fn eds(&self) -> &Eds {
+        &self.eds
+    }
+
+    /// The first start-up configuration failure, if any (start-up stopped there).
+    pub fn commissioning_fault(&self) -> Option<CommissioningFault> {
+        self.commissioning_fault
+    }
+
+    /// The failure as a sentence naming drive, object (EDS name) and the CiA 301 abort text.
+    pub fn describe_commissioning_fault(&self) -> Option<String> {
+        let f = self.commissioning_fault?;
+        Some(match f {
+            CommissioningFault::Abort {
+                node,
+                index,
+                sub,
+                write,
+                code,
+            } => format!(
+                "drive node {node} refused SDO {} of {}: abort code 0x{code:08X} ({}) [EDS {}]",
+                if write { "write" } else { "read" },
+                self.eds.describe(index, sub),
+                sdo_abort_text(code),
+                self.eds.file
+            ),
+            CommissioningFault::Readback {
+                node,
+                index,
+                sub,
+                wrote,
+                read,
+            } => format!(
+                "drive node {node}: {} reads back 0x{read:X} after drive-io wrote 0x{wrote:X}",
+                self.eds.describe(index, sub)
+            ),
+            CommissioningFault::Timeout { node, index, sub } => format!(
+                "drive node {node}: no SDO answer for {} after {SDO_RETRIES} tries",
+                self.eds.describe(index, sub)
+            ),
+        })
+    }
+
+    /// `(index, sub, value)` configured in drive `i` (for its DCF); empty until it is done.
+    pub fn configured_values(&self, i: usize) -> Vec<(u16, u8, u32)> {
+        match (self.plans.get(i), self.drives.get(i)) {
+            (Some(p), Some(d)) if d.sdo >= p.len() => crate::commissioning::configured_values(p),
+            _ => Vec::new(),
         }
+    }
+
+    /// True once every drive finished its start-up script.
+    pub fn configured(&self) -> bool {
+        (0..self.m).all(|i| self.drives[i].sdo >= self.plans[i].len())
+    }
+
+    /// Node ids in cable order.
+    pub fn node_ids(&self) -> impl Iterator<Item = u8> + '_ {
+        self.drives[..self.m].iter().map(|d| d.node)
+    }
+
+    /// Escalation of a stop the drives did not obey: stop producing drive-io's heartbeat, so
+    /// the drives' consumers (0x1016) time out and act per 0x6007.
+    pub fn inhibit_heartbeat(&mut self) {
+        self.hb_inhibit = true;
     }
 
     pub fn state(&self) -> BusState {
@@ -213,6 +349,10 @@ impl Master {
             return;
         }
         if state == BusState::Fault || !matches!(self.phase, Phase::Stopped(_)) {
+            if !matches!(self.phase, Phase::Stopped(_)) {
+                self.qs_since_ns = None;
+                self.qs_stage = 0;
+            }
             self.fault_code = code;
             self.fault_node = u32::from(node);
             tracing::error!(
@@ -281,13 +421,27 @@ impl Master {
                     d.booted = true;
                 } else if state == NmtState::BootUp.code() && !booting {
                     // A drive rebooted under us: it lost its configuration and enable state.
+                    tracing::error!(
+                        node,
+                        "drive booted mid-run (boot-up message): its configuration is lost; fault"
+                    );
                     self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, node);
                 }
             }
             // Error code 0 is "error reset / no error": informational.
-            Message::Emcy { code, .. } if code != 0 => {
+            Message::Emcy {
+                code,
+                error_register,
+                ..
+            } if code != 0 => {
                 self.last_emcy = u32::from(code);
-                tracing::error!(node, code = format_args!("{code:#06x}"), "EMCY");
+                tracing::error!(
+                    node,
+                    code = format_args!("{code:#06x}"),
+                    name = emcy_name(code),
+                    error_register = format_args!("{error_register:#04x}"),
+                    "EMCY"
+                );
                 self.stop(BusState::Fault, fault_code::EMCY, node);
             }
             Message::SdoResponse { data, .. } => self.on_sdo(i, &data),
@@ -296,50 +450,75 @@ impl Master {
     }
 
     fn on_sdo(&mut self, i: usize, data: &[u8; 8]) {
-        let d = &mut self.drives[i];
+        let d = self.drives[i];
+        let Some(&op) = self.plans[i].get(d.sdo) else {
+            return;
+        };
         if !d.sdo_outstanding {
             return;
         }
-        let (expect_index, is_read) = match d.sdo {
-            SdoStep::WriteHeartbeat => (OD_PRODUCER_HEARTBEAT_MS, false),
-            SdoStep::WriteMode => (OD_MODES_OF_OPERATION, false),
-            SdoStep::ReadMode => (OD_MODES_DISPLAY, true),
-            SdoStep::Done => return,
-        };
         let node = d.node;
-        let ok = match parse_sdo_response(data) {
-            SdoResponse::DownloadOk { index, .. } if !is_read && index == expect_index => true,
-            SdoResponse::UploadOk { index, value, .. } if is_read && index == expect_index => {
-                if value as u8 as i8 != MODE_CSP {
-                    tracing::error!(node, value, "drive does not report CSP mode in 0x6061");
-                    self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
+        let (index, sub) = op.index_sub();
+        let resp = parse_sdo_response(data);
+        let ok = match (op, resp) {
+            (SdoOp::Write { .. }, SdoResponse::DownloadOk { index: ri, sub: rs })
+                if (ri, rs) == (index, sub) =>
+            {
+                true
+            }
+            (
+                SdoOp::Verify { value, len, .. },
+                SdoResponse::UploadOk {
+                    index: ri,
+                    sub: rs,
+                    value: got,
+                },
+            ) if (ri, rs) == (index, sub) => {
+                let mask = if len >= 4 {
+                    u32::MAX
+                } else {
+                    (1u32 << (8 * u32::from(len))) - 1
+                };
+                if got & mask != value & mask {
+                    self.commissioning_failed(CommissioningFault::Readback {
+                        node,
+                        index,
+                        sub,
+                        wrote: value & mask,
+                        read: got & mask,
+                    });
                     return;
                 }
                 true
             }
-            SdoResponse::Abort { index, code, .. } if index == expect_index => {
-                tracing::error!(
+            (
+                _,
+                SdoResponse::Abort {
+                    index: ri,
+                    sub: rs,
+                    code,
+                },
+            ) if (ri, rs) == (index, sub) => {
+                self.commissioning_failed(CommissioningFault::Abort {
                     node,
                     index,
-                    code = format_args!("{code:#010x}"),
-                    "SDO abort"
-                );
-                self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
+                    sub,
+                    write: matches!(op, SdoOp::Write { .. }),
+                    code,
+                });
                 return;
             }
             _ => false, // stray or mismatched response: ignore, timeout handles it
         };
         if ok {
+            let d = &mut self.drives[i];
             d.sdo_outstanding = false;
             d.sdo_tries = 0;
-            if d.sdo == SdoStep::WriteHeartbeat {
+            d.sdo += 1;
+            if (index, sub) == (OD_PRODUCER_HEARTBEAT_MS, 0) && matches!(op, SdoOp::Write { .. }) {
+                // The drive produces heartbeats at the configured period from now on.
                 d.hb_monitored = true;
             }
-            d.sdo = match d.sdo {
-                SdoStep::WriteHeartbeat => SdoStep::WriteMode,
-                SdoStep::WriteMode => SdoStep::ReadMode,
-                _ => SdoStep::Done,
-            };
         }
     }
 
@@ -355,6 +534,21 @@ impl Master {
         } else {
             tracing::warn!(%error, "CAN error frame");
         }
+    }
+
+    fn commissioning_failed(&mut self, f: CommissioningFault) {
+        if self.commissioning_fault.is_none() {
+            self.commissioning_fault = Some(f);
+            if let Some(msg) = self.describe_commissioning_fault() {
+                tracing::error!("start-up configuration failed: {msg}");
+            }
+        }
+        let node = match f {
+            CommissioningFault::Abort { node, .. }
+            | CommissioningFault::Readback { node, .. }
+            | CommissioningFault::Timeout { node, .. } => node,
+        };
+        self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
     }
 
     /// Handles an e-stop event from the process bus (anyone may stop). A Reset event does
@@ -379,6 +573,8 @@ impl Master {
             return false;
         }
         tracing::info!(epoch = grant.epoch(), "reset: re-enabling drives");
+        self.hb_inhibit = false;
+        self.restart_nmt = std::mem::take(&mut self.nmt_stopped);
         self.fault_code = fault_code::NONE;
         self.fault_node = 0;
         self.set_phase(Phase::Enable);
@@ -399,6 +595,16 @@ impl Master {
         self.toggle = !self.toggle;
         self.applied_this_cycle = false;
         let boot_start = *self.boot_start_ns.get_or_insert(now_ns);
+        // drive-io's own heartbeat (the drives' 0x1016 consumer watches it), unless withheld
+        // as the last escalation of a stop.
+        if !self.hb_inhibit && now_ns >= self.next_master_hb_ns {
+            out.push(heartbeat(self.master_node_id, NmtState::Operational));
+            self.next_master_hb_ns = if now_ns - self.next_master_hb_ns > self.master_hb_ns {
+                now_ns + self.master_hb_ns
+            } else {
+                self.next_master_hb_ns + self.master_hb_ns
+            };
+        }
 
         // Heartbeat consumer (CiA 301 §7.2.8.3.2.2), active per drive once its producer time is set.
         for i in 0..self.m {
@@ -417,12 +623,13 @@ impl Master {
         {
             let node = self.drives[..self.m]
                 .iter()
-                .find(|d| {
+                .zip(&self.plans)
+                .find(|(d, plan)| {
                     !d.booted
-                        || d.sdo != SdoStep::Done
+                        || d.sdo < plan.len()
                         || Ds402State::from_statusword(d.statusword) != Ds402State::OperationEnabled
                 })
-                .map_or(0, |d| d.node);
+                .map_or(0, |(d, _)| d.node);
             tracing::error!(node, phase = ?self.phase, "boot timeout");
             self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
         }
@@ -440,50 +647,57 @@ impl Master {
                 }
             }
             Phase::Configure => {
-                let (hb, sdo_timeout) = (self.hb_producer_ms, self.sdo_timeout_ns);
+                let sdo_timeout = self.sdo_timeout_ns;
                 let mut timed_out = None;
-                for d in &mut self.drives[..self.m] {
-                    if d.sdo == SdoStep::Done {
+                for (i, d) in self.drives[..self.m].iter_mut().enumerate() {
+                    let Some(&op) = self.plans[i].get(d.sdo) else {
                         continue;
-                    }
+                    };
                     if d.sdo_outstanding && now_ns.saturating_sub(d.sdo_sent_ns) < sdo_timeout {
                         continue;
                     }
                     if d.sdo_outstanding && d.sdo_tries >= SDO_RETRIES {
-                        timed_out = Some(d.node);
+                        let (index, sub) = op.index_sub();
+                        timed_out = Some(CommissioningFault::Timeout {
+                            node: d.node,
+                            index,
+                            sub,
+                        });
                         continue;
                     }
-                    out.push(match d.sdo {
-                        SdoStep::WriteHeartbeat => {
-                            sdo_download(d.node, OD_PRODUCER_HEARTBEAT_MS, 0, u32::from(hb), 2)
-                        }
-                        SdoStep::WriteMode => sdo_download(
-                            d.node,
-                            OD_MODES_OF_OPERATION,
-                            0,
-                            u32::from(MODE_CSP as u8),
-                            1,
-                        ),
-                        _ => sdo_upload(d.node, OD_MODES_DISPLAY, 0),
+                    out.push(match op {
+                        SdoOp::Write {
+                            index,
+                            sub,
+                            value,
+                            len,
+                        } => sdo_download(d.node, index, sub, value, len),
+                        SdoOp::Verify { index, sub, .. } => sdo_upload(d.node, index, sub),
                     });
                     d.sdo_outstanding = true;
                     d.sdo_sent_ns = now_ns;
                     d.sdo_tries += 1;
                 }
-                if let Some(node) = timed_out {
-                    tracing::error!(node, "SDO timeout");
-                    self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
-                } else if self.drives[..self.m].iter().all(|d| d.sdo == SdoStep::Done) {
+                if let Some(f) = timed_out {
+                    self.commissioning_failed(f);
+                } else if self.configured() {
+                    tracing::info!(eds = %self.eds.file, "all drives configured and verified");
                     out.push(nmt(NMT_START, 0));
                     self.set_phase(Phase::Enable);
                 }
             }
             Phase::Enable => {
+                if std::mem::take(&mut self.restart_nmt) {
+                    out.push(nmt(NMT_START, 0));
+                }
                 let mut all_enabled = true;
                 for i in 0..self.m {
                     let d = self.drives[i];
                     let st = Ds402State::from_statusword(d.statusword);
-                    all_enabled &= d.have_tpdo1 && st == Ds402State::OperationEnabled;
+                    // After an NMT restart, wait for the heartbeat to say operational too.
+                    all_enabled &= d.have_tpdo1
+                        && st == Ds402State::OperationEnabled
+                        && (!d.seen_operational || d.last_hb_state == NmtState::Operational.code());
                     if d.have_tpdo1 {
                         // Enable while holding the actual position: the drive must not jump.
                         self.target[i] = d.position;
@@ -524,9 +738,82 @@ impl Master {
                     self.push_quick_stop(out);
                 }
             }
-            Phase::Stopped(_) => self.push_quick_stop(out),
+            Phase::Stopped(_) => {
+                self.push_quick_stop(out);
+                self.supervise_quick_stop(now_ns, out);
+            }
         }
         self.update_feedback(now_ns);
+    }
+
+    /// CiA 402 quick stop supervision: every drive must acknowledge the stop in a TPDO sent
+    /// after it was commanded (Quick Stop Active, or a state in which the brake holds:
+    /// switched on and below, Fault) with velocity actual 0, within `bus.quick_stop_timeout_ms`.
+    /// Otherwise escalate: NMT stop all (the drives act per 0x6007: disable voltage, the brake
+    /// holds), and if the heartbeats do not report NMT stopped within another timeout, withhold
+    /// drive-io's heartbeat (their 0x1016 consumers time out and act per 0x6007 again).
+    fn supervise_quick_stop(&mut self, now_ns: u64, out: &mut FrameBuf) {
+        if self.qs_stage == 3 || self.m == 0 {
+            return;
+        }
+        let since = *self.qs_since_ns.get_or_insert(now_ns);
+        let at_rest = |d: &DriveView| {
+            use Ds402State::*;
+            d.have_tpdo1
+                && d.rx_ns > since
+                && d.velocity == 0
+                && matches!(
+                    Ds402State::from_statusword(d.statusword),
+                    QuickStopActive
+                        | SwitchOnDisabled
+                        | ReadyToSwitchOn
+                        | SwitchedOn
+                        | Fault
+                        | NotReadyToSwitchOn
+                )
+        };
+        let elapsed = now_ns.saturating_sub(since);
+        if self.qs_stage == 0 && self.drives[..self.m].iter().all(at_rest) {
+            tracing::info!(
+                ms = elapsed as f64 * 1e-6,
+                "quick stop acknowledged: every drive stopped (statusword) at velocity 0"
+            );
+            self.qs_stage = 3;
+            return;
+        }
+        if self.qs_stage == 0 && elapsed > self.quick_stop_timeout_ns {
+            for d in self.drives[..self.m].iter().filter(|d| !at_rest(d)) {
+                tracing::error!(
+                    node = d.node,
+                    statusword = format_args!("{:#06x}", d.statusword),
+                    velocity_counts_per_s = d.velocity,
+                    "quick stop not acknowledged in time: escalating to NMT stop (0x6007 action)"
+                );
+            }
+            out.push(nmt(NMT_STOP, 0));
+            self.nmt_stopped = true;
+            self.qs_stage = 1;
+        } else if self.qs_stage == 1 && elapsed > 2 * self.quick_stop_timeout_ns {
+            let all_stopped = self.drives[..self.m]
+                .iter()
+                .all(|d| d.last_hb_state == NmtState::Stopped.code() && d.last_hb_ns > since);
+            if all_stopped {
+                self.qs_stage = 3;
+            } else {
+                tracing::error!(
+                    "drives do not report NMT stopped: withholding drive-io's heartbeat \
+                     (the drives' consumer timeout acts per 0x6007)"
+                );
+                self.hb_inhibit = true;
+                self.qs_stage = 2;
+            }
+        }
+    }
+
+    /// Stage of the quick stop supervision (0 waiting, 1 NMT stop sent, 2 heartbeat withheld,
+    /// 3 done), for tests and diagnostics.
+    pub fn quick_stop_stage(&self) -> u8 {
+        self.qs_stage
     }
 
     fn push_quick_stop(&mut self, out: &mut FrameBuf) {
@@ -607,6 +894,9 @@ impl Master {
                 tracing::error!(
                     node,
                     length = sp.cable_length_m[i],
+                    target_counts = c,
+                    previous_counts = self.target[i],
+                    periods,
                     "setpoint step exceeds max cable speed"
                 );
                 self.stop(BusState::Fault, fault_code::SETPOINT_STEP, node);

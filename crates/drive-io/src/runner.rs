@@ -19,6 +19,39 @@ pub enum RunError {
     Ipc(#[from] IpcError),
     #[error(transparent)]
     Can(#[from] CanError),
+    #[error("drive-io set-up: {0}")]
+    Setup(#[from] crate::master::SetupError),
+    /// A drive refused (or did not keep) its start-up configuration: start-up stops.
+    #[error("drive start-up configuration failed: {0}")]
+    Commissioning(String),
+    #[error("writing the DCF {path}: {source}")]
+    Dcf {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Writes `node<NN>.dcf` for every configured drive into `dir` (once, after start-up).
+pub fn write_dcfs(master: &Master, dir: &std::path::Path) -> Result<(), RunError> {
+    let dcf_err = |path: &std::path::Path, source| RunError::Dcf {
+        path: path.display().to_string(),
+        source,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| dcf_err(dir, e))?;
+    let kbit = 1000;
+    for (i, node) in master.node_ids().enumerate() {
+        let text = master.eds().write_dcf(
+            node,
+            &format!("winch {}", i + 1),
+            kbit,
+            &master.configured_values(i),
+        );
+        let path = dir.join(format!("node{node:02}.dcf"));
+        std::fs::write(&path, text).map_err(|e| dcf_err(&path, e))?;
+    }
+    tracing::info!(dir = %dir.display(), "DCF of every configured drive written");
+    Ok(())
 }
 
 /// Frames handled at most between the tick and the cycle computation.
@@ -107,7 +140,9 @@ pub fn run(
     let heartbeat = ipc.publisher::<Heartbeat>()?;
     // Wake sleeping watchers on stops only (rare): notify() costs 10-30 us, never per cycle.
     let wakeup = ipc.wakeup_notifier()?;
-    let mut master = Master::new(cfg);
+    let mut master = Master::new(cfg)?;
+    tracing::info!(eds = %master.eds().file, "drives configured from their EDS");
+    let mut dcf_pending = cfg.bus.dcf_dir.as_ref().map(|d| cfg.resolve(d));
     let period = master.sync_period_ns();
     let mut out = FrameBuf::default();
     let mut next = monotonic_ns() + period;
@@ -256,6 +291,16 @@ pub fn run(
             }
         }
         master.mark_written(monotonic_ns());
+        if let Some(msg) = master.describe_commissioning_fault() {
+            // Start-up stops: the quick-stop frames of this cycle are on the bus already.
+            return Err(RunError::Commissioning(msg));
+        }
+        if dcf_pending.is_some() && master.configured() {
+            // Once, right after start-up (not in the steady loop).
+            if let Some(dir) = dcf_pending.take() {
+                write_dcfs(&master, &dir)?;
+            }
+        }
         feedback.publish(master.feedback())?;
         if let Some(ev) = master.take_state_event(event_seq + 1) {
             event_seq += 1;

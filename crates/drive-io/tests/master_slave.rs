@@ -3,6 +3,7 @@
 use can_transport::RxFrame;
 use crs_ipc::{BusState, JointSetpoint, fault_code};
 use drive_io::canopen::{self, Ds402State, FrameBuf, Message};
+use drive_io::eds::{BUILTIN_WINCH_EDS, Eds};
 use drive_io::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
 use drive_io::{DrivesConfig, Master, hil};
 
@@ -13,6 +14,8 @@ struct Sim {
     axes: Vec<WinchAxis>,
     now: u64,
     mute: Option<usize>,
+    /// A drive that neither receives nor sends (dead controller).
+    dead: Option<usize>,
     log: Vec<Message>,
     /// Pulley force each drive reports in TPDO2, mN.
     force_mn: Vec<i32>,
@@ -20,12 +23,17 @@ struct Sim {
 
 impl Sim {
     fn new() -> Self {
+        Self::with_eds(Eds::builtin_winch().clone(), Eds::builtin_winch())
+    }
+
+    /// drive-io configured from `master_eds`, drives implementing `drive_eds`.
+    fn with_eds(master_eds: Eds, drive_eds: &Eds) -> Self {
         let cfg = hil::hil_config("udpbus:239.255.0.1:1");
-        let master = Master::new(&cfg);
+        let master = Master::with_eds(&cfg, master_eds).unwrap();
         let slaves = cfg
             .winches
             .iter()
-            .map(|w| DriveSlave::new(w.node_id, 20))
+            .map(|w| DriveSlave::with_eds(w.node_id, drive_eds, 20))
             .collect();
         let axes = (0..cfg.winches.len())
             .map(|i| WinchAxis::new(3.0 + i as f64, 5.0, 14.0))
@@ -37,6 +45,7 @@ impl Sim {
             axes,
             now: 1_000_000_000,
             mute: None,
+            dead: None,
             log: Vec::new(),
             force_mn: vec![1000; 8],
         };
@@ -72,6 +81,9 @@ impl Sim {
         for f in m_out.as_slice() {
             self.log.push(canopen::decode(f));
             for i in 0..self.slaves.len() {
+                if self.dead == Some(i) {
+                    continue;
+                }
                 if self.slaves[i].handle_frame(f, self.now, &mut s_out) == SlaveEvent::Sync {
                     let w = self.cfg.winches[i];
                     match self.slaves[i].demand() {
@@ -92,6 +104,9 @@ impl Sim {
             }
         }
         for (i, sl) in self.slaves.iter_mut().enumerate() {
+            if self.dead == Some(i) {
+                continue;
+            }
             sl.set_heartbeat_muted(self.mute == Some(i));
             sl.poll(self.now, &mut s_out);
         }
@@ -124,9 +139,15 @@ impl Sim {
 fn boot_sequence_uses_nmt_sdo_and_ds402() {
     let mut s = Sim::new();
     s.boot();
-    // NMT reset comm first, SDO writes of 0x1017 and 0x6060=8, NMT start, then RPDO/SYNC.
+    // NMT reset comm first (after drive-io's own heartbeat), the SDO start-up script from the
+    // EDS (PDO mapping, 0x1017, 0x6060=8, read-backs), NMT start, then RPDO/SYNC.
+    let first = s
+        .log
+        .iter()
+        .find(|m| !matches!(m, Message::Heartbeat { node: 0x7F, .. }))
+        .unwrap();
     assert!(matches!(
-        s.log[0],
+        first,
         Message::Nmt {
             command: canopen::NMT_RESET_COMM,
             node: 0
@@ -134,6 +155,19 @@ fn boot_sequence_uses_nmt_sdo_and_ds402() {
     ));
     let sdo_mode = s.log.iter().filter(|m| matches!(m, Message::SdoRequest { data, .. } if data[0] == 0x2F && data[1] == 0x60 && data[2] == 0x60 && data[4] == 8)).count();
     assert_eq!(sdo_mode, 4, "one 0x6060 = 8 write per drive");
+    // TPDO2 mapping entry 2 = 0x2110 (pulley force, 32 bit) written and read back per drive.
+    let map_write = s.log.iter().filter(|m| matches!(m, Message::SdoRequest { data, .. } if data[0] == 0x23 && data[1..4] == [0x01, 0x1A, 2] && data[4..8] == [0x20, 0, 0x10, 0x21])).count();
+    let map_read = s.log.iter().filter(|m| matches!(m, Message::SdoRequest { data, .. } if data[0] == 0x40 && data[1..4] == [0x01, 0x1A, 2])).count();
+    assert_eq!((map_write, map_read), (4, 4));
+    for sl in &s.slaves {
+        assert_eq!(sl.od_value(0x6007, 0), Some(2), "0x6007 = disable voltage");
+        assert_eq!(
+            sl.od_value(0x605A, 0),
+            Some(6),
+            "0x605A = stay in quick stop"
+        );
+        assert_eq!(sl.od_value(0x1016, 1), Some((0x7F << 16) | 600));
+    }
     let start = s
         .log
         .iter()
@@ -464,5 +498,258 @@ fn bus_off_or_error_passive_stops_every_drive_and_latches() {
                 .all(|sl| sl.ds402_state() == Ds402State::QuickStopActive),
             "{what}: every drive quick-stopped"
         );
+    }
+}
+
+/// A vendor EDS whose defaults differ from drive-io's layout: RPDO1 maps the controlword only,
+/// TPDO1 the statusword only, TPDO2 is disabled and maps the error code; no heartbeat.
+fn other_vendor_defaults() -> Eds {
+    let text = BUILTIN_WINCH_EDS
+        .replace(
+            "[1600sub0]\nParameterName=Number of mapped objects\nObjectType=0x7\nDataType=0x0005\nAccessType=rw\nDefaultValue=2",
+            "[1600sub0]\nParameterName=Number of mapped objects\nObjectType=0x7\nDataType=0x0005\nAccessType=rw\nDefaultValue=1",
+        )
+        .replace(
+            "[1A00sub0]\nParameterName=Number of mapped objects\nObjectType=0x7\nDataType=0x0005\nAccessType=rw\nDefaultValue=2",
+            "[1A00sub0]\nParameterName=Number of mapped objects\nObjectType=0x7\nDataType=0x0005\nAccessType=rw\nDefaultValue=1",
+        )
+        .replace("DefaultValue=$NODEID+0x280", "DefaultValue=$NODEID+0x80000280")
+        .replace("DefaultValue=0x606C0020", "DefaultValue=0x603F0010");
+    assert_ne!(text, BUILTIN_WINCH_EDS);
+    Eds::parse(&text, "other-vendor.eds").unwrap()
+}
+
+#[test]
+fn drives_with_other_default_mappings_are_configured_from_the_eds_and_run() {
+    let eds = other_vendor_defaults();
+    // Unconfigured, such a drive sends a 2-byte TPDO1 and no TPDO2: useless to drive-io.
+    let mut raw = DriveSlave::with_eds(1, &eds, 0);
+    let mut out = FrameBuf::default();
+    raw.start(0, &mut out);
+    raw.handle_frame(&canopen::nmt(canopen::NMT_START, 0), 0, &mut out);
+    out.clear();
+    raw.transmit_pdos(&mut out);
+    assert_eq!(out.len(), 1);
+    assert_eq!(out.as_slice()[0].data().len(), 2);
+
+    let mut s = Sim::with_eds(eds.clone(), &eds);
+    s.boot();
+    for sl in &s.slaves {
+        assert_eq!(sl.od_value(0x1A01, 1), Some(0x606C_0020));
+        assert_eq!(
+            sl.od_value(0x1801, 1),
+            Some(0x280 + u32::from(sl.node_id()))
+        );
+    }
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    for k in 1..=200u64 {
+        let l: Vec<f64> = l0.iter().map(|x| x + 0.05 * (k as f64 / 200.0)).collect();
+        let sp = s.setpoint(k, &l);
+        s.step(Some(&sp));
+        assert_eq!(s.master.state(), BusState::Running);
+    }
+    for k in 201..=250u64 {
+        let l: Vec<f64> = l0.iter().map(|x| x + 0.05).collect();
+        let sp = s.setpoint(k, &l);
+        s.step(Some(&sp));
+    }
+    for (i, l) in l0.iter().enumerate() {
+        let fb = s.master.feedback().cable_length_m[i];
+        assert!(
+            (fb - (l + 0.05)).abs() < 1e-6,
+            "winch {i}: {fb} l0 {} axis {} {:?} {:?}",
+            l,
+            s.axes[i].length_m,
+            s.master.state(),
+            s.master.feedback().fault_code
+        );
+        // Velocity and force arrive through the TPDO2 drive-io mapped.
+        assert_eq!(s.master.feedback().cable_force_n[i], 1.0);
+    }
+}
+
+#[test]
+fn a_drive_refusing_an_object_stops_start_up_naming_drive_object_and_abort_code() {
+    // drive-io's EDS lists the following error window; the drives do not implement it.
+    let drive_eds = Eds::parse(
+        &BUILTIN_WINCH_EDS.replace("[6065]", "[2065]"),
+        "drive-without-6065.eds",
+    )
+    .unwrap();
+    let mut s = Sim::with_eds(Eds::builtin_winch().clone(), &drive_eds);
+    for _ in 0..300 {
+        s.step(None);
+    }
+    assert_eq!(s.master.state(), BusState::Fault);
+    let msg = s.master.describe_commissioning_fault().unwrap();
+    for want in [
+        "drive node 1",
+        "0x6065sub0 (Following error window)",
+        "0x06020000",
+        "object does not exist in the object dictionary",
+        "write",
+    ] {
+        assert!(msg.contains(want), "`{want}` missing in: {msg}");
+    }
+    assert!(
+        !s.log.iter().any(|m| matches!(
+            m,
+            Message::Nmt {
+                command: canopen::NMT_START,
+                ..
+            }
+        )),
+        "start-up went on"
+    );
+}
+
+fn estop(s: &mut Sim) {
+    let ev = crs_ipc::StateEvent::new(crs_ipc::ProcessId::Test, crs_ipc::EventKind::EStop, 1);
+    s.master.on_event(&ev, s.now);
+}
+
+fn count(log: &[Message], f: impl Fn(&Message) -> bool) -> usize {
+    log.iter().filter(|m| f(m)).count()
+}
+
+#[test]
+fn quick_stop_acknowledged_by_statusword_and_rest_needs_no_escalation() {
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    for k in 1..=100u64 {
+        let l: Vec<f64> = l0.iter().map(|x| x + 0.025 * (k as f64 / 100.0)).collect();
+        let sp = s.setpoint(k, &l);
+        s.step(Some(&sp));
+    }
+    estop(&mut s);
+    s.log.clear();
+    for _ in 0..3000 {
+        s.step(None);
+    }
+    assert_eq!(s.master.quick_stop_stage(), 3, "acknowledged");
+    for sl in &s.slaves {
+        assert_eq!(sl.ds402_state(), Ds402State::QuickStopActive);
+    }
+    assert_eq!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Nmt {
+                command: canopen::NMT_STOP,
+                ..
+            }
+        )),
+        0
+    );
+    // drive-io's heartbeat keeps coming.
+    assert!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Heartbeat { node: 0x7F, .. }
+        )) >= 290
+    );
+}
+
+#[test]
+fn an_unacknowledged_quick_stop_escalates_to_nmt_stop_then_heartbeat_inhibit() {
+    let mut s = Sim::new();
+    s.boot();
+    s.dead = Some(1); // drive 2 stops answering (no TPDO, no heartbeat)
+    estop(&mut s);
+    s.log.clear();
+    let timeout = u64::from(s.cfg.bus.quick_stop_timeout_ms);
+    for _ in 0..timeout - 5 {
+        s.step(None);
+    }
+    assert_eq!(s.master.quick_stop_stage(), 0);
+    for _ in 0..10 {
+        s.step(None);
+    }
+    // Stage 1: NMT stop of all drives; the live ones act per 0x6007 = 2 (disable voltage).
+    assert_eq!(s.master.quick_stop_stage(), 1);
+    assert_eq!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Nmt {
+                command: canopen::NMT_STOP,
+                node: 0
+            }
+        )),
+        1
+    );
+    assert_eq!(s.slaves[0].nmt_state(), canopen::NmtState::Stopped);
+    assert_eq!(s.slaves[0].ds402_state(), Ds402State::SwitchOnDisabled);
+    assert_eq!(s.slaves[0].demand(), MotionDemand::Hold);
+    // Stage 2: drive 2 never reports NMT stopped => drive-io withholds its heartbeat.
+    for _ in 0..timeout + 10 {
+        s.step(None);
+    }
+    assert_eq!(s.master.quick_stop_stage(), 2);
+    s.log.clear();
+    for _ in 0..100 {
+        s.step(None);
+    }
+    assert_eq!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Heartbeat { node: 0x7F, .. }
+        )),
+        0
+    );
+}
+
+#[test]
+fn reset_after_an_escalation_restarts_the_drives_and_the_heartbeat() {
+    let mut s = Sim::new();
+    s.boot();
+    // A drive that does not acknowledge (muted TPDOs would be the same): its TPDO is stale.
+    s.dead = Some(3);
+    estop(&mut s);
+    for _ in 0..2 * s.cfg.bus.quick_stop_timeout_ms + 20 {
+        s.step(None);
+    }
+    assert_eq!(s.master.quick_stop_stage(), 2);
+    // The drive comes back; the monitor's reset (a grant) re-enables everything.
+    s.dead = None;
+    for _ in 0..50 {
+        s.step(None);
+    }
+    s.log.clear();
+    let mut ev = crs_ipc::StateEvent::new(
+        crs_ipc::ProcessId::SafetyMonitor,
+        crs_ipc::EventKind::Reset,
+        2,
+    );
+    ev.detail = 1;
+    let grant = drive_io::reset::ResetGate::new()
+        .check_unauthenticated(&ev)
+        .unwrap();
+    assert!(s.master.reset(grant, s.now));
+    for _ in 0..200 {
+        s.step(None);
+        if s.master.state() == BusState::Ready {
+            break;
+        }
+    }
+    assert_eq!(s.master.state(), BusState::Ready);
+    assert_eq!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Nmt {
+                command: canopen::NMT_START,
+                node: 0
+            }
+        )),
+        1
+    );
+    assert!(
+        count(&s.log, |m| matches!(
+            m,
+            Message::Heartbeat { node: 0x7F, .. }
+        )) > 0
+    );
+    for sl in &s.slaves {
+        assert_eq!(sl.ds402_state(), Ds402State::OperationEnabled);
+        assert_eq!(sl.nmt_state(), canopen::NmtState::Operational);
     }
 }

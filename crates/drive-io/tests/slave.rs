@@ -82,12 +82,36 @@ fn enable_sequence_and_csp_latching_on_sync() {
 }
 
 #[test]
-fn nmt_stop_holds_and_silences_pdos() {
+fn nmt_stop_acts_per_0x6007() {
+    // EDS default 0x6007 = 0 (no action): the drive keeps following its last target, no brake.
     let mut s = operational(1);
     let mut out = FrameBuf::default();
     for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
         s.handle_frame(&rpdo1(1, cw, 0), 0, &mut out);
     }
+    s.handle_frame(&nmt(NMT_STOP, 0), 0, &mut out);
+    assert_eq!(s.demand(), MotionDemand::Follow { target_counts: 0 });
+    // 3 = quick stop.
+    let mut s = operational(1);
+    s.handle_frame(&sdo_download(1, 0x6007, 0, 3, 2), 0, &mut out);
+    for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
+        s.handle_frame(&rpdo1(1, cw, 0), 0, &mut out);
+    }
+    s.handle_frame(&nmt(NMT_STOP, 0), 0, &mut out);
+    assert_eq!(s.ds402_state(), Ds402State::QuickStopActive);
+    assert_eq!(s.demand(), MotionDemand::QuickStop);
+}
+
+#[test]
+fn nmt_stop_holds_and_silences_pdos() {
+    let mut s = operational(1);
+    let mut out = FrameBuf::default();
+    // 0x6007 = 2 (disable voltage: the brake holds), what drive-io configures.
+    s.handle_frame(&sdo_download(1, 0x6007, 0, 2, 2), 0, &mut out);
+    for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
+        s.handle_frame(&rpdo1(1, cw, 0), 0, &mut out);
+    }
+    out.clear();
     s.handle_frame(&nmt(NMT_STOP, 0), 0, &mut out);
     assert_eq!(s.demand(), MotionDemand::Hold);
     out.clear();
@@ -255,4 +279,226 @@ fn winch_axis_respects_limits_and_stops() {
         ax.step(None, 1e-3);
     }
     assert_eq!(ax.velocity_m_per_s, 0.0);
+}
+
+fn sdo(s: &mut DriveSlave, f: can_transport::CanFrame) -> SdoResponse {
+    let mut o = FrameBuf::default();
+    s.handle_frame(&f, 0, &mut o);
+    match o
+        .as_slice()
+        .iter()
+        .map(decode)
+        .find(|m| matches!(m, Message::SdoResponse { .. }))
+    {
+        Some(Message::SdoResponse { data, .. }) => parse_sdo_response(&data),
+        m => panic!("{m:?}"),
+    }
+}
+
+#[test]
+fn pdo_mapping_follows_the_od_and_the_cia301_procedure() {
+    let mut s = operational(3);
+    let ok = |r: SdoResponse| assert!(matches!(r, SdoResponse::DownloadOk { .. }), "{r:?}");
+    let abort = |r: SdoResponse, want: u32| match r {
+        SdoResponse::Abort { code, .. } => assert_eq!(code, want, "{code:#x}"),
+        r => panic!("{r:?}"),
+    };
+    // Mapping a valid PDO is refused; so is changing a valid PDO's COB-ID.
+    abort(
+        sdo(&mut s, sdo_download(3, 0x1A00, 0, 0, 1)),
+        SDO_ABORT_UNSUPPORTED_ACCESS,
+    );
+    abort(
+        sdo(&mut s, sdo_download(3, 0x1800, 1, 0x190, 4)),
+        SDO_ABORT_VALUE_RANGE,
+    );
+    // Remap TPDO1 to position actual only, on COB-ID 0x190.
+    ok(sdo(&mut s, sdo_download(3, 0x1800, 1, 0x8000_0183, 4)));
+    ok(sdo(&mut s, sdo_download(3, 0x1A00, 0, 0, 1)));
+    // Entries only while sub 0 = 0; statusword is TPDO-mappable, controlword is not readable?
+    ok(sdo(&mut s, sdo_download(3, 0x1A00, 1, 0x6064_0020, 4)));
+    abort(
+        sdo(&mut s, sdo_download(3, 0x1A00, 2, 0x6065_0020, 4)),
+        SDO_ABORT_NOT_MAPPABLE,
+    );
+    abort(
+        sdo(&mut s, sdo_download(3, 0x1A00, 2, 0x6064_0010, 4)),
+        SDO_ABORT_NOT_MAPPABLE,
+    );
+    ok(sdo(&mut s, sdo_download(3, 0x1A00, 0, 1, 1)));
+    abort(
+        sdo(&mut s, sdo_download(3, 0x1A00, 1, 0x6041_0010, 4)),
+        SDO_ABORT_UNSUPPORTED_ACCESS,
+    );
+    ok(sdo(&mut s, sdo_download(3, 0x1800, 1, 0x190, 4)));
+    // Transmission types 241..=251 are reserved.
+    abort(
+        sdo(&mut s, sdo_download(3, 0x1801, 2, 245, 1)),
+        SDO_ABORT_VALUE_RANGE,
+    );
+    let mut out = FrameBuf::default();
+    s.set_actual(0x0102_0304, 0, 0);
+    s.transmit_pdos(&mut out);
+    let f: Vec<(u32, Vec<u8>)> = out
+        .as_slice()
+        .iter()
+        .map(|f| (f.id(), f.data().to_vec()))
+        .collect();
+    assert_eq!(f[0], (0x190, vec![4, 3, 2, 1]));
+    assert_eq!(f[1].0, 0x283, "TPDO2 unchanged");
+    // Read-back of what was written; 0x6064 is read-only; a missing sub-index is named so.
+    assert_eq!(
+        sdo(&mut s, sdo_upload(3, 0x1A00, 1)),
+        SdoResponse::UploadOk {
+            index: 0x1A00,
+            sub: 1,
+            value: 0x6064_0020
+        }
+    );
+    abort(sdo(&mut s, sdo_upload(3, 0x1A00, 9)), SDO_ABORT_NO_SUB);
+    // EDS limits: 0x6007 only 0..=3.
+    abort(
+        sdo(&mut s, sdo_download(3, 0x6007, 0, 4, 2)),
+        SDO_ABORT_VALUE_HIGH,
+    );
+    abort(
+        sdo(&mut s, sdo_download(3, 0x6007, 0, 2, 1)),
+        SDO_ABORT_LENGTH,
+    );
+    // Reset communication restores the EDS defaults of 0x1000-0x1FFF.
+    s.handle_frame(&nmt(NMT_RESET_COMM, 3), 0, &mut out);
+    assert_eq!(s.od_value(0x1800, 1), Some(0x183));
+    assert_eq!(s.od_value(0x1A00, 1), Some(0x6041_0010));
+}
+
+#[test]
+fn rpdo_as_mapped_and_short_rpdo_rejected_with_emcy() {
+    let mut s = operational(2);
+    // RPDO1 remapped to the controlword only.
+    for (i, sub, v, len) in [
+        (0x1400, 1, 0x8000_0202u32, 4u8),
+        (0x1600, 0, 0, 1),
+        (0x1600, 1, 0x6040_0010, 4),
+        (0x1600, 0, 1, 1),
+        (0x1400, 1, 0x202, 4),
+    ] {
+        assert!(matches!(
+            sdo(&mut s, sdo_download(2, i, sub, v, len)),
+            SdoResponse::DownloadOk { .. }
+        ));
+    }
+    let mut out = FrameBuf::default();
+    s.handle_frame(
+        &can_transport::CanFrame::new(0x202, &[6, 0]).unwrap(),
+        0,
+        &mut out,
+    );
+    assert_eq!(s.ds402_state(), Ds402State::ReadyToSwitchOn);
+    // A 6-byte mapping receiving 1 byte: not processed, EMCY 0x8210 once.
+    let mut s = operational(2);
+    s.handle_frame(
+        &can_transport::CanFrame::new(0x202, &[6]).unwrap(),
+        0,
+        &mut out,
+    );
+    assert_eq!(s.ds402_state(), Ds402State::SwitchOnDisabled);
+    assert!(frames(&out).contains(&Message::Emcy {
+        node: 2,
+        code: 0x8210,
+        error_register: 0x11
+    }));
+}
+
+#[test]
+fn consumer_heartbeat_loss_acts_per_0x6007() {
+    let ms = 1_000_000u64;
+    let mut s = operational(4);
+    assert!(matches!(
+        sdo(&mut s, sdo_download(4, 0x1016, 1, (0x7F << 16) | 50, 4)),
+        SdoResponse::DownloadOk { .. }
+    ));
+    assert!(matches!(
+        sdo(&mut s, sdo_download(4, 0x6007, 0, 3, 2)),
+        SdoResponse::DownloadOk { .. }
+    ));
+    let mut out = FrameBuf::default();
+    for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
+        s.handle_frame(&rpdo1(4, cw, 0), 0, &mut out);
+    }
+    // Not armed before the first heartbeat of the producer.
+    s.poll(500 * ms, &mut out);
+    assert_eq!(s.ds402_state(), Ds402State::OperationEnabled);
+    s.handle_frame(&heartbeat(0x7F, NmtState::Operational), 500 * ms, &mut out);
+    out.clear();
+    s.poll(550 * ms, &mut out);
+    assert_eq!(s.ds402_state(), Ds402State::OperationEnabled);
+    s.poll(550 * ms + 1, &mut out);
+    assert_eq!(s.ds402_state(), Ds402State::QuickStopActive);
+    assert!(frames(&out).contains(&Message::Emcy {
+        node: 4,
+        code: 0x8130,
+        error_register: 0x11
+    }));
+}
+
+#[test]
+fn quick_stop_option_and_following_error_per_od() {
+    // EDS default 0x605A = 2: after the ramp (velocity 0) Switch On Disabled.
+    let mut s = operational(5);
+    let mut out = FrameBuf::default();
+    for cw in [
+        CW_SHUTDOWN,
+        CW_SWITCH_ON,
+        CW_ENABLE_OPERATION,
+        CW_QUICK_STOP,
+    ] {
+        s.handle_frame(&rpdo1(5, cw, 0), 0, &mut out);
+    }
+    s.set_actual(0, 100, 0);
+    assert_eq!(s.ds402_state(), Ds402State::QuickStopActive);
+    s.set_actual(0, 0, 0);
+    assert_eq!(s.ds402_state(), Ds402State::SwitchOnDisabled);
+    // 6: stays in Quick Stop Active.
+    let mut s = operational(5);
+    sdo(&mut s, sdo_download(5, 0x605A, 0, 6, 2));
+    for cw in [
+        CW_SHUTDOWN,
+        CW_SWITCH_ON,
+        CW_ENABLE_OPERATION,
+        CW_QUICK_STOP,
+    ] {
+        s.handle_frame(&rpdo1(5, cw, 0), 0, &mut out);
+    }
+    s.set_actual(0, 0, 0);
+    assert_eq!(s.ds402_state(), Ds402State::QuickStopActive);
+    // Following error: window 100 counts, 3 ms at the default 1 ms cycle => fault on the 4th.
+    let mut s = operational(5);
+    sdo(&mut s, sdo_download(5, 0x6065, 0, 100, 4));
+    sdo(&mut s, sdo_download(5, 0x6066, 0, 3, 2));
+    for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
+        s.handle_frame(&rpdo1(5, cw, 0), 0, &mut out);
+    }
+    s.handle_frame(&rpdo1(5, CW_ENABLE_OPERATION, 1000), 0, &mut out);
+    s.handle_frame(&sync(), 0, &mut out);
+    out.clear();
+    for k in 0..4 {
+        assert_eq!(s.ds402_state(), Ds402State::OperationEnabled, "cycle {k}");
+        s.set_actual(500, 0, 0);
+        s.transmit_pdos(&mut out);
+    }
+    assert_eq!(s.ds402_state(), Ds402State::Fault);
+    assert!(frames(&out).contains(&Message::Emcy {
+        node: 5,
+        code: 0x8611,
+        error_register: 0x01
+    }));
+    // Software position limits clamp the latched target.
+    let mut s = operational(5);
+    sdo(&mut s, sdo_download(5, 0x607D, 2, 700, 4));
+    for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
+        s.handle_frame(&rpdo1(5, cw, 0), 0, &mut out);
+    }
+    s.handle_frame(&rpdo1(5, CW_ENABLE_OPERATION, 1000), 0, &mut out);
+    s.handle_frame(&sync(), 0, &mut out);
+    assert_eq!(s.demand(), MotionDemand::Follow { target_counts: 700 });
 }

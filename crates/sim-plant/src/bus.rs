@@ -7,7 +7,8 @@
 //!   like a CSP drive (velocity feed-forward from consecutive targets, dead-beat per SYNC
 //!   period) within the winch limits (cable speed ≤ `bus.max_cable_speed_m_per_s`,
 //!   acceleration ≤ the platform's table 5.1 limit), decelerates on quick stop and is held by
-//!   its brake otherwise (not Operation Enabled, NMT stopped, fault);
+//!   its brake otherwise (not Operation Enabled, fault; NMT stopped as 0x6007 says: drive-io
+//!   configures 2, disable voltage);
 //! * with `[safety_heartbeat]` in the drives config the drives validate the safety monitor's
 //!   heartbeat (drive-io's safety watch) and quick-stop without it;
 //! * the platform settles in the equilibrium of the [`Plant`] for the lengths the winches hold
@@ -79,6 +80,13 @@ impl Default for ConfigFiles {
 /// Why the plant cannot be put on the bus. Every variant names the file(s) and key(s).
 #[derive(Debug, thiserror::Error)]
 pub enum BusPlantError {
+    /// The drives' EDS (drives.toml `bus.eds`) cannot be read.
+    #[error("{drives}: {source}")]
+    Eds {
+        drives: String,
+        #[source]
+        source: drive_io::eds::EdsError,
+    },
     #[error(
         "{plant}: the plant has {plant_m} cables but {drives}: `winch` has {drives_m} [[winch]] \
          entries (cable i is the i-th [[winch]])"
@@ -401,7 +409,13 @@ impl PlantBus {
                 source,
             })?;
         let ids: Vec<u8> = drives.winches.iter().map(|w| w.node_id).collect();
-        let mut bank = DriveBank::new(&ids, opts.default_heartbeat_ms);
+        // The winches implement the object dictionary of the drives' EDS (drives.toml
+        // `bus.eds`, else the simulated winch's config/eds/crs-winch.eds).
+        let eds = drives.load_eds().map_err(|source| BusPlantError::Eds {
+            drives: files.drives.clone(),
+            source,
+        })?;
+        let mut bank = DriveBank::with_eds(&ids, &eds, opts.default_heartbeat_ms);
         if let Some(sw) = drives.safety_heartbeat {
             // The drives validate the safety monitor's heartbeat like the real ones (drives.toml
             // `[safety_heartbeat]`): without it they quick-stop and the brakes hold.

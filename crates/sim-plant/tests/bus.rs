@@ -94,7 +94,7 @@ impl Rig {
     }
 
     fn with_plant(control: Platform, mut plant: PlantBus) -> Self {
-        let master = Master::new(&drives());
+        let master = Master::new(&drives()).unwrap();
         let now = 1_000_000_000;
         plant.start(now);
         let mut r = Self {
@@ -600,6 +600,17 @@ fn drives_not_enabled_or_nmt_stopped_hold_the_cables() {
     // Operational but Switch On Disabled: enable-operation controlword and far targets do
     // nothing (the state machine needs shutdown -> switch on first).
     raw.send(canopen::nmt(canopen::NMT_START, 0));
+    // What drive-io configures at start-up (docs/can-protocol.md): 0x6007 = 2, NMT stop =>
+    // disable voltage (the brake holds). The EDS default 0 would keep following.
+    for node in 1..=8 {
+        raw.send(canopen::sdo_download(
+            node,
+            canopen::OD_ABORT_CONNECTION,
+            0,
+            2,
+            2,
+        ));
+    }
     for _ in 0..50 {
         raw.rpdo_all(0x0F, |_| 0);
         let r = raw.sync();

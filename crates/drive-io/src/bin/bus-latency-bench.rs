@@ -58,7 +58,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let spec = cfg.transport()?;
     let prefix = format!("bench/{}/", std::process::id());
     let control = EmulatorControl::new();
-    let mut ecfg = EmulatorConfig::from_drives(&cfg, 5.0);
+    let mut ecfg = EmulatorConfig::from_drives(&cfg, 5.0)?;
     ecfg.initial_length_m = vec![5.0; cfg.winches.len()];
     let emu_bus = can_transport::open(&spec)?;
     let dio_bus = can_transport::open(&spec)?;

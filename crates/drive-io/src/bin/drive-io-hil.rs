@@ -8,6 +8,7 @@
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    crs_log::init("drive-io-hil");
     let mut transports: Vec<String> = std::env::args().skip(1).collect();
     let timing = if transports.first().is_some_and(|a| a == "--realtime") {
         transports.remove(0);

@@ -24,6 +24,16 @@ struct Args {
     /// Pin the SYNC loop to this CPU (with --rt-priority).
     #[arg(long)]
     cpu: Option<usize>,
+    /// Override `bus.eds`: the drives' EDS (CiA 306) to configure them from.
+    #[arg(long)]
+    eds: Option<String>,
+    /// Override `bus.dcf_dir`: write node<NN>.dcf of every configured drive here.
+    #[arg(long)]
+    dcf_dir: Option<String>,
+    /// Print the start-up SDO script of every drive (from the EDS and the TOML) and exit,
+    /// without touching the bus.
+    #[arg(long)]
+    print_plan: bool,
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -49,6 +59,16 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     if let Some(t) = args.transport {
         cfg.bus.transport = t;
         cfg.validate()?;
+    }
+    if let Some(e) = args.eds {
+        // A path given on the command line is relative to the working directory.
+        cfg.bus.eds = Some(std::path::absolute(e)?.display().to_string());
+    }
+    if let Some(d) = args.dcf_dir {
+        cfg.bus.dcf_dir = Some(std::path::absolute(d)?.display().to_string());
+    }
+    if args.print_plan {
+        return print_plan(&cfg);
     }
     let spec = cfg.transport()?;
     // SAFETY: the handler only stores to an atomic (async-signal-safe).
@@ -76,5 +96,28 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         None => runner::run(&cfg, bus, &ipc, &STOP)?,
     };
     tracing::info!(?summary, "drive-io stopped");
+    Ok(())
+}
+
+/// `--print-plan`: what drive-io will write and read back in every drive, with EDS names.
+fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
+    let eds = cfg.load_eds()?;
+    println!("# EDS: {}", eds.file);
+    for w in &cfg.winches {
+        let ops = drive_io::commissioning::plan(&eds, w, &cfg.bus)?;
+        println!("# drive node {} ({} SDO transfers)", w.node_id, ops.len());
+        for op in ops {
+            let (index, sub) = op.index_sub();
+            let (what, value) = match op {
+                drive_io::commissioning::SdoOp::Write { value, .. } => ("write ", value),
+                drive_io::commissioning::SdoOp::Verify { value, .. } => ("verify", value),
+            };
+            println!(
+                "{:3} {what} 0x{value:08X}  {}",
+                w.node_id,
+                eds.describe(index, sub)
+            );
+        }
+    }
     Ok(())
 }

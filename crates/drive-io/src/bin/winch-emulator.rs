@@ -65,7 +65,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         )
         .into());
     }
-    let ecfg = EmulatorConfig::from_drives(&cfg, args.initial_length_m);
+    let ecfg = EmulatorConfig::from_drives(&cfg, args.initial_length_m)?;
     let bus = can_transport::open(&cfg.transport()?)?;
     let control = EmulatorControl::new();
     if let Some(i) = args.mute_heartbeat_index {

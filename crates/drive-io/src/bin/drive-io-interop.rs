@@ -1,0 +1,109 @@
+//! drive-io against drives that are not this project's code (python `canopen` LocalNodes,
+//! `tools/canopen_interop.py drive`), over python-can's udp_multicast bus. One scenario per
+//! run; prints `INTEROP PASS|FAIL <scenario>: ...`; exit status 0 iff it passed.
+//! Driven by tools/canopen-interop.sh (which starts the python drives first).
+
+use clap::Parser;
+use drive_io::interop;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+struct Args {
+    /// python-can bus, e.g. pycan-udp:239.74.163.2:43113
+    #[arg(long)]
+    transport: String,
+    /// run | emcy | heartbeat | reboot | refused
+    #[arg(long)]
+    scenario: String,
+    /// Number of drives (node ids 1..=N).
+    #[arg(long, default_value_t = 2)]
+    drives: u8,
+    /// The drives' EDS.
+    #[arg(long, default_value = "config/eds/crs-winch.eds")]
+    eds: String,
+    #[arg(long)]
+    dcf_dir: Option<String>,
+    #[arg(long)]
+    candump_log: Option<String>,
+    /// The node the python side faults (emcy, heartbeat, reboot).
+    #[arg(long, default_value_t = 2)]
+    node: u8,
+    /// The EMCY code the python side sends (emcy), e.g. 0x2310.
+    #[arg(long, default_value = "0x2310", value_parser = parse_u16)]
+    code: u16,
+}
+
+fn parse_u16(s: &str) -> Result<u16, String> {
+    match s.strip_prefix("0x") {
+        Some(h) => u16::from_str_radix(h, 16),
+        None => s.parse(),
+    }
+    .map_err(|e| format!("{s}: {e}"))
+}
+
+fn config(a: &Args) -> Result<drive_io::DrivesConfig, String> {
+    let abs = |p: &str| {
+        std::path::absolute(p)
+            .map(|p| p.display().to_string())
+            .map_err(|e| e.to_string())
+    };
+    let mut text = format!(
+        "[bus]\ntransport = \"{}\"\nsync_period_us = 1000\nstale_setpoint_cycles = 50\n\
+         heartbeat_producer_ms = 20\nheartbeat_timeout_ms = 300\nboot_timeout_ms = 20000\n\
+         sdo_timeout_ms = 500\ndrive_heartbeat_consumer_ms = 600\neds = \"{}\"\n",
+        a.transport,
+        abs(&a.eds)?
+    );
+    if let Some(d) = &a.dcf_dir {
+        text.push_str(&format!("dcf_dir = \"{}\"\n", abs(d)?));
+    }
+    if let Some(d) = &a.candump_log {
+        text.push_str(&format!("candump_log = \"{}\"\n", abs(d)?));
+    }
+    for n in 1..=a.drives {
+        let sign = if n % 2 == 1 { 1 } else { -1 };
+        let offset = if sign > 0 { 0 } else { 200_000_000 };
+        text.push_str(&format!(
+            "[[winch]]\nnode_id = {n}\ndrum_diameter_m = 0.305\ngear_ratio = 10.0\n\
+             counts_per_rev = 1048576\nsign = {sign}\noffset_counts = {offset}\n"
+        ));
+    }
+    drive_io::DrivesConfig::parse(&text).map_err(|e| e.to_string())
+}
+
+fn main() -> ExitCode {
+    crs_log::init("drive-io-interop");
+    let a = Args::parse();
+    let prefix = format!("interop/{}/", std::process::id());
+    let r = config(&a).and_then(|cfg| match a.scenario.as_str() {
+        "run" => interop::scenario_run(cfg, &prefix),
+        "emcy" => interop::scenario_emcy(cfg, &prefix, a.node, a.code),
+        "heartbeat" => {
+            interop::scenario_fault(cfg, &prefix, a.node, crs_ipc::fault_code::HEARTBEAT_LOST)
+        }
+        "reboot" => {
+            interop::scenario_fault(cfg, &prefix, a.node, crs_ipc::fault_code::UNEXPECTED_STATE)
+        }
+        "refused" => interop::scenario_refused(
+            cfg,
+            &prefix,
+            &[
+                "drive node 1",
+                "0x6065",
+                "0x06020000",
+                "object does not exist",
+            ],
+        ),
+        s => Err(format!("unknown scenario {s}")),
+    });
+    match r {
+        Ok(msg) => {
+            println!("INTEROP PASS {}: {msg}", a.scenario);
+            ExitCode::SUCCESS
+        }
+        Err(msg) => {
+            println!("INTEROP FAIL {}: {msg}", a.scenario);
+            ExitCode::FAILURE
+        }
+    }
+}
