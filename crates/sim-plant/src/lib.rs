@@ -26,6 +26,7 @@ pub mod bus;
 pub mod cable_law;
 pub mod campaign;
 pub mod config;
+pub mod oracle;
 pub mod plant;
 
 pub use campaign::{
