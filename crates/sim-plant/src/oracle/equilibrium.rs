@@ -17,7 +17,8 @@
 //! solver works on g, which is defined for all of them.
 //!
 //! The Hessian ∂g/∂x is taken by forward differences of g itself (no stiffness matrices
-//! K_G, K_C of eq. 2.67–2.76); the step is Newton's, halved until ‖g‖ decreases. The solution is
+//! K_G, K_C of eq. 2.67–2.76) and kept while the steps contract well; the step is Newton's,
+//! halved until ‖g‖ decreases. The solution is
 //! accepted when the Cartesian residual wrench Σ f_i [u_i; b_i × u_i] + w_e (eq. 2.30) —
 //! computed from the same cable vectors — is at round-off.
 
@@ -28,7 +29,7 @@ use cdpr_model::elastostatics::CableLaw;
 use glam::DVec3;
 use nalgebra::{Matrix6, Vector6};
 
-/// Newton iterations allowed per solve (quadratic convergence: 3–6 are typical).
+/// Iterations allowed per solve (Newton and chord steps; 3–8 are typical).
 const MAX_ITERATIONS: usize = 100;
 /// Converged when max |g| ≤ this × force scale (Σ f + largest load + 1 N).
 const GRADIENT_TOLERANCE: f64 = 1e-14;
@@ -280,7 +281,13 @@ pub fn solve(
 ) -> Result<Solution, EquilibriumError> {
     let mut x = *guess;
     evaluate(model, law, q_theta, &x, &mut ws.at)?;
+    // `ws.at` is evaluated at x and the law's chord angles are x's.
+    let mut law_at_x = true;
     let mut iterations = 0;
+    // The Hessian is taken at the first iteration and kept while Newton's steps contract
+    // well (a chord method: g is exact, so this changes the rate, not the solution); it is
+    // taken again when a step contracts ‖g‖ by less than 4 or the full step is rejected.
+    let mut hessian: Option<nalgebra::LU<f64, nalgebra::U6, nalgebra::U6>> = None;
     for it in 1..=MAX_ITERATIONS {
         if ws.at.f.iter().all(|f| *f == 0.0) {
             return Err(EquilibriumError::AllSlack);
@@ -289,19 +296,26 @@ pub fn solve(
             break;
         }
         iterations = it;
-        // Hessian H_jk = ∂g_j/∂x_k by forward differences of g.
-        let mut h = Matrix6::zeros();
-        for k in 0..6 {
-            let mut xk = x;
-            xk[k] += HESSIAN_STEP;
-            evaluate(model, law, q_theta, &xk, &mut ws.trial)?;
-            for j in 0..6 {
-                h[(j, k)] = (ws.trial.gradient[j] - ws.at.gradient[j]) / HESSIAN_STEP;
+        let fresh = hessian.is_none();
+        let lu = match hessian.take() {
+            Some(lu) => lu,
+            None => {
+                // H_jk = ∂g_j/∂x_k by forward differences of g.
+                let mut h = Matrix6::zeros();
+                for k in 0..6 {
+                    let mut xk = x;
+                    xk[k] += HESSIAN_STEP;
+                    evaluate(model, law, q_theta, &xk, &mut ws.trial)?;
+                    for j in 0..6 {
+                        h[(j, k)] = (ws.trial.gradient[j] - ws.at.gradient[j]) / HESSIAN_STEP;
+                    }
+                }
+                law_at_x = false;
+                h.lu()
             }
-        }
+        };
         let g = Vector6::from_column_slice(&ws.at.gradient);
-        let step = h
-            .lu()
+        let step = lu
             .solve(&(-g))
             .filter(|s| s.iter().all(|v| v.is_finite()))
             .ok_or(EquilibriumError::Singular { iteration: it })?;
@@ -312,21 +326,35 @@ pub fn solve(
             let trial: [f64; 6] = std::array::from_fn(|j| x[j] + alpha * step[j]);
             let ok = evaluate(model, law, q_theta, &trial, &mut ws.trial).is_ok()
                 && norm2(&ws.trial.gradient) < merit;
+            law_at_x = false;
             if ok {
                 x = trial;
                 std::mem::swap(&mut ws.at, &mut ws.trial);
+                law_at_x = true;
                 accepted = true;
                 break;
             }
+            if !fresh {
+                break; // an old Hessian: take a new one before shortening the step
+            }
             alpha *= 0.5;
         }
-        // No decrease along the Newton direction: g is at its round-off floor.
-        if !accepted || alpha * step.amax() < STEP_TOLERANCE {
+        if !accepted {
+            if fresh {
+                break; // no decrease along Newton's direction: g is at its round-off floor
+            }
+            continue;
+        }
+        if alpha * step.amax() < STEP_TOLERANCE {
             break;
         }
+        if alpha == 1.0 && norm2(&ws.at.gradient) * 16.0 <= merit {
+            hessian = Some(lu);
+        }
     }
-    // The last evaluation may have been a trial: place the law's chord angles at x again.
-    evaluate(model, law, q_theta, &x, &mut ws.at)?;
+    if !law_at_x {
+        evaluate(model, law, q_theta, &x, &mut ws.at)?;
+    }
     if ws.at.f.iter().all(|f| *f == 0.0) {
         return Err(EquilibriumError::AllSlack);
     }
