@@ -250,6 +250,8 @@ impl Plant {
             None => 1,
         };
         let last = self.last_q.clone();
+        // Sub-steps share the oracle's Hessian; a new command starts afresh.
+        self.ws.forget_hessian();
         let mut sol = None;
         for k in 1..=n_sub {
             let t = k as f64 / n_sub as f64;

@@ -124,6 +124,8 @@ impl State {
 pub struct Workspace {
     pub at: State,
     trial: State,
+    /// The last Hessian that contracted well (a start for the next solve; `None` = take one).
+    hessian: Option<nalgebra::LU<f64, nalgebra::U6, nalgebra::U6>>,
 }
 
 impl Workspace {
@@ -131,7 +133,14 @@ impl Workspace {
         Self {
             at: State::new(m),
             trial: State::new(m),
+            hessian: None,
         }
+    }
+
+    /// Forgets the kept Hessian: the next solve takes a new one (the plant does this at the
+    /// start of every command, so an answer depends only on its state and the command).
+    pub fn forget_hessian(&mut self) {
+        self.hessian = None;
     }
 }
 
@@ -284,10 +293,10 @@ pub fn solve(
     // `ws.at` is evaluated at x and the law's chord angles are x's.
     let mut law_at_x = true;
     let mut iterations = 0;
-    // The Hessian is taken at the first iteration and kept while Newton's steps contract
+    // The Hessian is taken at the first iteration (or kept from the previous solve) and kept while Newton's steps contract
     // well (a chord method: g is exact, so this changes the rate, not the solution); it is
     // taken again when a step contracts ‖g‖ by less than 4 or the full step is rejected.
-    let mut hessian: Option<nalgebra::LU<f64, nalgebra::U6, nalgebra::U6>> = None;
+    let mut hessian = ws.hessian.take();
     for it in 1..=MAX_ITERATIONS {
         if ws.at.f.iter().all(|f| *f == 0.0) {
             return Err(EquilibriumError::AllSlack);
@@ -352,6 +361,7 @@ pub fn solve(
             hessian = Some(lu);
         }
     }
+    ws.hessian = hessian;
     if !law_at_x {
         evaluate(model, law, q_theta, &x, &mut ws.at)?;
     }
