@@ -163,9 +163,6 @@ impl Plant {
     }
 
     pub fn restore(&mut self, st: &PlantState) {
-        // The oracle's kept Hessian belongs to the warm start like the pose: a restored plant
-        // answers as one that has just reached the restored state.
-        self.ws.forget_hessian();
         self.pose = st.pose;
         self.last_q.clone_from(&st.q_theta);
         self.law.set_hysteresis_state(&st.hysteresis);
@@ -253,6 +250,8 @@ impl Plant {
             None => 1,
         };
         let last = self.last_q.clone();
+        // Sub-steps share the oracle's Hessian; a new command starts afresh.
+        self.ws.forget_hessian();
         let mut sol = None;
         for k in 1..=n_sub {
             let t = k as f64 / n_sub as f64;
@@ -342,7 +341,6 @@ impl Plant {
             q_cmd[i] = self.winch_inverse(i, qt);
         }
         self.pose = *pose;
-        self.ws.forget_hessian();
         self.last_q = Some((0..m).map(|i| self.winch(i, q_cmd[i])).collect());
         Ok(TensionSetup { q_cmd, forces })
     }

@@ -137,9 +137,8 @@ impl Workspace {
         }
     }
 
-    /// Forgets the kept Hessian: the next solve takes a new one (the plant does this when its
-    /// warm start moves: restore, tension set-up). A kept Hessian only changes the rate of
-    /// convergence, like the warm start, not the solution.
+    /// Forgets the kept Hessian: the next solve takes a new one (the plant does this at the
+    /// start of every command, so an answer depends only on its state and the command).
     pub fn forget_hessian(&mut self) {
         self.hessian = None;
     }
