@@ -238,9 +238,9 @@ pub fn tension(model: &OracleModel, law: &mut PlantLaw, q_theta: &[f64], st: &mu
     set_chords(law, st);
     st.gradient = st.load_force.map(|v| -v);
     st.residual = st.wrench;
-    for i in 0..st.cables.len() {
+    for (i, &q_t) in q_theta.iter().enumerate().take(st.cables.len()) {
         let c = st.cables[i];
-        let f = cable_tension(model, law, i, c.q, q_theta[i]);
+        let f = cable_tension(model, law, i, c.q, q_t);
         st.f[i] = f;
         if f == 0.0 {
             continue;
