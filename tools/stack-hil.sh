@@ -86,6 +86,11 @@ for m in safety-monitor.toml safety-monitor-helicopter.toml; do
     -e 's/^setpoint_period_ms = .*/setpoint_period_ms = 4.0/' "$C/$m"
   # The guest is emulated: give the monitor's bus reader thread more slack before it counts as dead.
   sed -i -e 's/^reader_stall_cycles = .*/reader_stall_cycles = 40/' "$C/$m"
+  # Its SRDO configuration follows the drives' relaxed one (the configuration CRC must match).
+  sed -i -e 's/^safety_validation_time_ms = [0-9]*/safety_validation_time_ms = 150/' \
+    -e 's/^safety_pair_window_ms = [0-9]*/safety_pair_window_ms = 75/' "$C/$m"
+  grep -q '^safety_validation_time_ms = 150' "$C/$m" ||
+    { echo "stack-hil: relaxing $m's SRDO configuration failed" >&2; exit 1; }
   [ "$(grep -c '^silence_cycles = \(10\|20\)$' "$C/$m")" = 3 ] &&
     grep -q '^setpoint_period_ms = 4.0' "$C/$m" && grep -q '^reader_stall_cycles = 40' "$C/$m" ||
     { echo "stack-hil: relaxing $m failed (config keys changed?)" >&2; exit 1; }

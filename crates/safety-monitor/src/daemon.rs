@@ -330,8 +330,22 @@ pub fn run(
         transport = %transport,
         safety_cob_id = format_args!("{cob:#05x}"),
         reset_epoch = monitor.reset_epoch(),
+        profile = %cfg.monitor.profile,
+        platform_sha256 = %cfg.platform_sha256,
+        safety_params_crc = format_args!("{:#010x}", cfg.safety_params_crc),
+        srdo_crc = format_args!("{:#06x}", cfg.srdo().crc()),
         "safety monitor started"
     );
+    if cfg.is_bench() {
+        tracing::warn!("BENCH profile: checks may be switched off; not for the robot");
+    }
+    // The configuration signature (issue 16): the SRDO configuration CRC the consumers check
+    // and the CRC of the safety parameter set, doubled like the heartbeat, every cycle.
+    let signature = safety_frame::ConfigSignature {
+        srdo_crc: cfg.srdo().crc(),
+        safety_params_crc: cfg.safety_params_crc,
+    }
+    .encode(cob);
 
     let mut sum = Summary::default();
     let mut counter: u16 = 0;
@@ -605,7 +619,11 @@ pub fn run(
             }
         }
 
-        // The fail-safe heartbeat: every cycle, STOP while tripped.
+        // The fail-safe heartbeat: every cycle, STOP while tripped, after the signature (a
+        // consumer counts a RUN pair only with a recent signature of its own CRC).
+        for f in &signature {
+            send(tx.as_mut(), f, &mut sum.can_send_errors);
+        }
         for f in safety_frame::encode(&monitor.heartbeat(counter), cob) {
             send(tx.as_mut(), &f, &mut sum.can_send_errors);
         }

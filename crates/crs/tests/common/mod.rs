@@ -116,6 +116,9 @@ pub fn relaxed_configs_of(dir: &Path, daemon: &str, drives: &str, monitor: &str)
                 ("silence_cycles", "10"),
                 ("identity_grace_cycles", "40"),
                 ("setpoint_period_ms", "4.0"),
+                // The monitor's SRDO configuration follows the drives' (its CRC must match).
+                ("safety_validation_time_ms", "150"),
+                ("safety_pair_window_ms", "75"),
             ],
         ),
     ]
