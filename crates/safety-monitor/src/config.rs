@@ -188,10 +188,41 @@ pub struct MotionSection {
     pub margin: f64,
 }
 
+/// `[ipc]`: who may own the single-owner streams of the process bus (issue 16). Each list
+/// names the executables (basename of `/proc/<pid>/exe` of the publisher's process) allowed to
+/// publish that stream; any other publisher, or more than one, trips `foreign_publisher`. An
+/// empty list switches the check off (bench profile only).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct IpcSection {
+    #[serde(default = "d_motion_core")]
+    pub setpoint_owners: Vec<String>,
+    #[serde(default = "d_drive_io")]
+    pub feedback_owners: Vec<String>,
+    #[serde(default = "d_motion_core")]
+    pub identity_owners: Vec<String>,
+}
+
+fn d_motion_core() -> Vec<String> {
+    vec!["motion-core".into()]
+}
+fn d_drive_io() -> Vec<String> {
+    vec!["drive-io".into()]
+}
+fn d_ipc() -> IpcSection {
+    IpcSection {
+        setpoint_owners: d_motion_core(),
+        feedback_owners: d_drive_io(),
+        identity_owners: d_motion_core(),
+    }
+}
+
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
     monitor: MonitorSection,
+    #[serde(default = "d_ipc")]
+    ipc: IpcSection,
     #[serde(default = "d_feedback")]
     feedback: FeedbackSection,
     #[serde(default = "d_forces")]
@@ -358,6 +389,7 @@ pub struct MonitorConfig {
     pub forces: ForcesSection,
     pub motion: MotionSection,
     pub can: CanSection,
+    pub ipc: IpcSection,
     pub platform_file: PathBuf,
     pub platform: PlatformParams,
     pub drives_file: PathBuf,
@@ -614,6 +646,21 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             "must be >= 1 and <= can.safety_validation_time_ms".into(),
         ));
     }
+    for (key, names) in [
+        ("ipc.setpoint_owners", &raw.ipc.setpoint_owners),
+        ("ipc.feedback_owners", &raw.ipc.feedback_owners),
+        ("ipc.identity_owners", &raw.ipc.identity_owners),
+    ] {
+        if let Some(n) = names
+            .iter()
+            .find(|n| n.is_empty() || n.contains('/') || n.len() > 255)
+        {
+            return Err(bad(
+                key,
+                format!("{n:?}: an executable's file name (no path, 1..=255 bytes)"),
+            ));
+        }
+    }
     // Profiles (issue 16): outside the bench profile no switch may disable a check.
     let bench = match m.profile.as_str() {
         PROFILE_ROBOT => false,
@@ -626,7 +673,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         }
     };
     if !bench {
-        let off: [(&str, bool); 6] = [
+        let off: [(&str, bool); 9] = [
             ("monitor.require_ready", !m.require_ready),
             (
                 "feedback.check_following_error",
@@ -636,6 +683,9 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             ("forces.check", !fo.check),
             ("motion.check", !raw.motion.check),
             ("can.check_rpdo", !c.check_rpdo),
+            ("ipc.setpoint_owners", raw.ipc.setpoint_owners.is_empty()),
+            ("ipc.feedback_owners", raw.ipc.feedback_owners.is_empty()),
+            ("ipc.identity_owners", raw.ipc.identity_owners.is_empty()),
         ];
         if let Some((key, _)) = off.iter().find(|(_, is_off)| *is_off) {
             return Err(bad(
@@ -738,6 +788,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         forces: raw.forces,
         motion: raw.motion,
         can: raw.can,
+        ipc: raw.ipc,
         platform_file,
         platform,
         drives_file,

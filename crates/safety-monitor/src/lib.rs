@@ -28,6 +28,7 @@ pub mod daemon;
 pub mod identity;
 pub mod kinematics;
 pub mod monitor;
+pub mod ownership;
 pub mod platform;
 pub mod trip;
 

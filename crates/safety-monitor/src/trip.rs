@@ -63,10 +63,19 @@ pub enum Cause {
     /// second publisher impersonating the monitor, e.g. a forged Reset): the process bus can
     /// no longer be trusted (issue 16).
     ForgedEvent = 22,
+    // 23..=27 are left to the CAN bus-error and stop-escalation causes (issue 15).
+    /// The setpoint producer announced the end of its stream (STOPPING) before the end of the
+    /// plan it announced, while the stream was not holding, or without any plan announced: a
+    /// forged or premature end that would disarm the silence and sequence checks (issue 16).
+    UnplannedStreamEnd = 28,
+    /// A single-owner stream (setpoints, drive feedback, platform identity) has more than one
+    /// publisher, or its publisher is not the process the stack expects (iceoryx2's service
+    /// introspection: publisher count, owning node's process id and executable; issue 16).
+    ForeignPublisher = 29,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 22] = [
+    pub const ALL: [Cause; 24] = [
         Cause::DqLimit,
         Cause::NonFinite,
         Cause::OutsideWorkspace,
@@ -89,6 +98,8 @@ impl Cause {
         Cause::BusObservation,
         Cause::EStopEvent,
         Cause::ForgedEvent,
+        Cause::UnplannedStreamEnd,
+        Cause::ForeignPublisher,
     ];
 
     pub fn code(self) -> u8 {
@@ -126,6 +137,8 @@ impl Cause {
             Cause::BusObservation => "bus_observation",
             Cause::EStopEvent => "estop_event",
             Cause::ForgedEvent => "forged_event",
+            Cause::UnplannedStreamEnd => "unplanned_stream_end",
+            Cause::ForeignPublisher => "foreign_publisher",
         }
     }
 

@@ -50,6 +50,12 @@ impl Rig {
             PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/safety-monitor.toml");
         let mut cfg = config::load(&cfg_path).unwrap();
         cfg.monitor.rt_priority = 0;
+        // The test process itself publishes the setpoints and the identity (issue 16: the
+        // stream owners are checked by executable).
+        let me = std::env::current_exe().unwrap();
+        let me = me.file_name().unwrap().to_string_lossy().to_string();
+        cfg.ipc.setpoint_owners = vec![me.clone()];
+        cfg.ipc.identity_owners = vec![me];
         cfg.can.reset_wait_ms = 200;
         let kin = StandardKinematics::new(&cfg.platform);
         let id = platform_identity(&cfg.platform);
