@@ -21,6 +21,7 @@
 //! is `can_transport::safety_frame`; the drives' and drive-io's validation of it is
 //! `drive_io::safety_watch`. See docs/safety-monitor.md.
 
+pub mod accept;
 pub mod bus_frames;
 pub mod bus_watch;
 pub mod config;

@@ -180,3 +180,92 @@ fn safety_parameter_crc_covers_every_file() {
         .safety_params_crc;
     assert_ne!(b0, b1);
 }
+
+/// The accept step: a calibration's new platform file is shown as a diff and changes nothing
+/// without --yes; with it the monitor's accepted copy and its hash are written, the config
+/// loads the new parameters, and later edits of the candidate file (a calibration writing
+/// again) do not reach the monitor.
+#[test]
+fn a_new_platform_becomes_active_only_through_accept() {
+    let dir = std::env::temp_dir().join(format!("sm-accept-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    for f in ["safety-monitor.toml", "icosahedron.toml", "drives.toml"] {
+        std::fs::copy(root().join(f), dir.join(f)).unwrap();
+    }
+    let cfg = dir.join("safety-monitor.toml");
+    let before = std::fs::read_to_string(&cfg).unwrap();
+    let plat = std::fs::read_to_string(dir.join("icosahedron.toml")).unwrap();
+    let calibrated = plat.replace("f_max_n = 9000.0", "f_max_n = 9500.0");
+    assert_ne!(calibrated, plat);
+    let cand = dir.join("calibrated.toml");
+    std::fs::write(&cand, &calibrated).unwrap();
+
+    // Shown only.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_safety-monitor"))
+        .args([
+            "accept",
+            cand.to_str().unwrap(),
+            "--config",
+            cfg.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(text.contains("forces.f_max_n: 9000 -> 9500"), "{text}");
+    assert!(text.contains("1 parameter(s) differ"), "{text}");
+    assert!(text.contains("(accepted)"), "{text}");
+    assert_eq!(std::fs::read_to_string(&cfg).unwrap(), before);
+    assert_eq!(config::load(&cfg).unwrap().platform.f_max_n, 9000.0);
+
+    // Accepted.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_safety-monitor"))
+        .args([
+            "accept",
+            cand.to_str().unwrap(),
+            "--yes",
+            "--config",
+            cfg.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text} {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let c = config::load(&cfg).unwrap();
+    assert_eq!(c.platform.f_max_n, 9500.0);
+    assert!(
+        c.platform_file
+            .ends_with("accepted/safety-monitor.platform.toml")
+    );
+    assert_eq!(
+        std::fs::read(&c.platform_file).unwrap(),
+        calibrated.as_bytes()
+    );
+    // Every other line of the config is unchanged.
+    let after = std::fs::read_to_string(&cfg).unwrap();
+    let strip = |t: &str| -> Vec<String> {
+        t.lines()
+            .filter(|l| !l.starts_with("platform"))
+            .map(str::to_string)
+            .collect()
+    };
+    assert_eq!(strip(&before), strip(&after));
+    // The calibration writes its file again: the monitor still runs its accepted copy.
+    std::fs::write(&cand, plat.replace("f_max_n = 9000.0", "f_max_n = 8000.0")).unwrap();
+    assert_eq!(config::load(&cfg).unwrap().platform.f_max_n, 9500.0);
+    // Editing the accepted copy itself is caught by the pinned hash.
+    let copy = c.platform_file.clone();
+    std::fs::write(&copy, calibrated.replace("9500.0", "9600.0")).unwrap();
+    let e = config::load(&cfg).unwrap_err().to_string();
+    assert!(e.contains("platform_sha256"), "{e}");
+    // A candidate the monitor's parser refuses is not accepted.
+    std::fs::write(&cand, "[platform]\nname = \"x\"\n").unwrap();
+    let e = safety_monitor::accept::accept(&cfg, &cand, true).unwrap_err();
+    assert!(!e.is_empty());
+    let _ = std::fs::remove_dir_all(&dir);
+}

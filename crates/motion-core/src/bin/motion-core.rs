@@ -205,7 +205,8 @@ fn run(args: Args) -> Result<(), String> {
     let cfg = config::load(&args.config).map_err(|e| e.to_string())?;
     let platform = load_platform(&cfg.platform).map_err(|e| e.to_string())?;
     let model = platform.model.clone();
-    let identity = model.identity_hex();
+    // The identity the safety monitor compares (issue 16): model, workspace box, limits.
+    let identity = platform.identity_hex();
     tracing::info!(platform = %platform.name, identity = %identity, cables = model.m(), "platform loaded");
 
     let configured = lifecycle::configure(&cfg, &platform).map_err(|e| e.to_string())?;
@@ -268,7 +269,7 @@ fn run(args: Args) -> Result<(), String> {
     let stage = {
         let outbox = outbox.clone();
         let stats = stats.clone();
-        let identity = PlatformIdentity::new(model.identity(), model.m() as u32);
+        let identity = PlatformIdentity::new(platform.identity(), model.m() as u32);
         let mut rt = cfg.realtime;
         rt.priority = (rt.priority - 1).max(0);
         rt.lock_memory = false;
