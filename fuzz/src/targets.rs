@@ -496,8 +496,7 @@ fn run_watch(b: &[u8], _: &Scratch) -> Verdict {
                 "SafetyWatch permits at t = {now} ns with no frame on the safety ids for more than the validation time"
             ));
         }
-        if permits
-            && last_signature_frame.is_none_or(|t| now.saturating_sub(t) > 2 * validation_ns)
+        if permits && last_signature_frame.is_none_or(|t| now.saturating_sub(t) > 2 * validation_ns)
         {
             return Verdict::Violation(format!(
                 "SafetyWatch permits at t = {now} ns without a configuration signature"

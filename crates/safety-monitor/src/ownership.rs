@@ -113,7 +113,7 @@ impl OwnerWatch {
                 }
                 Some(exe) => {
                     live += 1;
-                    if !self.allowed.iter().any(|a| *a == exe) {
+                    if !self.allowed.contains(&exe) {
                         foreign.get_or_insert((pid, exe));
                     }
                 }
