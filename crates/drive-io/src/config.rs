@@ -144,8 +144,10 @@ pub struct DrivesConfig {
     pub bus: BusConfig,
     #[serde(rename = "winch")]
     pub winches: Vec<WinchConfig>,
-    /// Optional `[safety_heartbeat]`: validate the safety monitor's doubled heartbeat and stop
-    /// without it (see [`crate::safety_watch`]). Absent = no watch.
+    /// `[safety_heartbeat]`: validate the safety monitor's doubled heartbeat and its
+    /// configuration signature, and stop without them (see [`crate::safety_watch`]). Parsed as
+    /// optional so the drive side and tests can run without it, but the drive-io daemon refuses
+    /// to start without it ([`DrivesConfig::require_safety_heartbeat`], issue 16).
     #[serde(default)]
     pub safety_heartbeat: Option<crate::safety_watch::SafetyWatchConfig>,
 }

@@ -25,6 +25,14 @@
 //! only with the monitor's reset of the epoch this watch verified ([`VerifiedEpoch`]; see
 //! docs/safety-monitor.md).
 //!
+//! SRDO configuration (issue 16): the monitor sends a doubled configuration signature
+//! (`can_transport::safety_frame::ConfigSignature`) before every heartbeat pair; a RUN pair
+//! counts only if a signature carrying the CRC of THIS consumer's configuration
+//! ([`SafetyWatchConfig::srdo_crc`]: COB-ID, refresh time, validation time, pair window) arrived
+//! within the validation time before it. A signature with another CRC inhibits at once
+//! ([`InhibitReason::ConfigCrc`]), so a consumer configured differently from the producer never
+//! permits.
+//!
 //! Used by the drive side ([`crate::slave::DriveBank::enable_safety_watch`], the
 //! `winch-emulator`) and by drive-io's master loop ([`crate::runner`]) when `drives.toml` has a
 //! `[safety_heartbeat]` table. Pure logic: frames and times in, decisions out; no I/O, no
@@ -41,7 +49,8 @@ use serde::Deserialize;
 /// tolerated within the validation time; 0 = repeat and backwards steps are not).
 pub const MAX_COUNTER_STEP: u16 = 16;
 
-/// `[safety_heartbeat]` table of drives.toml. Absent = no watch (the default).
+/// `[safety_heartbeat]` table of drives.toml: mandatory for the drive-io daemon (issue 16; a
+/// bench-only override exists), absent = no watch on the drive side (winch emulator, plant).
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SafetyWatchConfig {
