@@ -120,6 +120,7 @@ fn frame_seeds(_: &Path) -> Vec<Vec<u8>> {
         co::sdo_abort(4, 0x1234, 1, 0x0602_0000),
     ];
     v.extend(safety_frame::encode(&hb, safety_frame::DEFAULT_COB_ID));
+    v.extend(signature().encode(safety_frame::DEFAULT_COB_ID));
     let mut seeds: Vec<Vec<u8>> = v.iter().map(frame_bytes).collect();
     seeds.push(v.iter().flat_map(frame_bytes).collect());
     seeds
@@ -406,6 +407,51 @@ pub fn all() -> Vec<Target> {
             },
         },
         Target {
+            name: "config-signature",
+            what: "the monitor's doubled configuration signature (safety_frame::ConfigSignature, issue 16)",
+            locate: Locate::No,
+            seeds: frame_seeds,
+            run: |b, _| {
+                let id = safety_frame::config_cob_id(safety_frame::DEFAULT_COB_ID);
+                let mut rx = safety_frame::PairReceiver::new(id, 10_000_000);
+                let mut any = Verdict::Accepted;
+                let mut last_normal: Option<[u8; 8]> = None;
+                for (k, f) in frames_from(b).iter().enumerate() {
+                    if f.id() == u32::from(id) && f.data().len() == 8 {
+                        let mut d = [0u8; 8];
+                        d.copy_from_slice(f.data());
+                        last_normal = Some(d);
+                    }
+                    match rx.on_frame_raw(f, k as u64 * 1000) {
+                        None => {}
+                        Some(Err(e)) => any = Verdict::Rejected(format!("{e:?}")),
+                        Some(Ok(d)) => {
+                            let inv_ok = f.data().len() == 8
+                                && last_normal.is_some_and(|n| {
+                                    n == d && n.iter().zip(f.data()).all(|(a, c)| *a == !*c)
+                                });
+                            if !inv_ok {
+                                return Verdict::Violation(
+                                    "a signature pair was accepted that is not an exact inverse"
+                                        .into(),
+                                );
+                            }
+                            match safety_frame::ConfigSignature::from_bytes(&d) {
+                                Ok(sig) if sig.to_bytes() != d => {
+                                    return Verdict::Violation(format!(
+                                        "signature {sig:?} does not round-trip"
+                                    ));
+                                }
+                                Ok(_) => {}
+                                Err(e) => any = Verdict::Rejected(format!("{e:?}")),
+                            }
+                        }
+                    }
+                }
+                any
+            },
+        },
+        Target {
             name: "safety-watch",
             what: "SafetyWatch state machine (drive_io::safety_watch) under arbitrary frame sequences and times",
             locate: Locate::No,
@@ -426,8 +472,13 @@ fn watch_seed() -> Vec<u8> {
             counter: c as u16,
             epoch: 1,
         };
+        let [s1, s2] = signature().encode(safety_frame::DEFAULT_COB_ID);
         let [n, i] = safety_frame::encode(&hb, safety_frame::DEFAULT_COB_ID);
         v.push(15);
+        v.extend(frame_bytes(&s1));
+        v.push(0);
+        v.extend(frame_bytes(&s2));
+        v.push(0);
         v.extend(frame_bytes(&n));
         v.push(0);
         v.extend(frame_bytes(&i));
@@ -435,14 +486,24 @@ fn watch_seed() -> Vec<u8> {
     v
 }
 
+/// The monitor's configuration signature for the default SRDO configuration.
+fn signature() -> safety_frame::ConfigSignature {
+    safety_frame::ConfigSignature {
+        srdo_crc: SafetyWatchConfig::default().srdo_crc(),
+        safety_params_crc: 0x1234_5678,
+    }
+}
+
 /// Properties: no panic; never PERMIT when no frame at all arrived on the safety ids within the
-/// validation time; never PERMIT right after the monitor said STOP in a valid pair.
+/// validation time; never PERMIT right after the monitor said STOP in a valid pair; never
+/// PERMIT without a signature frame (issue 16) within twice the validation time.
 fn run_watch(b: &[u8], _: &Scratch) -> Verdict {
     let cfg = SafetyWatchConfig::default();
     let validation_ns = u64::from(cfg.validation_time_ms) * 1_000_000;
     let mut w = SafetyWatch::new(cfg);
     let mut now: u64 = 1_000_000_000;
     let mut last_safety_frame: Option<u64> = None;
+    let mut last_signature_frame: Option<u64> = None;
     let mut i = 0;
     let mut pending_normal: Option<CanFrame> = None;
     while i + 4 <= b.len() {
@@ -455,6 +516,9 @@ fn run_watch(b: &[u8], _: &Scratch) -> Verdict {
         let safety_id = id == cfg.cob_id || id == cfg.cob_id + 1;
         if safety_id {
             last_safety_frame = Some(now);
+        }
+        if id == cfg.cob_id + 2 || id == cfg.cob_id + 3 {
+            last_signature_frame = Some(now);
         }
         let mut stop_said = false;
         if id == cfg.cob_id {
@@ -470,6 +534,12 @@ fn run_watch(b: &[u8], _: &Scratch) -> Verdict {
         if permits && silent {
             return Verdict::Violation(format!(
                 "SafetyWatch permits at t = {now} ns with no frame on the safety ids for more than the validation time"
+            ));
+        }
+        if permits && last_signature_frame.is_none_or(|t| now.saturating_sub(t) > 2 * validation_ns)
+        {
+            return Verdict::Violation(format!(
+                "SafetyWatch permits at t = {now} ns without a configuration signature"
             ));
         }
         if permits && stop_said {

@@ -224,6 +224,17 @@ impl PairReceiver {
         frame: &CanFrame,
         now_ns: u64,
     ) -> Option<Result<SafetyHeartbeat, PairError>> {
+        self.on_frame_raw(frame, now_ns)
+            .map(|r| r.and_then(|n| SafetyHeartbeat::from_bytes(&n)))
+    }
+
+    /// As [`PairReceiver::on_frame`], returning the 8 data bytes of a valid pair unparsed (the
+    /// configuration signature pair, [`ConfigSignature`], uses the same doubling).
+    pub fn on_frame_raw(
+        &mut self,
+        frame: &CanFrame,
+        now_ns: u64,
+    ) -> Option<Result<[u8; 8], PairError>> {
         if !self.is_safety_frame(frame) {
             return None;
         }
@@ -249,7 +260,140 @@ impl PairReceiver {
         if gap_ns > self.window_ns {
             return Some(Err(PairError::PairWindow { gap_ns }));
         }
-        Some(check_inverse(&n, &d).and_then(|()| SafetyHeartbeat::from_bytes(&n)))
+        Some(check_inverse(&n, &d).map(|()| n))
+    }
+}
+
+/// Kind nibble of the configuration signature pair (byte 0 low nibble).
+const KIND_CONFIG: u8 = 0x03;
+
+/// COB-ID of the normal frame of the configuration signature pair for a heartbeat on `cob_id`:
+/// the next SRDO pair (`cob_id + 2`, inverse on `cob_id + 3`; 0x103/0x104 = CiA 304 SRDO 2).
+pub fn config_cob_id(cob_id: u16) -> u16 {
+    cob_id.wrapping_add(2)
+}
+
+/// The SRDO communication parameters of the safety heartbeat: what producer and consumers must
+/// agree on (CiA 304 objects 0x1301..: COB-IDs, refresh time, SCT, SRVT). Each side computes
+/// [`SrdoParams::crc`] from ITS OWN configuration; the producer announces its CRC in the
+/// configuration signature pair and a consumer whose CRC differs never permits motion (CiA 304
+/// keeps the signature in 0x13FF and refuses to go operational on a mismatch).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SrdoParams {
+    /// Normal frame of the heartbeat pair (inverse on + 1, signature pair on + 2 / + 3).
+    pub cob_id: u16,
+    /// Producer refresh time (the monitor's cycle), ms.
+    pub refresh_time_ms: u32,
+    /// Safeguard cycle time (consumer validation time), ms.
+    pub validation_time_ms: u32,
+    /// Safeguard reception validation time (pair window), ms.
+    pub pair_window_ms: u32,
+}
+
+impl SrdoParams {
+    /// CRC-16/CCITT (polynomial 0x1021, initial value 0, CiA 304's checksum algorithm) over the
+    /// canonical little-endian bytes: version, COB-ID u16, refresh u32, SCT u32, SRVT u32.
+    pub fn crc(&self) -> u16 {
+        let mut b = [0u8; 15];
+        b[0] = PROTOCOL_VERSION;
+        b[1..3].copy_from_slice(&self.cob_id.to_le_bytes());
+        b[3..7].copy_from_slice(&self.refresh_time_ms.to_le_bytes());
+        b[7..11].copy_from_slice(&self.validation_time_ms.to_le_bytes());
+        b[11..15].copy_from_slice(&self.pair_window_ms.to_le_bytes());
+        crc16_ccitt(&b)
+    }
+}
+
+/// CRC-16/CCITT, polynomial 0x1021, initial value 0, no reflection, no final xor (also known
+/// as CRC-16/XMODEM; python's `binascii.crc_hqx(data, 0)`). Check value of "123456789": 0x31C3.
+pub fn crc16_ccitt(data: &[u8]) -> u16 {
+    let mut crc: u16 = 0;
+    for &b in data {
+        crc ^= u16::from(b) << 8;
+        for _ in 0..8 {
+            crc = if crc & 0x8000 != 0 {
+                (crc << 1) ^ 0x1021
+            } else {
+                crc << 1
+            };
+        }
+    }
+    crc
+}
+
+/// CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320, as zlib's `crc32`). Check value of
+/// "123456789": 0xCBF43926. Used for the safety parameter set's signature.
+pub fn crc32_ieee(data: &[u8]) -> u32 {
+    let mut crc: u32 = !0;
+    for &b in data {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
+
+/// The configuration signature the monitor sends every cycle, doubled like the heartbeat, on
+/// [`config_cob_id`] (issue 16, item 3/4). Payload (normal frame; the inverse carries `!byte`):
+///
+/// | byte | content |
+/// |------|---------|
+/// | 0    | protocol version (high nibble) and kind 0x3 (configuration signature) |
+/// | 1    | 0 (reserved) |
+/// | 2..4 | [`SrdoParams::crc`] of the producer's SRDO configuration, u16 LE |
+/// | 4..8 | CRC-32 of the monitor's safety parameter set, u32 LE (diagnosis: consumers log it) |
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ConfigSignature {
+    pub srdo_crc: u16,
+    pub safety_params_crc: u32,
+}
+
+impl ConfigSignature {
+    pub fn to_bytes(&self) -> [u8; 8] {
+        let c = self.srdo_crc.to_le_bytes();
+        let p = self.safety_params_crc.to_le_bytes();
+        [
+            (PROTOCOL_VERSION << 4) | KIND_CONFIG,
+            0,
+            c[0],
+            c[1],
+            p[0],
+            p[1],
+            p[2],
+            p[3],
+        ]
+    }
+
+    pub fn from_bytes(d: &[u8; 8]) -> Result<Self, PairError> {
+        if d[0] >> 4 != PROTOCOL_VERSION {
+            return Err(PairError::Version(d[0] >> 4));
+        }
+        if d[0] & 0x0F != KIND_CONFIG || d[1] != 0 {
+            return Err(PairError::UnknownState(d[0] & 0x0F));
+        }
+        Ok(Self {
+            srdo_crc: u16::from_le_bytes([d[2], d[3]]),
+            safety_params_crc: u32::from_le_bytes([d[4], d[5], d[6], d[7]]),
+        })
+    }
+
+    /// The two frames: normal on `config_cob_id(heartbeat_cob_id)`, inverse on the next id.
+    pub fn encode(&self, heartbeat_cob_id: u16) -> [CanFrame; 2] {
+        let d = self.to_bytes();
+        let mut inv = [0u8; 8];
+        for (o, b) in inv.iter_mut().zip(d) {
+            *o = !b;
+        }
+        let id = config_cob_id(heartbeat_cob_id);
+        [
+            CanFrame::new_std_lossy(id, &d),
+            CanFrame::new_std_lossy(id.wrapping_add(1), &inv),
+        ]
     }
 }
 
@@ -264,6 +408,68 @@ mod tests {
             counter,
             epoch: 7,
         }
+    }
+
+    #[test]
+    fn crcs_match_the_reference_check_values() {
+        // Check values of the catalogue (and python: binascii.crc_hqx(b"123456789", 0),
+        // zlib.crc32(b"123456789")).
+        assert_eq!(crc16_ccitt(b"123456789"), 0x31C3);
+        assert_eq!(crc32_ieee(b"123456789"), 0xCBF4_3926);
+        assert_eq!(crc32_ieee(b""), 0);
+    }
+
+    #[test]
+    fn srdo_crc_changes_with_every_parameter() {
+        let p = SrdoParams {
+            cob_id: 0x101,
+            refresh_time_ms: 15,
+            validation_time_ms: 50,
+            pair_window_ms: 10,
+        };
+        let c = p.crc();
+        assert_ne!(SrdoParams { cob_id: 0x103, ..p }.crc(), c);
+        assert_ne!(
+            SrdoParams {
+                refresh_time_ms: 16,
+                ..p
+            }
+            .crc(),
+            c
+        );
+        assert_ne!(
+            SrdoParams {
+                validation_time_ms: 500,
+                ..p
+            }
+            .crc(),
+            c
+        );
+        assert_ne!(
+            SrdoParams {
+                pair_window_ms: 11,
+                ..p
+            }
+            .crc(),
+            c
+        );
+    }
+
+    #[test]
+    fn config_signature_round_trip_and_rejects() {
+        let s = ConfigSignature {
+            srdo_crc: 0xA1B2,
+            safety_params_crc: 0xDEAD_BEEF,
+        };
+        let [a, b] = s.encode(DEFAULT_COB_ID);
+        assert_eq!((a.id(), b.id()), (0x103, 0x104));
+        let mut rx = PairReceiver::new(config_cob_id(DEFAULT_COB_ID), 1_000_000);
+        assert_eq!(rx.on_frame_raw(&a, 0), None);
+        let raw = rx.on_frame_raw(&b, 5).unwrap().unwrap();
+        assert_eq!(ConfigSignature::from_bytes(&raw), Ok(s));
+        // A heartbeat payload is not a signature, nor the reverse.
+        assert!(ConfigSignature::from_bytes(&hb(1).to_bytes()).is_err());
+        assert!(SafetyHeartbeat::from_bytes(&raw).is_err());
     }
 
     #[test]

@@ -74,6 +74,46 @@ pub struct Platform {
     pub sections: Vec<Section>,
 }
 
+impl Platform {
+    /// Identity of everything the safety monitor checks the stream against (issue 16): the
+    /// model ([`Model::identity`]: geometry, pulleys, stiffness, load, force limits), the
+    /// operating region (workspace box) and the motion limits (table 5.1), SHA-256 over
+    /// `"crs-platform-v2"`, the model identity, then position min/max (m), rotation min/max
+    /// (rad), then linear/angular velocity and acceleration limits (SI), exact f64 bits, little
+    /// endian. motion-core announces it; the safety monitor recomputes it with its own parser
+    /// (`safety_monitor::identity`) and trips on a mismatch.
+    pub fn identity(&self) -> [u8; 32] {
+        use sha2::{Digest, Sha256};
+        let mut h = Sha256::new();
+        h.update(b"crs-platform-v2");
+        h.update(self.model.identity());
+        let r = &self.region;
+        for v in [
+            r.position.min,
+            r.position.max,
+            r.rotation_min,
+            r.rotation_max,
+        ] {
+            v.iter().for_each(|c| h.update(c.to_bits().to_le_bytes()));
+        }
+        let l = &self.limits;
+        for c in [
+            l.linear_velocity_max,
+            l.angular_velocity_max,
+            l.linear_acceleration_max,
+            l.angular_acceleration_max,
+        ] {
+            h.update(c.to_bits().to_le_bytes());
+        }
+        h.finalize().into()
+    }
+
+    /// Hex form of [`Platform::identity`].
+    pub fn identity_hex(&self) -> String {
+        self.identity().iter().map(|b| format!("{b:02x}")).collect()
+    }
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawPlatform {

@@ -185,13 +185,17 @@ impl IpcNode {
     /// Opens a typed subscriber for topic `T` with the contract's buffer size.
     pub fn subscriber<T: Topic>(&self) -> Result<TopicSubscriber<T>, IpcError> {
         let service = self.service_name::<T>();
-        let port = self
-            .open_service::<T>()?
+        let factory = self.open_service::<T>()?;
+        let port = factory
             .subscriber_builder()
             .buffer_size(T::SUBSCRIBER_BUFFER)
             .create()
             .map_err(|e| svc_err(&service, "create subscriber", e))?;
-        Ok(TopicSubscriber { port, service })
+        Ok(TopicSubscriber {
+            port,
+            service,
+            factory,
+        })
     }
 
     fn event_service(
@@ -270,6 +274,16 @@ impl<T: Topic> TopicPublisher<T> {
 pub struct TopicSubscriber<T: Topic> {
     port: Subscriber<ipc::Service, T, ()>,
     service: String,
+    /// The service, kept for introspection of its publishers ([`TopicSubscriber::publishers`]).
+    factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+}
+
+/// One publisher of a service as iceoryx2 0.10's dynamic service configuration lists it: the
+/// process id encoded in its node's unique id (`UniqueNodeId::pid`), None if it cannot be
+/// read. iceoryx2 does not authenticate it further; see docs/safety-monitor.md (threat model).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PublisherInfo {
+    pub pid: Option<i32>,
 }
 
 impl<T: Topic> TopicSubscriber<T> {
@@ -294,6 +308,22 @@ impl<T: Topic> TopicSubscriber<T> {
                 Ok(Some(v))
             }
         }
+    }
+
+    /// The publishers currently connected to this service (iceoryx2's dynamic service
+    /// configuration, shared memory: no syscall, no allocation): fills `out` with up to
+    /// `out.len()` of them and returns how many there are in total.
+    pub fn publishers(&self, out: &mut [PublisherInfo]) -> usize {
+        use iceoryx2::service::port_factory::PortFactory as _;
+        let mut n = 0;
+        self.factory.dynamic_config().list_publishers(|d| {
+            if let Some(slot) = out.get_mut(n) {
+                slot.pid = d.node_id.pid::<ipc::Service>().ok().map(|p| p.value());
+            }
+            n += 1;
+            CallbackProgression::Continue
+        });
+        n
     }
 
     /// Drains the buffer, calling `f` for every valid sample in order; returns how many were

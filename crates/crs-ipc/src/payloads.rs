@@ -174,6 +174,14 @@ pub mod motion_state {
     /// Graceful end of the setpoint stream: published (kind StateChanged) AFTER the last
     /// setpoint, so the safety monitor disarms its silence watch instead of tripping.
     pub const STOPPING: u32 = 5;
+    /// motion-core announces its plan (kind StateChanged, issue 16): the sequence number of
+    /// the plan's LAST setpoint, low 32 bits in `detail`, high 32 bits in `detail_node`
+    /// ([`crate::StateEvent::plan`], [`crate::StateEvent::plan_end`]). Re-announced about once
+    /// per second. The safety monitor accepts [`STOPPING`] only once the stream has reached
+    /// that setpoint and holds. Not a loop state: it never appears in a heartbeat.
+    pub const PLAN: u32 = 6;
+    /// [`PLAN`] end of a stream without a planned end (the motion-cueing input).
+    pub const PLAN_OPEN_END: u64 = u64::MAX;
 }
 
 /// Who publishes a [`StateEvent`] / [`Heartbeat`].
@@ -285,6 +293,23 @@ impl ProcessId {
 }
 
 impl StateEvent {
+    /// motion-core's plan announcement: the stream's last planned setpoint is `end_sequence`
+    /// ([`motion_state::PLAN`]).
+    pub fn plan(end_sequence: u64, sequence: u64) -> Self {
+        let mut ev = Self::new(ProcessId::MotionCore, EventKind::StateChanged, sequence);
+        ev.state = motion_state::PLAN;
+        ev.detail = end_sequence as u32;
+        ev.detail_node = (end_sequence >> 32) as u32;
+        ev
+    }
+
+    /// The announced plan end if this is a plan announcement (any source: the receiver decides
+    /// whom it believes).
+    pub fn plan_end(&self) -> Option<u64> {
+        (self.kind == EventKind::StateChanged as u32 && self.state == motion_state::PLAN)
+            .then(|| u64::from(self.detail) | (u64::from(self.detail_node) << 32))
+    }
+
     /// The event as a typed [`Event`].
     pub fn decode(&self) -> Result<Event, DecodeError> {
         if self.version != CONTRACT_VERSION {

@@ -195,6 +195,16 @@ fn write_monitor_toml(
     let mut t = read_template(template)?;
     let mon = section(&mut t, "monitor", template)?;
     mon.insert("platform".into(), path_value(platform)?);
+    // The closed loop's simulated runs use the platform they were told to (the nominal or the
+    // calibrated one): this run's monitor accepts exactly that file (issue 16; on a robot the
+    // operator accepts with `safety-monitor accept`, which shows the diff first).
+    let bytes = std::fs::read(platform).map_err(|e| format!("{}: {e}", platform.display()))?;
+    mon.insert(
+        "platform_sha256".into(),
+        toml::Value::String(safety_monitor::identity::hex(
+            &safety_monitor::config::sha256_of(&bytes),
+        )),
+    );
     mon.insert("trip_log".into(), toml::Value::String(String::new()));
     section(&mut t, "can", template)?.insert("drives".into(), path_value(drives)?);
     write_from_template(out, &t, "safety-monitor", template)

@@ -131,7 +131,7 @@ pub fn check_monitor_platform(
 ) -> Result<(), String> {
     let mon = safety_monitor::config::load(monitor_config).map_err(|e| e.to_string())?;
     let monitor_id = safety_monitor::identity::platform_identity(&mon.platform);
-    if monitor_id != daemon_platform.model.identity() {
+    if monitor_id != daemon_platform.identity() {
         return Err(format!(
             "{}: [monitor] platform = {} is not the platform motion-core runs ({}: [daemon] \
              platform = {}); the monitor would trip on the platform identity. Use the monitor \

@@ -451,6 +451,13 @@ pub fn execute_observed(
                 "--transport".into(),
                 transport.clone(),
             ],
+            // The heartbeat is mandatory for drive-io (issue 16): only a run without the monitor
+            // (--no-monitor, a bench) with a drives config without it takes the bench override.
+            if !with_monitor && drives_cfg.safety_heartbeat.is_none() {
+                vec![drive_io::config::BENCH_OVERRIDE_FLAG.into()]
+            } else {
+                Vec::new()
+            },
         ]
         .concat(),
         &[],

@@ -86,6 +86,8 @@ fn helicopter_configs_differ_from_the_icosahedrons_only_in_the_platform() {
             .lines()
             .skip_while(|l| l.starts_with('#'))
             .filter(|l| !l.starts_with("platform = ") && !l.starts_with("waypoints = "))
+            // The accepted platform's hash differs with the platform (issue 16).
+            .filter(|l| !l.starts_with("platform_sha256 = "))
             .filter(|l| !l.starts_with("# Demo"))
             .map(str::to_string)
             .collect()

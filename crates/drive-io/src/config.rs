@@ -203,8 +203,10 @@ pub struct DrivesConfig {
     pub bus: BusConfig,
     #[serde(rename = "winch")]
     pub winches: Vec<WinchConfig>,
-    /// Optional `[safety_heartbeat]`: validate the safety monitor's doubled heartbeat and stop
-    /// without it (see [`crate::safety_watch`]). Absent = no watch.
+    /// `[safety_heartbeat]`: validate the safety monitor's doubled heartbeat and its
+    /// configuration signature, and stop without them (see [`crate::safety_watch`]). Parsed as
+    /// optional so the drive side and tests can run without it, but the drive-io daemon refuses
+    /// to start without it ([`DrivesConfig::require_safety_heartbeat`], issue 16).
     #[serde(default)]
     pub safety_heartbeat: Option<crate::safety_watch::SafetyWatchConfig>,
     /// Directory of the TOML file (set by [`DrivesConfig::load`]): relative paths resolve here.
@@ -372,4 +374,28 @@ impl DrivesConfig {
     pub fn sync_period_ns(&self) -> u64 {
         u64::from(self.bus.sync_period_us) * 1000
     }
+
+    /// Issue 16, item 3: the safety heartbeat is mandatory for the drive adapter. Without
+    /// `[safety_heartbeat]` drive-io refuses to start unless the bench-only override
+    /// ([`BENCH_OVERRIDE_FLAG`]) is given — never in config/ or systemd/ (a test checks the
+    /// shipped files). `Ok(true)`: running without the heartbeat on the override (the caller
+    /// logs that loudly).
+    pub fn require_safety_heartbeat(&self, bench_override: bool) -> Result<bool, ConfigError> {
+        match (&self.safety_heartbeat, bench_override) {
+            (Some(_), _) => Ok(false),
+            (None, true) => Ok(true),
+            (None, false) => Err(invalid(
+                "safety_heartbeat",
+                format!(
+                    "missing: the safety monitor's fail-safe heartbeat is mandatory (nothing may \
+                     move without the monitor). For a bench without a monitor only, start \
+                     drive-io with {BENCH_OVERRIDE_FLAG}"
+                ),
+            )),
+        }
+    }
 }
+
+/// drive-io's bench-only override: start without `[safety_heartbeat]` (no monitor on the bus).
+/// Must never appear in config/ or systemd/.
+pub const BENCH_OVERRIDE_FLAG: &str = "--bench-without-safety-heartbeat";

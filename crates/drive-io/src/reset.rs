@@ -143,8 +143,16 @@ mod tests {
     /// A watch that permits on `epoch` (a real verification of real frames: the only way to
     /// get a VerifiedEpoch).
     fn watch_on(epoch: u32) -> SafetyWatch {
-        let mut w = SafetyWatch::new(SafetyWatchConfig::default());
+        let cfg = SafetyWatchConfig::default();
+        let mut w = SafetyWatch::new(cfg);
         for k in 0..3u16 {
+            let sig = can_transport::safety_frame::ConfigSignature {
+                srdo_crc: cfg.srdo_crc(),
+                safety_params_crc: 0,
+            };
+            for f in sig.encode(DEFAULT_COB_ID) {
+                w.on_frame(&f, u64::from(k) * 1_000_000);
+            }
             for f in encode(
                 &SafetyHeartbeat {
                     state: SafetyState::Run,

@@ -25,6 +25,14 @@
 //! only with the monitor's reset of the epoch this watch verified ([`VerifiedEpoch`]; see
 //! docs/safety-monitor.md).
 //!
+//! SRDO configuration (issue 16): the monitor sends a doubled configuration signature
+//! (`can_transport::safety_frame::ConfigSignature`) before every heartbeat pair; a RUN pair
+//! counts only if a signature carrying the CRC of THIS consumer's configuration
+//! ([`SafetyWatchConfig::srdo_crc`]: COB-ID, refresh time, validation time, pair window) arrived
+//! within the validation time before it. A signature with another CRC inhibits at once
+//! ([`InhibitReason::ConfigCrc`]), so a consumer configured differently from the producer never
+//! permits.
+//!
 //! Used by the drive side ([`crate::slave::DriveBank::enable_safety_watch`], the
 //! `winch-emulator`) and by drive-io's master loop ([`crate::runner`]) when `drives.toml` has a
 //! `[safety_heartbeat]` table. Pure logic: frames and times in, decisions out; no I/O, no
@@ -32,7 +40,8 @@
 
 use can_transport::CanFrame;
 use can_transport::safety_frame::{
-    DEFAULT_COB_ID, PairError, PairReceiver, SafetyState, epoch_newer,
+    ConfigSignature, DEFAULT_COB_ID, PairError, PairReceiver, SafetyState, SrdoParams,
+    config_cob_id, epoch_newer,
 };
 use serde::Deserialize;
 
@@ -40,7 +49,8 @@ use serde::Deserialize;
 /// tolerated within the validation time; 0 = repeat and backwards steps are not).
 pub const MAX_COUNTER_STEP: u16 = 16;
 
-/// `[safety_heartbeat]` table of drives.toml. Absent = no watch (the default).
+/// `[safety_heartbeat]` table of drives.toml: mandatory for the drive-io daemon (issue 16; a
+/// bench-only override exists), absent = no watch on the drive side (winch emulator, plant).
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SafetyWatchConfig {
@@ -57,6 +67,14 @@ pub struct SafetyWatchConfig {
     /// once the watch has permitted) needed to release an inhibit.
     #[serde(default = "d_release")]
     pub release_pairs: u32,
+    /// The producer's refresh time (the monitor's cycle, ms): part of the SRDO configuration
+    /// whose CRC the watch compares with the monitor's configuration signature.
+    #[serde(default = "d_refresh")]
+    pub refresh_time_ms: u32,
+}
+
+fn d_refresh() -> u32 {
+    15
 }
 
 fn d_cob() -> u16 {
@@ -79,18 +97,42 @@ impl Default for SafetyWatchConfig {
             validation_time_ms: d_validation(),
             pair_window_ms: d_window(),
             release_pairs: d_release(),
+            refresh_time_ms: d_refresh(),
         }
     }
 }
 
 impl SafetyWatchConfig {
+    /// The SRDO communication parameters this consumer is configured with.
+    pub fn srdo_params(&self) -> SrdoParams {
+        SrdoParams {
+            cob_id: self.cob_id,
+            refresh_time_ms: self.refresh_time_ms,
+            validation_time_ms: self.validation_time_ms,
+            pair_window_ms: self.pair_window_ms,
+        }
+    }
+
+    /// CRC of this consumer's SRDO configuration ([`SrdoParams::crc`]): the monitor's
+    /// configuration signature must carry the same value, otherwise the watch never permits.
+    pub fn srdo_crc(&self) -> u16 {
+        self.srdo_params().crc()
+    }
+
     /// Checks the values; the error names the field.
     pub fn validate(&self) -> Result<(), (String, String)> {
         let bad = |f: &str, r: &str| Err((format!("safety_heartbeat.{f}"), r.to_string()));
-        if self.cob_id == 0 || self.cob_id >= 0x7FF || self.cob_id.is_multiple_of(2) {
+        if self.cob_id == 0 || self.cob_id >= 0x7FC || self.cob_id.is_multiple_of(2) {
             return bad(
                 "cob_id",
-                "must be an odd 11-bit id below 0x7FF (the pair uses cob_id and cob_id + 1)",
+                "must be an odd 11-bit id below 0x7FC (the heartbeat pair uses cob_id and \
+                 cob_id + 1, the configuration signature cob_id + 2 and cob_id + 3)",
+            );
+        }
+        if self.refresh_time_ms == 0 || self.refresh_time_ms >= self.validation_time_ms {
+            return bad(
+                "refresh_time_ms",
+                "must be >= 1 and below validation_time_ms (the producer's cycle)",
             );
         }
         if !(1..=10_000).contains(&self.validation_time_ms) {
@@ -122,6 +164,11 @@ pub enum InhibitReason {
     /// While permitted, a RUN pair carried another reset epoch than the one in force (a
     /// second producer, or a reset the watch did not see the STOP of).
     Epoch { in_force: u32, got: u32 },
+    /// The producer's configuration signature carries another SRDO configuration CRC than
+    /// this consumer's own (COB-IDs, refresh time, SCT or SRVT differ): never permit.
+    ConfigCrc { expected: u16, got: u16 },
+    /// No valid configuration signature within the validation time.
+    ConfigMissing,
 }
 
 /// A reset epoch read from a valid, complete RUN pair on the monitor's own COB-IDs while the
@@ -170,6 +217,12 @@ pub struct SafetyWatch {
     trips: u64,
     /// A trip not yet reported through [`SafetyWatch::take_trip`].
     unreported: Option<(InhibitReason, u64)>,
+    /// The configuration signature pair (issue 16): receiver, own CRC, time of the last
+    /// signature with a matching CRC (0 = none), the last signature received.
+    sig_rx: PairReceiver,
+    srdo_crc: u16,
+    sig_ok_ns: u64,
+    last_signature: Option<ConfigSignature>,
 }
 
 impl SafetyWatch {
@@ -188,7 +241,52 @@ impl SafetyWatch {
             tripped_ns: 0,
             trips: 0,
             unreported: None,
+            sig_rx: PairReceiver::new(
+                config_cob_id(cfg.cob_id),
+                u64::from(cfg.pair_window_ms) * 1_000_000,
+            ),
+            srdo_crc: cfg.srdo_crc(),
+            sig_ok_ns: 0,
+            last_signature: None,
         }
+    }
+
+    /// The last configuration signature received (valid pair), for diagnosis: its SRDO CRC
+    /// and the monitor's safety parameter CRC.
+    pub fn last_signature(&self) -> Option<ConfigSignature> {
+        self.last_signature
+    }
+
+    /// A signature with this consumer's CRC within the validation time before `now_ns`:
+    /// required for every RUN pair that permits or keeps permitting.
+    fn signature_fresh(&self, now_ns: u64) -> bool {
+        self.sig_ok_ns != 0 && now_ns.saturating_sub(self.sig_ok_ns) <= self.validation_ns
+    }
+
+    fn on_signature_frame(&mut self, frame: &CanFrame, now_ns: u64) -> Option<WatchState> {
+        let result = self.sig_rx.on_frame_raw(frame, now_ns)?;
+        match result.and_then(|d| ConfigSignature::from_bytes(&d)) {
+            Err(e) => {
+                self.sig_ok_ns = 0;
+                self.inhibit(InhibitReason::Invalid(e), now_ns);
+            }
+            Ok(sig) => {
+                self.last_signature = Some(sig);
+                if sig.srdo_crc == self.srdo_crc {
+                    self.sig_ok_ns = now_ns.max(1);
+                } else {
+                    self.sig_ok_ns = 0;
+                    self.inhibit(
+                        InhibitReason::ConfigCrc {
+                            expected: self.srdo_crc,
+                            got: sig.srdo_crc,
+                        },
+                        now_ns,
+                    );
+                }
+            }
+        }
+        Some(self.state)
     }
 
     pub fn config(&self) -> &SafetyWatchConfig {
@@ -250,6 +348,9 @@ impl SafetyWatch {
     /// Feeds one received frame (frames on other ids are ignored cheaply). Returns the new
     /// state.
     pub fn on_frame(&mut self, frame: &CanFrame, now_ns: u64) -> WatchState {
+        if let Some(st) = self.on_signature_frame(frame, now_ns) {
+            return st;
+        }
         let Some(result) = self.rx.on_frame(frame, now_ns) else {
             return self.state;
         };
@@ -292,6 +393,17 @@ impl SafetyWatch {
     }
 
     fn on_run(&mut self, epoch: u32, now_ns: u64) {
+        // SRDO configuration check (CiA 304's signature idea): no RUN pair counts without a
+        // recent signature whose CRC equals this consumer's own.
+        if !self.signature_fresh(now_ns) {
+            if !matches!(
+                self.state,
+                WatchState::Inhibit(InhibitReason::ConfigCrc { .. })
+            ) {
+                self.inhibit(InhibitReason::ConfigMissing, now_ns);
+            }
+            return;
+        }
         if self.state == WatchState::Permit {
             if self.epoch == Some(epoch) {
                 self.last_valid_ns = now_ns;
@@ -342,6 +454,7 @@ impl SafetyWatch {
             self.last_counter = None;
             self.inhibit(InhibitReason::Timeout, now_ns);
         }
+
         self.state == WatchState::Permit
     }
 }
@@ -353,8 +466,20 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
-    fn pair_e(counter: u16, state: SafetyState, epoch: u32) -> [CanFrame; 2] {
-        encode(
+    /// The monitor's configuration signature pair for the default SRDO configuration.
+    fn signature(srdo_crc: u16) -> [CanFrame; 2] {
+        ConfigSignature {
+            srdo_crc,
+            safety_params_crc: 0x1234_5678,
+        }
+        .encode(DEFAULT_COB_ID)
+    }
+
+    /// One monitor cycle: the configuration signature pair (matching the default
+    /// configuration), then the heartbeat pair.
+    fn pair_e(counter: u16, state: SafetyState, epoch: u32) -> [CanFrame; 4] {
+        let [s1, s2] = signature(SafetyWatchConfig::default().srdo_crc());
+        let [a, b] = encode(
             &SafetyHeartbeat {
                 state,
                 cause: if state == SafetyState::Stop { 1 } else { 0 },
@@ -362,10 +487,11 @@ mod tests {
                 epoch,
             },
             DEFAULT_COB_ID,
-        )
+        );
+        [s1, s2, a, b]
     }
 
-    fn pair(counter: u16, state: SafetyState) -> [CanFrame; 2] {
+    fn pair(counter: u16, state: SafetyState) -> [CanFrame; 4] {
         pair_e(counter, state, 1)
     }
 
@@ -376,7 +502,9 @@ mod tests {
         epoch: u32,
         t: u64,
     ) -> WatchState {
-        let [a, b] = pair_e(counter, state, epoch);
+        let [s1, s2, a, b] = pair_e(counter, state, epoch);
+        w.on_frame(&s1, t);
+        w.on_frame(&s2, t);
         w.on_frame(&a, t);
         w.on_frame(&b, t + 10_000)
     }
@@ -442,7 +570,7 @@ mod tests {
             feed(&mut w, k, SafetyState::Run, k as u64 * 15 * MS);
         }
         assert!(w.permits(40 * MS));
-        let [a, b] = pair(3, SafetyState::Run);
+        let [_, _, a, b] = pair(3, SafetyState::Run);
         let mut d = [0u8; 8];
         d.copy_from_slice(b.data());
         d[3] ^= 0x10;
@@ -646,6 +774,82 @@ mod tests {
         );
     }
 
+    /// Issue 16, item 3: a consumer whose SRDO configuration differs from the producer's
+    /// (here its validation time) never permits, however many valid RUN pairs arrive; a
+    /// signature mismatch while permitting inhibits at once; without any signature the RUN
+    /// pairs release nothing; a signature that stops arriving inhibits after the validation time.
+    #[test]
+    fn configuration_crc_mismatch_never_permits() {
+        let producer = SafetyWatchConfig::default();
+        let consumer = SafetyWatchConfig {
+            validation_time_ms: 500,
+            ..producer
+        };
+        assert_ne!(producer.srdo_crc(), consumer.srdo_crc());
+        let mut w = SafetyWatch::new(consumer);
+        for k in 0..20u16 {
+            let t = u64::from(k) * 15 * MS;
+            feed_e(&mut w, k, SafetyState::Run, 5 + u32::from(k), t);
+            assert!(!w.permits(t + MS), "pair {k}");
+        }
+        assert_eq!(
+            w.state(),
+            WatchState::Inhibit(InhibitReason::ConfigCrc {
+                expected: consumer.srdo_crc(),
+                got: producer.srdo_crc(),
+            })
+        );
+        assert_eq!(
+            w.last_signature().map(|s| s.srdo_crc),
+            Some(producer.srdo_crc())
+        );
+
+        // No signature at all: heartbeats alone release nothing.
+        let mut w = SafetyWatch::new(producer);
+        for k in 0..10u16 {
+            let [_, _, a, b] = pair(k, SafetyState::Run);
+            let t = u64::from(k) * 15 * MS;
+            w.on_frame(&a, t);
+            w.on_frame(&b, t + 10_000);
+            assert!(!w.permits(t + MS));
+        }
+        assert_eq!(w.state(), WatchState::Inhibit(InhibitReason::ConfigMissing));
+
+        // Permitting, then a mismatching signature: inhibit at once, and the matching one
+        // back with the same epoch does not release (no self-release).
+        let mut w = SafetyWatch::new(producer);
+        for k in 0..3u16 {
+            feed(&mut w, k, SafetyState::Run, u64::from(k) * 15 * MS);
+        }
+        assert!(w.permits(31 * MS));
+        for f in signature(producer.srdo_crc() ^ 1) {
+            w.on_frame(&f, 40 * MS);
+        }
+        assert!(!w.permits(40 * MS));
+        assert_eq!(w.trips(), 1);
+        for k in 3..10u16 {
+            feed(&mut w, k, SafetyState::Run, u64::from(k) * 15 * MS);
+        }
+        assert!(!w.permits(150 * MS));
+
+        // Permitting, then only heartbeats (signature lost): the first RUN pair more than the
+        // validation time after the last signature inhibits.
+        let mut w = SafetyWatch::new(producer);
+        for k in 0..3u16 {
+            feed(&mut w, k, SafetyState::Run, u64::from(k) * 15 * MS);
+        }
+        assert!(w.permits(30 * MS));
+        for k in 3..7u16 {
+            let [_, _, a, b] = pair(k, SafetyState::Run);
+            let t = u64::from(k) * 15 * MS;
+            w.on_frame(&a, t);
+            w.on_frame(&b, t + 10_000);
+            // The last signature came at 30 ms: pairs at 45, 60, 75 ms still count, 90 ms not.
+            assert_eq!(w.permits(t + 20_000), k < 6, "pair at {} ms", k * 15);
+        }
+        assert_eq!(w.state(), WatchState::Inhibit(InhibitReason::ConfigMissing));
+    }
+
     mod props {
         use super::*;
         use proptest::prelude::*;
@@ -697,7 +901,7 @@ mod tests {
                             if run { last_valid = Some(t + 10_000); }
                         }
                         Ev::Corrupt => {
-                            let [a, b] = pair_e(counter, SafetyState::Run, epoch);
+                            let [_, _, a, b] = pair_e(counter, SafetyState::Run, epoch);
                             let mut d = [0u8; 8];
                             d.copy_from_slice(b.data());
                             d[0] ^= 1;

@@ -39,6 +39,16 @@ pub enum ConfigError {
 pub struct MonitorSection {
     /// Platform TOML, relative to the config file.
     pub platform: PathBuf,
+    /// SHA-256 (hex) of the platform file's bytes as accepted by the operator
+    /// (`safety-monitor accept`, issue 16): a platform file that differs (a calibration wrote
+    /// it, someone edited it) is refused at start. Required in the robot profile.
+    #[serde(default)]
+    pub platform_sha256: String,
+    /// `"robot"` (default) or `"bench"`: only the bench profile may switch a check off
+    /// (check_* = false, require_ready = false, feedback.silence_cycles = 0) or run a platform
+    /// without an accepted hash.
+    #[serde(default = "d_profile")]
+    pub profile: String,
     /// Cycle period (ms); sec. 5.6: 15 ms.
     #[serde(default = "d_cycle")]
     pub cycle_ms: u32,
@@ -127,6 +137,14 @@ pub struct CanSection {
     /// every 3 ms) before the reader counts as dead and the monitor trips.
     #[serde(default = "d_reader_stall")]
     pub reader_stall_cycles: u32,
+    /// The consumers' validation time (CiA 304 SCT, ms) and pair window (SRVT, ms) this
+    /// producer is configured for: with `safety_cob_id` and `monitor.cycle_ms` (refresh time)
+    /// they form the SRDO configuration whose CRC the monitor announces every cycle; drives and
+    /// drive-io refuse to permit motion when their own configuration's CRC differs.
+    #[serde(default = "d_sct")]
+    pub safety_validation_time_ms: u32,
+    #[serde(default = "d_srvt")]
+    pub safety_pair_window_ms: u32,
 }
 
 /// `[forces]`: the drives' measured cable forces (TPDO2 pulley force, read from the bus on the
@@ -170,10 +188,41 @@ pub struct MotionSection {
     pub margin: f64,
 }
 
+/// `[ipc]`: who may own the single-owner streams of the process bus (issue 16). Each list
+/// names the executables (basename of `/proc/<pid>/exe` of the publisher's process) allowed to
+/// publish that stream; any other publisher, or more than one, trips `foreign_publisher`. An
+/// empty list switches the check off (bench profile only).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct IpcSection {
+    #[serde(default = "d_motion_core")]
+    pub setpoint_owners: Vec<String>,
+    #[serde(default = "d_drive_io")]
+    pub feedback_owners: Vec<String>,
+    #[serde(default = "d_motion_core")]
+    pub identity_owners: Vec<String>,
+}
+
+fn d_motion_core() -> Vec<String> {
+    vec!["motion-core".into()]
+}
+fn d_drive_io() -> Vec<String> {
+    vec!["drive-io".into()]
+}
+fn d_ipc() -> IpcSection {
+    IpcSection {
+        setpoint_owners: d_motion_core(),
+        feedback_owners: d_drive_io(),
+        identity_owners: d_motion_core(),
+    }
+}
+
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
     monitor: MonitorSection,
+    #[serde(default = "d_ipc")]
+    ipc: IpcSection,
     #[serde(default = "d_feedback")]
     feedback: FeedbackSection,
     #[serde(default = "d_forces")]
@@ -231,6 +280,24 @@ fn d_reset_wait() -> u32 {
 fn d_reader_stall() -> u32 {
     10
 }
+fn d_sct() -> u32 {
+    50
+}
+fn d_srvt() -> u32 {
+    10
+}
+fn d_profile() -> String {
+    PROFILE_ROBOT.into()
+}
+
+/// The default profile: every check on, the platform accepted by hash.
+pub const PROFILE_ROBOT: &str = "robot";
+/// Bench profile: checks may be switched off, an unaccepted platform runs (logged).
+pub const PROFILE_BENCH: &str = "bench";
+/// Upper bound of the consumers' validation time the monitor may announce (ms): 200 ms is the
+/// largest SCT for which a dead monitor still stops the robot within the spec's reaction budget
+/// of a few safety cycles (sec. 5.6: 15 ms cycle).
+pub const MAX_SAFETY_VALIDATION_MS: u32 = 200;
 fn d_sp_period() -> f64 {
     1.0
 }
@@ -322,14 +389,32 @@ pub struct MonitorConfig {
     pub forces: ForcesSection,
     pub motion: MotionSection,
     pub can: CanSection,
+    pub ipc: IpcSection,
     pub platform_file: PathBuf,
     pub platform: PlatformParams,
     pub drives_file: PathBuf,
     /// In cable order (cable i = i-th `[[winch]]`).
     pub winches: Vec<Winch>,
+    /// CRC-32 of the safety parameter set: the bytes of this file, the platform file and the
+    /// drives file, in that order (issue 16: logged at start, announced on the bus every cycle).
+    pub safety_params_crc: u32,
+    /// SHA-256 of the platform file's bytes (compared with `monitor.platform_sha256`).
+    pub platform_sha256: String,
 }
 
 impl MonitorConfig {
+    /// The SRDO configuration of the monitor's heartbeat (its CRC goes on the bus).
+    pub fn srdo(&self) -> can_transport::safety_frame::SrdoParams {
+        can_transport::safety_frame::SrdoParams {
+            cob_id: self.can.safety_cob_id,
+            refresh_time_ms: self.monitor.cycle_ms,
+            validation_time_ms: self.can.safety_validation_time_ms,
+            pair_window_ms: self.can.safety_pair_window_ms,
+        }
+    }
+    pub fn is_bench(&self) -> bool {
+        self.monitor.profile == PROFILE_BENCH
+    }
     pub fn dq_limit_m(&self) -> f64 {
         self.monitor.dq_limit_mm * 1e-3
     }
@@ -536,11 +621,78 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
     c.transport
         .parse::<can_transport::TransportSpec>()
         .map_err(|e| bad("can.transport", e.to_string()))?;
-    if c.safety_cob_id == 0 || c.safety_cob_id >= 0x7FF || c.safety_cob_id.is_multiple_of(2) {
+    if c.safety_cob_id == 0 || c.safety_cob_id >= 0x7FC || c.safety_cob_id.is_multiple_of(2) {
         return Err(bad(
             "can.safety_cob_id",
-            "must be an odd 11-bit id below 0x7FF (the pair uses id and id + 1)".into(),
+            "must be an odd 11-bit id below 0x7FC (the heartbeat pair uses id and id + 1, the \
+             configuration signature id + 2 and id + 3)"
+                .into(),
         ));
+    }
+    if c.safety_validation_time_ms <= m.cycle_ms
+        || c.safety_validation_time_ms > MAX_SAFETY_VALIDATION_MS
+    {
+        return Err(bad(
+            "can.safety_validation_time_ms",
+            format!(
+                "{} ms must be above monitor.cycle_ms ({} ms) and at most {MAX_SAFETY_VALIDATION_MS} ms",
+                c.safety_validation_time_ms, m.cycle_ms
+            ),
+        ));
+    }
+    if c.safety_pair_window_ms == 0 || c.safety_pair_window_ms > c.safety_validation_time_ms {
+        return Err(bad(
+            "can.safety_pair_window_ms",
+            "must be >= 1 and <= can.safety_validation_time_ms".into(),
+        ));
+    }
+    for (key, names) in [
+        ("ipc.setpoint_owners", &raw.ipc.setpoint_owners),
+        ("ipc.feedback_owners", &raw.ipc.feedback_owners),
+        ("ipc.identity_owners", &raw.ipc.identity_owners),
+    ] {
+        if let Some(n) = names
+            .iter()
+            .find(|n| n.is_empty() || n.contains('/') || n.len() > 255)
+        {
+            return Err(bad(
+                key,
+                format!("{n:?}: an executable's file name (no path, 1..=255 bytes)"),
+            ));
+        }
+    }
+    // Profiles (issue 16): outside the bench profile no switch may disable a check.
+    let bench = match m.profile.as_str() {
+        PROFILE_ROBOT => false,
+        PROFILE_BENCH => true,
+        other => {
+            return Err(bad(
+                "monitor.profile",
+                format!("{other:?}: must be \"{PROFILE_ROBOT}\" or \"{PROFILE_BENCH}\""),
+            ));
+        }
+    };
+    if !bench {
+        let off: [(&str, bool); 9] = [
+            ("monitor.require_ready", !m.require_ready),
+            (
+                "feedback.check_following_error",
+                !raw.feedback.check_following_error,
+            ),
+            ("feedback.silence_cycles", raw.feedback.silence_cycles == 0),
+            ("forces.check", !fo.check),
+            ("motion.check", !raw.motion.check),
+            ("can.check_rpdo", !c.check_rpdo),
+            ("ipc.setpoint_owners", raw.ipc.setpoint_owners.is_empty()),
+            ("ipc.feedback_owners", raw.ipc.feedback_owners.is_empty()),
+            ("ipc.identity_owners", raw.ipc.identity_owners.is_empty()),
+        ];
+        if let Some((key, _)) = off.iter().find(|(_, is_off)| *is_off) {
+            return Err(bad(
+                key,
+                "switches a check off: only allowed with monitor.profile = \"bench\"".into(),
+            ));
+        }
     }
     // A file this one names but that cannot be opened is this file's error, at the key that
     // names it; what is wrong inside it is reported by its own parser, with its own lines.
@@ -552,6 +704,37 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
     let platform_file = relative_to(path, &m.platform);
     named("monitor.platform", &platform_file)?;
     let platform = load_platform(&platform_file)?;
+    // The accepted platform (issue 16): the file's bytes must hash to what the operator
+    // accepted; a calibration writes a new file and never changes the accepted one.
+    let platform_bytes = std::fs::read(&platform_file).map_err(|source| ConfigError::Read {
+        file: platform_file.display().to_string(),
+        source,
+    })?;
+    let platform_sha256 = crate::identity::hex(&sha256_of(&platform_bytes));
+    match (m.platform_sha256.is_empty(), bench) {
+        (true, false) => {
+            return Err(bad(
+                "monitor.platform_sha256",
+                format!(
+                    "missing: the robot profile runs only an accepted platform (run \
+                     `safety-monitor accept {}`)",
+                    platform_file.display()
+                ),
+            ));
+        }
+        (false, _) if !m.platform_sha256.eq_ignore_ascii_case(&platform_sha256) => {
+            return Err(bad(
+                "monitor.platform_sha256",
+                format!(
+                    "{} has SHA-256 {platform_sha256}, not the accepted {}: the platform file \
+                     changed since it was accepted (review it with `safety-monitor accept`)",
+                    platform_file.display(),
+                    m.platform_sha256
+                ),
+            ));
+        }
+        _ => {}
+    }
     let drives_file = relative_to(path, &c.drives);
     named("can.drives", &drives_file)?;
     let winches = load_drives(&drives_file)?;
@@ -587,13 +770,25 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             ),
         ));
     }
+    let drives_bytes = std::fs::read(&drives_file).map_err(|source| ConfigError::Read {
+        file: drives_file.display().to_string(),
+        source,
+    })?;
+    let mut set = Vec::with_capacity(text.len() + platform_bytes.len() + drives_bytes.len());
+    set.extend_from_slice(text.as_bytes());
+    set.extend_from_slice(&platform_bytes);
+    set.extend_from_slice(&drives_bytes);
+    let safety_params_crc = can_transport::safety_frame::crc32_ieee(&set);
     Ok(MonitorConfig {
+        safety_params_crc,
+        platform_sha256,
         file: path.to_path_buf(),
         monitor: raw.monitor,
         feedback: raw.feedback,
         forces: raw.forces,
         motion: raw.motion,
         can: raw.can,
+        ipc: raw.ipc,
         platform_file,
         platform,
         drives_file,
@@ -651,4 +846,10 @@ pub fn load_drives(path: &Path) -> Result<Vec<Winch>, ConfigError> {
         });
     }
     Ok(out)
+}
+
+/// SHA-256 of a file's bytes (the accepted-platform hash).
+pub fn sha256_of(bytes: &[u8]) -> [u8; 32] {
+    use sha2::Digest;
+    sha2::Sha256::digest(bytes).into()
 }

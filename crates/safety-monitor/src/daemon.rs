@@ -360,8 +360,30 @@ pub fn run_on(
         transport = %transport,
         safety_cob_id = format_args!("{cob:#05x}"),
         reset_epoch = monitor.reset_epoch(),
+        profile = %cfg.monitor.profile,
+        platform_sha256 = %cfg.platform_sha256,
+        safety_params_crc = format_args!("{:#010x}", cfg.safety_params_crc),
+        srdo_crc = format_args!("{:#06x}", cfg.srdo().crc()),
         "safety monitor started"
     );
+    if cfg.is_bench() {
+        tracing::warn!("BENCH profile: checks may be switched off; not for the robot");
+    }
+    // The configuration signature (issue 16): the SRDO configuration CRC the consumers check
+    // and the CRC of the safety parameter set, doubled like the heartbeat, every cycle.
+    let signature = safety_frame::ConfigSignature {
+        srdo_crc: cfg.srdo().crc(),
+        safety_params_crc: cfg.safety_params_crc,
+    }
+    .encode(cob);
+
+    // One owner per stream (issue 16): setpoints, feedback and identity.
+    let mut owners = [
+        crate::ownership::OwnerWatch::new("setpoints", cfg.ipc.setpoint_owners.clone()),
+        crate::ownership::OwnerWatch::new("drive feedback", cfg.ipc.feedback_owners.clone()),
+        crate::ownership::OwnerWatch::new("platform identity", cfg.ipc.identity_owners.clone()),
+    ];
+    let mut procs = crate::ownership::ProcFs;
 
     let mut sum = Summary::default();
     let mut stops = StopPath::new();
@@ -441,11 +463,21 @@ pub fn run_on(
             {
                 reset_request = Some(ev.sequence);
             } else if ev.source == ProcessId::MotionCore as u32
+                && let Some(end) = ev.plan_end()
+                && fresh
+            {
+                monitor.on_plan_announced(end);
+            } else if ev.source == ProcessId::MotionCore as u32
                 && ev.kind == EventKind::StateChanged as u32
                 && ev.state == MOTION_CORE_STOPPING
                 && fresh
             {
-                tracing::info!("motion-core announced the end of its setpoint stream");
+                // Accepted only at the end of the announced plan, evaluated at the end of this
+                // cycle after this cycle's setpoints (issue 16; otherwise unplanned_stream_end).
+                tracing::info!(
+                    at_plan_end = monitor.stream_end_planned(),
+                    "motion-core announced the end of its setpoint stream"
+                );
                 monitor.on_stream_end();
             } else if ev.kind == EventKind::EStop as u32
                 && ev.source != ProcessId::SafetyMonitor as u32
@@ -525,6 +557,16 @@ pub fn run_on(
             }
         }
 
+        check_owners(
+            &mut owners,
+            [
+                publishers_of(&setpoints),
+                publishers_of(&feedback),
+                publishers_of(&identities),
+            ],
+            &mut procs,
+            &mut monitor,
+        );
         if let Some(f) = reader_watch.check(&health) {
             tracing::error!(?f, "the monitor's own bus reader failed");
             monitor.on_bus_observation_failed(f.value());
@@ -634,7 +676,11 @@ pub fn run_on(
             }
         }
 
-        // The fail-safe heartbeat: every cycle, STOP while tripped.
+        // The fail-safe heartbeat: every cycle, STOP while tripped, after the signature (a
+        // consumer counts a RUN pair only with a recent signature of its own CRC).
+        for f in &signature {
+            stops.other(tx.as_mut(), f);
+        }
         let tripped = monitor.state() == MonitorState::Tripped;
         let stage = stops.heartbeat(
             tx.as_mut(),
@@ -686,6 +732,53 @@ pub fn run_on(
         tracing::warn!(dropped, "bus observations dropped (queue full)");
     }
     Ok(sum)
+}
+
+/// The publishers of a stream: (count, the first four).
+fn publishers_of<T: crs_ipc::Topic>(
+    sub: &crs_ipc::TopicSubscriber<T>,
+) -> (usize, [crs_ipc::PublisherInfo; 4]) {
+    let mut buf = [crs_ipc::PublisherInfo::default(); 4];
+    let n = sub.publishers(&mut buf);
+    (n, buf)
+}
+
+/// Applies the owner checks of this cycle: a stream with several or a foreign publisher trips
+/// `foreign_publisher` every cycle it lasts (so a reset needs it gone).
+fn check_owners(
+    owners: &mut [crate::ownership::OwnerWatch; 3],
+    seen: [(usize, [crs_ipc::PublisherInfo; 4]); 3],
+    procs: &mut impl crate::ownership::ProcessLookup,
+    monitor: &mut Monitor,
+) {
+    use crate::ownership::Ownership;
+    for (w, (n, buf)) in owners.iter_mut().zip(seen) {
+        let stream = w.stream();
+        let (verdict, changed) = w.check(n, &buf[..n.min(4)], procs);
+        match verdict {
+            Ownership::Ok => {
+                if changed && n > 0 {
+                    tracing::info!(stream, publisher_pid = ?buf[0].pid, "stream owner verified");
+                }
+            }
+            Ownership::Several(k) => {
+                if changed {
+                    tracing::error!(
+                        stream,
+                        publishers = k,
+                        "a second publisher on a single-owner stream: e-stop"
+                    );
+                }
+                monitor.on_foreign_publisher(*k as u32);
+            }
+            Ownership::Foreign(pid, exe) => {
+                if changed {
+                    tracing::error!(stream, pid, executable = %exe, "a foreign process owns a single-owner stream: e-stop");
+                }
+                monitor.on_foreign_publisher(1);
+            }
+        }
+    }
 }
 
 fn estop_event(rec: &TripRecord, seq: u64) -> StateEvent {

@@ -22,6 +22,7 @@
 //! is `can_transport::safety_frame`; the drives' and drive-io's validation of it is
 //! `drive_io::safety_watch`. See docs/safety-monitor.md.
 
+pub mod accept;
 pub mod bus_frames;
 pub mod bus_watch;
 pub mod config;
@@ -29,6 +30,7 @@ pub mod daemon;
 pub mod identity;
 pub mod kinematics;
 pub mod monitor;
+pub mod ownership;
 pub mod platform;
 pub mod stop_path;
 pub mod trip;

@@ -349,13 +349,13 @@ pub mod evidence {
         use Cause::*;
         match c {
             DqLimit | NonFinite | OutsideWorkspace | SequenceGaps | SetpointSilence
-            | CableCount | SequenceRegression | MotionVelocity | MotionAcceleration => {
-                Class::Stream
-            }
+            | CableCount | SequenceRegression | MotionVelocity | MotionAcceleration
+            | UnplannedStreamEnd => Class::Stream,
             IdentityMismatch | IdentityMissing => Class::Identity,
             FollowingError | FeedbackSilence | RpdoMismatch | FollowingUnchecked => Class::Feedback,
             ForceSlack | ForceOverload | ForceSilence => Class::Forces,
-            IpcError | BusObservation | EStopEvent | ForgedEvent | CanBusError => Class::Receive,
+            IpcError | BusObservation | EStopEvent | ForgedEvent | CanBusError
+            | ForeignPublisher => Class::Receive,
         }
     }
 
@@ -444,7 +444,22 @@ pub struct Monitor {
     /// The monitor's clock at the end of the last cycle that brought setpoints, and the last
     /// pose of that cycle (the own-clock velocity check).
     cycle_ref: Option<(u64, DVec3, DMat3)>,
+    /// The plan the producer announced (sequence of its last setpoint) and whether the stream
+    /// holds (issue 16: STOPPING only at the end of an announced plan).
+    plan: PlanWatch,
 }
+
+/// What the monitor knows about the producer's plan: its announced end and the newest
+/// setpoints (a stream holds when consecutive setpoints carry exactly the same pose).
+#[derive(Debug, Clone, Copy, Default)]
+struct PlanWatch {
+    end: Option<u64>,
+    last_pose: Option<[f64; 6]>,
+    hold_run: u32,
+}
+
+/// Consecutive identical setpoint poses that make a hold (the stream stands still).
+pub const PLAN_HOLD_SETPOINTS: u32 = 2;
 
 impl Monitor {
     /// `identity`: the platform identity the monitor computed itself
@@ -500,7 +515,67 @@ impl Monitor {
             prev_pose: None,
             last_pose: None,
             cycle_ref: None,
+            plan: PlanWatch::default(),
         }
+    }
+
+    /// The producer announced its plan: `end` is the sequence number of its last planned
+    /// setpoint (`crs_ipc::motion_state::PLAN`; [`crs_ipc::motion_state::PLAN_OPEN_END`] for a
+    /// stream without a planned end).
+    pub fn on_plan_announced(&mut self, end: u64) {
+        self.plan.end = Some(end);
+    }
+
+    /// True when an end of the stream announced now would be accepted: a plan was announced,
+    /// the stream has reached its last setpoint and holds.
+    pub fn stream_end_planned(&self) -> bool {
+        match (self.plan.end, self.last_sequence) {
+            (Some(end), Some(last)) => {
+                end != crs_ipc::motion_state::PLAN_OPEN_END
+                    && last >= end
+                    && self.plan.hold_run >= PLAN_HOLD_SETPOINTS
+            }
+            // No setpoint at all since the last end: nothing to disarm.
+            (_, None) => !self.seen_setpoint,
+            (None, Some(_)) => false,
+        }
+    }
+
+    /// Hold tracking for [`Monitor::stream_end_planned`] (every setpoint, in order).
+    fn track_plan(&mut self, sp: &JointSetpoint) {
+        self.plan.hold_run = match self.plan.last_pose {
+            Some(p) if p == sp.pose => self.plan.hold_run.saturating_add(1),
+            _ => 1,
+        };
+        self.plan.last_pose = Some(sp.pose);
+    }
+
+    /// Consumes this cycle's end-of-stream announcement: accepted only at the end of the
+    /// announced plan (issue 16); otherwise `unplanned_stream_end` and the checks stay armed.
+    fn take_stream_end(&mut self) -> bool {
+        if !std::mem::take(&mut self.stream_end) {
+            return false;
+        }
+        if self.stream_end_planned() {
+            return true;
+        }
+        let end = self.plan.end;
+        self.fault(Fault {
+            sequence: self.last_sequence.unwrap_or(0),
+            value: end.map_or(-1.0, |e| e as f64),
+            limit: f64::from(self.plan.hold_run),
+            ..Fault::new(Cause::UnplannedStreamEnd)
+        });
+        false
+    }
+
+    /// A single-owner stream has a second or a foreign publisher (the daemon's service
+    /// introspection; `value` = number of publishers seen).
+    pub fn on_foreign_publisher(&mut self, publishers: u32) {
+        self.fault(Fault {
+            value: f64::from(publishers),
+            ..Fault::new(Cause::ForeignPublisher)
+        });
     }
 
     /// Sets the initial reset epoch (construction only). The daemon starts from its wall clock
@@ -617,6 +692,7 @@ impl Monitor {
         self.new_setpoints += 1;
         self.seen_setpoint = true;
         self.stats.setpoints_checked += 1;
+        self.track_plan(sp);
         let at = |cause: Cause| Fault {
             sequence: sp.sequence,
             ..Fault::new(cause)
@@ -1020,7 +1096,7 @@ impl Monitor {
     /// Closes the cycle at `now_ns`: the per-cycle checks, then the latch.
     pub fn end_cycle(&mut self, now_ns: u64) -> CycleReport {
         self.stats.cycles += 1;
-        let ending = std::mem::take(&mut self.stream_end);
+        let ending = self.take_stream_end();
         // Frozen / dead motion loop.
         if self.seen_setpoint && !ending {
             if self.new_setpoints == 0 {
@@ -1158,6 +1234,7 @@ impl Monitor {
             self.prev_pose = None;
             self.last_pose = None;
             self.cycle_ref = None;
+            self.plan = PlanWatch::default();
         }
         let report = CycleReport {
             state: self.state,

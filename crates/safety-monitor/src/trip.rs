@@ -67,10 +67,19 @@ pub enum Cause {
     /// monitor's own socket; value = 1 bus-off, 2 error-passive): frames to and from the drives,
     /// the monitor's stop frames among them, may no longer get through (issue 15).
     CanBusError = 23,
+    // 24..=27 are left free (issue 16 numbered its causes from 28).
+    /// The setpoint producer announced the end of its stream (STOPPING) before the end of the
+    /// plan it announced, while the stream was not holding, or without any plan announced: a
+    /// forged or premature end that would disarm the silence and sequence checks (issue 16).
+    UnplannedStreamEnd = 28,
+    /// A single-owner stream (setpoints, drive feedback, platform identity) has more than one
+    /// publisher, or its publisher is not the process the stack expects (iceoryx2's service
+    /// introspection: publisher count, owning node's process id and executable; issue 16).
+    ForeignPublisher = 29,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 23] = [
+    pub const ALL: [Cause; 25] = [
         Cause::DqLimit,
         Cause::NonFinite,
         Cause::OutsideWorkspace,
@@ -94,6 +103,8 @@ impl Cause {
         Cause::EStopEvent,
         Cause::ForgedEvent,
         Cause::CanBusError,
+        Cause::UnplannedStreamEnd,
+        Cause::ForeignPublisher,
     ];
 
     pub fn code(self) -> u8 {
@@ -132,6 +143,8 @@ impl Cause {
             Cause::EStopEvent => "estop_event",
             Cause::ForgedEvent => "forged_event",
             Cause::CanBusError => "can_bus_error",
+            Cause::UnplannedStreamEnd => "unplanned_stream_end",
+            Cause::ForeignPublisher => "foreign_publisher",
         }
     }
 

@@ -1,12 +1,13 @@
 //! The monitor's independent implementation agrees with motion-core's (which is a dev-dependency
 //! ONLY: the monitor itself never links motion-core code).
-//! * the platform identity computed from the monitor's own parse equals `Model::identity()`
-//!   bit for bit on the project's platform files (a mismatch would trip the monitor at start);
+//! * the platform identity computed from the monitor's own parse equals `Platform::identity()`
+//!   (model, workspace box, limits; issue 16) and its model part `Model::identity()` bit for
+//!   bit on the project's platform files (a mismatch would trip the monitor at start);
 //! * φ*(x) equals motion-core's standard inverse kinematics to 1e-9 m over the workspace.
 
 use cdpr_model::config::{load_platform as mc_load, parse_platform as mc_parse};
 use proptest::prelude::*;
-use safety_monitor::identity::platform_identity;
+use safety_monitor::identity::{model_identity, platform_identity};
 use safety_monitor::kinematics::StandardKinematics;
 use safety_monitor::platform::{load_platform, parse_platform};
 use std::path::PathBuf;
@@ -26,9 +27,18 @@ fn identity_agrees_with_motion_core_on_the_platform_files() {
         "crs-nominal.toml",
     ] {
         let p = config(f);
-        let ours = platform_identity(&load_platform(&p).unwrap());
-        let theirs = mc_load(&p).unwrap().model.identity();
-        assert_eq!(ours, theirs, "{f}: identity differs");
+        let mine = load_platform(&p).unwrap();
+        let theirs = mc_load(&p).unwrap();
+        assert_eq!(
+            model_identity(&mine),
+            theirs.model.identity(),
+            "{f}: model identity differs"
+        );
+        assert_eq!(
+            platform_identity(&mine),
+            theirs.identity(),
+            "{f}: identity differs"
+        );
     }
     // Different platforms have different identities.
     let a = platform_identity(&load_platform(&config("icosahedron.toml")).unwrap());
@@ -47,8 +57,59 @@ fn identity_agrees_with_non_unit_pulley_axes_and_per_cable_values() {
          swivel_axes = [[0.3, 0.4, 1.2], [0, 0, 3], [0.1, -0.2, 0.7], [1e-3, 0, 1], \
          [0, 0, 1], [-0.5, 0.25, 2], [0.2, 0.2, 0.2], [0, 0.6, 0.8]]\n";
     let ours = platform_identity(&parse_platform(&text, "mem").unwrap());
-    let theirs = mc_parse(&text, "mem").unwrap().model.identity();
+    let theirs = mc_parse(&text, "mem").unwrap().identity();
     assert_eq!(ours, theirs);
+}
+
+/// Issue 16: the identity covers the workspace box and the motion limits, not only the model:
+/// changing any one of them changes both implementations' identity identically.
+#[test]
+fn identity_covers_workspace_box_and_limits() {
+    let text = std::fs::read_to_string(config("icosahedron.toml")).unwrap();
+    let base = platform_identity(&parse_platform(&text, "mem").unwrap());
+    let mut edits = 0;
+    for key in [
+        "position_max_m",
+        "rotation_min_deg",
+        "linear_velocity_max_m_per_s",
+        "angular_acceleration_max_deg_per_s2",
+    ] {
+        // Scale the first number of the key's line by 0.9 (stays valid: boxes shrink, limits
+        // drop).
+        let line = text
+            .lines()
+            .find(|l| l.trim_start().starts_with(&format!("{key} =")))
+            .unwrap_or_else(|| panic!("{key} not in icosahedron.toml"));
+        let edited_line = {
+            let (k, v) = line.split_once('=').unwrap();
+            let v = v.trim();
+            let scaled = if let Some(inner) = v.strip_prefix('[') {
+                let inner = inner.split(']').next().unwrap();
+                let nums: Vec<f64> = inner
+                    .split(',')
+                    .map(|x| x.trim().parse().unwrap())
+                    .collect();
+                let s: Vec<String> = nums.iter().map(|x| format!("{:?}", x * 0.9)).collect();
+                format!("[{}]", s.join(", "))
+            } else {
+                let x: f64 = v.split_whitespace().next().unwrap().parse().unwrap();
+                format!("{:?}", x * 0.9)
+            };
+            format!("{k}= {scaled}")
+        };
+        let edited = text.replace(line, &edited_line);
+        let ours = platform_identity(&parse_platform(&edited, "mem").unwrap());
+        let theirs = mc_parse(&edited, "mem").unwrap();
+        assert_ne!(ours, base, "{key} is not covered");
+        assert_eq!(ours, theirs.identity(), "{key}: implementations differ");
+        // The model part alone does not see it.
+        assert_eq!(
+            model_identity(&parse_platform(&edited, "mem").unwrap()),
+            theirs.model.identity()
+        );
+        edits += 1;
+    }
+    assert_eq!(edits, 4);
 }
 
 proptest! {

@@ -56,6 +56,12 @@ impl Rig {
             PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/safety-monitor.toml");
         let mut cfg = config::load(&cfg_path).unwrap();
         cfg.monitor.rt_priority = 0;
+        // The test process itself publishes the setpoints and the identity (issue 16: the
+        // stream owners are checked by executable).
+        let me = std::env::current_exe().unwrap();
+        let me = me.file_name().unwrap().to_string_lossy().to_string();
+        cfg.ipc.setpoint_owners = vec![me.clone()];
+        cfg.ipc.identity_owners = vec![me];
         cfg.can.reset_wait_ms = 200;
         let kin = StandardKinematics::new(&cfg.platform);
         let id = platform_identity(&cfg.platform);
@@ -281,7 +287,10 @@ fn offset_101_mm_trips_and_stops_the_bus_99_mm_does_not() {
     let published = rig.seq;
     let s = rig.finish();
     assert_eq!(s.trips, 1);
-    assert!(published > 100, "the rig published only {published} setpoints");
+    assert!(
+        published > 100,
+        "the rig published only {published} setpoints"
+    );
     assert!(
         s.setpoints_checked + s.setpoints_missing + 32 >= published,
         "published {published}: {s:?}"

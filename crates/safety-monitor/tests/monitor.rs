@@ -244,6 +244,8 @@ fn silence_for_n_cycles_trips_only_after_the_first_setpoint() {
 #[test]
 fn an_announced_end_of_stream_disarms_silence_and_a_new_stream_rearms() {
     let mut m = monitor();
+    // The producer's plan ends at its setpoint 10 (issue 16); the stream holds at HOME.
+    m.on_plan_announced(10);
     let seq = good_cycle(&mut m, 1, 0);
     m.on_setpoint(&sp(seq, HOME, 0, 0.0));
     m.on_stream_end();
@@ -1361,4 +1363,77 @@ fn bus_off_and_error_passive_trip_overflow_is_a_blind_reader_warnings_pass() {
             None => assert!(r.new_trip.is_none(), "{cond:?}"),
         }
     }
+}
+
+/// Issue 16, item 2: an end-of-stream announcement (STOPPING) is accepted only at the end of
+/// the plan the producer announced, with the stream holding; otherwise it trips
+/// `unplanned_stream_end` and the silence check stays armed (a forged STOPPING cannot disarm it).
+#[test]
+fn stopping_is_accepted_only_at_the_end_of_the_announced_plan() {
+    let moving = |k: u64| [0.0, 0.0, 2.0 + 1e-5 * k as f64, 0.0, 0.0, 0.0];
+    let stop_now = |m: &mut Monitor| {
+        m.on_stream_end();
+        m.end_cycle(0)
+    };
+    // No plan announced at all.
+    let mut m = monitor();
+    let seq = good_cycle(&mut m, 1, 0);
+    assert!(!m.stream_end_planned());
+    let r = stop_now(&mut m);
+    assert_eq!(
+        r.new_trip.map(|t| t.fault.cause),
+        Some(Cause::UnplannedStreamEnd)
+    );
+    // Still armed: the silence that follows is also latched.
+    m.end_cycle(0);
+    assert!(m.last_faults().contains(Cause::SetpointSilence));
+    let _ = seq;
+
+    // A plan ending at 100 while the stream is at 16 (holding at a waypoint): refused.
+    let mut m = monitor();
+    m.on_plan_announced(100);
+    good_cycle(&mut m, 1, 0);
+    assert_eq!(
+        stop_now(&mut m).new_trip.map(|t| t.fault.cause),
+        Some(Cause::UnplannedStreamEnd)
+    );
+
+    // Past the plan's end but still moving: refused.
+    let mut m = monitor_with(|l| l.motion.check = false);
+    m.on_plan_announced(5);
+    for k in 1..=15 {
+        m.on_setpoint(&sp(k, moving(k), 0, 0.0));
+    }
+    assert!(!m.stream_end_planned());
+    assert_eq!(
+        stop_now(&mut m).new_trip.map(|t| t.fault.cause),
+        Some(Cause::UnplannedStreamEnd)
+    );
+
+    // A stream without a planned end (motion cueing): refused.
+    let mut m = monitor();
+    m.on_plan_announced(crs_ipc::motion_state::PLAN_OPEN_END);
+    good_cycle(&mut m, 1, 0);
+    assert_eq!(
+        stop_now(&mut m).new_trip.map(|t| t.fault.cause),
+        Some(Cause::UnplannedStreamEnd)
+    );
+
+    // At the plan's end and holding: accepted, nothing trips afterwards.
+    let mut m = monitor_with(|l| l.motion.check = false);
+    m.on_plan_announced(10);
+    for k in 1..=10 {
+        m.on_setpoint(&sp(k, moving(k), 0, 0.0));
+    }
+    m.end_cycle(0);
+    assert!(!m.stream_end_planned(), "at the end but not yet holding");
+    for k in 11..=12 {
+        m.on_setpoint(&sp(k, moving(10), 0, 0.0));
+    }
+    assert!(m.stream_end_planned());
+    assert!(stop_now(&mut m).faults.is_empty());
+    for _ in 0..100 {
+        assert!(m.end_cycle(0).faults.is_empty());
+    }
+    assert_eq!(m.state(), MonitorState::Armed);
 }

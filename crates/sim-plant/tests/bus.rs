@@ -1111,6 +1111,76 @@ fn drives_with_a_safety_heartbeat_watch_stay_braked_without_the_monitor() {
     assert_eq!(max_abs_diff(plant.plant_lengths(), &start), 0.0);
 }
 
+/// Issue 16: sim-plant's winches check the monitor's SRDO configuration CRC. With valid RUN
+/// heartbeats whose configuration signature carries another CRC (a monitor configured with
+/// another validation time) no drive can be enabled; with the signature of the drives' own
+/// configuration the same sequence enables all eight.
+#[test]
+fn winches_refuse_a_monitor_with_another_srdo_configuration() {
+    use can_transport::safety_frame::{self, ConfigSignature, SafetyHeartbeat, SafetyState};
+    let d = DrivesConfig::load(&config_dir().join("drives.toml")).unwrap();
+    let own = d.safety_heartbeat.unwrap();
+    let other = drive_io::safety_watch::SafetyWatchConfig {
+        validation_time_ms: own.validation_time_ms + 100,
+        ..own
+    };
+    let enabled_with = |srdo_crc: u16| -> usize {
+        let cfg = plant_cfg("icosahedron-ideal.toml");
+        let control = cfg.platform.clone();
+        let mut plant = PlantBus::new(cfg, &control, &d, BusOptions::new(&d, &control)).unwrap();
+        let mut wire = VecBus::default();
+        let mut now = 0;
+        plant.start(now);
+        plant.handle_frame(&canopen::nmt(canopen::NMT_START, 0), now);
+        for n in 1..=8u8 {
+            plant.handle_frame(&canopen::sdo_download(n, 0x6060, 0, 8, 1), now);
+        }
+        for k in 0..40u16 {
+            now += 15_000_000;
+            let sig = ConfigSignature {
+                srdo_crc,
+                safety_params_crc: 0,
+            };
+            let hb = SafetyHeartbeat {
+                state: SafetyState::Run,
+                cause: 0,
+                counter: k,
+                epoch: 7,
+            };
+            for f in sig
+                .encode(own.cob_id)
+                .into_iter()
+                .chain(safety_frame::encode(&hb, own.cob_id))
+            {
+                plant.handle_frame(&f, now);
+            }
+            let cw = [0x06, 0x07, 0x0F][usize::from(k.min(2))];
+            for i in 0..8 {
+                plant.handle_frame(&canopen::rpdo1(i as u8 + 1, cw, 0), now);
+            }
+            assert!(plant.handle_frame(&canopen::sync(), now));
+            plant.cycle(now, 1e-3);
+            plant.flush(&mut wire).unwrap();
+        }
+        (0..8)
+            .filter(|&i| {
+                plant.drives().slave(i).unwrap().ds402_state() == Ds402State::OperationEnabled
+            })
+            .count()
+    };
+    assert_ne!(own.srdo_crc(), other.srdo_crc());
+    assert_eq!(
+        enabled_with(other.srdo_crc()),
+        0,
+        "enabled despite the CRC mismatch"
+    );
+    assert_eq!(
+        enabled_with(own.srdo_crc()),
+        8,
+        "the matching signature must release"
+    );
+}
+
 /// Ramps an offset on one cable's command (0.1 mm per SYNC, as the fault matrix's 0.1 m/s)
 /// from home until `target_m`, then holds 200 cycles; returns (offset at the first drive
 /// fault, the cable's largest and smallest measured force before it).

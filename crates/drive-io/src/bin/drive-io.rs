@@ -34,6 +34,11 @@ struct Args {
     /// without touching the bus.
     #[arg(long)]
     print_plan: bool,
+    /// BENCH ONLY: start although the config has no `[safety_heartbeat]` (no safety monitor
+    /// on the bus; nothing stops the drives when the monitor is absent). Never in config/ or
+    /// systemd/ units; logged as an error at start.
+    #[arg(long = "bench-without-safety-heartbeat")]
+    bench_without_safety_heartbeat: bool,
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -71,6 +76,17 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         return print_plan(&cfg);
     }
     let spec = cfg.transport()?;
+    if cfg.require_safety_heartbeat(args.bench_without_safety_heartbeat)? {
+        tracing::error!(
+            "BENCH OVERRIDE {}: running WITHOUT the safety monitor's heartbeat; a dead or absent \
+             monitor does not stop the drives. Never use this on the robot.",
+            drive_io::config::BENCH_OVERRIDE_FLAG
+        );
+        eprintln!(
+            "drive-io: WARNING: bench override {}: no safety heartbeat validation",
+            drive_io::config::BENCH_OVERRIDE_FLAG
+        );
+    }
     // SAFETY: the handler only stores to an atomic (async-signal-safe).
     unsafe {
         libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);

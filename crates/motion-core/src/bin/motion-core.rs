@@ -68,8 +68,20 @@ struct IoxPorts {
     identity: TopicPublisher<PlatformIdentity>,
     loop_stats: TopicPublisher<LoopStatsSample>,
     platform_identity: PlatformIdentity,
+    /// Sequence number of the plan's last setpoint (`motion_state::PLAN`, issue 16): the
+    /// safety monitor accepts the end-of-stream announcement only after it.
+    plan_end: u64,
     hb_seq: u64,
     _node: IpcNode,
+}
+
+impl IoxPorts {
+    fn announce_plan(&mut self) {
+        self.hb_seq += 1;
+        let _ = self
+            .events
+            .publish(&StateEvent::plan(self.plan_end, self.hb_seq));
+    }
 }
 impl StagePorts for IoxPorts {
     fn setpoint(&mut self, sp: &JointSetpoint) -> bool {
@@ -108,6 +120,7 @@ impl StagePorts for IoxPorts {
         let mut id = self.platform_identity;
         id.timestamp_ns = crs_ipc::monotonic_ns();
         let _ = self.identity.publish(&id);
+        self.announce_plan();
     }
     fn stream_end(&mut self) {
         self.hb_seq += 1;
@@ -192,7 +205,8 @@ fn run(args: Args) -> Result<(), String> {
     let cfg = config::load(&args.config).map_err(|e| e.to_string())?;
     let platform = load_platform(&cfg.platform).map_err(|e| e.to_string())?;
     let model = platform.model.clone();
-    let identity = model.identity_hex();
+    // The identity the safety monitor compares (issue 16): model, workspace box, limits.
+    let identity = platform.identity_hex();
     tracing::info!(platform = %platform.name, identity = %identity, cables = model.m(), "platform loaded");
 
     let configured = lifecycle::configure(&cfg, &platform).map_err(|e| e.to_string())?;
@@ -240,6 +254,14 @@ fn run(args: Args) -> Result<(), String> {
     // `Send`, and publishing allocates: see `daemon::outbox`). It is spawned before the
     // real-time settings so it does not inherit the loop's priority; it sets its own below it.
     let period_ns = cfg.realtime.period_ns;
+    // The plan's last setpoint: sequence numbers count published setpoints from 1, one per
+    // cycle, so the plan's last reference goes out as number `samples` (later if the planner
+    // starved the loop). The cueing input has no planned end.
+    let plan_end = if cueing {
+        crs_ipc::motion_state::PLAN_OPEN_END
+    } else {
+        plan.samples as u64
+    };
     let start_ns = realtime::now_ns() + 50_000_000;
     let outbox = Arc::new(Outbox::new(64));
     let stats = Arc::new(LoopStats::default());
@@ -247,7 +269,7 @@ fn run(args: Args) -> Result<(), String> {
     let stage = {
         let outbox = outbox.clone();
         let stats = stats.clone();
-        let identity = PlatformIdentity::new(model.identity(), model.m() as u32);
+        let identity = PlatformIdentity::new(platform.identity(), model.m() as u32);
         let mut rt = cfg.realtime;
         rt.priority = (rt.priority - 1).max(0);
         rt.lock_memory = false;
@@ -269,6 +291,7 @@ fn run(args: Args) -> Result<(), String> {
                             .publisher::<LoopStatsSample>()
                             .map_err(|e| e.to_string())?,
                         platform_identity: identity,
+                        plan_end,
                         hb_seq: 0,
                         _node: node,
                     };
@@ -276,6 +299,8 @@ fn run(args: Args) -> Result<(), String> {
                         .identity
                         .publish(&identity)
                         .map_err(|e| e.to_string())?;
+                    let mut ports = ports;
+                    ports.announce_plan();
                     Ok(ports)
                 })();
                 let mut ports = match ports {

@@ -4,6 +4,9 @@
 //! * `safety-monitor [--config F] [--transport T] [--ipc-prefix P]`: run the monitor.
 //! * `safety-monitor reset [--ipc-prefix P]`: operator reset; exit 0 if accepted, 1 if refused.
 //! * `safety-monitor identity [--config F]`: print the platform identity the monitor computes.
+//! * `safety-monitor accept NEW.toml [--config F] [--yes]`: show the parameter diff of a
+//!   (re)calibrated platform against the one the monitor runs; with `--yes` make it the
+//!   monitor's accepted platform (issue 16).
 
 use clap::{Parser, Subcommand};
 use safety_monitor::daemon::{self, ResetReply};
@@ -46,6 +49,15 @@ enum Cmd {
     },
     /// Print the platform identity (SHA-256) the monitor computes from the platform TOML.
     Identity,
+    /// Show what a new platform file changes against the monitor's accepted one; with --yes
+    /// write it as the monitor's accepted copy and pin its SHA-256 in the config.
+    Accept {
+        /// The candidate platform TOML (e.g. a calibration's output).
+        platform: PathBuf,
+        /// Accept after reviewing the diff (without it nothing is written).
+        #[arg(long)]
+        yes: bool,
+    },
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -98,6 +110,45 @@ fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
                         "reset REFUSED: the cause persists ({})",
                         c.map_or("unknown".to_string(), |c| c.to_string())
                     );
+                    Ok(ExitCode::FAILURE)
+                }
+            }
+        }
+        Some(Cmd::Accept { platform, yes }) => {
+            let r = safety_monitor::accept::accept(&args.config, &platform, yes)?;
+            println!(
+                "monitor config {}: runs {} ({})",
+                args.config.display(),
+                r.current.display(),
+                r.current_status
+            );
+            println!("candidate {}:", platform.display());
+            println!("  sha256   {}", r.new_sha256);
+            println!("  identity {}", r.new_identity);
+            if r.diff.is_empty() {
+                println!("  no parameter differs");
+            } else {
+                println!("  {} parameter(s) differ:", r.diff.len());
+                for l in &r.diff {
+                    println!("    {l}");
+                }
+            }
+            match r.written {
+                Some(copy) => {
+                    tracing::warn!(
+                        copy = %copy.display(),
+                        sha256 = %r.new_sha256,
+                        "platform ACCEPTED for the safety monitor"
+                    );
+                    println!(
+                        "ACCEPTED: the monitor now runs {} (sha256 {}); restart it",
+                        copy.display(),
+                        r.new_sha256
+                    );
+                    Ok(ExitCode::SUCCESS)
+                }
+                None => {
+                    println!("not accepted: review the diff, then run again with --yes");
                     Ok(ExitCode::FAILURE)
                 }
             }

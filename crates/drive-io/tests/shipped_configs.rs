@@ -1,0 +1,106 @@
+//! Issue 16, item 3: every drives configuration shipped in config/ carries the safety
+//! monitor's heartbeat (`[safety_heartbeat]`), and the bench-only override that lets drive-io
+//! start without it appears nowhere in config/ or systemd/.
+
+use drive_io::DrivesConfig;
+use drive_io::config::BENCH_OVERRIDE_FLAG;
+use std::path::{Path, PathBuf};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            files(&p, out);
+        } else {
+            out.push(p);
+        }
+    }
+}
+
+#[test]
+fn every_shipped_drives_config_has_the_safety_heartbeat() {
+    let mut all = Vec::new();
+    files(&repo().join("config"), &mut all);
+    let mut drives = 0;
+    for p in all
+        .iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+    {
+        let text = std::fs::read_to_string(p).unwrap();
+        let is_drives = text.lines().any(|l| l.trim() == "[bus]")
+            && text.lines().any(|l| l.trim() == "[[winch]]");
+        if !is_drives {
+            continue;
+        }
+        drives += 1;
+        let cfg = DrivesConfig::load(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        assert!(
+            cfg.safety_heartbeat.is_some(),
+            "{}: no [safety_heartbeat]",
+            p.display()
+        );
+        assert_eq!(cfg.require_safety_heartbeat(false).ok(), Some(false));
+    }
+    assert!(drives >= 1, "no drives config found under config/");
+}
+
+#[test]
+fn the_bench_override_is_never_shipped() {
+    let mut all = Vec::new();
+    files(&repo().join("config"), &mut all);
+    files(&repo().join("systemd"), &mut all);
+    assert!(all.len() > 5);
+    for p in &all {
+        let Ok(text) = std::fs::read_to_string(p) else {
+            continue;
+        };
+        assert!(
+            !text.contains(BENCH_OVERRIDE_FLAG),
+            "{}: contains the bench-only override {BENCH_OVERRIDE_FLAG}",
+            p.display()
+        );
+    }
+}
+
+#[test]
+fn without_the_heartbeat_drive_io_refuses_unless_overridden() {
+    let text = std::fs::read_to_string(repo().join("config/drives.toml")).unwrap();
+    let mut cfg = DrivesConfig::parse(&text).unwrap();
+    cfg.safety_heartbeat = None;
+    let e = cfg.require_safety_heartbeat(false).unwrap_err().to_string();
+    assert!(
+        e.contains("safety_heartbeat") && e.contains(BENCH_OVERRIDE_FLAG),
+        "{e}"
+    );
+    assert_eq!(cfg.require_safety_heartbeat(true).ok(), Some(true));
+}
+
+/// The daemon itself: a config without `[safety_heartbeat]` is refused at start, naming the
+/// table and the override.
+#[test]
+fn the_daemon_refuses_to_start_without_the_heartbeat() {
+    let text = std::fs::read_to_string(repo().join("config/drives.toml")).unwrap();
+    let start = text.find("[safety_heartbeat]").unwrap();
+    let end = start + text[start..].find("[[winch]]").unwrap();
+    let stripped = format!("{}{}", &text[..start], &text[end..]);
+    let dir = std::env::temp_dir().join(format!("dio-no-hb-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("drives.toml");
+    std::fs::write(&path, stripped).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_drive-io"))
+        .arg("--config")
+        .arg(&path)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("safety_heartbeat") && err.contains(BENCH_OVERRIDE_FLAG),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
