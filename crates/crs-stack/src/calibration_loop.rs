@@ -468,7 +468,7 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
             a.campaign.display()
         ),
     )?;
-    let nominal_checks = lifecycle::configure_checks(&daemon_tpl, &nominal);
+    let nominal_checks = lifecycle::configure_checks(&daemon_tpl, &nominal)?;
     nominal_checks
         .verify_plan(&wps)
         .map_err(|e| format!("{}: the plan is refused: {e}", a.campaign.display()))?;
@@ -590,7 +590,7 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
         with_sg.then_some(sg_a.as_path()),
         &campaign,
     )?;
-    lifecycle::configure_checks(&daemon_tpl, &cal_pf)
+    lifecycle::configure_checks(&daemon_tpl, &cal_pf)?
         .verify_plan(&wps)
         .map_err(|e| {
             format!(
