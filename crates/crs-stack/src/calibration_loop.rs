@@ -353,6 +353,7 @@ fn stack_run(
         settle_s: a.settle_s,
         campaign: Some(name.to_string()),
         rt_priority: (a.rt_priority >= 6).then_some(a.rt_priority),
+        ride: None,
     };
     let mut attempt = 0;
     let sum = loop {

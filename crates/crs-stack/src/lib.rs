@@ -13,14 +13,19 @@
 //!   motion-core's own [`configure`](motion_core::daemon::lifecycle::configure) step.
 //! - [`platforms`]: the platforms the stack runs (`crs sim --platform icosahedron|helicopter`)
 //!   and the consistent set of daemon, plant, monitor and drives configs of each.
+//! - [`ride_run`]: the helicopter hover physics (crate `ride-physics`) as the run's motion
+//!   source on motion-core's cueing input (`crs sim --source helicopter`), and
+//!   [`gamepad`], a game controller as its pilot.
 //! - [`sim_run`]: one run of the whole simulated stack (`crs sim`), its summary and verdict.
 //! - [`surrogate_evaluation`]: the surrogate fit of a platform and its evaluation on the plant.
 //! - [`transport`]: which CAN transport a run uses (vcan0 or the UDP loopback bus).
 
 pub mod calibration_loop;
 pub mod campaign;
+pub mod gamepad;
 pub mod platforms;
 pub mod rest_recording;
+pub mod ride_run;
 pub mod sim_run;
 pub mod supervisor;
 pub mod surrogate_evaluation;

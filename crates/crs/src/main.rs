@@ -8,6 +8,7 @@ mod console_cmd;
 mod gen_cmd;
 mod model_cmd;
 mod plant_cmd;
+mod ride_cmd;
 mod sim_cmd;
 mod sim_plots;
 mod surrogate_cmd;

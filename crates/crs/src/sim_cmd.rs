@@ -87,6 +87,8 @@ pub struct SimArgs {
     pub(crate) rt_priority: Option<i32>,
     #[command(flatten)]
     pub(crate) console: SimConsoleArgs,
+    #[command(flatten)]
+    pub(crate) ride: crate::ride_cmd::RideArgs,
 }
 
 /// What `crs sim` runs next to the stack: the operator console (`--console`) and the run's
@@ -149,7 +151,7 @@ impl SimArgs {
     /// `--config` daemon runs (if it is a known one), else the default (icosahedron).
     fn platform_set(&self) -> Result<platforms::StackConfigs, Box<dyn std::error::Error>> {
         let dir = Path::new(platforms::CONFIG_DIR);
-        if let Some(p) = &self.platform {
+        if let Some(p) = self.platform.clone().or(self.ride.default_platform()).as_ref() {
             let set = platforms::resolve(p, dir)?;
             if let Some(config) = &self.config {
                 // A daemon TOML given next to --platform must run that platform.
@@ -203,6 +205,7 @@ impl SimArgs {
             settle_s: self.settle_s,
             campaign: self.campaign.clone(),
             rt_priority: self.rt_priority,
+            ride: self.ride.spec()?,
         })
     }
 }

@@ -80,7 +80,7 @@ pub fn region_grid(region: &Region, n: usize) -> Vec<Pose> {
 }
 
 /// Positions per axis of [`region_grid`] for the dynamic acceleration limits.
-pub const DYNAMIC_GRID_POINTS: usize = 5;
+pub const DYNAMIC_GRID_POINTS: usize = 3;
 
 /// Poses of the region grid whose static margin is below this share of the force range
 /// (f_max − f_min)/2 do not bound the planner's accelerations (see
