@@ -45,7 +45,11 @@ pub enum BodyError {
 impl RigidBody {
     /// Validates mass, COG and inertia (symmetric, positive definite, I₁ + I₂ ≥ I₃ for every
     /// permutation of the principal moments: a real mass distribution).
-    pub fn new(mass_kg: f64, cog_m: Vector3<f64>, inertia_kg_m2: Matrix3<f64>) -> Result<Self, BodyError> {
+    pub fn new(
+        mass_kg: f64,
+        cog_m: Vector3<f64>,
+        inertia_kg_m2: Matrix3<f64>,
+    ) -> Result<Self, BodyError> {
         if !(mass_kg.is_finite() && mass_kg > 0.0) {
             return Err(BodyError::Mass(mass_kg));
         }
@@ -53,7 +57,9 @@ impl RigidBody {
             return Err(BodyError::Cog);
         }
         let i = inertia_kg_m2;
-        if !i.iter().all(|v| v.is_finite()) || (i - i.transpose()).abs().max() > 1e-9 * (1.0 + i.abs().max()) {
+        if !i.iter().all(|v| v.is_finite())
+            || (i - i.transpose()).abs().max() > 1e-9 * (1.0 + i.abs().max())
+        {
             return Err(BodyError::Inertia);
         }
         let ev = i.symmetric_eigenvalues();
@@ -78,7 +84,8 @@ impl RigidBody {
         let c = (self.cog_m * self.mass_kg + other.cog_m * other.mass_kg) / m;
         let steiner = |b: &RigidBody| {
             let d = b.cog_m - c;
-            b.inertia_kg_m2 + (Matrix3::identity() * d.norm_squared() - d * d.transpose()) * b.mass_kg
+            b.inertia_kg_m2
+                + (Matrix3::identity() * d.norm_squared() - d * d.transpose()) * b.mass_kg
         };
         RigidBody {
             mass_kg: m,
@@ -132,11 +139,13 @@ pub fn spatial_inertia(body: &RigidBody, pose: &Pose) -> nalgebra::Matrix6<f64> 
     let i_w = r * body.inertia_kg_m2 * r.transpose();
     let mut s = nalgebra::Matrix6::zeros();
     // force = m (a + α × c) = m a − m c̃ α
-    s.fixed_view_mut::<3, 3>(0, 0).copy_from(&(Matrix3::identity() * m));
+    s.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(Matrix3::identity() * m));
     s.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-cx * m));
     // torque = c × force + I_w α = m c̃ a − m c̃ c̃ α + I_w α
     s.fixed_view_mut::<3, 3>(3, 0).copy_from(&(cx * m));
-    s.fixed_view_mut::<3, 3>(3, 3).copy_from(&(i_w - cx * cx * m));
+    s.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(i_w - cx * cx * m));
     s
 }
 
@@ -215,10 +224,14 @@ pub fn feasible_acceleration_scale(
             // row i of A^{+T} = a_iᵀ (AᵀA)⁻¹
             let row = at.transpose() * inv;
             let g = row * s_x;
-            let reach = g.fixed_columns::<3>(0).norm() * a_max + g.fixed_columns::<3>(3).norm() * alpha_max;
+            let reach =
+                g.fixed_columns::<3>(0).norm() * a_max + g.fixed_columns::<3>(3).norm() * alpha_max;
             let slack = (f0[i] - p.f_min).min(p.f_max - f0[i]) - row.norm() * omega_w;
             if slack < 0.0 {
-                return Err(ScaleError::NotFeasibleAtRest { pose_index: k, cable: i });
+                return Err(ScaleError::NotFeasibleAtRest {
+                    pose_index: k,
+                    cable: i,
+                });
             }
             if reach > 0.0 && slack / reach < best.scale {
                 best = AccelerationScale {
@@ -312,8 +325,14 @@ mod tests {
         };
         let w_in = inertial_wrench(&b, &pose(t), &m);
         for k in 0..3 {
-            assert!((w_in[k] + f[k]).abs() < 1e-3 * (1.0 + f[k].abs()), "force {k}: {w_in} vs {f}");
-            assert!((w_in[3 + k] + tau[k]).abs() < 1e-3 * (1.0 + tau[k].abs()), "torque {k}: {w_in} vs {tau}");
+            assert!(
+                (w_in[k] + f[k]).abs() < 1e-3 * (1.0 + f[k].abs()),
+                "force {k}: {w_in} vs {f}"
+            );
+            assert!(
+                (w_in[3 + k] + tau[k]).abs() < 1e-3 * (1.0 + tau[k].abs()),
+                "torque {k}: {w_in} vs {tau}"
+            );
         }
         // The spatial inertia is the ω-free part.
         let m0 = Motion {
@@ -321,23 +340,53 @@ mod tests {
             ..m
         };
         let lin = -spatial_inertia(&b, &pose(t))
-            * Vector6::new(a.x, a.y, a.z, m.angular_acceleration.x, m.angular_acceleration.y, m.angular_acceleration.z);
+            * Vector6::new(
+                a.x,
+                a.y,
+                a.z,
+                m.angular_acceleration.x,
+                m.angular_acceleration.y,
+                m.angular_acceleration.z,
+            );
         assert!((lin - inertial_wrench(&b, &pose(t), &m0)).norm() < 1e-9);
     }
 
     #[test]
     fn combining_bodies_keeps_mass_cog_and_moves_inertia_by_steiner() {
-        let a = RigidBody::new(100.0, Vector3::new(1.0, 0.0, 0.0), Matrix3::identity() * 10.0).unwrap();
-        let b = RigidBody::new(100.0, Vector3::new(-1.0, 0.0, 0.0), Matrix3::identity() * 10.0).unwrap();
+        let a = RigidBody::new(
+            100.0,
+            Vector3::new(1.0, 0.0, 0.0),
+            Matrix3::identity() * 10.0,
+        )
+        .unwrap();
+        let b = RigidBody::new(
+            100.0,
+            Vector3::new(-1.0, 0.0, 0.0),
+            Matrix3::identity() * 10.0,
+        )
+        .unwrap();
         let s = a.combined(&b);
         assert_eq!(s.mass_kg, 200.0);
         assert!(s.cog_m.norm() < 1e-12);
         // Two point masses 1 m off the axis: +2 × 100 kg m² about y and z, nothing about x.
-        assert!((s.inertia_kg_m2 - Matrix3::from_diagonal(&Vector3::new(20.0, 220.0, 220.0))).norm() < 1e-9);
-        assert!(RigidBody::new(1.0, Vector3::zeros(), Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 3.0))).is_err());
+        assert!(
+            (s.inertia_kg_m2 - Matrix3::from_diagonal(&Vector3::new(20.0, 220.0, 220.0))).norm()
+                < 1e-9
+        );
+        assert!(
+            RigidBody::new(
+                1.0,
+                Vector3::zeros(),
+                Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, 3.0))
+            )
+            .is_err()
+        );
         assert!(RigidBody::new(-1.0, Vector3::zeros(), Matrix3::identity()).is_err());
         // The helicopter's weight wrench is eq. 5.12's.
         let w = heli().weight_wrench(&Pose::default());
-        assert!((w - Vector6::new(0.0, 0.0, -7500.0, 0.0, -600.0, 0.0)).norm() < 1e-9, "{w}");
+        assert!(
+            (w - Vector6::new(0.0, 0.0, -7500.0, 0.0, -600.0, 0.0)).norm() < 1e-9,
+            "{w}"
+        );
     }
 }

@@ -170,7 +170,10 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("crs-no-js-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let e = open_in(&dir).err().unwrap();
-        assert!(e.starts_with("no game controller found") && e.contains("--pilot FILE.csv"), "{e}");
+        assert!(
+            e.starts_with("no game controller found") && e.contains("--pilot FILE.csv"),
+            "{e}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

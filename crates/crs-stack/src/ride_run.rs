@@ -109,10 +109,7 @@ pub fn prepare(spec: &RideSpec, platform: &Platform) -> Result<PreparedRide, Str
             let d = t.duration_s();
             (Pilot::Track(t), d)
         }
-        PilotSpec::Gamepad { duration_s } => (
-            Pilot::Live(crate::gamepad::open()?),
-            *duration_s,
-        ),
+        PilotSpec::Gamepad { duration_s } => (Pilot::Live(crate::gamepad::open()?), *duration_s),
     };
     Ok(PreparedRide {
         model,
@@ -180,9 +177,7 @@ fn fly(
     stop: &AtomicBool,
 ) -> Result<(RideSummary, Vec<PathPoint>), String> {
     let node = IpcNode::with_prefix("crs-ride", prefix).map_err(|e| e.to_string())?;
-    let publisher = node
-        .publisher::<CueingPose>()
-        .map_err(|e| e.to_string())?;
+    let publisher = node.publisher::<CueingPose>().map_err(|e| e.to_string())?;
     let model = ride.model;
     let mut state = HoverState::at_rest(&home);
     let mut sum = RideSummary {
@@ -213,7 +208,7 @@ fn fly(
             sum.wall_contact_s += DT_S;
         }
         let _ = publisher.publish(&CueingPose::new(state.pose_array(), k + 1));
-        if k % 10 == 0 {
+        if k.is_multiple_of(10) {
             path.push(PathPoint {
                 t_s: state.t,
                 pose: state.pose_array(),

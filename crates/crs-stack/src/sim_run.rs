@@ -531,7 +531,7 @@ pub fn execute_observed(
             }
             refs.push_back((sp.timestamp_ns, sp.pose));
             last_ref = Some(sp.pose);
-            if ride_model.is_some() && sum.setpoints % 10 == 0 {
+            if ride_model.is_some() && sum.setpoints.is_multiple_of(10) {
                 ride_reference.push([sp.pose[0], sp.pose[1], sp.pose[2]]);
             }
             if refs.len() > 4000 {

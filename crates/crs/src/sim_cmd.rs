@@ -151,7 +151,12 @@ impl SimArgs {
     /// `--config` daemon runs (if it is a known one), else the default (icosahedron).
     fn platform_set(&self) -> Result<platforms::StackConfigs, Box<dyn std::error::Error>> {
         let dir = Path::new(platforms::CONFIG_DIR);
-        if let Some(p) = self.platform.clone().or(self.ride.default_platform()).as_ref() {
+        if let Some(p) = self
+            .platform
+            .clone()
+            .or(self.ride.default_platform())
+            .as_ref()
+        {
             let set = platforms::resolve(p, dir)?;
             if let Some(config) = &self.config {
                 // A daemon TOML given next to --platform must run that platform.

@@ -44,7 +44,10 @@ fn hover_flight_into_the_corners_runs_clean_on_the_stack() {
         String::from_utf8_lossy(&o.stdout),
         String::from_utf8_lossy(&o.stderr)
     );
-    assert!(o.status.success(), "crs sim --source helicopter failed:\n{text}");
+    assert!(
+        o.status.success(),
+        "crs sim --source helicopter failed:\n{text}"
+    );
     assert!(text.contains("SIM-CHECK: PASS"), "{text}");
     let sum: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(out.join("run/summary.json")).expect("summary.json"),
@@ -56,15 +59,24 @@ fn hover_flight_into_the_corners_runs_clean_on_the_stack() {
     assert_eq!(sum["loop_rejected"], 0, "{sum}");
     let ride = &sum["ride"];
     assert!(ride["flown_s"].as_f64().unwrap() > 16.9, "{sum}");
-    assert!(ride["wall_contact_s"].as_f64().unwrap() > 1.0, "walls never pushed: {sum}");
+    assert!(
+        ride["wall_contact_s"].as_f64().unwrap() > 1.0,
+        "walls never pushed: {sum}"
+    );
     for k in 0..3 {
         let pen = ride["max_wall_penetration_mm"][k].as_f64().unwrap();
         let margin = ride["wall_margin_mm"][k].as_f64().unwrap();
-        assert!(pen > 1.0 && pen < margin, "axis {k}: {pen} mm beyond the walls: {sum}");
+        assert!(
+            pen > 1.0 && pen < margin,
+            "axis {k}: {pen} mm beyond the walls: {sum}"
+        );
     }
     // The reference really flew: the tracked pose reached near both corners' walls.
     let svg = std::fs::read_to_string(out.join("run/ride-path.svg")).expect("ride-path.svg");
-    assert!(svg.contains("<polyline") && svg.contains("elastic walls"), "{svg}");
+    assert!(
+        svg.contains("<polyline") && svg.contains("elastic walls"),
+        "{svg}"
+    );
     let _ = std::fs::remove_dir_all(&out);
 }
 
@@ -74,7 +86,11 @@ fn pilot_errors_and_missing_controllers_are_refused_before_anything_starts() {
     let dir = std::env::temp_dir().join(format!("crs-ride-bad-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let bad = dir.join("pilot.csv");
-    std::fs::write(&bad, "t_s,collective,roll,pitch,yaw\n0,0.5,0,0,0\n1,2.0,0,0,0\n").unwrap();
+    std::fs::write(
+        &bad,
+        "t_s,collective,roll,pitch,yaw\n0,0.5,0,0,0\n1,2.0,0,0,0\n",
+    )
+    .unwrap();
     let run = |pilot: &str| {
         let o = std::process::Command::new(&crs)
             .current_dir(root())
@@ -86,7 +102,10 @@ fn pilot_errors_and_missing_controllers_are_refused_before_anything_starts() {
         String::from_utf8_lossy(&o.stderr).to_string()
     };
     let e = run(bad.to_str().unwrap());
-    assert!(e.contains("pilot.csv:3:3: column `collective`: 2 outside [0, 1]"), "{e}");
+    assert!(
+        e.contains("pilot.csv:3:3: column `collective`: 2 outside [0, 1]"),
+        "{e}"
+    );
     let e = run("script:loops");
     assert!(e.contains("unknown pilot script `loops`"), "{e}");
     if crs_stack::gamepad::devices(std::path::Path::new("/dev/input")).is_empty() {

@@ -106,7 +106,10 @@ fn setup() -> Setup {
     with_surrogate_dynamic
         .set_surrogate(Box::new(sg), n)
         .unwrap_or_else(|e| panic!("{e}"));
-    assert!(pf.dynamics.is_some(), "config/icosahedron.toml has [dynamics]");
+    assert!(
+        pf.dynamics.is_some(),
+        "config/icosahedron.toml has [dynamics]"
+    );
     with_surrogate_dynamic.set_dynamics(pf.dynamics);
     let refs = demo_references(&pf);
     // Every reference must pass the checks: a rejected one returns early and would flatter

@@ -57,7 +57,11 @@ fn a_reference_the_static_check_accepts_is_refused_with_its_inertial_wrench() {
     let s = statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut fs).unwrap();
     let d = statics::force_distribution(&data, &(p.w_e + w_in), p.f_min, p.f_max, &mut fd).unwrap();
     println!("static  f = {fs:.0?} N (feasible {})", s.feasible);
-    println!("dynamic f = {fd:.0?} N (feasible {}), w_in = {:.0?}", d.feasible, w_in.as_slice());
+    println!(
+        "dynamic f = {fd:.0?} N (feasible {}), w_in = {:.0?}",
+        d.feasible,
+        w_in.as_slice()
+    );
     assert!(s.feasible && !d.feasible);
     // The dynamic forces close the dynamic wrench: A^T f + w_e + w_in = 0.
     let res: Vector6<f64> = statics::residual_wrench(&data, &fd, &(p.w_e + w_in));
@@ -77,8 +81,13 @@ fn the_planner_accelerations_come_from_what_stays_feasible() {
     assert!(stat.dynamic_limits().is_none());
     let d = dynamic.dynamic_limits().unwrap();
     let (ls, ld) = (stat.planner_limits(), dynamic.planner_limits());
-    assert!(d.acceleration_factor > 0.1 && d.acceleration_factor < 1.0, "{d:?}");
-    assert!((ld.linear_acceleration - ls.linear_acceleration * d.acceleration_factor).abs() < 1e-12);
+    assert!(
+        d.acceleration_factor > 0.1 && d.acceleration_factor < 1.0,
+        "{d:?}"
+    );
+    assert!(
+        (ld.linear_acceleration - ls.linear_acceleration * d.acceleration_factor).abs() < 1e-12
+    );
     assert_eq!(ld.linear_velocity, ls.linear_velocity);
     println!(
         "helicopter planner accelerations: static {:.2} m/s², {:.1}°/s²; dynamic {:.2} m/s², {:.1}°/s² (factor {:.3})",
@@ -98,5 +107,10 @@ fn the_planner_accelerations_come_from_what_stays_feasible() {
     let mut bare = pf.clone();
     bare.dynamics = None;
     daemon.dynamic_wrench = true;
-    assert!(lifecycle::configure(&daemon, &bare).unwrap().dynamic_limits().is_none());
+    assert!(
+        lifecycle::configure(&daemon, &bare)
+            .unwrap()
+            .dynamic_limits()
+            .is_none()
+    );
 }

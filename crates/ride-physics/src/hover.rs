@@ -8,8 +8,8 @@
 //! velocities first, positions with the new velocities; stable for the walls' ω_n·dt ≪ 1 at
 //! 1 kHz).
 //!
-//! Inputs ([`PilotInput`]): the collective sets the thrust along the cabin's z axis, T = m g (1
-//! + authority·(2u − 1)) (0.5 = hover); roll, pitch and yaw command the cabin's attitude
+//! Inputs ([`PilotInput`]): the collective sets the thrust along the cabin's z axis,
+//! T = m g (1 + authority·(2u − 1)) (0.5 = hover); roll, pitch and yaw command the cabin's attitude
 //! (full stick = `attitude_command_max`), held by the PD assist "operating in the helicopter
 //! fixed frame to assist the passenger" (sec. 5.5), τ_th = K_p (φ_cmd − φ) − K_d φ̇. A tilted
 //! thrust accelerates the cabin horizontally: pitch +1 flies towards +x, roll +1 towards −y
@@ -160,11 +160,26 @@ mod tests {
     fn hover_collective_holds_still_and_full_collective_climbs_at_its_authority() {
         let m = helicopter_model();
         let s = run(&m, PilotInput::HOVER, 5.0);
-        assert!((s.r - Vector3::new(0.0, 0.0, 1.5)).norm() < 1e-12 && s.v.norm() < 1e-12, "{s:?}");
+        assert!(
+            (s.r - Vector3::new(0.0, 0.0, 1.5)).norm() < 1e-12 && s.v.norm() < 1e-12,
+            "{s:?}"
+        );
         // One step of full collective: a = authority · g upwards (nothing else acts yet).
         let mut s = HoverState::at_rest(&Pose::new(Vector3::new(0.0, 0.0, 1.5), Vector3::zeros()));
-        step(&m, &mut s, &PilotInput { collective: 1.0, ..PilotInput::HOVER }, 1e-3);
-        assert!((s.acc.z - m.collective_authority * m.gravity_m_per_s2).abs() < 1e-9, "{}", s.acc);
+        step(
+            &m,
+            &mut s,
+            &PilotInput {
+                collective: 1.0,
+                ..PilotInput::HOVER
+            },
+            1e-3,
+        );
+        assert!(
+            (s.acc.z - m.collective_authority * m.gravity_m_per_s2).abs() < 1e-9,
+            "{}",
+            s.acc
+        );
     }
 
     #[test]
@@ -173,15 +188,44 @@ mod tests {
         // Without walls, to see the free response.
         m.walls.min = Vector3::repeat(-1e3);
         m.walls.max = Vector3::repeat(1e3);
-        let s = run(&m, PilotInput { pitch: 0.5, ..PilotInput::HOVER }, 6.0);
+        let s = run(
+            &m,
+            PilotInput {
+                pitch: 0.5,
+                ..PilotInput::HOVER
+            },
+            6.0,
+        );
         assert!(s.v.x > 0.05 && s.v.y.abs() < 1e-6, "{:?}", s.v);
-        assert!((s.phi.y - 0.5 * m.attitude_command_max.y).abs() < 0.05 * m.attitude_command_max.y, "{}", s.phi);
-        let s = run(&m, PilotInput { roll: 0.5, ..PilotInput::HOVER }, 6.0);
+        assert!(
+            (s.phi.y - 0.5 * m.attitude_command_max.y).abs() < 0.05 * m.attitude_command_max.y,
+            "{}",
+            s.phi
+        );
+        let s = run(
+            &m,
+            PilotInput {
+                roll: 0.5,
+                ..PilotInput::HOVER
+            },
+            6.0,
+        );
         assert!(s.v.y < -0.05 && s.v.x.abs() < 1e-6, "{:?}", s.v);
         // The damped horizontal speed: T sin φ / D_lin.
         let t = thrust(&m, 0.5);
         let v_term = t * (0.5 * m.attitude_command_max.x).sin() / m.damping_linear.y;
-        let s = run(&m, PilotInput { roll: 0.5, ..PilotInput::HOVER }, 30.0);
-        assert!((s.v.y.abs() - v_term).abs() < 0.02 * v_term, "{} vs {v_term}", s.v.y);
+        let s = run(
+            &m,
+            PilotInput {
+                roll: 0.5,
+                ..PilotInput::HOVER
+            },
+            30.0,
+        );
+        assert!(
+            (s.v.y.abs() - v_term).abs() < 0.02 * v_term,
+            "{} vs {v_term}",
+            s.v.y
+        );
     }
 }

@@ -213,9 +213,7 @@ impl PilotTrack {
     pub fn script(name: &str, push_s: f64, release_s: f64) -> Result<Self, PilotError> {
         let dirs: Vec<[i32; 3]> = match name {
             "walls" => directions().collect(),
-            "corners" => directions()
-                .filter(|d| d.iter().all(|c| *c != 0))
-                .collect(),
+            "corners" => directions().filter(|d| d.iter().all(|c| *c != 0)).collect(),
             _ => return Err(PilotError::UnknownScript(name.to_string())),
         };
         let mut samples = vec![(0.0, PilotInput::HOVER)];
@@ -283,16 +281,32 @@ mod tests {
         let e = PilotTrack::parse_csv(&format!("{h}0,0.5,0,0,0\n0,0.5,0,0,0\n"), "p.csv")
             .unwrap_err()
             .to_string();
-        assert!(e.starts_with("p.csv:3:1: column `t_s`: 0 s is not after"), "{e}");
-        let e = PilotTrack::parse_csv(&format!("{h}0,half,0,0,0\n"), "p.csv").unwrap_err().to_string();
+        assert!(
+            e.starts_with("p.csv:3:1: column `t_s`: 0 s is not after"),
+            "{e}"
+        );
+        let e = PilotTrack::parse_csv(&format!("{h}0,half,0,0,0\n"), "p.csv")
+            .unwrap_err()
+            .to_string();
         assert_eq!(e, "p.csv:2:3: column `collective`: `half` is not a number");
-        let e = PilotTrack::parse_csv(&format!("{h}0,0.5,0,0\n"), "p.csv").unwrap_err().to_string();
+        let e = PilotTrack::parse_csv(&format!("{h}0,0.5,0,0\n"), "p.csv")
+            .unwrap_err()
+            .to_string();
         assert_eq!(e, "p.csv:2: has 4 columns, expected 5");
-        let e = PilotTrack::parse_csv("t,collective\n", "p.csv").unwrap_err().to_string();
+        let e = PilotTrack::parse_csv("t,collective\n", "p.csv")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("p.csv:1: header must be"), "{e}");
-        let e = PilotTrack::read_csv(Path::new("/nonexistent/p.csv")).unwrap_err().to_string();
+        let e = PilotTrack::read_csv(Path::new("/nonexistent/p.csv"))
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("/nonexistent/p.csv: cannot read"), "{e}");
-        assert!(PilotTrack::script("loop", 1.0, 1.0).unwrap_err().to_string().contains("walls, corners"));
+        assert!(
+            PilotTrack::script("loop", 1.0, 1.0)
+                .unwrap_err()
+                .to_string()
+                .contains("walls, corners")
+        );
     }
 
     #[test]
@@ -301,7 +315,11 @@ mod tests {
         assert_eq!(directions().count(), 26);
         let held: Vec<PilotInput> = t.samples().iter().skip(2).step_by(4).map(|s| s.1).collect();
         for d in directions() {
-            assert!(held.iter().any(|u| u.pitch == d[0] as f64 && u.roll == -d[1] as f64), "{d:?}");
+            assert!(
+                held.iter()
+                    .any(|u| u.pitch == d[0] as f64 && u.roll == -d[1] as f64),
+                "{d:?}"
+            );
         }
         assert!((t.duration_s() - (0.5 + 26.0 * 3.0)).abs() < 1e-9);
     }

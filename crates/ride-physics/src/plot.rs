@@ -33,11 +33,18 @@ pub fn path_svg(
         2.0 * w,
         h + 60.0
     );
-    let _ = write!(s, r#"<text x="10" y="18" font-size="14">{}</text>"#, esc(title));
-    for (panel, (ax, ay, name)) in [(0usize, 1usize, "top view x–y (m)"), (0, 2, "side view x–z (m)")]
-        .iter()
-        .enumerate()
-        .map(|(k, v)| (k, *v))
+    let _ = write!(
+        s,
+        r#"<text x="10" y="18" font-size="14">{}</text>"#,
+        esc(title)
+    );
+    for (panel, (ax, ay, name)) in [
+        (0usize, 1usize, "top view x–y (m)"),
+        (0, 2, "side view x–z (m)"),
+    ]
+    .iter()
+    .enumerate()
+    .map(|(k, v)| (k, *v))
     {
         let x0 = panel as f64 * w;
         let lo = [region.position.min[ax] - 0.3, region.position.min[ay] - 0.3];
@@ -67,12 +74,27 @@ pub fn path_svg(
             [walls.max[ax], walls.max[ay]],
             r##"fill="none" stroke="#c00" stroke-dasharray="6 4""##,
         );
-        let _ = write!(s, r#"<text x="{:.1}" y="{:.1}">{name}</text>"#, x0 + pad, 30.0 + h - 8.0);
+        let _ = write!(
+            s,
+            r#"<text x="{:.1}" y="{:.1}">{name}</text>"#,
+            x0 + pad,
+            30.0 + h - 8.0
+        );
         for (v, label) in [(lo[0], lo[0]), (hi[0], hi[0])] {
-            let _ = write!(s, r#"<text x="{:.1}" y="{:.1}" font-size="10">{label:.1}</text>"#, px(v), 30.0 + h - pad + 14.0);
+            let _ = write!(
+                s,
+                r#"<text x="{:.1}" y="{:.1}" font-size="10">{label:.1}</text>"#,
+                px(v),
+                30.0 + h - pad + 14.0
+            );
         }
         for (v, label) in [(lo[1], lo[1]), (hi[1], hi[1])] {
-            let _ = write!(s, r#"<text x="{:.1}" y="{:.1}" font-size="10">{label:.2}</text>"#, x0 + 4.0, py(v));
+            let _ = write!(
+                s,
+                r#"<text x="{:.1}" y="{:.1}" font-size="10">{label:.2}</text>"#,
+                x0 + 4.0,
+                py(v)
+            );
         }
         if !reference.is_empty() {
             let pts: Vec<String> = reference
@@ -107,11 +129,17 @@ pub fn path_svg(
         s,
         r##"<text x="10" y="{:.0}">grey: operating region (hard loop) · red dashed: elastic walls (eq. 5.22) · blue: hover model · orange: wall pushing{}</text></svg>"##,
         h + 52.0,
-        if reference.is_empty() { "" } else { " · green: motion-core's reference" }
+        if reference.is_empty() {
+            ""
+        } else {
+            " · green: motion-core's reference"
+        }
     );
     s
 }
 
 fn esc(t: &str) -> String {
-    t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+    t.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }

@@ -189,13 +189,19 @@ impl HoverSettings {
             if walls.min[k] >= walls.max[k] {
                 return Err(err(
                     &format!("walls.margin_m[{k}]"),
-                    format!("leaves no room inside the operating region of `{}`", platform.name),
+                    format!(
+                        "leaves no room inside the operating region of `{}`",
+                        platform.name
+                    ),
                 ));
             }
             if rotation_walls.min[k] > rotation_walls.max[k] {
                 return Err(err(
                     &format!("walls.margin_deg[{k}]"),
-                    format!("leaves no room inside the rotation range of `{}`", platform.name),
+                    format!(
+                        "leaves no room inside the rotation range of `{}`",
+                        platform.name
+                    ),
                 ));
             }
             let c = self.attitude_command_max_rad[k];
@@ -213,7 +219,10 @@ impl HoverSettings {
         }
         let h = platform.home.r;
         if (0..3).any(|k| h[k] < walls.min[k] || h[k] > walls.max[k]) {
-            return Err(err("walls.margin_m", "the home pose lies outside the walls".into()));
+            return Err(err(
+                "walls.margin_m",
+                "the home pose lies outside the walls".into(),
+            ));
         }
         let i = body.inertia_kg_m2;
         let principal = Vector3::new(i[(0, 0)], i[(1, 1)], i[(2, 2)]);
@@ -239,7 +248,9 @@ pub(crate) mod tests {
     use super::*;
 
     pub fn config(name: &str) -> std::path::PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config").join(name)
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../config")
+            .join(name)
     }
 
     pub fn helicopter_model() -> HoverModel {
@@ -261,18 +272,34 @@ pub(crate) mod tests {
     fn bad_settings_name_the_key() {
         let text = std::fs::read_to_string(config("ride-helicopter.toml")).unwrap();
         let bad = text.replace("collective_authority = 0.1", "collective_authority = 1.5");
-        let e = HoverSettings::parse(&bad, "r.toml").unwrap_err().to_string();
-        assert!(e.starts_with("r.toml: `controls.collective_authority`: must lie in (0, 1)"), "{e}");
+        let e = HoverSettings::parse(&bad, "r.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("r.toml: `controls.collective_authority`: must lie in (0, 1)"),
+            "{e}"
+        );
         let bad = text.replace("[damping]", "[damping]\nfoo = 1");
         let e = HoverSettings::parse(&bad, "r.toml").unwrap_err();
         assert!(e.line.is_some() && e.message.contains("foo"), "{e}");
         let pf = cdpr_model::config::load_platform(config("helicopter.toml")).unwrap();
-        let s = HoverSettings::parse(&text.replace("margin_m = [0.2, 0.2, 0.1]", "margin_m = [0.2, 0.2, 0.3]"), "r.toml").unwrap();
+        let s = HoverSettings::parse(
+            &text.replace("margin_m = [0.2, 0.2, 0.1]", "margin_m = [0.2, 0.2, 0.3]"),
+            "r.toml",
+        )
+        .unwrap();
         let e = s.model(&pf, "r.toml").unwrap_err().to_string();
-        assert!(e.contains("walls.margin_m[2]") && e.contains("no room"), "{e}");
+        assert!(
+            e.contains("walls.margin_m[2]") && e.contains("no room"),
+            "{e}"
+        );
         let mut bare = pf.clone();
         bare.dynamics = None;
-        let e = HoverSettings::parse(&text, "r.toml").unwrap().model(&bare, "r.toml").unwrap_err().to_string();
+        let e = HoverSettings::parse(&text, "r.toml")
+            .unwrap()
+            .model(&bare, "r.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("no [dynamics]"), "{e}");
     }
 }

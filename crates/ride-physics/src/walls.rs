@@ -62,7 +62,10 @@ mod tests {
     #[test]
     fn inside_no_force_beyond_spring_and_damper_along_the_normal() {
         let w = w();
-        assert_eq!(w.force(&Vector3::new(0.5, 0.0, 1.5), &Vector3::new(3.0, 0.0, 0.0)), Vector3::zeros());
+        assert_eq!(
+            w.force(&Vector3::new(0.5, 0.0, 1.5), &Vector3::new(3.0, 0.0, 0.0)),
+            Vector3::zeros()
+        );
         // 0.1 m beyond +x moving out at 0.2 m/s: 1000·0.1 + 100·0.2 = 120 N inward.
         let f = w.force(&Vector3::new(1.1, 0.0, 1.5), &Vector3::new(0.2, 0.0, 0.0));
         assert!((f - Vector3::new(-120.0, 0.0, 0.0)).norm() < 1e-9, "{f}");
@@ -72,6 +75,9 @@ mod tests {
         // Leaving fast: the damper would pull, the wall only stops pushing.
         let f = w.force(&Vector3::new(1.01, 0.0, 1.5), &Vector3::new(-1.0, 0.0, 0.0));
         assert_eq!(f, Vector3::zeros());
-        assert!((w.penetration(&Vector3::new(1.1, -1.2, 1.5)) - Vector3::new(0.1, 0.2, 0.0)).norm() < 1e-12);
+        assert!(
+            (w.penetration(&Vector3::new(1.1, -1.2, 1.5)) - Vector3::new(0.1, 0.2, 0.0)).norm()
+                < 1e-12
+        );
     }
 }

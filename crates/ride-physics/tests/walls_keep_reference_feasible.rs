@@ -18,7 +18,9 @@ use ride_physics::settings::HoverSettings;
 use ride_physics::{HoverModel, HoverState, PilotInput, step};
 
 fn cfg(name: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config").join(name)
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../config")
+        .join(name)
 }
 
 struct Flight {
@@ -42,7 +44,9 @@ fn cueing_limits() -> CueingLimits {
         let pf = load_platform(cfg("helicopter.toml")).unwrap();
         let daemon = config::load(&cfg("motion-core-helicopter.toml")).unwrap();
         let configured = lifecycle::configure(&daemon, &pf).unwrap();
-        let d = configured.dynamic_limits().expect("the helicopter has [dynamics]");
+        let d = configured
+            .dynamic_limits()
+            .expect("the helicopter has [dynamics]");
         assert!(d.acceleration_factor > 0.0 && d.acceleration_factor <= 1.0);
         let lim = configured.planner_limits();
         CueingLimits {
@@ -132,9 +136,9 @@ fn full_stick_into_every_wall_and_corner_is_never_refused_and_forces_stay_in_lim
             let u = full_stick(d, yaw);
             for k in 0..push + release {
                 let input = if k < push { u } else { PilotInput::HOVER };
-                let r = f
-                    .tick(&input)
-                    .unwrap_or_else(|e| panic!("direction {d:?} yaw {yaw}: step {k}: refused: {e}"));
+                let r = f.tick(&input).unwrap_or_else(|e| {
+                    panic!("direction {d:?} yaw {yaw}: step {k}: refused: {e}")
+                });
                 if k % 10 == 0 {
                     f.record_forces(&r, &mut data);
                 }
@@ -158,9 +162,14 @@ fn full_stick_into_every_wall_and_corner_is_never_refused_and_forces_stay_in_lim
             summary.push((d, f.max_penetration, f.f_lo, f.f_hi, f.max_ref_accel));
         }
     }
-    let pen = summary.iter().fold(Vector3::zeros(), |a: Vector3<f64>, s| a.sup(&s.1));
+    let pen = summary
+        .iter()
+        .fold(Vector3::zeros(), |a: Vector3<f64>, s| a.sup(&s.1));
     let lo = summary.iter().map(|s| s.2).fold(f64::INFINITY, f64::min);
-    let hi = summary.iter().map(|s| s.3).fold(f64::NEG_INFINITY, f64::max);
+    let hi = summary
+        .iter()
+        .map(|s| s.3)
+        .fold(f64::NEG_INFINITY, f64::max);
     println!(
         "26 full-stick flights: max wall penetration [{:.1}, {:.1}, {:.1}] mm (margins [{:.0}, {:.0}, {:.0}] mm), forces {lo:.0} … {hi:.0} N",
         pen.x * 1e3,

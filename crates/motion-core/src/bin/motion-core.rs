@@ -231,7 +231,9 @@ fn run(args: Args) -> Result<(), String> {
             d.bound_at.r.y,
             d.bound_at.r.z
         ),
-        None => tracing::info!("static wrench w_e checked (no [dynamics] in the platform TOML, or dynamic_wrench = false)"),
+        None => tracing::info!(
+            "static wrench w_e checked (no [dynamics] in the platform TOML, or dynamic_wrench = false)"
+        ),
     }
     // Verify the whole plan with the loop's own checks before anything moves: a plan that
     // would leave the workspace or the wrench-feasible set is refused, naming where.
@@ -389,8 +391,7 @@ fn run(args: Args) -> Result<(), String> {
             outbox.state.store(code, Ordering::Relaxed);
             if let Some(after) = exit_after {
                 let latched = hl.state().is_latched();
-                if plan_done_at.is_none() && (latched || (!hl.is_cueing() && hl.plan_finished()))
-                {
+                if plan_done_at.is_none() && (latched || (!hl.is_cueing() && hl.plan_finished())) {
                     plan_done_at = Some(now);
                 }
                 // A finite cueing stream is done when its source falls silent: the hold

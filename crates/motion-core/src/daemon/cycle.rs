@@ -215,8 +215,9 @@ impl Cycle {
                     p.w_e + inertial_wrench(body, &pose, &motion)
                 }
             };
-            let fd = statics::force_distribution(&self.data, &w, p.f_min, p.f_max, &mut self.forces)
-                .map_err(|_| Rejection::Kinematics)?;
+            let fd =
+                statics::force_distribution(&self.data, &w, p.f_min, p.f_max, &mut self.forces)
+                    .map_err(|_| Rejection::Kinematics)?;
             if !fd.feasible {
                 let (cable, force_n) = if fd.f_lo < p.f_min {
                     (fd.cable_lo, fd.f_lo)

@@ -210,7 +210,9 @@ pub fn configure_checks(
     cfg: &DaemonConfig,
     platform: &Platform,
 ) -> Result<Configured, ConfigureError> {
-    let dynamics = platform.dynamics.filter(|_| cfg.dynamic_wrench && cfg.check_wrench_feasibility);
+    let dynamics = platform
+        .dynamics
+        .filter(|_| cfg.dynamic_wrench && cfg.check_wrench_feasibility);
     let mut limits = planner_limits(&platform.limits, &cfg.trajectory);
     let mut dynamic_scale = None;
     if let Some(body) = &dynamics {
@@ -226,7 +228,8 @@ pub fn configure_checks(
         )
         .map_err(|source| {
             let k = match source {
-                ScaleError::Singular { pose_index } | ScaleError::NotFeasibleAtRest { pose_index, .. } => pose_index,
+                ScaleError::Singular { pose_index }
+                | ScaleError::NotFeasibleAtRest { pose_index, .. } => pose_index,
             };
             ConfigureError::DynamicallyInfeasible {
                 pose: poses[k],
