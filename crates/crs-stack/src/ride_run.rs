@@ -142,15 +142,19 @@ pub struct RideThread {
 }
 
 /// Starts the 1 kHz model thread publishing on the run's iceoryx2 prefix, from `home`.
-pub fn start(ride: PreparedRide, prefix: &str, home: cdpr_model::Pose) -> RideThread {
+pub fn start(
+    ride: PreparedRide,
+    prefix: &str,
+    home: cdpr_model::Pose,
+) -> Result<RideThread, String> {
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();
     let prefix = prefix.to_string();
     let handle = std::thread::Builder::new()
         .name("crs-ride".into())
         .spawn(move || fly(ride, &prefix, home, &s))
-        .expect("spawn the ride thread");
-    RideThread { stop, handle }
+        .map_err(|e| format!("cannot start the ride thread: {e}"))?;
+    Ok(RideThread { stop, handle })
 }
 
 impl RideThread {

@@ -610,7 +610,10 @@ pub fn execute_observed(
                 "  hover physics (eq. 5.21-5.22) flying {} for {:.1} s on motion-core's cueing input",
                 r.describe, r.duration_s
             );
-            ride_thread = Some(crate::ride_run::start(r, &prefix, platform.home));
+            match crate::ride_run::start(r, &prefix, platform.home) {
+                Ok(t) => ride_thread = Some(t),
+                Err(e) => break Err(e),
+            }
         }
         if supervisor::interrupted() {
             break Err("interrupted (Ctrl-C): stopped all processes".into());
