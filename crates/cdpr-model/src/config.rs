@@ -4,6 +4,7 @@
 //! degrees (`_deg`) and converted here, at the edge. Unknown keys are rejected. Every error
 //! names the file, the key and the line.
 
+use crate::dynamics::{GRAVITY_M_PER_S2, RigidBody};
 use crate::model::{Model, ModelError, ModelParams, Pulleys};
 use crate::pose::Pose;
 use crate::workspace::PositionBox;
@@ -72,6 +73,9 @@ pub struct Platform {
     /// Optional initial cable forces at the home pose, N (eq. 6.2 / 6.22).
     pub f_ini: Option<Vec<f64>>,
     pub sections: Vec<Section>,
+    /// Mass properties of the platform with its payload (`[dynamics]`, eq. 5.13–5.16), for the
+    /// dynamic wrench w = w_e + w_in; `None`: the platform is checked statically only.
+    pub dynamics: Option<RigidBody>,
 }
 
 impl Platform {
@@ -129,6 +133,27 @@ struct RawPlatform {
     home: RawHome,
     #[serde(default)]
     sections: std::collections::BTreeMap<String, Spanned<Vec<i64>>>,
+    dynamics: Option<RawDynamics>,
+}
+
+/// `[dynamics]`: the cabin's mass properties and an optional `[dynamics.payload]`, combined
+/// into one rigid body (eq. 5.13–5.14: stator and cabin inertias).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDynamics {
+    mass_kg: Spanned<f64>,
+    center_of_gravity_m: Spanned<[f64; 3]>,
+    inertia_kg_m2: Spanned<[f64; 3]>,
+    payload: Option<RawBody>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBody {
+    mass_kg: Spanned<f64>,
+    center_of_gravity_m: Spanned<[f64; 3]>,
+    /// Principal moments [I_xx, I_yy, I_zz] about the COG along the platform axes, kg·m².
+    inertia_kg_m2: Spanned<[f64; 3]>,
 }
 
 #[derive(Deserialize)]
@@ -528,6 +553,11 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
         });
     }
 
+    let dynamics = match &raw.dynamics {
+        None => None,
+        Some(d) => Some(dynamics(loc, d, model.params().w_e)?),
+    };
+
     let name = raw.platform.name.get_ref().trim().to_string();
     if name.is_empty() {
         return Err(loc.err(
@@ -547,7 +577,62 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
         home,
         f_ini,
         sections,
+        dynamics,
     })
+}
+
+fn body(loc: &Locator, b: &RawBody, key: &str) -> Result<RigidBody, ConfigError> {
+    let mass = loc.positive(&b.mass_kg, &format!("{key}.mass_kg"))?;
+    let c = &b.center_of_gravity_m;
+    loc.finite(c, &format!("{key}.center_of_gravity_m"), c.get_ref())?;
+    let i = &b.inertia_kg_m2;
+    loc.finite(i, &format!("{key}.inertia_kg_m2"), i.get_ref())?;
+    RigidBody::new(
+        mass,
+        vec3(c.get_ref()),
+        nalgebra::Matrix3::from_diagonal(&vec3(i.get_ref())),
+    )
+    .map_err(|e| loc.err(i.span(), format!("{key}.inertia_kg_m2"), e.to_string()))
+}
+
+/// The platform with payload; its weight must be the static load's (w_e, eq. 5.12): the
+/// dynamic and the static wrench describe the same body, so a contradiction is refused.
+fn dynamics(loc: &Locator, d: &RawDynamics, w_e: Vector6<f64>) -> Result<RigidBody, ConfigError> {
+    let cabin = RawBody {
+        mass_kg: d.mass_kg.clone(),
+        center_of_gravity_m: d.center_of_gravity_m.clone(),
+        inertia_kg_m2: d.inertia_kg_m2.clone(),
+    };
+    let mut total = body(loc, &cabin, "dynamics")?;
+    if let Some(p) = &d.payload {
+        total = total.combined(&body(loc, p, "dynamics.payload")?);
+    }
+    let weight = total.weight_wrench(&Pose::default());
+    let tol_f = 0.02 * weight[2].abs();
+    if (weight[2] - w_e[2]).abs() > tol_f {
+        return Err(loc.err(
+            d.mass_kg.span(),
+            "dynamics.mass_kg",
+            format!(
+                "the platform with payload weighs {:.0} N ({:.1} kg × {GRAVITY_M_PER_S2} m/s²), but                  load.wrench_n_nm carries {:.0} N: they must agree within 2 %",
+                -weight[2], total.mass_kg, -w_e[2]
+            ),
+        ));
+    }
+    // The torque of a 1 cm error of the centre of gravity.
+    let tol_t = 0.01 * weight[2].abs();
+    if (weight.fixed_rows::<3>(3) - w_e.fixed_rows::<3>(3)).norm() > tol_t {
+        return Err(loc.err(
+            d.center_of_gravity_m.span(),
+            "dynamics.center_of_gravity_m",
+            format!(
+                "the weight at the centre of gravity [{:.3}, {:.3}, {:.3}] m exerts a torque [{:.0},                  {:.0}, {:.0}] N·m, but load.wrench_n_nm carries [{:.0}, {:.0}, {:.0}] N·m",
+                total.cog_m.x, total.cog_m.y, total.cog_m.z, weight[3], weight[4], weight[5], w_e[3],
+                w_e[4], w_e[5]
+            ),
+        ));
+    }
+    Ok(total)
 }
 
 fn model_error(loc: &Locator, raw: &RawPlatform, e: ModelError) -> ConfigError {

@@ -16,6 +16,7 @@
 //! | exact wrench feasibility (LP) | [`feasibility`] | 3.29, 2.38–2.40 |
 //! | planar robots (n = 2, 3; any m > n): IK with pulleys, forces, W_WF, W_R, cond(J_qa) | [`planar`] | 2.3–2.8, 2.30, 2.42, 3.29, 3.33–3.41, 4.23 |
 //! | icosahedron space-frame truss check (matrix stiffness method) | [`truss`] | 5.2–5.7 |
+//! | rigid-body dynamics, inertial wrench w_in | [`dynamics`] | 5.13–5.16, 5.21 |
 //! | operator TOML | [`config`] | tables 5.1, eq. 5.8, 5.12, 5.17, 6.1, 6.20 |
 //!
 //! This crate knows nothing of IPC, real time, CAN or command lines: the daemon (`motion-core`),
@@ -31,6 +32,7 @@
 
 pub mod config;
 pub mod config_writer;
+pub mod dynamics;
 pub mod elastostatics;
 pub mod feasibility;
 pub mod forward;

@@ -128,3 +128,29 @@ fn missing_file_and_syntax_errors_are_clear() {
     let e = parse_platform("", "x.toml").unwrap_err();
     assert!(e.message.contains("missing"), "{e}");
 }
+
+#[test]
+fn dynamics_that_contradict_the_static_load_are_refused_by_key_and_line() {
+    // [dynamics] + [dynamics.payload] of the icosahedron make the 5500 N of [load].
+    let p = common::platform("icosahedron.toml");
+    let d = p.dynamics.expect("[dynamics]");
+    assert!((d.mass_kg - 560.7).abs() < 1e-9 && d.cog_m.norm() < 1e-12);
+    let text = base().replace("mass_kg = 480.7", "mass_kg = 380.7");
+    let e = parse_platform(&text, "ico.toml").unwrap_err();
+    assert_eq!(e.key, "dynamics.mass_kg", "{e}");
+    assert!(
+        e.to_string().contains("load.wrench_n_nm carries 5500 N"),
+        "{e}"
+    );
+    let text = base().replace(
+        "center_of_gravity_m = [0.0, 0.0, 0.0]\ninertia_kg_m2 = [104.5",
+        "center_of_gravity_m = [0.1, 0.0, 0.0]\ninertia_kg_m2 = [104.5",
+    );
+    let e = parse_platform(&text, "ico.toml").unwrap_err();
+    assert_eq!(e.key, "dynamics.center_of_gravity_m", "{e}");
+    // Not a real mass distribution: I_zz > I_xx + I_yy.
+    let text = base().replace("[104.5, 104.5, 104.5]", "[10.0, 10.0, 104.5]");
+    let e = parse_platform(&text, "ico.toml").unwrap_err();
+    assert_eq!(e.key, "dynamics.inertia_kg_m2", "{e}");
+    assert_eq!(e.line, Some(line_of(&text, "[10.0, 10.0, 104.5]")), "{e}");
+}

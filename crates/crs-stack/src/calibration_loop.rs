@@ -363,6 +363,7 @@ fn stack_run(
         settle_s: a.settle_s,
         campaign: Some(name.to_string()),
         rt_priority: (a.rt_priority >= 6).then_some(a.rt_priority),
+        ride: None,
     };
     let mut attempt = 0;
     let sum = loop {
@@ -478,7 +479,7 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
             a.campaign.display()
         ),
     )?;
-    let nominal_checks = lifecycle::configure_checks(&daemon_tpl, &nominal);
+    let nominal_checks = lifecycle::configure_checks(&daemon_tpl, &nominal)?;
     nominal_checks
         .verify_plan(&wps)
         .map_err(|e| format!("{}: the plan is refused: {e}", a.campaign.display()))?;
@@ -600,7 +601,7 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
         with_sg.then_some(sg_a.as_path()),
         &campaign,
     )?;
-    lifecycle::configure_checks(&daemon_tpl, &cal_pf)
+    lifecycle::configure_checks(&daemon_tpl, &cal_pf)?
         .verify_plan(&wps)
         .map_err(|e| {
             format!(

@@ -19,6 +19,9 @@
 //! - [`platforms`]: the platforms the stack runs (`crs sim --platform icosahedron|helicopter`)
 //!   and the consistent set of daemon, plant, monitor and drives configs of each.
 //! - [`run_plots`]: the plots and index.html of every `crs sim` run.
+//! - [`ride_run`]: the helicopter hover physics (crate `ride-physics`) as the run's motion
+//!   source on motion-core's cueing input (`crs sim --source helicopter`), and
+//!   [`gamepad`], a game controller as its pilot.
 //! - [`sim_run`]: one run of the whole simulated stack (`crs sim`), its summary and verdict.
 //! - [`surrogate_evaluation`]: the surrogate fit of a platform and its evaluation on the plant.
 //! - [`surrogate_report`]: report.md/json and tracking.svg of a surrogate evaluation.
@@ -31,10 +34,12 @@ pub mod calibration_output;
 pub mod campaign;
 pub mod commission;
 pub mod diagnosis_bench;
+pub mod gamepad;
 pub mod load_experiment;
 pub mod platforms;
 pub mod reachable_on_plant;
 pub mod rest_recording;
+pub mod ride_run;
 pub mod run_plots;
 pub mod sim_run;
 pub mod supervisor;

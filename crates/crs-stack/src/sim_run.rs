@@ -83,6 +83,9 @@ pub struct SimOptions {
     /// with mlockall, as motion-core and the monitor run theirs: keeps the setpoint stream and
     /// the SYNCs going on a loaded host (needs root; ignored with a note otherwise).
     pub rt_priority: Option<i32>,
+    /// Fly the helicopter hover physics as the motion source instead of the waypoint plan
+    /// ([`crate::ride_run`]; motion-core follows it on its cueing input).
+    pub ride: Option<crate::ride_run::RideSpec>,
 }
 
 /// What a run measured (printed, and written to <out>/summary.json).
@@ -124,6 +127,8 @@ pub struct Summary {
     pub bus_stopped_during_run: Option<String>,
     /// The recording written (--record).
     pub record: Option<PathBuf>,
+    /// The hover flight (`--source helicopter`).
+    pub ride: Option<crate::ride_run::RideSummary>,
     pub duration_s: f64,
 }
 
@@ -285,6 +290,13 @@ pub fn execute_observed(
             &daemon.platform,
             &platform,
         )?;
+    }
+    let mut ride = match &a.ride {
+        Some(spec) => Some(crate::ride_run::prepare(spec, &platform)?),
+        None => None,
+    };
+    if ride.is_some() && (a.record.is_some() || a.dwell_s.is_some() || a.waypoints.is_some()) {
+        return Err("--source helicopter flies the hover model: --waypoints, --dwell-s and --record belong to the waypoint plan".into());
     }
     let home_q = configured
         .home_command()
@@ -481,11 +493,17 @@ pub fn execute_observed(
         "--exit-after-plan-s".into(),
         a.hold_s.to_string(),
     ];
-    if let Some(w) = &waypoints_arg {
+    if ride.is_some() {
+        mc_args.extend(["--input".into(), "cueing".into()]);
+    } else if let Some(w) = &waypoints_arg {
         mc_args.push("--waypoints".into());
         mc_args.push(s(w));
     }
     stack.spawn("motion-core", &exe("motion-core"), &mc_args, &[])?;
+    // The hover model starts with motion-core's first setpoint (its cueing subscriber is up).
+    let mut ride_thread: Option<crate::ride_run::RideThread> = None;
+    let ride_model = ride.as_ref().map(|r| r.model);
+    let mut ride_reference: Vec<[f64; 3]> = Vec::new();
 
     // Follow the run.
     let mut sum = Summary {
@@ -520,6 +538,9 @@ pub fn execute_observed(
             }
             refs.push_back((sp.timestamp_ns, sp.pose));
             last_ref = Some(sp.pose);
+            if ride_model.is_some() && sum.setpoints.is_multiple_of(10) {
+                ride_reference.push([sp.pose[0], sp.pose[1], sp.pose[2]]);
+            }
             if refs.len() > 4000 {
                 refs.pop_front();
             }
@@ -588,6 +609,19 @@ pub fn execute_observed(
                 r.forces(f.timestamp_ns, &f.cable_force_n[..m]);
             }
         }
+        if sum.setpoints > 0
+            && ride_thread.is_none()
+            && let Some(r) = ride.take()
+        {
+            println!(
+                "  hover physics (eq. 5.21-5.22) flying {} for {:.1} s on motion-core's cueing input",
+                r.describe, r.duration_s
+            );
+            match crate::ride_run::start(r, &prefix, platform.home) {
+                Ok(t) => ride_thread = Some(t),
+                Err(e) => break Err(e),
+            }
+        }
         if supervisor::interrupted() {
             break Err("interrupted (Ctrl-C): stopped all processes".into());
         }
@@ -612,6 +646,11 @@ pub fn execute_observed(
         last_truth = Some(t);
     }
     stack.stop_all();
+    if let (Some(t), Some(model)) = (ride_thread.take(), ride_model) {
+        let (mut rs, path) = t.join()?;
+        crate::ride_run::write_svg(&a.out, &platform, &model, &mut rs, &path, &ride_reference)?;
+        sum.ride = Some(rs);
+    }
     if n_track > 0 {
         sum.tracking_position_mean_mm = sum_p / n_track as f64 * 1e3;
         sum.tracking_rotation_mean_deg = (sum_r / n_track as f64).to_degrees();
@@ -761,6 +800,24 @@ fn print_summary(s: &Summary) {
     );
     if let Some(b) = &s.bus_stopped_during_run {
         println!("  DRIVE BUS STOPPED DURING THE RUN: {b}; the drives held from then on");
+    }
+    if let Some(r) = &s.ride {
+        println!(
+            "  hover flight ({}): {:.1} s flown, walls pushed {:.1} s, max beyond the walls [{:.1}, {:.1}, {:.1}] mm (walls [{:.0}, {:.0}, {:.0}] mm inside the region); {} late model steps{}",
+            r.pilot,
+            r.flown_s,
+            r.wall_contact_s,
+            r.max_wall_penetration_mm[0],
+            r.max_wall_penetration_mm[1],
+            r.max_wall_penetration_mm[2],
+            r.wall_margin_mm[0],
+            r.wall_margin_mm[1],
+            r.wall_margin_mm[2],
+            r.late_steps,
+            r.path_svg
+                .as_ref()
+                .map_or(String::new(), |p| format!("; path plot {}", p.display()))
+        );
     }
 }
 

@@ -95,6 +95,9 @@ fn the_model_library_and_the_data_format_pull_in_no_ipc_rt_can_or_cli() {
     forbid("config-diagnostics", &RUNTIME);
     // The load estimator reads forces; it needs neither the simulator nor the bus.
     forbid("load-tracking", &["sim-plant", "drive-io", "crs-stack"]);
+    // The ride physics is a model too: the stack runs it, it knows no IPC or real time.
+    forbid("ride-physics", &RUNTIME);
+    forbid("ride-physics", &["motion-core", "crs-stack"]);
 }
 
 #[test]

@@ -191,7 +191,7 @@ pub struct CampaignArgs {
 pub fn run_campaign(a: CampaignArgs) -> Result<(), BoxErr> {
     let daemon = motion_core::daemon::config::load(&a.daemon_config).map_err(|e| e.to_string())?;
     let pf = load_platform(&a.platform)?;
-    let checks = lifecycle::configure_checks(&daemon, &pf);
+    let checks = lifecycle::configure_checks(&daemon, &pf)?;
     let chosen = campaign::generate(&checks, a.poses, a.fraction, a.force_margin_n)?;
     let (_, dur) = timed_waypoints(
         pf.home,

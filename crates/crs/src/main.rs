@@ -9,6 +9,7 @@ mod gen_cmd;
 mod load_cmd;
 mod model_cmd;
 mod plant_cmd;
+mod ride_cmd;
 mod sim_cmd;
 mod surrogate_cmd;
 

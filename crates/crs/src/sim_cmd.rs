@@ -94,6 +94,8 @@ pub struct SimArgs {
     pub(crate) timing: String,
     #[command(flatten)]
     pub(crate) console: SimConsoleArgs,
+    #[command(flatten)]
+    pub(crate) ride: crate::ride_cmd::RideArgs,
 }
 
 /// What `crs sim` runs next to the stack: the operator console (`--console`) and the run's
@@ -156,7 +158,12 @@ impl SimArgs {
     /// `--config` daemon runs (if it is a known one), else the default (icosahedron).
     fn platform_set(&self) -> Result<platforms::StackConfigs, Box<dyn std::error::Error>> {
         let dir = Path::new(platforms::CONFIG_DIR);
-        if let Some(p) = &self.platform {
+        if let Some(p) = self
+            .platform
+            .clone()
+            .or(self.ride.default_platform())
+            .as_ref()
+        {
             let set = platforms::resolve(p, dir)?;
             if let Some(config) = &self.config {
                 // A daemon TOML given next to --platform must run that platform.
@@ -220,6 +227,7 @@ impl SimArgs {
             settle_s: self.settle_s,
             campaign: self.campaign.clone(),
             rt_priority: self.rt_priority,
+            ride: self.ride.spec()?,
         })
     }
 }

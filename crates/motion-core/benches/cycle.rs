@@ -2,7 +2,9 @@
 //! checks (finite, workspace box, velocity/acceleration limits of table 5.1, wrench feasibility
 //! eq. 3.29 with the closed-form forces eq. 3.41) + standard IK (eq. 2.3) + the polynomial
 //! surrogate offset (eq. 5.26), exactly as the daemon runs it on the default platform
-//! (`config/icosahedron.toml`, `check_wrench_feasibility = true`).
+//! (`config/icosahedron.toml`, `check_wrench_feasibility = true`), with the static wrench w_e
+//! and, side by side, the dynamic wrench w = w_e + w_in of the reference (eq. 5.13–5.16, the
+//! platform's `[dynamics]`, the daemon's default).
 //!
 //! The surrogate is fitted here, in the set-up, like `crs surrogate fit`: degree 3 (84 Legendre
 //! coefficients per cable) to q_off(x) = φ_el(x, f_ref(x)) − φ(x) (`cdpr_model::offset_target`).
@@ -65,13 +67,16 @@ fn fit_surrogate(pf: &Platform) -> Surrogate {
 }
 
 /// The demo trajectory sampled at 1 ms with the daemon's planner limits (motion-core.toml:
-/// velocity_scale 0.3, acceleration_scale 0.2, jerk 20 m/s³ / 200 °/s³).
+/// velocity_scale 0.3, acceleration_scale 0.2, jerk 20 m/s³ / 200 °/s³; accelerations scaled
+/// to what the dynamic wrench keeps feasible, as `lifecycle::configure` does).
 fn demo_references(pf: &Platform) -> Vec<Reference> {
     let waypoints = trajectory::read_waypoints(config("demo-waypoints.csv").as_ref())
         .unwrap_or_else(|e| panic!("{e}"));
     let daemon = motion_core::daemon::config::load(config("motion-core.toml").as_ref())
         .unwrap_or_else(|e| panic!("{e}"));
-    let lim = motion_core::daemon::lifecycle::planner_limits(&pf.limits, &daemon.trajectory);
+    let lim = motion_core::daemon::lifecycle::configure_checks(&daemon, pf)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .planner_limits();
     let mut refs = Vec::new();
     trajectory::plan_samples::<String>(pf.home, &waypoints, lim, 1e-3, |_, r| {
         refs.push(r);
@@ -83,6 +88,7 @@ fn demo_references(pf: &Platform) -> Vec<Reference> {
 
 struct Setup {
     with_surrogate: Cycle,
+    with_surrogate_dynamic: Cycle,
     without_surrogate: Cycle,
     refs: Vec<Reference>,
 }
@@ -92,25 +98,37 @@ fn setup() -> Setup {
     let sg = fit_surrogate(&pf);
     let new_cycle = || Cycle::new(pf.model.clone(), pf.limits, pf.region, true);
     let mut with_surrogate = new_cycle();
+    let mut with_surrogate_dynamic = new_cycle();
     let n = sg.n_cables();
     with_surrogate
+        .set_surrogate(Box::new(sg.clone()), n)
+        .unwrap_or_else(|e| panic!("{e}"));
+    with_surrogate_dynamic
         .set_surrogate(Box::new(sg), n)
         .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        pf.dynamics.is_some(),
+        "config/icosahedron.toml has [dynamics]"
+    );
+    with_surrogate_dynamic.set_dynamics(pf.dynamics);
     let refs = demo_references(&pf);
     // Every reference must pass the checks: a rejected one returns early and would flatter
     // the figures.
     let mut sp = JointSetpoint::default();
-    for (k, r) in refs.iter().enumerate() {
-        with_surrogate
-            .compute(r, &mut sp)
-            .unwrap_or_else(|e| panic!("reference {k} refused: {e}"));
-        assert!(
-            sp.surrogate_offset_m[..n].iter().any(|o| *o != 0.0),
-            "the surrogate offset must be non-zero"
-        );
+    for cycle in [&mut with_surrogate, &mut with_surrogate_dynamic] {
+        for (k, r) in refs.iter().enumerate() {
+            cycle
+                .compute(r, &mut sp)
+                .unwrap_or_else(|e| panic!("reference {k} refused: {e}"));
+            assert!(
+                sp.surrogate_offset_m[..n].iter().any(|o| *o != 0.0),
+                "the surrogate offset must be non-zero"
+            );
+        }
     }
     Setup {
         with_surrogate,
+        with_surrogate_dynamic,
         without_surrogate: new_cycle(),
         refs,
     }
@@ -121,6 +139,10 @@ fn criterion_benches(c: &mut Criterion, s: &mut Setup) {
     let mut sp = JointSetpoint::default();
     for (name, cycle) in [
         ("cycle_compute_checks_ik_surrogate", &mut s.with_surrogate),
+        (
+            "cycle_compute_dynamic_wrench_checks_ik_surrogate",
+            &mut s.with_surrogate_dynamic,
+        ),
         (
             "cycle_compute_checks_ik_no_surrogate",
             &mut s.without_surrogate,
@@ -156,6 +178,10 @@ fn per_call_histogram(s: &mut Setup, calls: usize, verdict: bool) {
     overhead.sort_unstable();
     for (name, cycle) in [
         ("checks + IK + surrogate", &mut s.with_surrogate),
+        (
+            "checks with the dynamic wrench + IK + surrogate",
+            &mut s.with_surrogate_dynamic,
+        ),
         ("checks + IK, no surrogate", &mut s.without_surrogate),
     ] {
         let mut k = 0usize;

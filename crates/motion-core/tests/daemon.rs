@@ -620,12 +620,19 @@ fn configure_scales_the_planner_limits_and_verifies_the_shipped_demo_plan() {
     let pf = common::platform("icosahedron.toml");
     let c = lifecycle::configure(&cfg, &pf).unwrap_or_else(|e| panic!("{e}"));
     let l = c.planner_limits();
-    // motion-core.toml: velocity_scale 0.3, acceleration_scale 0.2 of table 5.1.
+    // motion-core.toml: velocity_scale 0.3, acceleration_scale 0.2 of table 5.1, the
+    // accelerations scaled to what the dynamic wrench keeps feasible (eq. 5.13-5.16).
     assert_eq!(l.linear_velocity, pf.limits.linear_velocity_max * 0.3);
+    let factor = c
+        .dynamic_limits()
+        .expect("dynamic wrench on")
+        .acceleration_factor;
+    assert!(factor > 0.0 && factor <= 1.0, "{factor}");
     assert_eq!(
         l.angular_acceleration,
-        pf.limits.angular_acceleration_max * 0.2
+        pf.limits.angular_acceleration_max * 0.2 * factor
     );
+    println!("icosahedron acceleration factor {factor:.3}");
     assert_eq!(l.linear_jerk, 20.0);
     assert!(!c.has_surrogate());
     let wps = trajectory::read_waypoints(cfg.trajectory.waypoints.as_ref().unwrap()).unwrap();

@@ -32,7 +32,8 @@ struct Args {
     /// Waypoint CSV to run (overrides [trajectory].waypoints).
     #[arg(long)]
     waypoints: Option<PathBuf>,
-    /// Exit once the plan has been run and this many seconds of hold have passed.
+    /// Exit once the plan has been run and this many seconds of hold have passed (with
+    /// `--input cueing`: this many seconds after the last cueing target, once one arrived).
     #[arg(long)]
     exit_after_plan_s: Option<f64>,
     /// Reference input: `waypoints` (ruckig plan of the waypoint CSV) or `cueing` (follow the
@@ -233,6 +234,21 @@ fn run(args: Args) -> Result<(), String> {
     };
     let lim = configured.planner_limits();
     let period_s = configured.period_s();
+    match configured.dynamic_limits() {
+        Some(d) => tracing::info!(
+            acceleration_factor = d.acceleration_factor,
+            linear_acceleration = lim.linear_acceleration,
+            angular_acceleration_deg = lim.angular_acceleration.to_degrees(),
+            "dynamic wrench w = w_e + w_in checked every cycle (eq. 5.13-5.16); planner accelerations scaled to what stays feasible (bound at cable {} at [{:.2}, {:.2}, {:.2}] m)",
+            d.cable + 1,
+            d.bound_at.r.x,
+            d.bound_at.r.y,
+            d.bound_at.r.z
+        ),
+        None => tracing::info!(
+            "static wrench w_e checked (no [dynamics] in the platform TOML, or dynamic_wrench = false)"
+        ),
+    }
     // Verify the whole plan with the loop's own checks before anything moves: a plan that
     // would leave the workspace or the wrench-feasible set is refused, naming where.
     let plan = configured
@@ -400,10 +416,13 @@ fn run(args: Args) -> Result<(), String> {
             outbox.state.store(code, Ordering::Relaxed);
             if let Some(after) = exit_after {
                 let latched = hl.state().is_latched();
-                if plan_done_at.is_none() && (hl.plan_finished() || latched) {
+                if plan_done_at.is_none() && (latched || (!hl.is_cueing() && hl.plan_finished())) {
                     plan_done_at = Some(now);
                 }
-                if plan_done_at.is_some_and(|t0| now > t0 + after) {
+                // A finite cueing stream is done when its source falls silent: the hold
+                // counts from its last target.
+                let from = plan_done_at.or(hl.cueing_last_ns().filter(|_| hl.is_cueing()));
+                if from.is_some_and(|t0| now > t0 + after) {
                     STOP.store(true, Ordering::Relaxed);
                 }
             }

@@ -16,6 +16,9 @@ pub struct DaemonConfig {
     pub surrogate: Option<PathBuf>,
     /// Check wrench feasibility (eq. 3.29) of every reference.
     pub check_wrench_feasibility: bool,
+    /// Check (and plan for) the dynamic wrench w = w_e + w_in (eq. 5.13–5.16) when the platform
+    /// TOML has `[dynamics]`; false: the static wrench w_e only.
+    pub dynamic_wrench: bool,
     /// Log a statistics summary every this many seconds (0 = only at exit).
     pub stats_interval_s: f64,
     /// Optional file the statistics summary is written to (JSON, rewritten each interval).
@@ -52,6 +55,8 @@ struct RawDaemon {
     surrogate: Option<String>,
     #[serde(default = "yes")]
     check_wrench_feasibility: bool,
+    #[serde(default = "yes")]
+    dynamic_wrench: bool,
     #[serde(default = "one")]
     stats_interval_s: Spanned<f64>,
     stats_file: Option<String>,
@@ -196,6 +201,7 @@ pub fn parse(text: &str, file: &str, base: &Path) -> Result<DaemonConfig, Config
             .filter(|s| !s.is_empty())
             .map(|s| base.join(s)),
         check_wrench_feasibility: raw.daemon.check_wrench_feasibility,
+        dynamic_wrench: raw.daemon.dynamic_wrench,
         stats_interval_s: si,
         stats_file: raw.daemon.stats_file.as_ref().map(|s| base.join(s)),
         realtime: RealtimeSettings {

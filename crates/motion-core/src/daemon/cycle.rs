@@ -3,6 +3,7 @@
 //! Allocation-free and lock-free; every rejection is a typed value.
 
 use cdpr_model::config::{MotionLimits, Region};
+use cdpr_model::dynamics::{Motion, RigidBody, inertial_wrench};
 use cdpr_model::kinematics;
 use cdpr_model::model::{Data, Model};
 use cdpr_model::pose::{Pose, twist_from_coordinates};
@@ -45,7 +46,7 @@ pub enum Rejection {
     NonFinite,
     #[error("reference pose outside the configured workspace region")]
     OutsideRegion,
-    #[error("reference pose not wrench feasible (eq. 3.29): cable {} would need {force_n:.1} N", cable + 1)]
+    #[error("reference not wrench feasible (eq. 3.29 with w = w_e + w_in when dynamic): cable {} would need {force_n:.1} N", cable + 1)]
     NotWrenchFeasible { cable: usize, force_n: f64 },
     #[error("linear velocity {value:.3} m/s exceeds the limit")]
     LinearVelocity { value: f64 },
@@ -85,6 +86,9 @@ pub struct Cycle {
     offset_limit_m: f64,
     /// Check eq. 3.29 with the closed-form forces every cycle (≈ 0.4 µs).
     check_feasibility: bool,
+    /// Mass properties for the dynamic wrench w = w_e + w_in (eq. 5.13–5.16); `None` checks
+    /// the static wrench w_e only.
+    dynamics: Option<RigidBody>,
     /// Tolerance on the limits for rounding in the trajectory generator (1 + this).
     limit_tolerance: f64,
     forces: Vec<f64>,
@@ -111,6 +115,7 @@ impl Cycle {
             surrogate: None,
             offset_limit_m: DELTA_Q_LIMIT_M,
             check_feasibility,
+            dynamics: None,
             limit_tolerance: 1e-6,
             forces: vec![0.0; m],
             offsets: vec![0.0; m],
@@ -140,6 +145,18 @@ impl Cycle {
 
     pub fn has_surrogate(&self) -> bool {
         self.surrogate.is_some()
+    }
+
+    /// Checks (and distributes forces for) the dynamic wrench w = w_e + w_in of the reference
+    /// (eq. 5.13–5.16) instead of the static w_e: `Some(body)` with the platform's mass
+    /// properties, `None` for the static check.
+    pub fn set_dynamics(&mut self, body: Option<RigidBody>) {
+        self.dynamics = body;
+    }
+
+    /// The mass properties of the dynamic check, if on.
+    pub fn dynamics(&self) -> Option<&RigidBody> {
+        self.dynamics.as_ref()
     }
 
     pub fn model(&self) -> &Model {
@@ -185,8 +202,21 @@ impl Cycle {
             .map_err(|_| Rejection::Kinematics)?;
         if self.check_feasibility {
             let p = self.model.params();
+            // w = w_e + w_in (eq. 5.13–5.16): the cables must also accelerate the platform.
+            // α = J_P φ̈ drops the J̇_P φ̇ term (≤ |φ̇|² sin φ: < 1 % of the limits here).
+            let w = match &self.dynamics {
+                None => p.w_e,
+                Some(body) => {
+                    let motion = Motion {
+                        acceleration: a.fixed_rows::<3>(0).into_owned(),
+                        angular_velocity: v.fixed_rows::<3>(3).into_owned(),
+                        angular_acceleration: a.fixed_rows::<3>(3).into_owned(),
+                    };
+                    p.w_e + inertial_wrench(body, &pose, &motion)
+                }
+            };
             let fd =
-                statics::force_distribution(&self.data, &p.w_e, p.f_min, p.f_max, &mut self.forces)
+                statics::force_distribution(&self.data, &w, p.f_min, p.f_max, &mut self.forces)
                     .map_err(|_| Rejection::Kinematics)?;
             if !fd.feasible {
                 let (cable, force_n) = if fd.f_lo < p.f_min {

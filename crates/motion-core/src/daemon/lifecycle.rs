@@ -12,7 +12,10 @@ use super::HardLoop;
 use super::config::{DaemonConfig, TrajectorySettings};
 use super::cycle::{Cycle, OffsetModel, Reference, Rejection, SurrogateRejected};
 use super::trajectory::{self, PlannerLimits, PlanningFailed, Waypoint};
-use cdpr_model::config::{MotionLimits, Platform};
+use cdpr_model::Pose;
+use cdpr_model::config::{MotionLimits, Platform, Region};
+use cdpr_model::dynamics::{ScaleError, feasible_acceleration_scale};
+use nalgebra::Vector3;
 
 use crs_ipc::JointSetpoint;
 use std::path::PathBuf;
@@ -32,7 +35,66 @@ pub enum ConfigureError {
         #[source]
         source: SurrogateRejected,
     },
+    #[error(
+        "the platform's operating region is not wrench feasible with the dynamic wrench (eq. 5.13-5.16) at [{:.3}, {:.3}, {:.3}] m, [{:.1}, {:.1}, {:.1}]°: {source}",
+        pose.r.x, pose.r.y, pose.r.z,
+        pose.phi.x.to_degrees(), pose.phi.y.to_degrees(), pose.phi.z.to_degrees()
+    )]
+    DynamicallyInfeasible {
+        pose: Pose,
+        #[source]
+        source: ScaleError,
+    },
 }
+
+/// Poses the dynamic acceleration limits are computed on: `n` positions per axis of the
+/// region's box (n ≥ 2, corners included) × rotations {min, 0, max} per axis (0 only where the
+/// range contains it).
+pub fn region_grid(region: &Region, n: usize) -> Vec<Pose> {
+    let n = n.max(2);
+    let lin = |lo: f64, hi: f64| (0..n).map(move |k| lo + (hi - lo) * k as f64 / (n - 1) as f64);
+    let rot = |k: usize| {
+        let (lo, hi) = (region.rotation_min[k], region.rotation_max[k]);
+        let mut v = vec![lo, hi];
+        if lo < 0.0 && hi > 0.0 {
+            v.push(0.0);
+        }
+        v
+    };
+    let (pmin, pmax) = (region.position.min, region.position.max);
+    let mut out = Vec::new();
+    for x in lin(pmin.x, pmax.x) {
+        for y in lin(pmin.y, pmax.y) {
+            for z in lin(pmin.z, pmax.z) {
+                for a in rot(0) {
+                    for b in rot(1) {
+                        for c in rot(2) {
+                            out.push(Pose::new(Vector3::new(x, y, z), Vector3::new(a, b, c)));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Positions per axis of [`region_grid`] for the dynamic acceleration limits.
+pub const DYNAMIC_GRID_POINTS: usize = 3;
+
+/// Poses of the region grid whose static margin is below this share of the force range
+/// (f_max − f_min)/2 do not bound the planner's accelerations (see
+/// `cdpr_model::dynamics::feasible_acceleration_scale`).
+pub const DYNAMIC_STATIC_MARGIN_SHARE: f64 = 0.25;
+
+fn dynamic_static_margin_n(platform: &Platform) -> f64 {
+    let p = platform.model.params();
+    DYNAMIC_STATIC_MARGIN_SHARE * 0.5 * (p.f_max - p.f_min)
+}
+
+/// Share of the feasible acceleration scale the planner uses: the bound is exact at the grid
+/// poses, not between them.
+pub const DYNAMIC_SCALE_MARGIN: f64 = 0.8;
 
 /// Why [`Configured::verify_plan`] refused a plan.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -93,13 +155,26 @@ pub struct Configured {
     period_ns: u64,
     check_wrench_feasibility: bool,
     surrogate: Option<SurrogateInfo>,
+    /// The acceleration scale the dynamic wrench allowed (1 = table 5.1 × the daemon's
+    /// scales unchanged; `None`: static check).
+    dynamic_scale: Option<DynamicLimits>,
+}
+
+/// How the dynamic wrench limited the planner (for logs and `crs sim`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DynamicLimits {
+    /// Factor applied to the configured planner accelerations (≤ 1).
+    pub acceleration_factor: f64,
+    /// The pose of the region grid and the cable that bound it.
+    pub bound_at: Pose,
+    pub cable: usize,
 }
 
 /// Configures the daemon for `platform`: the cycle computation (workspace, limits, eq. 3.29
 /// when enabled), the surrogate of the daemon TOML loaded, identity-checked against the
 /// platform and bound-checked (eq. 5.27), and the planner limits.
 pub fn configure(cfg: &DaemonConfig, platform: &Platform) -> Result<Configured, ConfigureError> {
-    let mut c = configure_checks(cfg, platform);
+    let mut c = configure_checks(cfg, platform)?;
     if let Some(path) = &cfg.surrogate {
         let s = surrogate::Surrogate::load(path, &platform.model.identity_hex()).map_err(|e| {
             ConfigureError::SurrogateFile {
@@ -124,25 +199,76 @@ pub fn configure(cfg: &DaemonConfig, platform: &Platform) -> Result<Configured, 
 
 /// The checks and planner limits of [`configure`] without the surrogate of the daemon TOML,
 /// for offline plan verification and timing against another platform file (a campaign checked
-/// against a calibrated model whose identity the TOML's surrogate does not carry). Cannot fail.
-pub fn configure_checks(cfg: &DaemonConfig, platform: &Platform) -> Configured {
-    Configured {
+/// against a calibrated model whose identity the TOML's surrogate does not carry).
+///
+/// With the dynamic wrench (`dynamic_wrench` and the platform's `[dynamics]`, eq. 5.13–5.16)
+/// the planner's accelerations come from what stays feasible: the largest scale of the
+/// configured accelerations for which every pose of the region grid stays wrench feasible at
+/// any acceleration within them (and the planner's angular velocity), times
+/// [`DYNAMIC_SCALE_MARGIN`]; refused when the region is not feasible even at rest.
+pub fn configure_checks(
+    cfg: &DaemonConfig,
+    platform: &Platform,
+) -> Result<Configured, ConfigureError> {
+    let dynamics = platform
+        .dynamics
+        .filter(|_| cfg.dynamic_wrench && cfg.check_wrench_feasibility);
+    let mut limits = planner_limits(&platform.limits, &cfg.trajectory);
+    let mut dynamic_scale = None;
+    if let Some(body) = &dynamics {
+        let poses = region_grid(&platform.region, DYNAMIC_GRID_POINTS);
+        let s = feasible_acceleration_scale(
+            &platform.model,
+            body,
+            &poses,
+            dynamic_static_margin_n(platform),
+            limits.linear_acceleration,
+            limits.angular_acceleration,
+            limits.angular_velocity,
+        )
+        .map_err(|source| {
+            let k = match source {
+                ScaleError::Singular { pose_index }
+                | ScaleError::NotFeasibleAtRest { pose_index, .. } => pose_index,
+            };
+            ConfigureError::DynamicallyInfeasible {
+                pose: poses[k],
+                source,
+            }
+        })?;
+        let factor = (s.scale * DYNAMIC_SCALE_MARGIN).min(1.0);
+        limits.linear_acceleration *= factor;
+        limits.angular_acceleration *= factor;
+        dynamic_scale = Some(DynamicLimits {
+            acceleration_factor: factor,
+            bound_at: poses[s.pose_index],
+            cable: s.cable,
+        });
+    }
+    Ok(Configured {
         platform: platform.clone(),
-        cycle: new_cycle(platform, cfg.check_wrench_feasibility),
-        limits: planner_limits(&platform.limits, &cfg.trajectory),
+        cycle: new_cycle(platform, cfg.check_wrench_feasibility, dynamics),
+        limits,
         period_ns: cfg.realtime.period_ns,
         check_wrench_feasibility: cfg.check_wrench_feasibility,
         surrogate: None,
-    }
+        dynamic_scale,
+    })
 }
 
-fn new_cycle(platform: &Platform, check_wrench_feasibility: bool) -> Cycle {
-    Cycle::new(
+fn new_cycle(
+    platform: &Platform,
+    check_wrench_feasibility: bool,
+    dynamics: Option<cdpr_model::dynamics::RigidBody>,
+) -> Cycle {
+    let mut c = Cycle::new(
         platform.model.clone(),
         platform.limits,
         platform.region,
         check_wrench_feasibility,
-    )
+    );
+    c.set_dynamics(dynamics);
+    c
 }
 
 impl Configured {
@@ -162,6 +288,11 @@ impl Configured {
 
     pub fn planner_limits(&self) -> PlannerLimits {
         self.limits
+    }
+
+    /// How the dynamic wrench limited the planner's accelerations (`None`: static check).
+    pub fn dynamic_limits(&self) -> Option<DynamicLimits> {
+        self.dynamic_scale
     }
 
     pub fn period_ns(&self) -> u64 {
@@ -205,7 +336,11 @@ impl Configured {
                 return Err(PlanRefused::WaypointOutside { index });
             }
         }
-        let mut check = new_cycle(&self.platform, self.check_wrench_feasibility);
+        let mut check = new_cycle(
+            &self.platform,
+            self.check_wrench_feasibility,
+            self.cycle.dynamics().copied(),
+        );
         let period_s = self.period_s();
         let mut sp = JointSetpoint::default();
         let mut n = 0usize;

@@ -151,6 +151,8 @@ pub struct HardLoop {
     sampler: Sampler,
     /// Motion-cueing input; when set it replaces the planned trajectory as the reference.
     cueing: Option<(cueing::CueingFilter, Box<dyn cueing::CueingSource>)>,
+    /// Loop time of the last cueing target received (for the end of a finite stream).
+    cueing_last_ns: Option<u64>,
     state: LoopState,
     setpoint: JointSetpoint,
     last_safe: Option<JointSetpoint>,
@@ -163,6 +165,7 @@ impl HardLoop {
             cycle,
             sampler,
             cueing: None,
+            cueing_last_ns: None,
             state: LoopState::Running,
             setpoint: JointSetpoint::default(),
             last_safe: None,
@@ -205,6 +208,11 @@ impl HardLoop {
         self.cueing.is_some()
     }
 
+    /// Loop time (ns) of the last cueing target received, `None` before the first.
+    pub fn cueing_last_ns(&self) -> Option<u64> {
+        self.cueing_last_ns
+    }
+
     /// One cycle at monotonic time `now_ns`. Returns the state after the cycle.
     #[inline]
     pub fn step(
@@ -228,6 +236,7 @@ impl HardLoop {
                 Some((filter, source)) => {
                     if let Some(t) = source.latest() {
                         filter.set_target(&t);
+                        self.cueing_last_ns = Some(now_ns);
                     }
                     filter.step()
                 }
