@@ -71,6 +71,10 @@ impl TimingProfile {
             R::one("monitor", "identity_grace_cycles", "40"),
             R::one("motion", "setpoint_period_ms", "4.0"),
             R::one("can", "reader_stall_cycles", "40"),
+            // The monitor's SRDO configuration follows the drives' relaxed watch: its CRC (the
+            // configuration signature the drives compare) must match theirs.
+            R::one("can", "safety_validation_time_ms", "150"),
+            R::one("can", "safety_pair_window_ms", "75"),
         ];
         match self {
             TimingProfile::Spec => return [Vec::new(), Vec::new(), Vec::new()],
