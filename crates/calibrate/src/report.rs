@@ -296,10 +296,23 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
     s
 }
 
+/// Why the identified platform cannot be written.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum PlatformTomlError {
+    #[error("identified model: {0}")]
+    Model(#[from] ModelError),
+    #[error(transparent)]
+    Write(#[from] cdpr_model::config_writer::WriteError),
+}
+
 /// The identified platform as platform TOML: `base` with the calibrated geometry, pulleys,
 /// k_F, w_e and force limits of `cal`, named `name`. The text is written by the model crate's
 /// writer ([`cdpr_model::config_writer::platform_toml`]), next to the reader the daemon uses.
-pub fn platform_toml(base: &Platform, cal: &CalModel, name: &str) -> Result<String, ModelError> {
+pub fn platform_toml(
+    base: &Platform,
+    cal: &CalModel,
+    name: &str,
+) -> Result<String, PlatformTomlError> {
     let p = Platform {
         name: name.to_string(),
         description: format!("calibrated from {}", base.name),
@@ -315,7 +328,7 @@ pub fn platform_toml(base: &Platform, cal: &CalModel, name: &str) -> Result<Stri
             ),
             "Effects the platform schema cannot express are in the side file named in the report.",
         ],
-    ))
+    )?)
 }
 
 /// Side file (TOML) with the cable offsets and every extension parameter of the model.

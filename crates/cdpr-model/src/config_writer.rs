@@ -9,9 +9,21 @@ use crate::config::Platform;
 use nalgebra::Vector3;
 use std::fmt::Write as _;
 
+/// Why a platform cannot be written as platform TOML.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum WriteError {
+    /// The schema's `[dynamics] inertia_kg_m2` holds principal moments along the platform axes;
+    /// an inertia with products of inertia (e.g. a payload combined off-axis) cannot be written
+    /// without losing them.
+    #[error(
+        "[dynamics]: the inertia has products of inertia (largest {0:.3e} kg·m²), which the platform TOML cannot express"
+    )]
+    InertiaNotDiagonal(f64),
+}
+
 /// The platform as platform-TOML text. `header` is written first as `#` comment lines (e.g.
 /// where the platform came from).
-pub fn platform_toml(p: &Platform, header: &[&str]) -> String {
+pub fn platform_toml(p: &Platform, header: &[&str]) -> Result<String, WriteError> {
     let mut s = String::new();
     for line in header {
         let _ = writeln!(s, "# {line}");
@@ -60,6 +72,31 @@ pub fn platform_toml(p: &Platform, header: &[&str]) -> String {
         "[load]\nwrench_n_nm = [{}]\n",
         list(&mut params.w_e.iter().copied())
     );
+    if let Some(d) = &p.dynamics {
+        let i = &d.inertia_kg_m2;
+        let off = [
+            i[(0, 1)],
+            i[(0, 2)],
+            i[(1, 2)],
+            i[(1, 0)],
+            i[(2, 0)],
+            i[(2, 1)],
+        ]
+        .iter()
+        .fold(0.0f64, |a, v| a.max(v.abs()));
+        if off > 1e-12 * i.diagonal().amax().max(1.0) {
+            return Err(WriteError::InertiaNotDiagonal(off));
+        }
+        let _ = writeln!(
+            s,
+            "[dynamics]\nmass_kg = {:?}\ncenter_of_gravity_m = {}\ninertia_kg_m2 = [{:?}, {:?}, {:?}]\n",
+            d.mass_kg,
+            v3(&d.cog_m),
+            i[(0, 0)],
+            i[(1, 1)],
+            i[(2, 2)]
+        );
+    }
     let _ = writeln!(
         s,
         "[forces]\nf_min_n = {:?}\nf_max_n = {:?}\nf_abs_max_n = {:?}\n",
@@ -112,7 +149,7 @@ pub fn platform_toml(p: &Platform, header: &[&str]) -> String {
             let _ = writeln!(s, "{} = [{}]", sec.name, c.join(", "));
         }
     }
-    s
+    Ok(s)
 }
 
 #[cfg(test)]
@@ -134,7 +171,7 @@ mod tests {
             let Ok(p) = load_platform(&path) else {
                 continue; // not a platform file (daemon, monitor, drives configs)
             };
-            let text = platform_toml(&p, &["written by the round-trip test"]);
+            let text = platform_toml(&p, &["written by the round-trip test"]).expect("writable");
             let back = parse_platform(&text, "written")
                 .unwrap_or_else(|e| panic!("{}: written text does not load: {e}", path.display()));
             assert_eq!(back, p, "{}", path.display());
@@ -159,7 +196,7 @@ mod tests {
             axis: vec![Vector3::z(); m],
         });
         p.model = crate::model::Model::new(params).expect("model");
-        let back = parse_platform(&platform_toml(&p, &[]), "written").expect("loads");
+        let back = parse_platform(&platform_toml(&p, &[]).unwrap(), "written").expect("loads");
         assert_eq!(back.model.params().pulleys, p.model.params().pulleys);
     }
 }
