@@ -461,6 +461,10 @@ struct PlanWatch {
 /// Consecutive identical setpoint poses that make a hold (the stream stands still).
 pub const PLAN_HOLD_SETPOINTS: u32 = 2;
 
+/// Consecutive identical poses before a stream without a planned end (motion cueing) may end:
+/// 50 setpoints (50 ms at the spec's 1 ms loop) of standing still.
+pub const OPEN_END_HOLD_SETPOINTS: u32 = 50;
+
 impl Monitor {
     /// `identity`: the platform identity the monitor computed itself
     /// ([`crate::identity::platform_identity`]).
@@ -530,11 +534,14 @@ impl Monitor {
     /// the stream has reached its last setpoint and holds.
     pub fn stream_end_planned(&self) -> bool {
         match (self.plan.end, self.last_sequence) {
-            (Some(end), Some(last)) => {
-                end != crs_ipc::motion_state::PLAN_OPEN_END
-                    && last >= end
-                    && self.plan.hold_run >= PLAN_HOLD_SETPOINTS
+            // A stream without a planned end (motion cueing, the ride source) ends when the
+            // operator ends the ride: accepted only while the platform holds, as at a plan's
+            // end; while it moves, an end is refused (a forged STOPPING cannot disarm the
+            // checks of a moving platform).
+            (Some(end), Some(_)) if end == crs_ipc::motion_state::PLAN_OPEN_END => {
+                self.plan.hold_run >= OPEN_END_HOLD_SETPOINTS
             }
+            (Some(end), Some(last)) => last >= end && self.plan.hold_run >= PLAN_HOLD_SETPOINTS,
             // No setpoint at all since the last end: nothing to disarm.
             (_, None) => !self.seen_setpoint,
             (None, Some(_)) => false,

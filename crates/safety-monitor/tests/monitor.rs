@@ -1410,14 +1410,28 @@ fn stopping_is_accepted_only_at_the_end_of_the_announced_plan() {
         Some(Cause::UnplannedStreamEnd)
     );
 
-    // A stream without a planned end (motion cueing): refused.
-    let mut m = monitor();
+    // A stream without a planned end (motion cueing) while it moves: refused.
+    let mut m = monitor_with(|l| l.motion.check = false);
     m.on_plan_announced(crs_ipc::motion_state::PLAN_OPEN_END);
-    good_cycle(&mut m, 1, 0);
+    for k in 1..=15 {
+        m.on_setpoint(&sp(k, moving(k), 0, 0.0));
+    }
+    assert!(!m.stream_end_planned());
     assert_eq!(
         stop_now(&mut m).new_trip.map(|t| t.fault.cause),
         Some(Cause::UnplannedStreamEnd)
     );
+    // ... and once it has held still long enough (the operator ended the ride): accepted.
+    let mut m = monitor_with(|l| l.motion.check = false);
+    m.on_plan_announced(crs_ipc::motion_state::PLAN_OPEN_END);
+    for k in 1..=15 {
+        m.on_setpoint(&sp(k, moving(k), 0, 0.0));
+    }
+    for k in 16..=15 + 50 {
+        m.on_setpoint(&sp(k, moving(15), 0, 0.0));
+    }
+    assert!(m.stream_end_planned());
+    assert!(stop_now(&mut m).faults.is_empty());
 
     // At the plan's end and holding: accepted, nothing trips afterwards.
     let mut m = monitor_with(|l| l.motion.check = false);
