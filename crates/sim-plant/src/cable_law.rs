@@ -1,6 +1,6 @@
 //! The plant's cable force law: powertrain compliance (effect 3), tension-dependent stiffness
-//! (effect 4a), hysteresis (effect 4b) and sag (effect 5), behind the model library's
-//! [`CableLaw`] interface; the plant's equilibrium ([`crate::oracle`]) evaluates it.
+//! (effect 4a), hysteresis (effect 4b) and sag (effect 5), behind motion-core's
+//! [`CableLaw`] so the elastostatic forward kinematics ν_el (eq. 2.42) solves the plant with it.
 //!
 //! Per cable, with e = q − q_θ (eq. 2.35):
 //! * linear compliance c(q) = (q + l_extra)/k_F + c_s (eq. 2.33 with the rope stored in the
@@ -18,8 +18,7 @@
 //!   kinematics at every trial pose). The force acts along the chord; the share of the rope
 //!   weight the platform carries (half of each span) is added to the wrench by the plant.
 //!
-//! With every effect off the law is the model library's [`LinearElastic`] bit for bit; the
-//! oracle then uses its own linear law instead (the two are cross-checked in tests/oracle.rs).
+//! With every effect off the law is motion-core's [`LinearElastic`] bit for bit.
 
 use crate::config::{Effects, Hysteresis, TensionStiffness};
 use cdpr_model::elastostatics::{CableForce, CableLaw, LinearElastic};

@@ -3,10 +3,7 @@
 //! The "ground truth model" ν̂_el of the spec's meta-model (ch. 3.2, Fig. 3.2/3.7): what the
 //! controller and the calibration are tested against. Given commanded (controlled) cable
 //! lengths it returns the equilibrium the physical robot settles in — pose x̂ and forces f̂ from
-//! the elastostatic forward kinematics (eq. 2.42–2.43) — and what the sensors read. The truth is
-//! computed by the plant's own equations ([`oracle`]: geometry, pulley model, equilibrium as the
-//! minimum of the potential energy), not by the model library the controller uses; only the
-//! platform data is shared, so an error in the library's equations shows as a disagreement.
+//! the elastostatic forward kinematics (eq. 2.42–2.43) — and what the sensors read.
 //!
 //! Each physical effect is a named, parameterised block of the plant TOML ([`config`]), off
 //! unless switched on, so a data set can carry effects the control model does not know:
@@ -14,7 +11,7 @@
 //! | effect | block | where |
 //! |---|---|---|
 //! | 1 geometry deviations Δa, Δb (ch. 3.2, eq. 6.7) | `geometry_deviation` | [`plant`] |
-//! | 2 pulley kinematics (eq. 2.16–2.29) | `pulleys` | [`oracle`] (own tangent construction) |
+//! | 2 pulley kinematics (eq. 2.16–2.29) | `pulleys` | [`plant`] (motion-core) |
 //! | 3 powertrain compliance (sec. 5.1, eq. 6.18) | `powertrain` | [`cable_law`] |
 //! | 4 tension-dependent stiffness, hysteresis (Fig. 5.7) | `stiffness`, `hysteresis` | [`cable_law`] |
 //! | 5 cable sag (Irvine / Ernst) | `sag` | [`cable_law`] |
@@ -29,7 +26,6 @@ pub mod bus;
 pub mod cable_law;
 pub mod campaign;
 pub mod config;
-pub mod oracle;
 pub mod plant;
 
 pub use campaign::{

@@ -1,19 +1,23 @@
 //! The simulated plant (ground-truth model ν̂_el of the meta-model, ch. 3.2, Fig. 3.2/3.7):
 //! commanded controlled lengths in, the equilibrium the physical robot settles in out
-//! (elastostatic equilibrium, eq. 2.42–2.43, with the effects of [`crate::config`]), plus
-//! sensor readings. The truth is computed by the plant's own equations ([`crate::oracle`]:
-//! own geometry and pulley model, equilibrium as the minimum of the potential energy), not by
-//! the model library the controller uses; only the platform data is shared.
+//! (elastostatic forward kinematics, eq. 2.42–2.43, with the effects of [`crate::config`]),
+//! plus sensor readings.
 
 use crate::cable_law::{HysteresisState, PlantLaw};
 use crate::config::{Effects, PlantConfig};
-use crate::oracle::{self, EquilibriumError, GeometryError, OracleModel, Workspace};
-use cdpr_model::{Model, ModelError, Pose, Pulleys};
-use nalgebra::Vector6;
+use cdpr_model::elastostatics::{self, Stiffness};
+use cdpr_model::forward::{FkError, FkOptions, FkSolution, elastostatic_with_law};
+use cdpr_model::kinematics::{self, KinematicsError};
+use cdpr_model::pose::twist_from_coordinates;
+use cdpr_model::statics::{self, StaticsError};
+use cdpr_model::{Data, Model, ModelError, Pose, Pulleys};
+use nalgebra::{Vector3, Vector6};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 
+/// Iteration limit of the pose-dependent solver (linear convergence near the solution).
+const MAX_ITERATIONS: usize = 200;
 /// Largest change of a physical controlled length per quasi-static sub-step, m. The winches
 /// move continuously, so a large command change is followed along a path (continuation):
 /// the plant stays on the physical equilibrium branch and the hysteresis sees the path.
@@ -29,11 +33,11 @@ pub enum PlantError {
     #[error("commanded length of cable {cable} is not finite")]
     NonFinite { cable: usize },
     #[error("no equilibrium: {0}")]
-    NoEquilibrium(#[from] EquilibriumError),
+    NoEquilibrium(#[from] FkError),
     #[error("kinematics: {0}")]
-    Kinematics(#[from] GeometryError),
-    #[error("statics: the structure matrix A^T A is singular at the set-up pose")]
-    SingularStructure,
+    Kinematics(#[from] KinematicsError),
+    #[error("statics: {0}")]
+    Statics(#[from] StaticsError),
     #[error("initial tension cannot be realised: cable {cable} would carry {force:.1} N")]
     InfeasibleTension { cable: usize, force: f64 },
 }
@@ -52,7 +56,7 @@ pub struct Equilibrium {
     /// External wrench acting on the platform at x̂ (load plus, with sag, the rope-weight
     /// share), N and N·m.
     pub wrench: Vector6<f64>,
-    /// Newton iterations of the last inner solve (the oracle's equilibrium).
+    /// Levenberg–Marquardt iterations of the last inner solve.
     pub iterations: usize,
     /// ‖A^T f + w_e‖ at x̂ (N, N·m).
     pub residual_norm: f64,
@@ -89,21 +93,19 @@ pub struct PlantState {
 #[derive(Clone, Debug)]
 pub struct Plant {
     config: PlantConfig,
-    /// The physical parameters as a model-library `Model` (validation and analysis only; the
-    /// truth path uses `oracle`).
     model: Model,
-    /// The plant's own model of its physics (geometry, loads).
-    oracle: OracleModel,
-    /// The oracle's scratch (state at the last evaluated pose).
-    ws: Workspace,
+    data: Data,
     law: PlantLaw,
     /// Last equilibrium pose (warm start).
     pose: Pose,
+    /// External wrench used in the current solve.
+    w_e: Vector6<f64>,
     q_phys: Vec<f64>,
     /// Physical controlled lengths of the last equilibrium.
     last_q: Option<Vec<f64>>,
     /// Sub-step target (scratch).
     q_target: Vec<f64>,
+    opts: FkOptions,
     rng: StdRng,
 }
 
@@ -112,21 +114,23 @@ impl Plant {
     pub fn new(config: PlantConfig) -> Result<Self, PlantError> {
         let fx = &config.effects;
         let model = physical_model(&config.platform.model, fx)?;
-        let oracle = OracleModel::from_config(&config);
+        let data = Data::new(&model);
         let law = PlantLaw::new(&config.platform.model.params().k_f, fx);
         let m = model.m();
         let rng = StdRng::seed_from_u64(config.seed);
         let pose = config.platform.home;
+        let w_e = model.params().w_e;
         Ok(Self {
             config,
             model,
-            ws: Workspace::new(m),
-            oracle,
+            data,
             law,
             pose,
+            w_e,
             q_phys: vec![0.0; m],
             last_q: None,
             q_target: vec![0.0; m],
+            opts: FkOptions::default(),
             rng,
         })
     }
@@ -142,11 +146,6 @@ impl Plant {
     /// The physical model (geometry and pulleys of the plant, for tests and analysis).
     pub fn physical_model(&self) -> &Model {
         &self.model
-    }
-
-    /// The plant's own model of its physics (the oracle's geometry and loads).
-    pub fn oracle_model(&self) -> &OracleModel {
-        &self.oracle
     }
 
     /// Restarts the sensor-noise RNG.
@@ -171,15 +170,51 @@ impl Plant {
     /// The platform load at pose x (effect 7, or the platform's nominal wrench). With sag on,
     /// the solver adds the rope-weight share (see [`Equilibrium::wrench`] for the total).
     pub fn wrench_at(&self, x: &Pose) -> Vector6<f64> {
-        let l = &self.oracle.loads;
-        let c = l.constant;
-        let mut w = Vector6::new(c[0], c[1], c[2], c[3], c[4], c[5]);
-        if let Some((weight, cog)) = l.weight {
-            let rot = oracle::Orientation::at([x.phi.x, x.phi.y, x.phi.z]).r;
-            let tau = (rot * cog).cross(weight);
-            w += Vector6::new(weight.x, weight.y, weight.z, tau.x, tau.y, tau.z);
+        match &self.config.effects.load {
+            None => self.model.params().w_e,
+            Some(l) => {
+                let fg = Vector3::new(0.0, 0.0, -l.mass * l.gravity);
+                let tau = (x.rotation() * l.center_of_gravity).cross(&fg);
+                Vector6::new(fg.x, fg.y, fg.z, tau.x, tau.y, tau.z) + l.extra_wrench
+            }
         }
-        w
+    }
+
+    fn pose_dependent(&self) -> bool {
+        self.law.has_sag()
+            || self
+                .config
+                .effects
+                .load
+                .is_some_and(|l| l.center_of_gravity != Vector3::zeros())
+    }
+
+    /// Sets the pose-dependent inputs (chord angles, wrench) from the kinematics at x.
+    fn freeze_at(&mut self, x: &Pose) -> Result<(), PlantError> {
+        kinematics::inverse(&self.model, &mut self.data, x)?;
+        self.sag_inputs_from_data(x);
+        Ok(())
+    }
+
+    /// With the kinematics of x in `data`: chord angles for the sag law and the wrench, with
+    /// the share of the rope weight the platform carries under sag (effect 5): half of each
+    /// free span's weight μ g q_f,i hangs at its platform anchor b_i (parabolic span, the
+    /// other half at the pulley), w += Σ [−½ μ g q_f,i e_z; b_i × (−½ μ g q_f,i e_z)].
+    fn sag_inputs_from_data(&mut self, x: &Pose) {
+        self.w_e = self.wrench_at(x);
+        if let Some(sag) = self.config.effects.sag {
+            for i in 0..self.m() {
+                let uz = self.data.u[i].z;
+                self.law.sag_cos2[i] = (1.0 - uz * uz).max(0.0);
+                let g = Vector3::new(
+                    0.0,
+                    0.0,
+                    -0.5 * sag.mass_per_length * sag.gravity * self.data.q_free[i],
+                );
+                let tau = self.data.b_world[i].cross(&g);
+                self.w_e += Vector6::new(g.x, g.y, g.z, tau.x, tau.y, tau.z);
+            }
+        }
     }
 
     /// Physical controlled lengths from the commands (effect 6): q_θ = s q_cmd + o.
@@ -216,21 +251,20 @@ impl Plant {
             self.q_target[i] = v;
         }
         let saved = self.state();
-        let sol = match self.follow() {
+        let result = self.follow();
+        let sol = match result {
             Ok(sol) => sol,
             Err(e) => {
                 self.restore(&saved);
                 return Err(e);
             }
         };
-        let at = &self.ws.at;
-        let w = at.wrench;
         Ok(Equilibrium {
-            pose: Pose::from_array(sol.x),
-            forces: at.f.clone(),
+            pose: sol.pose,
+            forces: self.data.f.clone(),
             q_theta: self.q_phys.clone(),
-            lengths: at.cables.iter().map(|c| c.q).collect(),
-            wrench: Vector6::new(w[0], w[1], w[2], w[3], w[4], w[5]),
+            lengths: self.data.q.clone(),
+            wrench: self.w_e,
             iterations: sol.iterations,
             residual_norm: sol.residual_norm,
         })
@@ -238,7 +272,7 @@ impl Plant {
 
     /// Follows the command from the last equilibrium to `q_target` in quasi-static sub-steps,
     /// committing the hysteresis after each. Leaves `q_phys` = `q_target`.
-    fn follow(&mut self) -> Result<oracle::Solution, PlantError> {
+    fn follow(&mut self) -> Result<FkSolution, PlantError> {
         let m = self.m();
         let n_sub = match &self.last_q {
             Some(last) => {
@@ -250,8 +284,6 @@ impl Plant {
             None => 1,
         };
         let last = self.last_q.clone();
-        // Sub-steps share the oracle's Hessian; a new command starts afresh.
-        self.ws.forget_hessian();
         let mut sol = None;
         for k in 1..=n_sub {
             let t = k as f64 / n_sub as f64;
@@ -261,25 +293,123 @@ impl Plant {
                     _ => self.q_target[i],
                 };
             }
-            let s = oracle::solve(
-                &self.oracle,
-                &mut self.law,
-                &self.q_phys,
-                &self.pose.to_array(),
-                &mut self.ws,
-            )?;
-            // ws.at holds the cables at s.x and the law its chord angles: commit the hysteresis.
+            let s = self.solve(self.pose)?;
+            // data holds the kinematics and forces at s.pose: commit the hysteresis state.
             for i in 0..m {
-                let e = self
-                    .law
-                    .elastic_input(i, self.ws.at.cables[i].q, self.q_phys[i]);
+                let e = self.law.elastic_input(i, self.data.q[i], self.q_phys[i]);
                 self.law.commit(i, e);
             }
-            self.pose = Pose::from_array(s.x);
+            self.pose = s.pose;
             sol = Some(s);
         }
         self.last_q = Some(self.q_target.clone());
-        sol.ok_or(PlantError::NoEquilibrium(EquilibriumError::AllSlack))
+        sol.ok_or(PlantError::NoEquilibrium(FkError::AllSlack))
+    }
+
+    fn solve(&mut self, guess: Pose) -> Result<FkSolution, PlantError> {
+        if !self.pose_dependent() {
+            // Constant wrench and chord-independent law: motion-core's ν_el as is.
+            self.w_e = self.wrench_at(&guess);
+            return Ok(elastostatic_with_law(
+                &self.model,
+                &mut self.data,
+                &self.law,
+                &self.w_e,
+                &self.q_phys,
+                &guess,
+                &self.opts,
+            )?);
+        }
+        self.solve_pose_dependent(guess)
+    }
+
+    /// Residual wrench ρ(x) = A^T f + w_e(x) (eq. 2.43) with the chord angles (sag) and the
+    /// gravity torque (load) evaluated at x itself.
+    fn eval(&mut self, x: &Pose) -> Result<Vector6<f64>, PlantError> {
+        kinematics::inverse(&self.model, &mut self.data, x)?;
+        self.sag_inputs_from_data(x);
+        elastostatics::cable_forces(&mut self.data, &self.law, &self.q_phys);
+        Ok(statics::cable_wrench(&self.data, &self.data.f) + self.w_e)
+    }
+
+    fn scale(&self) -> f64 {
+        self.data.f.iter().sum::<f64>() + self.w_e.amax() + 1.0
+    }
+
+    /// ν_el for pose-dependent inputs: Levenberg–Marquardt on the exact residual (angles and
+    /// wrench at the trial pose) with the Jacobian K_G − K_C (eq. 2.74, 2.76) of the frozen
+    /// inputs; the neglected ∂(chord angle, gravity torque)/∂x terms are small, so it still
+    /// converges to the exact equilibrium, only not quadratically.
+    fn solve_pose_dependent(&mut self, guess: Pose) -> Result<FkSolution, PlantError> {
+        let opts = self.opts;
+        let mut x = guess;
+        let mut rho = self.eval(&x)?;
+        let mut cost = 0.5 * rho.norm_squared();
+        let mut mu = opts.initial_damping;
+        for it in 1..=MAX_ITERATIONS {
+            if self.data.f.iter().all(|f| *f == 0.0) {
+                return Err(FkError::AllSlack.into());
+            }
+            if rho.amax() <= opts.wrench_tolerance * self.scale() {
+                return Ok(FkSolution {
+                    pose: x,
+                    iterations: it - 1,
+                    residual_norm: rho.norm(),
+                });
+            }
+            let j = Stiffness::at(&self.model, &self.data).k_wx * twist_from_coordinates(&x);
+            let jtj = j.transpose() * j;
+            let jtr = j.transpose() * rho;
+            loop {
+                let mut lhs = jtj;
+                for k in 0..6 {
+                    lhs[(k, k)] += mu * jtj[(k, k)].max(1e-12);
+                }
+                let step = lhs
+                    .cholesky()
+                    .ok_or(FkError::Singular { iteration: it })?
+                    .solve(&(-jtr));
+                let x_new = x.add_increment(&step);
+                let accepted = match self.eval(&x_new) {
+                    Ok(r) if 0.5 * r.norm_squared() <= cost => Some(r),
+                    _ => None,
+                };
+                if let Some(r) = accepted {
+                    x = x_new;
+                    rho = r;
+                    cost = 0.5 * rho.norm_squared();
+                    mu = (mu / 5.0).max(1e-15);
+                    if step.amax() < opts.step_tolerance {
+                        return self.accept(x, it);
+                    }
+                    break;
+                }
+                mu *= 4.0;
+                if mu > 1e12 {
+                    return self.accept(x, it);
+                }
+            }
+        }
+        self.accept(x, MAX_ITERATIONS)
+    }
+
+    fn accept(&mut self, x: Pose, iterations: usize) -> Result<FkSolution, PlantError> {
+        let rho = self.eval(&x)?;
+        if self.data.f.iter().all(|f| *f == 0.0) {
+            return Err(FkError::AllSlack.into());
+        }
+        if rho.amax() > self.opts.wrench_acceptance * self.scale() {
+            return Err(FkError::NotConverged {
+                iterations,
+                residual: rho.norm(),
+            }
+            .into());
+        }
+        Ok(FkSolution {
+            pose: x,
+            iterations,
+            residual_norm: rho.norm(),
+        })
     }
 
     /// Sensor readings of an equilibrium (effect 8): tracker noise on every pose coordinate,
@@ -325,19 +455,24 @@ impl Plant {
                 got: f_ini.len(),
             });
         }
-        oracle::place(&self.oracle, &pose.to_array(), &mut self.ws.at)?;
-        oracle::equilibrium::set_chords(&mut self.law, &self.ws.at);
-        let forces =
-            oracle::project_tension(&self.ws.at, f_ini).ok_or(PlantError::SingularStructure)?;
+        self.freeze_at(pose)?;
+        kinematics::inverse(&self.model, &mut self.data, pose)?;
+        let mut f_ext = vec![0.0; m];
+        let mut f_int = vec![0.0; m];
+        statics::split_internal_external(&self.data, &self.w_e, f_ini, &mut f_ext, &mut f_int)?;
+        let forces: Vec<f64> = f_ext.iter().zip(&f_int).map(|(a, b)| a + b).collect();
         if let Some((cable, &force)) = forces.iter().enumerate().find(|(_, f)| **f <= 0.0) {
             return Err(PlantError::InfeasibleTension { cable, force });
         }
         let mut q_cmd = vec![0.0; m];
         for i in 0..m {
             self.law.reset_at_force(i, forces[i]);
-            let q = self.ws.at.cables[i].q;
-            let qt =
-                oracle::equilibrium::controlled_length(&self.oracle, &self.law, i, q, forces[i]);
+            let qt = cdpr_model::elastostatics::CableLaw::controlled_length(
+                &self.law,
+                i,
+                self.data.q[i],
+                forces[i],
+            );
             q_cmd[i] = self.winch_inverse(i, qt);
         }
         self.pose = *pose;

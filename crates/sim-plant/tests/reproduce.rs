@@ -1,5 +1,4 @@
-//! Must-show (a): the plant with every effect off reproduces the control model (to round-off:
-//! the plant computes it with its own equations, `sim_plant::oracle`), and a
+//! Must-show (a): the plant with every effect off reproduces the control model exactly, and a
 //! purely kinematic command drifts by force propagation (eq. 3.24).
 
 #![allow(clippy::needless_range_loop)] // per-cable index loops read like the equations
@@ -47,13 +46,10 @@ fn ideal_plant_settles_at_the_elastostatic_command_to_round_off() {
                 f_ref[i]
             );
         }
-        // and the model library's ν_el from the plant's answer stays there: the plant's own
-        // formulation (sim_plant::oracle) and the library's agree to round-off
-        // (tests/oracle.rs has the tolerance argument)
+        // and it is motion-core's ν_el bit for bit (same law, same wrench, same start)
         let mut d2 = Data::new(model);
         let sol = elastostatic(model, &mut d2, &q, &eq.pose, &FkOptions::default()).unwrap();
-        let (dp, dr) = sol.pose.error_to(&eq.pose);
-        assert!(dp < 1e-11 && dr < 1e-11, "{dp:e} m {dr:e} rad");
+        assert_eq!(pose_bits(&sol.pose), pose_bits(&eq.pose));
         n += 1;
     }
     assert_eq!(n, poses.len());
