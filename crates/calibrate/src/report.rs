@@ -313,10 +313,32 @@ pub fn platform_toml(
     cal: &CalModel,
     name: &str,
 ) -> Result<String, PlatformTomlError> {
+    // [dynamics] describes the same body whose weight [load] carries: the identified load
+    // (eq. 6.23) moves its mass and the COG's x, y with it (the loader refuses the two when
+    // they disagree); the COG height and the inertia's shape are not identified and stay,
+    // the inertia scaled with the mass.
+    let g = cdpr_model::dynamics::GRAVITY_M_PER_S2;
+    let m_id = -cal.w_e[2] / g;
+    let dynamics = base.dynamics.clone().map(|d| {
+        if m_id > 0.0 && d.mass_kg > 0.0 {
+            cdpr_model::dynamics::RigidBody {
+                mass_kg: m_id,
+                cog_m: nalgebra::Vector3::new(
+                    cal.w_e[4] / (m_id * g),
+                    -cal.w_e[3] / (m_id * g),
+                    d.cog_m.z,
+                ),
+                inertia_kg_m2: d.inertia_kg_m2 * (m_id / d.mass_kg),
+            }
+        } else {
+            d
+        }
+    });
     let p = Platform {
         name: name.to_string(),
         description: format!("calibrated from {}", base.name),
         model: cal.model()?,
+        dynamics,
         ..base.clone()
     };
     Ok(cdpr_model::config_writer::platform_toml(

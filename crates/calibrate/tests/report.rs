@@ -60,3 +60,23 @@ fn bad_data_sets_are_rejected_with_a_reason() {
         })
     ));
 }
+
+/// A platform with `[dynamics]` whose identified load moved (eq. 6.23): the written platform
+/// carries the identified weight and COG in `[dynamics]` too and loads (the loader refuses a
+/// `[dynamics]` that contradicts `[load]`).
+#[test]
+fn an_identified_load_moves_the_dynamics_with_it() {
+    let base = cdpr_model::config::load_platform(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/icosahedron.toml"),
+    )
+    .unwrap();
+    assert!(base.dynamics.is_some(), "the icosahedron has [dynamics]");
+    let mut cal = CalModel::from_model(&base.model);
+    cal.w_e[2] *= 1.06;
+    cal.w_e[3] += 150.0;
+    cal.w_e[4] -= 90.0;
+    let text = report::platform_toml(&base, &cal, "heavier").expect("writable");
+    let p = parse_platform(&text, "heavier.toml").expect("written platform must load");
+    let d = p.dynamics.unwrap();
+    assert!((d.mass_kg * 9.81 + cal.w_e[2]).abs() < 1e-6, "{d:?}");
+}
