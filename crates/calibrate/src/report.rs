@@ -319,7 +319,7 @@ pub fn platform_toml(
     // the inertia scaled with the mass.
     let g = cdpr_model::dynamics::GRAVITY_M_PER_S2;
     let m_id = -cal.w_e[2] / g;
-    let dynamics = base.dynamics.clone().map(|d| {
+    let dynamics = base.dynamics.map(|d| {
         if m_id > 0.0 && d.mass_kg > 0.0 {
             cdpr_model::dynamics::RigidBody {
                 mass_kg: m_id,
