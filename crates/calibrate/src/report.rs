@@ -316,7 +316,9 @@ pub fn platform_toml(
     // [dynamics] describes the same body whose weight [load] carries: the identified load
     // (eq. 6.23) moves its mass and the COG's x, y with it (the loader refuses the two when
     // they disagree); the COG height and the inertia's shape are not identified and stay,
-    // the inertia scaled with the mass.
+    // the inertia scaled with the mass. An identified load that no point weight can produce
+    // (a yaw torque, horizontal forces: eq. 6.23 has them) leaves no consistent [dynamics]:
+    // it is then left out, and the header says so for the reviewer.
     let g = cdpr_model::dynamics::GRAVITY_M_PER_S2;
     let m_id = -cal.w_e[2] / g;
     let dynamics = base.dynamics.map(|d| {
@@ -334,21 +336,31 @@ pub fn platform_toml(
             d
         }
     });
-    let p = Platform {
+    let mut p = Platform {
         name: name.to_string(),
         description: format!("calibrated from {}", base.name),
         model: cal.model()?,
         dynamics,
         ..base.clone()
     };
+    let identified = format!(
+        "Identified by `crs calibrate` from {} (spec ch. 4).",
+        base.name
+    );
+    let side =
+        "Effects the platform schema cannot express are in the side file named in the report.";
+    let text = cdpr_model::config_writer::platform_toml(&p, &[&identified, side])?;
+    if p.dynamics.is_none() || cdpr_model::config::parse_platform(&text, name).is_ok() {
+        return Ok(text);
+    }
+    p.dynamics = None;
     Ok(cdpr_model::config_writer::platform_toml(
         &p,
         &[
-            &format!(
-                "Identified by `crs calibrate` from {} (spec ch. 4).",
-                base.name
-            ),
-            "Effects the platform schema cannot express are in the side file named in the report.",
+            &identified,
+            side,
+            "[dynamics] LEFT OUT: the identified load is not a pure weight (yaw torque or horizontal",
+            "force), so no mass/COG agrees with it; set [dynamics] after review (docs/ride-physics.md).",
         ],
     )?)
 }

@@ -80,3 +80,19 @@ fn an_identified_load_moves_the_dynamics_with_it() {
     let d = p.dynamics.unwrap();
     assert!((d.mass_kg * 9.81 + cal.w_e[2]).abs() < 1e-6, "{d:?}");
 }
+
+/// An identified yaw torque (eq. 6.23 has one) cannot come from a point weight: the platform
+/// is still written and loads, without [dynamics], and says so.
+#[test]
+fn a_load_no_weight_can_produce_leaves_dynamics_out_and_says_so() {
+    let base = cdpr_model::config::load_platform(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/icosahedron.toml"),
+    )
+    .unwrap();
+    let mut cal = CalModel::from_model(&base.model);
+    cal.w_e[5] = -99.0;
+    let text = report::platform_toml(&base, &cal, "yawed").expect("writable");
+    let p = parse_platform(&text, "yawed.toml").expect("written platform must load");
+    assert!(p.dynamics.is_none());
+    assert!(text.contains("[dynamics] LEFT OUT"), "{text}");
+}
