@@ -176,14 +176,16 @@ fn write_configs(dir: &Path, args: &Args) -> Res<()> {
          0.0,0.2,0.0,2.0,0.0,0.0,0.0\n0.0,-0.2,0.1,2.1,0.0,0.0,1.0\n\
          0.0,0.2,-0.1,1.9,1.0,0.0,0.0\n0.0,-0.2,0.0,2.0,0.0,0.0,0.0\n0.0,0.0,0.0,2.0,0.0,0.0,0.0\n";
     // Stream owners (issue 16): this harness's fake motion core publishes setpoints and the
-    // identity in most scenarios; `foreign_publisher` runs the strict (shipped) owners.
+    // identity in most scenarios, and its replacement adapter publishes drive feedback in
+    // `unknown_applied_sequence`; `foreign_publisher` runs the strict (shipped) owners.
     let strict = format!(
         "{monitor}[ipc]\nsetpoint_owners = [\"motion-core\"]\nfeedback_owners = [\"drive-io\"]\n\
          identity_owners = [\"motion-core\"]\n"
     );
     let monitor = format!(
         "{monitor}[ipc]\nsetpoint_owners = [\"motion-core\", \"safety-hil\"]\n\
-         feedback_owners = [\"drive-io\"]\nidentity_owners = [\"motion-core\", \"safety-hil\"]\n"
+         feedback_owners = [\"drive-io\", \"safety-hil\"]\n\
+         identity_owners = [\"motion-core\", \"safety-hil\"]\n"
     );
     // The drives (winch emulator) of `heartbeat_config_crc_mismatch`: one SRDO parameter (their
     // validation time) differs from what the monitor announces.
