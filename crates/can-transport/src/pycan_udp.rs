@@ -15,6 +15,7 @@
 
 use crate::frame::{CanFrame, RxFrame};
 use crate::poll::wait_readable;
+use crate::udp::io;
 use crate::{CanBus, CanError, monotonic_ns};
 use socket2::{Domain, Protocol, SockAddr, Socket, Type};
 use std::net::{Ipv4Addr, SocketAddrV4, UdpSocket};
@@ -257,11 +258,6 @@ pub struct PyCanUdpBus {
     rx_errors: u64,
     buf: [u8; 4096],
     out: Vec<u8>,
-}
-
-fn io(iface: &str, op: &'static str) -> impl FnOnce(std::io::Error) -> CanError {
-    let iface = iface.to_string();
-    move |source| CanError::Io { iface, op, source }
 }
 
 impl PyCanUdpBus {

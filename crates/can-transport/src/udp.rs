@@ -30,7 +30,8 @@ pub struct UdpBus {
     buf: [u8; 2048],
 }
 
-fn io(iface: &str, op: &'static str) -> impl FnOnce(std::io::Error) -> CanError {
+/// An I/O error of socket operation `op` on `iface` (shared by the UDP transports).
+pub(crate) fn io(iface: &str, op: &'static str) -> impl FnOnce(std::io::Error) -> CanError {
     let iface = iface.to_string();
     move |source| CanError::Io { iface, op, source }
 }

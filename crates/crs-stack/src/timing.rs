@@ -189,8 +189,8 @@ pub fn write_profile(
         .iter()
         .filter_map(|n| n.map(|n| n.to_string_lossy().into_owned()))
         .collect();
-    let mut out = Vec::new();
-    for (orig, rules) in originals.iter().zip(profile.rules()) {
+    let mut out: [PathBuf; 3] = Default::default();
+    for ((orig, rules), slot) in originals.iter().zip(profile.rules()).zip(&mut out) {
         let text = std::fs::read_to_string(orig).map_err(io(orig))?;
         let base = orig.parent().unwrap_or(Path::new("."));
         let edited = edit(&text, &rules, base, &sibling_names).map_err(|(section, key)| {
@@ -202,12 +202,9 @@ pub fn write_profile(
         })?;
         let path = dir.join(orig.file_name().unwrap_or_default());
         std::fs::write(&path, edited).map_err(io(&path))?;
-        out.push(path);
+        *slot = path;
     }
-    let mut it = out.into_iter();
-    let (Some(daemon), Some(drives), Some(monitor)) = (it.next(), it.next(), it.next()) else {
-        unreachable!("three files in, three out")
-    };
+    let [daemon, drives, monitor] = out;
     Ok(TimedConfigs {
         daemon,
         drives,
