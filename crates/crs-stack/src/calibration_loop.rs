@@ -361,6 +361,7 @@ fn stack_run(
         dwell_s: Some(a.dwell_s),
         record: Some(record.to_path_buf()),
         settle_s: a.settle_s,
+        record_mean_forces: false,
         campaign: Some(name.to_string()),
         rt_priority: (a.rt_priority >= 6).then_some(a.rt_priority),
         ride: None,

@@ -93,6 +93,23 @@ impl<T> Ring<T> {
     }
 }
 
+impl Ring<Vec<f64>> {
+    /// The element-wise mean of the readings stamped in [lo, hi] (stamped with the newest),
+    /// over the readings as long as the first one.
+    fn mean_in(&self, lo: u64, hi: u64) -> Option<(u64, Vec<f64>)> {
+        let mut inside = self.buf.iter().filter(|(t, _)| *t >= lo && *t <= hi);
+        let (t0, first) = inside.next()?;
+        let (mut newest, mut sum, mut n) = (*t0, first.clone(), 1.0);
+        for (t, v) in inside.filter(|(_, v)| v.len() == first.len()) {
+            newest = newest.max(*t);
+            sum.iter_mut().zip(v).for_each(|(s, x)| *s += x);
+            n += 1.0;
+        }
+        sum.iter_mut().for_each(|s| *s /= n);
+        Some((newest, sum))
+    }
+}
+
 /// Detects rest points and samples them (module docs).
 pub struct RestRecorder {
     settle_ns: u64,
@@ -103,6 +120,8 @@ pub struct RestRecorder {
     tracker: Ring<[f64; 6]>,
     forces: Ring<Vec<f64>>,
     truth: Ring<[f64; 6]>,
+    /// Sample the mean of the force readings in the settled window, not the last one.
+    mean_forces: bool,
     pub samples: Vec<RestSample>,
     pub skipped: Vec<Skipped>,
 }
@@ -121,9 +140,17 @@ impl RestRecorder {
             tracker: Ring::new(),
             forces: Ring::new(),
             truth: Ring::new(),
+            mean_forces: false,
             samples: Vec::new(),
             skipped: Vec::new(),
         })
+    }
+
+    /// With `mean`, a rest point's forces are the mean of every force reading in its settled
+    /// window (σ/√n for n readings of independent sensor noise) instead of the last reading.
+    pub fn averaging_forces(mut self, mean: bool) -> Self {
+        self.mean_forces = mean;
+        self
     }
 
     fn same(&self, h: &Held, pose: &[f64; 6], q: &[f64]) -> bool {
@@ -206,7 +233,11 @@ impl RestRecorder {
     fn sample(&mut self, h: Held) {
         let lo = h.since_ns + self.settle_ns;
         let tr = self.tracker.latest_in(lo, h.last_ns).cloned();
-        let fr = self.forces.latest_in(lo, h.last_ns).cloned();
+        let fr = if self.mean_forces {
+            self.forces.mean_in(lo, h.last_ns)
+        } else {
+            self.forces.latest_in(lo, h.last_ns).cloned()
+        };
         match (tr, fr) {
             (Some((t_ts, pose)), Some((_, f))) => {
                 let true_pose = self.truth.latest_in(lo, h.last_ns).map(|(_, p)| *p);
@@ -384,6 +415,25 @@ mod tests {
             // B lasts 1500..=2299 ms; the last reading before the run ended is stamped 2297.
             assert_eq!(b.measured_pose[0], 2297.0);
             assert_eq!(b.since_ns, 1500 * MS);
+        }
+    }
+
+    #[test]
+    fn averaging_takes_the_mean_of_the_settled_window_only() {
+        for late in [false, true] {
+            let mut r = RestRecorder::new(0.5).unwrap().averaging_forces(true);
+            feed(&mut r, late);
+            assert_eq!(r.samples.len(), 2);
+            // A: readings stamped 500..=999 ms carry 500..=999; nothing from the motion after.
+            assert_eq!(
+                r.samples[0].measured_forces,
+                vec![749.5, 749.5],
+                "late = {late}"
+            );
+            // The pose stays the last tracker reading.
+            assert_eq!(r.samples[0].measured_pose[0], 999.0);
+            // B: 2000..=2297 ms.
+            assert_eq!(r.samples[1].measured_forces, vec![2148.5, 2148.5]);
         }
     }
 

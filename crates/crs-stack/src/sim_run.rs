@@ -77,6 +77,11 @@ pub struct SimOptions {
     /// A rest point needs the reference constant for at least this long (s); its sample is the
     /// last tracker / force reading before the reference moves again.
     pub settle_s: f64,
+    /// Record the MEAN of the force readings in each rest point's settled window instead of
+    /// the last one (commissioning: a payload's COG height comes from the small torque a 2°
+    /// tilt adds, which a single 10 N-noise reading per cable cannot resolve; calibration keeps
+    /// the last reading, the sample its noise model and figures were made with).
+    pub record_mean_forces: bool,
     /// Campaign name for the recording's metadata (default: the waypoint file's name).
     pub campaign: Option<String>,
     /// Run drive-io's SYNC loop (this priority) and sim-plant's loop (5 below) as SCHED_FIFO
@@ -269,7 +274,7 @@ pub fn execute_observed(
         return Err("--hold-s must be ≥ 0 and --timeout-s > 0".into());
     }
     let mut recorder = match &a.record {
-        Some(_) => Some(RestRecorder::new(a.settle_s)?),
+        Some(_) => Some(RestRecorder::new(a.settle_s)?.averaging_forces(a.record_mean_forces)),
         None => None,
     };
     if a.record.is_some() && a.hold_s < a.settle_s {

@@ -225,6 +225,7 @@ impl SimArgs {
             dwell_s: self.dwell_s,
             record: self.record.clone(),
             settle_s: self.settle_s,
+            record_mean_forces: false,
             campaign: self.campaign.clone(),
             rt_priority: self.rt_priority,
             ride: self.ride.spec()?,
