@@ -195,6 +195,9 @@ impl<B: CanBus> CanBus for LoggingBus<B> {
         }
         Ok(r)
     }
+    fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
+        self.inner.readiness_fd()
+    }
     fn interface(&self) -> &str {
         self.inner.interface()
     }

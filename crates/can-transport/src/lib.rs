@@ -17,6 +17,7 @@ pub mod candump;
 pub mod cannelloni;
 mod frame;
 mod poll;
+pub use poll::wait_readable_any;
 pub mod pycan_udp;
 pub mod safety_frame;
 mod socketcan_bus;
@@ -105,6 +106,14 @@ pub trait CanBus: Send {
     fn bus_errors(&self) -> u64 {
         0
     }
+    /// A descriptor that becomes readable when a receive may return something, for waiting
+    /// on the bus and other sources in one poll ([`wait_readable_any`]); drain it with
+    /// [`CanBus::try_recv_event`] (which may still return `None`: a filtered or malformed
+    /// frame). `None`: the transport has no such descriptor; wait with
+    /// [`CanBus::recv_event_timeout`].
+    fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
+        None
+    }
 }
 
 impl<B: CanBus + ?Sized> CanBus for Box<B> {
@@ -134,6 +143,9 @@ impl<B: CanBus + ?Sized> CanBus for Box<B> {
     }
     fn bus_errors(&self) -> u64 {
         (**self).bus_errors()
+    }
+    fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
+        (**self).readiness_fd()
     }
 }
 

@@ -375,6 +375,9 @@ impl CanBus for PyCanUdpBus {
         }
     }
 
+    fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
+        Some(self.rx.as_raw_fd())
+    }
     fn interface(&self) -> &str {
         &self.name
     }

@@ -219,6 +219,9 @@ impl CanBus for SocketCanBus {
         self.bus_errors
     }
 
+    fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
+        Some(self.sock.as_raw_fd())
+    }
     fn interface(&self) -> &str {
         &self.iface
     }

@@ -258,6 +258,9 @@ impl CanBus for UdpBus {
         self.bus_errors
     }
 
+    fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
+        Some(self.rx.as_raw_fd())
+    }
     fn interface(&self) -> &str {
         &self.name
     }

@@ -10,9 +10,11 @@
 //! * Buffers are sized deliberately: iceoryx2 0.10's default subscriber buffer of 2 with safe
 //!   overflow silently drops samples for a reader slower than the writer (a 15 ms safety monitor
 //!   reading a 1 kHz stream would lose 13 of 15 setpoints).
-//! * No event notifications on the 1 ms path: `notify()` costs the publisher 10-30 us (a syscall).
-//!   Cyclic readers poll; the only event service ([`IpcNode::wakeup_notifier`]) is for rare
-//!   events (e-stop) where a wake-up is worth that cost.
+//! * No event notifications in the 1 ms hard loop: `notify()` costs the publisher 10-30 us (a
+//!   syscall). Cyclic readers poll. Two event services: [`IpcNode::wakeup_notifier`] for rare
+//!   events (e-stop), and [`IpcNode::setpoint_ready_notifier`], notified by motion-core's publish
+//!   stage (a thread beside the hard loop) so drive-io's SYNC follows the setpoint within the
+//!   same period.
 //! * [`IpcNode::new`] passes an explicit iceoryx2 [`Config`] (no "no config file" warning) and
 //!   removes stale resources of dead nodes before creating its own node.
 //! * Tests isolate themselves with a service-name prefix: [`IpcNode::with_prefix`] or the
@@ -200,6 +202,7 @@ impl IpcNode {
 
     fn event_service(
         &self,
+        name: &str,
     ) -> Result<
         (
             String,
@@ -207,7 +210,7 @@ impl IpcNode {
         ),
         IpcError,
     > {
-        let full = format!("{}{}", self.prefix, topics::WAKEUP_EVENT);
+        let full = format!("{}{}", self.prefix, name);
         let sname: ServiceName = full
             .as_str()
             .try_into()
@@ -227,7 +230,7 @@ impl IpcNode {
     /// Notifier for the rare-event wake-up service (`crs/v1/wakeup`): call it after publishing an
     /// e-stop [`StateEvent`], never in a 1 ms loop (10-30 us per notify).
     pub fn wakeup_notifier(&self) -> Result<WakeupNotifier, IpcError> {
-        let (service, f) = self.event_service()?;
+        let (service, f) = self.event_service(topics::WAKEUP_EVENT)?;
         let port = f
             .notifier_builder()
             .create()
@@ -237,12 +240,34 @@ impl IpcNode {
 
     /// Listener for the wake-up service, for processes that sleep until an event arrives.
     pub fn wakeup_listener(&self) -> Result<WakeupListener, IpcError> {
-        let (service, f) = self.event_service()?;
+        let (service, f) = self.event_service(topics::WAKEUP_EVENT)?;
         let port = f
             .listener_builder()
             .create()
             .map_err(|e| svc_err(&service, "create listener", e))?;
         Ok(WakeupListener { port, service })
+    }
+
+    /// Notifier of [`topics::SETPOINT_READY_EVENT`], for the process that publishes
+    /// [`JointSetpoint`]s (motion-core's publish stage): notify after publishing.
+    pub fn setpoint_ready_notifier(&self) -> Result<WakeupNotifier, IpcError> {
+        let (service, f) = self.event_service(topics::SETPOINT_READY_EVENT)?;
+        let port = f
+            .notifier_builder()
+            .create()
+            .map_err(|e| svc_err(&service, "create notifier", e))?;
+        Ok(WakeupNotifier { port, service })
+    }
+
+    /// Listener of [`topics::SETPOINT_READY_EVENT`] (drive-io): its file descriptor goes into
+    /// the same ppoll as the CAN socket ([`SetpointReadyListener::raw_fd`]).
+    pub fn setpoint_ready_listener(&self) -> Result<SetpointReadyListener, IpcError> {
+        let (service, f) = self.event_service(topics::SETPOINT_READY_EVENT)?;
+        let port = f
+            .listener_builder()
+            .create()
+            .map_err(|e| svc_err(&service, "create listener", e))?;
+        Ok(SetpointReadyListener { port, service })
     }
 }
 
@@ -374,6 +399,33 @@ impl WakeupNotifier {
             .notify()
             .map(|_| ())
             .map_err(|e| svc_err(&self.service, "notify", e))
+    }
+}
+
+/// Listens for "a setpoint was published" without blocking: the owner multiplexes its file
+/// descriptor with other sources (drive-io: the CAN socket) and drains it when readable.
+pub struct SetpointReadyListener {
+    port: Listener<ipc::Service>,
+    service: String,
+}
+
+impl SetpointReadyListener {
+    /// The descriptor that becomes readable when a notification is pending (iceoryx2 0.10's
+    /// IPC event is a unix datagram socket; valid as long as the listener lives).
+    pub fn raw_fd(&self) -> std::os::fd::RawFd {
+        use iceoryx2::prelude::FileDescriptorBased;
+        // SAFETY: the descriptor is owned by the listener port and outlives the returned
+        // number only as long as `self`; callers use it for poll(2), never close it.
+        unsafe { self.port.file_descriptor().native_handle() }
+    }
+
+    /// Consumes every pending notification without blocking; true if there was one.
+    pub fn drain(&self) -> Result<bool, IpcError> {
+        let n = self
+            .port
+            .try_wait(|_| {})
+            .map_err(|e| svc_err(&self.service, "try_wait", e))?;
+        Ok(n > 0)
     }
 }
 

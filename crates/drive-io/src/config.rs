@@ -92,6 +92,45 @@ pub struct BusConfig {
     /// its heartbeat).
     #[serde(default = "d_qs_timeout")]
     pub quick_stop_timeout_ms: u32,
+    /// What starts a cycle (RPDOs + SYNC): `setpoint` = motion-core's "setpoint published"
+    /// notification, within the same period (phase-locked; its own clock takes over when a
+    /// setpoint is `setpoint_wait_us` late), or `clock` = drive-io's own free-running 1 ms
+    /// timer (a setpoint waits up to one period for the next tick).
+    #[serde(default)]
+    pub sync_source: SyncSource,
+    /// With `sync_source = "setpoint"`: how long past its nominal tick drive-io waits for the
+    /// setpoint before it sends SYNC on its own clock (µs, < sync_period_us / 2).
+    #[serde(default = "d_setpoint_wait")]
+    pub setpoint_wait_us: u32,
+}
+
+/// What starts drive-io's cycle ([`BusConfig::sync_source`], [`crate::sync_clock`]).
+#[derive(Debug, Clone, Copy, Default, Deserialize, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SyncSource {
+    /// Phase-locked to motion-core's setpoint stream (own clock as fallback).
+    #[default]
+    Setpoint,
+    /// drive-io's own free-running timer.
+    Clock,
+}
+
+impl std::str::FromStr for SyncSource {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "setpoint" => Ok(Self::Setpoint),
+            "clock" => Ok(Self::Clock),
+            _ => Err(format!("{s:?}: expected \"setpoint\" or \"clock\"")),
+        }
+    }
+}
+
+fn d_setpoint_wait() -> u32 {
+    // A quarter period: past motion-core's usual lateness on a loaded host (loop lateness p99
+    // 150-200 µs in `crs sim`), short enough that a stalled stream costs the drives at most
+    // that much SYNC jitter once.
+    250
 }
 
 fn d_master_id() -> u8 {
@@ -261,6 +300,12 @@ impl DrivesConfig {
         self.transport()?;
         if !(250..=100_000).contains(&b.sync_period_us) {
             return Err(invalid("bus.sync_period_us", "must be in 250..=100000"));
+        }
+        if b.setpoint_wait_us == 0 || b.setpoint_wait_us >= b.sync_period_us / 2 {
+            return Err(invalid(
+                "bus.setpoint_wait_us",
+                "must be > 0 and < bus.sync_period_us / 2",
+            ));
         }
         if b.stale_setpoint_cycles == 0 {
             return Err(invalid("bus.stale_setpoint_cycles", "must be >= 1"));

@@ -8,12 +8,12 @@
 //! "give up" bounds only.
 
 use crate::canopen::{Ds402State, NmtState};
-use crate::config::DrivesConfig;
+use crate::config::{DrivesConfig, SyncSource};
 use crate::emulator::{self, EmulatorConfig, EmulatorControl};
 use crate::runner;
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, IpcNode, JointSetpoint, ProcessId, StateEvent,
-    TopicPublisher, TopicSubscriber, fault_code, monotonic_ns,
+    TopicPublisher, TopicSubscriber, WakeupNotifier, fault_code, monotonic_ns,
 };
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -62,14 +62,23 @@ pub struct Rig {
     pub setpoints: TopicPublisher<JointSetpoint>,
     pub feedback: TopicSubscriber<DriveFeedback>,
     pub events: TopicPublisher<StateEvent>,
+    /// "setpoint published", notified after every setpoint as motion-core's publish stage does.
+    ready: WakeupNotifier,
     pub seq: u64,
     pub initial: [f64; HIL_WINCHES],
 }
 
 impl Rig {
-    /// Starts the emulator and drive-io on `transport`, with iceoryx2 services under `prefix`.
+    /// Starts the emulator and drive-io on `transport`, with iceoryx2 services under `prefix`;
+    /// drive-io phase-locked to the setpoints (the default `sync_source`).
     pub fn start(transport: &str, prefix: &str) -> Res<Rig> {
-        let cfg = hil_config(transport);
+        Self::start_with(transport, prefix, SyncSource::Setpoint)
+    }
+
+    /// [`Rig::start`] with drive-io's cycle started by `sync`.
+    pub fn start_with(transport: &str, prefix: &str, sync: SyncSource) -> Res<Rig> {
+        let mut cfg = hil_config(transport);
+        cfg.bus.sync_source = sync;
         let spec = cfg.transport().map_err(|e| e.to_string())?;
         let mut ecfg = EmulatorConfig::from_drives(&cfg, 5.0).map_err(|e| e.to_string())?;
         ecfg.initial_length_m = (0..HIL_WINCHES).map(|i| 4.0 + 0.5 * i as f64).collect();
@@ -90,6 +99,7 @@ impl Rig {
             .subscriber::<DriveFeedback>()
             .map_err(|e| e.to_string())?;
         let events = node.publisher::<StateEvent>().map_err(|e| e.to_string())?;
+        let ready = node.setpoint_ready_notifier().map_err(|e| e.to_string())?;
         let stop = Arc::new(AtomicBool::new(false));
         let (s2, cfg2, prefix2) = (stop.clone(), cfg.clone(), prefix.to_string());
         let dio = std::thread::Builder::new()
@@ -109,6 +119,7 @@ impl Rig {
             setpoints,
             feedback,
             events,
+            ready,
             seq: 0,
             initial: [0.0; HIL_WINCHES],
         })
@@ -187,6 +198,7 @@ impl Rig {
         };
         sp.cable_length_m[..HIL_WINCHES].copy_from_slice(lengths);
         self.setpoints.publish(&sp).map_err(|e| e.to_string())?;
+        self.ready.notify().map_err(|e| e.to_string())?;
         Ok(sp)
     }
 
@@ -637,6 +649,55 @@ pub fn scenario_estop(transport: &str, prefix: &str) -> Res<String> {
     Ok("e-stop -> all QuickStopActive and holding; reset -> Ready, all Operation Enabled".into())
 }
 
+/// Phase lock (issue 20 item 3): with `sync_source = "setpoint"` every published setpoint
+/// starts a drive-io cycle (RPDOs + SYNC) of its own; with `"clock"` none does, the same stream
+/// is applied on drive-io's own ticks. Setpoints 5 ms apart, so the count holds in emulated
+/// time too (no latency is asserted here; bus-latency-bench measures it on the host).
+pub fn scenario_phase_lock(transport: &str, prefix: &str) -> Res<String> {
+    const N: u64 = 100;
+    let mut report = Vec::new();
+    for sync in [SyncSource::Setpoint, SyncSource::Clock] {
+        let mut rig = Rig::start_with(transport, &format!("{prefix}{sync:?}/"), sync)?;
+        rig.boot()?;
+        let hold = rig.initial;
+        let mut last = 0;
+        for _ in 0..N {
+            last = rig.publish(&hold)?.sequence;
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let t0 = Instant::now();
+        while rig
+            .latest_feedback(Duration::from_secs(1))?
+            .applied_setpoint_sequence
+            < last
+        {
+            if t0.elapsed() > Duration::from_secs(10) {
+                return fail(format!("{sync:?}: setpoint {last} never applied"));
+            }
+        }
+        let s = rig.shutdown()?;
+        let ok = match sync {
+            // A notification is lost only when drive-io was not scheduled for a whole 5 ms.
+            SyncSource::Setpoint => s.setpoint_cycles >= N * 9 / 10 && s.clock_cycles > 0,
+            SyncSource::Clock => s.setpoint_cycles == 0,
+        };
+        if !ok {
+            return fail(format!(
+                "{sync:?}: {} cycles started by a setpoint, {} by the clock, for {N} setpoints",
+                s.setpoint_cycles, s.clock_cycles
+            ));
+        }
+        report.push(format!(
+            "{sync:?}: {} by setpoint / {} by clock",
+            s.setpoint_cycles, s.clock_cycles
+        ));
+    }
+    Ok(format!(
+        "{N} setpoints 5 ms apart, all applied; {}",
+        report.join("; ")
+    ))
+}
+
 /// All scenarios, one transport each (`transports[i]`), printing `HIL PASS|FAIL <name>` markers.
 pub fn run_all(transports: &[String], prefix: &str, timing: Timing) -> bool {
     type Scenario = fn(&str, &str) -> Res<String>;
@@ -644,11 +705,12 @@ pub fn run_all(transports: &[String], prefix: &str, timing: Timing) -> bool {
         Timing::RealTime => scenario_follow,
         Timing::Emulated => |t, p| scenario_follow_timed(t, p, Timing::Emulated),
     };
-    let scenarios: [(&str, Scenario); 4] = [
+    let scenarios: [(&str, Scenario); 5] = [
         ("follow_setpoints", follow),
         ("stale_setpoints_quick_stop", scenario_stale),
         ("heartbeat_loss_faults_all", scenario_heartbeat_loss),
         ("estop_event_quick_stop_and_reset", scenario_estop),
+        ("phase_lock", scenario_phase_lock),
     ];
     let mut ok = true;
     for (k, (name, f)) in scenarios.iter().enumerate() {

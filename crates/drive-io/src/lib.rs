@@ -5,7 +5,8 @@
 //! * [`config`]: config/drives.toml (transport, timing, per-winch length <-> counts scaling).
 //! * [`canopen`]: COB-IDs, objects, PDO/SDO/NMT encoding (docs/can-protocol.md).
 //! * [`eds`]: CiA 306 EDS/DCF files; [`commissioning`]: the SDO start-up script from the EDS.
-//! * [`master`]: pure master logic; [`runner`]: the 1 ms process loop with iceoryx2.
+//! * [`master`]: pure master logic; [`runner`]: the 1 ms process loop with iceoryx2;
+//!   [`sync_clock`]: when a cycle starts (phase-locked to the setpoints, or free-running).
 //! * [`hil`]: hardware-in-the-loop scenarios run on the host (UDP bus) and in the vcan VM.
 
 pub mod canopen;
@@ -20,6 +21,7 @@ pub mod reset;
 pub mod runner;
 pub mod safety_watch;
 pub mod slave;
+pub mod sync_clock;
 
 pub use config::{ConfigError, DrivesConfig, WinchConfig};
 pub use master::Master;

@@ -2,13 +2,15 @@
 
 use crate::canopen::FrameBuf;
 use crate::config::DrivesConfig;
+use crate::config::SyncSource;
 use crate::master::Master;
 use crate::reset::{Ignored, ResetGate, is_reset_event};
 use crate::safety_watch::SafetyWatch;
-use can_transport::{CanBus, CanError, RxEvent};
+use crate::sync_clock::SyncClock;
+use can_transport::{CanBus, CanError, RxEvent, wait_readable_any};
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, ProcessId,
-    StateEvent, monotonic_ns,
+    SetpointReadyListener, StateEvent, monotonic_ns,
 };
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -82,6 +84,9 @@ pub struct RunSummary {
     pub overruns: u32,
     pub final_state: BusState,
     pub tx_full_drops: u64,
+    /// Cycles started by motion-core's setpoint notification / by drive-io's own clock.
+    pub setpoint_cycles: u64,
+    pub clock_cycles: u64,
 }
 
 /// Lowers the kernel timer slack of the calling thread to 1 ns (default 50 us), so the ppoll
@@ -145,7 +150,6 @@ pub fn run(
     let mut dcf_pending = cfg.bus.dcf_dir.as_ref().map(|d| cfg.resolve(d));
     let period = master.sync_period_ns();
     let mut out = FrameBuf::default();
-    let mut next = monotonic_ns() + period;
     let mut event_seq = 0u64;
     let mut tx_full = 0u64;
     let mut overruns = 0u32;
@@ -171,19 +175,69 @@ pub fn run(
     if let Err(e) = bus.subscribe_bus_errors() {
         tracing::warn!(error = %e, "CAN error frames not available on this transport");
     }
+    // Phase lock (issue 20 item 3, crate::sync_clock): wait on the CAN socket and motion-core's
+    // "setpoint published" event in one ppoll.
+    let mut clock = SyncClock::new(
+        cfg.bus.sync_source,
+        period,
+        u64::from(cfg.bus.setpoint_wait_us) * 1000,
+        monotonic_ns(),
+    );
+    let ready = match cfg.bus.sync_source {
+        SyncSource::Setpoint => Some(ipc.setpoint_ready_listener()?),
+        SyncSource::Clock => None,
+    };
+    let mut ready = ready.as_ref();
+    let bus_fd = bus.readiness_fd();
+    tracing::info!(sync_source = ?cfg.bus.sync_source, multiplexed = bus_fd.is_some(), "cycle timing");
     while !stop.load(Ordering::Relaxed) {
-        // Wait for the tick, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
+        // Wait for the cycle, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
         let mut now = monotonic_ns();
-        while now < next {
-            match bus.recv_event_timeout(Duration::from_nanos(next - now))? {
-                Some(RxEvent::Frame(rx)) => {
-                    if let Some(w) = watch.as_mut() {
-                        w.on_frame(&rx.frame, rx.rx_monotonic_ns);
+        loop {
+            let wake = clock.wake_at_ns();
+            if now >= wake {
+                break;
+            }
+            let left = Duration::from_nanos(wake - now);
+            match (ready, bus_fd) {
+                (Some(listener), Some(fd)) => {
+                    let [can, note] =
+                        wait_readable_any([fd, listener.raw_fd()], left).map_err(|e| {
+                            CanError::Io {
+                                iface: bus.interface().to_string(),
+                                op: "ppoll",
+                                source: e,
+                            }
+                        })?;
+                    if note && drain_ready(listener, &mut clock) {
+                        ready = None;
                     }
-                    master.on_frame(&rx);
+                    if can {
+                        for _ in 0..MAX_DRAIN_PER_CYCLE {
+                            match bus.try_recv_event()? {
+                                Some(ev) => on_rx(ev, &mut master, watch.as_mut()),
+                                None => break,
+                            }
+                        }
+                    }
                 }
-                Some(RxEvent::BusError(e)) => master.on_bus_error(&e.error),
-                None => {}
+                _ => {
+                    // No descriptor to multiplex (or clock mode): receive until the tick, and
+                    // look at the event every 50 µs.
+                    let slice = if ready.is_some() {
+                        left.min(Duration::from_micros(50))
+                    } else {
+                        left
+                    };
+                    if let Some(ev) = bus.recv_event_timeout(slice)? {
+                        on_rx(ev, &mut master, watch.as_mut());
+                    }
+                    if let Some(listener) = ready
+                        && drain_ready(listener, &mut clock)
+                    {
+                        ready = None;
+                    }
+                }
             }
             now = monotonic_ns();
         }
@@ -192,26 +246,16 @@ pub fn run(
         // Bounded so a flooded bus cannot stall the cycle.
         for _ in 0..MAX_DRAIN_PER_CYCLE {
             match bus.try_recv_event()? {
-                Some(RxEvent::Frame(rx)) => {
-                    if let Some(w) = watch.as_mut() {
-                        w.on_frame(&rx.frame, rx.rx_monotonic_ns);
-                    }
-                    master.on_frame(&rx)
-                }
-                Some(RxEvent::BusError(e)) => master.on_bus_error(&e.error),
+                Some(ev) => on_rx(ev, &mut master, watch.as_mut()),
                 None => break,
             }
         }
         // Cycle time = after the drain, so every frame handled is older than the cycle.
         let cycle_now = monotonic_ns();
-        let late = now - next;
-        if late >= period {
-            let missed = (late / period) as u32;
+        let (_trigger, missed) = clock.start(now);
+        if missed > 0 {
             overruns = overruns.saturating_add(missed);
             master.add_overruns(missed);
-            next = now + period; // re-anchor: never burst SYNCs to catch up
-        } else {
-            next += period;
         }
         cycles += 1;
 
@@ -316,10 +360,47 @@ pub fn run(
             heartbeat.publish(&hb)?;
         }
     }
+    tracing::info!(
+        setpoint_cycles = clock.locked_cycles(),
+        clock_cycles = clock.clock_cycles(),
+        "cycles started by a setpoint / by drive-io's own clock"
+    );
     Ok(RunSummary {
         cycles,
         overruns,
         final_state: master.state(),
         tx_full_drops: tx_full,
+        setpoint_cycles: clock.locked_cycles(),
+        clock_cycles: clock.clock_cycles(),
     })
+}
+
+/// One received frame or bus error into the safety watch and the master.
+fn on_rx(ev: RxEvent, master: &mut Master, watch: Option<&mut SafetyWatch>) {
+    match ev {
+        RxEvent::Frame(rx) => {
+            if let Some(w) = watch {
+                w.on_frame(&rx.frame, rx.rx_monotonic_ns);
+            }
+            master.on_frame(&rx);
+        }
+        RxEvent::BusError(e) => master.on_bus_error(&e.error),
+    }
+}
+
+/// Drains the "setpoint published" event into the clock. True if the event channel failed:
+/// drive-io then runs on its own clock for good (SYNC never stops for an IPC error).
+fn drain_ready(listener: &SetpointReadyListener, clock: &mut SyncClock) -> bool {
+    match listener.drain() {
+        Ok(true) => {
+            clock.notified();
+            false
+        }
+        Ok(false) => false,
+        Err(e) => {
+            tracing::error!(error = %e, "setpoint event failed: SYNC on drive-io's own clock from now on");
+            clock.degrade_to_clock();
+            true
+        }
+    }
 }

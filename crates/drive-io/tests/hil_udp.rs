@@ -40,3 +40,8 @@ fn heartbeat_loss_faults_all() {
 fn estop_event_quick_stop_and_reset() {
     check(hil::scenario_estop(&transport(3), &prefix("estop")));
 }
+
+#[test]
+fn phase_locked_cycles_follow_the_setpoints() {
+    check(hil::scenario_phase_lock(&transport(4), &prefix("phase")));
+}

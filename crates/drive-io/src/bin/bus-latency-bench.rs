@@ -7,10 +7,17 @@
 //! are not phase-locked), so it is also reported split: tick -> RPDO written (drive-io's own
 //! processing) = `applied_setpoint_write_ns - DriveFeedback.timestamp_ns`.
 //!
-//! usage: bus-latency-bench [--seconds 60] [--transport udpbus:239.255.70.3:41000]
+//! Issue 20 item 3: the free-running design (`sync_source = "clock"`) and the phase-locked one
+//! (`"setpoint"`: drive-io starts its cycle on motion-core's "setpoint published" event) run one
+//! after the other in ONE run, same load, same host; by default a thread spins on cpu 0 ("the
+//! other core loaded") while the stack's threads are pinned to cpu 1.
+//!
+//! usage: bus-latency-bench [--seconds 30] [--modes clock,setpoint] [--no-load]
+//!        [--rt-priority 80] [--transport udpbus:239.255.70.3:41000]
 
 use clap::Parser;
 use crs_ipc::{DriveFeedback, IpcNode, JointSetpoint, MAX_CABLES, monotonic_ns};
+use drive_io::config::SyncSource;
 use drive_io::emulator::{self, EmulatorConfig, EmulatorControl};
 use drive_io::{hil, runner};
 use std::sync::Arc;
@@ -19,10 +26,27 @@ use std::time::Duration;
 
 #[derive(Parser)]
 struct Args {
-    #[arg(long, default_value_t = 60)]
+    /// Seconds per mode.
+    #[arg(long, default_value_t = 30)]
     seconds: u64,
+    /// UDP bus of the first mode; the next mode uses port + 1.
     #[arg(long, default_value = "udpbus:239.255.70.3:41000")]
     transport: String,
+    /// The cycle designs to compare, one after the other in this run.
+    #[arg(long, value_delimiter = ',', default_value = "clock,setpoint")]
+    modes: Vec<SyncSource>,
+    /// Spin a load thread on this cpu during the whole run ("the other core loaded").
+    #[arg(long, default_value = "0")]
+    load_cpu: Option<usize>,
+    /// Run without the load thread.
+    #[arg(long, conflicts_with = "load_cpu")]
+    no_load: bool,
+    /// Pin the stack's threads (publisher, drive-io, emulator) to this cpu.
+    #[arg(long, default_value_t = 1)]
+    stack_cpu: usize,
+    /// SCHED_FIFO priority of drive-io (the publisher one below), with mlockall; needs root.
+    #[arg(long)]
+    rt_priority: Option<i32>,
 }
 
 const RING: usize = 8192;
@@ -53,20 +77,153 @@ fn pct(v: &mut [u64], p: f64) -> f64 {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args = Args::parse();
-    let cfg = hil::hil_config(&args.transport);
+    let mut args = Args::parse();
+    if args.no_load {
+        args.load_cpu = None;
+    }
+    if args.load_cpu.is_some_and(|c| c == args.stack_cpu) {
+        return Err("--load-cpu and --stack-cpu must differ".into());
+    }
+    // The load: one thread spinning on the other core for the whole run.
+    let load_stop = Arc::new(AtomicBool::new(false));
+    let load = args.load_cpu.map(|cpu| {
+        let stop = load_stop.clone();
+        std::thread::spawn(move || {
+            pin(cpu);
+            let mut x = 0u64;
+            while !stop.load(Ordering::Relaxed) {
+                x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+            }
+        })
+    });
+    let mut results = Vec::new();
+    for (k, mode) in args.modes.iter().enumerate() {
+        let transport = with_port_offset(&args.transport, k as u16)?;
+        results.push((*mode, run_mode(&args, *mode, &transport)?));
+    }
+    load_stop.store(true, Ordering::Relaxed);
+    if let Some(l) = load {
+        let _ = l.join();
+    }
+    println!(
+        "\n{} s per mode at 1 kHz, transport {}, stack threads on cpu {}, {}, {}",
+        args.seconds,
+        args.transport,
+        args.stack_cpu,
+        match args.load_cpu {
+            Some(c) => format!("a spinning load on cpu {c}"),
+            None => "no load thread".into(),
+        },
+        match args.rt_priority {
+            Some(p) => format!("SCHED_FIFO {p} (drive-io) / {} (publisher)", p - 1),
+            None => "SCHED_OTHER".into(),
+        }
+    );
+    println!(
+        "| sync_source | published -> RPDOs+SYNC written p50 | p99 | p99.9 | max | cycle start -> written p99 | cycles by setpoint / by clock | overruns |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for (mode, r) in &results {
+        println!(
+            "| {} | {:.1} µs | {:.1} µs | {:.1} µs | {:.1} µs | {:.1} µs | {} / {} | {} |",
+            match mode {
+                SyncSource::Setpoint => "setpoint (phase-locked)",
+                SyncSource::Clock => "clock (free-running)",
+            },
+            r.p50,
+            r.p99,
+            r.p999,
+            r.max,
+            r.processing_p99,
+            r.summary.setpoint_cycles,
+            r.summary.clock_cycles,
+            r.summary.overruns
+        );
+    }
+    for (mode, r) in &results {
+        println!(
+            "{mode:?}: {} setpoints published, {} applied and measured, {} feedback samples not Running, tx_full {}, final state {:?}",
+            r.published, r.measured, r.not_running, r.summary.tx_full_drops, r.summary.final_state
+        );
+    }
+    Ok(())
+}
+
+/// The same multicast group on port + k: each mode on its own bus.
+fn with_port_offset(transport: &str, k: u16) -> Result<String, String> {
+    let (head, port) = transport
+        .rsplit_once(':')
+        .ok_or_else(|| format!("--transport {transport:?}: expected udpbus:<group>:<port>"))?;
+    let port: u16 = port
+        .parse()
+        .map_err(|_| format!("--transport {transport:?}: bad port"))?;
+    Ok(format!("{head}:{}", port + k))
+}
+
+fn pin(cpu: usize) {
+    // SAFETY: affinity of the calling thread only, with a zeroed then filled cpu_set_t.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        libc::CPU_SET(cpu, &mut set);
+        if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+            eprintln!(
+                "pinning to cpu {cpu} failed: {}",
+                std::io::Error::last_os_error()
+            );
+        }
+    }
+}
+
+/// Pins (and with `rt`, SCHED_FIFO + mlockall) the calling thread.
+fn place(cpu: usize, rt: Option<i32>) {
+    match rt {
+        Some(p) => {
+            if let Err(e) = runner::make_realtime(p, Some(cpu)) {
+                eprintln!("real-time set-up failed ({e}): running SCHED_OTHER");
+                pin(cpu);
+            }
+        }
+        None => pin(cpu),
+    }
+}
+
+struct ModeResult {
+    p50: f64,
+    p99: f64,
+    p999: f64,
+    max: f64,
+    processing_p99: f64,
+    published: u64,
+    measured: usize,
+    not_running: u64,
+    summary: runner::RunSummary,
+}
+
+fn run_mode(
+    args: &Args,
+    mode: SyncSource,
+    transport: &str,
+) -> Result<ModeResult, Box<dyn std::error::Error>> {
+    let mut cfg = hil::hil_config(transport);
+    cfg.bus.sync_source = mode;
     let spec = cfg.transport()?;
-    let prefix = format!("bench/{}/", std::process::id());
+    let prefix = format!("bench/{}/{mode:?}/", std::process::id());
     let control = EmulatorControl::new();
     let mut ecfg = EmulatorConfig::from_drives(&cfg, 5.0)?;
     ecfg.initial_length_m = vec![5.0; cfg.winches.len()];
     let emu_bus = can_transport::open(&spec)?;
     let dio_bus = can_transport::open(&spec)?;
     let c2 = control.clone();
-    let emu = std::thread::spawn(move || emulator::run(emu_bus, &ecfg, &c2));
+    let cpu = args.stack_cpu;
+    let rt = args.rt_priority;
+    let emu = std::thread::spawn(move || {
+        pin(cpu);
+        emulator::run(emu_bus, &ecfg, &c2)
+    });
     let stop = Arc::new(AtomicBool::new(false));
     let (s2, cfg2, p2) = (stop.clone(), cfg.clone(), prefix.clone());
     let dio = std::thread::spawn(move || -> Result<runner::RunSummary, String> {
+        place(cpu, rt);
         let ipc = IpcNode::with_prefix("drive-io", &p2).map_err(|e| e.to_string())?;
         runner::run(&cfg2, dio_bus, &ipc, &s2).map_err(|e| e.to_string())
     });
@@ -96,12 +253,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         cfg.winches.len(),
     );
     let secs = args.seconds;
+    // Plays motion-core's publish stage: publish, then notify (in both modes, as motion-core
+    // always does; in clock mode drive-io does not listen).
     let publisher = std::thread::spawn(move || -> Result<u64, String> {
+        place(cpu, rt.map(|p| p - 1));
         runner::tighten_timer_slack();
         let node = IpcNode::with_prefix("bench-pub", &p3).map_err(|e| e.to_string())?;
         let p = node
             .publisher::<JointSetpoint>()
             .map_err(|e| e.to_string())?;
+        let ready = node.setpoint_ready_notifier().map_err(|e| e.to_string())?;
         let n = secs * 1000;
         let mut next = monotonic_ns() + 1_000_000;
         for seq in 1..=n {
@@ -119,6 +280,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             sp.timestamp_ns = monotonic_ns();
             st2[(seq as usize) % RING].store(sp.timestamp_ns, Ordering::Release);
             p.publish(&sp).map_err(|e| e.to_string())?;
+            ready.notify().map_err(|e| e.to_string())?;
         }
         d2.store(true, Ordering::Release);
         Ok(n)
@@ -149,30 +311,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let summary = dio.join().map_err(|_| "drive-io panicked")??;
     control.stop.store(true, Ordering::Release);
     emu.join().map_err(|_| "emulator panicked")??;
-    let n = total.len();
-    let max_t = total.iter().copied().max().unwrap_or(0) as f64 / 1000.0;
-    let max_p = processing.iter().copied().max().unwrap_or(0) as f64 / 1000.0;
-    println!(
-        "transport {} | {} s at 1 kHz | {published} setpoints published, {n} applied+measured",
-        args.transport, args.seconds
-    );
-    println!(
-        "setpoint published -> RPDO written (us): p50 {:.1}  p99 {:.1}  p99.9 {:.1}  max {:.1}",
-        pct(&mut total, 0.5),
-        pct(&mut total, 0.99),
-        pct(&mut total, 0.999),
-        max_t
-    );
-    println!(
-        "drive-io SYNC tick -> RPDO written (us): p50 {:.1}  p99 {:.1}  p99.9 {:.1}  max {:.1}",
-        pct(&mut processing, 0.5),
-        pct(&mut processing, 0.99),
-        pct(&mut processing, 0.999),
-        max_p
-    );
-    println!(
-        "drive-io cycles {} overruns {} tx_full {} final state {:?}; feedback samples not Running: {not_running}",
-        summary.cycles, summary.overruns, summary.tx_full_drops, summary.final_state
-    );
-    Ok(())
+    let measured = total.len();
+    if measured == 0 {
+        return Err(format!("{mode:?}: no setpoint was applied (drive-io never ran)").into());
+    }
+    let max = total.iter().copied().max().unwrap_or(0) as f64 / 1000.0;
+    Ok(ModeResult {
+        p50: pct(&mut total, 0.5),
+        p99: pct(&mut total, 0.99),
+        p999: pct(&mut total, 0.999),
+        max,
+        processing_p99: pct(&mut processing, 0.99),
+        published,
+        measured,
+        not_running,
+        summary,
+    })
 }

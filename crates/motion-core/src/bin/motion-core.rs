@@ -4,7 +4,7 @@ use cdpr_model::config::load_platform;
 use clap::Parser;
 use crs_ipc::{
     CueingPose, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlatformIdentity,
-    ProcessId, StateEvent, TopicPublisher, TopicSubscriber,
+    ProcessId, StateEvent, TopicPublisher, TopicSubscriber, WakeupNotifier,
 };
 use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
 use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
@@ -68,6 +68,9 @@ struct IoxPorts {
     events: TopicPublisher<StateEvent>,
     identity: TopicPublisher<PlatformIdentity>,
     loop_stats: TopicPublisher<LoopStatsSample>,
+    /// "setpoint published" (drive-io's phase-locked cycle follows it).
+    setpoint_ready: WakeupNotifier,
+    notify_failures: u64,
     platform_identity: PlatformIdentity,
     /// Sequence number of the plan's last setpoint (`motion_state::PLAN`, issue 16): the
     /// safety monitor accepts the end-of-stream announcement only after it.
@@ -122,6 +125,15 @@ impl StagePorts for IoxPorts {
         id.timestamp_ns = crs_ipc::monotonic_ns();
         let _ = self.identity.publish(&id);
         self.announce_plan();
+    }
+    fn setpoints_sent(&mut self) {
+        if let Err(e) = self.setpoint_ready.notify() {
+            // drive-io falls back to its own clock `setpoint_wait_us` late: log, go on.
+            self.notify_failures += 1;
+            if self.notify_failures.is_power_of_two() {
+                tracing::warn!(error = %e, failures = self.notify_failures, "setpoint notification failed");
+            }
+        }
     }
     fn stream_end(&mut self) {
         self.hb_seq += 1;
@@ -306,6 +318,10 @@ fn run(args: Args) -> Result<(), String> {
                         loop_stats: node
                             .publisher::<LoopStatsSample>()
                             .map_err(|e| e.to_string())?,
+                        setpoint_ready: node
+                            .setpoint_ready_notifier()
+                            .map_err(|e| e.to_string())?,
+                        notify_failures: 0,
                         platform_identity: identity,
                         plan_end,
                         hb_seq: 0,

@@ -86,6 +86,10 @@ pub trait StagePorts {
     fn announce(&mut self) {}
     /// After the last setpoint of a graceful stop has been sent: the end of the stream.
     fn stream_end(&mut self) {}
+    /// After a pass that sent setpoints: tell the readers that follow the stream (drive-io's
+    /// phase-locked SYNC, issue 20 item 3). Here in the stage, not the hard loop: a notify is
+    /// a syscall (10–30 µs).
+    fn setpoints_sent(&mut self) {}
 }
 
 /// One pass of the publish stage: drains the outbox, then heartbeat/state bookkeeping.
@@ -104,6 +108,9 @@ pub fn publish_pass(
             outbox.publish_failures.fetch_add(1, Ordering::Relaxed);
         }
         n += 1;
+    }
+    if n > 0 {
+        ports.setpoints_sent();
     }
     let state = outbox.state.load(Ordering::Relaxed);
     if state != *last_state {

@@ -1,0 +1,257 @@
+//! When drive-io starts a cycle (RPDOs + SYNC): phase-locked to motion-core's setpoints, with
+//! its own clock as the fallback (issue 20 item 3, docs/can-protocol.md "Cycle timing").
+//!
+//! Free-running (`sync_source = "clock"`), drive-io's tick and motion-core's loop are two 1 ms
+//! clocks with an arbitrary phase: a setpoint waits on average half a period (p50 566 µs,
+//! p99 1073 µs measured) for the next SYNC. Phase-locked (`"setpoint"`, the default), motion-core's
+//! publish stage notifies an iceoryx2 event after each setpoint and drive-io starts the cycle on
+//! it, so the setpoint is on the bus tens of µs after it was published.
+//!
+//! Why an event and not one shared clock: a shared CLOCK_MONOTONIC schedule (drive-io ticking a
+//! fixed offset after motion-core's cycle start) must budget the offset for motion-core's worst
+//! compute time plus its scheduling lateness, so every setpoint would wait that budget; the event
+//! costs the waiting side nothing and the publishing side one notify (10–30 µs) in its publish
+//! stage, off the hard loop.
+//!
+//! Failure behaviour:
+//! * motion-core stalls or dies: no notification; drive-io starts the cycle on its own clock
+//!   `setpoint_wait` after the nominal tick (the first miss), then every period — SYNC and
+//!   heartbeats go on, the drives hold, and after `stale_setpoint_cycles` without a new
+//!   setpoint drive-io stops the bus exactly as in clock mode. The cycles run on the fallback
+//!   clock are counted.
+//! * drive-io stalls: motion-core's notify never blocks (iceoryx2's counting bit set plus a
+//!   non-blocking datagram), setpoints queue in the subscriber buffer (the newest is taken),
+//!   and the drives' heartbeat consumer (0x1016) and the safety monitor see the silent master.
+//! * notifications faster than half a period (a burst after a stall, a foreign notifier) never
+//!   send SYNC faster than that: the drives' interpolation sees at most 2 kHz.
+
+use crate::config::SyncSource;
+
+/// What started a cycle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Trigger {
+    /// motion-core's "setpoint published" notification.
+    Setpoint,
+    /// drive-io's own clock (clock mode, or the fallback when no setpoint came in time).
+    Clock,
+}
+
+/// The cycle scheduler (pure logic, time passed in; the runner does the waiting).
+#[derive(Clone, Debug)]
+pub struct SyncClock {
+    source: SyncSource,
+    period_ns: u64,
+    wait_ns: u64,
+    /// Clock mode: the next tick. Setpoint mode: the fallback deadline.
+    next_ns: u64,
+    last_start_ns: u64,
+    pending: bool,
+    locked: u64,
+    on_clock: u64,
+}
+
+impl SyncClock {
+    /// First cycle one period after `now_ns`. `wait_ns` is ignored in clock mode.
+    pub fn new(source: SyncSource, period_ns: u64, wait_ns: u64, now_ns: u64) -> Self {
+        Self {
+            source,
+            period_ns,
+            wait_ns,
+            next_ns: now_ns + period_ns,
+            last_start_ns: now_ns,
+            pending: false,
+            locked: 0,
+            on_clock: 0,
+        }
+    }
+
+    pub fn source(&self) -> SyncSource {
+        self.source
+    }
+
+    /// Falls back to clock mode for good (the notification channel failed).
+    pub fn degrade_to_clock(&mut self) {
+        self.source = SyncSource::Clock;
+        self.pending = false;
+    }
+
+    /// Wait for frames (and notifications) until this time; then the cycle is due.
+    pub fn wake_at_ns(&self) -> u64 {
+        match (self.source, self.pending) {
+            // Never two SYNCs closer than half a period.
+            (SyncSource::Setpoint, true) => self.last_start_ns + self.period_ns / 2,
+            _ => self.next_ns,
+        }
+    }
+
+    /// A "setpoint published" notification arrived.
+    pub fn notified(&mut self) {
+        if self.source == SyncSource::Setpoint {
+            self.pending = true;
+        }
+    }
+
+    /// Starts the cycle at `now_ns` (≥ [`SyncClock::wake_at_ns`]): what triggered it and how
+    /// many whole periods the clock missed (an overrun: this host preempted drive-io).
+    pub fn start(&mut self, now_ns: u64) -> (Trigger, u32) {
+        let trigger = if self.pending {
+            Trigger::Setpoint
+        } else {
+            Trigger::Clock
+        };
+        let late = now_ns.saturating_sub(self.next_ns);
+        let missed = if trigger == Trigger::Clock && late >= self.period_ns {
+            u32::try_from(late / self.period_ns).unwrap_or(u32::MAX)
+        } else {
+            0
+        };
+        match trigger {
+            Trigger::Setpoint => {
+                self.locked += 1;
+                self.next_ns = now_ns + self.period_ns + self.wait_ns;
+            }
+            Trigger::Clock => {
+                self.on_clock += 1;
+                // Re-anchor after a miss: never burst SYNCs to catch up.
+                self.next_ns = if missed > 0 {
+                    now_ns + self.period_ns
+                } else {
+                    self.next_ns + self.period_ns
+                };
+            }
+        }
+        self.pending = false;
+        self.last_start_ns = now_ns;
+        (trigger, missed)
+    }
+
+    /// Cycles started by a setpoint notification.
+    pub fn locked_cycles(&self) -> u64 {
+        self.locked
+    }
+
+    /// Cycles started by drive-io's own clock.
+    pub fn clock_cycles(&self) -> u64 {
+        self.on_clock
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+    const US: u64 = 1_000;
+
+    /// Runs the scheduler against a setpoint stream (notification times), returning the cycle
+    /// start times and triggers up to `until`.
+    fn simulate(clock: &mut SyncClock, notes: &[u64], until: u64) -> Vec<(u64, Trigger)> {
+        let mut out = Vec::new();
+        let mut i = 0;
+        let mut now = 0;
+        loop {
+            // The runner waits until wake_at or a notification, whichever is first.
+            let wake = clock.wake_at_ns();
+            if i < notes.len() && notes[i] <= wake {
+                if notes[i] > until {
+                    break;
+                }
+                now = now.max(notes[i]);
+                clock.notified();
+                i += 1;
+                continue;
+            }
+            now = now.max(wake);
+            if now > until {
+                break;
+            }
+            out.push((now, clock.start(now).0));
+        }
+        out
+    }
+
+    #[test]
+    fn clock_mode_ticks_every_period_and_ignores_setpoints() {
+        let mut c = SyncClock::new(SyncSource::Clock, MS, 250 * US, 0);
+        let notes: Vec<u64> = (0..10).map(|k| k * MS + 300 * US).collect();
+        let cycles = simulate(&mut c, &notes, 5 * MS);
+        let times: Vec<u64> = cycles.iter().map(|c| c.0).collect();
+        assert_eq!(times, vec![MS, 2 * MS, 3 * MS, 4 * MS, 5 * MS]);
+        assert!(cycles.iter().all(|c| c.1 == Trigger::Clock));
+    }
+
+    #[test]
+    fn setpoint_mode_follows_the_stream_at_its_phase() {
+        // Setpoints published at k ms + 300 µs (any phase to drive-io's own start).
+        let mut c = SyncClock::new(SyncSource::Setpoint, MS, 250 * US, 0);
+        let notes: Vec<u64> = (0..20).map(|k| k * MS + 300 * US).collect();
+        let cycles = simulate(&mut c, &notes, 19 * MS);
+        // The first setpoint (at 0.3 ms, before drive-io's first tick) starts a cycle once half
+        // a period has passed since drive-io started; every later one at its own time.
+        assert_eq!(cycles[0], (500 * US, Trigger::Setpoint));
+        for (k, cy) in cycles.iter().enumerate().skip(1) {
+            assert_eq!(
+                *cy,
+                (k as u64 * MS + 300 * US, Trigger::Setpoint),
+                "cycle {k}"
+            );
+        }
+        assert_eq!(c.clock_cycles(), 0);
+    }
+
+    #[test]
+    fn a_stalled_stream_falls_back_to_the_clock_and_relocks() {
+        let mut c = SyncClock::new(SyncSource::Setpoint, MS, 250 * US, 0);
+        // Setpoints at 1.3 .. 5.3 ms, then motion-core stalls until 10.3 ms.
+        let mut notes: Vec<u64> = (1..=5).map(|k| k * MS + 300 * US).collect();
+        notes.extend((10..=12).map(|k| k * MS + 300 * US));
+        let cycles = simulate(&mut c, &notes, 12 * MS + 400 * US);
+        let want = [
+            (MS, Trigger::Clock), // no setpoint yet: own clock
+            // The first setpoint 0.3 ms after that tick waits until half a period has passed.
+            (MS + 500 * US, Trigger::Setpoint),
+            (2 * MS + 300 * US, Trigger::Setpoint),
+            (3 * MS + 300 * US, Trigger::Setpoint),
+            (4 * MS + 300 * US, Trigger::Setpoint),
+            (5 * MS + 300 * US, Trigger::Setpoint),
+            // The stall: the first fallback `wait` after the missing setpoint's tick, then
+            // every period.
+            (6 * MS + 550 * US, Trigger::Clock),
+            (7 * MS + 550 * US, Trigger::Clock),
+            (8 * MS + 550 * US, Trigger::Clock),
+            (9 * MS + 550 * US, Trigger::Clock),
+            // Relocked at once (the last own cycle is > half a period ago).
+            (10 * MS + 300 * US, Trigger::Setpoint),
+            (11 * MS + 300 * US, Trigger::Setpoint),
+            (12 * MS + 300 * US, Trigger::Setpoint),
+        ];
+        assert_eq!(cycles, want);
+        assert_eq!((c.locked_cycles(), c.clock_cycles()), (8, 5));
+    }
+
+    #[test]
+    fn a_burst_of_notifications_never_sends_sync_faster_than_half_a_period() {
+        let mut c = SyncClock::new(SyncSource::Setpoint, MS, 250 * US, 0);
+        // 40 notifications 50 µs apart (a queue drained after a stall, or a foreign notifier).
+        let notes: Vec<u64> = (0..40).map(|k| MS + k * 50 * US).collect();
+        let cycles = simulate(&mut c, &notes, 3 * MS);
+        for w in cycles.windows(2) {
+            assert!(w[1].0 - w[0].0 >= MS / 2, "{cycles:?}");
+        }
+    }
+
+    #[test]
+    fn a_preempted_clock_counts_missed_periods_and_reanchors() {
+        let mut c = SyncClock::new(SyncSource::Clock, MS, 0, 0);
+        assert_eq!(c.start(MS), (Trigger::Clock, 0));
+        // Woken 3.4 ms late.
+        assert_eq!(c.start(5 * MS + 400 * US), (Trigger::Clock, 3));
+        assert_eq!(c.wake_at_ns(), 6 * MS + 400 * US);
+        // After degrading, notifications are ignored.
+        let mut s = SyncClock::new(SyncSource::Setpoint, MS, 250 * US, 0);
+        s.degrade_to_clock();
+        s.notified();
+        assert_eq!(s.wake_at_ns(), MS);
+        assert_eq!(s.start(MS).0, Trigger::Clock);
+    }
+}
