@@ -20,6 +20,7 @@
 //! * Tests isolate themselves with a service-name prefix: [`IpcNode::with_prefix`] or the
 //!   `CRS_IPC_PREFIX` environment variable read by [`IpcNode::new`].
 
+pub mod identity_golden;
 mod payloads;
 pub mod topics;
 

@@ -25,7 +25,8 @@ pub const PLATFORM_TAG: &[u8] = b"crs-platform-v2";
 /// SHA-256 identity of everything the monitor checks the stream against: the model
 /// ([`model_identity`]), then the workspace box (position min/max in m, rotation min/max in
 /// rad) and the table 5.1 motion limits (SI), exact f64 bits, little endian; identical to
-/// `cdpr_model::config::Platform::identity` (tests/agreement.rs). The drive scaling is not in
+/// `cdpr_model::config::Platform::identity` (tests/agreement.rs) and pinned by the golden vector
+/// `crs_ipc::identity_golden` (tests/identity_golden.rs). The drive scaling is not in
 /// it (motion-core does not know it): the monitor's safety parameter CRC, announced on the
 /// bus, covers the drives file.
 pub fn platform_identity(p: &PlatformParams) -> [u8; 32] {

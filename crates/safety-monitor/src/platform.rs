@@ -1,15 +1,27 @@
-//! The monitor's OWN reading of the platform TOML (`config/icosahedron.toml`, format documented
-//! in crates/motion-core/src/config.rs). Written separately from motion-core on purpose (diverse
-//! redundancy): only the parameters the monitor needs (geometry for the standard kinematics, the
-//! workspace box) plus those the platform identity hashes (stiffness, load, force limits,
-//! pulleys) are read. Everything is validated; an error names the file, the line and the key.
+//! The monitor's OWN reading of the platform TOML (`config/icosahedron.toml`; the format's
+//! owner is `cdpr_model::config`). Only the parameters the monitor needs are read (geometry for
+//! the standard kinematics, the workspace box, the force range and motion limits it checks) plus
+//! those the platform identity hashes (stiffness, load, pulleys).
+//!
+//! Diverse redundancy (issue 14): the motion core reads this file through serde-derived structs
+//! and the model library's validation (`cdpr_model::config`, `Model::new`). The monitor shares
+//! none of that: it lets the `toml` crate build the spanned document tree
+//! ([`toml::de::DeTable`]) and walks it by hand with the small typed accessors of [`Walker`];
+//! its checks are its own ([`check`]). The one piece both readers share is the TOML tokenizer.
+//! A fault in a derive, a struct or a validation rule on one side cannot reach the other side the
+//! same way; the two readings meet only in the platform identity (`identity.rs`), which must
+//! agree bit for bit, and the golden vector in `crs_ipc::identity_golden` pins that identity for
+//! both.
+//!
+//! Every error names the file, the line and column of the offending value (or key) and its full
+//! path down to the element, e.g. `geometry.frame_anchors_m[3][1]`.
 
-use crs_ipc::MAX_CABLES;
 use glam::DVec3;
-use serde::Deserialize;
 use std::fmt;
+use std::ops::Range;
 use std::path::Path;
 use toml::Spanned;
+use toml::de::{DeTable, DeValue};
 
 /// A platform file the monitor cannot use.
 #[derive(Debug, Clone, PartialEq)]
@@ -17,7 +29,9 @@ pub struct PlatformError {
     pub file: String,
     /// 1-based line, when known.
     pub line: Option<usize>,
-    /// Dotted key, e.g. `geometry.platform_anchors_m[3]`.
+    /// 1-based column (in characters), when known.
+    pub column: Option<usize>,
+    /// Path of the value, e.g. `geometry.platform_anchors_m[3][0]`; empty for a syntax error.
     pub key: String,
     pub message: String,
 }
@@ -27,6 +41,9 @@ impl fmt::Display for PlatformError {
         write!(f, "{}", self.file)?;
         if let Some(l) = self.line {
             write!(f, ":{l}")?;
+            if let Some(c) = self.column {
+                write!(f, ":{c}")?;
+            }
         }
         if self.key.is_empty() {
             write!(f, ": {}", self.message)
@@ -114,135 +131,12 @@ impl PlatformParams {
     }
 }
 
-#[derive(Deserialize)]
-struct Raw {
-    platform: RawMeta,
-    geometry: RawGeometry,
-    pulleys: Option<RawPulleys>,
-    elasticity: RawElasticity,
-    load: RawLoad,
-    forces: RawForces,
-    workspace: RawWorkspace,
-    limits: RawLimits,
-}
+/// Degrees to radians: the factor `f64::to_radians` multiplies by, so that the monitor's
+/// radians are bit-identical to the motion core's (the identity hashes exact bits).
+const RAD_PER_DEG: f64 = std::f64::consts::PI / 180.0;
 
-#[derive(Deserialize)]
-struct RawLimits {
-    linear_velocity_max_m_per_s: Spanned<f64>,
-    angular_velocity_max_deg_per_s: Spanned<f64>,
-    linear_acceleration_max_m_per_s2: Spanned<f64>,
-    angular_acceleration_max_deg_per_s2: Spanned<f64>,
-}
-
-#[derive(Deserialize)]
-struct RawMeta {
-    name: Spanned<String>,
-}
-
-// Kinematic tables: unknown keys are refused (a key the monitor does not understand could
-// change the geometry).
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawGeometry {
-    frame_anchors_m: Spanned<Vec<[f64; 3]>>,
-    platform_anchors_m: Spanned<Vec<[f64; 3]>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawPulleys {
-    radius_m: Spanned<OneOrMany>,
-    swivel_axes: Spanned<Vec<[f64; 3]>>,
-}
-
-#[derive(Deserialize)]
-#[serde(untagged)]
-enum OneOrMany {
-    One(f64),
-    Many(Vec<f64>),
-}
-
-#[derive(Deserialize)]
-struct RawElasticity {
-    k_f_n: Spanned<OneOrMany>,
-}
-
-#[derive(Deserialize)]
-struct RawLoad {
-    wrench_n_nm: Spanned<[f64; 6]>,
-}
-
-#[derive(Deserialize)]
-struct RawForces {
-    f_min_n: Spanned<f64>,
-    f_max_n: Spanned<f64>,
-}
-
-#[derive(Deserialize)]
-struct RawWorkspace {
-    position_min_m: Spanned<[f64; 3]>,
-    position_max_m: Spanned<[f64; 3]>,
-    rotation_min_deg: Spanned<[f64; 3]>,
-    rotation_max_deg: Spanned<[f64; 3]>,
-}
-
-struct Ctx<'a> {
-    text: &'a str,
-    file: &'a str,
-}
-
-impl Ctx<'_> {
-    fn err<T>(
-        &self,
-        span: std::ops::Range<usize>,
-        key: impl Into<String>,
-        msg: impl Into<String>,
-    ) -> Result<T, PlatformError> {
-        let upto = &self.text[..span.start.min(self.text.len())];
-        Err(PlatformError {
-            file: self.file.to_string(),
-            line: Some(upto.matches('\n').count() + 1),
-            key: key.into(),
-            message: msg.into(),
-        })
-    }
-
-    fn finite<T>(&self, v: &Spanned<T>, key: &str, xs: &[f64]) -> Result<(), PlatformError> {
-        match xs.iter().position(|x| !x.is_finite()) {
-            Some(i) => self.err(v.span(), format!("{key}[{i}]"), "must be a finite number"),
-            None => Ok(()),
-        }
-    }
-
-    fn per_cable(
-        &self,
-        v: &Spanned<OneOrMany>,
-        key: &str,
-        m: usize,
-    ) -> Result<Vec<f64>, PlatformError> {
-        let xs = match v.get_ref() {
-            OneOrMany::One(x) => vec![*x; m],
-            OneOrMany::Many(xs) if xs.len() == m => xs.clone(),
-            OneOrMany::Many(xs) => {
-                return self.err(
-                    v.span(),
-                    key,
-                    format!("has {} entries but there are {m} cables", xs.len()),
-                );
-            }
-        };
-        self.finite(v, key, &xs)?;
-        Ok(xs)
-    }
-}
-
-fn flat(rows: &[[f64; 3]]) -> Vec<f64> {
-    rows.iter().flatten().copied().collect()
-}
-
-fn v3(a: &[f64; 3]) -> DVec3 {
-    DVec3::new(a[0], a[1], a[2])
-}
+/// Two anchor points closer than this are the same point (the Jacobian would be singular).
+const DISTINCT_ANCHOR_M: f64 = 1e-9;
 
 /// Reads and validates the platform TOML at `path`.
 pub fn load_platform(path: &Path) -> Result<PlatformParams, PlatformError> {
@@ -250,6 +144,7 @@ pub fn load_platform(path: &Path) -> Result<PlatformParams, PlatformError> {
     let text = std::fs::read_to_string(path).map_err(|e| PlatformError {
         file: file.clone(),
         line: None,
+        column: None,
         key: String::new(),
         message: format!("cannot read: {e}"),
     })?;
@@ -258,207 +153,586 @@ pub fn load_platform(path: &Path) -> Result<PlatformParams, PlatformError> {
 
 /// Parses and validates platform TOML text (`file` names it in errors).
 pub fn parse_platform(text: &str, file: &str) -> Result<PlatformParams, PlatformError> {
-    let cx = Ctx { text, file };
-    let raw: Raw = toml::from_str(text).map_err(|e| PlatformError {
-        file: file.to_string(),
-        line: e
-            .span()
-            .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1),
-        key: String::new(),
-        message: e.message().trim().to_string(),
-    })?;
-    let g = &raw.geometry;
-    let a_rows = g.frame_anchors_m.get_ref();
-    let b_rows = g.platform_anchors_m.get_ref();
-    let m = a_rows.len();
-    if m == 0 || m > MAX_CABLES {
-        return cx.err(
-            g.frame_anchors_m.span(),
-            "geometry.frame_anchors_m",
-            format!("needs 1..={MAX_CABLES} rows, got {m}"),
-        );
+    let w = Walker { text, file };
+    let doc = DeTable::parse(text).map_err(|e| w.syntax_error(&e))?;
+    let root = Table {
+        at: Place::root(),
+        entries: doc.get_ref(),
+    };
+    let read = read_document(&w, &root)?;
+    check::all(&w, &read)?;
+    Ok(read.into_params())
+}
+
+/// Where a value sits: its path from the document root and its byte range in the text
+/// (`None` for something that is absent, e.g. a missing table).
+#[derive(Clone, Debug)]
+struct Place {
+    path: String,
+    span: Option<Range<usize>>,
+}
+
+impl Place {
+    fn root() -> Self {
+        Self {
+            path: String::new(),
+            span: None,
+        }
     }
-    cx.finite(
-        &g.frame_anchors_m,
-        "geometry.frame_anchors_m",
-        &flat(a_rows),
-    )?;
-    cx.finite(
-        &g.platform_anchors_m,
-        "geometry.platform_anchors_m",
-        &flat(b_rows),
-    )?;
-    if b_rows.len() != m {
-        return cx.err(
-            g.platform_anchors_m.span(),
-            "geometry.platform_anchors_m",
-            format!("has {} rows but there are {m} cables", b_rows.len()),
-        );
+
+    fn child(&self, key: &str, span: Range<usize>) -> Self {
+        let path = if self.path.is_empty() {
+            key.to_string()
+        } else {
+            format!("{}.{key}", self.path)
+        };
+        Self {
+            path,
+            span: Some(span),
+        }
     }
-    let pulleys = match &raw.pulleys {
+
+    /// The place of an absent `key` of this table: its path, located at the table (header).
+    fn missing(&self, key: &str) -> Self {
+        let mut at = self.child(key, 0..0);
+        at.span = self.span.clone();
+        at
+    }
+
+    fn element(&self, i: usize, span: Range<usize>) -> Self {
+        Self {
+            path: format!("{}[{i}]", self.path),
+            span: Some(span),
+        }
+    }
+}
+
+/// A finite number read from the file, kept with its place so that a later check can point
+/// at exactly this value.
+#[derive(Clone, Debug)]
+struct Num {
+    x: f64,
+    at: Place,
+}
+
+/// A 3-vector read from the file (a row such as `[-5.380, 7.677, 6.524]`).
+#[derive(Clone, Debug)]
+struct Row {
+    xyz: [Num; 3],
+    at: Place,
+}
+
+impl Row {
+    fn vec(&self) -> DVec3 {
+        DVec3::new(self.xyz[0].x, self.xyz[1].x, self.xyz[2].x)
+    }
+}
+
+/// An array of rows (anchor points, pulley axes) with the array's own place.
+#[derive(Clone, Debug)]
+struct Rows {
+    rows: Vec<Row>,
+    at: Place,
+}
+
+/// A table of the document being walked.
+struct Table<'d, 'i> {
+    at: Place,
+    entries: &'d DeTable<'i>,
+}
+
+/// A value of the document being walked.
+struct Item<'d, 'i> {
+    at: Place,
+    value: &'d DeValue<'i>,
+}
+
+/// The monitor's typed accessors over the spanned TOML tree of one file; every failure becomes
+/// a [`PlatformError`] at the value's line and column.
+struct Walker<'t> {
+    text: &'t str,
+    file: &'t str,
+}
+
+impl Walker<'_> {
+    /// 1-based line and column (characters) of byte `offset`.
+    fn line_column(&self, offset: usize) -> (usize, usize) {
+        let mut end = offset.min(self.text.len());
+        while !self.text.is_char_boundary(end) {
+            end -= 1;
+        }
+        let before = &self.text[..end];
+        let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+        (
+            before.matches('\n').count() + 1,
+            before[line_start..].chars().count() + 1,
+        )
+    }
+
+    fn error(&self, at: &Place, message: impl Into<String>) -> PlatformError {
+        let (line, column) = at.span.as_ref().map(|s| self.line_column(s.start)).unzip();
+        PlatformError {
+            file: self.file.to_string(),
+            line,
+            column,
+            key: at.path.clone(),
+            message: message.into(),
+        }
+    }
+
+    fn syntax_error(&self, e: &toml::de::Error) -> PlatformError {
+        let (line, column) = e.span().map(|s| self.line_column(s.start)).unzip();
+        PlatformError {
+            file: self.file.to_string(),
+            line,
+            column,
+            key: String::new(),
+            message: e.message().trim().to_string(),
+        }
+    }
+
+    /// The entry `key` of `table`, if present.
+    fn get<'d, 'i>(&self, table: &Table<'d, 'i>, key: &str) -> Option<Item<'d, 'i>> {
+        table
+            .entries
+            .iter()
+            .find(|(k, _)| k.get_ref().as_ref() == key)
+            .map(|(_, v)| Item {
+                at: table.at.child(key, v.span()),
+                value: v.get_ref(),
+            })
+    }
+
+    /// The entry `key` of `table`; its absence is an error at the table.
+    fn require<'d, 'i>(
+        &self,
+        table: &Table<'d, 'i>,
+        key: &str,
+    ) -> Result<Item<'d, 'i>, PlatformError> {
+        self.get(table, key).ok_or_else(|| {
+            let what = if table.at.path.is_empty() {
+                format!("the file has no [{key}] table")
+            } else {
+                format!("[{}] has no key `{key}`", table.at.path)
+            };
+            self.error(&table.at.missing(key), what)
+        })
+    }
+
+    fn table<'d, 'i>(&self, item: Item<'d, 'i>) -> Result<Table<'d, 'i>, PlatformError> {
+        match item.value {
+            DeValue::Table(entries) => Ok(Table {
+                at: item.at,
+                entries,
+            }),
+            other => Err(self.error(
+                &item.at,
+                format!("expected a table, found {}", a_type(other)),
+            )),
+        }
+    }
+
+    /// A table the monitor reads: every key in it must be one the monitor knows (`known`), so
+    /// that a key it does not understand cannot silently change what the motion core does.
+    fn known_table<'d, 'i>(
+        &self,
+        parent: &Table<'d, 'i>,
+        key: &str,
+        known: &[&str],
+    ) -> Result<Table<'d, 'i>, PlatformError> {
+        let t = self.table(self.require(parent, key)?)?;
+        self.only_keys(&t, known)?;
+        Ok(t)
+    }
+
+    /// Like [`Walker::known_table`], for a table that may be absent.
+    fn optional_known_table<'d, 'i>(
+        &self,
+        parent: &Table<'d, 'i>,
+        key: &str,
+        known: &[&str],
+    ) -> Result<Option<Table<'d, 'i>>, PlatformError> {
+        let Some(item) = self.get(parent, key) else {
+            return Ok(None);
+        };
+        let t = self.table(item)?;
+        self.only_keys(&t, known)?;
+        Ok(Some(t))
+    }
+
+    fn only_keys(&self, t: &Table, known: &[&str]) -> Result<(), PlatformError> {
+        match t
+            .entries
+            .iter()
+            .find(|(k, _)| !known.contains(&k.get_ref().as_ref()))
+        {
+            Some((k, _)) => Err(self.error(
+                &t.at.child(k.get_ref(), k.span()),
+                format!(
+                    "unknown key (the keys of [{}] are: {})",
+                    t.at.path,
+                    known.join(", ")
+                ),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// A number: TOML float or integer (integers as `i64 as f64`, as serde reads them), and
+    /// finite (nan and ±inf are refused for every number the monitor reads).
+    fn number(&self, item: &Item) -> Result<Num, PlatformError> {
+        let x = match item.value {
+            DeValue::Float(f) => f
+                .as_str()
+                .parse::<f64>()
+                .map_err(|_| self.error(&item.at, format!("`{}` is not a number", f.as_str())))?,
+            DeValue::Integer(i) => i64::from_str_radix(i.as_str(), i.radix())
+                .map(|i| i as f64)
+                .map_err(|_| self.error(&item.at, format!("integer {i} is out of range")))?,
+            other => {
+                return Err(self.error(
+                    &item.at,
+                    format!("expected a number, found {}", a_type(other)),
+                ));
+            }
+        };
+        if !x.is_finite() {
+            return Err(self.error(&item.at, format!("must be a finite number, got {x}")));
+        }
+        Ok(Num {
+            x,
+            at: item.at.clone(),
+        })
+    }
+
+    /// The elements of an array, each with its own path (`key[i]`) and place.
+    fn elements<'d, 'i>(&self, item: &Item<'d, 'i>) -> Result<Vec<Item<'d, 'i>>, PlatformError> {
+        match item.value {
+            DeValue::Array(xs) => Ok(xs
+                .iter()
+                .enumerate()
+                .map(|(i, v): (usize, &'d Spanned<DeValue<'i>>)| Item {
+                    at: item.at.element(i, v.span()),
+                    value: v.get_ref(),
+                })
+                .collect()),
+            other => Err(self.error(
+                &item.at,
+                format!("expected an array, found {}", a_type(other)),
+            )),
+        }
+    }
+
+    /// An array of exactly `n` numbers.
+    fn numbers(&self, item: &Item, n: usize) -> Result<Vec<Num>, PlatformError> {
+        let xs = self.elements(item)?;
+        if xs.len() != n {
+            return Err(self.error(
+                &item.at,
+                format!("expected {n} numbers, found {}", xs.len()),
+            ));
+        }
+        xs.iter().map(|x| self.number(x)).collect()
+    }
+
+    fn row(&self, item: &Item) -> Result<Row, PlatformError> {
+        let v = self.numbers(item, 3)?;
+        Ok(Row {
+            xyz: [v[0].clone(), v[1].clone(), v[2].clone()],
+            at: item.at.clone(),
+        })
+    }
+
+    fn rows(&self, item: &Item) -> Result<Rows, PlatformError> {
+        Ok(Rows {
+            rows: self
+                .elements(item)?
+                .iter()
+                .map(|r| self.row(r))
+                .collect::<Result<_, _>>()?,
+            at: item.at.clone(),
+        })
+    }
+
+    /// One value per cable: a single number for all `m` cables, or an array of exactly `m`.
+    fn per_cable(&self, item: &Item, m: usize) -> Result<Vec<Num>, PlatformError> {
+        match item.value {
+            DeValue::Array(xs) if xs.len() != m => Err(self.error(
+                &item.at,
+                format!("has {} entries but there are {m} cables", xs.len()),
+            )),
+            DeValue::Array(_) => self.numbers(item, m),
+            _ => Ok(vec![self.number(item)?; m]),
+        }
+    }
+
+    fn string(&self, item: &Item) -> Result<String, PlatformError> {
+        match item.value {
+            DeValue::String(s) => Ok(s.to_string()),
+            other => Err(self.error(
+                &item.at,
+                format!("expected a string, found {}", a_type(other)),
+            )),
+        }
+    }
+}
+
+fn a_type(v: &DeValue) -> &'static str {
+    match v {
+        DeValue::String(_) => "a string",
+        DeValue::Integer(_) => "an integer",
+        DeValue::Float(_) => "a float",
+        DeValue::Boolean(_) => "a boolean",
+        DeValue::Datetime(_) => "a date-time",
+        DeValue::Array(_) => "an array",
+        DeValue::Table(_) => "a table",
+    }
+}
+
+/// Everything read from the file, still with places, before the cross-field checks.
+struct Read {
+    name: String,
+    name_at: Place,
+    frame_anchors: Rows,
+    platform_anchors: Rows,
+    /// Radii and swivel axes.
+    pulleys: Option<(Vec<Num>, Rows)>,
+    k_f: Vec<Num>,
+    wrench: Vec<Num>,
+    f_min: Num,
+    f_max: Num,
+    position_min: Row,
+    position_max: Row,
+    rotation_min_deg: Row,
+    rotation_max_deg: Row,
+    /// Linear velocity, angular velocity (deg/s), linear acceleration, angular acceleration
+    /// (deg/s²), in the file's units.
+    limits: [Num; 4],
+}
+
+/// Walks the tables the monitor uses. `[winch]`, `[home]`, `[dynamics]` and `[sections]` are
+/// the motion core's alone and are not read.
+fn read_document(w: &Walker, root: &Table) -> Result<Read, PlatformError> {
+    let platform = w.table(w.require(root, "platform")?)?;
+    let name_item = w.require(&platform, "name")?;
+    let name = w.string(&name_item)?;
+    let name_at = name_item.at;
+
+    let geometry = w.known_table(root, "geometry", &["frame_anchors_m", "platform_anchors_m"])?;
+    let a_item = w.require(&geometry, "frame_anchors_m")?;
+    let frame_anchors = w.rows(&a_item)?;
+    // m comes from the frame anchors; it must be settled before any per-cable value is read.
+    check::cable_count(w, &frame_anchors)?;
+    let m = frame_anchors.rows.len();
+    let platform_anchors = w.rows(&w.require(&geometry, "platform_anchors_m")?)?;
+
+    let pulleys = match w.optional_known_table(root, "pulleys", &["radius_m", "swivel_axes"])? {
         None => None,
-        Some(p) => {
-            let radius_m = cx.per_cable(&p.radius_m, "pulleys.radius_m", m)?;
-            if let Some(i) = radius_m.iter().position(|r| *r < 0.0) {
-                return cx.err(
-                    p.radius_m.span(),
-                    format!("pulleys.radius_m[{i}]"),
-                    "must be >= 0",
-                );
-            }
-            let rows = p.swivel_axes.get_ref();
-            if rows.len() != m {
-                return cx.err(
-                    p.swivel_axes.span(),
-                    "pulleys.swivel_axes",
-                    format!("has {} rows but there are {m} cables", rows.len()),
-                );
-            }
-            cx.finite(&p.swivel_axes, "pulleys.swivel_axes", &flat(rows))?;
-            let mut axis = Vec::with_capacity(m);
-            for (i, r) in rows.iter().enumerate() {
-                // Normalised component-wise by the Euclidean norm (same arithmetic as the
-                // motion core, so the identity hashes agree bit for bit).
-                let n = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-                if n.is_nan() || n < 1e-12 {
-                    return cx.err(
-                        p.swivel_axes.span(),
-                        format!("pulleys.swivel_axes[{i}]"),
-                        "must be a non-zero vector",
-                    );
-                }
-                axis.push(DVec3::new(r[0] / n, r[1] / n, r[2] / n));
-            }
-            Some(PulleyParams { radius_m, axis })
+        Some(t) => {
+            let radius = w.per_cable(&w.require(&t, "radius_m")?, m)?;
+            let axes = w.rows(&w.require(&t, "swivel_axes")?)?;
+            Some((radius, axes))
         }
     };
-    let k_f_n = cx.per_cable(&raw.elasticity.k_f_n, "elasticity.k_f_n", m)?;
-    if let Some(i) = k_f_n.iter().position(|k| *k <= 0.0) {
-        return cx.err(
-            raw.elasticity.k_f_n.span(),
-            format!("elasticity.k_f_n[{i}]"),
-            "must be > 0",
-        );
-    }
-    let w = *raw.load.wrench_n_nm.get_ref();
-    cx.finite(&raw.load.wrench_n_nm, "load.wrench_n_nm", &w)?;
-    let (f_min_n, f_max_n) = (*raw.forces.f_min_n.get_ref(), *raw.forces.f_max_n.get_ref());
-    if !(f_min_n.is_finite() && f_max_n.is_finite() && f_min_n >= 0.0 && f_min_n < f_max_n) {
-        return cx.err(
-            raw.forces.f_min_n.span(),
-            "forces.f_min_n",
-            format!("must satisfy 0 <= f_min_n < f_max_n (got {f_min_n} N, {f_max_n} N)"),
-        );
-    }
-    let ws = &raw.workspace;
-    for (v, key) in [
-        (&ws.position_min_m, "workspace.position_min_m"),
-        (&ws.position_max_m, "workspace.position_max_m"),
-        (&ws.rotation_min_deg, "workspace.rotation_min_deg"),
-        (&ws.rotation_max_deg, "workspace.rotation_max_deg"),
-    ] {
-        cx.finite(v, key, v.get_ref())?;
-    }
-    for k in 0..3 {
-        if ws.position_min_m.get_ref()[k] >= ws.position_max_m.get_ref()[k] {
-            return cx.err(
-                ws.position_max_m.span(),
-                format!("workspace.position_max_m[{k}]"),
-                "must be greater than workspace.position_min_m",
-            );
-        }
-        if ws.rotation_min_deg.get_ref()[k] > ws.rotation_max_deg.get_ref()[k] {
-            return cx.err(
-                ws.rotation_max_deg.span(),
-                format!("workspace.rotation_max_deg[{k}]"),
-                "must be >= workspace.rotation_min_deg",
-            );
-        }
-    }
-    let l = &raw.limits;
-    for (v, key) in [
-        (
-            &l.linear_velocity_max_m_per_s,
-            "limits.linear_velocity_max_m_per_s",
-        ),
-        (
-            &l.angular_velocity_max_deg_per_s,
-            "limits.angular_velocity_max_deg_per_s",
-        ),
-        (
-            &l.linear_acceleration_max_m_per_s2,
-            "limits.linear_acceleration_max_m_per_s2",
-        ),
-        (
-            &l.angular_acceleration_max_deg_per_s2,
-            "limits.angular_acceleration_max_deg_per_s2",
-        ),
-    ] {
-        let x = *v.get_ref();
-        if !(x.is_finite() && x > 0.0) {
-            return cx.err(
-                v.span(),
-                key,
-                format!("must be a finite number > 0, got {x}"),
-            );
-        }
-    }
-    let deg = std::f64::consts::PI / 180.0;
-    let limits = MotionLimits {
-        linear_velocity_m_per_s: *l.linear_velocity_max_m_per_s.get_ref(),
-        angular_velocity_rad_per_s: *l.angular_velocity_max_deg_per_s.get_ref() * deg,
-        linear_acceleration_m_per_s2: *l.linear_acceleration_max_m_per_s2.get_ref(),
-        angular_acceleration_rad_per_s2: *l.angular_acceleration_max_deg_per_s2.get_ref() * deg,
-    };
-    let name = raw.platform.name.get_ref().trim().to_string();
-    if name.is_empty() {
-        return cx.err(
-            raw.platform.name.span(),
-            "platform.name",
-            "must not be empty",
-        );
-    }
-    let frame_anchors_m: Vec<DVec3> = a_rows.iter().map(v3).collect();
-    let platform_anchors_m: Vec<DVec3> = b_rows.iter().map(v3).collect();
-    for (key, pts, span) in [
-        (
-            "geometry.frame_anchors_m",
-            &frame_anchors_m,
-            g.frame_anchors_m.span(),
-        ),
-        (
-            "geometry.platform_anchors_m",
-            &platform_anchors_m,
-            g.platform_anchors_m.span(),
-        ),
-    ] {
-        for i in 0..m {
-            for j in i + 1..m {
-                if pts[i].distance(pts[j]) < 1e-9 {
-                    return cx.err(
-                        span,
-                        format!("{key}[{j}]"),
-                        format!("coincides with row {i} (anchor points must be distinct)"),
-                    );
-                }
-            }
-        }
-    }
-    Ok(PlatformParams {
+
+    let elasticity = w.known_table(root, "elasticity", &["k_f_n"])?;
+    let k_f = w.per_cable(&w.require(&elasticity, "k_f_n")?, m)?;
+    let load = w.known_table(root, "load", &["wrench_n_nm"])?;
+    let wrench = w.numbers(&w.require(&load, "wrench_n_nm")?, 6)?;
+    // f_abs_max_n is the motion core's (winch dimensioning); the monitor checks the operating
+    // range f_min..f_max.
+    let forces = w.known_table(root, "forces", &["f_min_n", "f_max_n", "f_abs_max_n"])?;
+    let f_min = w.number(&w.require(&forces, "f_min_n")?)?;
+    let f_max = w.number(&w.require(&forces, "f_max_n")?)?;
+
+    let ws_keys = [
+        "position_min_m",
+        "position_max_m",
+        "rotation_min_deg",
+        "rotation_max_deg",
+    ];
+    let ws = w.known_table(root, "workspace", &ws_keys)?;
+    let [
+        position_min,
+        position_max,
+        rotation_min_deg,
+        rotation_max_deg,
+    ] = ws_keys.map(|k| w.require(&ws, k).and_then(|item| w.row(&item)));
+
+    let limit_keys = [
+        "linear_velocity_max_m_per_s",
+        "angular_velocity_max_deg_per_s",
+        "linear_acceleration_max_m_per_s2",
+        "angular_acceleration_max_deg_per_s2",
+    ];
+    let lt = w.known_table(root, "limits", &limit_keys)?;
+    let [v, om, a, al] = limit_keys.map(|k| w.require(&lt, k).and_then(|item| w.number(&item)));
+
+    Ok(Read {
         name,
-        frame_anchors_m,
-        platform_anchors_m,
+        name_at,
+        frame_anchors,
+        platform_anchors,
         pulleys,
-        k_f_n,
-        wrench_n_nm: w,
-        f_min_n,
-        f_max_n,
-        workspace: WorkspaceBox {
-            position_min_m: v3(ws.position_min_m.get_ref()),
-            position_max_m: v3(ws.position_max_m.get_ref()),
-            rotation_min_rad: v3(ws.rotation_min_deg.get_ref()) * (std::f64::consts::PI / 180.0),
-            rotation_max_rad: v3(ws.rotation_max_deg.get_ref()) * (std::f64::consts::PI / 180.0),
-        },
-        limits,
+        k_f,
+        wrench,
+        f_min,
+        f_max,
+        position_min: position_min?,
+        position_max: position_max?,
+        rotation_min_deg: rotation_min_deg?,
+        rotation_max_deg: rotation_max_deg?,
+        limits: [v?, om?, a?, al?],
     })
+}
+
+/// The monitor's own rules over what was read; each failure points at the offending value.
+mod check {
+    use super::{DISTINCT_ANCHOR_M, Num, PlatformError, Read, Row, Rows, Walker};
+    use crs_ipc::MAX_CABLES;
+
+    pub(super) fn all(w: &Walker, r: &Read) -> Result<(), PlatformError> {
+        let m = r.frame_anchors.rows.len();
+        same_count(w, &r.platform_anchors, m)?;
+        distinct(w, &r.frame_anchors.rows)?;
+        distinct(w, &r.platform_anchors.rows)?;
+        if let Some((radius, axes)) = &r.pulleys {
+            for x in radius {
+                at_least_zero(w, x)?;
+            }
+            same_count(w, axes, m)?;
+            for a in &axes.rows {
+                if super::unit(a).is_none() {
+                    return Err(w.error(&a.at, "must be a non-zero vector"));
+                }
+            }
+        }
+        for k in &r.k_f {
+            if k.x <= 0.0 {
+                return Err(w.error(&k.at, format!("must be > 0, got {} N", k.x)));
+            }
+        }
+        at_least_zero(w, &r.f_min)?;
+        if r.f_max.x <= r.f_min.x {
+            return Err(w.error(
+                &r.f_max.at,
+                format!(
+                    "must be greater than forces.f_min_n ({} N <= {} N)",
+                    r.f_max.x, r.f_min.x
+                ),
+            ));
+        }
+        for k in 0..3 {
+            let (lo, hi) = (&r.position_min.xyz[k], &r.position_max.xyz[k]);
+            if hi.x <= lo.x {
+                return Err(w.error(
+                    &hi.at,
+                    format!("must be greater than {} ({})", lo.at.path, lo.x),
+                ));
+            }
+            let (lo, hi) = (&r.rotation_min_deg.xyz[k], &r.rotation_max_deg.xyz[k]);
+            if hi.x < lo.x {
+                return Err(w.error(&hi.at, format!("must be >= {} ({})", lo.at.path, lo.x)));
+            }
+        }
+        for l in &r.limits {
+            if l.x <= 0.0 {
+                return Err(w.error(&l.at, format!("must be > 0, got {}", l.x)));
+            }
+        }
+        if r.name.trim().is_empty() {
+            return Err(w.error(&r.name_at, "must not be empty"));
+        }
+        Ok(())
+    }
+
+    /// 1..=MAX_CABLES cables (the IPC payloads carry at most MAX_CABLES).
+    pub(super) fn cable_count(w: &Walker, a: &Rows) -> Result<(), PlatformError> {
+        let m = a.rows.len();
+        if m == 0 || m > MAX_CABLES {
+            return Err(w.error(&a.at, format!("needs 1..={MAX_CABLES} rows, got {m}")));
+        }
+        Ok(())
+    }
+
+    fn same_count(w: &Walker, r: &Rows, m: usize) -> Result<(), PlatformError> {
+        if r.rows.len() != m {
+            return Err(w.error(
+                &r.at,
+                format!("has {} rows but there are {m} cables", r.rows.len()),
+            ));
+        }
+        Ok(())
+    }
+
+    /// No two anchors of one side coincide (the structure matrix would lose rank).
+    fn distinct(w: &Walker, rows: &[Row]) -> Result<(), PlatformError> {
+        for (j, b) in rows.iter().enumerate() {
+            if let Some(i) = rows[..j]
+                .iter()
+                .position(|a| a.vec().distance(b.vec()) < DISTINCT_ANCHOR_M)
+            {
+                return Err(w.error(
+                    &b.at,
+                    format!("coincides with row {i} (anchor points must be distinct)"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn at_least_zero(w: &Walker, n: &Num) -> Result<(), PlatformError> {
+        if n.x < 0.0 {
+            return Err(w.error(&n.at, format!("must be >= 0, got {}", n.x)));
+        }
+        Ok(())
+    }
+}
+
+/// The unit vector along `r`, or `None` for a (near) zero vector. Normalised as the motion core
+/// normalises pulley axes (Euclidean norm x² + y² + z² summed in that order, then each
+/// component divided by it), so the identities agree bit for bit.
+fn unit(r: &Row) -> Option<DVec3> {
+    let [x, y, z] = [r.xyz[0].x, r.xyz[1].x, r.xyz[2].x];
+    let n = (x * x + y * y + z * z).sqrt();
+    (n >= 1e-12).then(|| DVec3::new(x / n, y / n, z / n))
+}
+
+impl Read {
+    /// The checked values in SI (degrees converted here, at the edge).
+    fn into_params(self) -> PlatformParams {
+        let vecs = |rows: &[Row]| rows.iter().map(Row::vec).collect::<Vec<_>>();
+        let xs = |nums: &[Num]| nums.iter().map(|n| n.x).collect::<Vec<_>>();
+        let mut wrench_n_nm = [0.0; 6];
+        for (dst, n) in wrench_n_nm.iter_mut().zip(&self.wrench) {
+            *dst = n.x;
+        }
+        let [v, om, a, al] = self.limits.map(|n| n.x);
+        PlatformParams {
+            name: self.name.trim().to_string(),
+            frame_anchors_m: vecs(&self.frame_anchors.rows),
+            platform_anchors_m: vecs(&self.platform_anchors.rows),
+            pulleys: self.pulleys.as_ref().map(|(radius, axes)| PulleyParams {
+                radius_m: xs(radius),
+                // `check::all` refused zero axes.
+                axis: axes.rows.iter().filter_map(unit).collect(),
+            }),
+            k_f_n: xs(&self.k_f),
+            wrench_n_nm,
+            f_min_n: self.f_min.x,
+            f_max_n: self.f_max.x,
+            workspace: WorkspaceBox {
+                position_min_m: self.position_min.vec(),
+                position_max_m: self.position_max.vec(),
+                rotation_min_rad: self.rotation_min_deg.vec() * RAD_PER_DEG,
+                rotation_max_rad: self.rotation_max_deg.vec() * RAD_PER_DEG,
+            },
+            limits: MotionLimits {
+                linear_velocity_m_per_s: v,
+                angular_velocity_rad_per_s: om * RAD_PER_DEG,
+                linear_acceleration_m_per_s2: a,
+                angular_acceleration_rad_per_s2: al * RAD_PER_DEG,
+            },
+        }
+    }
 }

@@ -641,8 +641,11 @@ fn platform_errors_name_the_key_and_line() {
     let text = std::fs::read_to_string(&cfg().platform_file).unwrap();
     let bad = text.replace("[-5.380,  7.677,  6.524]", "[-5.380,  7.677,  nan]");
     let e = safety_monitor::platform::parse_platform(&bad, "x.toml").unwrap_err();
-    assert_eq!(e.key, "geometry.frame_anchors_m[2]");
-    assert!(e.line.is_some());
+    // The element itself: row 0, component 2, at its line and column in the file (line 13 of
+    // config/icosahedron.toml; the key was once the flattened index `[2]`, which read as row 2).
+    assert_eq!(e.key, "geometry.frame_anchors_m[0][2]");
+    assert_eq!((e.line, e.column), (Some(13), Some(21)), "{e}");
+    assert!(e.to_string().starts_with("x.toml:13:21: "), "{e}");
     let bad = text.replace(
         "platform_anchors_m = [\n  [-1.383,  0.528, -0.747],\n",
         "platform_anchors_m = [\n",
