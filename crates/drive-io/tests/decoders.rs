@@ -68,6 +68,9 @@ fn good_config_and_scaling() {
     let rev = std::f64::consts::PI * 0.305;
     assert_eq!(w.length_to_counts(rev), Some(10 * 1048576));
     assert_eq!(cfg.bus.sync_period_us, 1000);
+    // Phase-locked by default (issue 20 item 3).
+    assert_eq!(cfg.bus.sync_source, drive_io::config::SyncSource::Setpoint);
+    assert_eq!(cfg.bus.setpoint_wait_us, 250);
     assert!(w.length_to_counts(-0.1).is_none() && w.length_to_counts(f64::NAN).is_none());
 }
 
@@ -90,6 +93,14 @@ fn errors_name_the_field() {
         (
             GOOD.replace("[bus]", "[bus]\nstale_setpoint_cycles = 0"),
             "bus.stale_setpoint_cycles",
+        ),
+        (
+            GOOD.replace("[bus]", "[bus]\nsetpoint_wait_us = 500"),
+            "bus.setpoint_wait_us",
+        ),
+        (
+            GOOD.replace("[bus]", "[bus]\nsync_source = \"tick\""),
+            "sync_source",
         ),
         (
             GOOD.replace("counts_per_rev = 1048576", "counts_per_rev = 1e12"),

@@ -280,6 +280,9 @@ fn publish_stage_ends_the_stream_after_the_last_setpoint() {
         fn stream_end(&mut self) {
             self.0.push("end");
         }
+        fn setpoints_sent(&mut self) {
+            self.0.push("notify");
+        }
     }
     let outbox = Outbox::new(8);
     let stats = LoopStats::default();
@@ -291,7 +294,12 @@ fn publish_stage_ends_the_stream_after_the_last_setpoint() {
     let mut log = Log::default();
     // Stop already set: the stage runs no periodic pass, only the final drain.
     run_publish_stage(&outbox, &stats, &mut log, 0, 1_000_000, 0, 10, &stop);
-    assert_eq!(log.0, vec!["setpoint", "setpoint", "setpoint", "end"]);
+    // One "setpoint published" notification per pass, after its setpoints (drive-io's
+    // phase-locked cycle reads them when woken), none for a pass without setpoints.
+    assert_eq!(
+        log.0,
+        vec!["setpoint", "setpoint", "setpoint", "notify", "end"]
+    );
 }
 
 #[test]
