@@ -7,26 +7,11 @@
 
 use cdpr_model::config::Platform;
 use cdpr_model::{Data, Pose, kinematics};
-use nalgebra::Vector6;
 use std::path::Path;
 
-/// What the plant did at one reference pose.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Measured {
-    /// Forces within the limits; position error |r_M − r| (m) and the measured |Δr| (m) under the
-    /// payload step.
-    Reachable {
-        error_m: f64,
-        dr_m: f64,
-    },
-    OutOfLimits,
-    Failed,
-}
-
-/// The wrench step of the sensitivity map: 1 kN more payload.
-pub fn payload_step() -> Vector6<f64> {
-    Vector6::new(0.0, 0.0, -1000.0, 0.0, 0.0, 0.0)
-}
+/// What the plant did at one reference pose, and the payload step of the sensitivity map: the
+/// analysis side (`model_analysis::reachable`) defines both, the plant fills them in here.
+pub use model_analysis::reachable::{Measured, payload_step};
 
 /// Measures `refs` on the plant `plant_path`; returns the measurements and, when the plant is
 /// built on another platform file than the controller's `platform_path`, a note saying so.

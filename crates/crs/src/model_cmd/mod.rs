@@ -1,23 +1,20 @@
 //! `crs model …`: inverse/forward kinematics, force distribution, stiffness and workspace of a
 //! platform TOML at a pose, as tables for people or JSON for scripts. Units on the command line
-//! are named in the flags: positions in m, angles in degrees, lengths in m, forces in N.
+//! are named in the flags: positions in m, angles in degrees, lengths in m, forces in N. The
+//! analyses and their tables, JSON, CSV and SVG are the library `model-analysis`.
 
-mod kinematics;
-mod planar;
-mod reachable;
-mod sensitivity;
-mod statics;
-mod truss;
-mod workspace;
+mod design_checks;
 
 use cdpr_model::Pose;
 use cdpr_model::config::{Platform, load_platform};
+use cdpr_model::workspace::{FeasibilityTest, PositionBox};
+use model_analysis::Report;
+use model_analysis::reachable::{self, PlantMeasurement};
 use nalgebra::Vector3;
-use serde_json::json;
 use std::error::Error;
 use std::path::PathBuf;
 
-pub(crate) type Res = Result<(), Box<dyn Error>>;
+type Res = Result<(), Box<dyn Error>>;
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct Common {
@@ -40,7 +37,7 @@ pub struct PoseArgs {
 }
 
 /// Three comma-separated numbers from a flag, or a clear error naming the flag.
-pub(crate) fn triple(flag: &str, v: &[f64]) -> Result<Vector3<f64>, Box<dyn Error>> {
+fn triple(flag: &str, v: &[f64]) -> Result<Vector3<f64>, Box<dyn Error>> {
     if v.len() != 3 {
         return Err(format!("{flag} takes 3 comma-separated values, got {}", v.len()).into());
     }
@@ -116,13 +113,13 @@ pub enum ModelCommand {
     },
     /// The spec's planar 4-cable robot (eq. 3.40 / 4.24): condition numbers, initial tension,
     /// physical and reachable areas and pulley influence of ch. 3-4, next to the spec's values.
-    Planar(planar::PlanarArgs),
+    Planar(design_checks::PlanarArgs),
     /// Icosahedron cabin space-frame truss check (eq. 5.2-5.7): rod forces for a pose or the
     /// worst case over the operating region, against the 151 kN rod rating.
-    Truss(truss::TrussArgs),
+    Truss(design_checks::TrussArgs),
     /// Pose error caused by parameter errors (eq. 3.25-3.28): per parameter at a pose, and an
     /// RMS error map over the operating region for given anchor and stiffness uncertainties.
-    Sensitivity(sensitivity::SensitivityArgs),
+    Sensitivity(design_checks::SensitivityArgs),
     /// Wrench-feasible constant-orientation workspace (eq. 3.29): grid fraction and hull volume.
     Workspace {
         #[command(flatten)]
@@ -167,20 +164,75 @@ pub enum ModelCommand {
     },
 }
 
+/// A report as JSON or as its table.
+pub(crate) fn show(json: bool, r: &impl Report) {
+    if json {
+        println!("{}", r.json());
+    } else {
+        print!("{r}");
+    }
+}
+
+/// The box of `--min-m/--max-m` (default: the configured region), validated with the grid size.
+fn box_from_flags(
+    pf: &Platform,
+    min_m: Option<Vec<f64>>,
+    max_m: Option<Vec<f64>>,
+    resolution: usize,
+) -> Result<PositionBox, Box<dyn Error>> {
+    let mut bounds = pf.region.position;
+    if let Some(v) = min_m {
+        bounds.min = triple("--min-m", &v)?;
+    }
+    if let Some(v) = max_m {
+        bounds.max = triple("--max-m", &v)?;
+    }
+    if (0..3).any(|k| bounds.min[k] >= bounds.max[k]) {
+        return Err("--min-m must be below --max-m on every axis".into());
+    }
+    if resolution < 2 {
+        return Err("--resolution must be at least 2".into());
+    }
+    Ok(bounds)
+}
+
 pub fn run(cmd: ModelCommand) -> Res {
+    use model_analysis::{kinematics, statics};
     match cmd {
-        ModelCommand::Ik { common, pose } => kinematics::ik(&common, &pose),
+        ModelCommand::Ik { common, pose } => {
+            let pf = load(&common)?;
+            show(common.json, &kinematics::ik(&pf, &pose.pose(&pf)?)?);
+        }
         ModelCommand::Fk {
             common,
             lengths_m,
             elastic,
             guess,
-        } => kinematics::fk(&common, &lengths_m, elastic, &guess),
-        ModelCommand::Forces { common, pose } => statics::forces(&common, &pose),
-        ModelCommand::Stiffness { common, pose } => statics::stiffness(&common, &pose),
-        ModelCommand::Planar(a) => planar::planar_cmd(&a),
-        ModelCommand::Truss(a) => truss::truss_cmd(&a),
-        ModelCommand::Sensitivity(a) => sensitivity::sensitivity_cmd(&a),
+        } => {
+            let pf = load(&common)?;
+            if lengths_m.len() != pf.model.m() {
+                return Err(format!(
+                    "--lengths-m has {} values but {} has {} cables",
+                    lengths_m.len(),
+                    pf.name,
+                    pf.model.m()
+                )
+                .into());
+            }
+            let g = guess.pose(&pf)?;
+            show(common.json, &kinematics::fk(&pf, &lengths_m, elastic, &g)?);
+        }
+        ModelCommand::Forces { common, pose } => {
+            let pf = load(&common)?;
+            show(common.json, &statics::forces(&pf, &pose.pose(&pf)?)?);
+        }
+        ModelCommand::Stiffness { common, pose } => {
+            let pf = load(&common)?;
+            show(common.json, &statics::stiffness(&pf, &pose.pose(&pf)?)?);
+        }
+        ModelCommand::Planar(a) => design_checks::planar(&a)?,
+        ModelCommand::Truss(a) => design_checks::truss(&a)?,
+        ModelCommand::Sensitivity(a) => design_checks::sensitivity(&a)?,
         ModelCommand::Workspace {
             reachable: true,
             plant,
@@ -193,18 +245,38 @@ pub fn run(cmd: ModelCommand) -> Res {
             ..
         } => {
             let pf = load(&common)?;
-            let bounds = workspace::box_from_flags(&pf, min_m, max_m, resolution)?;
+            let bounds = box_from_flags(&pf, min_m, max_m, resolution)?;
             let phi = triple("--rotation-deg", &rotation_deg)?.map(f64::to_radians);
-            reachable::reachable_cmd(&reachable::ReachableRequest {
-                pf: &pf,
-                platform_path: &common.platform,
-                bounds,
-                phi,
-                resolution,
-                plant,
-                svg,
-                json: common.json,
-            })
+            let pred = reachable::predict(&pf, &bounds, &phi, resolution)?;
+            let measured = match &plant {
+                Some(p) => {
+                    let t1 = std::time::Instant::now();
+                    let (measured, note) = crs_stack::reachable_on_plant::measure_with_plant(
+                        p,
+                        &common.platform,
+                        &pf,
+                        &pred.refs,
+                        &pred.f_ini,
+                    )?;
+                    if let Some(n) = note {
+                        eprintln!("{n}");
+                    }
+                    Some(PlantMeasurement {
+                        config: p.display().to_string(),
+                        measured,
+                        seconds: t1.elapsed().as_secs_f64(),
+                    })
+                }
+                None => None,
+            };
+            let r = reachable::ReachableReport::new(&pf, bounds, resolution, pred, measured);
+            if let Some(path) = &svg {
+                r.write_svg(path)?;
+            }
+            show(common.json, &r);
+            if let (Some(p), false) = (&svg, common.json) {
+                println!("  map of the slice through home written to {}", p.display());
+            }
         }
         ModelCommand::Workspace {
             common,
@@ -216,38 +288,35 @@ pub fn run(cmd: ModelCommand) -> Res {
             test,
             csv,
             ..
-        } => workspace::workspace_cmd(
-            &common,
-            min_m,
-            max_m,
-            &rotation_deg,
-            resolution,
-            hull,
-            test,
-            csv,
-        ),
+        } => {
+            let pf = load(&common)?;
+            let bounds = box_from_flags(&pf, min_m, max_m, resolution)?;
+            let rot = triple("--rotation-deg", &rotation_deg)?;
+            let tests: &[FeasibilityTest] = match test {
+                TestArg::ClosedForm => &[FeasibilityTest::ClosedForm],
+                TestArg::Exact => &[FeasibilityTest::Exact],
+                TestArg::Both => &[FeasibilityTest::ClosedForm, FeasibilityTest::Exact],
+            };
+            let r = model_analysis::workspace::workspace(
+                &pf,
+                bounds,
+                rot.into(),
+                resolution,
+                hull,
+                tests,
+            )?;
+            if let Some(path) = &csv {
+                r.write_csv(path)?;
+            }
+            show(common.json, &r);
+            if let (Some(p), false) = (&csv, common.json) {
+                println!("grid written to {}", p.display());
+            }
+        }
     }
+    Ok(())
 }
 
 pub(crate) fn load(c: &Common) -> Result<Platform, Box<dyn Error>> {
     Ok(load_platform(&c.platform)?)
-}
-
-pub(crate) fn pose_json(p: &Pose) -> serde_json::Value {
-    json!({
-        "position_m": [p.r.x, p.r.y, p.r.z],
-        "rotation_deg": [p.phi.x.to_degrees(), p.phi.y.to_degrees(), p.phi.z.to_degrees()],
-    })
-}
-
-pub(crate) fn fmt_pose(p: &Pose) -> String {
-    format!(
-        "r = [{:.4}, {:.4}, {:.4}] m, φ = [{:.4}, {:.4}, {:.4}]°",
-        p.r.x,
-        p.r.y,
-        p.r.z,
-        p.phi.x.to_degrees(),
-        p.phi.y.to_degrees(),
-        p.phi.z.to_degrees()
-    )
 }
