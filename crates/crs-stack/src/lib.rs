@@ -14,6 +14,7 @@
 //! - [`campaign`]: calibration-campaign generation and waypoint timing/writing, checked with
 //!   motion-core's own [`configure`](motion_core::daemon::lifecycle::configure) step.
 //! - [`commission`]: commissioning and the pre-ride check (`crs commission`, eq. 6.21–6.24, 3.42).
+//! - [`commission_report`]: what `crs commission` prints of a commissioning.
 //! - [`diagnosis_bench`]: the residual diagnosis benchmark (`crs calibrate bench-diagnosis`).
 //! - [`load_experiment`]: the seed's walking-subject load tracking (sec. 5.3) on the plant.
 //! - [`platforms`]: the platforms the stack runs (`crs sim --platform icosahedron|helicopter`)
@@ -22,6 +23,8 @@
 //! - [`ride_run`]: the helicopter hover physics (crate `ride-physics`) as the run's motion
 //!   source on motion-core's cueing input (`crs sim --source helicopter`), and
 //!   [`gamepad`], a game controller as its pilot.
+//! - [`console_setup`]: the operator console of a stack (platform view, plan progress).
+//! - [`sim_observer`]: what `crs sim` runs next to the stack: the console and the run's plots.
 //! - [`sim_run`]: one run of the whole simulated stack (`crs sim`), its summary and verdict.
 //! - [`surrogate_evaluation`]: the surrogate fit of a platform and its evaluation on the plant.
 //! - [`surrogate_report`]: report.md/json and tracking.svg of a surrogate evaluation.
@@ -33,6 +36,8 @@ pub mod calibration_loop;
 pub mod calibration_output;
 pub mod campaign;
 pub mod commission;
+pub mod commission_report;
+pub mod console_setup;
 pub mod diagnosis_bench;
 pub mod gamepad;
 pub mod load_experiment;
@@ -41,6 +46,7 @@ pub mod reachable_on_plant;
 pub mod rest_recording;
 pub mod ride_run;
 pub mod run_plots;
+pub mod sim_observer;
 pub mod sim_run;
 pub mod supervisor;
 pub mod surrogate_evaluation;

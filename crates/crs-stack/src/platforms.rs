@@ -167,6 +167,76 @@ pub fn plant_platform_note(
     )))
 }
 
+/// Why the configs of a run could not be chosen.
+#[derive(Debug, thiserror::Error)]
+pub enum SelectError {
+    /// `--platform` names no known platform (the message lists them).
+    #[error("{0}")]
+    Platform(String),
+    /// The daemon TOML or a platform TOML.
+    #[error(transparent)]
+    Config(#[from] cdpr_model::config::ConfigError),
+    /// `--platform` and the daemon TOML of `--config` name different platforms.
+    #[error(
+        "--platform {choice} is {platform}, but --config {config} runs {runs} ({runs_file}): leave one out"
+    )]
+    Conflict {
+        choice: String,
+        platform: String,
+        config: String,
+        runs: String,
+        runs_file: String,
+    },
+    /// The plant TOML.
+    #[error("{0}")]
+    Plant(String),
+}
+
+/// [`plant_platform_note`] for the platform the daemon TOML `daemon_config` runs.
+pub fn plant_note_for_daemon(
+    plant: &Path,
+    daemon_config: &Path,
+) -> Result<Option<String>, SelectError> {
+    let daemon = motion_core::daemon::config::load(daemon_config)?;
+    let platform = cdpr_model::config::load_platform(&daemon.platform)?;
+    plant_platform_note(plant, &daemon.platform, &platform).map_err(SelectError::Plant)
+}
+
+/// The set of configs of a run: `platform`'s; without it the set of the platform the daemon
+/// TOML `config` runs (if it is a known one), else the default ([`KNOWN`]`[0]`, the
+/// icosahedron). A daemon TOML given next to `platform` must run that platform.
+pub fn select(
+    platform: Option<&str>,
+    config: Option<&Path>,
+    dir: &Path,
+) -> Result<StackConfigs, SelectError> {
+    if let Some(p) = platform {
+        let set = resolve(p, dir).map_err(SelectError::Platform)?;
+        if let Some(config) = config {
+            let daemon = motion_core::daemon::config::load(config)?;
+            let runs = cdpr_model::config::load_platform(&daemon.platform)?;
+            let chosen = cdpr_model::config::load_platform(&set.platform)?;
+            if runs.model.identity() != chosen.model.identity() {
+                return Err(SelectError::Conflict {
+                    choice: p.to_string(),
+                    platform: set.platform.display().to_string(),
+                    config: config.display().to_string(),
+                    runs: runs.name,
+                    runs_file: daemon.platform.display().to_string(),
+                });
+            }
+        }
+        return Ok(set);
+    }
+    if let Some(config) = config {
+        let daemon = motion_core::daemon::config::load(config)?;
+        if let Ok(set) = resolve(&daemon.platform.display().to_string(), dir) {
+            return Ok(set);
+        }
+    }
+    Ok(KNOWN[0].configs(dir))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
