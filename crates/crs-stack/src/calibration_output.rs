@@ -2,12 +2,34 @@
 //! report.json, the plots, `calibrated.toml` (the last step that validated, never a failed one:
 //! issue 13) and the side file with what the platform schema cannot express.
 
-use calibrate::pipeline::PipelineReport;
-use calibrate::{Observation, report};
-use cdpr_model::config::{Platform, load_platform};
+use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
+use calibrate::repeatability::{self, RepeatabilityConfig};
+use calibrate::{FitError, Observation, report};
+use cdpr_model::config::{ConfigError, Platform, load_platform};
 use std::path::{Path, PathBuf};
 
-type BoxErr = Box<dyn std::error::Error>;
+/// Why an identification or its output failed.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    #[error(transparent)]
+    Fit(#[from] FitError),
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    #[error(transparent)]
+    PlatformToml(#[from] report::PlatformTomlError),
+    /// The platform TOML written does not load with the daemon's loader.
+    #[error("written platform does not load: {0}")]
+    WrittenDoesNotLoad(ConfigError),
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+    /// The final step failed validation (issue 13): what was written instead.
+    #[error("the final calibration step \"{step}\" failed validation ({failure}); {what}")]
+    FinalStepFailed {
+        step: String,
+        failure: String,
+        what: String,
+    },
+}
 
 /// The files [`write`] wrote.
 pub struct Written {
@@ -30,7 +52,7 @@ pub fn write(
     eval: &[Observation],
     out: &Path,
     command: &str,
-) -> Result<Written, BoxErr> {
+) -> Result<Written, OutputError> {
     std::fs::create_dir_all(out)?;
     let plots = report::plots(rep, eval);
     let mut names = Vec::new();
@@ -63,7 +85,7 @@ pub fn write(
         )?;
         std::fs::write(&side_path, report::side_file(&st.model, &chosen))?;
         // The written platform must load with the daemon's loader.
-        load_platform(&toml_path).map_err(|e| format!("written platform does not load: {e}"))?;
+        load_platform(&toml_path).map_err(OutputError::WrittenDoesNotLoad)?;
         md.push_str(&format!(
             "\n## Output\n\n* Identified platform (step \"{}\"): `{}` (loads with `cdpr_model::config::load_platform`).\n* Side file (cable offsets and extension parameters the platform schema cannot express): `{}`.\n",
             st.name,
@@ -81,5 +103,77 @@ pub fn write(
         json,
         platform: toml_path,
         written_step: written.map(|st| st.name.clone()),
+    })
+}
+
+/// What one identification run does besides the data: the pipeline, the optional
+/// repeatability assessment, the output directory and the command quoted in the report.
+pub struct Identification<'a> {
+    pub pipeline: &'a PipelineConfig,
+    /// Multi-start / bootstrap repeatability (eq. 6.8, 6.10); None = off.
+    pub repeatability: Option<RepeatabilityConfig>,
+    pub out: &'a Path,
+    pub command: &'a str,
+}
+
+/// Identifies from `base` on `train` (validated on `holdout`, or on `train` when empty),
+/// assesses the repeatability when asked, and writes the report, plots, calibrated.toml and the
+/// side file into `id.out` ([`write`]). `progress` hears each stage's iterations and cost (cost
+/// not finite: a stage starts) as a line of text. A final step that failed validation is an
+/// error after the files are written ([`OutputError::FinalStepFailed`]).
+pub fn identify(
+    base: &Platform,
+    train: &[Observation],
+    holdout: &[Observation],
+    id: &Identification<'_>,
+    progress: &mut dyn FnMut(String),
+) -> Result<(PipelineReport, Written), OutputError> {
+    let mut rep = pipeline::run(
+        &base.model,
+        train,
+        holdout,
+        id.pipeline,
+        &mut |stage, it, cost| {
+            if cost.is_finite() {
+                progress(format!("{stage}: iteration {it}, cost {cost:.4e}"));
+            } else {
+                progress(stage.to_string());
+            }
+        },
+    )?;
+    if let Some(rc) = &id.repeatability {
+        rep.repeatability = Some(repeatability::assess(
+            &base.model,
+            train,
+            holdout,
+            id.pipeline,
+            &rep,
+            rc,
+            &mut |what, k| progress(format!("{what} {}", k + 1)),
+        ));
+    }
+    let eval = if holdout.is_empty() { train } else { holdout };
+    let out = write(base, &rep, eval, id.out, id.command)?;
+    Ok((rep, out))
+}
+
+/// [`OutputError::FinalStepFailed`] when the final step of `rep` failed validation, saying
+/// what [`write`] wrote instead.
+pub fn final_step_check(rep: &PipelineReport, out: &Written) -> Result<(), OutputError> {
+    let fin = rep.final_stage();
+    if !fin.failed() {
+        return Ok(());
+    }
+    let what = match &out.written_step {
+        Some(st) => format!(
+            "{} holds the last validated step, \"{st}\"",
+            out.platform.display()
+        ),
+        None => "no calibrated platform was written".into(),
+    };
+    Err(OutputError::FinalStepFailed {
+        step: fin.name.clone(),
+        failure: fin.holdout.failure_text().unwrap_or_default(),
+        what,
     })
 }

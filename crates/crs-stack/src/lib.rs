@@ -3,9 +3,11 @@
 //! What `crs sim`, the closed calibration loop (`crs calibrate loop`) and the HIL runners share,
 //! so the `crs` binary stays command-line glue:
 //!
+//! - [`calibration_demo`]: the demo's identification and validation campaigns on the plant.
 //! - [`calibration_loop`]: the closed calibration loop (`crs calibrate loop`): before run,
 //!   identification, after run, report.
-//! - [`calibration_output`]: report, plots, calibrated.toml and side file of an identification.
+//! - [`calibration_output`]: one identification run and what it writes (report, plots,
+//!   calibrated.toml, side file).
 //! - [`supervisor`]: ONE process supervisor — start the daemons in order with their logs and
 //!   IPC prefix, notice the first child that dies, stop all (SIGTERM, then SIGKILL) in reverse
 //!   order, Ctrl-C handling.
@@ -17,6 +19,7 @@
 //! - [`commission_report`]: what `crs commission` prints of a commissioning.
 //! - [`diagnosis_bench`]: the residual diagnosis benchmark (`crs calibrate bench-diagnosis`).
 //! - [`load_experiment`]: the seed's walking-subject load tracking (sec. 5.3) on the plant.
+//! - [`plant_check`]: a plant TOML checked and settled at home (`crs plant check`).
 //! - [`platforms`]: the platforms the stack runs (`crs sim --platform icosahedron|helicopter`)
 //!   and the consistent set of daemon, plant, monitor and drives configs of each.
 //! - [`run_plots`]: the plots and index.html of every `crs sim` run.
@@ -32,6 +35,7 @@
 //!   QEMU guest): the relaxed copies of the daemon, drives and monitor configs.
 //! - [`transport`]: which CAN transport a run uses (vcan0 or the UDP loopback bus).
 
+pub mod calibration_demo;
 pub mod calibration_loop;
 pub mod calibration_output;
 pub mod campaign;
@@ -41,6 +45,7 @@ pub mod console_setup;
 pub mod diagnosis_bench;
 pub mod gamepad;
 pub mod load_experiment;
+pub mod plant_check;
 pub mod platforms;
 pub mod reachable_on_plant;
 pub mod rest_recording;

@@ -12,6 +12,7 @@ use std::path::Path;
 /// What the plant did at one reference pose, and the payload step of the sensitivity map: the
 /// analysis side (`model_analysis::reachable`) defines both, the plant fills them in here.
 pub use model_analysis::reachable::{Measured, payload_step};
+use model_analysis::reachable::{PlantMeasurement, Prediction};
 
 /// Measures `refs` on the plant `plant_path`; returns the measurements and, when the plant is
 /// built on another platform file than the controller's `platform_path`, a note saying so.
@@ -82,4 +83,22 @@ pub fn measure_with_plant(
         out.push(m);
     }
     Ok((out, note))
+}
+
+/// [`measure_with_plant`] on the grid of `pred`, timed, as the analysis' plant side.
+pub fn measure_prediction(
+    plant_path: &Path,
+    platform_path: &Path,
+    pf: &Platform,
+    pred: &Prediction,
+) -> Result<(PlantMeasurement, Option<String>), Box<dyn std::error::Error>> {
+    let t0 = std::time::Instant::now();
+    let (measured, note) =
+        measure_with_plant(plant_path, platform_path, pf, &pred.refs, &pred.f_ini)?;
+    let m = PlantMeasurement {
+        config: plant_path.display().to_string(),
+        measured,
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    Ok((m, note))
 }

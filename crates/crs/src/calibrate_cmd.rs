@@ -80,28 +80,19 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
             validation_seed_offset,
             opts,
         } => {
-            let pcfg = sim_plant::load_plant(&plant)?;
-            let camp = sim_plant::load_campaign(&campaign)?;
-            let base = pcfg.platform.clone();
-            let m = base.model.m();
             let bar = spinner("recording identification campaign");
-            let mut p = sim_plant::Plant::new(pcfg.clone())?;
-            let ds = sim_plant::run_campaign(&mut p, &base, &camp, "nominal")?.dataset;
-            let mut vcamp = camp.clone();
-            if let sim_plant::PoseSet::Random { seed, .. } = &mut vcamp.poses {
-                *seed += validation_seed_offset;
-            }
-            vcamp.seed = Some(camp.seed.unwrap_or(pcfg.seed) + validation_seed_offset);
-            bar.set_message("recording validation campaign");
-            let mut p = sim_plant::Plant::new(pcfg)?;
-            let vds = sim_plant::run_campaign(&mut p, &base, &vcamp, "nominal")?.dataset;
+            let demo = crs_stack::calibration_demo::record(
+                &plant,
+                &campaign,
+                validation_seed_offset,
+                &opts.out,
+                &mut |m| bar.set_message(m.to_string()),
+            )?;
             bar.finish_and_clear();
-            std::fs::create_dir_all(&opts.out)?;
-            crs_dataset::save_dataset(opts.out.join("identification.csv"), &ds)?;
-            crs_dataset::save_dataset(opts.out.join("validation.csv"), &vds)?;
-            let train = from_dataset(&ds, m)?;
-            let holdout = from_dataset(&vds, m)?;
-            calibrate_and_report(&base, &train, &holdout, &opts, &command).map(|_| ())
+            let (base, m) = (&demo.base, demo.base.model.m());
+            let train = from_dataset(&demo.identification, m)?;
+            let holdout = from_dataset(&demo.validation, m)?;
+            calibrate_and_report(base, &train, &holdout, &opts, &command).map(|_| ())
         }
         CalibrateCommand::Loop(a) => crate::calibrate_loop_cmd::run_loop(a, &command),
         CalibrateCommand::Campaign(a) => crate::calibrate_loop_cmd::run_campaign(a),

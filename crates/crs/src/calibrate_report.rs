@@ -4,11 +4,12 @@
 //! use it without importing each other.
 
 use calibrate::effects::Effect;
-use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
+use calibrate::pipeline::{PipelineConfig, PipelineReport};
+use calibrate::repeatability::RepeatabilityConfig;
 use calibrate::{Observation, report};
 use cdpr_model::config::Platform;
 use clap::Args;
-use crs_stack::calibration_output;
+use crs_stack::calibration_output::{self, Identification};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 
@@ -118,7 +119,7 @@ pub(crate) fn spinner(msg: &str) -> ProgressBar {
 }
 
 /// Identifies from `base`, writes the report, plots, calibrated.toml and the side file into
-/// `opts.out`; returns the pipeline report.
+/// `opts.out` (`crs_stack::calibration_output::identify`) and prints the stage table.
 pub(crate) fn calibrate_and_report(
     base: &Platform,
     train: &[Observation],
@@ -127,35 +128,35 @@ pub(crate) fn calibrate_and_report(
     command: &str,
 ) -> Result<PipelineReport, Box<dyn std::error::Error>> {
     let cfg = config(opts)?;
+    let id = Identification {
+        pipeline: &cfg,
+        repeatability: (opts.multi_start > 0 || opts.bootstrap > 0).then_some(
+            RepeatabilityConfig {
+                multi_starts: opts.multi_start,
+                bootstrap: opts.bootstrap,
+                seed: opts.repeat_seed,
+            },
+        ),
+        out: &opts.out,
+        command,
+    };
+    identify_and_print(base, train, holdout, &id, opts.json)
+}
+
+/// [`calibration_output::identify`] with a spinner; prints the stage table (or the JSON) and
+/// the failed steps; a final step that failed validation is an error.
+pub(crate) fn identify_and_print(
+    base: &Platform,
+    train: &[Observation],
+    holdout: &[Observation],
+    id: &Identification<'_>,
+    json: bool,
+) -> Result<PipelineReport, Box<dyn std::error::Error>> {
     let bar = spinner("identifying");
-    let mut rep: PipelineReport =
-        pipeline::run(&base.model, train, holdout, &cfg, &mut |stage, it, cost| {
-            if cost.is_finite() {
-                bar.set_message(format!("{stage}: iteration {it}, cost {cost:.4e}"));
-            } else {
-                bar.set_message(stage.to_string());
-            }
-        })?;
-    if opts.multi_start > 0 || opts.bootstrap > 0 {
-        let rc = calibrate::repeatability::RepeatabilityConfig {
-            multi_starts: opts.multi_start,
-            bootstrap: opts.bootstrap,
-            seed: opts.repeat_seed,
-        };
-        rep.repeatability = Some(calibrate::repeatability::assess(
-            &base.model,
-            train,
-            holdout,
-            &cfg,
-            &rep,
-            &rc,
-            &mut |what, k| bar.set_message(format!("{what} {}", k + 1)),
-        ));
-    }
+    let (rep, out) =
+        calibration_output::identify(base, train, holdout, id, &mut |m| bar.set_message(m))?;
     bar.finish_and_clear();
-    let eval = if holdout.is_empty() { train } else { holdout };
-    let out = calibration_output::write(base, &rep, eval, &opts.out, command)?;
-    if opts.json {
+    if json {
         println!("{}", out.json);
     } else {
         println!("{}", report::stage_table(&rep));
@@ -164,21 +165,6 @@ pub(crate) fn calibrate_and_report(
     for (name, text) in rep.failed_stages() {
         eprintln!("calibration step \"{name}\" failed: {text} held-out samples");
     }
-    let fin = rep.final_stage();
-    if fin.failed() {
-        let what = match &out.written_step {
-            Some(st) => format!(
-                "{} holds the last validated step, \"{st}\"",
-                out.platform.display()
-            ),
-            None => "no calibrated platform was written".into(),
-        };
-        return Err(format!(
-            "the final calibration step \"{}\" failed validation ({}); {what}",
-            fin.name,
-            fin.holdout.failure_text().unwrap_or_default()
-        )
-        .into());
-    }
+    calibration_output::final_step_check(&rep, &out)?;
     Ok(rep)
 }

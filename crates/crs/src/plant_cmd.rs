@@ -3,7 +3,7 @@
 
 use cdpr_model::config::load_platform;
 use crs_dataset::{load_dataset, save_dataset};
-use sim_plant::campaign::{ControlKind, PoseErrors, pose_errors};
+use sim_plant::campaign::{ControlKind, pose_errors};
 use sim_plant::{CampaignConfig, Plant, load_campaign, load_plant, run_campaign};
 use std::path::PathBuf;
 
@@ -51,24 +51,9 @@ pub enum PlantCommand {
 pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
     match cmd {
         PlantCommand::Check { plant } => {
-            let cfg = load_plant(&plant)?;
-            println!(
-                "plant `{}` on platform {} ({} cables)",
-                cfg.name,
-                cfg.platform_path.display(),
-                cfg.platform.model.m()
-            );
-            println!("effects on: {}", cfg.effects.enabled_names().join(", "));
-            let home = cfg.platform.home;
-            let f_ini = cfg.platform.f_ini.clone();
-            let mut p = Plant::new(cfg)?;
-            if let Some(f) = f_ini {
-                let setup = p.setup_tension(&home, &f)?;
-                let eq = p.step(&setup.q_cmd)?;
-                let (dp, dr) = eq.pose.error_to(&home);
-                println!("home settled: |Δr| = {:.3e} m, |Δφ| = {:.3e} rad", dp, dr);
-                println!("forces at home, N: {}", fmt_vec(&eq.forces, 1));
-            }
+            let c = crs_stack::plant_check::check(&plant)?;
+            print!("{c}");
+            c.home?;
             Ok(())
         }
         PlantCommand::Record {
@@ -133,7 +118,7 @@ pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
                 );
             }
             if let Some(e) = pose_errors(&res.dataset) {
-                print_errors(&e);
+                println!("{e}");
             }
             Ok(())
         }
@@ -141,7 +126,7 @@ pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
             let ds = load_dataset(&data)?;
             match pose_errors(&ds) {
                 Some(e) => {
-                    print_errors(&e);
+                    println!("{e}");
                     Ok(())
                 }
                 None => {
@@ -150,22 +135,4 @@ pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
             }
         }
     }
-}
-
-fn print_errors(e: &PoseErrors) {
-    println!(
-        "pose errors over {} samples (eq. 3.3): position mean {:.2} mm, max {:.2} mm; rotation mean {:.3} deg, max {:.3} deg",
-        e.samples,
-        e.mean_position * 1e3,
-        e.max_position * 1e3,
-        e.mean_rotation.to_degrees(),
-        e.max_rotation.to_degrees()
-    );
-}
-
-fn fmt_vec(v: &[f64], prec: usize) -> String {
-    v.iter()
-        .map(|x| format!("{x:.prec$}"))
-        .collect::<Vec<_>>()
-        .join(" ")
 }

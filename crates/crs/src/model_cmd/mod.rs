@@ -7,9 +7,9 @@ mod design_checks;
 
 use cdpr_model::Pose;
 use cdpr_model::config::{Platform, load_platform};
-use cdpr_model::workspace::{FeasibilityTest, PositionBox};
+use cdpr_model::workspace::FeasibilityTest;
 use model_analysis::Report;
-use model_analysis::reachable::{self, PlantMeasurement};
+use model_analysis::reachable;
 use nalgebra::Vector3;
 use std::error::Error;
 use std::path::PathBuf;
@@ -69,48 +69,33 @@ pub enum TestArg {
     Both,
 }
 
+/// A platform at a pose.
+#[derive(clap::Args, Debug, Clone)]
+pub struct AtPose {
+    #[command(flatten)]
+    common: Common,
+    #[command(flatten)]
+    pose: PoseArgs,
+}
+
+impl AtPose {
+    fn load(&self) -> Result<(Platform, Pose), Box<dyn Error>> {
+        let pf = load(&self.common)?;
+        let x = self.pose.pose(&pf)?;
+        Ok((pf, x))
+    }
+}
+
 #[derive(clap::Subcommand, Debug)]
 pub enum ModelCommand {
     /// Inverse kinematics: cable lengths, directions, pulley wrap angles (eq. 2.3-2.8, 2.16-2.29).
-    Ik {
-        #[command(flatten)]
-        common: Common,
-        #[command(flatten)]
-        pose: PoseArgs,
-    },
+    Ik(AtPose),
     /// Forward kinematics from cable lengths: least squares (eq. 2.11) or elastostatic (eq. 2.42).
-    Fk {
-        #[command(flatten)]
-        common: Common,
-        /// Controlled cable lengths q_θ, m (one per cable, comma separated).
-        #[arg(
-            long,
-            value_delimiter = ',',
-            required = true,
-            allow_hyphen_values = true
-        )]
-        lengths_m: Vec<f64>,
-        /// Solve the elastostatic forward kinematics ν_el with the platform's stiffness and wrench.
-        #[arg(long)]
-        elastic: bool,
-        /// Initial guess (default: the platform's home pose).
-        #[command(flatten)]
-        guess: PoseArgs,
-    },
+    Fk(FkArgs),
     /// Closed-form force distribution (eq. 3.41), feasibility, internal/external split and section wrenches.
-    Forces {
-        #[command(flatten)]
-        common: Common,
-        #[command(flatten)]
-        pose: PoseArgs,
-    },
+    Forces(AtPose),
     /// Stiffness at the reference force distribution: K_C, K_G, K_wx (eq. 2.67-2.78).
-    Stiffness {
-        #[command(flatten)]
-        common: Common,
-        #[command(flatten)]
-        pose: PoseArgs,
-    },
+    Stiffness(AtPose),
     /// The spec's planar 4-cable robot (eq. 3.40 / 4.24): condition numbers, initial tension,
     /// physical and reachable areas and pulley influence of ch. 3-4, next to the spec's values.
     Planar(design_checks::PlanarArgs),
@@ -121,47 +106,70 @@ pub enum ModelCommand {
     /// RMS error map over the operating region for given anchor and stiffness uncertainties.
     Sensitivity(design_checks::SensitivityArgs),
     /// Wrench-feasible constant-orientation workspace (eq. 3.29): grid fraction and hull volume.
-    Workspace {
-        #[command(flatten)]
-        common: Common,
-        /// Box minimum x,y,z in m (default: the configured workspace region).
-        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
-        min_m: Option<Vec<f64>>,
-        /// Box maximum x,y,z in m.
-        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
-        max_m: Option<Vec<f64>>,
-        /// Constant orientation φx,φy,φz in degrees.
-        #[arg(
-            long,
-            value_delimiter = ',',
-            default_value = "0,0,0",
-            allow_hyphen_values = true
-        )]
-        rotation_deg: Vec<f64>,
-        /// Grid points per axis.
-        #[arg(long, default_value_t = 21)]
-        resolution: usize,
-        /// Also compute the workspace hull (Pott 2008) around the home position.
-        #[arg(long)]
-        hull: bool,
-        /// Feasibility test: the hard loop's closed form (eq. 3.41, sufficient), the exact LP
-        /// (eq. 3.29, necessary and sufficient), or both side by side.
-        #[arg(long, value_enum, default_value_t = TestArg::ClosedForm)]
-        test: TestArg,
-        /// Reachable workspace of the kinematic controller (eq. 3.33-3.35) instead, with the
-        /// exact W_WF, a payload-sensitivity map and, with --plant, the plant's measurement.
-        #[arg(long)]
-        reachable: bool,
-        /// Plant TOML (sim-plant) that measures the reachable workspace (with --reachable).
-        #[arg(long, requires = "reachable")]
-        plant: Option<PathBuf>,
-        /// SVG map of the slice through the home position (with --reachable).
-        #[arg(long, requires = "reachable")]
-        svg: Option<PathBuf>,
-        /// Write every grid point with its verdict to this CSV file.
-        #[arg(long)]
-        csv: Option<PathBuf>,
-    },
+    Workspace(WorkspaceArgs),
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct FkArgs {
+    #[command(flatten)]
+    common: Common,
+    /// Controlled cable lengths q_θ, m (one per cable, comma separated).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        required = true,
+        allow_hyphen_values = true
+    )]
+    lengths_m: Vec<f64>,
+    /// Solve the elastostatic forward kinematics ν_el with the platform's stiffness and wrench.
+    #[arg(long)]
+    elastic: bool,
+    /// Initial guess (default: the platform's home pose).
+    #[command(flatten)]
+    guess: PoseArgs,
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct WorkspaceArgs {
+    #[command(flatten)]
+    common: Common,
+    /// Box minimum x,y,z in m (default: the configured workspace region).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    min_m: Option<Vec<f64>>,
+    /// Box maximum x,y,z in m.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    max_m: Option<Vec<f64>>,
+    /// Constant orientation φx,φy,φz in degrees.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,0,0",
+        allow_hyphen_values = true
+    )]
+    rotation_deg: Vec<f64>,
+    /// Grid points per axis.
+    #[arg(long, default_value_t = 21)]
+    resolution: usize,
+    /// Also compute the workspace hull (Pott 2008) around the home position.
+    #[arg(long)]
+    hull: bool,
+    /// Feasibility test: the hard loop's closed form (eq. 3.41, sufficient), the exact LP
+    /// (eq. 3.29, necessary and sufficient), or both side by side.
+    #[arg(long, value_enum, default_value_t = TestArg::ClosedForm)]
+    test: TestArg,
+    /// Reachable workspace of the kinematic controller (eq. 3.33-3.35) instead, with the
+    /// exact W_WF, a payload-sensitivity map and, with --plant, the plant's measurement.
+    #[arg(long)]
+    reachable: bool,
+    /// Plant TOML (sim-plant) that measures the reachable workspace (with --reachable).
+    #[arg(long, requires = "reachable")]
+    plant: Option<PathBuf>,
+    /// SVG map of the slice through the home position (with --reachable).
+    #[arg(long, requires = "reachable")]
+    svg: Option<PathBuf>,
+    /// Write every grid point with its verdict to this CSV file.
+    #[arg(long)]
+    csv: Option<PathBuf>,
 }
 
 /// A report as JSON or as its table.
@@ -173,148 +181,107 @@ pub(crate) fn show(json: bool, r: &impl Report) {
     }
 }
 
-/// The box of `--min-m/--max-m` (default: the configured region), validated with the grid size.
-fn box_from_flags(
-    pf: &Platform,
-    min_m: Option<Vec<f64>>,
-    max_m: Option<Vec<f64>>,
-    resolution: usize,
-) -> Result<PositionBox, Box<dyn Error>> {
-    let mut bounds = pf.region.position;
-    if let Some(v) = min_m {
-        bounds.min = triple("--min-m", &v)?;
-    }
-    if let Some(v) = max_m {
-        bounds.max = triple("--max-m", &v)?;
-    }
-    if (0..3).any(|k| bounds.min[k] >= bounds.max[k]) {
-        return Err("--min-m must be below --max-m on every axis".into());
-    }
-    if resolution < 2 {
-        return Err("--resolution must be at least 2".into());
-    }
-    Ok(bounds)
-}
-
 pub fn run(cmd: ModelCommand) -> Res {
     use model_analysis::{kinematics, statics};
     match cmd {
-        ModelCommand::Ik { common, pose } => {
-            let pf = load(&common)?;
-            show(common.json, &kinematics::ik(&pf, &pose.pose(&pf)?)?);
+        ModelCommand::Ik(a) => {
+            let (pf, x) = a.load()?;
+            show(a.common.json, &kinematics::ik(&pf, &x)?);
         }
-        ModelCommand::Fk {
-            common,
-            lengths_m,
-            elastic,
-            guess,
-        } => {
-            let pf = load(&common)?;
-            if lengths_m.len() != pf.model.m() {
+        ModelCommand::Fk(a) => {
+            let pf = load(&a.common)?;
+            if a.lengths_m.len() != pf.model.m() {
                 return Err(format!(
                     "--lengths-m has {} values but {} has {} cables",
-                    lengths_m.len(),
+                    a.lengths_m.len(),
                     pf.name,
                     pf.model.m()
                 )
                 .into());
             }
-            let g = guess.pose(&pf)?;
-            show(common.json, &kinematics::fk(&pf, &lengths_m, elastic, &g)?);
+            let g = a.guess.pose(&pf)?;
+            show(
+                a.common.json,
+                &kinematics::fk(&pf, &a.lengths_m, a.elastic, &g)?,
+            );
         }
-        ModelCommand::Forces { common, pose } => {
-            let pf = load(&common)?;
-            show(common.json, &statics::forces(&pf, &pose.pose(&pf)?)?);
+        ModelCommand::Forces(a) => {
+            let (pf, x) = a.load()?;
+            show(a.common.json, &statics::forces(&pf, &x)?);
         }
-        ModelCommand::Stiffness { common, pose } => {
-            let pf = load(&common)?;
-            show(common.json, &statics::stiffness(&pf, &pose.pose(&pf)?)?);
+        ModelCommand::Stiffness(a) => {
+            let (pf, x) = a.load()?;
+            show(a.common.json, &statics::stiffness(&pf, &x)?);
         }
         ModelCommand::Planar(a) => design_checks::planar(&a)?,
         ModelCommand::Truss(a) => design_checks::truss(&a)?,
         ModelCommand::Sensitivity(a) => design_checks::sensitivity(&a)?,
-        ModelCommand::Workspace {
-            reachable: true,
-            plant,
-            svg,
-            common,
-            min_m,
-            max_m,
-            rotation_deg,
-            resolution,
-            ..
-        } => {
-            let pf = load(&common)?;
-            let bounds = box_from_flags(&pf, min_m, max_m, resolution)?;
-            let phi = triple("--rotation-deg", &rotation_deg)?.map(f64::to_radians);
-            let pred = reachable::predict(&pf, &bounds, &phi, resolution)?;
-            let measured = match &plant {
+        ModelCommand::Workspace(a) => a.run()?,
+    }
+    Ok(())
+}
+
+impl WorkspaceArgs {
+    fn run(self) -> Res {
+        let pf = load(&self.common)?;
+        // The box of `--min-m/--max-m` (default: the configured region) and the grid size.
+        let mut bounds = pf.region.position;
+        if let Some(v) = &self.min_m {
+            bounds.min = triple("--min-m", v)?;
+        }
+        if let Some(v) = &self.max_m {
+            bounds.max = triple("--max-m", v)?;
+        }
+        if (0..3).any(|k| bounds.min[k] >= bounds.max[k]) {
+            return Err("--min-m must be below --max-m on every axis".into());
+        }
+        if self.resolution < 2 {
+            return Err("--resolution must be at least 2".into());
+        }
+        let rot = triple("--rotation-deg", &self.rotation_deg)?;
+        let (json, n) = (self.common.json, self.resolution);
+        if self.reachable {
+            let pred = reachable::predict(&pf, &bounds, &rot.map(f64::to_radians), n)?;
+            let measured = match &self.plant {
                 Some(p) => {
-                    let t1 = std::time::Instant::now();
-                    let (measured, note) = crs_stack::reachable_on_plant::measure_with_plant(
+                    let (m, note) = crs_stack::reachable_on_plant::measure_prediction(
                         p,
-                        &common.platform,
+                        &self.common.platform,
                         &pf,
-                        &pred.refs,
-                        &pred.f_ini,
+                        &pred,
                     )?;
                     if let Some(n) = note {
                         eprintln!("{n}");
                     }
-                    Some(PlantMeasurement {
-                        config: p.display().to_string(),
-                        measured,
-                        seconds: t1.elapsed().as_secs_f64(),
-                    })
+                    Some(m)
                 }
                 None => None,
             };
-            let r = reachable::ReachableReport::new(&pf, bounds, resolution, pred, measured);
-            if let Some(path) = &svg {
+            let r = reachable::ReachableReport::new(&pf, bounds, n, pred, measured);
+            if let Some(path) = &self.svg {
                 r.write_svg(path)?;
             }
-            show(common.json, &r);
-            if let (Some(p), false) = (&svg, common.json) {
+            show(json, &r);
+            if let (Some(p), false) = (&self.svg, json) {
                 println!("  map of the slice through home written to {}", p.display());
             }
+            return Ok(());
         }
-        ModelCommand::Workspace {
-            common,
-            min_m,
-            max_m,
-            rotation_deg,
-            resolution,
-            hull,
-            test,
-            csv,
-            ..
-        } => {
-            let pf = load(&common)?;
-            let bounds = box_from_flags(&pf, min_m, max_m, resolution)?;
-            let rot = triple("--rotation-deg", &rotation_deg)?;
-            let tests: &[FeasibilityTest] = match test {
-                TestArg::ClosedForm => &[FeasibilityTest::ClosedForm],
-                TestArg::Exact => &[FeasibilityTest::Exact],
-                TestArg::Both => &[FeasibilityTest::ClosedForm, FeasibilityTest::Exact],
-            };
-            let r = model_analysis::workspace::workspace(
-                &pf,
-                bounds,
-                rot.into(),
-                resolution,
-                hull,
-                tests,
-            )?;
-            if let Some(path) = &csv {
-                r.write_csv(path)?;
-            }
-            show(common.json, &r);
-            if let (Some(p), false) = (&csv, common.json) {
-                println!("grid written to {}", p.display());
-            }
+        let tests: &[FeasibilityTest] = match self.test {
+            TestArg::ClosedForm => &[FeasibilityTest::ClosedForm],
+            TestArg::Exact => &[FeasibilityTest::Exact],
+            TestArg::Both => &[FeasibilityTest::ClosedForm, FeasibilityTest::Exact],
+        };
+        let r = model_analysis::workspace::workspace(&pf, bounds, rot.into(), n, self.hull, tests)?;
+        if let Some(path) = &self.csv {
+            r.write_csv(path)?;
         }
+        show(json, &r);
+        if let (Some(p), false) = (&self.csv, json) {
+            println!("grid written to {}", p.display());
+        }
+        Ok(())
     }
-    Ok(())
 }
 
 pub(crate) fn load(c: &Common) -> Result<Platform, Box<dyn Error>> {
