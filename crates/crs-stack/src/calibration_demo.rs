@@ -30,18 +30,18 @@ pub struct DemoData {
 
 /// Records the campaign `campaign` on the plant `plant` (identification), and again with its
 /// random poses and noise seeded `validation_seed_offset` further on (validation); writes
-/// identification.csv and validation.csv into `out`. `progress` hears which campaign runs.
+/// identification.csv and validation.csv into `out`. `progress` shows which campaign runs.
 pub fn record(
     plant: &Path,
     campaign: &Path,
     validation_seed_offset: u64,
     out: &Path,
-    progress: &mut dyn FnMut(&str),
+    progress: &mut dyn crate::progress::Progress,
 ) -> Result<DemoData, DemoError> {
     let pcfg = sim_plant::load_plant(plant)?;
     let camp = sim_plant::load_campaign(campaign)?;
     let base = pcfg.platform.clone();
-    progress("recording identification campaign");
+    progress.start("recording identification campaign");
     let mut p = Plant::new(pcfg.clone())?;
     let identification = sim_plant::run_campaign(&mut p, &base, &camp, "nominal")?.dataset;
     let mut vcamp = camp.clone();
@@ -49,9 +49,10 @@ pub fn record(
         *seed += validation_seed_offset;
     }
     vcamp.seed = Some(camp.seed.unwrap_or(pcfg.seed) + validation_seed_offset);
-    progress("recording validation campaign");
+    progress.update("recording validation campaign".into());
     let mut p = Plant::new(pcfg)?;
     let validation = sim_plant::run_campaign(&mut p, &base, &vcamp, "nominal")?.dataset;
+    progress.finish();
     std::fs::create_dir_all(out)?;
     crs_dataset::save_dataset(out.join("identification.csv"), &identification)?;
     crs_dataset::save_dataset(out.join("validation.csv"), &validation)?;

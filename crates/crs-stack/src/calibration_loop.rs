@@ -61,6 +61,61 @@ pub trait LoopTools {
     ) -> Result<PipelineReport, BoxErr>;
 }
 
+/// The loop's tools from this library: the surrogate fit of `crs surrogate fit`
+/// ([`fit_platform`](crate::surrogate_evaluation::fit_platform)) and the identification of
+/// `crs calibrate run --no-extension --ridge-kf λ`, every other option at its default
+/// ([`identify_and_report`](crate::calibration_output::identify_and_report)); `progress` shows
+/// them running.
+pub struct StackTools<'a> {
+    pub progress: &'a mut dyn crate::progress::Progress,
+}
+
+impl LoopTools for StackTools<'_> {
+    fn fit_surrogate(
+        &mut self,
+        pf: &Platform,
+        opts: &surrogate::FitOptions,
+    ) -> Result<(surrogate::Surrogate, surrogate::FitReport), BoxErr> {
+        self.progress
+            .start(&format!("fitting the surrogate of `{}`", pf.name));
+        let r = crate::surrogate_evaluation::fit_platform(pf, opts);
+        self.progress.finish();
+        Ok(r?)
+    }
+
+    fn identify(
+        &mut self,
+        nominal: &Platform,
+        train: &[Observation],
+        held: &[Observation],
+        out: &Path,
+        _holdout_every: u64,
+        ridge_kf: f64,
+        command: &str,
+    ) -> Result<PipelineReport, BoxErr> {
+        let cfg = calibrate::pipeline::PipelineConfig {
+            ridge_kf,
+            no_extension: true,
+            ..Default::default()
+        };
+        let id = crate::calibration_output::Identification {
+            pipeline: &cfg,
+            repeatability: None,
+            out,
+            command,
+        };
+        let rep = crate::calibration_output::identify_and_report(
+            nominal,
+            train,
+            held,
+            &id,
+            false,
+            self.progress,
+        )?;
+        Ok(rep)
+    }
+}
+
 /// The options of `crs calibrate loop`.
 #[derive(Clone, Debug)]
 pub struct LoopOptions {

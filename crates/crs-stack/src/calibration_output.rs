@@ -177,3 +177,30 @@ pub fn final_step_check(rep: &PipelineReport, out: &Written) -> Result<(), Outpu
         what,
     })
 }
+
+/// [`identify`] as `crs calibrate run` shows it: progress while it runs, then the stage table
+/// and the report's path (or, with `json`, report.json's text) on stdout and the failed steps on
+/// stderr; a final step that failed validation is an error ([`final_step_check`]).
+pub fn identify_and_report(
+    base: &Platform,
+    train: &[Observation],
+    holdout: &[Observation],
+    id: &Identification<'_>,
+    json: bool,
+    progress: &mut dyn crate::progress::Progress,
+) -> Result<PipelineReport, OutputError> {
+    progress.start("identifying");
+    let (rep, out) = identify(base, train, holdout, id, &mut |m| progress.update(m))?;
+    progress.finish();
+    if json {
+        println!("{}", out.json);
+    } else {
+        println!("{}", report::stage_table(&rep));
+        println!("report: {}", out.report.display());
+    }
+    for (name, text) in rep.failed_stages() {
+        eprintln!("calibration step \"{name}\" failed: {text} held-out samples");
+    }
+    final_step_check(&rep, &out)?;
+    Ok(rep)
+}

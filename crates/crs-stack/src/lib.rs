@@ -11,6 +11,7 @@
 //! - [`supervisor`]: ONE process supervisor — start the daemons in order with their logs and
 //!   IPC prefix, notice the first child that dies, stop all (SIGTERM, then SIGKILL) in reverse
 //!   order, Ctrl-C handling.
+//! - [`progress`]: how a long step shows that it runs (the CLI's spinner).
 //! - [`reachable_on_plant`]: the kinematic controller's reachable workspace measured on the plant.
 //! - [`rest_recording`]: rest points of a run from the live topics → a `crs-dataset 1` file.
 //! - [`campaign`]: calibration-campaign generation and waypoint timing/writing, checked with
@@ -20,6 +21,7 @@
 //! - [`diagnosis_bench`]: the residual diagnosis benchmark (`crs calibrate bench-diagnosis`).
 //! - [`load_experiment`]: the seed's walking-subject load tracking (sec. 5.3) on the plant.
 //! - [`plant_check`]: a plant TOML checked and settled at home (`crs plant check`).
+//! - [`plant_record`]: a measurement campaign on the plant written as a data set.
 //! - [`platforms`]: the platforms the stack runs (`crs sim --platform icosahedron|helicopter`)
 //!   and the consistent set of daemon, plant, monitor and drives configs of each.
 //! - [`run_plots`]: the plots and index.html of every `crs sim` run.
@@ -46,7 +48,9 @@ pub mod diagnosis_bench;
 pub mod gamepad;
 pub mod load_experiment;
 pub mod plant_check;
+pub mod plant_record;
 pub mod platforms;
+pub mod progress;
 pub mod reachable_on_plant;
 pub mod rest_recording;
 pub mod ride_run;

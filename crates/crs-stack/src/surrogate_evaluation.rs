@@ -15,12 +15,12 @@ type BoxErr = Box<dyn std::error::Error>;
 pub fn fit_platform(
     pf: &Platform,
     opts: &FitOptions,
-) -> Result<(Surrogate, surrogate::FitReport), BoxErr> {
+) -> Result<(Surrogate, surrogate::FitReport), surrogate::FitError> {
     let m = pf.model.m();
     let (lower, upper) = region_box(&pf.region);
     let region = Region { lower, upper };
     let mut target = OffsetTarget::new(&pf.model);
-    let r = fit(
+    fit(
         &region,
         opts,
         m,
@@ -29,8 +29,60 @@ pub fn fit_platform(
             let mut out = vec![0.0; m];
             target.offset(&Pose::from_array(*x), &mut out).map(|_| out)
         },
-    )?;
-    Ok(r)
+    )
+}
+
+/// Why a surrogate file could not be written or read for a platform.
+#[derive(Debug, thiserror::Error)]
+pub enum SurrogateFileError {
+    #[error(transparent)]
+    Platform(#[from] cdpr_model::config::ConfigError),
+    #[error(transparent)]
+    Fit(#[from] surrogate::FitError),
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// The surrogate file (named) could not be saved or loaded.
+    #[error("{}: {source}", file.display())]
+    File {
+        file: std::path::PathBuf,
+        source: surrogate::FileError,
+    },
+}
+
+/// [`fit_platform`] timed, saved to `out` (its directory created); returns the surrogate, its
+/// report and the fit's time in s.
+pub fn fit_and_save(
+    pf: &Platform,
+    opts: &FitOptions,
+    out: &Path,
+) -> Result<(Surrogate, surrogate::FitReport, f64), SurrogateFileError> {
+    let t0 = std::time::Instant::now();
+    let (sg, report) = fit_platform(pf, opts)?;
+    let dt = t0.elapsed().as_secs_f64();
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    sg.save(out).map_err(|source| SurrogateFileError::File {
+        file: out.to_path_buf(),
+        source,
+    })?;
+    Ok((sg, report, dt))
+}
+
+/// The platform TOML `platform` and the surrogate file `file` checked against it as the daemon
+/// loads it (format, checksum, platform identity, bound).
+pub fn load_for_platform(
+    file: &Path,
+    platform: &Path,
+) -> Result<(Platform, Surrogate), SurrogateFileError> {
+    let pf = cdpr_model::config::load_platform(platform)?;
+    let sg = Surrogate::load(file, &pf.model.identity_hex()).map_err(|source| {
+        SurrogateFileError::File {
+            file: file.to_path_buf(),
+            source,
+        }
+    })?;
+    Ok((pf, sg))
 }
 
 /// One controller's tracking on the plant over the evaluation grid.

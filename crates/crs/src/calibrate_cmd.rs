@@ -2,7 +2,7 @@
 //! data sets (docs/data-format.md), with a Markdown/JSON/SVG report and the identified model
 //! written back as a platform TOML (crates/calibrate, docs/calibration.md).
 
-use crate::calibrate_report::{Opts, calibrate_and_report, spinner};
+use crate::calibrate_report::{Opts, Spinner, calibrate_and_report};
 use calibrate::{Observation, from_dataset, split};
 use cdpr_model::config::load_platform;
 use std::path::{Path, PathBuf};
@@ -80,15 +80,13 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
             validation_seed_offset,
             opts,
         } => {
-            let bar = spinner("recording identification campaign");
             let demo = crs_stack::calibration_demo::record(
                 &plant,
                 &campaign,
                 validation_seed_offset,
                 &opts.out,
-                &mut |m| bar.set_message(m.to_string()),
+                &mut Spinner::default(),
             )?;
-            bar.finish_and_clear();
             let (base, m) = (&demo.base, demo.base.model.m());
             let train = from_dataset(&demo.identification, m)?;
             let holdout = from_dataset(&demo.validation, m)?;

@@ -4,14 +4,10 @@
 //! refitted surrogate, re-run the same campaign and report the MEASURED pose error at the rest
 //! points before and after. `crs calibrate campaign` makes the campaign file.
 
-use crate::calibrate_report::{identify_and_print, spinner};
-use calibrate::Observation;
-use calibrate::pipeline::{PipelineConfig, PipelineReport};
-use cdpr_model::config::Platform;
-use crs_stack::calibration_loop::{LoopOptions, LoopTools};
-use crs_stack::calibration_output::Identification;
+use crate::calibrate_report::Spinner;
+use crs_stack::calibration_loop::{LoopOptions, StackTools};
 use crs_stack::campaign::{self, CampaignRequest};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 type BoxErr = Box<dyn std::error::Error>;
 
@@ -113,49 +109,12 @@ impl LoopArgs {
     }
 }
 
-/// The CLI's surrogate fit (with a spinner) and identification (report, plots, calibrated.toml).
-struct CliTools;
-
-impl LoopTools for CliTools {
-    fn fit_surrogate(
-        &mut self,
-        pf: &Platform,
-        opts: &surrogate::FitOptions,
-    ) -> Result<(surrogate::Surrogate, surrogate::FitReport), BoxErr> {
-        let bar = spinner(&format!("fitting the surrogate of `{}`", pf.name));
-        let r = crate::surrogate_cmd::fit_platform(pf, opts);
-        bar.finish_and_clear();
-        r
-    }
-
-    fn identify(
-        &mut self,
-        nominal: &Platform,
-        train: &[Observation],
-        held: &[Observation],
-        out: &Path,
-        _holdout_every: u64,
-        ridge_kf: f64,
-        command: &str,
-    ) -> Result<PipelineReport, BoxErr> {
-        // `crs calibrate run --no-extension --ridge-kf λ` with every other option at its default.
-        let cfg = PipelineConfig {
-            ridge_kf,
-            no_extension: true,
-            ..PipelineConfig::default()
-        };
-        let id = Identification {
-            pipeline: &cfg,
-            repeatability: None,
-            out,
-            command,
-        };
-        identify_and_print(nominal, train, held, &id, false)
-    }
-}
-
 pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
-    crs_stack::calibration_loop::run_loop(a.options(), command, &mut CliTools)
+    let mut progress = Spinner::default();
+    let mut tools = StackTools {
+        progress: &mut progress,
+    };
+    crs_stack::calibration_loop::run_loop(a.options(), command, &mut tools)
 }
 
 #[derive(clap::Args, Debug)]

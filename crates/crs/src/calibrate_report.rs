@@ -3,13 +3,14 @@
 //! plots, calibrated.toml and side file it writes. A module of its own so that both commands
 //! use it without importing each other.
 
+use calibrate::Observation;
 use calibrate::effects::Effect;
 use calibrate::pipeline::{PipelineConfig, PipelineReport};
 use calibrate::repeatability::RepeatabilityConfig;
-use calibrate::{Observation, report};
 use cdpr_model::config::Platform;
 use clap::Args;
 use crs_stack::calibration_output::{self, Identification};
+use crs_stack::progress::Progress;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 
@@ -107,15 +108,31 @@ pub(crate) fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Err
     Ok(cfg)
 }
 
-pub(crate) fn spinner(msg: &str) -> ProgressBar {
-    let bar = ProgressBar::new_spinner();
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} [{elapsed}] {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
-    );
-    bar.enable_steady_tick(std::time::Duration::from_millis(120));
-    bar.set_message(msg.to_string());
-    bar
+/// The command line's progress: a spinner with the elapsed time on stderr.
+#[derive(Default)]
+pub(crate) struct Spinner(Option<ProgressBar>);
+
+impl Progress for Spinner {
+    fn start(&mut self, what: &str) {
+        let bar = ProgressBar::new_spinner();
+        bar.set_style(
+            ProgressStyle::with_template("{spinner} [{elapsed}] {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        );
+        bar.enable_steady_tick(std::time::Duration::from_millis(120));
+        bar.set_message(what.to_string());
+        self.0 = Some(bar);
+    }
+    fn update(&mut self, what: String) {
+        if let Some(b) = &self.0 {
+            b.set_message(what);
+        }
+    }
+    fn finish(&mut self) {
+        if let Some(b) = self.0.take() {
+            b.finish_and_clear();
+        }
+    }
 }
 
 /// Identifies from `base`, writes the report, plots, calibrated.toml and the side file into
@@ -140,31 +157,12 @@ pub(crate) fn calibrate_and_report(
         out: &opts.out,
         command,
     };
-    identify_and_print(base, train, holdout, &id, opts.json)
-}
-
-/// [`calibration_output::identify`] with a spinner; prints the stage table (or the JSON) and
-/// the failed steps; a final step that failed validation is an error.
-pub(crate) fn identify_and_print(
-    base: &Platform,
-    train: &[Observation],
-    holdout: &[Observation],
-    id: &Identification<'_>,
-    json: bool,
-) -> Result<PipelineReport, Box<dyn std::error::Error>> {
-    let bar = spinner("identifying");
-    let (rep, out) =
-        calibration_output::identify(base, train, holdout, id, &mut |m| bar.set_message(m))?;
-    bar.finish_and_clear();
-    if json {
-        println!("{}", out.json);
-    } else {
-        println!("{}", report::stage_table(&rep));
-        println!("report: {}", out.report.display());
-    }
-    for (name, text) in rep.failed_stages() {
-        eprintln!("calibration step \"{name}\" failed: {text} held-out samples");
-    }
-    calibration_output::final_step_check(&rep, &out)?;
-    Ok(rep)
+    Ok(calibration_output::identify_and_report(
+        base,
+        train,
+        holdout,
+        &id,
+        opts.json,
+        &mut Spinner::default(),
+    )?)
 }

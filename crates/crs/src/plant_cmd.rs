@@ -1,10 +1,9 @@
 //! `crs plant …`: the simulated plant (crates/sim-plant) from the command line — check a plant
 //! TOML, record a measurement campaign into a data set, evaluate a data set's pose errors.
 
-use cdpr_model::config::load_platform;
-use crs_dataset::{load_dataset, save_dataset};
+use crs_dataset::load_dataset;
 use sim_plant::campaign::{ControlKind, pose_errors};
-use sim_plant::{CampaignConfig, Plant, load_campaign, load_plant, run_campaign};
+use sim_plant::{CampaignConfig, load_campaign, load_plant};
 use std::path::PathBuf;
 
 #[derive(clap::Subcommand, Debug)]
@@ -93,31 +92,9 @@ pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
             if seed.is_some() {
                 camp.seed = seed;
             }
-            let control_path = camp
-                .control_platform
-                .clone()
-                .unwrap_or_else(|| cfg.platform_path.clone());
-            let control = load_platform(&control_path)?;
-            let mut p = Plant::new(cfg)?;
-            let t0 = std::time::Instant::now();
-            let res = run_campaign(&mut p, &control, &camp, &control_path.display().to_string())?;
-            let dt = t0.elapsed();
-            save_dataset(&out, &res.dataset).map_err(|e| format!("{}: {e}", out.display()))?;
-            eprintln!(
-                "wrote {} samples to {} ({} unreachable) in {:.1} ms",
-                res.dataset.samples.len(),
-                out.display(),
-                res.unreachable.len(),
-                dt.as_secs_f64() * 1e3
-            );
-            for u in &res.unreachable {
-                let x = u.pose_ref.to_array();
-                eprintln!(
-                    "  unreachable pose {} phase {} at [{:.3}, {:.3}, {:.3}] m: {}",
-                    u.pose_index, u.phase as u8, x[0], x[1], x[2], u.reason
-                );
-            }
-            if let Some(e) = pose_errors(&res.dataset) {
+            let rec = crs_stack::plant_record::record(cfg, &camp, &out)?;
+            eprint!("{rec}");
+            if let Some(e) = pose_errors(&rec.result.dataset) {
                 println!("{e}");
             }
             Ok(())

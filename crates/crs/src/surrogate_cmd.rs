@@ -2,11 +2,10 @@
 //! (sec. 5.6, eq. 5.23–5.27), its file check, and its evaluation on the simulated plant.
 
 use cdpr_model::config::load_platform;
-pub use crs_stack::surrogate_evaluation::fit_platform;
-use crs_stack::surrogate_evaluation::{Evaluation, evaluate};
+use crs_stack::surrogate_evaluation::{Evaluation, evaluate, fit_and_save, load_for_platform};
 use crs_stack::surrogate_report::{self, FitSummary};
 use std::path::{Path, PathBuf};
-use surrogate::{Basis, FitOptions, Surrogate};
+use surrogate::{Basis, FitOptions};
 
 #[derive(clap::Subcommand, Debug)]
 pub enum SurrogateCommand {
@@ -83,9 +82,7 @@ pub fn run(cmd: SurrogateCommand) -> Result<(), BoxErr> {
     match cmd {
         SurrogateCommand::Fit(a) => fit(a),
         SurrogateCommand::Check { file, platform } => {
-            let pf = load_platform(&platform)?;
-            let sg = Surrogate::load(&file, &pf.model.identity_hex())
-                .map_err(|e| format!("{}: {e}", file.display()))?;
+            let (pf, sg) = load_for_platform(&file, &platform)?;
             let r = sg.report();
             println!(
                 "{}: ok — platform `{}`, {} cables, degree {}, max |φ_sg| {:.2} mm, certified {:.2} mm, fit error max {:.4} mm",
@@ -106,9 +103,7 @@ pub fn run(cmd: SurrogateCommand) -> Result<(), BoxErr> {
             grid,
             report_dir,
         } => {
-            let pf = load_platform(&platform)?;
-            let sg = Surrogate::load(&file, &pf.model.identity_hex())
-                .map_err(|e| format!("{}: {e}", file.display()))?;
+            let (pf, sg) = load_for_platform(&file, &platform)?;
             let ev = evaluate(&pf, &sg, &plant, grid)?;
             let report = sg.report().clone();
             write_report(&ev, &report_dir, Some(&report))
@@ -144,14 +139,7 @@ fn fit(a: FitArgs) -> Result<(), BoxErr> {
         require_certified_bound: a.require_certified_bound,
         ..FitOptions::default()
     };
-    let t0 = std::time::Instant::now();
-    let (sg, report) = fit_platform(&pf, &opts)?;
-    let dt = t0.elapsed().as_secs_f64();
-    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)?;
-    }
-    sg.save(&a.out)
-        .map_err(|e| format!("{}: {e}", a.out.display()))?;
+    let (sg, report, dt) = fit_and_save(&pf, &opts, &a.out)?;
     print!(
         "{}",
         FitSummary {
