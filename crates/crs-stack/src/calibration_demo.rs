@@ -2,8 +2,8 @@
 //! identification and a validation campaign recorded on the simulated plant with the nominal
 //! model, saved as data sets next to the report.
 
+use calibrate::Observation;
 use cdpr_model::config::{ConfigError, Platform};
-use crs_dataset::Dataset;
 use sim_plant::campaign::CampaignError;
 use sim_plant::{Plant, PlantError, PoseSet};
 use std::path::Path;
@@ -19,18 +19,21 @@ pub enum DemoError {
     Campaign(#[from] CampaignError),
     #[error(transparent)]
     Io(#[from] std::io::Error),
+    #[error(transparent)]
+    Observations(#[from] calibrate::observation::ObservationError),
 }
 
-/// The two data sets and the platform they were recorded with (the plant's nominal).
+/// The two campaigns' observations and the platform they were recorded with (the plant's
+/// nominal).
 pub struct DemoData {
     pub base: Platform,
-    pub identification: Dataset,
-    pub validation: Dataset,
+    pub identification: Vec<Observation>,
+    pub validation: Vec<Observation>,
 }
 
 /// Records the campaign `campaign` on the plant `plant` (identification), and again with its
 /// random poses and noise seeded `validation_seed_offset` further on (validation); writes
-/// identification.csv and validation.csv into `out`. `progress` shows which campaign runs.
+/// identification.csv and validation.csv into `out` and returns their observations. `progress` shows which campaign runs.
 pub fn record(
     plant: &Path,
     campaign: &Path,
@@ -56,9 +59,10 @@ pub fn record(
     std::fs::create_dir_all(out)?;
     crs_dataset::save_dataset(out.join("identification.csv"), &identification)?;
     crs_dataset::save_dataset(out.join("validation.csv"), &validation)?;
+    let m = base.model.m();
     Ok(DemoData {
+        identification: calibrate::from_dataset(&identification, m)?,
+        validation: calibrate::from_dataset(&validation, m)?,
         base,
-        identification,
-        validation,
     })
 }

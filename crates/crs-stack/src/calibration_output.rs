@@ -106,6 +106,49 @@ pub fn write(
     })
 }
 
+/// Why the data of an identification could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    #[error(transparent)]
+    Platform(#[from] ConfigError),
+    #[error(transparent)]
+    Dataset(#[from] crs_dataset::DatasetError),
+    /// The data set (named) does not fit the platform.
+    #[error("{}: {source}", path.display())]
+    Observations {
+        path: PathBuf,
+        source: calibrate::observation::ObservationError,
+    },
+}
+
+/// The observations of the data set `path` for a platform of `m` cables.
+pub fn load_observations(path: &Path, m: usize) -> Result<Vec<Observation>, DataError> {
+    let ds = crs_dataset::load_dataset(path)?;
+    calibrate::from_dataset(&ds, m).map_err(|source| DataError::Observations {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The nominal platform `platform` and the training and held-out observations of `crs calibrate
+/// run`: the data set `data` and the validation set `validate`, or without one every
+/// `holdout_every`-th pose of `data` held out.
+pub fn load_run_data(
+    platform: &Path,
+    data: &Path,
+    validate: Option<&Path>,
+    holdout_every: u64,
+) -> Result<(Platform, Vec<Observation>, Vec<Observation>), DataError> {
+    let base = load_platform(platform)?;
+    let m = base.model.m();
+    let obs = load_observations(data, m)?;
+    let (train, holdout) = match validate {
+        Some(v) => (obs, load_observations(v, m)?),
+        None => calibrate::split(&obs, holdout_every),
+    };
+    Ok((base, train, holdout))
+}
+
 /// What one identification run does besides the data: the pipeline, the optional
 /// repeatability assessment, the output directory and the command quoted in the report.
 pub struct Identification<'a> {

@@ -4,9 +4,9 @@
 //! refitted surrogate, re-run the same campaign and report the MEASURED pose error at the rest
 //! points before and after. `crs calibrate campaign` makes the campaign file.
 
-use crate::calibrate_report::Spinner;
 use crs_stack::calibration_loop::{LoopOptions, StackTools};
 use crs_stack::campaign::{self, CampaignRequest};
+use crs_stack::progress::Spinner;
 use std::path::PathBuf;
 
 type BoxErr = Box<dyn std::error::Error>;

@@ -1,9 +1,7 @@
 //! `crs`: the operator / commissioning command line of the cable-robot stack.
 
-mod calibrate_bench;
 mod calibrate_cmd;
 mod calibrate_loop_cmd;
-mod calibrate_report;
 mod console_cmd;
 mod gen_cmd;
 mod load_cmd;
