@@ -9,10 +9,12 @@ use cdpr_model::config::Platform;
 use cdpr_model::{Data, Pose, kinematics};
 use std::path::Path;
 
+use cdpr_model::workspace::PositionBox;
+use model_analysis::reachable::{self, PlantMeasurement, Prediction, ReachableReport};
 /// What the plant did at one reference pose, and the payload step of the sensitivity map: the
 /// analysis side (`model_analysis::reachable`) defines both, the plant fills them in here.
 pub use model_analysis::reachable::{Measured, payload_step};
-use model_analysis::reachable::{PlantMeasurement, Prediction};
+use nalgebra::Vector3;
 
 /// Measures `refs` on the plant `plant_path`; returns the measurements and, when the plant is
 /// built on another platform file than the controller's `platform_path`, a note saying so.
@@ -101,4 +103,28 @@ pub fn measure_prediction(
         seconds: t0.elapsed().as_secs_f64(),
     };
     Ok((m, note))
+}
+
+/// `crs model workspace --reachable`: the model's prediction of W_R on the `resolution`³ grid
+/// of `bounds` at orientation `phi` (rad) and, with `plant`, the plant's measurement of it;
+/// `platform_path` is the controller's platform file (a plant built on another one gets a note,
+/// returned next to the report).
+pub fn analyse(
+    pf: &Platform,
+    platform_path: &Path,
+    bounds: PositionBox,
+    phi: &Vector3<f64>,
+    resolution: usize,
+    plant: Option<&Path>,
+) -> Result<(ReachableReport, Option<String>), Box<dyn std::error::Error>> {
+    let pred = reachable::predict(pf, &bounds, phi, resolution)?;
+    let (measured, note) = match plant {
+        Some(p) => {
+            let (m, note) = measure_prediction(p, platform_path, pf, &pred)?;
+            (Some(m), note)
+        }
+        None => (None, None),
+    };
+    let r = ReachableReport::new(pf, bounds, resolution, pred, measured);
+    Ok((r, note))
 }

@@ -9,7 +9,7 @@ use cdpr_model::planar::{self, AreaTest, PlanarModel, PlanarPose, Reachable};
 use nalgebra::{DVector, Vector2};
 use serde_json::json;
 use std::fmt::{self, Write as _};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The parameters varied from the spec's example.
 #[derive(Clone, Copy, Debug)]
@@ -41,6 +41,8 @@ pub struct PlanarReport {
     pub pulleys: Vec<(f64, f64, usize)>,
     /// Grid points the two W_PHYS tests could not evaluate.
     pub unevaluated: usize,
+    /// The SVG map, once written.
+    pub svg: Option<PathBuf>,
 }
 
 /// Recomputes the planar example with the limits, stiffness and grid of `r`.
@@ -83,6 +85,7 @@ pub fn planar(r: &PlanarRequest) -> Result<PlanarReport, AnalysisError> {
         reach,
         pulleys,
         unevaluated: e1 + e2,
+        svg: None,
     })
 }
 
@@ -107,7 +110,7 @@ impl PlanarReport {
 
     /// Area map: grey = W_PHYS by the exact test only, blue = also the closed form, outlined
     /// dots = reachable by the kinematic controller (W_R); frame anchors as red squares.
-    pub fn write_svg(&self, path: &Path) -> Result<(), AnalysisError> {
+    pub fn write_svg(&mut self, path: &Path) -> Result<(), AnalysisError> {
         let (model, grid, h, x_ini) = (&self.model, &self.grid, self.request.grid_m, &self.x_ini);
         let (x0, y0, x1, y1) = (-6.6, -0.7, 5.7, 8.7);
         let s = 60.0; // px per m
@@ -169,6 +172,7 @@ impl PlanarReport {
             (y1 - y0) * s + 32.0
         )?;
         std::fs::write(path, svg)?;
+        self.svg = Some(path.to_path_buf());
         Ok(())
     }
 }
@@ -247,6 +251,9 @@ impl fmt::Display for PlanarReport {
                 "not evaluated (counted as outside): elastostatic FK failed on {} grid points, {} points could not be evaluated",
                 reach.fk_failures, self.unevaluated
             )?;
+        }
+        if let Some(p) = &self.svg {
+            writeln!(f, "map written to {}", p.display())?;
         }
         Ok(())
     }

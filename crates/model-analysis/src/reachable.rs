@@ -12,7 +12,7 @@ use cdpr_model::{Data, Pose};
 use nalgebra::{Vector3, Vector6};
 use serde_json::json;
 use std::fmt::{self, Write as _};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// What a plant did at one reference pose.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -105,6 +105,8 @@ pub struct ReachableReport {
     pub resolution: usize,
     pub prediction: Prediction,
     pub plant: Option<PlantMeasurement>,
+    /// The SVG map, once written.
+    pub svg: Option<PathBuf>,
 }
 
 /// The plant's figures against the prediction.
@@ -143,6 +145,7 @@ impl ReachableReport {
             resolution,
             prediction,
             plant,
+            svg: None,
         }
     }
 
@@ -239,7 +242,7 @@ impl ReachableReport {
 
     /// The map of the slice through the home position: W_R predicted (shade = |Δr| under the
     /// payload step), wrench feasible only, and where the plant disagrees.
-    pub fn write_svg(&self, path: &Path) -> Result<(), AnalysisError> {
+    pub fn write_svg(&mut self, path: &Path) -> Result<(), AnalysisError> {
         let (refs, exact) = (&self.prediction.refs, &self.prediction.exact);
         let pred = &self.prediction.analysis;
         let measured = self.plant.as_ref().map(|p| &p.measured);
@@ -336,6 +339,7 @@ impl ReachableReport {
             self.plant.as_ref().map_or("not run", |p| p.config.as_str())
         )?;
         std::fs::write(path, svg)?;
+        self.svg = Some(path.to_path_buf());
         Ok(())
     }
 }
@@ -426,6 +430,13 @@ impl fmt::Display for ReachableReport {
                     s.rel.len()
                 )?;
             }
+        }
+        if let Some(p) = &self.svg {
+            writeln!(
+                f,
+                "  map of the slice through home written to {}",
+                p.display()
+            )?;
         }
         Ok(())
     }

@@ -12,7 +12,7 @@ use cdpr_model::{Data, Model, Pose, workspace};
 use nalgebra::Vector3;
 use serde_json::json;
 use std::fmt::{self, Write as _};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The parameter uncertainties in the units people give them, and what to show.
 #[derive(Clone, Debug)]
@@ -78,6 +78,8 @@ pub struct SensitivityReport {
     pub map: Option<Vec<(Pose, MapPoint)>>,
     region: cdpr_model::workspace::PositionBox,
     home_z: f64,
+    /// The SVG of the map's slice, once written.
+    pub svg: Option<PathBuf>,
 }
 
 /// RMS position error of one parameter group alone, m.
@@ -191,6 +193,7 @@ pub fn sensitivity(
         errors: e,
         region: pf.region.position,
         home_z: pf.home.r.z,
+        svg: None,
     })
 }
 
@@ -282,7 +285,7 @@ impl SensitivityReport {
     }
 
     /// The map's slice through the home height; nothing without a map.
-    pub fn write_svg(&self, path: &Path) -> Result<(), AnalysisError> {
+    pub fn write_svg(&mut self, path: &Path) -> Result<(), AnalysisError> {
         let Some(pts) = &self.map else {
             return Ok(());
         };
@@ -363,6 +366,7 @@ impl SensitivityReport {
             y0 + 18.0
         )?;
         std::fs::write(path, svg)?;
+        self.svg = Some(path.to_path_buf());
         Ok(())
     }
 }
@@ -448,6 +452,9 @@ impl fmt::Display for SensitivityReport {
                     )?;
                 }
             }
+        }
+        if let Some(p) = &self.svg {
+            writeln!(f, "  map slice written to {}", p.display())?;
         }
         Ok(())
     }

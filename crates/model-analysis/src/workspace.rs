@@ -7,7 +7,7 @@ use cdpr_model::config::Platform;
 use cdpr_model::workspace::{self, FeasibilityTest, GridResult, Hull, PositionBox};
 use serde_json::json;
 use std::fmt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The grid (and hull) of one feasibility test.
 pub struct Evaluated {
@@ -26,6 +26,8 @@ pub struct WorkspaceReport {
     pub resolution: usize,
     /// One entry per test, in the order asked for.
     pub runs: Vec<Evaluated>,
+    /// The CSV of the grid, once written.
+    pub csv: Option<PathBuf>,
 }
 
 /// Samples the `resolution`³ grid of `bounds` at the orientation `rotation_deg` with each of
@@ -62,6 +64,7 @@ pub fn workspace(
         rotation_deg,
         resolution,
         runs,
+        csv: None,
     })
 }
 
@@ -74,7 +77,7 @@ fn key(t: FeasibilityTest) -> &'static str {
 
 impl WorkspaceReport {
     /// Every grid point with each test's verdict and whether it lies on the boundary.
-    pub fn write_csv(&self, path: &Path) -> Result<(), AnalysisError> {
+    pub fn write_csv(&mut self, path: &Path) -> Result<(), AnalysisError> {
         let mut w = csv::Writer::from_path(path)?;
         let mut header = vec!["x_m", "y_m", "z_m"];
         for r in &self.runs {
@@ -84,6 +87,7 @@ impl WorkspaceReport {
             });
         }
         w.write_record(&header)?;
+        self.csv = Some(path.to_path_buf());
         let Some(first) = self.runs.first() else {
             return Ok(w.flush()?);
         };
@@ -174,6 +178,9 @@ impl fmt::Display for WorkspaceReport {
                     _ => String::new(),
                 }
             )?;
+        }
+        if let Some(p) = &self.csv {
+            writeln!(f, "grid written to {}", p.display())?;
         }
         Ok(())
     }

@@ -6,7 +6,7 @@ use cdpr_model::config::load_platform;
 use cdpr_model::workspace::FeasibilityTest;
 use cdpr_model::{Data, Pose, kinematics};
 use crs_test_support::fixtures::config;
-use model_analysis::{kinematics as ik_fk, statics, truss, workspace};
+use model_analysis::{Report, kinematics as ik_fk, statics, truss, workspace};
 
 #[test]
 fn ik_report_lists_every_cable_with_the_model_lengths_and_fk_inverts_it() {
@@ -51,7 +51,7 @@ fn forces_report_the_exact_test_accepts_what_the_closed_form_accepts() {
 fn workspace_report_counts_match_its_csv_and_the_closed_form_is_a_subset() {
     let pf = load_platform(config("icosahedron.toml")).unwrap();
     let n = 4;
-    let r = workspace::workspace(
+    let mut r = workspace::workspace(
         &pf,
         pf.region.position,
         [0.0; 3],
@@ -113,4 +113,27 @@ fn truss_worst_case_is_at_least_the_home_pose() {
         .fold(0.0f64, |a, v| a.max(v.abs()));
     assert_eq!(f.abs(), max);
     assert_eq!(home.json()["worst_member"], j + 1);
+}
+
+#[test]
+fn a_written_file_is_named_in_the_table_not_in_the_json() {
+    let pf = load_platform(config("icosahedron.toml")).unwrap();
+    let mut r = workspace::workspace(
+        &pf,
+        pf.region.position,
+        [0.0; 3],
+        2,
+        false,
+        &[FeasibilityTest::ClosedForm],
+    )
+    .unwrap();
+    assert!(!r.to_string().contains("grid written to"));
+    let p = std::env::temp_dir().join(format!("model-analysis-w-{}.csv", std::process::id()));
+    r.write_csv(&p).unwrap();
+    assert!(
+        r.to_string()
+            .ends_with(&format!("grid written to {}\n", p.display()))
+    );
+    assert!(!r.json().to_string().contains("written"));
+    std::fs::remove_file(p).ok();
 }

@@ -82,7 +82,7 @@ pub(super) fn planar(a: &PlanarArgs) -> Res {
     if !(a.grid_m.is_finite() && a.grid_m >= 0.02) {
         return Err("--grid-m must be at least 0.02 m".into());
     }
-    let r = model_analysis::planar::planar(&PlanarRequest {
+    let mut r = model_analysis::planar::planar(&PlanarRequest {
         f_min_n: a.f_min_n,
         f_max_n: a.f_max_n,
         k_f_n: a.k_f_n,
@@ -92,9 +92,6 @@ pub(super) fn planar(a: &PlanarArgs) -> Res {
         r.write_svg(path)?;
     }
     show(a.json, &r);
-    if let (Some(p), false) = (&a.svg, a.json) {
-        println!("map written to {}", p.display());
-    }
     Ok(())
 }
 
@@ -137,7 +134,7 @@ pub(super) fn sensitivity(a: &SensitivityArgs) -> Res {
     }
     let x = a.pose.pose(&pf)?;
     let label = a.common.platform.display().to_string();
-    let r = model_analysis::sensitivity::sensitivity(
+    let mut r = model_analysis::sensitivity::sensitivity(
         &pf,
         &label,
         &x,
@@ -157,8 +154,5 @@ pub(super) fn sensitivity(a: &SensitivityArgs) -> Res {
         return Ok(());
     }
     print!("{r}");
-    if let Some(p) = &a.svg {
-        println!("  map slice written to {}", p.display());
-    }
     Ok(())
 }

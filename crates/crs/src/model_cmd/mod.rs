@@ -9,7 +9,6 @@ use cdpr_model::Pose;
 use cdpr_model::config::{Platform, load_platform};
 use cdpr_model::workspace::FeasibilityTest;
 use model_analysis::Report;
-use model_analysis::reachable;
 use nalgebra::Vector3;
 use std::error::Error;
 use std::path::PathBuf;
@@ -241,30 +240,21 @@ impl WorkspaceArgs {
         let rot = triple("--rotation-deg", &self.rotation_deg)?;
         let (json, n) = (self.common.json, self.resolution);
         if self.reachable {
-            let pred = reachable::predict(&pf, &bounds, &rot.map(f64::to_radians), n)?;
-            let measured = match &self.plant {
-                Some(p) => {
-                    let (m, note) = crs_stack::reachable_on_plant::measure_prediction(
-                        p,
-                        &self.common.platform,
-                        &pf,
-                        &pred,
-                    )?;
-                    if let Some(n) = note {
-                        eprintln!("{n}");
-                    }
-                    Some(m)
-                }
-                None => None,
-            };
-            let r = reachable::ReachableReport::new(&pf, bounds, n, pred, measured);
+            let (mut r, note) = crs_stack::reachable_on_plant::analyse(
+                &pf,
+                &self.common.platform,
+                bounds,
+                &rot.map(f64::to_radians),
+                n,
+                self.plant.as_deref(),
+            )?;
+            if let Some(n) = note {
+                eprintln!("{n}");
+            }
             if let Some(path) = &self.svg {
                 r.write_svg(path)?;
             }
             show(json, &r);
-            if let (Some(p), false) = (&self.svg, json) {
-                println!("  map of the slice through home written to {}", p.display());
-            }
             return Ok(());
         }
         let tests: &[FeasibilityTest] = match self.test {
@@ -272,14 +262,12 @@ impl WorkspaceArgs {
             TestArg::Exact => &[FeasibilityTest::Exact],
             TestArg::Both => &[FeasibilityTest::ClosedForm, FeasibilityTest::Exact],
         };
-        let r = model_analysis::workspace::workspace(&pf, bounds, rot.into(), n, self.hull, tests)?;
+        let mut r =
+            model_analysis::workspace::workspace(&pf, bounds, rot.into(), n, self.hull, tests)?;
         if let Some(path) = &self.csv {
             r.write_csv(path)?;
         }
         show(json, &r);
-        if let (Some(p), false) = (&self.csv, json) {
-            println!("grid written to {}", p.display());
-        }
         Ok(())
     }
 }
