@@ -15,43 +15,40 @@ pub enum LoadCommand {
     /// A subject walks a rectangle on the cabin floor of the simulated plant while the cabin is
     /// held; the cable forces alone track where it stands (eq. 5.9–5.10). Prints the tracking
     /// error against the seed's ±9.7 cm, writes walk.svg and walk.json.
-    Track {
-        /// Plant TOML (the controller's model is its nominal platform).
-        #[arg(long, default_value = "config/plant/icosahedron.toml")]
-        plant: PathBuf,
-        /// Subject mass, kg.
-        #[arg(long, default_value_t = 80.0)]
-        subject_kg: f64,
-        /// Laps of the 1.2 m × 1.0 m rectangle at 0.5 m/s, forces sampled at 10 Hz.
-        #[arg(long, default_value_t = 2)]
-        laps: usize,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        #[arg(long, default_value = "out/load-track")]
-        out: PathBuf,
-    },
+    Track(TrackArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TrackArgs {
+    /// Plant TOML (the controller's model is its nominal platform).
+    #[arg(long, default_value = "config/plant/icosahedron.toml")]
+    plant: PathBuf,
+    /// Subject mass, kg.
+    #[arg(long, default_value_t = 80.0)]
+    subject_kg: f64,
+    /// Laps of the 1.2 m × 1.0 m rectangle at 0.5 m/s, forces sampled at 10 Hz.
+    #[arg(long, default_value_t = 2)]
+    laps: usize,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[arg(long, default_value = "out/load-track")]
+    out: PathBuf,
 }
 
 pub fn run(cmd: LoadCommand) -> Result<(), BoxErr> {
     match cmd {
-        LoadCommand::Track {
-            plant,
-            subject_kg,
-            laps,
-            seed,
-            out,
-        } => {
-            if !(subject_kg.is_finite() && subject_kg > 0.0) {
-                return Err(format!("--subject-kg must be > 0, got {subject_kg}").into());
+        LoadCommand::Track(a) => {
+            if !(a.subject_kg.is_finite() && a.subject_kg > 0.0) {
+                return Err(format!("--subject-kg must be > 0, got {}", a.subject_kg).into());
             }
             let r = load_experiment::run(&WalkConfig {
-                plant,
-                subject_kg,
-                laps,
-                seed,
+                plant: a.plant,
+                subject_kg: a.subject_kg,
+                laps: a.laps,
+                seed: a.seed,
                 ..WalkConfig::default()
             })?;
-            let (svg, json) = load_experiment::write(&r, &out)?;
+            let (svg, json) = load_experiment::write(&r, &a.out)?;
             print!("{r}");
             println!("wrote {} and {}", svg.display(), json.display());
             Ok(())

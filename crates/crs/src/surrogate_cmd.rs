@@ -22,18 +22,21 @@ pub enum SurrogateCommand {
         platform: PathBuf,
     },
     /// Evaluate an existing surrogate on the plant (kinematics + surrogate vs kinematics alone).
-    Evaluate {
-        #[arg(long)]
-        file: PathBuf,
-        #[arg(long, default_value = "config/crs-nominal.toml")]
-        platform: PathBuf,
-        #[arg(long, default_value = "config/plant/crs-ideal.toml")]
-        plant: PathBuf,
-        #[arg(long, default_value_t = 5)]
-        grid: usize,
-        #[arg(long, default_value = "out/surrogate-report")]
-        report_dir: PathBuf,
-    },
+    Evaluate(EvaluateArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct EvaluateArgs {
+    #[arg(long)]
+    file: PathBuf,
+    #[arg(long, default_value = "config/crs-nominal.toml")]
+    platform: PathBuf,
+    #[arg(long, default_value = "config/plant/crs-ideal.toml")]
+    plant: PathBuf,
+    #[arg(long, default_value_t = 5)]
+    grid: usize,
+    #[arg(long, default_value = "out/surrogate-report")]
+    report_dir: PathBuf,
 }
 
 #[derive(clap::Args, Debug)]
@@ -96,17 +99,11 @@ pub fn run(cmd: SurrogateCommand) -> Result<(), BoxErr> {
             );
             Ok(())
         }
-        SurrogateCommand::Evaluate {
-            file,
-            platform,
-            plant,
-            grid,
-            report_dir,
-        } => {
-            let (pf, sg) = load_for_platform(&file, &platform)?;
-            let ev = evaluate(&pf, &sg, &plant, grid)?;
+        SurrogateCommand::Evaluate(a) => {
+            let (pf, sg) = load_for_platform(&a.file, &a.platform)?;
+            let ev = evaluate(&pf, &sg, &a.plant, a.grid)?;
             let report = sg.report().clone();
-            write_report(&ev, &report_dir, Some(&report))
+            write_report(&ev, &a.report_dir, Some(&report))
         }
     }
 }
