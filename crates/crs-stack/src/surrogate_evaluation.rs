@@ -49,13 +49,57 @@ pub enum SurrogateFileError {
     },
 }
 
-/// [`fit_platform`] timed, saved to `out` (its directory created); returns the surrogate, its
-/// report and the fit's time in s.
+/// A fitted surrogate, saved; it prints as `crs surrogate fit` shows it: size, conditioning,
+/// fit error and the bound of eq. 5.27 with its margin.
+pub struct Fitted {
+    pub surrogate: Surrogate,
+    pub report: surrogate::FitReport,
+    /// Time of the fit, s.
+    pub seconds: f64,
+    /// The file written.
+    pub out: std::path::PathBuf,
+    /// The platform's name and cable count.
+    pub platform: String,
+    pub cables: usize,
+}
+
+impl std::fmt::Display for Fitted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let report = &self.report;
+        writeln!(
+            f,
+            "fitted `{}` ({} cables) over its operating region in {:.2} s",
+            self.platform, self.cables, self.seconds
+        )?;
+        writeln!(
+            f,
+            "  degree {}, {} coefficients/cable, {} fit / {} validation samples, condition {:.2}",
+            report.degree,
+            report.n_coeffs_per_cable,
+            report.n_fit_samples,
+            report.n_validation_samples,
+            report.condition_number
+        )?;
+        writeln!(
+            f,
+            "  fit error vs the full model: max {:.4} mm, mean {:.4} mm",
+            report.max_fit_error_mm, report.mean_fit_error_mm
+        )?;
+        writeln!(
+            f,
+            "  max |φ_sg| {:.2} mm (sampled), certified Σ|c| {:.2} mm < bound {:.0} mm − margin {:.0} mm (eq. 5.27)",
+            report.max_abs_offset_mm, report.certified_bound_mm, report.bound_mm, report.margin_mm
+        )?;
+        writeln!(f, "wrote {}", self.out.display())
+    }
+}
+
+/// [`fit_platform`] timed and saved to `out` (its directory created).
 pub fn fit_and_save(
     pf: &Platform,
     opts: &FitOptions,
     out: &Path,
-) -> Result<(Surrogate, surrogate::FitReport, f64), SurrogateFileError> {
+) -> Result<Fitted, SurrogateFileError> {
     let t0 = std::time::Instant::now();
     let (sg, report) = fit_platform(pf, opts)?;
     let dt = t0.elapsed().as_secs_f64();
@@ -66,7 +110,14 @@ pub fn fit_and_save(
         file: out.to_path_buf(),
         source,
     })?;
-    Ok((sg, report, dt))
+    Ok(Fitted {
+        surrogate: sg,
+        report,
+        seconds: dt,
+        out: out.to_path_buf(),
+        platform: pf.name.clone(),
+        cables: pf.model.m(),
+    })
 }
 
 /// The platform TOML `platform` and the surrogate file `file` checked against it as the daemon

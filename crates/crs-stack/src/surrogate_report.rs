@@ -22,53 +22,6 @@ impl std::fmt::Display for Written {
     }
 }
 
-/// A surrogate fit as `crs surrogate fit` prints it: size, conditioning, fit error and the
-/// bound of eq. 5.27 with its margin.
-pub struct FitSummary<'a> {
-    /// The platform's name and cable count.
-    pub platform: &'a str,
-    pub cables: usize,
-    /// Time of the fit, s.
-    pub seconds: f64,
-    pub report: &'a surrogate::FitReport,
-    /// The surrogate file written.
-    pub out: &'a Path,
-}
-
-impl std::fmt::Display for FitSummary<'_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let report = self.report;
-        writeln!(
-            f,
-            "fitted `{}` ({} cables) over its operating region in {:.2} s",
-            self.platform, self.cables, self.seconds
-        )?;
-        writeln!(
-            f,
-            "  degree {}, {} coefficients/cable, {} fit / {} validation samples, condition {:.2}",
-            report.degree,
-            report.n_coeffs_per_cable,
-            report.n_fit_samples,
-            report.n_validation_samples,
-            report.condition_number
-        )?;
-        writeln!(
-            f,
-            "  fit error vs the full model: max {:.4} mm, mean {:.4} mm",
-            report.max_fit_error_mm, report.mean_fit_error_mm
-        )?;
-        writeln!(
-            f,
-            "  max |φ_sg| {:.2} mm (sampled), certified Σ|c| {:.2} mm < bound {:.0} mm − margin {:.0} mm (eq. 5.27)",
-            report.max_abs_offset_mm,
-            report.certified_bound_mm,
-            report.bound_mm,
-            report.margin_mm
-        )?;
-        writeln!(f, "wrote {}", self.out.display())
-    }
-}
-
 /// Write report.md, report.json and tracking.svg of `ev` (and the fit's figures) into `dir`.
 pub fn write(
     ev: &Evaluation,

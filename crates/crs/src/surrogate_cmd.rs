@@ -2,9 +2,9 @@
 //! (sec. 5.6, eq. 5.23–5.27), its file check, and its evaluation on the simulated plant.
 
 use cdpr_model::config::load_platform;
-use crs_stack::surrogate_evaluation::{Evaluation, evaluate, fit_and_save, load_for_platform};
-use crs_stack::surrogate_report::{self, FitSummary};
-use std::path::{Path, PathBuf};
+use crs_stack::surrogate_evaluation::{evaluate, fit_and_save, load_for_platform};
+use crs_stack::surrogate_report;
+use std::path::PathBuf;
 use surrogate::{Basis, FitOptions};
 
 #[derive(clap::Subcommand, Debug)]
@@ -102,8 +102,11 @@ pub fn run(cmd: SurrogateCommand) -> Result<(), BoxErr> {
         SurrogateCommand::Evaluate(a) => {
             let (pf, sg) = load_for_platform(&a.file, &a.platform)?;
             let ev = evaluate(&pf, &sg, &a.plant, a.grid)?;
-            let report = sg.report().clone();
-            write_report(&ev, &a.report_dir, Some(&report))
+            print!(
+                "{}",
+                surrogate_report::write(&ev, &a.report_dir, Some(sg.report()))?
+            );
+            Ok(())
         }
     }
 }
@@ -136,29 +139,14 @@ fn fit(a: FitArgs) -> Result<(), BoxErr> {
         require_certified_bound: a.require_certified_bound,
         ..FitOptions::default()
     };
-    let (sg, report, dt) = fit_and_save(&pf, &opts, &a.out)?;
-    print!(
-        "{}",
-        FitSummary {
-            platform: &pf.name,
-            cables: pf.model.m(),
-            seconds: dt,
-            report: &report,
-            out: &a.out,
-        }
-    );
+    let fitted = fit_and_save(&pf, &opts, &a.out)?;
+    print!("{fitted}");
     if let Some(plant) = &a.plant {
-        let ev = evaluate(&pf, &sg, plant, a.grid)?;
-        write_report(&ev, &a.report_dir, Some(&report))?;
+        let ev = evaluate(&pf, &fitted.surrogate, plant, a.grid)?;
+        print!(
+            "{}",
+            surrogate_report::write(&ev, &a.report_dir, Some(&fitted.report))?
+        );
     }
-    Ok(())
-}
-
-fn write_report(
-    ev: &Evaluation,
-    dir: &Path,
-    fit: Option<&surrogate::FitReport>,
-) -> Result<(), BoxErr> {
-    print!("{}", surrogate_report::write(ev, dir, fit)?);
     Ok(())
 }
