@@ -6,7 +6,7 @@ use cdpr_model::config::load_platform;
 use cdpr_model::workspace::FeasibilityTest;
 use cdpr_model::{Data, Pose, kinematics};
 use crs_test_support::fixtures::config;
-use model_analysis::{Report, kinematics as ik_fk, statics, truss, workspace};
+use model_analysis::{kinematics as ik_fk, statics, truss, workspace};
 
 #[test]
 fn ik_report_lists_every_cable_with_the_model_lengths_and_fk_inverts_it() {
