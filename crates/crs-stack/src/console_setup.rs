@@ -118,3 +118,25 @@ pub fn serve(
     crs_console::run_blocking(cfg)?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_plan_view_ends_each_waypoint_later_and_the_last_at_the_total() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config");
+        let daemon = motion_core::daemon::config::load(&dir.join("motion-core.toml")).unwrap();
+        let pf = cdpr_model::config::load_platform(&daemon.platform).unwrap();
+        let v = plan_view(&daemon, &pf, &dir.join("demo-waypoints.csv")).unwrap();
+        assert!(!v.waypoint_end_s.is_empty());
+        assert!(v.waypoint_end_s.windows(2).all(|w| w[1] > w[0]));
+        assert_eq!(*v.waypoint_end_s.last().unwrap(), v.total_s);
+        assert!(matches!(
+            plan_view(&daemon, &pf, &dir.join("nonesuch.csv")),
+            Err(PlanViewError::Waypoints(_))
+        ));
+        let view = platform_view(&pf);
+        assert_eq!(view.frame_anchors_m.len(), pf.model.m());
+    }
+}

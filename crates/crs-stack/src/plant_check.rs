@@ -78,3 +78,40 @@ impl fmt::Display for PlantCheck {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plant(name: &str) -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../config/plant")
+            .join(name)
+    }
+
+    #[test]
+    fn a_plant_with_set_up_tension_settles_at_home_and_says_so() {
+        let c = check(&plant("crs-ideal.toml")).unwrap();
+        let h = c
+            .home
+            .as_ref()
+            .unwrap()
+            .as_ref()
+            .expect("crs-nominal has f_ini");
+        assert_eq!(h.forces.len(), c.cables);
+        // The ideal plant holds the set-up pose it was tensioned at (eq. 3.14).
+        assert!(h.dr_m < 1e-6 && h.dphi_rad < 1e-6, "{}", c);
+        let text = c.to_string();
+        assert!(
+            text.contains("home settled") && text.contains("forces at home"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_plant_without_set_up_tension_is_described_only() {
+        let c = check(&plant("icosahedron.toml")).unwrap();
+        assert!(matches!(c.home, Ok(None)));
+        assert_eq!(c.to_string().lines().count(), 2);
+    }
+}

@@ -304,4 +304,32 @@ mod tests {
             }
         }
     }
+
+    #[test]
+    fn select_takes_the_flag_else_the_daemons_platform_else_the_icosahedron() {
+        let dir = config_dir();
+        let heli = dir.join("motion-core-helicopter.toml");
+        let ico = dir.join("motion-core.toml");
+        assert_eq!(select(None, None, &dir).unwrap(), KNOWN[0].configs(&dir));
+        assert_eq!(
+            select(None, Some(&heli), &dir).unwrap(),
+            resolve("helicopter", &dir).unwrap()
+        );
+        assert_eq!(
+            select(Some("helicopter"), Some(&heli), &dir).unwrap(),
+            resolve("helicopter", &dir).unwrap()
+        );
+        // A daemon TOML of another platform next to --platform is refused, naming both.
+        let e = select(Some("helicopter"), Some(&ico), &dir).unwrap_err();
+        assert!(matches!(e, SelectError::Conflict { .. }), "{e}");
+        let text = e.to_string();
+        assert!(
+            text.contains("--platform helicopter") && text.contains("leave one out"),
+            "{text}"
+        );
+        assert!(matches!(
+            select(Some("nonesuch"), None, &dir),
+            Err(SelectError::Platform(_))
+        ));
+    }
 }
