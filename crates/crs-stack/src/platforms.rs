@@ -190,6 +190,58 @@ pub enum SelectError {
     /// The plant TOML.
     #[error("{0}")]
     Plant(String),
+    #[error(transparent)]
+    Timing(#[from] crate::timing::TimingError),
+}
+
+/// Single files that replace those of a platform's set (`crs sim --config/--drives/--plant/
+/// --monitor-config`).
+#[derive(Clone, Debug, Default)]
+pub struct Overrides {
+    pub daemon: Option<PathBuf>,
+    pub drives: Option<PathBuf>,
+    pub plant: Option<PathBuf>,
+    pub monitor: Option<PathBuf>,
+}
+
+/// The config files a run uses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunFiles {
+    pub daemon: PathBuf,
+    pub drives: PathBuf,
+    pub plant: PathBuf,
+    pub monitor: PathBuf,
+}
+
+/// The files of a run: the set of `platform` (or of the daemon override, see [`select`]) with
+/// single files replaced by `overrides`; the daemon, drives and monitor configs as the timing
+/// profile `timing` runs them (non-spec profiles: relaxed copies written under
+/// `out/timing-<profile>/`, [`crate::timing::write_profile`]).
+pub fn run_files(
+    platform: Option<&str>,
+    overrides: &Overrides,
+    timing: &str,
+    out: &Path,
+) -> Result<RunFiles, SelectError> {
+    let set = select(platform, overrides.daemon.as_deref(), Path::new(CONFIG_DIR))?;
+    let pick =
+        |flag: &Option<PathBuf>, default: &PathBuf| flag.clone().unwrap_or_else(|| default.clone());
+    let profile: crate::timing::TimingProfile = timing.parse()?;
+    let timed = crate::timing::write_profile(
+        profile,
+        &crate::timing::TimedConfigs {
+            daemon: pick(&overrides.daemon, &set.daemon),
+            drives: pick(&overrides.drives, &set.drives),
+            monitor: pick(&overrides.monitor, &set.monitor),
+        },
+        &out.join(format!("timing-{}", profile.name())),
+    )?;
+    Ok(RunFiles {
+        daemon: timed.daemon,
+        drives: timed.drives,
+        plant: pick(&overrides.plant, &set.plant),
+        monitor: timed.monitor,
+    })
 }
 
 /// [`plant_platform_note`] for the platform the daemon TOML `daemon_config` runs.

@@ -6,8 +6,8 @@ use crate::console_cmd::SimConsoleArgs;
 use crs_stack::platforms;
 use crs_stack::sim_observer::SimObserver;
 use crs_stack::sim_run::{SimOptions, execute_observed};
-use crs_stack::timing::{self, TimedConfigs, TimingProfile};
-use std::path::{Path, PathBuf};
+use crs_stack::timing::TimingProfile;
+use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct SimArgs {
@@ -96,32 +96,22 @@ pub struct SimArgs {
 }
 
 impl SimArgs {
-    /// The run's options: the files of the platform's set, single files replaced by the flags.
+    /// The run's options.
     pub(crate) fn options(&self) -> Result<SimOptions, Box<dyn std::error::Error>> {
-        // The platform's set of configs: `--platform`'s, else that of the `--config` daemon.
+        // The platform's set of configs (`--platform`'s, else that of the `--config` daemon),
+        // single files replaced by the flags, as the timing profile runs them.
         let platform = self.platform.clone().or(self.ride.default_platform());
-        let set = platforms::select(
-            platform.as_deref(),
-            self.config.as_deref(),
-            Path::new(platforms::CONFIG_DIR),
-        )?;
-        let pick = |flag: &Option<PathBuf>, default: &PathBuf| {
-            flag.clone().unwrap_or_else(|| default.clone())
+        let overrides = platforms::Overrides {
+            daemon: self.config.clone(),
+            drives: self.drives.clone(),
+            plant: self.plant.clone(),
+            monitor: self.monitor_config.clone(),
         };
-        let profile: TimingProfile = self.timing.parse()?;
-        let timed = timing::write_profile(
-            profile,
-            &TimedConfigs {
-                daemon: pick(&self.config, &set.daemon),
-                drives: pick(&self.drives, &set.drives),
-                monitor: pick(&self.monitor_config, &set.monitor),
-            },
-            &self.out.join(format!("timing-{}", profile.name())),
-        )?;
+        let files = platforms::run_files(platform.as_deref(), &overrides, &self.timing, &self.out)?;
         Ok(SimOptions {
-            config: timed.daemon,
-            drives: timed.drives,
-            plant: pick(&self.plant, &set.plant),
+            config: files.daemon,
+            drives: files.drives,
+            plant: files.plant,
             transport: self.transport.clone(),
             waypoints: self.waypoints.clone(),
             hold_s: self.hold_s,
@@ -131,7 +121,7 @@ impl SimArgs {
             no_monitor: self.no_monitor,
             check: self.check,
             max_static_error_mm: self.max_static_error_mm,
-            monitor_config: timed.monitor,
+            monitor_config: files.monitor,
             dwell_s: self.dwell_s,
             record: self.record.clone(),
             settle_s: self.settle_s,
