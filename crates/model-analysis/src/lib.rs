@@ -52,8 +52,6 @@ pub enum AnalysisError {
     Planar(#[from] cdpr_model::planar::PlanarError),
     #[error(transparent)]
     Truss(#[from] cdpr_model::truss::TrussError),
-    #[error(transparent)]
-    Model(#[from] cdpr_model::ModelError),
     /// The sensitivity needs the controller's forces, which a pose outside the closed form's
     /// workspace does not have.
     #[error(
@@ -72,8 +70,6 @@ pub enum AnalysisError {
     Csv(#[from] csv::Error),
     #[error(transparent)]
     Io(#[from] std::io::Error),
-    #[error(transparent)]
-    Json(#[from] serde_json::Error),
     #[error("formatting an SVG: {0}")]
     Format(#[from] std::fmt::Error),
 }
