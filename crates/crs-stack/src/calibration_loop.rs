@@ -19,9 +19,10 @@
 //! fixes them on the real robot too (eq. 3.14 / 6.24).
 
 //!
-//! The identification with its report and the surrogate fit are the command line's (`crs
-//! calibrate run`, `crs surrogate fit`): they come in through [`LoopTools`], so this library
-//! does not depend on the CLI.
+//! The identification with its report and the surrogate fit (`crs calibrate run`, `crs
+//! surrogate fit`) come in through [`LoopTools`]; [`StackTools`] is this library's own
+//! (identification by `calibration_output`, the fit by `surrogate_evaluation`), showing its
+//! progress through the caller's [`Progress`](crate::progress::Progress).
 
 use crate::campaign::timed_waypoints;
 use crate::campaign::write_waypoints;
@@ -38,7 +39,7 @@ use std::time::Instant;
 
 type BoxErr = Box<dyn std::error::Error>;
 
-/// What the loop takes from the command line: the two steps an operator also runs by hand.
+/// The two steps of the loop an operator also runs by hand.
 pub trait LoopTools {
     /// `crs surrogate fit` of `pf` with `opts` (progress shown as the caller likes).
     fn fit_surrogate(
