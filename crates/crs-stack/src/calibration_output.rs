@@ -161,7 +161,7 @@ pub struct Identification<'a> {
 
 /// Identifies from `base` on `train` (validated on `holdout`, or on `train` when empty),
 /// assesses the repeatability when asked, and writes the report, plots, calibrated.toml and the
-/// side file into `id.out` ([`write`]). `progress` hears each stage's iterations and cost (cost
+/// side file into `id.out` ([`write()`]). `progress` hears each stage's iterations and cost (cost
 /// not finite: a stage starts) as a line of text. A final step that failed validation is an
 /// error after the files are written ([`OutputError::FinalStepFailed`]).
 pub fn identify(
@@ -201,7 +201,7 @@ pub fn identify(
 }
 
 /// [`OutputError::FinalStepFailed`] when the final step of `rep` failed validation, saying
-/// what [`write`] wrote instead.
+/// what [`write()`] wrote instead.
 pub fn final_step_check(rep: &PipelineReport, out: &Written) -> Result<(), OutputError> {
     let fin = rep.final_stage();
     if !fin.failed() {
