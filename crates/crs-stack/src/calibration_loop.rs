@@ -19,9 +19,10 @@
 //! fixes them on the real robot too (eq. 3.14 / 6.24).
 
 //!
-//! The identification with its report and the surrogate fit are the command line's (`crs
-//! calibrate run`, `crs surrogate fit`): they come in through [`LoopTools`], so this library
-//! does not depend on the CLI.
+//! The identification with its report and the surrogate fit (`crs calibrate run`, `crs
+//! surrogate fit`) come in through [`LoopTools`]; [`StackTools`] is this library's own
+//! (identification by `calibration_output`, the fit by `surrogate_evaluation`), showing its
+//! progress through the caller's [`Progress`](crate::progress::Progress).
 
 use crate::campaign::timed_waypoints;
 use crate::campaign::write_waypoints;
@@ -38,7 +39,7 @@ use std::time::Instant;
 
 type BoxErr = Box<dyn std::error::Error>;
 
-/// What the loop takes from the command line: the two steps an operator also runs by hand.
+/// The two steps of the loop an operator also runs by hand.
 pub trait LoopTools {
     /// `crs surrogate fit` of `pf` with `opts` (progress shown as the caller likes).
     fn fit_surrogate(
@@ -59,6 +60,61 @@ pub trait LoopTools {
         ridge_kf: f64,
         command: &str,
     ) -> Result<PipelineReport, BoxErr>;
+}
+
+/// The loop's tools from this library: the surrogate fit of `crs surrogate fit`
+/// ([`fit_platform`](crate::surrogate_evaluation::fit_platform)) and the identification of
+/// `crs calibrate run --no-extension --ridge-kf λ`, every other option at its default
+/// ([`identify_and_report`](crate::calibration_output::identify_and_report)); `progress` shows
+/// them running.
+pub struct StackTools<'a> {
+    pub progress: &'a mut dyn crate::progress::Progress,
+}
+
+impl LoopTools for StackTools<'_> {
+    fn fit_surrogate(
+        &mut self,
+        pf: &Platform,
+        opts: &surrogate::FitOptions,
+    ) -> Result<(surrogate::Surrogate, surrogate::FitReport), BoxErr> {
+        self.progress
+            .start(&format!("fitting the surrogate of `{}`", pf.name));
+        let r = crate::surrogate_evaluation::fit_platform(pf, opts);
+        self.progress.finish();
+        Ok(r?)
+    }
+
+    fn identify(
+        &mut self,
+        nominal: &Platform,
+        train: &[Observation],
+        held: &[Observation],
+        out: &Path,
+        _holdout_every: u64,
+        ridge_kf: f64,
+        command: &str,
+    ) -> Result<PipelineReport, BoxErr> {
+        let cfg = calibrate::pipeline::PipelineConfig {
+            ridge_kf,
+            no_extension: true,
+            ..Default::default()
+        };
+        let id = crate::calibration_output::Identification {
+            pipeline: &cfg,
+            repeatability: None,
+            out,
+            command,
+        };
+        let rep = crate::calibration_output::identify_and_report(
+            nominal,
+            train,
+            held,
+            &id,
+            false,
+            self.progress,
+        )?;
+        Ok(rep)
+    }
 }
 
 /// The options of `crs calibrate loop`.

@@ -197,6 +197,69 @@ pub fn write_waypoints(path: &Path, wps: &[Waypoint], comment: &str) -> Result<(
     })
 }
 
+/// Why `crs calibrate campaign` could not make its file.
+#[derive(Debug, thiserror::Error)]
+pub enum MakeCampaignError {
+    /// The daemon or platform TOML.
+    #[error(transparent)]
+    Config(#[from] cdpr_model::config::ConfigError),
+    #[error(transparent)]
+    Configure(#[from] motion_core::daemon::lifecycle::ConfigureError),
+    #[error(transparent)]
+    Campaign(#[from] CampaignError),
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+}
+
+/// What a campaign file is made from.
+pub struct CampaignRequest<'a> {
+    /// Platform TOML (workspace region, force limits, planner limits).
+    pub platform: &'a Path,
+    /// Daemon TOML (planner limits, loop period, feasibility check).
+    pub daemon_config: &'a Path,
+    pub poses: usize,
+    /// Fraction of the workspace box (around its centre) the poses are drawn from.
+    pub fraction: f64,
+    /// Distance of the reference forces (eq. 3.41) from f_min and f_max, N.
+    pub force_margin_n: f64,
+    /// The CSV to write.
+    pub out: &'a Path,
+}
+
+/// Generates the campaign of `r` ([`generate`], checked with motion-core's configure step) and
+/// writes it with a comment saying how it was made; returns the number of poses and the plan's
+/// duration without rests (s).
+pub fn make(r: &CampaignRequest<'_>) -> Result<(usize, f64), MakeCampaignError> {
+    let daemon = motion_core::daemon::config::load(r.daemon_config)?;
+    let pf = cdpr_model::config::load_platform(r.platform)?;
+    let checks = motion_core::daemon::lifecycle::configure_checks(&daemon, &pf)?;
+    let chosen = generate(&checks, r.poses, r.fraction, r.force_margin_n)?;
+    let (_, dur) = timed_waypoints(
+        pf.home,
+        &chosen,
+        checks.planner_limits(),
+        checks.period_s(),
+        0.0,
+    )?;
+    let comment = format!(
+        "Calibration campaign for `{}` ({}): {} poses, written by\n`crs calibrate campaign --platform {} --poses {} --fraction {} --force-margin-n {}`.\nHalton points over {:.0} % of the workspace box with varied orientations (platform geometry\nobservable), reference forces (eq. 3.41) within [f_min + {m}, f_max - {m}] N, ordered as a\nnearest-neighbour tour from the home pose; the whole plan ({dur:.1} s without rests) passes\nmotion-core's checks (workspace, limits, eq. 3.29). t_s = 0: `crs sim --dwell-s` times it.",
+        pf.name,
+        r.platform.display(),
+        chosen.len(),
+        r.platform.display(),
+        r.poses,
+        r.fraction,
+        r.force_margin_n,
+        r.fraction * 100.0,
+        m = r.force_margin_n,
+    );
+    if let Some(dir) = r.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    write_waypoints(r.out, &chosen, &comment)?;
+    Ok((chosen.len(), dur))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

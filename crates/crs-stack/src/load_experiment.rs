@@ -96,6 +96,46 @@ pub struct WalkResult {
 /// The seed's tracking accuracy (sec. 5.3), m.
 pub const SEED_TRACKING_M: f64 = 0.097;
 
+/// The summary `crs load track` prints: samples, tracking error against the seed's ±9.7 cm,
+/// estimated mass and the estimator's stated 1σ.
+impl std::fmt::Display for WalkResult {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "walking subject {:.0} kg on plant `{}`: {} samples, {} without an estimate",
+            self.subject_kg,
+            self.plant,
+            self.samples.len(),
+            self.failed
+        )?;
+        writeln!(
+            f,
+            "  tracking error: mean {:.1} cm, p95 {:.1} cm, max {:.1} cm; {:.0} % within the seed's ±{:.1} cm",
+            self.error_mean_m * 100.0,
+            self.error_p95_m * 100.0,
+            self.error_max_m * 100.0,
+            self.within_seed_share * 100.0,
+            SEED_TRACKING_M * 100.0
+        )?;
+        writeln!(
+            f,
+            "  estimated mass mean {:.1} kg; stated 1σ (10 N sensor noise) {:.1} cm",
+            self.mass_mean_kg,
+            self.stated_std_mean_m * 100.0
+        )
+    }
+}
+
+/// Writes `walk.svg` ([`plot`]) and `walk.json` into `out`; returns their paths.
+pub fn write(r: &WalkResult, out: &Path) -> Result<(PathBuf, PathBuf), BoxErr> {
+    std::fs::create_dir_all(out)?;
+    let svg = out.join("walk.svg");
+    plot(r, &svg)?;
+    let json = out.join("walk.json");
+    std::fs::write(&json, serde_json::to_string_pretty(r)?)?;
+    Ok((svg, json))
+}
+
 /// The walked rectangle: position at arc length s (platform frame xy).
 fn path_at(c: &WalkConfig, s: f64) -> [f64; 2] {
     let (a, b) = (c.half_x_m, c.half_y_m);

@@ -167,6 +167,128 @@ pub fn plant_platform_note(
     )))
 }
 
+/// Why the configs of a run could not be chosen.
+#[derive(Debug, thiserror::Error)]
+pub enum SelectError {
+    /// `--platform` names no known platform (the message lists them).
+    #[error("{0}")]
+    Platform(String),
+    /// The daemon TOML or a platform TOML.
+    #[error(transparent)]
+    Config(#[from] cdpr_model::config::ConfigError),
+    /// `--platform` and the daemon TOML of `--config` name different platforms.
+    #[error(
+        "--platform {choice} is {platform}, but --config {config} runs {runs} ({runs_file}): leave one out"
+    )]
+    Conflict {
+        choice: String,
+        platform: String,
+        config: String,
+        runs: String,
+        runs_file: String,
+    },
+    /// The plant TOML.
+    #[error("{0}")]
+    Plant(String),
+    #[error(transparent)]
+    Timing(#[from] crate::timing::TimingError),
+}
+
+/// Single files that replace those of a platform's set (`crs sim --config/--drives/--plant/
+/// --monitor-config`).
+#[derive(Clone, Debug, Default)]
+pub struct Overrides {
+    pub daemon: Option<PathBuf>,
+    pub drives: Option<PathBuf>,
+    pub plant: Option<PathBuf>,
+    pub monitor: Option<PathBuf>,
+}
+
+/// The config files a run uses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunFiles {
+    pub daemon: PathBuf,
+    pub drives: PathBuf,
+    pub plant: PathBuf,
+    pub monitor: PathBuf,
+}
+
+/// The files of a run: the set of `platform` (or of the daemon override, see [`select`]) with
+/// single files replaced by `overrides`; the daemon, drives and monitor configs as the timing
+/// profile `timing` runs them (non-spec profiles: relaxed copies written under
+/// `out/timing-<profile>/`, [`crate::timing::write_profile`]).
+pub fn run_files(
+    platform: Option<&str>,
+    overrides: &Overrides,
+    timing: &str,
+    out: &Path,
+) -> Result<RunFiles, SelectError> {
+    let set = select(platform, overrides.daemon.as_deref(), Path::new(CONFIG_DIR))?;
+    let pick =
+        |flag: &Option<PathBuf>, default: &PathBuf| flag.clone().unwrap_or_else(|| default.clone());
+    let profile: crate::timing::TimingProfile = timing.parse()?;
+    let timed = crate::timing::write_profile(
+        profile,
+        &crate::timing::TimedConfigs {
+            daemon: pick(&overrides.daemon, &set.daemon),
+            drives: pick(&overrides.drives, &set.drives),
+            monitor: pick(&overrides.monitor, &set.monitor),
+        },
+        &out.join(format!("timing-{}", profile.name())),
+    )?;
+    Ok(RunFiles {
+        daemon: timed.daemon,
+        drives: timed.drives,
+        plant: pick(&overrides.plant, &set.plant),
+        monitor: timed.monitor,
+    })
+}
+
+/// [`plant_platform_note`] for the platform the daemon TOML `daemon_config` runs.
+pub fn plant_note_for_daemon(
+    plant: &Path,
+    daemon_config: &Path,
+) -> Result<Option<String>, SelectError> {
+    let daemon = motion_core::daemon::config::load(daemon_config)?;
+    let platform = cdpr_model::config::load_platform(&daemon.platform)?;
+    plant_platform_note(plant, &daemon.platform, &platform).map_err(SelectError::Plant)
+}
+
+/// The set of configs of a run: `platform`'s; without it the set of the platform the daemon
+/// TOML `config` runs (if it is a known one), else the default ([`KNOWN`]`[0]`, the
+/// icosahedron). A daemon TOML given next to `platform` must run that platform.
+pub fn select(
+    platform: Option<&str>,
+    config: Option<&Path>,
+    dir: &Path,
+) -> Result<StackConfigs, SelectError> {
+    if let Some(p) = platform {
+        let set = resolve(p, dir).map_err(SelectError::Platform)?;
+        if let Some(config) = config {
+            let daemon = motion_core::daemon::config::load(config)?;
+            let runs = cdpr_model::config::load_platform(&daemon.platform)?;
+            let chosen = cdpr_model::config::load_platform(&set.platform)?;
+            if runs.model.identity() != chosen.model.identity() {
+                return Err(SelectError::Conflict {
+                    choice: p.to_string(),
+                    platform: set.platform.display().to_string(),
+                    config: config.display().to_string(),
+                    runs: runs.name,
+                    runs_file: daemon.platform.display().to_string(),
+                });
+            }
+        }
+        return Ok(set);
+    }
+    if let Some(config) = config {
+        let daemon = motion_core::daemon::config::load(config)?;
+        if let Ok(set) = resolve(&daemon.platform.display().to_string(), dir) {
+            return Ok(set);
+        }
+    }
+    Ok(KNOWN[0].configs(dir))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -233,5 +355,33 @@ mod tests {
                 assert!(note.is_some_and(|n| n.contains(&pf.name)));
             }
         }
+    }
+
+    #[test]
+    fn select_takes_the_flag_else_the_daemons_platform_else_the_icosahedron() {
+        let dir = config_dir();
+        let heli = dir.join("motion-core-helicopter.toml");
+        let ico = dir.join("motion-core.toml");
+        assert_eq!(select(None, None, &dir).unwrap(), KNOWN[0].configs(&dir));
+        assert_eq!(
+            select(None, Some(&heli), &dir).unwrap(),
+            resolve("helicopter", &dir).unwrap()
+        );
+        assert_eq!(
+            select(Some("helicopter"), Some(&heli), &dir).unwrap(),
+            resolve("helicopter", &dir).unwrap()
+        );
+        // A daemon TOML of another platform next to --platform is refused, naming both.
+        let e = select(Some("helicopter"), Some(&ico), &dir).unwrap_err();
+        assert!(matches!(e, SelectError::Conflict { .. }), "{e}");
+        let text = e.to_string();
+        assert!(
+            text.contains("--platform helicopter") && text.contains("leave one out"),
+            "{text}"
+        );
+        assert!(matches!(
+            select(Some("nonesuch"), None, &dir),
+            Err(SelectError::Platform(_))
+        ));
     }
 }

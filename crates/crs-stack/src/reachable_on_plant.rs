@@ -7,26 +7,14 @@
 
 use cdpr_model::config::Platform;
 use cdpr_model::{Data, Pose, kinematics};
-use nalgebra::Vector6;
 use std::path::Path;
 
-/// What the plant did at one reference pose.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Measured {
-    /// Forces within the limits; position error |r_M − r| (m) and the measured |Δr| (m) under the
-    /// payload step.
-    Reachable {
-        error_m: f64,
-        dr_m: f64,
-    },
-    OutOfLimits,
-    Failed,
-}
-
-/// The wrench step of the sensitivity map: 1 kN more payload.
-pub fn payload_step() -> Vector6<f64> {
-    Vector6::new(0.0, 0.0, -1000.0, 0.0, 0.0, 0.0)
-}
+use cdpr_model::workspace::PositionBox;
+use model_analysis::reachable::{self, PlantMeasurement, Prediction, ReachableReport};
+/// What the plant did at one reference pose, and the payload step of the sensitivity map: the
+/// analysis side (`model_analysis::reachable`) defines both, the plant fills them in here.
+pub use model_analysis::reachable::{Measured, payload_step};
+use nalgebra::Vector3;
 
 /// Measures `refs` on the plant `plant_path`; returns the measurements and, when the plant is
 /// built on another platform file than the controller's `platform_path`, a note saying so.
@@ -97,4 +85,46 @@ pub fn measure_with_plant(
         out.push(m);
     }
     Ok((out, note))
+}
+
+/// [`measure_with_plant`] on the grid of `pred`, timed, as the analysis' plant side.
+pub fn measure_prediction(
+    plant_path: &Path,
+    platform_path: &Path,
+    pf: &Platform,
+    pred: &Prediction,
+) -> Result<(PlantMeasurement, Option<String>), Box<dyn std::error::Error>> {
+    let t0 = std::time::Instant::now();
+    let (measured, note) =
+        measure_with_plant(plant_path, platform_path, pf, &pred.refs, &pred.f_ini)?;
+    let m = PlantMeasurement {
+        config: plant_path.display().to_string(),
+        measured,
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    Ok((m, note))
+}
+
+/// `crs model workspace --reachable`: the model's prediction of W_R on the `resolution`³ grid
+/// of `bounds` at orientation `phi` (rad) and, with `plant`, the plant's measurement of it;
+/// `platform_path` is the controller's platform file (a plant built on another one gets a note,
+/// returned next to the report).
+pub fn analyse(
+    pf: &Platform,
+    platform_path: &Path,
+    bounds: PositionBox,
+    phi: &Vector3<f64>,
+    resolution: usize,
+    plant: Option<&Path>,
+) -> Result<(ReachableReport, Option<String>), Box<dyn std::error::Error>> {
+    let pred = reachable::predict(pf, &bounds, phi, resolution)?;
+    let (measured, note) = match plant {
+        Some(p) => {
+            let (m, note) = measure_prediction(p, platform_path, pf, &pred)?;
+            (Some(m), note)
+        }
+        None => (None, None),
+    };
+    let r = ReachableReport::new(pf, bounds, resolution, pred, measured);
+    Ok((r, note))
 }

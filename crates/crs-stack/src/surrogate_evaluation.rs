@@ -15,12 +15,12 @@ type BoxErr = Box<dyn std::error::Error>;
 pub fn fit_platform(
     pf: &Platform,
     opts: &FitOptions,
-) -> Result<(Surrogate, surrogate::FitReport), BoxErr> {
+) -> Result<(Surrogate, surrogate::FitReport), surrogate::FitError> {
     let m = pf.model.m();
     let (lower, upper) = region_box(&pf.region);
     let region = Region { lower, upper };
     let mut target = OffsetTarget::new(&pf.model);
-    let r = fit(
+    fit(
         &region,
         opts,
         m,
@@ -29,8 +29,111 @@ pub fn fit_platform(
             let mut out = vec![0.0; m];
             target.offset(&Pose::from_array(*x), &mut out).map(|_| out)
         },
-    )?;
-    Ok(r)
+    )
+}
+
+/// Why a surrogate file could not be written or read for a platform.
+#[derive(Debug, thiserror::Error)]
+pub enum SurrogateFileError {
+    #[error(transparent)]
+    Platform(#[from] cdpr_model::config::ConfigError),
+    #[error(transparent)]
+    Fit(#[from] surrogate::FitError),
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// The surrogate file (named) could not be saved or loaded.
+    #[error("{}: {source}", file.display())]
+    File {
+        file: std::path::PathBuf,
+        source: surrogate::FileError,
+    },
+}
+
+/// A fitted surrogate, saved; it prints as `crs surrogate fit` shows it: size, conditioning,
+/// fit error and the bound of eq. 5.27 with its margin.
+pub struct Fitted {
+    pub surrogate: Surrogate,
+    pub report: surrogate::FitReport,
+    /// Time of the fit, s.
+    pub seconds: f64,
+    /// The file written.
+    pub out: std::path::PathBuf,
+    /// The platform's name and cable count.
+    pub platform: String,
+    pub cables: usize,
+}
+
+impl std::fmt::Display for Fitted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let report = &self.report;
+        writeln!(
+            f,
+            "fitted `{}` ({} cables) over its operating region in {:.2} s",
+            self.platform, self.cables, self.seconds
+        )?;
+        writeln!(
+            f,
+            "  degree {}, {} coefficients/cable, {} fit / {} validation samples, condition {:.2}",
+            report.degree,
+            report.n_coeffs_per_cable,
+            report.n_fit_samples,
+            report.n_validation_samples,
+            report.condition_number
+        )?;
+        writeln!(
+            f,
+            "  fit error vs the full model: max {:.4} mm, mean {:.4} mm",
+            report.max_fit_error_mm, report.mean_fit_error_mm
+        )?;
+        writeln!(
+            f,
+            "  max |φ_sg| {:.2} mm (sampled), certified Σ|c| {:.2} mm < bound {:.0} mm − margin {:.0} mm (eq. 5.27)",
+            report.max_abs_offset_mm, report.certified_bound_mm, report.bound_mm, report.margin_mm
+        )?;
+        writeln!(f, "wrote {}", self.out.display())
+    }
+}
+
+/// [`fit_platform`] timed and saved to `out` (its directory created).
+pub fn fit_and_save(
+    pf: &Platform,
+    opts: &FitOptions,
+    out: &Path,
+) -> Result<Fitted, SurrogateFileError> {
+    let t0 = std::time::Instant::now();
+    let (sg, report) = fit_platform(pf, opts)?;
+    let dt = t0.elapsed().as_secs_f64();
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    sg.save(out).map_err(|source| SurrogateFileError::File {
+        file: out.to_path_buf(),
+        source,
+    })?;
+    Ok(Fitted {
+        surrogate: sg,
+        report,
+        seconds: dt,
+        out: out.to_path_buf(),
+        platform: pf.name.clone(),
+        cables: pf.model.m(),
+    })
+}
+
+/// The platform TOML `platform` and the surrogate file `file` checked against it as the daemon
+/// loads it (format, checksum, platform identity, bound).
+pub fn load_for_platform(
+    file: &Path,
+    platform: &Path,
+) -> Result<(Platform, Surrogate), SurrogateFileError> {
+    let pf = cdpr_model::config::load_platform(platform)?;
+    let sg = Surrogate::load(file, &pf.model.identity_hex()).map_err(|source| {
+        SurrogateFileError::File {
+            file: file.to_path_buf(),
+            source,
+        }
+    })?;
+    Ok((pf, sg))
 }
 
 /// One controller's tracking on the plant over the evaluation grid.

@@ -13,6 +13,15 @@ pub struct Written {
     pub files: Vec<PathBuf>,
 }
 
+/// As `crs surrogate` prints it: the Markdown table, then the files written.
+impl std::fmt::Display for Written {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let names: Vec<String> = self.files.iter().map(|p| p.display().to_string()).collect();
+        write!(f, "\n{}", self.markdown)?;
+        writeln!(f, "wrote {}", names.join(", "))
+    }
+}
+
 /// Write report.md, report.json and tracking.svg of `ev` (and the fit's figures) into `dir`.
 pub fn write(
     ev: &Evaluation,

@@ -1,11 +1,18 @@
 //! `crs calibrate …`: identification, residual diagnosis and model extension from measured
 //! data sets (docs/data-format.md), with a Markdown/JSON/SVG report and the identified model
-//! written back as a platform TOML (crates/calibrate, docs/calibration.md).
+//! written back as a platform TOML (crates/calibrate, docs/calibration.md); the identification
+//! run is `crs_stack::calibration_output`, the diagnosis benchmark `crs_stack::diagnosis_bench`.
 
-use crate::calibrate_report::{Opts, calibrate_and_report, spinner};
-use calibrate::{Observation, from_dataset, split};
-use cdpr_model::config::load_platform;
-use std::path::{Path, PathBuf};
+use calibrate::Observation;
+use calibrate::effects::Effect;
+use calibrate::pipeline::{PipelineConfig, PipelineReport};
+use calibrate::repeatability::RepeatabilityConfig;
+use cdpr_model::config::Platform;
+use clap::Args;
+use crs_stack::calibration_output::{self, Identification};
+use crs_stack::diagnosis_bench::{BenchConfig, run as run_bench};
+use crs_stack::progress::Spinner;
+use std::path::PathBuf;
 
 #[derive(clap::Subcommand, Debug)]
 pub enum CalibrateCommand {
@@ -48,12 +55,190 @@ pub enum CalibrateCommand {
     /// Diagnosis benchmark: single-effect scenarios on the simulated plant (every catalogue
     /// effect plus a baseline, several seeds, randomised magnitudes); prints the confusion
     /// matrix, FK failures and held-out error against the true-effect model.
-    BenchDiagnosis(crate::calibrate_bench::BenchArgs),
+    BenchDiagnosis(BenchArgs),
 }
 
-fn load(path: &Path, m: usize) -> Result<Vec<Observation>, Box<dyn std::error::Error>> {
-    let ds = crs_dataset::load_dataset(path)?;
-    Ok(from_dataset(&ds, m).map_err(|e| format!("{}: {e}", path.display()))?)
+#[derive(Args, Debug)]
+pub struct Opts {
+    /// Output directory for report.md, report.json, plots, calibrated.toml.
+    #[arg(long, default_value = "calibration-out")]
+    pub(crate) out: PathBuf,
+    /// Hold out poses with pose_index % N == N − 1 when no validation set is given.
+    #[arg(long, default_value_t = 4)]
+    pub(crate) holdout_every: u64,
+    /// Weight of the wrench rows w_ρ,w (eq. 4.38).
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) w_wrench: f64,
+    /// Weight of the length rows w_ρ,q (eq. 4.38).
+    #[arg(long, default_value_t = 1e4)]
+    pub(crate) w_length: f64,
+    /// Ridge λ on the platform anchors b (eq. 4.32, sec. 6.5).
+    #[arg(long, default_value_t = 0.0)]
+    pub(crate) ridge_b: f64,
+    /// Lasso λ on the platform anchors b (eq. 4.32).
+    #[arg(long, default_value_t = 0.0)]
+    pub(crate) lasso_b: f64,
+    /// Ridge λ on the cable stiffnesses k_F towards the nominal (eq. 4.32; k_F in 1e6 N).
+    /// Default: chosen from 0, 10, 100, 1000, 10000 by the held-out position and force errors
+    /// (report.md lists the sweep).
+    #[arg(long)]
+    pub(crate) ridge_kf: Option<f64>,
+    /// Candidate effects (comma separated): pulleys, powertrain, stiffness, hysteresis, sag, drum,
+    /// load_cog, force_sensors.
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) candidates: Option<Vec<String>>,
+    /// Minimum reduction of the held-out mean position error (through the FK) for an effect
+    /// to be added (fraction); default from baseline data, see docs/calibration.md.
+    #[arg(long, default_value_t = calibrate::effects::SelectConfig::default().min_gain_pos)]
+    pub(crate) min_gain_pos: f64,
+    /// The same for the held-out mean force error ‖f_P − f_M‖ (fraction).
+    #[arg(long, default_value_t = calibrate::effects::SelectConfig::default().min_gain_force)]
+    pub(crate) min_gain_force: f64,
+    /// Repeatability: the optimal elastostatic fit again from K random frame-anchor starts
+    /// (eq. 6.8) and once on the held-out set (eq. 6.10); 0 = off.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) multi_start: usize,
+    /// Repeatability: the whole pipeline on B bootstrap resamples of the training poses (how
+    /// often each effect is chosen, spread of k_F and the extension parameters); 0 = off.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) bootstrap: usize,
+    /// Seed of the random starts and resamples.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) repeat_seed: u64,
+    /// After the diagnosis, also fit a flexible per-cable length correction (polynomial in
+    /// force and length, not a physical effect) as its own, labelled step: for when accuracy
+    /// matters more than explanation.
+    #[arg(long)]
+    pub(crate) flexible: bool,
+    /// Skip the residual diagnosis / model extension.
+    #[arg(long)]
+    pub(crate) no_extension: bool,
+    /// Also fit the kinematic parameters on the Cartesian residual through the forward
+    /// kinematics (eq. 4.3–4.4), reported as the stage "optimal kinematic (Cartesian residual)".
+    #[arg(long)]
+    pub(crate) cartesian: bool,
+    /// Also print the report as JSON on stdout.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+pub(crate) fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Error>> {
+    let mut cfg = PipelineConfig::default();
+    cfg.weights.wrench = o.w_wrench;
+    cfg.weights.length = o.w_length;
+    cfg.ridge_b = o.ridge_b;
+    cfg.lasso_b = o.lasso_b;
+    match o.ridge_kf {
+        Some(l) if !(l.is_finite() && l >= 0.0) => {
+            return Err(format!("--ridge-kf: {l} is not a finite λ ≥ 0").into());
+        }
+        Some(l) => cfg.ridge_kf = l,
+        None => cfg.ridge_kf_auto = true,
+    }
+    cfg.no_extension = o.no_extension;
+    cfg.flexible = o.flexible;
+    cfg.cartesian = o.cartesian;
+    cfg.select.min_gain_pos = o.min_gain_pos;
+    cfg.select.min_gain_force = o.min_gain_force;
+    if let Some(c) = &o.candidates {
+        cfg.select.candidates = c
+            .iter()
+            .map(|n| {
+                Effect::from_name(n.trim())
+                    .ok_or_else(|| format!("--candidates: unknown effect `{n}`"))
+            })
+            .collect::<Result<_, _>>()?;
+    }
+    Ok(cfg)
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Nominal platform (the control model and the plant's nominal).
+    #[arg(long, default_value = "config/crs-nominal.toml")]
+    platform: PathBuf,
+    /// Plant whose effect magnitudes are the 1× reference.
+    #[arg(long, default_value = "config/plant/crs-like.toml")]
+    plant: PathBuf,
+    /// Seeds per scenario.
+    #[arg(long, default_value_t = 5)]
+    seeds: u64,
+    /// Random poses of the identification campaign (each with a tension test: 2 rows per pose
+    /// plus the return); the validation campaign has 3/4 of them.
+    #[arg(long, default_value_t = 40)]
+    poses: usize,
+    /// Scenarios (comma separated): baseline and catalogue effect names; default all.
+    #[arg(long, value_delimiter = ',')]
+    scenarios: Option<Vec<String>>,
+    /// A scenario's effect "matters" when the true-effect model cuts the held-out mean
+    /// position error of the base model by at least this fraction ...
+    #[arg(long, default_value_t = 0.05)]
+    matters_pos: f64,
+    /// ... or its held-out mean force error by at least this fraction. Both sit above what a
+    /// catalogue candidate gains on data without any effect (≤ 1.3 % position, ≤ 12.1 % force
+    /// on 20 baseline sets), so "matters" means "can be told from the noise of the fit".
+    #[arg(long, default_value_t = 0.15)]
+    matters_force: f64,
+    /// Seeds of the baseline scenario (no effect): the false-addition rate needs more than the
+    /// effect scenarios' seeds to be a rate.
+    #[arg(long, default_value_t = 20)]
+    baseline_seeds: u64,
+    /// First seed: another value draws other magnitudes, poses and noise (the selection's
+    /// thresholds were set on seeds 0–19 of the baseline, so a run from another first seed is
+    /// an out-of-sample check of them).
+    #[arg(long, default_value_t = 0)]
+    first_seed: u64,
+    /// Print every candidate's evidence (round, held-out gains, verdict) of runs where the
+    /// true effect matters but was not chosen, or where another effect was chosen.
+    #[arg(long)]
+    explain_misses: bool,
+}
+
+fn bench(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
+    run_bench(&BenchConfig {
+        platform: a.platform,
+        plant: a.plant,
+        seeds: a.seeds,
+        poses: a.poses,
+        scenarios: a.scenarios,
+        matters_pos: a.matters_pos,
+        matters_force: a.matters_force,
+        baseline_seeds: a.baseline_seeds,
+        first_seed: a.first_seed,
+        explain_misses: a.explain_misses,
+    })
+}
+
+/// Identifies from `base`, writes the report, plots, calibrated.toml and the side file into
+/// `opts.out` (`crs_stack::calibration_output::identify`) and prints the stage table.
+pub(crate) fn calibrate_and_report(
+    base: &Platform,
+    train: &[Observation],
+    holdout: &[Observation],
+    opts: &Opts,
+    command: &str,
+) -> Result<PipelineReport, Box<dyn std::error::Error>> {
+    let cfg = config(opts)?;
+    let id = Identification {
+        pipeline: &cfg,
+        repeatability: (opts.multi_start > 0 || opts.bootstrap > 0).then_some(
+            RepeatabilityConfig {
+                multi_starts: opts.multi_start,
+                bootstrap: opts.bootstrap,
+                seed: opts.repeat_seed,
+            },
+        ),
+        out: &opts.out,
+        command,
+    };
+    Ok(calibration_output::identify_and_report(
+        base,
+        train,
+        holdout,
+        &id,
+        opts.json,
+        &mut Spinner::default(),
+    )?)
 }
 
 pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
@@ -65,13 +250,12 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
             validate,
             opts,
         } => {
-            let base = load_platform(&platform)?;
-            let m = base.model.m();
-            let obs = load(&data, m)?;
-            let (train, holdout) = match &validate {
-                Some(v) => (obs, load(v, m)?),
-                None => split(&obs, opts.holdout_every),
-            };
+            let (base, train, holdout) = calibration_output::load_run_data(
+                &platform,
+                &data,
+                validate.as_deref(),
+                opts.holdout_every,
+            )?;
             calibrate_and_report(&base, &train, &holdout, &opts, &command).map(|_| ())
         }
         CalibrateCommand::Demo {
@@ -80,31 +264,18 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
             validation_seed_offset,
             opts,
         } => {
-            let pcfg = sim_plant::load_plant(&plant)?;
-            let camp = sim_plant::load_campaign(&campaign)?;
-            let base = pcfg.platform.clone();
-            let m = base.model.m();
-            let bar = spinner("recording identification campaign");
-            let mut p = sim_plant::Plant::new(pcfg.clone())?;
-            let ds = sim_plant::run_campaign(&mut p, &base, &camp, "nominal")?.dataset;
-            let mut vcamp = camp.clone();
-            if let sim_plant::PoseSet::Random { seed, .. } = &mut vcamp.poses {
-                *seed += validation_seed_offset;
-            }
-            vcamp.seed = Some(camp.seed.unwrap_or(pcfg.seed) + validation_seed_offset);
-            bar.set_message("recording validation campaign");
-            let mut p = sim_plant::Plant::new(pcfg)?;
-            let vds = sim_plant::run_campaign(&mut p, &base, &vcamp, "nominal")?.dataset;
-            bar.finish_and_clear();
-            std::fs::create_dir_all(&opts.out)?;
-            crs_dataset::save_dataset(opts.out.join("identification.csv"), &ds)?;
-            crs_dataset::save_dataset(opts.out.join("validation.csv"), &vds)?;
-            let train = from_dataset(&ds, m)?;
-            let holdout = from_dataset(&vds, m)?;
-            calibrate_and_report(&base, &train, &holdout, &opts, &command).map(|_| ())
+            let demo = crs_stack::calibration_demo::record(
+                &plant,
+                &campaign,
+                validation_seed_offset,
+                &opts.out,
+                &mut Spinner::default(),
+            )?;
+            let (base, train, holdout) = (&demo.base, &demo.identification, &demo.validation);
+            calibrate_and_report(base, train, holdout, &opts, &command).map(|_| ())
         }
         CalibrateCommand::Loop(a) => crate::calibrate_loop_cmd::run_loop(a, &command),
         CalibrateCommand::Campaign(a) => crate::calibrate_loop_cmd::run_campaign(a),
-        CalibrateCommand::BenchDiagnosis(a) => crate::calibrate_bench::run(a),
+        CalibrateCommand::BenchDiagnosis(a) => bench(a),
     }
 }

@@ -4,14 +4,10 @@
 //! refitted surrogate, re-run the same campaign and report the MEASURED pose error at the rest
 //! points before and after. `crs calibrate campaign` makes the campaign file.
 
-use crate::calibrate_report::{Opts, calibrate_and_report, spinner};
-use calibrate::Observation;
-use calibrate::pipeline::PipelineReport;
-use cdpr_model::config::{Platform, load_platform};
-use crs_stack::calibration_loop::{LoopOptions, LoopTools};
-use crs_stack::campaign::{self, timed_waypoints, write_waypoints};
-use motion_core::daemon::lifecycle;
-use std::path::{Path, PathBuf};
+use crs_stack::calibration_loop::{LoopOptions, StackTools};
+use crs_stack::campaign::{self, CampaignRequest};
+use crs_stack::progress::Spinner;
+use std::path::PathBuf;
 
 type BoxErr = Box<dyn std::error::Error>;
 
@@ -113,56 +109,12 @@ impl LoopArgs {
     }
 }
 
-/// The CLI's surrogate fit (with a spinner) and identification (report, plots, calibrated.toml).
-struct CliTools;
-
-impl LoopTools for CliTools {
-    fn fit_surrogate(
-        &mut self,
-        pf: &Platform,
-        opts: &surrogate::FitOptions,
-    ) -> Result<(surrogate::Surrogate, surrogate::FitReport), BoxErr> {
-        let bar = spinner(&format!("fitting the surrogate of `{}`", pf.name));
-        let r = crate::surrogate_cmd::fit_platform(pf, opts);
-        bar.finish_and_clear();
-        r
-    }
-
-    fn identify(
-        &mut self,
-        nominal: &Platform,
-        train: &[Observation],
-        held: &[Observation],
-        out: &Path,
-        holdout_every: u64,
-        ridge_kf: f64,
-        command: &str,
-    ) -> Result<PipelineReport, BoxErr> {
-        let opts = Opts {
-            out: out.to_path_buf(),
-            holdout_every,
-            w_wrench: 1.0,
-            w_length: 1e4,
-            ridge_b: 0.0,
-            lasso_b: 0.0,
-            ridge_kf: Some(ridge_kf),
-            candidates: None,
-            min_gain_pos: calibrate::effects::SelectConfig::default().min_gain_pos,
-            min_gain_force: calibrate::effects::SelectConfig::default().min_gain_force,
-            no_extension: true,
-            flexible: false,
-            multi_start: 0,
-            bootstrap: 0,
-            repeat_seed: 1,
-            cartesian: false,
-            json: false,
-        };
-        calibrate_and_report(nominal, train, held, &opts, command)
-    }
-}
-
 pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
-    crs_stack::calibration_loop::run_loop(a.options(), command, &mut CliTools)
+    let mut progress = Spinner::default();
+    let mut tools = StackTools {
+        progress: &mut progress,
+    };
+    crs_stack::calibration_loop::run_loop(a.options(), command, &mut tools)
 }
 
 #[derive(clap::Args, Debug)]
@@ -189,36 +141,16 @@ pub struct CampaignArgs {
 }
 
 pub fn run_campaign(a: CampaignArgs) -> Result<(), BoxErr> {
-    let daemon = motion_core::daemon::config::load(&a.daemon_config).map_err(|e| e.to_string())?;
-    let pf = load_platform(&a.platform)?;
-    let checks = lifecycle::configure_checks(&daemon, &pf)?;
-    let chosen = campaign::generate(&checks, a.poses, a.fraction, a.force_margin_n)?;
-    let (_, dur) = timed_waypoints(
-        pf.home,
-        &chosen,
-        checks.planner_limits(),
-        checks.period_s(),
-        0.0,
-    )?;
-    let comment = format!(
-        "Calibration campaign for `{}` ({}): {} poses, written by\n`crs calibrate campaign --platform {} --poses {} --fraction {} --force-margin-n {}`.\nHalton points over {:.0} % of the workspace box with varied orientations (platform geometry\nobservable), reference forces (eq. 3.41) within [f_min + {m}, f_max - {m}] N, ordered as a\nnearest-neighbour tour from the home pose; the whole plan ({dur:.1} s without rests) passes\nmotion-core's checks (workspace, limits, eq. 3.29). t_s = 0: `crs sim --dwell-s` times it.",
-        pf.name,
-        a.platform.display(),
-        chosen.len(),
-        a.platform.display(),
-        a.poses,
-        a.fraction,
-        a.force_margin_n,
-        a.fraction * 100.0,
-        m = a.force_margin_n,
-    );
-    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)?;
-    }
-    write_waypoints(&a.out, &chosen, &comment)?;
+    let (n, dur) = campaign::make(&CampaignRequest {
+        platform: &a.platform,
+        daemon_config: &a.daemon_config,
+        poses: a.poses,
+        fraction: a.fraction,
+        force_margin_n: a.force_margin_n,
+        out: &a.out,
+    })?;
     println!(
-        "wrote {} poses to {} (plan {dur:.1} s without rests)",
-        chosen.len(),
+        "wrote {n} poses to {} (plan {dur:.1} s without rests)",
         a.out.display()
     );
     Ok(())

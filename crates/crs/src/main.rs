@@ -1,9 +1,7 @@
 //! `crs`: the operator / commissioning command line of the cable-robot stack.
 
-mod calibrate_bench;
 mod calibrate_cmd;
 mod calibrate_loop_cmd;
-mod calibrate_report;
 mod console_cmd;
 mod gen_cmd;
 mod load_cmd;
@@ -33,30 +31,20 @@ enum Command {
     /// default platform and report tracking, forces, loop statistics and the monitor state.
     Sim(sim_cmd::SimArgs),
     /// Model computations on a platform TOML: ik, fk, forces, stiffness, workspace.
-    Model {
-        #[command(subcommand)]
-        cmd: model_cmd::ModelCommand,
-    },
+    #[command(subcommand)]
+    Model(model_cmd::ModelCommand),
     /// The simulated plant: measurement campaigns and data sets.
-    Plant {
-        #[command(subcommand)]
-        cmd: plant_cmd::PlantCommand,
-    },
+    #[command(subcommand)]
+    Plant(plant_cmd::PlantCommand),
     /// The polynomial surrogate of the elastostatic force control: fit, check, inspect.
-    Surrogate {
-        #[command(subcommand)]
-        cmd: surrogate_cmd::SurrogateCommand,
-    },
+    #[command(subcommand)]
+    Surrogate(surrogate_cmd::SurrogateCommand),
     /// Calibration from measured data: identification, residual diagnosis, model extension.
-    Calibrate {
-        #[command(subcommand)]
-        cmd: calibrate_cmd::CalibrateCommand,
-    },
+    #[command(subcommand)]
+    Calibrate(calibrate_cmd::CalibrateCommand),
     /// Load tracking from the cable forces (eq. 5.9–5.10): the walking-subject experiment.
-    Load {
-        #[command(subcommand)]
-        cmd: load_cmd::LoadCommand,
-    },
+    #[command(subcommand)]
+    Load(load_cmd::LoadCommand),
     /// Commissioning and pre-ride check on the running stack: set-up wrench, payload mass and
     /// COG, cable offsets, initial tension (eq. 6.21–6.24, 3.42); refuses (exit 1) when the
     /// payload is out of tolerance. Writes <out>/commission.toml for review.
@@ -77,11 +65,11 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Sim(a) => sim_cmd::run(a),
-        Command::Model { cmd } => model_cmd::run(cmd),
-        Command::Plant { cmd } => plant_cmd::run(cmd),
-        Command::Surrogate { cmd } => surrogate_cmd::run(cmd),
-        Command::Calibrate { cmd } => calibrate_cmd::run(cmd),
-        Command::Load { cmd } => load_cmd::run(cmd),
+        Command::Model(cmd) => model_cmd::run(cmd),
+        Command::Plant(cmd) => plant_cmd::run(cmd),
+        Command::Surrogate(cmd) => surrogate_cmd::run(cmd),
+        Command::Calibrate(cmd) => calibrate_cmd::run(cmd),
+        Command::Load(cmd) => load_cmd::run(cmd),
         Command::Commission(a) => load_cmd::commission(a),
         Command::Console(a) => console_cmd::run(a),
         Command::GenMan { dir } => gen_cmd::gen_man(Cli::command(), &dir)

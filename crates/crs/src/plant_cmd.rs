@@ -1,10 +1,9 @@
 //! `crs plant …`: the simulated plant (crates/sim-plant) from the command line — check a plant
 //! TOML, record a measurement campaign into a data set, evaluate a data set's pose errors.
 
-use cdpr_model::config::load_platform;
-use crs_dataset::{load_dataset, save_dataset};
-use sim_plant::campaign::{ControlKind, PoseErrors, pose_errors};
-use sim_plant::{CampaignConfig, Plant, load_campaign, load_plant, run_campaign};
+use crs_dataset::load_dataset;
+use sim_plant::campaign::{ControlKind, pose_errors};
+use sim_plant::{CampaignConfig, load_campaign, load_plant};
 use std::path::PathBuf;
 
 #[derive(clap::Subcommand, Debug)]
@@ -15,32 +14,7 @@ pub enum PlantCommand {
         plant: PathBuf,
     },
     /// Drive the plant through a measurement campaign and write a data set (CSV).
-    Record {
-        /// Plant TOML (the ground truth).
-        #[arg(long)]
-        plant: PathBuf,
-        /// Campaign TOML (default: 5x5x4 grid in x_min = [-1.5,-1.5,1.25], x_max = [1.5,1.5,2.0]).
-        #[arg(long)]
-        campaign: Option<PathBuf>,
-        /// Control platform TOML (default: the campaign's, else the plant's nominal platform).
-        #[arg(long)]
-        control: Option<PathBuf>,
-        /// Control model: kinematic (q = φ(x) + q_off) or elastostatic (q = φ_el(x, f_ref)).
-        #[arg(long, value_parser = ["kinematic", "elastostatic"])]
-        control_model: Option<String>,
-        /// Tension test at every pose: shorten all cables by this many metres and return.
-        #[arg(long)]
-        tension_test_m: Option<f64>,
-        /// Do not write force columns (no force sensors).
-        #[arg(long)]
-        no_forces: bool,
-        /// Sensor-noise seed (default: the campaign's, else the plant's).
-        #[arg(long)]
-        seed: Option<u64>,
-        /// Output CSV.
-        #[arg(long)]
-        out: PathBuf,
-    },
+    Record(RecordArgs),
     /// Pose errors (eq. 3.3) of a data set's measured poses against its reference poses.
     Evaluate {
         /// Data set CSV.
@@ -48,92 +22,74 @@ pub enum PlantCommand {
     },
 }
 
+#[derive(clap::Args, Debug)]
+pub struct RecordArgs {
+    /// Plant TOML (the ground truth).
+    #[arg(long)]
+    plant: PathBuf,
+    /// Campaign TOML (default: 5x5x4 grid in x_min = [-1.5,-1.5,1.25], x_max = [1.5,1.5,2.0]).
+    #[arg(long)]
+    campaign: Option<PathBuf>,
+    /// Control platform TOML (default: the campaign's, else the plant's nominal platform).
+    #[arg(long)]
+    control: Option<PathBuf>,
+    /// Control model: kinematic (q = φ(x) + q_off) or elastostatic (q = φ_el(x, f_ref)).
+    #[arg(long, value_parser = ["kinematic", "elastostatic"])]
+    control_model: Option<String>,
+    /// Tension test at every pose: shorten all cables by this many metres and return.
+    #[arg(long)]
+    tension_test_m: Option<f64>,
+    /// Do not write force columns (no force sensors).
+    #[arg(long)]
+    no_forces: bool,
+    /// Sensor-noise seed (default: the campaign's, else the plant's).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Output CSV.
+    #[arg(long)]
+    out: PathBuf,
+}
+
 pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
     match cmd {
         PlantCommand::Check { plant } => {
-            let cfg = load_plant(&plant)?;
-            println!(
-                "plant `{}` on platform {} ({} cables)",
-                cfg.name,
-                cfg.platform_path.display(),
-                cfg.platform.model.m()
-            );
-            println!("effects on: {}", cfg.effects.enabled_names().join(", "));
-            let home = cfg.platform.home;
-            let f_ini = cfg.platform.f_ini.clone();
-            let mut p = Plant::new(cfg)?;
-            if let Some(f) = f_ini {
-                let setup = p.setup_tension(&home, &f)?;
-                let eq = p.step(&setup.q_cmd)?;
-                let (dp, dr) = eq.pose.error_to(&home);
-                println!("home settled: |Δr| = {:.3e} m, |Δφ| = {:.3e} rad", dp, dr);
-                println!("forces at home, N: {}", fmt_vec(&eq.forces, 1));
-            }
+            let c = crs_stack::plant_check::check(&plant)?;
+            print!("{c}");
+            c.home?;
             Ok(())
         }
-        PlantCommand::Record {
-            plant,
-            campaign,
-            control,
-            control_model,
-            tension_test_m,
-            no_forces,
-            seed,
-            out,
-        } => {
-            let cfg = load_plant(&plant)?;
-            let mut camp = match &campaign {
+        PlantCommand::Record(a) => {
+            let cfg = load_plant(&a.plant)?;
+            let mut camp = match &a.campaign {
                 Some(c) => load_campaign(c)?,
                 None => CampaignConfig::default(),
             };
-            if let Some(c) = control {
+            if let Some(c) = a.control {
                 camp.control_platform = Some(c);
             }
-            if let Some(k) = control_model.as_deref() {
+            if let Some(k) = a.control_model.as_deref() {
                 camp.control = if k == "elastostatic" {
                     ControlKind::Elastostatic
                 } else {
                     ControlKind::Kinematic
                 };
             }
-            if let Some(t) = tension_test_m {
+            if let Some(t) = a.tension_test_m {
                 if !(t.is_finite() && t > 0.0 && t <= 0.2) {
                     return Err(format!("--tension-test-m must be in (0, 0.2] m, got {t}").into());
                 }
                 camp.tension_test = Some(t);
             }
-            if no_forces {
+            if a.no_forces {
                 camp.force_columns = false;
             }
-            if seed.is_some() {
-                camp.seed = seed;
+            if a.seed.is_some() {
+                camp.seed = a.seed;
             }
-            let control_path = camp
-                .control_platform
-                .clone()
-                .unwrap_or_else(|| cfg.platform_path.clone());
-            let control = load_platform(&control_path)?;
-            let mut p = Plant::new(cfg)?;
-            let t0 = std::time::Instant::now();
-            let res = run_campaign(&mut p, &control, &camp, &control_path.display().to_string())?;
-            let dt = t0.elapsed();
-            save_dataset(&out, &res.dataset).map_err(|e| format!("{}: {e}", out.display()))?;
-            eprintln!(
-                "wrote {} samples to {} ({} unreachable) in {:.1} ms",
-                res.dataset.samples.len(),
-                out.display(),
-                res.unreachable.len(),
-                dt.as_secs_f64() * 1e3
-            );
-            for u in &res.unreachable {
-                let x = u.pose_ref.to_array();
-                eprintln!(
-                    "  unreachable pose {} phase {} at [{:.3}, {:.3}, {:.3}] m: {}",
-                    u.pose_index, u.phase as u8, x[0], x[1], x[2], u.reason
-                );
-            }
-            if let Some(e) = pose_errors(&res.dataset) {
-                print_errors(&e);
+            let rec = crs_stack::plant_record::record(cfg, &camp, &a.out)?;
+            eprint!("{rec}");
+            if let Some(e) = pose_errors(&rec.result.dataset) {
+                println!("{e}");
             }
             Ok(())
         }
@@ -141,7 +97,7 @@ pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
             let ds = load_dataset(&data)?;
             match pose_errors(&ds) {
                 Some(e) => {
-                    print_errors(&e);
+                    println!("{e}");
                     Ok(())
                 }
                 None => {
@@ -150,22 +106,4 @@ pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
             }
         }
     }
-}
-
-fn print_errors(e: &PoseErrors) {
-    println!(
-        "pose errors over {} samples (eq. 3.3): position mean {:.2} mm, max {:.2} mm; rotation mean {:.3} deg, max {:.3} deg",
-        e.samples,
-        e.mean_position * 1e3,
-        e.max_position * 1e3,
-        e.mean_rotation.to_degrees(),
-        e.max_rotation.to_degrees()
-    );
-}
-
-fn fmt_vec(v: &[f64], prec: usize) -> String {
-    v.iter()
-        .map(|x| format!("{x:.prec$}"))
-        .collect::<Vec<_>>()
-        .join(" ")
 }

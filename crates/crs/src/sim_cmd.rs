@@ -3,13 +3,10 @@
 //! writes the summary) plus the `--check` verdict.
 
 use crate::console_cmd::SimConsoleArgs;
-use cdpr_model::config::load_platform;
-use crs_ipc::{JointSetpoint, LoopStatsSample, PlantTruth, StateEvent};
 use crs_stack::platforms;
-use crs_stack::run_plots::{self, RunRecord};
-use crs_stack::sim_run::{RunObserver, RunStart, SimOptions, Summary, execute_observed};
-use crs_stack::timing::{self, TimedConfigs, TimingProfile};
-use std::path::Path;
+use crs_stack::sim_observer::SimObserver;
+use crs_stack::sim_run::{SimOptions, execute_observed};
+use crs_stack::timing::TimingProfile;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -98,120 +95,23 @@ pub struct SimArgs {
     pub(crate) ride: crate::ride_cmd::RideArgs,
 }
 
-/// What `crs sim` runs next to the stack: the operator console (`--console`) and the run's
-/// plots (out/sim/*.svg + index.html).
-struct SimObserver<'a> {
-    console_args: &'a SimConsoleArgs,
-    console: Option<crs_console::ConsoleHandle>,
-    plots: Option<RunRecord>,
-}
-
-impl RunObserver for SimObserver<'_> {
-    fn started(&mut self, run: &RunStart<'_>) -> Result<(), Box<dyn std::error::Error>> {
-        self.console = crate::console_cmd::start_for_sim(
-            self.console_args,
-            run.prefix,
-            run.daemon,
-            run.platform,
-            run.waypoints,
-        )?;
-        let p = run.platform.model.params();
-        self.plots = Some(RunRecord::new(p.f_min, p.f_max));
-        Ok(())
-    }
-    fn setpoint(&mut self, sp: &JointSetpoint) {
-        if let Some(p) = self.plots.as_mut() {
-            p.setpoint(sp);
-        }
-    }
-    fn truth(&mut self, t: &PlantTruth) {
-        if let Some(p) = self.plots.as_mut() {
-            p.truth(t);
-        }
-    }
-    fn loop_stats(&mut self, s: &LoopStatsSample) {
-        if let Some(p) = self.plots.as_mut() {
-            p.loop_stats(s);
-        }
-    }
-    fn event(&mut self, e: &StateEvent) {
-        if let Some(p) = self.plots.as_mut() {
-            p.event(e);
-        }
-    }
-    fn finished(&mut self, out: &Path, summary: &Summary) {
-        let Some(plots) = self.plots.as_ref() else {
-            return;
-        };
-        let written = serde_json::to_value(summary)
-            .map_err(|e| e.to_string())
-            .and_then(|v| run_plots::write(out, plots, &v).map_err(|e| e.to_string()));
-        match written {
-            Ok(index) => println!("plots written to {}", index.display()),
-            Err(e) => println!("plots NOT written: {e}"),
-        }
-    }
-}
-
 impl SimArgs {
-    /// The platform's set of configs: `--platform`'s; without it the set of the platform the
-    /// `--config` daemon runs (if it is a known one), else the default (icosahedron).
-    fn platform_set(&self) -> Result<platforms::StackConfigs, Box<dyn std::error::Error>> {
-        let dir = Path::new(platforms::CONFIG_DIR);
-        if let Some(p) = self
-            .platform
-            .clone()
-            .or(self.ride.default_platform())
-            .as_ref()
-        {
-            let set = platforms::resolve(p, dir)?;
-            if let Some(config) = &self.config {
-                // A daemon TOML given next to --platform must run that platform.
-                let daemon =
-                    motion_core::daemon::config::load(config).map_err(|e| e.to_string())?;
-                let runs = load_platform(&daemon.platform)?;
-                if runs.model.identity() != load_platform(&set.platform)?.model.identity() {
-                    return Err(format!(
-                        "--platform {p} is {}, but --config {} runs {} ({}): leave one out",
-                        set.platform.display(),
-                        config.display(),
-                        runs.name,
-                        daemon.platform.display()
-                    )
-                    .into());
-                }
-            }
-            return Ok(set);
-        }
-        if let Some(config) = &self.config {
-            let daemon = motion_core::daemon::config::load(config).map_err(|e| e.to_string())?;
-            if let Ok(set) = platforms::resolve(&daemon.platform.display().to_string(), dir) {
-                return Ok(set);
-            }
-        }
-        Ok(platforms::KNOWN[0].configs(dir))
-    }
-
-    /// The run's options: the files of the platform's set, single files replaced by the flags.
+    /// The run's options.
     pub(crate) fn options(&self) -> Result<SimOptions, Box<dyn std::error::Error>> {
-        let set = self.platform_set()?;
-        let pick = |flag: &Option<PathBuf>, default: &PathBuf| {
-            flag.clone().unwrap_or_else(|| default.clone())
+        // The platform's set of configs (`--platform`'s, else that of the `--config` daemon),
+        // single files replaced by the flags, as the timing profile runs them.
+        let platform = self.platform.clone().or(self.ride.default_platform());
+        let overrides = platforms::Overrides {
+            daemon: self.config.clone(),
+            drives: self.drives.clone(),
+            plant: self.plant.clone(),
+            monitor: self.monitor_config.clone(),
         };
-        let profile: TimingProfile = self.timing.parse()?;
-        let timed = timing::write_profile(
-            profile,
-            &TimedConfigs {
-                daemon: pick(&self.config, &set.daemon),
-                drives: pick(&self.drives, &set.drives),
-                monitor: pick(&self.monitor_config, &set.monitor),
-            },
-            &self.out.join(format!("timing-{}", profile.name())),
-        )?;
+        let files = platforms::run_files(platform.as_deref(), &overrides, &self.timing, &self.out)?;
         Ok(SimOptions {
-            config: timed.daemon,
-            drives: timed.drives,
-            plant: pick(&self.plant, &set.plant),
+            config: files.daemon,
+            drives: files.drives,
+            plant: files.plant,
             transport: self.transport.clone(),
             waypoints: self.waypoints.clone(),
             hold_s: self.hold_s,
@@ -221,7 +121,7 @@ impl SimArgs {
             no_monitor: self.no_monitor,
             check: self.check,
             max_static_error_mm: self.max_static_error_mm,
-            monitor_config: timed.monitor,
+            monitor_config: files.monitor,
             dwell_s: self.dwell_s,
             record: self.record.clone(),
             settle_s: self.settle_s,
@@ -233,28 +133,17 @@ impl SimArgs {
     }
 }
 
-/// A plant of another platform than the daemon's runs, with a note (a plant with undeclared
-/// errors is built on the nominal platform, so this only notes a real mix-up or a deliberate
-/// experiment).
-fn note_plant_platform(o: &SimOptions) -> Result<(), Box<dyn std::error::Error>> {
-    let daemon = motion_core::daemon::config::load(&o.config).map_err(|e| e.to_string())?;
-    let platform = load_platform(&daemon.platform)?;
-    if let Some(note) = platforms::plant_platform_note(&o.plant, &daemon.platform, &platform)? {
+pub fn run(a: SimArgs) -> Result<(), Box<dyn std::error::Error>> {
+    let mut observer = SimObserver::new(a.console.request());
+    let options = a.options()?;
+    // A plant of another platform than the daemon's runs, with a note (a plant with undeclared
+    // errors is built on the nominal platform, so this only notes a real mix-up or a deliberate
+    // experiment).
+    if let Some(note) = platforms::plant_note_for_daemon(&options.plant, &options.config)? {
         println!("  {note}");
     }
-    Ok(())
-}
-
-pub fn run(a: SimArgs) -> Result<(), Box<dyn std::error::Error>> {
-    let mut observer = SimObserver {
-        console_args: &a.console,
-        console: None,
-        plots: None,
-    };
-    let options = a.options()?;
-    note_plant_platform(&options)?;
     let sum = execute_observed(&options, &mut observer)?;
-    drop(observer.console.take());
+    observer.stop_console();
     if a.check {
         let fails = sum.check_failures(a.max_static_error_mm);
         if !fails.is_empty() {

@@ -630,6 +630,21 @@ pub struct PoseErrors {
     pub samples: usize,
 }
 
+/// One line: position and rotation error, mean and max (mm, degrees).
+impl std::fmt::Display for PoseErrors {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "pose errors over {} samples (eq. 3.3): position mean {:.2} mm, max {:.2} mm; rotation mean {:.3} deg, max {:.3} deg",
+            self.samples,
+            self.mean_position * 1e3,
+            self.max_position * 1e3,
+            self.mean_rotation.to_degrees(),
+            self.max_rotation.to_degrees()
+        )
+    }
+}
+
 /// Pose errors of the `Phase::Pose` rows against their reference poses (eq. 3.3); `None` when
 /// there is no such row with reference columns.
 pub fn pose_errors(ds: &Dataset) -> Option<PoseErrors> {
