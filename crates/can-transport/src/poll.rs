@@ -5,26 +5,7 @@ use std::time::Duration;
 
 /// Waits until `fd` is readable or `timeout` passes. Returns Ok(true) if readable.
 pub(crate) fn wait_readable(fd: RawFd, timeout: Duration) -> std::io::Result<bool> {
-    let mut pfd = libc::pollfd {
-        fd,
-        events: libc::POLLIN,
-        revents: 0,
-    };
-    let ts = libc::timespec {
-        tv_sec: timeout.as_secs().min(i64::MAX as u64) as libc::time_t,
-        tv_nsec: timeout.subsec_nanos() as libc::c_long,
-    };
-    loop {
-        // SAFETY: one valid pollfd, a valid timespec, no signal mask.
-        let r = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
-        if r >= 0 {
-            return Ok(r > 0);
-        }
-        let e = std::io::Error::last_os_error();
-        if e.kind() != std::io::ErrorKind::Interrupted {
-            return Err(e);
-        }
-    }
+    Ok(wait_readable_any([fd], timeout)?[0])
 }
 
 /// Waits until one of `fds` is readable or `timeout` passes (ppoll, ns resolution); returns
