@@ -61,20 +61,12 @@ pub struct ConsoleConfig {
 /// Makes the calling thread a background thread: nice 10 and, when given and other CPUs exist,
 /// off `avoid_cpu`. Best effort (a refused call leaves the thread as it is).
 pub fn background_thread(avoid_cpu: Option<usize>) {
-    // SAFETY: setpriority/sched_setaffinity on the calling thread (tid) with a valid cpu_set_t.
-    unsafe {
-        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
-        libc::setpriority(libc::PRIO_PROCESS, tid, 10);
-        if let Some(cpu) = avoid_cpu {
-            let n = libc::sysconf(libc::_SC_NPROCESSORS_ONLN).max(1) as usize;
-            if n > 1 && cpu < n {
-                let mut set: libc::cpu_set_t = std::mem::zeroed();
-                for c in (0..n.min(libc::CPU_SETSIZE as usize)).filter(|c| *c != cpu) {
-                    libc::CPU_SET(c, &mut set);
-                }
-                libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
-            }
-        }
+    // Best effort by design: a console thread that could not be moved still serves the page.
+    // (Nice 10 is refused only below an inherited higher nice value without CAP_SYS_NICE; the
+    // affinity only for a CPU set the process may not use.)
+    let _ = crs_rt::set_thread_nice(10);
+    if let Some(cpu) = avoid_cpu {
+        let _ = crs_rt::keep_off_cpu(cpu);
     }
 }
 

@@ -3,9 +3,17 @@
 //! Every setting is applied and reported; one the process is not permitted to use degrades
 //! with a clear warning instead of failing silently.
 //!
-//! One home (issue 14): motion-core's 1 ms loop, the safety monitor's 15 ms cycle, drive-io's
-//! SYNC loop and sim-plant's loop all set themselves up here. The monitor may use it and stay
-//! independent of the controller: this is operating-system plumbing, not controller code.
+//! One home (issue 14): motion-core's 1 ms loop, the safety monitor's 15 ms cycle and its bus
+//! reader, drive-io's SYNC loop and its latency bench, sim-plant's loop and the operator
+//! console's background threads all set themselves up here; no other crate calls
+//! sched_setscheduler, mlockall, sched_setaffinity, PR_SET_TIMERSLACK or clock_nanosleep.
+//! The monitor may use it and stay independent of the controller: this is operating-system
+//! plumbing, not controller code. Dependencies: libc and thiserror only, so that stays true.
+//!
+//! The single settings ([`set_fifo_priority`], [`lock_memory`], [`pin_to_cpu`],
+//! [`set_affinity`], [`keep_off_cpu`], [`set_thread_nice`], [`set_timer_slack`]) return the
+//! kernel's error; the preambles combine them: [`apply`] (reports, degrades), [`apply_strict`]
+//! and [`make_realtime`] (refuse what was not granted).
 
 use std::fmt;
 
@@ -68,74 +76,144 @@ impl RealtimeReport {
     }
 }
 
-fn errno_text() -> String {
-    std::io::Error::last_os_error().to_string()
+/// SCHED_FIFO at `priority` for the calling thread: a FIFO thread runs until it blocks, so the
+/// loop's wake-up is not delayed by SCHED_OTHER work on its CPU. Needs CAP_SYS_NICE (or root,
+/// or an RLIMIT_RTPRIO at least `priority`); the kernel's refusal is returned as is.
+pub fn set_fifo_priority(priority: i32) -> std::io::Result<()> {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: plain syscall on the calling thread with a valid parameter struct.
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
 }
 
-/// Applies the settings to the calling thread (and the process, for the memory lock).
+/// mlockall(MCL_CURRENT | MCL_FUTURE) for the whole process: no page of it, present or later
+/// mapped, is paged out, so a loop never stalls on a page fault (a major fault costs
+/// milliseconds, the loop's whole period). Needs CAP_IPC_LOCK or a large enough
+/// RLIMIT_MEMLOCK (the systemd units set LimitMEMLOCK=infinity).
+pub fn lock_memory() -> std::io::Result<()> {
+    // SAFETY: mlockall has no memory-safety preconditions.
+    let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+/// Sets the calling thread's affinity to exactly `cpus`. Pinning keeps a loop on the CPU set
+/// aside for it (no migrations, warm caches) and keeps helper threads off it. A CPU number
+/// beyond the kernel's `cpu_set_t` (CPU_SETSIZE) is refused as invalid input rather than
+/// written out of bounds (the numbers come from configuration files and flags).
+pub fn set_affinity(cpus: impl IntoIterator<Item = usize>) -> std::io::Result<()> {
+    // SAFETY: cpu_set_t is plain data; all-zero is the empty set.
+    let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+    for cpu in cpus {
+        if cpu >= libc::CPU_SETSIZE as usize {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!("CPU {cpu} is beyond CPU_SETSIZE ({})", libc::CPU_SETSIZE),
+            ));
+        }
+        // SAFETY: cpu < CPU_SETSIZE (checked above), so the bit lies inside the set.
+        unsafe { libc::CPU_SET(cpu, &mut set) };
+    }
+    // SAFETY: affinity of the calling thread, with a valid cpu_set_t of the size passed.
+    let rc = unsafe { libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+/// Pins the calling thread to `cpu` alone (see [`set_affinity`]).
+pub fn pin_to_cpu(cpu: usize) -> std::io::Result<()> {
+    set_affinity([cpu])
+}
+
+/// Sets the calling thread to every online CPU except `cpu`, for threads that must stay off a
+/// loop's CPU (the operator console's web threads: a burst of requests must not compete with
+/// the 1 ms loop). With one CPU online, or `cpu` not among them, the affinity is left alone:
+/// there is nowhere else to go, and an empty set would be refused.
+pub fn keep_off_cpu(cpu: usize) -> std::io::Result<()> {
+    // SAFETY: sysconf has no preconditions.
+    let online = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) }.max(1) as usize;
+    if online <= 1 || cpu >= online {
+        return Ok(());
+    }
+    set_affinity((0..online.min(libc::CPU_SETSIZE as usize)).filter(|c| *c != cpu))
+}
+
+/// Nice value of the calling thread (setpriority on its thread id: on Linux the nice value is
+/// per thread). Background threads take a positive one so that, on a shared CPU, SCHED_OTHER
+/// work of the stack gets ahead of them.
+pub fn set_thread_nice(nice: i32) -> std::io::Result<()> {
+    // SAFETY: gettid and setpriority on the calling thread have no memory-safety preconditions.
+    let rc = unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, nice)
+    };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+/// PR_SET_TIMERSLACK for the calling thread, ns. The kernel may defer a timer wake-up by up to
+/// the slack (default 50 µs) to batch wake-ups; a 1 ms loop wants its deadline met as closely
+/// as the scheduler allows, so loops set it to 1 ns. (0 would mean "back to the default".)
+pub fn set_timer_slack(slack_ns: u64) -> std::io::Result<()> {
+    // SAFETY: prctl(PR_SET_TIMERSLACK) takes an integer argument and affects only this thread.
+    let rc = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, slack_ns as libc::c_ulong, 0, 0, 0) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+/// Applies the settings to the calling thread (and the process, for the memory lock): every
+/// setting is attempted even when another was refused, so the report says what the loop
+/// really runs with.
 pub fn apply(s: &RealtimeSettings) -> RealtimeReport {
     let scheduler = if s.priority <= 0 {
         Applied::Skipped("SCHED_OTHER (priority 0 configured)".into())
     } else {
-        let param = libc::sched_param {
-            sched_priority: s.priority.min(99),
-        };
-        // SAFETY: plain syscall on the calling thread with a valid parameter struct.
-        let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
-        if rc == 0 {
-            Applied::Ok(format!("SCHED_FIFO priority {}", s.priority.min(99)))
-        } else {
-            Applied::Degraded(format!(
-                "SCHED_FIFO priority {} not permitted ({}); running SCHED_OTHER — grant CAP_SYS_NICE or run as root for real-time timing",
-                s.priority,
-                errno_text()
-            ))
+        match set_fifo_priority(s.priority.min(99)) {
+            Ok(()) => Applied::Ok(format!("SCHED_FIFO priority {}", s.priority.min(99))),
+            Err(e) => Applied::Degraded(format!(
+                "SCHED_FIFO priority {} not permitted ({e}); running SCHED_OTHER — grant CAP_SYS_NICE or run as root for real-time timing",
+                s.priority
+            )),
         }
     };
     let memory_lock = if !s.lock_memory {
         Applied::Skipped("memory not locked (lock_memory = false)".into())
     } else {
-        // SAFETY: mlockall has no memory-safety preconditions.
-        let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
-        if rc == 0 {
-            Applied::Ok("mlockall(MCL_CURRENT | MCL_FUTURE)".into())
-        } else {
-            Applied::Degraded(format!(
-                "mlockall failed ({}); page faults may stall the loop — raise LimitMEMLOCK",
-                errno_text()
-            ))
+        match lock_memory() {
+            Ok(()) => Applied::Ok("mlockall(MCL_CURRENT | MCL_FUTURE)".into()),
+            Err(e) => Applied::Degraded(format!(
+                "mlockall failed ({e}); page faults may stall the loop — raise LimitMEMLOCK"
+            )),
         }
     };
     let affinity = match s.cpu {
         None => Applied::Skipped("no CPU pinning configured".into()),
-        Some(cpu) => {
-            // SAFETY: cpu_set_t is plain data; CPU_SET writes inside it.
-            let rc = unsafe {
-                let mut set: libc::cpu_set_t = std::mem::zeroed();
-                libc::CPU_SET(cpu, &mut set);
-                libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set)
-            };
-            if rc == 0 {
-                Applied::Ok(format!("pinned to CPU {cpu}"))
-            } else {
-                Applied::Degraded(format!("pinning to CPU {cpu} failed ({})", errno_text()))
-            }
-        }
+        Some(cpu) => match pin_to_cpu(cpu) {
+            Ok(()) => Applied::Ok(format!("pinned to CPU {cpu}")),
+            Err(e) => Applied::Degraded(format!("pinning to CPU {cpu} failed ({e})")),
+        },
     };
-    // SAFETY: prctl(PR_SET_TIMERSLACK) takes an integer argument.
-    let rc = unsafe {
-        libc::prctl(
-            libc::PR_SET_TIMERSLACK,
-            s.timer_slack_ns as libc::c_ulong,
-            0,
-            0,
-            0,
-        )
-    };
-    let timer_slack = if rc == 0 {
-        Applied::Ok(format!("{} ns", s.timer_slack_ns))
-    } else {
-        Applied::Degraded(format!("PR_SET_TIMERSLACK failed ({})", errno_text()))
+    let timer_slack = match set_timer_slack(s.timer_slack_ns) {
+        Ok(()) => Applied::Ok(format!("{} ns", s.timer_slack_ns)),
+        Err(e) => Applied::Degraded(format!("PR_SET_TIMERSLACK failed ({e})")),
     };
     RealtimeReport {
         scheduler,
@@ -206,9 +284,13 @@ pub fn apply_strict(s: &RealtimeSettings) -> Result<RealtimeReport, RtError> {
 }
 
 /// The set-up of a loop whose operator asked for real time on the command line (drive-io's SYNC
-/// loop, sim-plant's loop, the monitor's cycle): SCHED_FIFO at `priority` (1..=99), optionally
-/// pinned to `cpu`, all memory locked; the kernel's default 50 µs timer slack. Anything not
-/// granted is an error naming the setting (needs root or CAP_SYS_NICE + CAP_IPC_LOCK).
+/// loop, sim-plant's loop) or in its configuration (the monitor's `[monitor] rt_priority`):
+/// SCHED_FIFO at `priority` (1..=99), optionally pinned to `cpu`, all memory locked; the
+/// kernel's default 50 µs timer slack (drive-io tightens its own afterwards). Anything not
+/// granted is an error naming the setting (needs root or CAP_SYS_NICE + CAP_IPC_LOCK); every
+/// setting is attempted regardless, so a caller that goes on after the error (the monitor, the
+/// bus bench) runs with what was granted. The caller decides: the daemons started with
+/// `--rt-priority` stop, the monitor warns and keeps supervising.
 pub fn make_realtime(priority: i32, cpu: Option<usize>) -> Result<RealtimeReport, RtError> {
     apply_strict(&RealtimeSettings {
         period_ns: 0,
@@ -246,6 +328,88 @@ mod tests {
         assert!(matches!(r.scheduler, Applied::Skipped(_)));
         assert!(matches!(r.memory_lock, Applied::Skipped(_)));
         assert!(matches!(r.affinity, Applied::Skipped(_)));
+    }
+
+    /// The calling thread's affinity, as the set of allowed CPU numbers.
+    fn allowed_cpus() -> Vec<usize> {
+        // SAFETY: reads the calling thread's affinity into a set we own.
+        unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            let rc = libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set);
+            assert_eq!(
+                rc,
+                0,
+                "sched_getaffinity: {}",
+                std::io::Error::last_os_error()
+            );
+            (0..libc::CPU_SETSIZE as usize)
+                .filter(|c| libc::CPU_ISSET(*c, &set))
+                .collect()
+        }
+    }
+
+    #[test]
+    fn pinning_leaves_the_thread_on_that_cpu_alone() {
+        // In a thread of its own: the affinity must not leak into other tests.
+        std::thread::spawn(|| {
+            let cpu = *allowed_cpus().last().expect("some CPU is allowed");
+            pin_to_cpu(cpu).expect("pinning to an allowed CPU");
+            assert_eq!(allowed_cpus(), vec![cpu]);
+        })
+        .join()
+        .unwrap();
+    }
+
+    #[test]
+    fn a_cpu_beyond_the_cpu_set_is_refused_not_a_panic() {
+        let e = pin_to_cpu(1 << 20).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput, "{e}");
+        let r = apply(&RealtimeSettings {
+            period_ns: 1_000_000,
+            priority: 0,
+            cpu: Some(1 << 20),
+            lock_memory: false,
+            timer_slack_ns: 50_000,
+        });
+        assert!(matches!(r.affinity, Applied::Degraded(_)), "{}", r.affinity);
+    }
+
+    #[test]
+    fn the_timer_slack_is_set_on_the_calling_thread() {
+        std::thread::spawn(|| {
+            set_timer_slack(1).expect("PR_SET_TIMERSLACK");
+            // SAFETY: PR_GET_TIMERSLACK takes no pointer argument.
+            let slack = unsafe { libc::prctl(libc::PR_GET_TIMERSLACK, 0, 0, 0, 0) };
+            assert_eq!(slack, 1);
+        })
+        .join()
+        .unwrap();
+    }
+
+    #[test]
+    fn a_background_thread_keeps_off_the_cpu_at_its_nice_value() {
+        // SAFETY: sysconf has no preconditions.
+        let online = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) } as usize;
+        std::thread::spawn(move || {
+            let before = allowed_cpus();
+            keep_off_cpu(0).expect("keeping off CPU 0");
+            // 19, the weakest: raising the nice value is always permitted (the tests may
+            // already run at nice 19, and lowering it needs CAP_SYS_NICE).
+            set_thread_nice(19).expect("raising the nice value");
+            if online > 1 {
+                assert!(!allowed_cpus().contains(&0), "still allowed on CPU 0");
+            } else {
+                assert_eq!(allowed_cpus(), before, "one CPU: affinity left alone");
+            }
+            // SAFETY: getpriority on the calling thread's id.
+            let nice = unsafe {
+                let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+                libc::getpriority(libc::PRIO_PROCESS, tid)
+            };
+            assert_eq!(nice, 19);
+        })
+        .join()
+        .unwrap();
     }
 
     #[test]

@@ -168,6 +168,33 @@ fn the_safety_monitor_shares_no_code_with_the_controller() {
 }
 
 #[test]
+fn the_rt_utility_stays_small() {
+    // The independent monitor links crs-rt (sleep, priority, affinity, mlock: operating-system
+    // plumbing every loop shares). Any dependency crs-rt gained would be linked into the
+    // monitor too, so it has exactly libc and thiserror.
+    let (deps, name_of) = graph();
+    let id = name_of
+        .iter()
+        .find(|(_, n)| n.as_str() == "crs-rt")
+        .map(|(id, _)| id.clone())
+        .expect("crs-rt is in the workspace graph");
+    let direct: BTreeSet<&str> = deps[&id].iter().map(|d| name_of[d].as_str()).collect();
+    assert_eq!(direct, BTreeSet::from(["libc", "thiserror"]));
+    for user in [
+        "motion-core",
+        "drive-io",
+        "sim-plant",
+        "safety-monitor",
+        "crs-console",
+    ] {
+        assert!(
+            closure(user).contains("crs-rt"),
+            "{user} should take its real-time set-up from crs-rt"
+        );
+    }
+}
+
+#[test]
 fn only_the_command_line_uses_the_stack_library() {
     let (deps, name_of) = graph();
     for (id, ds) in &deps {

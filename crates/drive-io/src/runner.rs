@@ -89,45 +89,6 @@ pub struct RunSummary {
     pub clock_cycles: u64,
 }
 
-/// Lowers the kernel timer slack of the calling thread to 1 ns (default 50 us), so the ppoll
-/// deadline of the SYNC tick is met as closely as the scheduler allows.
-pub fn tighten_timer_slack() {
-    // SAFETY: prctl(PR_SET_TIMERSLACK) only affects the calling thread.
-    unsafe {
-        libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0);
-    }
-}
-
-/// Makes the calling thread real-time: SCHED_FIFO at `priority` (1..=99), optionally pinned to
-/// `cpu`, and locks all current and future memory (no page faults in the loop). Needs root or
-/// CAP_SYS_NICE + CAP_IPC_LOCK; the error says which call failed.
-pub fn make_realtime(priority: i32, cpu: Option<usize>) -> Result<(), std::io::Error> {
-    let err = |what: &str| {
-        let e = std::io::Error::last_os_error();
-        std::io::Error::new(e.kind(), format!("{what}: {e}"))
-    };
-    // SAFETY: plain syscalls on the calling thread/process with valid arguments.
-    unsafe {
-        if libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) != 0 {
-            return Err(err("mlockall"));
-        }
-        let param = libc::sched_param {
-            sched_priority: priority,
-        };
-        if libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) != 0 {
-            return Err(err("sched_setscheduler(SCHED_FIFO)"));
-        }
-        if let Some(cpu) = cpu {
-            let mut set: libc::cpu_set_t = std::mem::zeroed();
-            libc::CPU_SET(cpu, &mut set);
-            if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
-                return Err(err("sched_setaffinity"));
-            }
-        }
-    }
-    Ok(())
-}
-
 /// Runs drive-io until `stop` is set: waits for each SYNC tick while processing received frames,
 /// then reads the newest setpoint and e-stop events, writes RPDOs + SYNC, publishes feedback.
 /// No allocation per cycle (iceoryx2 loan/receive and the fixed [`FrameBuf`] only).
@@ -137,7 +98,11 @@ pub fn run(
     ipc: &IpcNode,
     stop: &AtomicBool,
 ) -> Result<RunSummary, RunError> {
-    tighten_timer_slack();
+    // Timer slack 1 ns (kernel default 50 µs), so the ppoll deadline of the SYNC tick is met as
+    // closely as the scheduler allows. The prctl only fails for an invalid argument; say so.
+    if let Err(e) = crs_rt::set_timer_slack(1) {
+        tracing::warn!(error = %e, "timer slack not tightened: SYNC ticks may be up to 50 µs late");
+    }
     let setpoints = ipc.subscriber::<JointSetpoint>()?;
     let events = ipc.subscriber::<StateEvent>()?;
     let feedback = ipc.publisher::<DriveFeedback>()?;

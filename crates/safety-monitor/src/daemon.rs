@@ -38,6 +38,7 @@ use crs_ipc::{
     DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, MAX_CABLES,
     PlatformIdentity, ProcessId, StateEvent, monotonic_ns,
 };
+use crs_rt::sleep_until;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -147,54 +148,6 @@ pub struct Summary {
     pub bus_errors: u64,
     pub max_abs_dq_m: f64,
     pub max_lateness_ns: u64,
-}
-
-/// Sleeps until the absolute CLOCK_MONOTONIC time `t_ns` (TIMER_ABSTIME: no drift).
-pub fn sleep_until(t_ns: u64) {
-    let ts = libc::timespec {
-        tv_sec: (t_ns / 1_000_000_000) as libc::time_t,
-        tv_nsec: (t_ns % 1_000_000_000) as libc::c_long,
-    };
-    loop {
-        // SAFETY: valid timespec; a null remainder is allowed with TIMER_ABSTIME.
-        let r = unsafe {
-            libc::clock_nanosleep(
-                libc::CLOCK_MONOTONIC,
-                libc::TIMER_ABSTIME,
-                &ts,
-                std::ptr::null_mut(),
-            )
-        };
-        if r != libc::EINTR {
-            return;
-        }
-    }
-}
-
-/// SCHED_FIFO at `priority` (+ optional CPU pinning, mlockall) for the calling thread; the
-/// error says which call failed.
-pub fn make_realtime(priority: i32, cpu: Option<usize>) -> Result<(), String> {
-    let err = |what: &str| format!("{what}: {}", std::io::Error::last_os_error());
-    // SAFETY: plain syscalls with valid arguments on the calling thread/process.
-    unsafe {
-        if libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) != 0 {
-            return Err(err("mlockall"));
-        }
-        let p = libc::sched_param {
-            sched_priority: priority,
-        };
-        if libc::sched_setscheduler(0, libc::SCHED_FIFO, &p) != 0 {
-            return Err(err("sched_setscheduler(SCHED_FIFO)"));
-        }
-        if let Some(c) = cpu {
-            let mut set: libc::cpu_set_t = std::mem::zeroed();
-            libc::CPU_SET(c, &mut set);
-            if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
-                return Err(err("sched_setaffinity"));
-            }
-        }
-    }
-    Ok(())
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -346,9 +299,17 @@ pub fn run_on(
 
     if cfg.monitor.rt_priority > 0 {
         let cpu = usize::try_from(cfg.monitor.cpu).ok();
-        match make_realtime(cfg.monitor.rt_priority, cpu) {
-            Ok(()) => tracing::info!(priority = cfg.monitor.rt_priority, ?cpu, "SCHED_FIFO"),
-            Err(e) => tracing::warn!("realtime settings not applied ({e}): running SCHED_OTHER"),
+        // The OS plumbing is shared with the other loops (crs-rt: no controller code). Every
+        // setting is attempted even when another is refused; the monitor keeps running on
+        // what was granted (it must not stop the stack's supervision over a missing
+        // capability), and the warning names what was not.
+        match crs_rt::make_realtime(cfg.monitor.rt_priority, cpu) {
+            Ok(_) => tracing::info!(
+                priority = cfg.monitor.rt_priority,
+                ?cpu,
+                "SCHED_FIFO + mlockall"
+            ),
+            Err(e) => tracing::warn!("{e}; the monitor runs without it"),
         }
     }
     tracing::info!(

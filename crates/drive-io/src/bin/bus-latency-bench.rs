@@ -51,22 +51,6 @@ struct Args {
 
 const RING: usize = 8192;
 
-fn sleep_until(t_ns: u64) {
-    let ts = libc::timespec {
-        tv_sec: (t_ns / 1_000_000_000) as libc::time_t,
-        tv_nsec: (t_ns % 1_000_000_000) as libc::c_long,
-    };
-    // SAFETY: valid timespec; absolute CLOCK_MONOTONIC sleep; EINTR just returns early.
-    unsafe {
-        libc::clock_nanosleep(
-            libc::CLOCK_MONOTONIC,
-            libc::TIMER_ABSTIME,
-            &ts,
-            std::ptr::null_mut(),
-        )
-    };
-}
-
 fn pct(v: &mut [u64], p: f64) -> f64 {
     if v.is_empty() {
         return f64::NAN;
@@ -160,27 +144,22 @@ fn with_port_offset(transport: &str, k: u16) -> Result<String, String> {
     Ok(format!("{head}:{}", port + k))
 }
 
+/// Pins the calling thread; a refusal is reported and the bench goes on unpinned (its output
+/// states the placement it asked for, so the reader can judge the figures).
 fn pin(cpu: usize) {
-    // SAFETY: affinity of the calling thread only, with a zeroed then filled cpu_set_t.
-    unsafe {
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        libc::CPU_SET(cpu, &mut set);
-        if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
-            eprintln!(
-                "pinning to cpu {cpu} failed: {}",
-                std::io::Error::last_os_error()
-            );
-        }
+    if let Err(e) = crs_rt::pin_to_cpu(cpu) {
+        eprintln!("pinning to cpu {cpu} failed: {e}");
     }
 }
 
-/// Pins (and with `rt`, SCHED_FIFO + mlockall) the calling thread.
+/// Pins (and with `rt`, SCHED_FIFO + mlockall) the calling thread. crs-rt attempts every
+/// setting even when one is refused, so the thread is pinned whatever else was granted; the
+/// error lists what was not.
 fn place(cpu: usize, rt: Option<i32>) {
     match rt {
         Some(p) => {
-            if let Err(e) = runner::make_realtime(p, Some(cpu)) {
-                eprintln!("real-time set-up failed ({e}): running SCHED_OTHER");
-                pin(cpu);
+            if let Err(e) = crs_rt::make_realtime(p, Some(cpu)) {
+                eprintln!("{e}: the bench runs without it");
             }
         }
         None => pin(cpu),
@@ -257,7 +236,10 @@ fn run_mode(
     // always does; in clock mode drive-io does not listen).
     let publisher = std::thread::spawn(move || -> Result<u64, String> {
         place(cpu, rt.map(|p| p - 1));
-        runner::tighten_timer_slack();
+        // Timer slack 1 ns, as drive-io's runner sets for its own loop (kernel default 50 µs).
+        if let Err(e) = crs_rt::set_timer_slack(1) {
+            eprintln!("timer slack not tightened: {e}");
+        }
         let node = IpcNode::with_prefix("bench-pub", &p3).map_err(|e| e.to_string())?;
         let p = node
             .publisher::<JointSetpoint>()
@@ -266,7 +248,7 @@ fn run_mode(
         let n = secs * 1000;
         let mut next = monotonic_ns() + 1_000_000;
         for seq in 1..=n {
-            sleep_until(next);
+            crs_rt::sleep_until(next);
             next += 1_000_000;
             let t = seq as f64 * 1e-3;
             let mut sp = JointSetpoint {

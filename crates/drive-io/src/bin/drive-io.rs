@@ -98,7 +98,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     };
     let bus = can_transport::open(&spec)?;
     if let Some(p) = args.rt_priority {
-        runner::make_realtime(p, args.cpu)?;
+        crs_rt::make_realtime(p, args.cpu)?;
         tracing::info!(priority = p, cpu = ?args.cpu, "SCHED_FIFO + mlockall");
     }
     tracing::info!(transport = %spec, drives = cfg.winches.len(), "drive-io starting");

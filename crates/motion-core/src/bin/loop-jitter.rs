@@ -201,7 +201,9 @@ fn next_deadline(deadline: u64, done: u64, period_ns: u64) -> (u64, bool) {
 }
 
 /// The bare loop: sleep to the absolute deadline, read the clock, record, nothing else.
-/// Returns the deadline following the block and the number of overruns.
+/// Returns the deadline following the block and the number of overruns. It sleeps with the
+/// same `sleep_until` (crs-rt's) as `run_timed`: the baseline must differ from the daemon loop
+/// only in the work between wake-ups, not in the timer.
 fn bare_block(mut deadline: u64, period_ns: u64, end_ns: u64, out: &mut Samples) -> (u64, u64) {
     let mut overruns = 0;
     loop {

@@ -271,7 +271,7 @@ impl Fake {
             let mut n = 0u64;
             while !c.stop.load(Ordering::Relaxed) {
                 next += period_ns;
-                safety_monitor::daemon::sleep_until(next);
+                crs_rt::sleep_until(next);
                 let now = monotonic_ns();
                 if now > next + 50_000_000 {
                     next = now; // the guest stalled: no burst
@@ -1575,7 +1575,7 @@ fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
             let mut next = monotonic_ns();
             while !stop.load(Ordering::Relaxed) {
                 next += period;
-                safety_monitor::daemon::sleep_until(next);
+                crs_rt::sleep_until(next);
                 let _ = bus.send(&f);
             }
         })
@@ -1601,7 +1601,7 @@ fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
     let mut cycle = fb0.cycle;
     let r = loop {
         next += period;
-        safety_monitor::daemon::sleep_until(next);
+        crs_rt::sleep_until(next);
         cycle += 1;
         let mut fb = fb0;
         fb.cycle = cycle;
