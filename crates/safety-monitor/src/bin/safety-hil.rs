@@ -280,11 +280,11 @@ impl Fake {
                     continue;
                 }
                 if n.is_multiple_of(100) {
-                    let mut h = id;
+                    let mut h = *id.as_bytes();
                     if c.wrong_identity.load(Ordering::Relaxed) {
                         h[31] ^= 0x5A;
                     }
-                    let _ = id_pub.publish(&PlatformIdentity::new(h, 8));
+                    let _ = id_pub.publish(&PlatformIdentity::new(crs_ipc::PlatformId::new(h), 8));
                 }
                 n += 1;
                 let target = c.offset_target_um.load(Ordering::Relaxed);
