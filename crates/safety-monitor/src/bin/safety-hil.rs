@@ -316,7 +316,9 @@ impl Fake {
                 if c.nan.load(Ordering::Relaxed) {
                     s.pose[3] = f64::NAN;
                 }
-                if offset_um.abs() > 100_000 && c.crossed_ns.load(Ordering::Relaxed) == 0 {
+                // The spec's 100 mm (the harness's monitor runs with dq_limit_mm = 100).
+                let limit_um = (safety_monitor::config::DELTA_Q_LIMIT_M * 1e6).round() as i64;
+                if offset_um.abs() > limit_um && c.crossed_ns.load(Ordering::Relaxed) == 0 {
                     c.crossed_ns.store(now, Ordering::Relaxed);
                 }
                 sp_pub.publish(&s).map_err(|e| e.to_string())?;
