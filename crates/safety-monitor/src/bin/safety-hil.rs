@@ -489,6 +489,17 @@ impl Stack {
     ) -> Res<Stack> {
         let sdir = dir.join(name);
         std::fs::create_dir_all(&sdir).map_err(|e| e.to_string())?;
+        // A fault injection left by an earlier run in the same --workdir would be read by the
+        // new emulator at its start (a force fault before drive-io is Running trips the
+        // monitor at start-up and the scenario times out): every scenario starts clean.
+        for stale in ["emulator.control", "emulator.control.tmp"] {
+            match std::fs::remove_file(sdir.join(stale)) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(format!("{}: {e}", sdir.join(stale).display()));
+                }
+                _ => {}
+            }
+        }
         let prefix = format!("shil-{name}-{}/", std::process::id());
         let node = IpcNode::with_prefix("safety-hil", &prefix).map_err(|e| e.to_string())?;
         let mut st = Stack {
