@@ -167,10 +167,11 @@ pub fn motion_state_name(code: u32) -> String {
 }
 
 fn monitor_state_name(code: u32) -> String {
+    use crs_ipc::monitor_state::*;
     match code {
-        1 => "armed".into(),
-        2 => "TRIPPED".into(),
-        3 => "not ready".into(),
+        ARMED => "armed".into(),
+        TRIPPED => "TRIPPED".into(),
+        NOT_READY => "not ready".into(),
         c => format!("state {c}"),
     }
 }

@@ -184,6 +184,17 @@ pub mod motion_state {
     pub const PLAN_OPEN_END: u64 = u64::MAX;
 }
 
+/// `StateEvent::state` / `Heartbeat::state` codes of the safety monitor (source
+/// SafetyMonitor): `safety_monitor::MonitorState::code` encodes them, crs-console decodes them.
+pub mod monitor_state {
+    /// No fault latched: the safety heartbeat says RUN.
+    pub const ARMED: u32 = 1;
+    /// E-stop latched until the monitor accepts an operator reset.
+    pub const TRIPPED: u32 = 2;
+    /// Start-up: not every drive verified yet, the safety heartbeat says STOP.
+    pub const NOT_READY: u32 = 3;
+}
+
 /// Who publishes a [`StateEvent`] / [`Heartbeat`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
@@ -393,8 +404,73 @@ impl Default for TrackerPose {
     }
 }
 
-/// Identity of the platform model motion-core runs (a 32-byte hash, e.g. SHA-256 of the model
-/// TOML), so the safety monitor can check it uses the same platform.
+/// The 32-byte platform identity hash (SHA-256 over the canonical serialisation of the model,
+/// the workspace box and the motion limits, `"crs-platform-v2"`; see [`crate::identity_golden`]).
+/// motion-core computes it through the model library, the safety monitor with its own code;
+/// the monitor trips when they differ. A type of its own so that a platform identity is not
+/// confused with any other 32-byte hash (e.g. the SHA-256 of a file's bytes); `Display` is
+/// lower-case hex for logs and errors.
+///
+/// Layout: one `[u8; 32]` field under `#[repr(C)]` (size 32, alignment 1, as the bare array),
+/// so [`PlatformIdentity`] is binary-identical to the contract before the newtype (checked at
+/// compile time below); its type name `crs_ipc::PlatformIdentity.v1` is unchanged.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, ZeroCopySend)]
+#[repr(C)]
+pub struct PlatformId([u8; 32]);
+
+impl PlatformId {
+    pub const fn new(bytes: [u8; 32]) -> Self {
+        Self(bytes)
+    }
+
+    pub const fn as_bytes(&self) -> &[u8; 32] {
+        &self.0
+    }
+}
+
+impl From<[u8; 32]> for PlatformId {
+    fn from(bytes: [u8; 32]) -> Self {
+        Self(bytes)
+    }
+}
+
+impl AsRef<[u8]> for PlatformId {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
+}
+
+/// Comparison with the bare bytes a library computes (the model library does not depend on
+/// the IPC contract, so `cdpr_model::config::Platform::identity` returns `[u8; 32]`).
+impl PartialEq<[u8; 32]> for PlatformId {
+    fn eq(&self, other: &[u8; 32]) -> bool {
+        &self.0 == other
+    }
+}
+
+impl PartialEq<PlatformId> for [u8; 32] {
+    fn eq(&self, other: &PlatformId) -> bool {
+        self == &other.0
+    }
+}
+
+impl std::fmt::Display for PlatformId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for b in &self.0 {
+            write!(f, "{b:02x}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::fmt::Debug for PlatformId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "PlatformId({self})")
+    }
+}
+
+/// Identity of the platform model motion-core runs, so the safety monitor can check it uses
+/// the same platform.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("crs_ipc::PlatformIdentity.v1")]
 #[repr(C)]
@@ -402,11 +478,21 @@ pub struct PlatformIdentity {
     pub version: u32,
     pub cable_count: u32,
     pub timestamp_ns: u64,
-    pub hash: [u8; 32],
+    pub hash: PlatformId,
 }
 
+// The contract's layout of PlatformIdentity.v1 (before the newtype: `hash: [u8; 32]` at 16,
+// 48 bytes, alignment 8): a change here must bump the type name and CONTRACT_VERSION.
+const _: () = {
+    assert!(std::mem::size_of::<PlatformId>() == 32);
+    assert!(std::mem::align_of::<PlatformId>() == 1);
+    assert!(std::mem::offset_of!(PlatformIdentity, hash) == 16);
+    assert!(std::mem::size_of::<PlatformIdentity>() == 48);
+    assert!(std::mem::align_of::<PlatformIdentity>() == 8);
+};
+
 impl PlatformIdentity {
-    pub fn new(hash: [u8; 32], cable_count: u32) -> Self {
+    pub fn new(hash: PlatformId, cable_count: u32) -> Self {
         Self {
             version: CONTRACT_VERSION,
             cable_count,
@@ -524,5 +610,39 @@ impl Default for PlantTruth {
             converged: 0,
             braked: 0,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn platform_id_displays_lower_case_hex_and_compares_with_its_bytes() {
+        let mut b = [0u8; 32];
+        b[0] = 0xAB;
+        b[31] = 0x0F;
+        let id = PlatformId::new(b);
+        let s = id.to_string();
+        assert_eq!(s.len(), 64);
+        assert!(s.starts_with("ab00"), "{s}");
+        assert!(s.ends_with("000f"), "{s}");
+        assert_eq!(format!("{id:?}"), format!("PlatformId({s})"));
+        assert_eq!(id, b);
+        assert_eq!(b, id);
+        b[5] ^= 1;
+        assert_ne!(id, b);
+        assert_eq!(id.as_bytes()[0], 0xAB);
+        assert_eq!(PlatformId::from(*id.as_bytes()), id);
+    }
+
+    /// The golden platform identity in its contract form matches the bytes pinned before the
+    /// newtype (the layout is checked at compile time above).
+    #[test]
+    fn golden_platform_identity_hex() {
+        assert_eq!(
+            crate::identity_golden::PLATFORM_IDENTITY.to_string(),
+            "3b8d8c284c85bb378e5efa7613f73024426c4a7a789d49089d51dfe90d8016cb"
+        );
     }
 }

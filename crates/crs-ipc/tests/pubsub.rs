@@ -65,12 +65,14 @@ fn identity_history_reaches_late_subscriber_and_wakeup_works() {
     let node = IpcNode::with_prefix("crs-ipc-test-e", &prefix("id")).unwrap();
     let publ = node.publisher::<PlatformIdentity>().unwrap();
     let _early = node.subscriber::<PlatformIdentity>().unwrap();
-    publ.publish(&PlatformIdentity::new([7; 32], 8)).unwrap();
+    publ.publish(&PlatformIdentity::new(PlatformId::new([7; 32]), 8))
+        .unwrap();
     let late = node.subscriber::<PlatformIdentity>().unwrap();
     // history is delivered on the publisher's next update; republish-free check via update.
     let mut got = late.receive().unwrap();
     if got.is_none() {
-        publ.publish(&PlatformIdentity::new([7; 32], 8)).unwrap();
+        publ.publish(&PlatformIdentity::new(PlatformId::new([7; 32]), 8))
+            .unwrap();
         got = late.receive().unwrap();
     }
     assert_eq!(got.unwrap().hash, [7; 32]);

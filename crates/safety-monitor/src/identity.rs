@@ -13,6 +13,7 @@
 //! the hashes differ and the monitor trips (identity mismatch) before anything moves.
 
 use crate::platform::PlatformParams;
+use crs_ipc::PlatformId;
 use sha2::{Digest, Sha256};
 
 /// Domain tag of the canonical serialisation (version 1).
@@ -29,7 +30,7 @@ pub const PLATFORM_TAG: &[u8] = b"crs-platform-v2";
 /// `crs_ipc::identity_golden` (tests/identity_golden.rs). The drive scaling is not in
 /// it (motion-core does not know it): the monitor's safety parameter CRC, announced on the
 /// bus, covers the drives file.
-pub fn platform_identity(p: &PlatformParams) -> [u8; 32] {
+pub fn platform_identity(p: &PlatformParams) -> PlatformId {
     let mut h = Sha256::new();
     h.update(PLATFORM_TAG);
     h.update(model_identity(p));
@@ -53,7 +54,7 @@ pub fn platform_identity(p: &PlatformParams) -> [u8; 32] {
     ] {
         h.update(c.to_bits().to_le_bytes());
     }
-    h.finalize().into()
+    PlatformId::new(h.finalize().into())
 }
 
 /// SHA-256 identity of the model parameters (`cdpr_model::Model::identity`).
@@ -91,7 +92,8 @@ pub fn model_identity(p: &PlatformParams) -> [u8; 32] {
     h.finalize().into()
 }
 
-/// Lower-case hex of a hash.
-pub fn hex(hash: &[u8; 32]) -> String {
-    hash.iter().map(|b| format!("{b:02x}")).collect()
+/// Lower-case hex of a hash: a [`PlatformId`] (whose `Display` is the same) or the bytes of
+/// another one (a file's SHA-256).
+pub fn hex<H: AsRef<[u8]> + ?Sized>(hash: &H) -> String {
+    hash.as_ref().iter().map(|b| format!("{b:02x}")).collect()
 }

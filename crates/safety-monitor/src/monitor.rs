@@ -18,8 +18,9 @@
 //! farther than the following-error bound from the setpoints it applied, RPDO targets on the bus
 //! farther than the limit from φ*(x) of every recent setpoint.
 //!
-//! The first fault latches [`MonitorState::Tripped`] and is logged ([`TripLog`]); the checks keep
-//! running while tripped, and every cause seen while tripped is latched too (per-cause latches).
+//! The first fault latches [`Latch::Tripped`], which carries its [`TripRecord`], and is logged
+//! ([`TripLog`]); the checks keep running while tripped, and every cause seen while tripped is
+//! latched too (per-cause latches).
 //! [`Monitor::request_reset`] (the operator's manual reset, ISO 13849-1 §5.2.2) is accepted
 //! only when no fault was seen for `reset_clear_cycles` consecutive cycles AND every latched
 //! cause was POSITIVELY shown cleared for as many cycles (see [`evidence`]): absence of a fault
@@ -34,7 +35,8 @@ use crate::platform::WorkspaceBox;
 use crate::trip::{Cause, CauseSet, Fault, TripLog, TripRecord};
 use can_transport::safety_frame::{SafetyHeartbeat, SafetyState};
 use crs_ipc::{
-    BusState, CONTRACT_VERSION, DriveFeedback, JointSetpoint, MAX_CABLES, PlatformIdentity,
+    BusState, CONTRACT_VERSION, DriveFeedback, JointSetpoint, MAX_CABLES, PlatformId,
+    PlatformIdentity,
 };
 use glam::{DMat3, DQuat, DVec3};
 
@@ -68,7 +70,7 @@ pub struct Limits {
     /// Cycles in a row with feedback but none of it checkable before the check trips.
     pub unchecked_cycles: u32,
     pub check_rpdo: bool,
-    /// Start in [`MonitorState::NotReady`] (STOP) until [`Readiness::ready`].
+    /// Start in [`Latch::NotReady`] (STOP) until [`Readiness::ready`].
     pub require_ready: bool,
     pub forces: ForceLimits,
     pub motion: MotionCheck,
@@ -171,9 +173,12 @@ struct ForceWatch {
     over_since_ns: Option<u64>,
 }
 
-/// Latched state.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum MonitorState {
+/// The monitor's state, with the data each state has: a trip cannot exist without its
+/// record, and the record cannot be read while the monitor is not tripped (issue 14). Private
+/// to [`Monitor`], read through [`Monitor::latch`]; the only transition out of
+/// [`Latch::Tripped`] consumes an [`authority::ResetToken`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Latch {
     /// Start-up: no fault, but the drives may not be enabled (the safety heartbeat says STOP)
     /// until every drive is operational with live force readings (see
     /// [`Monitor::readiness`]); the configuration was verified when it was loaded. Every check
@@ -185,17 +190,65 @@ pub enum MonitorState {
     /// motion-core after the drives are enabled, which needs this RUN, so the identity cannot
     /// be a condition of RUN itself without a deadlock; docs/safety-monitor.md "Start-up").
     Armed,
-    /// E-stop latched until an accepted reset: the safety heartbeat says STOP.
+    /// E-stop latched until an accepted reset: the safety heartbeat says STOP. Carries the
+    /// first fault that latched it (cause, cable, value, limit, sequence, cycle, time).
+    Tripped(TripRecord),
+}
+
+impl Latch {
+    /// The state without its data (what the heartbeat and the state events carry).
+    pub fn state(&self) -> MonitorState {
+        match self {
+            Latch::NotReady => MonitorState::NotReady,
+            Latch::Armed => MonitorState::Armed,
+            Latch::Tripped(_) => MonitorState::Tripped,
+        }
+    }
+
+    /// The trip that latched the e-stop; None unless tripped.
+    pub fn trip(&self) -> Option<&TripRecord> {
+        match self {
+            Latch::Tripped(rec) => Some(rec),
+            Latch::NotReady | Latch::Armed => None,
+        }
+    }
+
+    pub fn is_tripped(&self) -> bool {
+        matches!(self, Latch::Tripped(_))
+    }
+}
+
+/// The state as a code: [`Latch`] without its data, for comparisons and for the state code on
+/// the process bus (`Heartbeat::state` / `StateEvent::state`, [`crs_ipc::monitor_state`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MonitorState {
+    /// See [`Latch::NotReady`].
+    NotReady,
+    /// See [`Latch::Armed`].
+    Armed,
+    /// See [`Latch::Tripped`].
     Tripped,
 }
 
 impl MonitorState {
-    /// Code in `Heartbeat::state` / `StateEvent::state`.
+    /// Code in `Heartbeat::state` / `StateEvent::state` (the contract's
+    /// [`crs_ipc::monitor_state`] codes; crs-console decodes the same constants).
     pub fn code(self) -> u32 {
         match self {
-            MonitorState::Armed => 1,
-            MonitorState::Tripped => 2,
-            MonitorState::NotReady => 3,
+            MonitorState::Armed => crs_ipc::monitor_state::ARMED,
+            MonitorState::Tripped => crs_ipc::monitor_state::TRIPPED,
+            MonitorState::NotReady => crs_ipc::monitor_state::NOT_READY,
+        }
+    }
+
+    /// The state of a code received on the process bus; None for a code the contract does
+    /// not define.
+    pub fn from_code(code: u32) -> Option<MonitorState> {
+        match code {
+            crs_ipc::monitor_state::ARMED => Some(MonitorState::Armed),
+            crs_ipc::monitor_state::TRIPPED => Some(MonitorState::Tripped),
+            crs_ipc::monitor_state::NOT_READY => Some(MonitorState::NotReady),
+            _ => None,
         }
     }
 }
@@ -232,7 +285,7 @@ pub struct CycleReport {
     pub faults: CauseSet,
     pub setpoints: u32,
     pub missing: u32,
-    /// Set in the cycle that left [`MonitorState::NotReady`] for `Armed`.
+    /// Set in the cycle that left [`Latch::NotReady`] for `Armed`.
     pub became_ready: bool,
     /// The start-up conditions as this cycle saw them (what a not-ready monitor waits for).
     pub readiness: Readiness,
@@ -250,7 +303,7 @@ pub struct Readiness {
 
 impl Readiness {
     /// Every drive operational with live feedback (the identity is reported, not required:
-    /// see [`MonitorState::NotReady`]).
+    /// see [`Latch::NotReady`]).
     pub fn ready(&self) -> bool {
         self.not_operational == 0 && self.no_feedback == 0
     }
@@ -392,9 +445,10 @@ pub struct Monitor {
     lim: Limits,
     kin: StandardKinematics,
     m: usize,
-    identity: [u8; 32],
-    state: MonitorState,
-    trip: Option<TripRecord>,
+    identity: PlatformId,
+    /// NotReady / Armed / Tripped with its record: written only by [`Monitor::end_cycle`]
+    /// (NotReady → Armed, any → Tripped) and [`Monitor::release`] (the verified reset).
+    latch: Latch,
     log: TripLog,
     stats: Stats,
     // This cycle.
@@ -468,19 +522,18 @@ pub const OPEN_END_HOLD_SETPOINTS: u32 = 50;
 impl Monitor {
     /// `identity`: the platform identity the monitor computed itself
     /// ([`crate::identity::platform_identity`]).
-    pub fn new(lim: Limits, kin: StandardKinematics, identity: [u8; 32]) -> Self {
+    pub fn new(lim: Limits, kin: StandardKinematics, identity: PlatformId) -> Self {
         let window = (lim.gap_window_cycles.max(1) as usize).min(MAX_GAP_WINDOW);
         Self {
             m: kin.cables(),
             lim,
             kin,
             identity,
-            state: if lim.require_ready {
-                MonitorState::NotReady
+            latch: if lim.require_ready {
+                Latch::NotReady
             } else {
-                MonitorState::Armed
+                Latch::Armed
             },
-            trip: None,
             log: TripLog::default(),
             stats: Stats::default(),
             faults: CauseSet::default(),
@@ -605,11 +658,15 @@ impl Monitor {
     }
 
     pub fn state(&self) -> MonitorState {
-        self.state
+        self.latch.state()
     }
-    /// The trip that latched the current e-stop (None while armed).
+    /// The state with its data (the trip record while tripped).
+    pub fn latch(&self) -> &Latch {
+        &self.latch
+    }
+    /// The trip that latched the current e-stop (None while not tripped).
     pub fn trip(&self) -> Option<&TripRecord> {
-        self.trip.as_ref()
+        self.latch.trip()
     }
     pub fn trip_log(&self) -> &TripLog {
         &self.log
@@ -632,10 +689,10 @@ impl Monitor {
 
     /// The safety heartbeat to send this cycle (`counter` +1 per pair sent).
     pub fn heartbeat(&self, counter: u16) -> SafetyHeartbeat {
-        let (state, cause) = match (self.state, &self.trip) {
-            (MonitorState::Tripped, Some(t)) => (SafetyState::Stop, t.fault.cause.code()),
-            (MonitorState::Tripped | MonitorState::NotReady, _) => (SafetyState::Stop, 0),
-            (MonitorState::Armed, _) => (SafetyState::Run, 0),
+        let (state, cause) = match &self.latch {
+            Latch::Tripped(t) => (SafetyState::Stop, t.fault.cause.code()),
+            Latch::NotReady => (SafetyState::Stop, 0),
+            Latch::Armed => (SafetyState::Run, 0),
         };
         SafetyHeartbeat {
             state,
@@ -886,7 +943,7 @@ impl Monitor {
         self.feedback_count += 1;
         self.seen_feedback = true;
         self.stats.feedback_checked += 1;
-        if self.state == MonitorState::Tripped {
+        if self.latch.is_tripped() {
             self.reset_evidence_feedback(fb);
         }
         if !self.lim.check_following_error
@@ -1206,19 +1263,18 @@ impl Monitor {
         }
         let mut new_trip = None;
         let mut became_ready = false;
-        if self.state == MonitorState::Tripped {
+        if self.latch.is_tripped() {
             self.update_evidence(now_ns, &readiness);
         }
         if let Some(first) = self.first {
             self.clear_streak = 0;
-            if self.state != MonitorState::Tripped {
+            if !self.latch.is_tripped() {
                 let rec = TripRecord {
                     fault: first,
                     detected_ns: now_ns,
                     cycle: self.stats.cycles,
                 };
-                self.state = MonitorState::Tripped;
-                self.trip = Some(rec);
+                self.latch = Latch::Tripped(rec);
                 self.log.push(rec);
                 new_trip = Some(rec);
                 self.latched = self.faults;
@@ -1226,8 +1282,8 @@ impl Monitor {
             }
         } else {
             self.clear_streak = self.clear_streak.saturating_add(1);
-            if self.state == MonitorState::NotReady && readiness.ready() {
-                self.state = MonitorState::Armed;
+            if self.latch == Latch::NotReady && readiness.ready() {
+                self.latch = Latch::Armed;
                 became_ready = true;
             }
         }
@@ -1244,7 +1300,7 @@ impl Monitor {
             self.plan = PlanWatch::default();
         }
         let report = CycleReport {
-            state: self.state,
+            state: self.latch.state(),
             new_trip,
             faults: self.faults,
             setpoints: self.new_setpoints,
@@ -1321,10 +1377,10 @@ impl Monitor {
     /// many cycles ([`authority::verify`]). Accepting advances the reset epoch. While armed or
     /// not ready nothing changes.
     pub fn request_reset(&mut self) -> ResetDecision {
-        match self.state {
-            MonitorState::NotReady => ResetDecision::NotReady,
-            MonitorState::Armed => ResetDecision::NotTripped,
-            MonitorState::Tripped => {
+        match self.latch {
+            Latch::NotReady => ResetDecision::NotReady,
+            Latch::Armed => ResetDecision::NotTripped,
+            Latch::Tripped(_) => {
                 let need = self.lim.reset_clear_cycles;
                 match authority::verify(
                     self.latched,
@@ -1338,23 +1394,16 @@ impl Monitor {
                         self.release(token);
                         ResetDecision::Accepted { epoch }
                     }
-                    Err(c) => ResetDecision::Refused(
-                        self.last_faults
-                            .first()
-                            .or(Some(c))
-                            .or(self.trip.map(|t| t.fault.cause))
-                            .unwrap_or(Cause::IpcError),
-                    ),
+                    Err(c) => ResetDecision::Refused(self.last_faults.first().unwrap_or(c)),
                 }
             }
         }
     }
 
-    /// Leaves the latch: the only transition out of [`MonitorState::Tripped`], and it needs the
-    /// token only [`authority::verify`] mints.
+    /// Leaves the latch: the only transition out of [`Latch::Tripped`] (which drops the trip
+    /// record with it), and it needs the token only [`authority::verify`] mints.
     fn release(&mut self, _token: authority::ResetToken) {
-        self.state = MonitorState::Armed;
-        self.trip = None;
+        self.latch = Latch::Armed;
         self.latched.clear();
         self.evidence = [0; 32];
     }

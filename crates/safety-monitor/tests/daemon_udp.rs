@@ -29,7 +29,7 @@ struct Rig {
     bus: Box<dyn CanBus>,
     pairs: PairReceiver,
     kin: StandardKinematics,
-    id: [u8; 32],
+    id: crs_ipc::PlatformId,
     seq: u64,
     prefix: String,
     /// (state, time) of the last valid safety pair; NMT commands seen (command, time).

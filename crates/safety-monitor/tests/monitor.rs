@@ -3,12 +3,12 @@
 //! generated with motion-core's kinematics (dev-dependency), so Δq is the difference of two
 //! independent implementations plus the injected offset.
 
-use crs_ipc::{BusState, DriveFeedback, JointSetpoint, MAX_CABLES, PlatformIdentity};
+use crs_ipc::{BusState, DriveFeedback, JointSetpoint, MAX_CABLES, PlatformId, PlatformIdentity};
 use proptest::prelude::*;
 use safety_monitor::config::{self, MonitorConfig};
 use safety_monitor::identity::platform_identity;
 use safety_monitor::kinematics::StandardKinematics;
-use safety_monitor::monitor::{HISTORY, Limits};
+use safety_monitor::monitor::{HISTORY, Latch, Limits};
 use safety_monitor::{Cause, Monitor, MonitorState, ResetDecision};
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -276,9 +276,9 @@ fn identity_mismatch_and_missing_identity_trip() {
     lim.require_ready = false;
     let own = platform_identity(&c.platform);
     let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
-    let mut other = own;
+    let mut other = *own.as_bytes();
     other[0] ^= 1;
-    m.on_identity(&PlatformIdentity::new(other, 8));
+    m.on_identity(&PlatformIdentity::new(PlatformId::new(other), 8));
     assert_eq!(
         m.end_cycle(0).new_trip.unwrap().fault.cause,
         Cause::IdentityMismatch
@@ -425,6 +425,8 @@ fn reset_is_refused_while_the_cause_persists_and_accepted_after() {
     assert_eq!(m.heartbeat(2).epoch, e0 + 1);
     assert_eq!(m.state(), MonitorState::Armed);
     assert!(m.trip().is_none());
+    // Leaving the latch drops its record with it (the log keeps it).
+    assert_eq!(*m.latch(), Latch::Armed);
     good_cycle(&mut m, seq, 0);
     assert_eq!(m.state(), MonitorState::Armed);
     assert_eq!(m.trip_log().total(), 1);
@@ -446,6 +448,12 @@ fn the_latch_holds_the_first_cause_and_logs_every_trip() {
         (t.fault.cause, t.fault.cable, t.detected_ns),
         (Cause::DqLimit, Some(5), 7)
     );
+    // The record lives in the state (issue 14): the tripped state carries the same record.
+    match m.latch() {
+        Latch::Tripped(rec) => assert_eq!(rec, t),
+        other => panic!("not tripped: {other:?}"),
+    }
+    assert_eq!(m.latch().state(), MonitorState::Tripped);
     let hb = m.heartbeat(3);
     assert_eq!(hb.state, can_transport::safety_frame::SafetyState::Stop);
     assert_eq!(hb.cause, Cause::DqLimit.code());
@@ -708,7 +716,7 @@ proptest! {
                     f.cable_length_m.copy_from_slice(&vals[6..]);
                     m.on_feedback(&f);
                 }
-                2 => m.on_identity(&PlatformIdentity { version: state % 3, cable_count: count, timestamp_ns: seq, hash }),
+                2 => m.on_identity(&PlatformIdentity { version: state % 3, cable_count: count, timestamp_ns: seq, hash: PlatformId::new(hash) }),
                 3 => m.on_rpdo(count as usize % 20, vals[0], seq),
                 _ => {
                     let r = m.end_cycle(seq);
@@ -1453,4 +1461,21 @@ fn stopping_is_accepted_only_at_the_end_of_the_announced_plan() {
         assert!(m.end_cycle(0).faults.is_empty());
     }
     assert_eq!(m.state(), MonitorState::Armed);
+}
+
+/// The state codes on the process bus are the contract's (crs_ipc::monitor_state, which
+/// crs-console decodes) and decode back to the same state.
+#[test]
+fn state_codes_are_the_contract_constants() {
+    use crs_ipc::monitor_state::{ARMED, NOT_READY, TRIPPED};
+    for (s, code) in [
+        (MonitorState::Armed, ARMED),
+        (MonitorState::Tripped, TRIPPED),
+        (MonitorState::NotReady, NOT_READY),
+    ] {
+        assert_eq!(s.code(), code);
+        assert_eq!(MonitorState::from_code(code), Some(s));
+    }
+    assert_eq!(MonitorState::from_code(0), None);
+    assert_eq!(MonitorState::from_code(4), None);
 }

@@ -3,8 +3,8 @@
 use cdpr_model::config::load_platform;
 use clap::Parser;
 use crs_ipc::{
-    CueingPose, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlatformIdentity,
-    ProcessId, StateEvent, TopicPublisher, TopicSubscriber, WakeupNotifier,
+    CueingPose, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlatformId,
+    PlatformIdentity, ProcessId, StateEvent, TopicPublisher, TopicSubscriber, WakeupNotifier,
 };
 use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
 use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
@@ -297,7 +297,8 @@ fn run(args: Args) -> Result<(), String> {
     let stage = {
         let outbox = outbox.clone();
         let stats = stats.clone();
-        let identity = PlatformIdentity::new(platform.identity(), model.m() as u32);
+        let identity =
+            PlatformIdentity::new(PlatformId::new(platform.identity()), model.m() as u32);
         let mut rt = cfg.realtime;
         rt.priority = (rt.priority - 1).max(0);
         rt.lock_memory = false;

@@ -157,8 +157,7 @@ fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
             let cfg = safety_monitor::config::load(&args.config)?;
             let id = safety_monitor::identity::platform_identity(&cfg.platform);
             println!(
-                "{}  {} ({} cables)",
-                safety_monitor::identity::hex(&id),
+                "{id}  {} ({} cables)",
                 cfg.platform_file.display(),
                 cfg.platform.cables()
             );
