@@ -184,35 +184,49 @@ pub fn run(
         }
     };
     publish(&bank, &axes, crs_ipc::monotonic_ns());
+    // Frames handled at most before the watches are judged (a flooded bus cannot stall us).
+    const MAX_BACKLOG: usize = 512;
     while !control.stop.load(Ordering::Acquire) {
         bank.flush(&mut bus)?;
-        let rx = bus.recv_timeout(Duration::from_millis(2))?;
-        let now = crs_ipc::monotonic_ns();
-        if let Some(rx) = rx
-            && bank.handle_frame(&rx.frame, now)
-        {
-            for (i, (w, ax)) in cfg.winches.iter().zip(axes.iter_mut()).enumerate() {
-                match bank.demand(i) {
-                    MotionDemand::Follow { target_counts } => {
-                        ax.step(Some(w.counts_to_length(target_counts)), cfg.sync_period_s)
+        // Everything queued is handled, stamped with its receive time, BEFORE the watches are
+        // judged (bank.poll below): an emulator process the host did not schedule for a while
+        // must not fault on its own backlog (drive-io's runner does the same).
+        let mut rx = bus.recv_timeout(Duration::from_millis(2))?;
+        let mut handled = 0;
+        while let Some(frame) = rx {
+            if bank.handle_frame(&frame.frame, frame.rx_monotonic_ns) {
+                for (i, (w, ax)) in cfg.winches.iter().zip(axes.iter_mut()).enumerate() {
+                    match bank.demand(i) {
+                        MotionDemand::Follow { target_counts } => {
+                            ax.step(Some(w.counts_to_length(target_counts)), cfg.sync_period_s)
+                        }
+                        MotionDemand::QuickStop => ax.step(None, cfg.sync_period_s),
+                        MotionDemand::Hold => ax.hold(),
                     }
-                    MotionDemand::QuickStop => ax.step(None, cfg.sync_period_s),
-                    MotionDemand::Hold => ax.hold(),
+                    let pos = w
+                        .length_to_counts(ax.length_m)
+                        .unwrap_or(if ax.length_m < 0.0 { 0 } else { i32::MAX });
+                    let force = cfg.pretension_n + cfg.damping_n_per_m_per_s * ax.velocity_m_per_s;
+                    bank.set_actual(
+                        i,
+                        pos,
+                        w.m_per_s_to_counts_per_s(ax.velocity_m_per_s),
+                        control.reported_force_mn(i, (force * 1000.0) as i32),
+                    );
                 }
-                let pos = w
-                    .length_to_counts(ax.length_m)
-                    .unwrap_or(if ax.length_m < 0.0 { 0 } else { i32::MAX });
-                let force = cfg.pretension_n + cfg.damping_n_per_m_per_s * ax.velocity_m_per_s;
-                bank.set_actual(
-                    i,
-                    pos,
-                    w.m_per_s_to_counts_per_s(ax.velocity_m_per_s),
-                    control.reported_force_mn(i, (force * 1000.0) as i32),
-                );
+                bank.transmit_pdos();
+                // The answer to this SYNC goes out now, not after the backlog.
+                bank.flush(&mut bus)?;
+                control.syncs.fetch_add(1, Ordering::AcqRel);
             }
-            bank.transmit_pdos();
-            control.syncs.fetch_add(1, Ordering::AcqRel);
+            handled += 1;
+            rx = if handled < MAX_BACKLOG {
+                bus.try_recv()?
+            } else {
+                None
+            };
         }
+        let now = crs_ipc::monotonic_ns();
         let mute = control.heartbeat_mute_mask.load(Ordering::Acquire);
         for i in 0..m {
             if let Some(s) = bank.slave_mut(i) {
