@@ -201,6 +201,24 @@ impl IpcNode {
         })
     }
 
+    fn notifier_port(&self, name: &str) -> Result<(Notifier<ipc::Service>, String), IpcError> {
+        let (service, f) = self.event_service(name)?;
+        let port = f
+            .notifier_builder()
+            .create()
+            .map_err(|e| svc_err(&service, "create notifier", e))?;
+        Ok((port, service))
+    }
+
+    fn listener_port(&self, name: &str) -> Result<(Listener<ipc::Service>, String), IpcError> {
+        let (service, f) = self.event_service(name)?;
+        let port = f
+            .listener_builder()
+            .create()
+            .map_err(|e| svc_err(&service, "create listener", e))?;
+        Ok((port, service))
+    }
+
     fn event_service(
         &self,
         name: &str,
@@ -231,43 +249,27 @@ impl IpcNode {
     /// Notifier for the rare-event wake-up service (`crs/v1/wakeup`): call it after publishing an
     /// e-stop [`StateEvent`], never in a 1 ms loop (10-30 us per notify).
     pub fn wakeup_notifier(&self) -> Result<WakeupNotifier, IpcError> {
-        let (service, f) = self.event_service(topics::WAKEUP_EVENT)?;
-        let port = f
-            .notifier_builder()
-            .create()
-            .map_err(|e| svc_err(&service, "create notifier", e))?;
+        let (port, service) = self.notifier_port(topics::WAKEUP_EVENT)?;
         Ok(WakeupNotifier { port, service })
     }
 
     /// Listener for the wake-up service, for processes that sleep until an event arrives.
     pub fn wakeup_listener(&self) -> Result<WakeupListener, IpcError> {
-        let (service, f) = self.event_service(topics::WAKEUP_EVENT)?;
-        let port = f
-            .listener_builder()
-            .create()
-            .map_err(|e| svc_err(&service, "create listener", e))?;
+        let (port, service) = self.listener_port(topics::WAKEUP_EVENT)?;
         Ok(WakeupListener { port, service })
     }
 
     /// Notifier of [`topics::SETPOINT_READY_EVENT`], for the process that publishes
     /// [`JointSetpoint`]s (motion-core's publish stage): notify after publishing.
     pub fn setpoint_ready_notifier(&self) -> Result<WakeupNotifier, IpcError> {
-        let (service, f) = self.event_service(topics::SETPOINT_READY_EVENT)?;
-        let port = f
-            .notifier_builder()
-            .create()
-            .map_err(|e| svc_err(&service, "create notifier", e))?;
+        let (port, service) = self.notifier_port(topics::SETPOINT_READY_EVENT)?;
         Ok(WakeupNotifier { port, service })
     }
 
     /// Listener of [`topics::SETPOINT_READY_EVENT`] (drive-io): its file descriptor goes into
     /// the same ppoll as the CAN socket ([`SetpointReadyListener::raw_fd`]).
     pub fn setpoint_ready_listener(&self) -> Result<SetpointReadyListener, IpcError> {
-        let (service, f) = self.event_service(topics::SETPOINT_READY_EVENT)?;
-        let port = f
-            .listener_builder()
-            .create()
-            .map_err(|e| svc_err(&service, "create listener", e))?;
+        let (port, service) = self.listener_port(topics::SETPOINT_READY_EVENT)?;
         Ok(SetpointReadyListener { port, service })
     }
 }

@@ -195,22 +195,17 @@ pub fn analyse(
         return Err("the recording has no rest point with force readings".into());
     }
     // The set-up pose is found by the reference (the tracker sees it within its noise).
-    let at_setup = ds
-        .samples
-        .iter()
-        .filter(|s| s.forces.is_some())
-        .zip(&rest)
-        .filter(|(s, _)| {
-            let p = s.pose_ref.unwrap_or(s.pose);
-            p.error_to(&x0).0 < 1e-3 && p.error_to(&x0).1 < 1e-4
-        })
-        .map(|(_, r)| r)
-        .collect::<Vec<_>>();
-    let Some(first) = at_setup.first() else {
+    let Some(setup_forces) = ds.samples.iter().find_map(|s| {
+        let p = s.pose_ref.unwrap_or(s.pose);
+        let (dp, dr) = p.error_to(&x0);
+        (dp < 1e-3 && dr < 1e-4)
+            .then_some(s.forces.as_ref())
+            .flatten()
+    }) else {
         return Err("no rest point at the set-up pose (eq. 6.21) was recorded".into());
     };
-    let w = wrench_from_forces(model, &mut data, &x0, &first.forces)?;
-    let q_off = setup::cable_offsets(model, &mut data, &x0, &first.forces)?;
+    let w = wrench_from_forces(model, &mut data, &x0, setup_forces)?;
+    let q_off = setup::cable_offsets(model, &mut data, &x0, setup_forces)?;
     let fit = payload::identify(model, &mut data, &rest)?;
     let (m_cfg, c_cfg) = payload::configured(&model.params().w_e);
     let truth = match plant {
@@ -271,7 +266,7 @@ pub fn analyse(
         setup_pose: x0.to_array(),
         rest_points: rest.len(),
         w_e_setup: [w[0], w[1], w[2], w[3], w[4], w[5]],
-        f_setup: first.forces.clone(),
+        f_setup: setup_forces.clone(),
         q_off_m: q_off,
         payload: fit,
         configured: (m_cfg, [c_cfg.x, c_cfg.y]),

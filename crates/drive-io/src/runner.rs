@@ -148,11 +148,12 @@ pub fn run(
         u64::from(cfg.bus.setpoint_wait_us) * 1000,
         monotonic_ns(),
     );
-    let ready = match cfg.bus.sync_source {
+    let ready_port = match cfg.bus.sync_source {
         SyncSource::Setpoint => Some(ipc.setpoint_ready_listener()?),
         SyncSource::Clock => None,
     };
-    let mut ready = ready.as_ref();
+    // Dropped to None (own clock for good) if the event channel fails.
+    let mut ready = ready_port.as_ref();
     let bus_fd = bus.readiness_fd();
     tracing::info!(sync_source = ?cfg.bus.sync_source, multiplexed = bus_fd.is_some(), "cycle timing");
     while !stop.load(Ordering::Relaxed) {
@@ -178,12 +179,7 @@ pub fn run(
                         ready = None;
                     }
                     if can {
-                        for _ in 0..MAX_DRAIN_PER_CYCLE {
-                            match bus.try_recv_event()? {
-                                Some(ev) => on_rx(ev, &mut master, watch.as_mut()),
-                                None => break,
-                            }
-                        }
+                        drain_bus(&mut bus, &mut master, watch.as_mut())?;
                     }
                 }
                 _ => {
@@ -209,12 +205,7 @@ pub fn run(
         // Drain what is already queued (after a preemption the wait loop above is skipped):
         // judging heartbeats/TPDOs before reading them would fault on our own lateness.
         // Bounded so a flooded bus cannot stall the cycle.
-        for _ in 0..MAX_DRAIN_PER_CYCLE {
-            match bus.try_recv_event()? {
-                Some(ev) => on_rx(ev, &mut master, watch.as_mut()),
-                None => break,
-            }
-        }
+        drain_bus(&mut bus, &mut master, watch.as_mut())?;
         // Cycle time = after the drain, so every frame handled is older than the cycle.
         let cycle_now = monotonic_ns();
         let (_trigger, missed) = clock.start(now);
@@ -338,6 +329,21 @@ pub fn run(
         setpoint_cycles: clock.locked_cycles(),
         clock_cycles: clock.clock_cycles(),
     })
+}
+
+/// Handles what is queued on the bus, at most [`MAX_DRAIN_PER_CYCLE`] events.
+fn drain_bus(
+    bus: &mut impl CanBus,
+    master: &mut Master,
+    mut watch: Option<&mut SafetyWatch>,
+) -> Result<(), CanError> {
+    for _ in 0..MAX_DRAIN_PER_CYCLE {
+        match bus.try_recv_event()? {
+            Some(ev) => on_rx(ev, master, watch.as_deref_mut()),
+            None => break,
+        }
+    }
+    Ok(())
 }
 
 /// One received frame or bus error into the safety watch and the master.

@@ -65,10 +65,6 @@ impl SyncClock {
         }
     }
 
-    pub fn source(&self) -> SyncSource {
-        self.source
-    }
-
     /// Falls back to clock mode for good (the notification channel failed).
     pub fn degrade_to_clock(&mut self) {
         self.source = SyncSource::Clock;
