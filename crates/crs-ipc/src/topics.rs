@@ -16,6 +16,12 @@ pub const SETPOINT_READY_EVENT: &str = "crs/v1/setpoint_ready";
 ///
 /// Buffer sizes: the slowest reader is the 15 ms safety monitor; a buffer of 32 holds 32 ms of a
 /// 1 kHz stream, so it sees every sample with margin (iceoryx2's default of 2 would drop 13/15).
+/// The setpoint stream buffers 64 (64 ms at 1 kHz, 256 ms at the 4 ms test loop): longer than
+/// the drives' safety-heartbeat validation time (50 ms; 150 ms in the relaxed test profile), so
+/// a monitor stalled by its host either catches up and checks every setpoint, or is stopped by
+/// the drives' watch of its heartbeat — a late MONITOR is not misreported as a lossy STREAM
+/// (`sequence_gaps`). Seen in CI: a monitor starved > 128 ms on a shared 2-core host tripped
+/// `sequence_gaps` with the 32-sample buffer while the stream itself had no gap.
 pub trait Topic: Copy + core::fmt::Debug + ZeroCopySend + 'static {
     /// Service name without prefix, e.g. `crs/v1/joint_setpoints`.
     const NAME: &'static str;
@@ -49,7 +55,7 @@ macro_rules! topic {
 topic!(
     JointSetpoint,
     "crs/v1/joint_setpoints",
-    buffer = 32,
+    buffer = 64,
     history = 0,
     publishers = 1,
     subscribers = 8

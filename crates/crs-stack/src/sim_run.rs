@@ -116,10 +116,15 @@ pub struct Summary {
     pub loop_cycles: u64,
     pub loop_overruns: u64,
     pub loop_rejected: u64,
+    /// Setpoints the loop could not hand to its publish stage (stage stalled; each one is a
+    /// sequence gap the monitor counts).
+    pub loop_dropped: u64,
     pub loop_lateness_p99_us: f64,
     pub loop_lateness_max_us: f64,
     pub loop_compute_p99_us: f64,
     pub estops: u64,
+    /// The monitor's trip records (its log's `SAFETY TRIP` lines): why it stopped the run.
+    pub monitor_trips: Vec<String>,
     pub monitor_heartbeats: u64,
     pub drive_faults: u64,
     /// Pose error at the rest points (measured: tracker vs reference; true: plant vs reference).
@@ -130,6 +135,8 @@ pub struct Summary {
     /// motion-core was still streaming: the drives held from then on (on an overloaded host a
     /// gap of > `bus.stale_setpoint_cycles` SYNC periods in the setpoint stream does this).
     pub bus_stopped_during_run: Option<String>,
+    /// drive-io's ERROR lines of such a stop (which watch or fault stopped the bus).
+    pub bus_stop_reasons: Vec<String>,
     /// The recording written (--record).
     pub record: Option<PathBuf>,
     /// The hover flight (`--source helicopter`).
@@ -584,6 +591,7 @@ pub fn execute_observed(
             sum.loop_cycles = s.cycles;
             sum.loop_overruns = s.overruns;
             sum.loop_rejected = s.rejected;
+            sum.loop_dropped = s.dropped;
             sum.loop_lateness_p99_us = s.lateness_p99_ns as f64 * 1e-3;
             sum.loop_lateness_max_us = s.lateness_max_ns as f64 * 1e-3;
             sum.loop_compute_p99_us = s.compute_p99_ns as f64 * 1e-3;
@@ -685,6 +693,12 @@ pub fn execute_observed(
         sum.rest = rest_errors(&r.samples);
         sum.rest_points_skipped = r.skipped.len();
     }
+    if sum.estops > 0 && with_monitor {
+        sum.monitor_trips = log_lines(&a.out.join("safety-monitor.log"), "SAFETY TRIP", 4);
+    }
+    if sum.bus_stopped_during_run.is_some() {
+        sum.bus_stop_reasons = log_lines(&a.out.join("drive-io.log"), " ERROR ", 2);
+    }
     print_summary(&sum);
     if let (Some(path), Some(r), Ok(())) = (&a.record, &recorder, &result) {
         let m = platform.model.m();
@@ -740,6 +754,23 @@ pub fn execute_observed(
     Ok(sum)
 }
 
+/// The first `n` lines of a child's log that contain `needle`, from the level on (without the
+/// timestamp): the monitor's trip records, drive-io's stop reasons, so a summary with a stop
+/// says which check fired and with what value.
+fn log_lines(log: &Path, needle: &str, n: usize) -> Vec<String> {
+    let text = std::fs::read_to_string(log).unwrap_or_default();
+    text.lines()
+        .filter(|l| l.contains(needle))
+        .take(n)
+        .map(|l| {
+            l.split_once(' ')
+                .map_or(l, |(_, rest)| rest)
+                .trim()
+                .to_string()
+        })
+        .collect()
+}
+
 fn print_summary(s: &Summary) {
     println!("\n== crs sim summary ({}, {})", s.platform, s.transport);
     println!(
@@ -785,10 +816,11 @@ fn print_summary(s: &Summary) {
         if ok { "within" } else { "OUTSIDE" }
     );
     println!(
-        "  loop: {} cycles, {} overruns, {} rejected; lateness p99 {:.1} µs, max {:.1} µs; compute p99 {:.1} µs",
+        "  loop: {} cycles, {} overruns, {} rejected, {} not handed to the publish stage; lateness p99 {:.1} µs, max {:.1} µs; compute p99 {:.1} µs",
         s.loop_cycles,
         s.loop_overruns,
         s.loop_rejected,
+        s.loop_dropped,
         s.loop_lateness_p99_us,
         s.loop_lateness_max_us,
         s.loop_compute_p99_us
@@ -803,8 +835,14 @@ fn print_summary(s: &Summary) {
         s.estops,
         s.drive_faults
     );
+    for t in &s.monitor_trips {
+        println!("  monitor trip: {t}");
+    }
     if let Some(b) = &s.bus_stopped_during_run {
         println!("  DRIVE BUS STOPPED DURING THE RUN: {b}; the drives held from then on");
+        for r in &s.bus_stop_reasons {
+            println!("    drive-io: {r}");
+        }
     }
     if let Some(r) = &s.ride {
         println!(

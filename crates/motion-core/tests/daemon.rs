@@ -198,7 +198,7 @@ fn loop_thread_allocates_nothing_over_many_cycles() {
     assert_eq!(hl.state(), LoopState::Running);
     assert_eq!(stats.cycles.load(Ordering::Relaxed), cycles);
     assert_eq!(n, 0, "{n} heap operations on the loop thread");
-    // Every setpoint went through the outbox and over iceoryx2 (subscriber buffer 32: the test
+    // Every setpoint went through the outbox and over iceoryx2 (subscriber buffer 64: the test
     // drains every 16 cycles, so nothing is overwritten).
     assert_eq!(outbox.dropped.load(Ordering::Relaxed), 0);
     assert_eq!(sent as u64, cycles);

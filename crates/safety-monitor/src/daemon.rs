@@ -2,8 +2,8 @@
 //! around [`Monitor`], iceoryx2 in, iceoryx2 + CAN out.
 //!
 //! Per cycle: drain the platform identity, state events (reset requests), EVERY setpoint and
-//! feedback sample since the last cycle (the contract's subscriber buffer of 32 holds > 2 cycles
-//! at 1 kHz), the RPDO targets and drive heartbeats the bus reader thread saw; close the cycle;
+//! feedback sample since the last cycle (the contract's subscriber buffers of 64 setpoints and
+//! 32 feedback samples hold > 2 cycles at 1 kHz), the RPDO targets and drive heartbeats the bus reader thread saw; close the cycle;
 //! then
 //! * on a new trip: quick stop (RPDO1 controlword 0x0002) to every drive, NMT stop all, a STOP
 //!   safety heartbeat, all from the monitor's OWN CAN socket, and a latched `StateEvent::EStop`

@@ -1126,16 +1126,20 @@ fn pose_jump_inside_box(st: &mut Stack) -> Res<Outcome> {
     })
 }
 
-/// A 60 mm step on one cable in one setpoint (3 periods of motion at 5 m/s on the guest's 4 ms
-/// SYNC; Δq 60 mm passes the monitor) whose timestamp claims 100 ms more: drive-io judges the
-/// step on its own clock and the sequence numbers, refuses it and stops the drives.
+/// A 90 mm step on one cable in one setpoint (4.5 periods of motion at 5 m/s on the guest's 4 ms
+/// SYNC; Δq 90 mm passes the monitor's 100 mm) whose timestamp claims 100 ms more: drive-io
+/// judges the step on its own clock and the sequence numbers, refuses it and stops the drives.
+/// Why 90 and not less: drive-io rightly allows a stream that resumes after k silent SYNC
+/// periods a step of k periods of motion, and the emulated guest starves this publisher for 3
+/// periods often enough that a 60 mm (3-period) step was let through (a guest flake); 5 silent
+/// periods in a row are rare there, and the step stays below the monitor's Δq limit.
 fn lying_timestamps(st: &mut Stack) -> Res<Outcome> {
     let c = st.fake()?.clone();
     c.cable.store(1, Ordering::Relaxed);
     st.wait_following(false)?;
     let t0 = monotonic_ns();
     c.timestamp_lie_ns.store(100_000_000, Ordering::Relaxed);
-    c.step_um.store(60_000, Ordering::Relaxed);
+    c.step_um.store(90_000, Ordering::Relaxed);
     st.wait("drive-io faulted on the setpoint step", 10.0, |s| {
         Ok(s.bus_state() == Some(BusState::Fault))
     })?;
@@ -1148,14 +1152,14 @@ fn lying_timestamps(st: &mut Stack) -> Res<Outcome> {
     let t_fault = st.last_feedback.map(|f| f.timestamp_ns).unwrap_or(0);
     let stopped = st.require_braked()?;
     let moved = (st.emu()?.drives[1].length_m - home_length()).abs();
-    if moved > 0.03 {
+    if moved > 0.045 {
         return Err(format!("cable 2 moved {moved:.3} m: the step was applied"));
     }
     Ok(Outcome {
-        cause: "drive-io SETPOINT_STEP (monitor: none, Δq 60 mm)".into(),
+        cause: "drive-io SETPOINT_STEP (monitor: none, Δq 90 mm)".into(),
         detect_ms: ms(t0, t_fault),
         stop_ms: ms(t0, stopped),
-        note: "timestamps +100 ms per setpoint, 60 mm step".into(),
+        note: "timestamps +100 ms per setpoint, 90 mm step".into(),
     })
 }
 
