@@ -1,7 +1,9 @@
-//! `crs plant check`: a plant TOML validated, its effects listed and the plant settled at the
-//! home pose with the platform's set-up tension (when the platform configures one).
+//! `crs plant check`: a plant TOML validated, its effects listed, the plant settled at the
+//! home pose with the platform's set-up tension (when the platform configures one), and its
+//! equilibrium checked against the independent oracle (`sim_plant::oracle_check`).
 
 use cdpr_model::config::ConfigError;
+use sim_plant::oracle_check::{OracleAgreement, OracleCheckError, check_against_oracle};
 use sim_plant::{Plant, PlantError, load_plant};
 use std::fmt;
 use std::path::Path;
@@ -24,6 +26,25 @@ pub struct PlantCheck {
     /// The plant built and settled at home; None when the platform has no `f_ini` (no set-up
     /// tension to settle with). An error here is printed after the description.
     pub home: Result<Option<HomeSettle>, PlantError>,
+    /// The plant's conservative twin against the minimum-energy oracle (issue 14 item 4).
+    pub oracle: Result<OracleAgreement, OracleCheckError>,
+}
+
+impl PlantCheck {
+    /// Why the check fails, if it does: the home settle's error, the oracle check's error or
+    /// a disagreement beyond its tolerances.
+    pub fn failure(&self) -> Option<String> {
+        if let Err(e) = &self.home {
+            return Some(format!("the plant does not settle at home: {e}"));
+        }
+        match &self.oracle {
+            Err(e) => Some(format!("the oracle check could not run: {e}")),
+            Ok(a) if !a.within_tolerance() => Some(format!(
+                "the plant's equilibrium DISAGREES with the independent oracle: {a}"
+            )),
+            Ok(_) => None,
+        }
+    }
 }
 
 /// Loads the plant TOML `path`, builds the plant and, when its platform has a set-up tension,
@@ -36,6 +57,7 @@ pub fn check(path: &Path) -> Result<PlantCheck, ConfigError> {
         cables: cfg.platform.model.m(),
         effects: cfg.effects.enabled_names(),
         home: Ok(None),
+        oracle: check_against_oracle(&cfg),
     };
     out.home = settle_home(cfg);
     Ok(out)
@@ -75,6 +97,17 @@ impl fmt::Display for PlantCheck {
             let forces: Vec<String> = h.forces.iter().map(|x| format!("{x:.1}")).collect();
             writeln!(f, "forces at home, N: {}", forces.join(" "))?;
         }
+        match &self.oracle {
+            Ok(a) if a.within_tolerance() => writeln!(
+                f,
+                "independent oracle (minimum potential energy) agrees: {a}"
+            )?,
+            Ok(a) => writeln!(
+                f,
+                "independent oracle (minimum potential energy) DISAGREES: {a}"
+            )?,
+            Err(e) => writeln!(f, "independent oracle: not run: {e}")?,
+        }
         Ok(())
     }
 }
@@ -106,12 +139,22 @@ mod tests {
             text.contains("home settled") && text.contains("forces at home"),
             "{text}"
         );
+        assert!(
+            text.contains("independent oracle (minimum potential energy) agrees: 7 poses"),
+            "{text}"
+        );
+        assert!(c.failure().is_none(), "{text}");
     }
 
     #[test]
     fn a_plant_without_set_up_tension_is_described_only() {
         let c = check(&plant("icosahedron.toml")).unwrap();
         assert!(matches!(c.home, Ok(None)));
-        assert_eq!(c.to_string().lines().count(), 2);
+        let text = c.to_string();
+        assert_eq!(text.lines().count(), 3, "{text}");
+        assert!(
+            text.contains("oracle (minimum potential energy) agrees"),
+            "{text}"
+        );
     }
 }

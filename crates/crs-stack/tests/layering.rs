@@ -168,6 +168,34 @@ fn the_safety_monitor_shares_no_code_with_the_controller() {
 }
 
 #[test]
+fn the_plants_oracle_shares_no_code_with_the_model_library() {
+    // issue 14 item 4: the second formulation of the plant's equilibrium must not reach the
+    // equations it checks, nor nalgebra (whose code paths the model library's solvers use).
+    let c = closure("plant-oracle");
+    let allowed = BTreeSet::from([
+        "glam",
+        "thiserror",
+        "thiserror-impl",
+        "serde",
+        "serde_core",
+        "serde_derive",
+    ]);
+    let workspace_or_math: Vec<&String> = c
+        .iter()
+        .filter(|n| {
+            !allowed.contains(n.as_str())
+                && !["proc-macro2", "quote", "syn", "unicode-ident"].contains(&n.as_str())
+        })
+        .collect();
+    assert!(
+        workspace_or_math.is_empty(),
+        "plant-oracle depends on {workspace_or_math:?}"
+    );
+    assert!(c.contains("glam"), "{c:?}");
+    assert!(closure("sim-plant").contains("plant-oracle"));
+}
+
+#[test]
 fn the_rt_utility_stays_small() {
     // The independent monitor links crs-rt (sleep, priority, affinity, mlock: operating-system
     // plumbing every loop shares). Any dependency crs-rt gained would be linked into the

@@ -55,8 +55,10 @@ pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
         PlantCommand::Check { plant } => {
             let c = crs_stack::plant_check::check(&plant)?;
             print!("{c}");
-            c.home?;
-            Ok(())
+            match c.failure() {
+                Some(f) => Err(f.into()),
+                None => Ok(()),
+            }
         }
         PlantCommand::Record(a) => {
             let cfg = load_plant(&a.plant)?;

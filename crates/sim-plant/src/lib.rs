@@ -19,6 +19,10 @@
 //! | 7 platform mass and centre of gravity (eq. 6.20–6.23) | `load` | [`plant`] |
 //! | 8 tracker and force-sensor models | `tracker`, `force_sensors` | [`plant`] |
 //!
+//! [`oracle_check`] proves the plant's equilibrium against an independent formulation
+//! (`plant-oracle`: minimum potential energy from cable lengths, no model-library code), so an
+//! error in the equations the plant shares with the controller would show.
+//!
 //! [`campaign`] drives the plant through measurement campaigns (ch. 6.1, 6.4) and returns its
 //! results in the CSV data-set format of the `crs-dataset` crate (docs/data-format.md).
 
@@ -26,6 +30,7 @@ pub mod bus;
 pub mod cable_law;
 pub mod campaign;
 pub mod config;
+pub mod oracle_check;
 pub mod plant;
 
 pub use campaign::{

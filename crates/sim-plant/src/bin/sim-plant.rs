@@ -111,6 +111,18 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         control: control_file.clone(),
         drives: drives_file.clone(),
     };
+    // The ground truth proves its equilibrium against the independent formulation before it
+    // serves as one: an error in the equations it shares with the controller shows here.
+    let oracle = sim_plant::oracle_check::check_against_oracle(&plant_cfg)
+        .map_err(|e| format!("{plant_file}: the oracle check could not run: {e}"))?;
+    if !oracle.within_tolerance() {
+        return Err(format!(
+            "{plant_file}: the plant's equilibrium disagrees with the independent oracle \
+             (minimum potential energy): {oracle}"
+        )
+        .into());
+    }
+    tracing::info!(agreement = %oracle, "equilibrium agrees with the independent oracle (minimum potential energy)");
     let name = plant_cfg.name.clone();
     let effects = plant_cfg.effects.enabled_names().join(", ");
     let mut plant = PlantBus::new(plant_cfg, &control, &drives, opts)?;
