@@ -186,6 +186,8 @@ pub fn run(
     publish(&bank, &axes, crs_ipc::monotonic_ns());
     // Frames handled at most before the watches are judged (a flooded bus cannot stall us).
     const MAX_BACKLOG: usize = 512;
+    let mut last_pass_ns = crs_ipc::monotonic_ns();
+    let mut last_stall_log_ns = 0u64;
     while !control.stop.load(Ordering::Acquire) {
         bank.flush(&mut bus)?;
         // Everything queued is handled, stamped with its receive time, BEFORE the watches are
@@ -227,6 +229,18 @@ pub fn run(
             };
         }
         let now = crs_ipc::monotonic_ns();
+        // A test double on a non-real-time host: say when this loop itself was not scheduled
+        // for a while (at most once a second), so a watch trip shows whose stall it was.
+        let gap = now.saturating_sub(last_pass_ns);
+        if gap > 50_000_000 && now.saturating_sub(last_stall_log_ns) > 1_000_000_000 {
+            last_stall_log_ns = now;
+            tracing::warn!(
+                gap_ms = gap as f64 * 1e-6,
+                frames_handled = handled,
+                "emulator loop stalled (frames were handled with their receive time)"
+            );
+        }
+        last_pass_ns = now;
         let mute = control.heartbeat_mute_mask.load(Ordering::Acquire);
         for i in 0..m {
             if let Some(s) = bank.slave_mut(i) {

@@ -363,6 +363,7 @@ pub fn run_on(
     let mut resetting: Option<(u64, u32)> = None;
     let node_index = |node: u8| winches.iter().position(|w| w.node_id == node);
     let mut deadline = monotonic_ns() + period;
+    let mut last_overrun_log_ns = 0u64;
 
     while !stop.load(Ordering::Relaxed) {
         sleep_until(deadline);
@@ -670,11 +671,24 @@ pub fn run_on(
         deadline += period;
         let done = monotonic_ns();
         if done > deadline {
-            // Skip missed deadlines instead of bursting; the setpoint buffer (32) covers a late
+            // Skip missed deadlines instead of bursting; the setpoint buffer (64) covers a late
             // cycle, lost samples show up as sequence gaps.
             let missed = (done - deadline) / period + 1;
             sum.overruns += missed;
             deadline += missed * period;
+            // Said when it happens (at most once a second): a late monitor also delays its
+            // safety heartbeat pairs, and the drives' watch stops the robot after the
+            // validation time — the log must show whether the MONITOR was late.
+            if done.saturating_sub(last_overrun_log_ns) > 1_000_000_000 {
+                last_overrun_log_ns = done;
+                tracing::warn!(
+                    woke_late_ms = late as f64 * 1e-6,
+                    cycle_took_ms = done.saturating_sub(now) as f64 * 1e-6,
+                    missed_cycles = missed,
+                    overruns = sum.overruns,
+                    "monitor cycle overran its deadline"
+                );
+            }
         }
     }
     reader_stop.store(true, Ordering::Relaxed);
