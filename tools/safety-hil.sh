@@ -1,7 +1,7 @@
 #!/bin/bash
 # usage: tools/safety-hil.sh [--only SCENARIO]
 #   The safety monitor's fault-injection matrix on real SocketCAN: builds static binaries of
-#   safety-hil + safety-monitor (crates/safety-monitor), drive-io + winch-emulator
+#   safety-hil (crates/safety-hil), safety-monitor (crates/safety-monitor), drive-io + winch-emulator
 #   (crates/drive-io) and motion-core, and runs `safety-hil --transport socketcan:vcan0` inside
 #   the vcan QEMU guest (tools/vcan-vm.sh). Every process runs separately (iceoryx2 + CAN);
 #   each scenario injects one fault (101 mm / 99 mm offsets, frozen and killed motion-core,

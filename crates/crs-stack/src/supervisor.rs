@@ -3,15 +3,47 @@
 //! tail of its log; all are stopped in reverse start order (SIGTERM, then SIGKILL after a grace
 //! period) on [`Supervisor::stop_all`] or on drop, so no daemon outlives a failed run.
 //!
-//! Used by `crs sim` (and through it the closed calibration loop). Written so the safety HIL
-//! (`safety-hil`, its own copy today) can move onto it: per-child extra environment, a
-//! configurable grace period, [`Supervisor::stop`] for one child (a scenario that kills the
-//! publisher) and [`Supervisor::pid`] to signal one.
+//! Used by `crs sim` (and through it the closed calibration loop) and by the safety HIL
+//! (`crates/safety-hil`): per-child extra environment, a configurable grace period,
+//! [`Supervisor::stop`] for one child, [`Supervisor::signal`] (freeze, thaw, kill: the fault
+//! injections), [`Supervisor::kill`] / [`Supervisor::kill_all`] (no grace: a scenario that kills
+//! a process, or ends with every process killed outright), [`Supervisor::stop_with_usage`] (the
+//! child's whole-life CPU time from wait4) and [`Supervisor::quiet`] (no "started" lines among a
+//! harness's own output).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+
+/// A signal could not be delivered to a named child.
+#[derive(Debug, thiserror::Error)]
+pub enum SignalError {
+    #[error("{name} is not running under this supervisor")]
+    NotRunning { name: String },
+    /// It exited (and was reaped): its pid may belong to another process by now.
+    #[error("{name} has exited ({status})")]
+    Exited { name: String, status: ExitStatus },
+    #[error("kill({name}, {signal}): {source}")]
+    Kill {
+        name: String,
+        signal: i32,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// How a child stopped by [`Supervisor::stop_with_usage`] ended and what it used over its whole
+/// life (wait4's rusage).
+#[derive(Debug, Clone, Copy)]
+pub struct Usage {
+    pub status: ExitStatus,
+    pub user: Duration,
+    pub system: Duration,
+    pub max_rss_kib: i64,
+    pub voluntary_switches: i64,
+    pub involuntary_switches: i64,
+}
 
 /// A child could not be started.
 #[derive(Debug, thiserror::Error)]
@@ -42,6 +74,7 @@ pub struct Supervisor {
     prefix: String,
     log_dir: PathBuf,
     grace: Duration,
+    announce: bool,
 }
 
 /// A child that exited on its own.
@@ -61,7 +94,15 @@ impl Supervisor {
             prefix: prefix.to_string(),
             log_dir: log_dir.to_path_buf(),
             grace: Duration::from_secs(3),
+            announce: true,
         }
+    }
+
+    /// No "started <name> pid … log …" line on stdout per child (a harness whose stdout is
+    /// parsed by scripts).
+    pub fn quiet(mut self) -> Self {
+        self.announce = false;
+        self
     }
 
     /// SIGTERM → SIGKILL grace period of [`Supervisor::stop_all`].
@@ -104,9 +145,16 @@ impl Supervisor {
             source,
         })?;
         let pid = child.id();
-        println!("  started {name:<15} pid {pid:>6}  log {}", log.display());
+        if let Some(line) = self.started_line(name, pid, &log) {
+            println!("{line}");
+        }
         self.procs.push(Proc { name, child, log });
         Ok(pid)
+    }
+
+    fn started_line(&self, name: &str, pid: u32, log: &Path) -> Option<String> {
+        self.announce
+            .then(|| format!("  started {name:<15} pid {pid:>6}  log {}", log.display()))
     }
 
     /// The pid of the running child `name`.
@@ -137,6 +185,100 @@ impl Supervisor {
         let mut p = self.procs.remove(k);
         terminate(&mut p.child);
         wait_or_kill(&mut p.child, Instant::now(), self.grace)
+    }
+
+    /// Sends `signal` (SIGSTOP, SIGCONT, SIGKILL, …) to the running child `name`; it stays
+    /// supervised (a killed child then shows in [`Supervisor::exited`]). Refused for a child
+    /// that has already exited and been reaped: its pid may have been reused.
+    pub fn signal(&mut self, name: &str, signal: i32) -> Result<(), SignalError> {
+        let p = self
+            .procs
+            .iter_mut()
+            .find(|p| p.name == name)
+            .ok_or_else(|| SignalError::NotRunning { name: name.into() })?;
+        if let Ok(Some(status)) = p.child.try_wait() {
+            return Err(SignalError::Exited {
+                name: name.into(),
+                status,
+            });
+        }
+        // SAFETY: kill(2) on our own child, not reaped (try_wait above), so the pid is its own.
+        if unsafe { libc::kill(p.child.id() as libc::pid_t, signal) } != 0 {
+            return Err(SignalError::Kill {
+                name: name.into(),
+                signal,
+                source: std::io::Error::last_os_error(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Kills one child at once (SIGKILL, no grace period), reaps and forgets it.
+    pub fn kill(&mut self, name: &str) -> Option<ExitStatus> {
+        let k = self.procs.iter().position(|p| p.name == name)?;
+        let mut p = self.procs.remove(k);
+        let _ = p.child.kill();
+        p.child.wait().ok()
+    }
+
+    /// Kills every child at once (SIGKILL, no grace period), then reaps them all.
+    pub fn kill_all(&mut self) {
+        for p in &mut self.procs {
+            let _ = p.child.kill();
+        }
+        for p in &mut self.procs {
+            let _ = p.child.wait();
+        }
+        self.procs.clear();
+    }
+
+    /// Stops one child like [`Supervisor::stop`] (SIGTERM, SIGKILL after the grace period),
+    /// forgets it and returns its whole-life resource usage from wait4(2). None if there is no
+    /// such child or it was already reaped (by [`Supervisor::exited`]).
+    pub fn stop_with_usage(&mut self, name: &str) -> Option<Usage> {
+        let k = self.procs.iter().position(|p| p.name == name)?;
+        let p = self.procs.remove(k);
+        let pid = p.child.id() as libc::pid_t;
+        let mut status = 0;
+        // SAFETY: a zeroed rusage is a valid out-parameter.
+        let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
+        // SAFETY: wait4 on our own child with valid out-pointers. WNOHANG: 0 while it runs;
+        // -1 (ECHILD) if std has reaped it already, and then it must not be signalled.
+        let mut wait = |flags| unsafe { libc::wait4(pid, &mut status, flags, &mut ru) };
+        let mut r = wait(libc::WNOHANG);
+        if r == 0 {
+            // SAFETY: our child, not reaped (wait4 returned 0).
+            unsafe { libc::kill(pid, libc::SIGTERM) };
+            let t0 = Instant::now();
+            loop {
+                r = wait(libc::WNOHANG);
+                if r != 0 {
+                    break;
+                }
+                if t0.elapsed() > self.grace {
+                    // SAFETY: still our unreaped child.
+                    unsafe { libc::kill(pid, libc::SIGKILL) };
+                    r = wait(0);
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        }
+        if r != pid {
+            return None;
+        }
+        let tv = |t: libc::timeval| {
+            Duration::from_secs(t.tv_sec.max(0) as u64)
+                + Duration::from_micros(t.tv_usec.max(0) as u64)
+        };
+        Some(Usage {
+            status: std::os::unix::process::ExitStatusExt::from_raw(status),
+            user: tv(ru.ru_utime),
+            system: tv(ru.ru_stime),
+            max_rss_kib: ru.ru_maxrss,
+            voluntary_switches: ru.ru_nvcsw,
+            involuntary_switches: ru.ru_nivcsw,
+        })
     }
 
     /// Stops every child, in reverse start order: SIGTERM to all, then waits for each, SIGKILL
@@ -260,5 +402,149 @@ mod tests {
         let st = s.stop("a").expect("stopped");
         assert!(!st.success());
         assert!(s.stop("a").is_none());
+    }
+
+    /// Waits (bounded) until `cond` holds.
+    fn until(what: &str, mut cond: impl FnMut() -> bool) {
+        let t0 = Instant::now();
+        while !cond() {
+            assert!(t0.elapsed() < Duration::from_secs(10), "timed out: {what}");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// The state letter of /proc/<pid>/stat (R, S, T, Z, …).
+    fn proc_state(pid: u32) -> char {
+        let t = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+        t[t.rfind(')').unwrap() + 2..].chars().next().unwrap()
+    }
+
+    #[test]
+    fn signal_freezes_thaws_and_kills_a_named_child() {
+        use std::os::unix::process::ExitStatusExt;
+        let d = dir("signal");
+        let mut s = Supervisor::new("t", &d).quiet();
+        s.spawn("a", Path::new("/bin/sleep"), &["30".into()], &[])
+            .unwrap();
+        let pid = s.pid("a").unwrap();
+        s.signal("a", libc::SIGSTOP).unwrap();
+        until("stopped", || proc_state(pid) == 'T');
+        s.signal("a", libc::SIGCONT).unwrap();
+        until("running again", || proc_state(pid) != 'T');
+        assert!(s.exited().is_none());
+        s.signal("a", libc::SIGKILL).unwrap();
+        let mut e = None;
+        until("killed child reported", || {
+            e = s.exited();
+            e.is_some()
+        });
+        let e = e.unwrap();
+        assert_eq!((e.name, e.status.signal()), ("a", Some(libc::SIGKILL)));
+        // Reaped: no signal to a pid that may have been reused.
+        assert!(matches!(
+            s.signal("a", libc::SIGCONT),
+            Err(SignalError::Exited { .. })
+        ));
+        assert!(matches!(
+            s.signal("b", libc::SIGCONT),
+            Err(SignalError::NotRunning { .. })
+        ));
+    }
+
+    /// A shell that ignores SIGTERM (inherited by `sleep` across exec): only SIGKILL ends it.
+    fn stubborn(s: &mut Supervisor, name: &'static str) -> u32 {
+        s.spawn(
+            name,
+            Path::new("/bin/sh"),
+            &["-c".into(), "trap '' TERM; exec sleep 30".into()],
+            &[],
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn kill_does_not_wait_for_the_grace_period() {
+        use std::os::unix::process::ExitStatusExt;
+        let d = dir("kill");
+        let mut s = Supervisor::new("t", &d)
+            .quiet()
+            .with_grace(Duration::from_secs(60));
+        stubborn(&mut s, "a");
+        let t0 = Instant::now();
+        let st = s.kill("a").expect("killed");
+        assert!(t0.elapsed() < Duration::from_secs(10));
+        assert_eq!(st.signal(), Some(libc::SIGKILL));
+        assert!(s.pid("a").is_none() && s.kill("a").is_none());
+    }
+
+    #[test]
+    fn kill_all_reaps_every_child_without_grace() {
+        let d = dir("killall");
+        let mut s = Supervisor::new("t", &d)
+            .quiet()
+            .with_grace(Duration::from_secs(60));
+        let pids = [stubborn(&mut s, "a"), stubborn(&mut s, "b")];
+        let t0 = Instant::now();
+        s.kill_all();
+        assert!(t0.elapsed() < Duration::from_secs(10));
+        assert!(s.pid("a").is_none() && s.pid("b").is_none());
+        for pid in pids {
+            // Reaped: kill(pid, 0) fails.
+            assert_eq!(unsafe { libc::kill(pid as libc::pid_t, 0) }, -1);
+        }
+    }
+
+    #[test]
+    fn stop_with_usage_terminates_and_reports_the_childs_cpu_time() {
+        use std::os::unix::process::ExitStatusExt;
+        let d = dir("usage");
+        let mut s = Supervisor::new("t", &d).quiet();
+        // Burns CPU in the shell, says so, then sleeps under the same pid until SIGTERM.
+        s.spawn(
+            "burner",
+            Path::new("/bin/sh"),
+            &[
+                "-c".into(),
+                "i=0; while [ $i -lt 100000 ]; do i=$((i+1)); done; echo burnt; exec sleep 30"
+                    .into(),
+            ],
+            &[],
+        )
+        .unwrap();
+        let log = d.join("burner.log");
+        until("the burn done", || log_tail(&log, 1) == "burnt");
+        let u = s.stop_with_usage("burner").expect("usage");
+        // Ended by the SIGTERM (not the grace period's SIGKILL), its own CPU time counted.
+        assert_eq!(u.status.signal(), Some(libc::SIGTERM));
+        assert!(u.user + u.system > Duration::from_millis(5), "{u:?}");
+        assert!(u.max_rss_kib > 0);
+        assert!(s.pid("burner").is_none() && s.stop_with_usage("burner").is_none());
+    }
+
+    #[test]
+    fn stop_with_usage_leaves_a_reaped_child_alone() {
+        let d = dir("usage-reaped");
+        let mut s = Supervisor::new("t", &d).quiet();
+        s.spawn("q", Path::new("/bin/true"), &[], &[]).unwrap();
+        until("exited", || s.exited().is_some());
+        assert!(s.stop_with_usage("q").is_none());
+    }
+
+    #[test]
+    fn quiet_supervisor_announces_no_child() {
+        let d = dir("quiet");
+        let log = d.join("a.log");
+        let loud = Supervisor::new("t", &d);
+        let line = loud.started_line("a", 42, &log).expect("announced");
+        assert!(
+            line.contains("started a") && line.contains("pid     42"),
+            "{line}"
+        );
+        assert!(
+            Supervisor::new("t", &d)
+                .quiet()
+                .started_line("a", 42, &log)
+                .is_none()
+        );
     }
 }

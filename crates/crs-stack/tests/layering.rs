@@ -223,17 +223,34 @@ fn the_rt_utility_stays_small() {
 }
 
 #[test]
-fn only_the_command_line_uses_the_stack_library() {
+fn only_the_command_line_and_the_safety_hil_use_the_stack_library() {
+    // The safety HIL (a test harness) runs its processes under the stack's one supervisor.
     let (deps, name_of) = graph();
     for (id, ds) in &deps {
         let who = &name_of[id];
         if who == "crs" {
             continue;
         }
+        let may_use_stack = who == "safety-hil";
         assert!(
             !ds.iter()
-                .any(|d| name_of[d] == "crs-stack" || name_of[d] == "crs"),
+                .any(|d| name_of[d] == "crs" || (!may_use_stack && name_of[d] == "crs-stack")),
             "{who} depends on the stack library or the CLI"
+        );
+    }
+    assert!(closure("safety-hil").contains("crs-stack"));
+}
+
+#[test]
+fn nothing_depends_on_the_safety_hil() {
+    // The fault-injection harness is a test tool: no daemon, library or CLI may link it.
+    let (deps, name_of) = graph();
+    assert!(name_of.values().any(|n| n == "safety-hil"));
+    for (id, ds) in &deps {
+        assert!(
+            !ds.iter().any(|d| name_of[d] == "safety-hil"),
+            "{} depends on safety-hil",
+            name_of[id]
         );
     }
 }

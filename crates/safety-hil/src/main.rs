@@ -1,0 +1,266 @@
+//! `safety-hil`: the safety monitor's fault-injection matrix, every process separate, on a real
+//! CAN bus (vcan in the QEMU guest of tools/safety-hil.sh; any transport on a host).
+//!
+//! Per scenario: `winch-emulator` (test double of the 8 drives, validating the safety heartbeat,
+//! writing its true state to a status file), `safety-monitor`, `drive-io` (also validating the
+//! heartbeat), then either `motion-core` or a fake setpoint publisher (this process) to inject
+//! offsets, NaN poses, sequence gaps, a wrong platform identity. Each scenario injects one
+//! fault and requires braked drives with NO motion afterwards (true lengths unchanged over
+//! 0.5 s, velocities zero, no drive following), plus the expected monitor trip cause. The
+//! measured detection and stop times are printed: inside the emulator they are NOT real time
+//! (assert behaviour, never latency).
+//!
+//! The platform is a generated symmetric test cabin whose 8 cable lengths are equal at the home
+//! pose, so the winch emulator (one initial length for all drives) starts exactly there.
+//! Output: `SAFETY-HIL PASS|FAIL <scenario> ...` lines, a table, `SAFETY-HIL-RESULT PASS|FAIL`.
+//!
+//! Files: this one holds the command line, the scenario table and the run; `configs` the
+//! generated configs, `fake_motion` the fake motion-core publisher, `emulator` the winch
+//! emulator's status and control files, `stack` one scenario's processes (on
+//! `crs_stack::supervisor::Supervisor`) and their observation, `cpu_share` the monitor's CPU
+//! measurement, `scenarios/` the scenarios grouped by topic.
+
+mod configs;
+mod cpu_share;
+mod emulator;
+mod fake_motion;
+mod scenarios;
+mod stack;
+
+use clap::Parser;
+use scenarios::{
+    Outcome, bus, forces, integrity, process_faults, reset_authority, setpoint_stream,
+};
+use stack::Stack;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(about = "Fault-injection matrix of the safety monitor (multi-process, on a CAN bus)")]
+struct Args {
+    /// Bus of every process (socketcan:vcan0 in the VM; udpbus:... on a host without CAN).
+    #[arg(long, default_value = "socketcan:vcan0")]
+    transport: String,
+    /// Run only scenarios whose name contains this.
+    #[arg(long)]
+    only: Option<String>,
+    /// Directory for generated configs, status files and logs.
+    #[arg(long, default_value = "/tmp/safety-hil")]
+    workdir: PathBuf,
+    /// Directory of the binaries (default: found on PATH).
+    #[arg(long)]
+    bin_dir: Option<PathBuf>,
+    /// Safety-heartbeat validation time of the drives and drive-io (ms). The emulated guest is
+    /// not real time: lenient by default, the 50 ms of the spec is tested on the host.
+    #[arg(long, default_value_t = 50)]
+    validation_ms: u32,
+    /// Monitor: cycles without a new setpoint before the e-stop (spec-like default 2).
+    #[arg(long, default_value_t = 2)]
+    silence_cycles: u32,
+    /// Monitor: cycles without drive-io feedback, and without a drive's force reading, before
+    /// the e-stop (default 4; also the reader stall limit where above its default 10).
+    #[arg(long, default_value_t = 4)]
+    feedback_silence_cycles: u32,
+    /// Inside the emulated guest (as root): enlarge the default socket receive buffers so a
+    /// process the emulator stalls for tens of ms does not lose CAN frames (a lost half of a
+    /// safety pair stops the drives, correctly, but is an artefact of the emulator).
+    #[arg(long)]
+    guest_tuning: bool,
+    /// SYNC period of drive-io and the period of motion-core / the fake publisher (µs). The
+    /// spec's 1000 on a host; the script uses 4000 in the emulated guest, which cannot run
+    /// five 1 kHz processes (assert behaviour there, not timing).
+    #[arg(long, default_value_t = 1000)]
+    period_us: u32,
+    /// Instead of the scenarios: run the stack with a 1 kHz setpoint stream for this many
+    /// seconds and report the monitor process's CPU share (getrusage via wait4 over its whole
+    /// life, /proc/<pid>/stat over the window).
+    #[arg(long)]
+    cpu_share_s: Option<f64>,
+}
+
+pub type Res<T> = Result<T, String>;
+
+type Scenario = (&'static str, fn(&mut Stack) -> Res<Outcome>);
+
+const SCENARIOS: [Scenario; 28] = [
+    ("offset_101mm_trips", setpoint_stream::offset_101mm),
+    ("offset_99mm_no_trip", setpoint_stream::offset_99mm),
+    ("frozen_motion_core", process_faults::frozen_motion_core),
+    ("kill_motion_core", process_faults::kill_motion_core),
+    ("kill_drive_io", process_faults::kill_drive_io),
+    ("kill_monitor", process_faults::kill_monitor),
+    ("sequence_gaps", setpoint_stream::sequence_gaps),
+    ("nan_pose", setpoint_stream::nan_pose),
+    ("identity_mismatch", setpoint_stream::identity_mismatch),
+    ("corrupted_safety_frame", bus::corrupted_safety_frame),
+    ("forged_rpdo", bus::forged_rpdo),
+    (
+        "forged_rpdo_other_enabling_controlword",
+        bus::forged_rpdo_other_enabling_controlword,
+    ),
+    (
+        "pose_jump_inside_box",
+        setpoint_stream::pose_jump_inside_box,
+    ),
+    ("lying_timestamps", setpoint_stream::lying_timestamps),
+    (
+        "reset_refused_then_accepted",
+        reset_authority::reset_refused_then_accepted,
+    ),
+    (
+        "forged_reset_ignored",
+        reset_authority::forged_reset_ignored,
+    ),
+    (
+        "reset_while_armed_changes_nothing",
+        reset_authority::reset_while_armed_changes_nothing,
+    ),
+    (
+        "replayed_heartbeat_after_monitor_death",
+        reset_authority::replayed_heartbeat_after_monitor_death,
+    ),
+    ("overload_one_cable", forces::overload_one_cable),
+    ("slack_one_cable", forces::slack_one_cable),
+    (
+        "unknown_applied_sequence",
+        process_faults::unknown_applied_sequence,
+    ),
+    ("can_bus_off", bus::can_bus_off),
+    ("can_error_passive", bus::can_error_passive),
+    ("stop_frame_lost", bus::stop_frame_lost),
+    ("forged_stopping", integrity::forged_stopping),
+    ("foreign_publisher", integrity::foreign_publisher),
+    (
+        "heartbeat_config_crc_mismatch",
+        integrity::heartbeat_config_crc_mismatch,
+    ),
+    ("tampered_safety_config", integrity::tampered_safety_config),
+];
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    if args.guest_tuning {
+        for (f, v) in [
+            ("/proc/sys/net/core/rmem_default", "8388608"),
+            ("/proc/sys/net/core/rmem_max", "8388608"),
+        ] {
+            if let Err(e) = std::fs::write(f, v) {
+                println!("safety-hil: cannot set {f}: {e}");
+            }
+        }
+    }
+    if let Err(e) = configs::write_configs(&args.workdir, &args) {
+        println!("SAFETY-HIL FAIL setup: {e}");
+        println!("SAFETY-HIL-RESULT FAIL");
+        return ExitCode::FAILURE;
+    }
+    if let Some(secs) = args.cpu_share_s {
+        return match cpu_share::cpu_share(&args, secs) {
+            Ok(r) => {
+                println!("SAFETY-CPU {r}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                println!("SAFETY-CPU FAIL: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
+    println!(
+        "safety-hil: transport {}; drives' safety-heartbeat validation time {} ms; monitor \
+         silence {} cycles, feedback silence {} cycles (15 ms cycles); 1 kHz loops at {} µs; \
+         workdir {}",
+        args.transport,
+        args.validation_ms,
+        args.silence_cycles,
+        args.feedback_silence_cycles,
+        args.period_us,
+        args.workdir.display()
+    );
+    let mut rows = Vec::new();
+    let mut all_ok = true;
+    for (name, f) in SCENARIOS {
+        if args.only.as_deref().is_some_and(|o| !name.contains(o)) {
+            continue;
+        }
+        let t0 = Instant::now();
+        let mut stack = None;
+        let r = Stack::start(
+            name,
+            &args.workdir,
+            args.bin_dir.clone(),
+            &args.transport,
+            args.period_us,
+        )
+        .and_then(|mut st| {
+            let r = f(&mut st);
+            stack = Some(st);
+            r
+        });
+        let secs = t0.elapsed().as_secs_f64();
+        match r {
+            Ok(o) => {
+                let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.1}"));
+                println!(
+                    "SAFETY-HIL PASS {name}: cause {}; detect {} ms; stop {} ms; {} ({secs:.1} s)",
+                    o.cause,
+                    f(o.detect_ms),
+                    f(o.stop_ms),
+                    o.note
+                );
+                rows.push((name, o, true));
+            }
+            Err(e) => {
+                all_ok = false;
+                println!("SAFETY-HIL FAIL {name}: {e} ({secs:.1} s)");
+                match &stack {
+                    Some(st) => print!("{}", st.log_tail(25)),
+                    None => {
+                        let d = args.workdir.join(name);
+                        for p in ["safety-monitor", "drive-io", "winch-emulator"] {
+                            if let Ok(t) = std::fs::read_to_string(d.join(format!("{p}.log"))) {
+                                let v: Vec<&str> = t.lines().collect();
+                                println!("---- {p}");
+                                for l in &v[v.len().saturating_sub(25)..] {
+                                    println!("{l}");
+                                }
+                            }
+                        }
+                    }
+                }
+                rows.push((
+                    name,
+                    Outcome {
+                        cause: format!("FAIL: {e}"),
+                        ..Outcome::default()
+                    },
+                    false,
+                ));
+            }
+        }
+        drop(stack);
+    }
+    println!("\n| scenario | result | cause | detection (ms) | fault to drives braked (ms) |");
+    println!("|---|---|---|---|---|");
+    for (name, o, ok) in &rows {
+        let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.1}"));
+        println!(
+            "| {name} | {} | {} | {} | {} |",
+            if *ok { "PASS" } else { "FAIL" },
+            o.cause,
+            f(o.detect_ms),
+            f(o.stop_ms)
+        );
+    }
+    if rows.is_empty() {
+        all_ok = false;
+        println!("no scenario matched --only");
+    }
+    println!("SAFETY-HIL-RESULT {}", if all_ok { "PASS" } else { "FAIL" });
+    if all_ok {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}

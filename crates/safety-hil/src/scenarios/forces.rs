@@ -1,0 +1,43 @@
+//! Measured forces (issue 15): one cable's force leaves the band and stays out.
+
+use crate::Res;
+use crate::emulator::inject_force;
+use crate::scenarios::{Outcome, ms};
+use crate::stack::Stack;
+use crs_ipc::monotonic_ns;
+use safety_monitor::Cause;
+
+/// One cable's measured force leaves [f_min − 500 N, f_max + 1000 N] (test cabin: 1000 /
+/// 9000 N) and stays there: the monitor's filtered force check (45 ms) trips on that cable.
+pub fn force_fault(st: &mut Stack, cable: usize, force_n: f64, cause: Cause) -> Res<Outcome> {
+    let _ = st.fake()?.clone();
+    st.wait_following(false)?;
+    let t0 = monotonic_ns();
+    inject_force(&st.dir, cable, force_n)?;
+    let ev = st.monitor_trip(cause, 10.0)?;
+    if ev.detail_node as usize != cable {
+        return Err(format!(
+            "tripped on cable {}, expected {cable}",
+            ev.detail_node
+        ));
+    }
+    let stopped = st.require_braked()?;
+    Ok(Outcome {
+        cause: format!("{cause} cable {cable}"),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: format!(
+            "emulated drive reports {force_n} N (t0 = control file written; filter 45 ms)"
+        ),
+    })
+}
+
+pub fn overload_one_cable(st: &mut Stack) -> Res<Outcome> {
+    // Above f_max + margin (10 kN), below drive-io's own hard limit (14 kN): the monitor's
+    // filtered overload check is what stops it.
+    force_fault(st, 4, 10_500.0, Cause::ForceOverload)
+}
+
+pub fn slack_one_cable(st: &mut Stack) -> Res<Outcome> {
+    force_fault(st, 2, 200.0, Cause::ForceSlack)
+}

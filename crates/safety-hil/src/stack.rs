@@ -1,0 +1,432 @@
+//! The processes of one scenario and their observation: `winch-emulator`, `safety-monitor` and
+//! `drive-io` (then `motion-core` or the fake publisher), started under the stack's one process
+//! supervisor with per-process logs in the scenario's directory and the scenario's own iceoryx2
+//! prefix; the drive-io feedback, the state events and the heartbeats on that prefix, and the
+//! emulator's status file. Waits are bounded and end on an observed condition (monitor
+//! heartbeats, feedback samples, the emulator's status); the fixed 0.5 s of `require_braked` is
+//! the no-motion window the check itself requires.
+
+use crate::Res;
+use crate::configs::{
+    drives_never_ready, emulator_drives, home_length, monitor_config, monitor_fault_injection,
+};
+use crate::emulator::{DEMAND_FOLLOW, DEMAND_HOLD, DEMAND_QUICK_STOP, EmuStatus, parse_status};
+use crate::fake_motion::{Fake, FakeCtl};
+use crs_ipc::{BusState, DriveFeedback, EventKind, Heartbeat, IpcNode, ProcessId, StateEvent};
+use crs_stack::supervisor::{Supervisor, Usage};
+use safety_monitor::Cause;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+pub struct Stack {
+    pub name: &'static str,
+    pub dir: PathBuf,
+    pub cfg: PathBuf,
+    bin_dir: Option<PathBuf>,
+    pub transport: String,
+    pub period_us: u32,
+    pub prefix: String,
+    procs: Supervisor,
+    _node: IpcNode,
+    feedback: crs_ipc::TopicSubscriber<DriveFeedback>,
+    events: crs_ipc::TopicSubscriber<StateEvent>,
+    heartbeats: crs_ipc::TopicSubscriber<Heartbeat>,
+    pub last_feedback: Option<DriveFeedback>,
+    /// Monitor e-stop events (kind EStop from the monitor).
+    pub monitor_estops: Vec<StateEvent>,
+    pub monitor_resets: u32,
+    pub monitor_state: Option<u32>,
+    /// Monitor heartbeats (one per monitor cycle) and drive-io feedback samples (one per SYNC
+    /// cycle) received: scenarios pace their observations by these, never by sleeps.
+    pub monitor_heartbeats: u64,
+    pub feedback_count: u64,
+    /// motion-core's loop state (its heartbeat), if it runs.
+    pub motion_state: Option<u32>,
+    fake: Option<Fake>,
+}
+
+impl Stack {
+    pub fn exe(&self, name: &str) -> PathBuf {
+        match &self.bin_dir {
+            Some(d) => d.join(name),
+            None => PathBuf::from(name),
+        }
+    }
+
+    /// Starts `name` from the binary directory (its log `<name>.log` in the scenario's
+    /// directory, the scenario's iceoryx2 prefix, RUST_LOG=info whatever the harness has).
+    fn spawn(&mut self, name: &'static str, args: &[String]) -> Res<()> {
+        let exe = self.exe(name);
+        self.procs
+            .spawn(name, &exe, args, &[("RUST_LOG", "info")])
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    }
+
+    pub fn pid(&self, name: &str) -> Res<i32> {
+        self.procs
+            .pid(name)
+            .map(|p| p as i32)
+            .ok_or_else(|| format!("{name} not running"))
+    }
+
+    /// Sends `sig` to the running process `name` (it stays supervised).
+    pub fn signal(&mut self, name: &str, sig: i32) -> Res<()> {
+        self.procs.signal(name, sig).map_err(|e| e.to_string())
+    }
+
+    /// Stops `name` (SIGTERM, SIGKILL after the supervisor's grace period) and returns its
+    /// whole-life resource usage.
+    pub fn stop_with_usage(&mut self, name: &str) -> Res<Usage> {
+        self.procs
+            .stop_with_usage(name)
+            .ok_or_else(|| format!("{name} not running"))
+    }
+
+    pub fn start(
+        name: &'static str,
+        dir: &Path,
+        bin_dir: Option<PathBuf>,
+        transport: &str,
+        period_us: u32,
+    ) -> Res<Stack> {
+        let sdir = dir.join(name);
+        std::fs::create_dir_all(&sdir).map_err(|e| e.to_string())?;
+        // A fault injection left by an earlier run in the same --workdir would be read by the
+        // new emulator at its start (a force fault before drive-io is Running trips the
+        // monitor at start-up and the scenario times out): every scenario starts clean.
+        for stale in ["emulator.control", "emulator.control.tmp"] {
+            match std::fs::remove_file(sdir.join(stale)) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(format!("{}: {e}", sdir.join(stale).display()));
+                }
+                _ => {}
+            }
+        }
+        let prefix = format!("shil-{name}-{}/", std::process::id());
+        let node = IpcNode::with_prefix("safety-hil", &prefix).map_err(|e| e.to_string())?;
+        // Quiet: this harness's stdout is parsed by the scripts. The grace period bounds the
+        // graceful stop of `stop_with_usage` (the CPU measurement); killed processes and the
+        // end of a scenario use SIGKILL without grace.
+        let procs = Supervisor::new(&prefix, &sdir)
+            .quiet()
+            .with_grace(Duration::from_secs(10));
+        let mut st = Stack {
+            name,
+            dir: sdir,
+            cfg: dir.to_path_buf(),
+            bin_dir,
+            transport: transport.to_string(),
+            period_us,
+            prefix,
+            procs,
+            feedback: node.subscriber().map_err(|e| e.to_string())?,
+            events: node.subscriber().map_err(|e| e.to_string())?,
+            heartbeats: node.subscriber().map_err(|e| e.to_string())?,
+            _node: node,
+            last_feedback: None,
+            monitor_estops: Vec::new(),
+            monitor_resets: 0,
+            monitor_state: None,
+            monitor_heartbeats: 0,
+            feedback_count: 0,
+            motion_state: None,
+            fake: None,
+        };
+        let cfg_dir = st.cfg.clone();
+        let c = |f: &str| cfg_dir.join(f).display().to_string();
+        let status = st.dir.join("emulator.status").display().to_string();
+        let emu_args = vec![
+            "--config".into(),
+            c(emulator_drives(name)),
+            "--transport".into(),
+            st.transport.clone(),
+            "--initial-length-m".into(),
+            format!("{}", home_length()),
+            "--status-file".into(),
+            status,
+            "--control-file".into(),
+            st.dir.join("emulator.control").display().to_string(),
+        ];
+        st.spawn("winch-emulator", &emu_args)?;
+        let mon_args: Vec<String> = vec![
+            "--config".into(),
+            c(monitor_config(name)),
+            "--transport".into(),
+            st.transport.clone(),
+            "--ipc-prefix".into(),
+            st.prefix.clone(),
+        ]
+        .into_iter()
+        .chain(monitor_fault_injection(name).iter().map(|a| a.to_string()))
+        .collect();
+        st.spawn("safety-monitor", &mon_args)?;
+        // The monitor starts not ready (STOP) until every drive is operational and sends forces
+        // (after drive-io's NMT start): the drives release only after its RUN pairs, then
+        // drive-io can enable them.
+        st.wait("the monitor's heartbeat", 20.0, |s| {
+            Ok(s.monitor_state.is_some())
+        })?;
+        let dio_args = vec![
+            "--config".into(),
+            c("drives.toml"),
+            "--transport".into(),
+            st.transport.clone(),
+            "--ipc-prefix".into(),
+            st.prefix.clone(),
+        ];
+        st.spawn("drive-io", &dio_args)?;
+        if drives_never_ready(name) {
+            return Ok(st);
+        }
+        st.wait("drive-io Ready (boot, SDO, CiA 402 enable)", 40.0, |s| {
+            Ok(s.bus_state() == Some(BusState::Ready))
+        })?;
+        Ok(st)
+    }
+
+    pub fn bus_state(&self) -> Option<BusState> {
+        self.last_feedback
+            .and_then(|f| BusState::from_u32(f.bus_state))
+    }
+
+    pub fn poll(&mut self) -> Res<()> {
+        while let Ok(Some(f)) = self.feedback.receive() {
+            self.last_feedback = Some(f);
+            self.feedback_count += 1;
+        }
+        while let Ok(Some(e)) = self.events.receive() {
+            if e.source == ProcessId::SafetyMonitor as u32 {
+                if e.kind == EventKind::EStop as u32 {
+                    self.monitor_estops.push(e);
+                } else if e.kind == EventKind::Reset as u32 {
+                    self.monitor_resets += 1;
+                }
+            }
+        }
+        while let Ok(Some(h)) = self.heartbeats.receive() {
+            if h.source == ProcessId::SafetyMonitor as u32 {
+                self.monitor_state = Some(h.state);
+                self.monitor_heartbeats += 1;
+            } else if h.source == ProcessId::MotionCore as u32 {
+                self.motion_state = Some(h.state);
+            }
+        }
+        if let Some(e) = self.procs.exited() {
+            return Err(format!("{} exited unexpectedly ({})", e.name, e.status));
+        }
+        Ok(())
+    }
+
+    /// Forget a process we killed on purpose (SIGKILL if it still runs, reaped).
+    pub fn reap(&mut self, name: &str) {
+        self.procs.kill(name);
+    }
+
+    pub fn wait(
+        &mut self,
+        what: &str,
+        secs: f64,
+        mut cond: impl FnMut(&mut Stack) -> Res<bool>,
+    ) -> Res<f64> {
+        let t0 = Instant::now();
+        loop {
+            self.poll()?;
+            if cond(self)? {
+                return Ok(t0.elapsed().as_secs_f64());
+            }
+            if t0.elapsed().as_secs_f64() > secs {
+                return Err(format!("timed out after {secs} s waiting for {what}"));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    pub fn emu(&self) -> Res<EmuStatus> {
+        let p = self.dir.join("emulator.status");
+        for _ in 0..50 {
+            if let Some(s) = std::fs::read_to_string(&p)
+                .ok()
+                .and_then(|t| parse_status(&t))
+            {
+                return Ok(s);
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        Err(format!("{}: no valid emulator status", p.display()))
+    }
+
+    pub fn fake(&mut self) -> Res<&Arc<FakeCtl>> {
+        if self.fake.is_none() {
+            self.fake = Some(Fake::start(
+                &self.prefix,
+                &self.cfg.join("platform.toml"),
+                u64::from(self.period_us) * 1000,
+            )?);
+        }
+        Ok(&self.fake.as_ref().ok_or("no fake publisher")?.ctl)
+    }
+
+    pub fn start_motion_core(&mut self) -> Res<()> {
+        let c = self.cfg.join("motion-core.toml").display().to_string();
+        self.spawn("motion-core", &["--config".into(), c])
+    }
+
+    /// drive-io Running and the drives following (some cable moved by > 1 mm).
+    pub fn wait_following(&mut self, moving: bool) -> Res<()> {
+        self.wait("drive-io Running", 30.0, |s| {
+            Ok(s.bus_state() == Some(BusState::Running))
+        })?;
+        let e0 = self.emu()?;
+        self.wait("the drives following", 20.0, |s| {
+            let e = s.emu()?;
+            let follow = e.drives.iter().all(|d| d.demand == DEMAND_FOLLOW);
+            let moved = e
+                .drives
+                .iter()
+                .zip(&e0.drives)
+                .any(|(a, b)| (a.length_m - b.length_m).abs() > 1e-3);
+            Ok(follow && (moved || !moving))
+        })?;
+        if !self.monitor_estops.is_empty() {
+            return Err(format!(
+                "the monitor tripped before the fault was injected: {:?}",
+                self.monitor_estops
+            ));
+        }
+        Ok(())
+    }
+
+    /// Waits for braked drives (none following, all at rest), then requires NO motion over
+    /// 0.5 s. Returns the time the last drive stopped following (CLOCK_MONOTONIC ns).
+    pub fn require_braked(&mut self) -> Res<u64> {
+        // Braked: the brake holds (demand Hold: NMT stopped / not enabled; the axis is never
+        // stepped) or the quick stop has decelerated to rest.
+        self.wait("braked drives (none following, all at rest)", 10.0, |s| {
+            let e = s.emu()?;
+            Ok(e.drives.iter().all(|d| {
+                d.demand == DEMAND_HOLD
+                    || (d.demand == DEMAND_QUICK_STOP && d.velocity_m_per_s == 0.0)
+            }))
+        })?;
+        let a = self.emu()?;
+        std::thread::sleep(Duration::from_millis(500));
+        self.poll()?;
+        let b = self.emu()?;
+        for (i, (x, y)) in a.drives.iter().zip(&b.drives).enumerate() {
+            if (x.length_m - y.length_m).abs() > 1e-9 || y.demand == DEMAND_FOLLOW {
+                return Err(format!(
+                    "cable {} moved after the stop: {:.9} -> {:.9} m (demand {}, NMT {:#04x}, \
+                     statusword {:#06x})",
+                    i + 1,
+                    x.length_m,
+                    y.length_m,
+                    y.demand,
+                    y.nmt,
+                    y.statusword
+                ));
+            }
+        }
+        Ok(b.drives.iter().map(|d| d.left_follow_ns).max().unwrap_or(0))
+    }
+
+    /// The monitor's e-stop with one of `causes`.
+    pub fn monitor_trip_any(&mut self, causes: &[Cause], secs: f64) -> Res<StateEvent> {
+        self.wait(&format!("the monitor's e-stop ({causes:?})"), secs, |s| {
+            Ok(!s.monitor_estops.is_empty())
+        })?;
+        let e = self.monitor_estops[0];
+        if !causes.iter().any(|c| e.detail == u32::from(c.code())) {
+            return Err(format!(
+                "monitor tripped with cause {:?} (cable {}), expected one of {causes:?}",
+                Cause::from_code(e.detail),
+                e.detail_node
+            ));
+        }
+        Ok(e)
+    }
+
+    pub fn monitor_trip(&mut self, cause: Cause, secs: f64) -> Res<StateEvent> {
+        self.wait(&format!("the monitor's e-stop ({cause})"), secs, |s| {
+            Ok(!s.monitor_estops.is_empty())
+        })?;
+        let e = self.monitor_estops[0];
+        if e.detail != u32::from(cause.code()) {
+            return Err(format!(
+                "monitor tripped with cause {:?} (cable {}), expected {cause}",
+                Cause::from_code(e.detail),
+                e.detail_node
+            ));
+        }
+        Ok(e)
+    }
+
+    /// `safety-monitor reset` as the operator would run it; true if accepted.
+    pub fn operator_reset(&mut self) -> Res<(bool, String)> {
+        let out = Command::new(self.exe("safety-monitor"))
+            .args([
+                "reset",
+                "--ipc-prefix",
+                &self.prefix,
+                "--timeout-ms",
+                "5000",
+            ])
+            .env("RUST_LOG", "warn")
+            .output()
+            .map_err(|e| format!("running safety-monitor reset: {e}"))?;
+        let text = String::from_utf8_lossy(&out.stdout).trim().to_string();
+        match out.status.code() {
+            Some(0) => Ok((true, text)),
+            Some(1) => Ok((false, text)),
+            _ => Err(format!(
+                "safety-monitor reset failed: {} {}",
+                text,
+                String::from_utf8_lossy(&out.stderr)
+            )),
+        }
+    }
+
+    pub fn log_tail(&self, lines: usize) -> String {
+        let mut out = format!(
+            "==== logs of scenario {} ({})\n",
+            self.name,
+            self.dir.display()
+        );
+        for name in [
+            "safety-monitor",
+            "drive-io",
+            "winch-emulator",
+            "motion-core",
+        ] {
+            let p = self.dir.join(format!("{name}.log"));
+            if let Ok(t) = std::fs::read_to_string(&p) {
+                let v: Vec<&str> = t.lines().collect();
+                out.push_str(&format!("---- {name} (last {lines} lines)\n"));
+                for l in &v[v.len().saturating_sub(lines)..] {
+                    out.push_str(l);
+                    out.push('\n');
+                }
+            }
+        }
+        out
+    }
+}
+
+impl Drop for Stack {
+    fn drop(&mut self) {
+        if let Some(mut f) = self.fake.take() {
+            let _ = f.stop();
+        }
+        // Every process killed outright (the scenario's verdict is in; the next one starts on
+        // a quiet bus).
+        self.procs.kill_all();
+    }
+}
+
+/// A socket of its own on the scenario's bus (injections, spying).
+pub fn open_bus(st: &Stack) -> Res<Box<dyn can_transport::CanBus>> {
+    let spec: can_transport::TransportSpec = st.transport.parse().map_err(|e| format!("{e}"))?;
+    can_transport::open(&spec).map_err(|e| e.to_string())
+}
