@@ -190,13 +190,25 @@ pub fn run(
     let mut last_stall_log_ns = 0u64;
     while !control.stop.load(Ordering::Acquire) {
         bank.flush(&mut bus)?;
-        // Everything queued is handled, stamped with its receive time, BEFORE the watches are
-        // judged (bank.poll below): an emulator process the host did not schedule for a while
-        // must not fault on its own backlog (drive-io's runner does the same).
+        // The emulated drives are hardware with their own CPUs: they see each frame when it
+        // arrives on the bus, not when this process (on a non-real-time host, or in the TCG
+        // guest) gets round to reading it. So every frame is handled at its ARRIVAL time —
+        // the kernel's receive stamp where the transport has one (SocketCAN) — and the watches
+        // are judged at the bus time processed so far. Judging at the read time faulted a
+        // starved emulator on its own backlog: the first frame read after a 700 ms stall
+        // checked the safety watch (DriveBank::handle_frame does, per frame) against the last
+        // pair handled before the stall, while the pairs that arrived meanwhile were still
+        // queued (the guest safety-hil flakes of forged_stopping and
+        // forged_rpdo_other_enabling_controlword, "safety heartbeat invalid or missing:
+        // Timeout").
         let mut rx = bus.recv_timeout(Duration::from_millis(2))?;
+        let rt_minus_mono = realtime_minus_monotonic_ns();
         let mut handled = 0;
+        let mut bus_time_ns = 0;
         while let Some(frame) = rx {
-            if bank.handle_frame(&frame.frame, frame.rx_monotonic_ns) {
+            let at = arrival_ns(&frame, rt_minus_mono);
+            bus_time_ns = at;
+            if bank.handle_frame(&frame.frame, at) {
                 for (i, (w, ax)) in cfg.winches.iter().zip(axes.iter_mut()).enumerate() {
                     match bank.demand(i) {
                         MotionDemand::Follow { target_counts } => {
@@ -229,6 +241,13 @@ pub fn run(
             };
         }
         let now = crs_ipc::monotonic_ns();
+        // Judged at the bus time handled so far while frames are still queued (the backlog
+        // cap was hit), else now.
+        let judge_at = if handled >= MAX_BACKLOG {
+            bus_time_ns
+        } else {
+            now
+        };
         // A test double on a non-real-time host: say when this loop itself was not scheduled
         // for a while (at most once a second), so a watch trip shows whose stall it was.
         let gap = now.saturating_sub(last_pass_ns);
@@ -247,7 +266,7 @@ pub fn run(
                 s.set_heartbeat_muted(mute & (1 << i) != 0);
             }
         }
-        bank.poll(now);
+        bank.poll(judge_at);
         if let Some((reason, at_ns)) = bank.take_safety_trip() {
             tracing::error!(
                 ?reason,
@@ -264,4 +283,26 @@ pub fn run(
         publish(&bank, &axes, now);
     }
     Ok(())
+}
+
+/// CLOCK_REALTIME − CLOCK_MONOTONIC now, ns: converts the kernel's receive stamps (realtime)
+/// to the monotonic clock every watch runs on.
+fn realtime_minus_monotonic_ns() -> i128 {
+    let rt = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as i128);
+    rt - i128::from(crs_ipc::monotonic_ns())
+}
+
+/// When a frame arrived on the bus (CLOCK_MONOTONIC ns): the kernel's receive stamp where the
+/// transport gives one, never later than user space's receipt; else that receipt.
+fn arrival_ns(frame: &can_transport::RxFrame, rt_minus_mono: i128) -> u64 {
+    match frame.kernel_rx_realtime_ns {
+        Some(k) => {
+            let mono = i128::from(k) - rt_minus_mono;
+            u64::try_from(mono.clamp(0, i128::from(frame.rx_monotonic_ns)))
+                .unwrap_or(frame.rx_monotonic_ns)
+        }
+        None => frame.rx_monotonic_ns,
+    }
 }

@@ -53,6 +53,7 @@ pub fn cpu_share(args: &Args, secs: f64) -> Res<String> {
         args.bin_dir.clone(),
         &args.transport,
         args.period_us,
+        None,
     )?;
     let spawned = Instant::now();
     let _ = st.fake()?.clone();

@@ -64,9 +64,18 @@ struct Args {
     feedback_silence_cycles: u32,
     /// Inside the emulated guest (as root): enlarge the default socket receive buffers so a
     /// process the emulator stalls for tens of ms does not lose CAN frames (a lost half of a
-    /// safety pair stops the drives, correctly, but is an artefact of the emulator).
+    /// safety pair stops the drives, correctly, but is an artefact of the emulator), and run
+    /// the winch emulator (the stand-in for hardware drives) SCHED_FIFO below the monitor.
     #[arg(long)]
     guest_tuning: bool,
+    /// Attempts per scenario (default 1). The emulated guest passes 2: TCG is not real time,
+    /// and a scenario whose stack the emulator stalled before its fault (a watch timing out
+    /// while motion-core starts) says nothing about the fault. A scenario that passes only on
+    /// a later attempt is reported as such (its first failure and logs are printed; the table
+    /// says "PASS (attempt 2)"); one that fails every attempt fails the matrix. Timing is
+    /// asserted on the host, with one attempt.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=3))]
+    attempts: u32,
     /// SYNC period of drive-io and the period of motion-core / the fake publisher (µs). The
     /// spec's 1000 on a host; the script uses 4000 in the emulated guest, which cannot run
     /// five 1 kHz processes (assert behaviour there, not timing).
@@ -138,6 +147,29 @@ const SCENARIOS: [Scenario; 28] = [
     ("tampered_safety_config", integrity::tampered_safety_config),
 ];
 
+/// SCHED_FIFO priority of the winch emulator in the guest (--guest-tuning): below the
+/// monitor's 50 (the generated monitor config), above the SCHED_OTHER stack of the guest.
+const GUEST_EMULATOR_RT_PRIORITY: u32 = 40;
+
+/// The last lines of each process's log of a failed scenario.
+fn print_logs(args: &Args, name: &str, stack: Option<&Stack>) {
+    match stack {
+        Some(st) => print!("{}", st.log_tail(25)),
+        None => {
+            let d = args.workdir.join(name);
+            for p in ["safety-monitor", "drive-io", "winch-emulator"] {
+                if let Ok(t) = std::fs::read_to_string(d.join(format!("{p}.log"))) {
+                    let v: Vec<&str> = t.lines().collect();
+                    println!("---- {p}");
+                    for l in &v[v.len().saturating_sub(25)..] {
+                        println!("{l}");
+                    }
+                }
+            }
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
     if args.guest_tuning {
@@ -184,70 +216,83 @@ fn main() -> ExitCode {
         if args.only.as_deref().is_some_and(|o| !name.contains(o)) {
             continue;
         }
-        let t0 = Instant::now();
-        let mut stack = None;
-        let r = Stack::start(
-            name,
-            &args.workdir,
-            args.bin_dir.clone(),
-            &args.transport,
-            args.period_us,
-        )
-        .and_then(|mut st| {
-            let r = f(&mut st);
-            stack = Some(st);
-            r
-        });
-        let secs = t0.elapsed().as_secs_f64();
-        match r {
-            Ok(o) => {
-                let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.1}"));
-                println!(
-                    "SAFETY-HIL PASS {name}: cause {}; detect {} ms; stop {} ms; {} ({secs:.1} s)",
-                    o.cause,
-                    f(o.detect_ms),
-                    f(o.stop_ms),
-                    o.note
-                );
-                rows.push((name, o, true));
-            }
-            Err(e) => {
-                all_ok = false;
-                println!("SAFETY-HIL FAIL {name}: {e} ({secs:.1} s)");
-                match &stack {
-                    Some(st) => print!("{}", st.log_tail(25)),
-                    None => {
-                        let d = args.workdir.join(name);
-                        for p in ["safety-monitor", "drive-io", "winch-emulator"] {
-                            if let Ok(t) = std::fs::read_to_string(d.join(format!("{p}.log"))) {
-                                let v: Vec<&str> = t.lines().collect();
-                                println!("---- {p}");
-                                for l in &v[v.len().saturating_sub(25)..] {
-                                    println!("{l}");
-                                }
-                            }
-                        }
+        let mut attempt = 1;
+        loop {
+            let t0 = Instant::now();
+            let mut stack = None;
+            let r = Stack::start(
+                name,
+                &args.workdir,
+                args.bin_dir.clone(),
+                &args.transport,
+                args.period_us,
+                args.guest_tuning.then_some(GUEST_EMULATOR_RT_PRIORITY),
+            )
+            .and_then(|mut st| {
+                let r = f(&mut st);
+                stack = Some(st);
+                r
+            });
+            let secs = t0.elapsed().as_secs_f64();
+            match r {
+                Ok(o) => {
+                    let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.1}"));
+                    let retried = if attempt > 1 {
+                        format!(" [attempt {attempt}]")
+                    } else {
+                        String::new()
+                    };
+                    println!(
+                        "SAFETY-HIL PASS {name}: cause {}; detect {} ms; stop {} ms; {} ({secs:.1} s){retried}",
+                        o.cause,
+                        f(o.detect_ms),
+                        f(o.stop_ms),
+                        o.note
+                    );
+                    rows.push((name, o, true, attempt));
+                    break;
+                }
+                Err(e) => {
+                    let last = attempt >= args.attempts;
+                    if last {
+                        all_ok = false;
+                        println!("SAFETY-HIL FAIL {name}: {e} ({secs:.1} s)");
+                    } else {
+                        println!(
+                            "SAFETY-HIL RETRY {name}: attempt {attempt} of {} failed: {e} ({secs:.1} s)",
+                            args.attempts
+                        );
+                    }
+                    print_logs(&args, name, stack.as_ref());
+                    if last {
+                        rows.push((
+                            name,
+                            Outcome {
+                                cause: format!("FAIL: {e}"),
+                                ..Outcome::default()
+                            },
+                            false,
+                            attempt,
+                        ));
+                        break;
                     }
                 }
-                rows.push((
-                    name,
-                    Outcome {
-                        cause: format!("FAIL: {e}"),
-                        ..Outcome::default()
-                    },
-                    false,
-                ));
             }
+            drop(stack);
+            attempt += 1;
         }
-        drop(stack);
     }
     println!("\n| scenario | result | cause | detection (ms) | fault to drives braked (ms) |");
     println!("|---|---|---|---|---|");
-    for (name, o, ok) in &rows {
+    for (name, o, ok, attempt) in &rows {
         let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.1}"));
         println!(
             "| {name} | {} | {} | {} | {} |",
-            if *ok { "PASS" } else { "FAIL" },
+            match (*ok, *attempt) {
+                (true, 1) => "PASS".to_string(),
+                (true, a) => format!("PASS (attempt {a})"),
+                (false, _) => "FAIL".to_string(),
+            },
             o.cause,
             f(o.detect_ms),
             f(o.stop_ms)

@@ -91,6 +91,7 @@ impl Stack {
         bin_dir: Option<PathBuf>,
         transport: &str,
         period_us: u32,
+        emulator_rt_priority: Option<u32>,
     ) -> Res<Stack> {
         let sdir = dir.join(name);
         std::fs::create_dir_all(&sdir).map_err(|e| e.to_string())?;
@@ -105,7 +106,11 @@ impl Stack {
                 _ => {}
             }
         }
-        let prefix = format!("shil-{name}-{}/", std::process::id());
+        // Every start its own iceoryx2 services: a second attempt of a scenario (--attempts)
+        // must not meet the first attempt's dead nodes.
+        static STARTS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let n = STARTS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let prefix = format!("shil-{name}-{}-{n}/", std::process::id());
         let node = IpcNode::with_prefix("safety-hil", &prefix).map_err(|e| e.to_string())?;
         // Quiet: this harness's stdout is parsed by the scripts. The grace period bounds the
         // graceful stop of `stop_with_usage` (the CPU measurement); killed processes and the
@@ -138,7 +143,7 @@ impl Stack {
         let cfg_dir = st.cfg.clone();
         let c = |f: &str| cfg_dir.join(f).display().to_string();
         let status = st.dir.join("emulator.status").display().to_string();
-        let emu_args = vec![
+        let mut emu_args = vec![
             "--config".into(),
             c(emulator_drives(name)),
             "--transport".into(),
@@ -150,6 +155,9 @@ impl Stack {
             "--control-file".into(),
             st.dir.join("emulator.control").display().to_string(),
         ];
+        if let Some(p) = emulator_rt_priority {
+            emu_args.extend(["--rt-priority".into(), p.to_string()]);
+        }
         st.spawn("winch-emulator", &emu_args)?;
         let mon_args: Vec<String> = vec![
             "--config".into(),

@@ -34,6 +34,13 @@ struct Args {
     /// ignored; a missing file means no override.
     #[arg(long)]
     control_file: Option<PathBuf>,
+    /// Run the emulation loop SCHED_FIFO at this priority (1..=99) with mlockall. The drives it
+    /// stands in for are hardware with their own CPUs, never starved by the stack: on an
+    /// emulated or loaded host (the QEMU guest of tools/safety-hil.sh) this keeps the test
+    /// double from stalling hundreds of ms behind motion-core's start-up, which drive-io then
+    /// (rightly) sees as lost drive heartbeats. Refused with an error if not granted.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    rt_priority: Option<i32>,
 }
 
 fn main() -> ExitCode {
@@ -91,6 +98,15 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         safety_watch = ?ecfg.safety_watch,
         "winch emulator (test double) running"
     );
+    if let Some(p) = args.rt_priority {
+        // After the helper threads were spawned: only this (the emulation) thread is FIFO.
+        let report = crs_rt::make_realtime(p, None)?;
+        tracing::info!(
+            priority = p,
+            ?report,
+            "emulation loop SCHED_FIFO + mlockall"
+        );
+    }
     emulator::run(bus, &ecfg, &control)?;
     control.stop.store(true, Ordering::Release);
     Ok(())
