@@ -10,9 +10,12 @@ use crate::pose::Pose;
 use crate::workspace::PositionBox;
 use nalgebra::{Vector3, Vector6};
 use serde::Deserialize;
+use serde::de::{self, Deserializer, SeqAccess, Visitor};
+use std::fmt;
 use std::ops::Range;
 use std::path::Path;
 use toml::Spanned;
+use toml::de::{DeTable, DeValue};
 
 /// A configuration error with its location (`file:line:column: `key`: message`): the stack's
 /// one type for it, from `config-diagnostics`.
@@ -142,8 +145,8 @@ struct RawPlatform {
 #[serde(deny_unknown_fields)]
 struct RawDynamics {
     mass_kg: Spanned<f64>,
-    center_of_gravity_m: Spanned<[f64; 3]>,
-    inertia_kg_m2: Spanned<[f64; 3]>,
+    center_of_gravity_m: Spanned<Fixed<3>>,
+    inertia_kg_m2: Spanned<Fixed<3>>,
     payload: Option<RawBody>,
 }
 
@@ -151,9 +154,9 @@ struct RawDynamics {
 #[serde(deny_unknown_fields)]
 struct RawBody {
     mass_kg: Spanned<f64>,
-    center_of_gravity_m: Spanned<[f64; 3]>,
+    center_of_gravity_m: Spanned<Fixed<3>>,
     /// Principal moments [I_xx, I_yy, I_zz] about the COG along the platform axes, kg·m².
-    inertia_kg_m2: Spanned<[f64; 3]>,
+    inertia_kg_m2: Spanned<Fixed<3>>,
 }
 
 #[derive(Deserialize)]
@@ -167,15 +170,15 @@ struct RawMeta {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawGeometry {
-    frame_anchors_m: Spanned<Vec<[f64; 3]>>,
-    platform_anchors_m: Spanned<Vec<[f64; 3]>>,
+    frame_anchors_m: Rows,
+    platform_anchors_m: Rows,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawPulleys {
     radius_m: Spanned<PerCable>,
-    swivel_axes: Spanned<Vec<[f64; 3]>>,
+    swivel_axes: Rows,
 }
 
 #[derive(Deserialize)]
@@ -195,7 +198,7 @@ struct RawElasticity {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawLoad {
-    wrench_n_nm: Spanned<[f64; 6]>,
+    wrench_n_nm: Spanned<Fixed<6>>,
 }
 
 #[derive(Deserialize)]
@@ -225,18 +228,124 @@ struct RawWinch {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawWorkspace {
-    position_min_m: Spanned<[f64; 3]>,
-    position_max_m: Spanned<[f64; 3]>,
-    rotation_min_deg: Spanned<[f64; 3]>,
-    rotation_max_deg: Spanned<[f64; 3]>,
+    position_min_m: Spanned<Fixed<3>>,
+    position_max_m: Spanned<Fixed<3>>,
+    rotation_min_deg: Spanned<Fixed<3>>,
+    rotation_max_deg: Spanned<Fixed<3>>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawHome {
-    position_m: Spanned<[f64; 3]>,
-    rotation_deg: Spanned<[f64; 3]>,
+    position_m: Spanned<Fixed<3>>,
+    rotation_deg: Spanned<Fixed<3>>,
     f_ini_n: Option<Spanned<Vec<f64>>>,
+}
+
+/// Exactly `N` numbers (a point, an axis, a wrench), each kept with its own span so that a bad
+/// one is located at itself. Not serde's `[f64; N]`: under `toml` that reads the first `N`
+/// elements and ignores the rest, so a row typed with a fourth coordinate loaded silently.
+#[derive(Clone, Debug)]
+struct Fixed<const N: usize> {
+    values: [f64; N],
+    spans: [Range<usize>; N],
+}
+
+impl<const N: usize> std::ops::Deref for Fixed<N> {
+    type Target = [f64; N];
+    fn deref(&self) -> &[f64; N] {
+        &self.values
+    }
+}
+
+impl<const N: usize> Fixed<N> {
+    /// Every element finite; a bad one is named `key[i]` at its own line and column.
+    fn finite(&self, loc: &Locator, key: &str) -> Result<(), ConfigError> {
+        match self.values.iter().position(|x| !x.is_finite()) {
+            Some(i) => Err(loc.err(
+                self.spans[i].clone(),
+                format!("{key}[{i}]"),
+                "must be a finite number",
+            )),
+            None => Ok(()),
+        }
+    }
+}
+
+impl<'de, const N: usize> Deserialize<'de> for Fixed<N> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Elements<const N: usize>;
+        impl<'de, const N: usize> Visitor<'de> for Elements<N> {
+            type Value = Fixed<N>;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                write!(f, "an array of length {N}")
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Fixed<N>, A::Error> {
+                let mut read: Vec<Spanned<f64>> = Vec::with_capacity(N);
+                while let Some(x) = seq.next_element::<Spanned<f64>>()? {
+                    read.push(x);
+                }
+                if read.len() != N {
+                    return Err(de::Error::invalid_length(read.len(), &self));
+                }
+                let mut out = Fixed {
+                    values: [0.0; N],
+                    spans: std::array::from_fn(|_| 0..0),
+                };
+                for (i, x) in read.into_iter().enumerate() {
+                    out.spans[i] = x.span();
+                    out.values[i] = x.into_inner();
+                }
+                Ok(out)
+            }
+        }
+        d.deserialize_seq(Elements::<N>)
+    }
+}
+
+/// Rows of exactly three numbers (anchor points, pulley axes), each row and element with its
+/// span.
+type Rows = Spanned<Vec<Spanned<Fixed<3>>>>;
+
+/// Every element of every row finite; a bad one is named `key[row][column]` (the element the
+/// operator must fix, as the safety monitor's own reader names it) at its line and column.
+fn finite_rows(loc: &Locator, rows: &Rows, key: &str) -> Result<(), ConfigError> {
+    for (i, row) in rows.get_ref().iter().enumerate() {
+        row.get_ref().finite(loc, &format!("{key}[{i}]"))?;
+    }
+    Ok(())
+}
+
+/// The path (`geometry.frame_anchors_m[2][1]`) of the innermost value of `text`, other than a
+/// table, whose span holds byte `at`; None if there is none (a syntax error, a header, a key).
+/// serde's errors carry the span of the value they refuse but no path down to it.
+fn value_path(text: &str, at: usize) -> Option<String> {
+    fn within(v: &Spanned<DeValue>, path: String, at: usize) -> Option<String> {
+        let span = v.span();
+        match v.get_ref() {
+            DeValue::Table(t) => in_table(t, &path, at),
+            _ if !span.contains(&at) => None,
+            DeValue::Array(xs) => Some(
+                xs.iter()
+                    .enumerate()
+                    .find_map(|(i, x)| within(x, format!("{path}[{i}]"), at))
+                    .unwrap_or(path),
+            ),
+            _ => Some(path),
+        }
+    }
+    fn in_table(t: &DeTable, path: &str, at: usize) -> Option<String> {
+        t.iter().find_map(|(k, v)| {
+            let key = if path.is_empty() {
+                k.get_ref().to_string()
+            } else {
+                format!("{path}.{}", k.get_ref())
+            };
+            within(v, key, at)
+        })
+    }
+    let doc = DeTable::parse(text).ok()?;
+    in_table(doc.get_ref(), "", at)
 }
 
 /// Reads and validates a platform TOML file.
@@ -265,7 +374,13 @@ pub fn parse_platform(text: &str, file: &str) -> Result<Platform, ConfigError> {
             file: file.to_string(),
             line,
             column,
-            key: String::new(),
+            // The refused value's path down to the element (a string inside the third anchor
+            // is `geometry.frame_anchors_m[2][1]`); none for a syntax error, a missing or an
+            // unknown key.
+            key: e
+                .span()
+                .and_then(|s| value_path(text, s.start))
+                .unwrap_or_default(),
             message: e.message().trim().to_string(),
         }
     })?;
@@ -342,17 +457,8 @@ fn vec3(a: &[f64; 3]) -> Vector3<f64> {
 fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
     let g = &raw.geometry;
     let m = g.frame_anchors_m.get_ref().len();
-    let flat = |v: &Vec<[f64; 3]>| v.iter().flatten().copied().collect::<Vec<_>>();
-    loc.finite(
-        &g.frame_anchors_m,
-        "geometry.frame_anchors_m",
-        &flat(g.frame_anchors_m.get_ref()),
-    )?;
-    loc.finite(
-        &g.platform_anchors_m,
-        "geometry.platform_anchors_m",
-        &flat(g.platform_anchors_m.get_ref()),
-    )?;
+    finite_rows(loc, &g.frame_anchors_m, "geometry.frame_anchors_m")?;
+    finite_rows(loc, &g.platform_anchors_m, "geometry.platform_anchors_m")?;
     if g.platform_anchors_m.get_ref().len() != m {
         return Err(loc.err(
             g.platform_anchors_m.span(),
@@ -382,16 +488,16 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
                     format!("has {} rows but there are {m} cables", axes.len()),
                 ));
             }
-            loc.finite(&p.swivel_axes, "pulleys.swivel_axes", &flat(axes))?;
+            finite_rows(loc, &p.swivel_axes, "pulleys.swivel_axes")?;
             Some(Pulleys {
                 radius,
-                axis: axes.iter().map(vec3).collect(),
+                axis: axes.iter().map(|r| vec3(r.get_ref())).collect(),
             })
         }
     };
     let k_f = per_cable(loc, &raw.elasticity.k_f_n, "elasticity.k_f_n", m)?;
     let w = raw.load.wrench_n_nm.get_ref();
-    loc.finite(&raw.load.wrench_n_nm, "load.wrench_n_nm", w)?;
+    w.finite(loc, "load.wrench_n_nm")?;
     let fo = &raw.forces;
     let f_min = *fo.f_min_n.get_ref();
     loc.finite(&fo.f_min_n, "forces.f_min_n", &[f_min])?;
@@ -413,11 +519,19 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
     }
 
     let params = ModelParams {
-        a: g.frame_anchors_m.get_ref().iter().map(vec3).collect(),
-        b: g.platform_anchors_m.get_ref().iter().map(vec3).collect(),
+        a: g.frame_anchors_m
+            .get_ref()
+            .iter()
+            .map(|r| vec3(r.get_ref()))
+            .collect(),
+        b: g.platform_anchors_m
+            .get_ref()
+            .iter()
+            .map(|r| vec3(r.get_ref()))
+            .collect(),
         pulleys,
         k_f,
-        w_e: Vector6::from_column_slice(w),
+        w_e: Vector6::from_column_slice(&w[..]),
         f_min,
         f_max,
     };
@@ -458,7 +572,7 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
         (&ws.rotation_min_deg, "workspace.rotation_min_deg"),
         (&ws.rotation_max_deg, "workspace.rotation_max_deg"),
     ] {
-        loc.finite(v, key, v.get_ref())?;
+        v.get_ref().finite(loc, key)?;
     }
     for k in 0..3 {
         if ws.position_min_m.get_ref()[k] >= ws.position_max_m.get_ref()[k] {
@@ -486,12 +600,8 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
     };
 
     let h = &raw.home;
-    loc.finite(&h.position_m, "home.position_m", h.position_m.get_ref())?;
-    loc.finite(
-        &h.rotation_deg,
-        "home.rotation_deg",
-        h.rotation_deg.get_ref(),
-    )?;
+    h.position_m.get_ref().finite(loc, "home.position_m")?;
+    h.rotation_deg.get_ref().finite(loc, "home.rotation_deg")?;
     let home = Pose::new(
         vec3(h.position_m.get_ref()),
         vec3(h.rotation_deg.get_ref()).map(f64::to_radians),
@@ -584,9 +694,10 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
 fn body(loc: &Locator, b: &RawBody, key: &str) -> Result<RigidBody, ConfigError> {
     let mass = loc.positive(&b.mass_kg, &format!("{key}.mass_kg"))?;
     let c = &b.center_of_gravity_m;
-    loc.finite(c, &format!("{key}.center_of_gravity_m"), c.get_ref())?;
+    c.get_ref()
+        .finite(loc, &format!("{key}.center_of_gravity_m"))?;
     let i = &b.inertia_kg_m2;
-    loc.finite(i, &format!("{key}.inertia_kg_m2"), i.get_ref())?;
+    i.get_ref().finite(loc, &format!("{key}.inertia_kg_m2"))?;
     RigidBody::new(
         mass,
         vec3(c.get_ref()),
@@ -654,8 +765,16 @@ fn model_error(loc: &Locator, raw: &RawPlatform, e: ModelError) -> ConfigError {
             raw.elasticity.k_f_n.span(),
             format!("elasticity.k_f_n[{i}]"),
         ),
-        ModelError::ZeroPulleyAxis(i) | ModelError::NegativePulleyRadius(i) => match &raw.pulleys {
-            Some(p) => (p.swivel_axes.span(), format!("pulleys[{i}]")),
+        // The row the operator must fix (`pulleys.swivel_axes[2]`, as the monitor names it).
+        ModelError::ZeroPulleyAxis(i) => match raw.pulleys.as_ref().and_then(|p| {
+            let row = p.swivel_axes.get_ref().get(*i)?;
+            Some(row.span())
+        }) {
+            Some(span) => (span, format!("pulleys.swivel_axes[{i}]")),
+            None => (0..0, "pulleys".into()),
+        },
+        ModelError::NegativePulleyRadius(i) => match &raw.pulleys {
+            Some(p) => (p.radius_m.span(), format!("pulleys.radius_m[{i}]")),
             None => (0..0, "pulleys".into()),
         },
         ModelError::ForceLimits { .. } => (raw.forces.f_min_n.span(), "forces".into()),

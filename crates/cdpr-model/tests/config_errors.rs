@@ -154,3 +154,195 @@ fn dynamics_that_contradict_the_static_load_are_refused_by_key_and_line() {
     assert_eq!(e.key, "dynamics.inertia_kg_m2", "{e}");
     assert_eq!(e.line, Some(line_of(&text, "[10.0, 10.0, 104.5]")), "{e}");
 }
+
+/// 1-based line and column of the first occurrence of `needle`.
+fn where_is(text: &str, needle: &str) -> (usize, usize) {
+    let at = text
+        .find(needle)
+        .unwrap_or_else(|| panic!("{needle:?} not found"));
+    let before = &text[..at];
+    let col = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+    (before.matches('\n').count() + 1, col)
+}
+
+/// `text` with `from` replaced once (it must occur).
+fn edit(text: &str, from: &str, to: &str) -> String {
+    assert!(text.contains(from), "{from:?} not in the file");
+    text.replacen(from, to, 1)
+}
+
+/// Parses `bad`, expecting a refusal of `key` located at `needle` with a message containing
+/// `says`, printed as `p.toml:line:column: `key`: message`.
+fn refused(bad: &str, key: &str, needle: &str, says: &str) {
+    let e = parse_platform(bad, "p.toml").expect_err(key);
+    let (line, column) = where_is(bad, needle);
+    assert_eq!(e.key, key, "{e}");
+    assert_eq!((e.line, e.column), (Some(line), Some(column)), "{key}: {e}");
+    assert!(e.message.contains(says), "{key}: {e}");
+    assert!(
+        e.to_string()
+            .starts_with(&format!("p.toml:{line}:{column}: `{key}`: ")),
+        "{e}"
+    );
+}
+
+/// A bad element of an array of rows is named by row and column, at its own line and column,
+/// as the safety monitor's reader names it (the flattened index `frame_anchors_m[7]` at the
+/// array's first line was a number the operator could not find).
+#[test]
+fn bad_elements_of_rows_are_named_by_row_and_column() {
+    let t = base();
+    let third = "[ 5.016,  7.555,  6.503]";
+    refused(
+        &edit(&t, third, "[ 5.016,  nan,  6.503]"),
+        "geometry.frame_anchors_m[2][1]",
+        "nan,",
+        "finite",
+    );
+    refused(
+        &edit(&t, third, "[ 5.016,  7.555,  -inf]"),
+        "geometry.frame_anchors_m[2][2]",
+        "-inf",
+        "finite",
+    );
+    refused(
+        &edit(&t, third, "[ 5.016,  \"7.555\",  6.503]"),
+        "geometry.frame_anchors_m[2][1]",
+        "\"7.555\"",
+        "invalid type: string",
+    );
+    refused(
+        &edit(&t, "[ 1.403, -0.551,  0.746]", "[ true, -0.551,  0.746]"),
+        "geometry.platform_anchors_m[5][0]",
+        "true",
+        "invalid type: boolean",
+    );
+    // The wrong arity of a row names the row.
+    refused(
+        &edit(&t, third, "[ 5.016,  7.555]"),
+        "geometry.frame_anchors_m[2]",
+        "[ 5.016,  7.555]",
+        "invalid length 2, expected an array of length 3",
+    );
+    refused(
+        &edit(&t, third, "\"5.016 7.555 6.503\""),
+        "geometry.frame_anchors_m[2]",
+        "\"5.016",
+        "invalid type: string",
+    );
+    // The helicopter's platform anchors (eq. 5.17).
+    let heli = std::fs::read_to_string(common::config_path("helicopter.toml")).unwrap();
+    refused(
+        &edit(&heli, "[-0.233,  0.453, -0.940]", "[-0.233,  0.453, nan]"),
+        "geometry.platform_anchors_m[3][2]",
+        "nan]",
+        "finite",
+    );
+}
+
+/// A fourth coordinate (or a seventh wrench component) is refused: serde's `[f64; N]` under
+/// `toml` read the first N and dropped the rest, so the typo loaded silently (the monitor's
+/// reader refused the same file).
+#[test]
+fn extra_elements_of_fixed_arrays_are_refused() {
+    let t = base();
+    refused(
+        &edit(
+            &t,
+            "[ 5.016,  7.555,  6.503]",
+            "[ 5.016,  7.555,  6.503, 1.0]",
+        ),
+        "geometry.frame_anchors_m[2]",
+        "[ 5.016,  7.555,  6.503, 1.0]",
+        "invalid length 4, expected an array of length 3",
+    );
+    let wrench = "[0.0, 0.0, -5500.0, 0.0, 0.0, 0.0]";
+    refused(
+        &edit(&t, wrench, "[0.0, 0.0, -5500.0, 0.0, 0.0, 0.0, 1.0]"),
+        "load.wrench_n_nm",
+        "[0.0, 0.0, -5500.0",
+        "invalid length 7, expected an array of length 6",
+    );
+    refused(
+        &edit(
+            &t,
+            "position_m = [0.0, 0.0, 2.0]",
+            "position_m = [0.0, 0.0, 2.0, 0.0]",
+        ),
+        "home.position_m",
+        "[0.0, 0.0, 2.0, 0.0]",
+        "invalid length 4, expected an array of length 3",
+    );
+    // A bad element of a flat array keeps its index and now its own column.
+    refused(
+        &edit(&t, wrench, "[0.0, 0.0, -5500.0, 0.0, \"x\", 0.0]"),
+        "load.wrench_n_nm[4]",
+        "\"x\"",
+        "invalid type: string",
+    );
+}
+
+/// Pulley swivel axes: a bad element names `pulleys.swivel_axes[row][column]`, a zero axis
+/// the row (it was `pulleys[2]`, a key the file does not have).
+#[test]
+fn bad_pulley_axes_are_named_by_row_and_column() {
+    let t = std::fs::read_to_string(common::config_path("icosahedron-pulleys.toml")).unwrap();
+    let rows = "  [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0],\n";
+    let third = |row: &str| {
+        edit(
+            &t,
+            rows,
+            &format!("  [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], {row}, [0.0, 0.0, 1.0],\n"),
+        )
+    };
+    refused(
+        &third("[nan, 0.0, 1.0]"),
+        "pulleys.swivel_axes[2][0]",
+        "nan",
+        "finite",
+    );
+    refused(
+        &third("[0.0, \"z\", 1.0]"),
+        "pulleys.swivel_axes[2][1]",
+        "\"z\"",
+        "invalid type: string",
+    );
+    refused(
+        &third("[0.0, 0.0]"),
+        "pulleys.swivel_axes[2]",
+        "[0.0, 0.0]",
+        "invalid length 2",
+    );
+    refused(
+        &third("[0.0, 0.0, 0.0]"),
+        "pulleys.swivel_axes[2]",
+        "[0.0, 0.0, 0.0]",
+        "non-zero",
+    );
+}
+
+/// Errors that are not about a value keep an empty key: a syntax error, a missing key, an
+/// unknown key (their messages name the key).
+#[test]
+fn errors_not_about_a_value_have_no_key() {
+    let t = base();
+    for bad in [
+        edit(&t, "[forces]", "[forces"),
+        edit(&t, "f_max_n = 9000.0\n", ""),
+        edit(
+            &t,
+            "f_min_n = 1000.0",
+            "f_min_n = 1000.0\nf_minimum_n = 3.0",
+        ),
+    ] {
+        let e = parse_platform(&bad, "p.toml").unwrap_err();
+        assert_eq!(e.key, "", "{e}");
+        assert!(e.line.is_some(), "{e}");
+    }
+    let e = parse_platform(
+        &edit(&t, "f_min_n = 1000.0", "f_min_n = \"1000\""),
+        "p.toml",
+    )
+    .unwrap_err();
+    assert_eq!(e.key, "forces.f_min_n", "{e}");
+}

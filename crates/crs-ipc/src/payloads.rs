@@ -185,7 +185,7 @@ pub mod motion_state {
 }
 
 /// `StateEvent::state` / `Heartbeat::state` codes of the safety monitor (source
-/// SafetyMonitor): `safety_monitor::MonitorState::code` encodes them, crs-console decodes them.
+/// SafetyMonitor): `safety_monitor::StateCode::code` encodes them, crs-console decodes them.
 pub mod monitor_state {
     /// No fault latched: the safety heartbeat says RUN.
     pub const ARMED: u32 = 1;

@@ -29,7 +29,7 @@ use crate::bus_watch::{ReaderHealth, ReaderWatch};
 use crate::config::MonitorConfig;
 use crate::identity::platform_identity;
 use crate::kinematics::StandardKinematics;
-use crate::monitor::{Limits, Monitor, MonitorState, ResetDecision};
+use crate::monitor::{Limits, Monitor, ResetDecision, StateCode};
 use crate::stop_path::{StopCounts, StopPath, StopStage};
 use crate::trip::{Cause, TripRecord};
 use can_transport::{CanBus, CanError, RxEvent, TransportSpec, safety_frame};
@@ -540,7 +540,7 @@ pub fn run_on(
                 identity_verified = readiness.identity_verified,
                 "ready: every drive operational with live feedback; permitting motion (RUN)"
             );
-        } else if report.state == MonitorState::NotReady && counter.is_multiple_of(67) {
+        } else if report.state == StateCode::NotReady && counter.is_multiple_of(67) {
             tracing::info!(
                 identity_verified = readiness.identity_verified,
                 not_operational = format_args!("{:#x}", readiness.not_operational),
@@ -570,7 +570,7 @@ pub fn run_on(
             if let Some(p) = &trip_log {
                 append_trip_log(p, &rec);
             }
-        } else if report.state == MonitorState::Tripped {
+        } else if report.state == StateCode::Tripped {
             stops.nmt_stop(tx.as_mut());
             if foreign_reset && let Some(rec) = monitor.trip() {
                 event_seq += 1;
@@ -643,7 +643,7 @@ pub fn run_on(
         for f in &signature {
             stops.other(tx.as_mut(), f);
         }
-        let tripped = monitor.state() == MonitorState::Tripped;
+        let tripped = monitor.state().is_tripped();
         let stage = stops.heartbeat(
             tx.as_mut(),
             &safety_frame::encode(&monitor.heartbeat(counter), cob),
@@ -760,7 +760,7 @@ fn estop_event(rec: &TripRecord, seq: u64) -> StateEvent {
     let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::EStop, seq);
     // The time of the cycle that detected the fault (the stop frames went out right after).
     ev.timestamp_ns = rec.detected_ns;
-    ev.state = MonitorState::Tripped.code();
+    ev.state = StateCode::Tripped.code();
     ev.detail = u32::from(rec.fault.cause.code());
     ev.detail_node = rec.fault.cable.map_or(0, |c| u32::from(c) + 1);
     ev

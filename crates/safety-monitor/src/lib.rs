@@ -35,5 +35,5 @@ pub mod platform;
 pub mod stop_path;
 pub mod trip;
 
-pub use monitor::{Latch, Limits, Monitor, MonitorState, ResetDecision};
+pub use monitor::{Limits, Monitor, MonitorState, ResetDecision, StateCode};
 pub use trip::{Cause, Fault, TripRecord};

@@ -18,7 +18,7 @@
 //! farther than the following-error bound from the setpoints it applied, RPDO targets on the bus
 //! farther than the limit from φ*(x) of every recent setpoint.
 //!
-//! The first fault latches [`Latch::Tripped`], which carries its [`TripRecord`], and is logged
+//! The first fault latches [`MonitorState::Tripped`], which carries its [`TripRecord`], and is logged
 //! ([`TripLog`]); the checks keep running while tripped, and every cause seen while tripped is
 //! latched too (per-cause latches).
 //! [`Monitor::request_reset`] (the operator's manual reset, ISO 13849-1 §5.2.2) is accepted
@@ -70,7 +70,7 @@ pub struct Limits {
     /// Cycles in a row with feedback but none of it checkable before the check trips.
     pub unchecked_cycles: u32,
     pub check_rpdo: bool,
-    /// Start in [`Latch::NotReady`] (STOP) until [`Readiness::ready`].
+    /// Start in [`MonitorState::NotReady`] (STOP) until [`Readiness::ready`].
     pub require_ready: bool,
     pub forces: ForceLimits,
     pub motion: MotionCheck,
@@ -175,10 +175,11 @@ struct ForceWatch {
 
 /// The monitor's state, with the data each state has: a trip cannot exist without its
 /// record, and the record cannot be read while the monitor is not tripped (issue 14). Private
-/// to [`Monitor`], read through [`Monitor::latch`]; the only transition out of
-/// [`Latch::Tripped`] consumes an [`authority::ResetToken`].
+/// to [`Monitor`], read through [`Monitor::state`]; the only transition out of
+/// [`MonitorState::Tripped`] consumes an [`authority::ResetToken`]. [`StateCode`] is the same
+/// state without its data.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Latch {
+pub enum MonitorState {
     /// Start-up: no fault, but the drives may not be enabled (the safety heartbeat says STOP)
     /// until every drive is operational with live force readings (see
     /// [`Monitor::readiness`]); the configuration was verified when it was loaded. Every check
@@ -195,59 +196,67 @@ pub enum Latch {
     Tripped(TripRecord),
 }
 
-impl Latch {
-    /// The state without its data (what the heartbeat and the state events carry).
-    pub fn state(&self) -> MonitorState {
+impl MonitorState {
+    /// The state without its data (for comparisons; its [`StateCode::code`] is what the
+    /// heartbeat and the state events carry).
+    pub fn state_code(&self) -> StateCode {
         match self {
-            Latch::NotReady => MonitorState::NotReady,
-            Latch::Armed => MonitorState::Armed,
-            Latch::Tripped(_) => MonitorState::Tripped,
+            MonitorState::NotReady => StateCode::NotReady,
+            MonitorState::Armed => StateCode::Armed,
+            MonitorState::Tripped(_) => StateCode::Tripped,
         }
+    }
+
+    /// Code in `Heartbeat::state` / `StateEvent::state`: [`StateCode::code`] of
+    /// [`MonitorState::state_code`].
+    pub fn code(&self) -> u32 {
+        self.state_code().code()
     }
 
     /// The trip that latched the e-stop; None unless tripped.
     pub fn trip(&self) -> Option<&TripRecord> {
         match self {
-            Latch::Tripped(rec) => Some(rec),
-            Latch::NotReady | Latch::Armed => None,
+            MonitorState::Tripped(rec) => Some(rec),
+            MonitorState::NotReady | MonitorState::Armed => None,
         }
     }
 
     pub fn is_tripped(&self) -> bool {
-        matches!(self, Latch::Tripped(_))
+        matches!(self, MonitorState::Tripped(_))
     }
 }
 
-/// The state as a code: [`Latch`] without its data, for comparisons and for the state code on
-/// the process bus (`Heartbeat::state` / `StateEvent::state`, [`crs_ipc::monitor_state`]).
+/// The state as a code: [`MonitorState`] without its data, for comparisons and for the state
+/// code on the process bus (`Heartbeat::state` / `StateEvent::state`,
+/// [`crs_ipc::monitor_state`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum MonitorState {
-    /// See [`Latch::NotReady`].
+pub enum StateCode {
+    /// See [`MonitorState::NotReady`].
     NotReady,
-    /// See [`Latch::Armed`].
+    /// See [`MonitorState::Armed`].
     Armed,
-    /// See [`Latch::Tripped`].
+    /// See [`MonitorState::Tripped`].
     Tripped,
 }
 
-impl MonitorState {
+impl StateCode {
     /// Code in `Heartbeat::state` / `StateEvent::state` (the contract's
     /// [`crs_ipc::monitor_state`] codes; crs-console decodes the same constants).
     pub fn code(self) -> u32 {
         match self {
-            MonitorState::Armed => crs_ipc::monitor_state::ARMED,
-            MonitorState::Tripped => crs_ipc::monitor_state::TRIPPED,
-            MonitorState::NotReady => crs_ipc::monitor_state::NOT_READY,
+            StateCode::Armed => crs_ipc::monitor_state::ARMED,
+            StateCode::Tripped => crs_ipc::monitor_state::TRIPPED,
+            StateCode::NotReady => crs_ipc::monitor_state::NOT_READY,
         }
     }
 
     /// The state of a code received on the process bus; None for a code the contract does
     /// not define.
-    pub fn from_code(code: u32) -> Option<MonitorState> {
+    pub fn from_code(code: u32) -> Option<StateCode> {
         match code {
-            crs_ipc::monitor_state::ARMED => Some(MonitorState::Armed),
-            crs_ipc::monitor_state::TRIPPED => Some(MonitorState::Tripped),
-            crs_ipc::monitor_state::NOT_READY => Some(MonitorState::NotReady),
+            crs_ipc::monitor_state::ARMED => Some(StateCode::Armed),
+            crs_ipc::monitor_state::TRIPPED => Some(StateCode::Tripped),
+            crs_ipc::monitor_state::NOT_READY => Some(StateCode::NotReady),
             _ => None,
         }
     }
@@ -278,14 +287,14 @@ const EMPTY: Entry = Entry {
 /// Outcome of [`Monitor::end_cycle`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CycleReport {
-    pub state: MonitorState,
+    pub state: StateCode,
     /// Set in the cycle that latched the e-stop.
     pub new_trip: Option<TripRecord>,
     /// Every cause seen this cycle (also while tripped).
     pub faults: CauseSet,
     pub setpoints: u32,
     pub missing: u32,
-    /// Set in the cycle that left [`Latch::NotReady`] for `Armed`.
+    /// Set in the cycle that left [`MonitorState::NotReady`] for `Armed`.
     pub became_ready: bool,
     /// The start-up conditions as this cycle saw them (what a not-ready monitor waits for).
     pub readiness: Readiness,
@@ -303,7 +312,7 @@ pub struct Readiness {
 
 impl Readiness {
     /// Every drive operational with live feedback (the identity is reported, not required:
-    /// see [`Latch::NotReady`]).
+    /// see [`MonitorState::NotReady`]).
     pub fn ready(&self) -> bool {
         self.not_operational == 0 && self.no_feedback == 0
     }
@@ -448,7 +457,7 @@ pub struct Monitor {
     identity: PlatformId,
     /// NotReady / Armed / Tripped with its record: written only by [`Monitor::end_cycle`]
     /// (NotReady → Armed, any → Tripped) and [`Monitor::release`] (the verified reset).
-    latch: Latch,
+    state: MonitorState,
     log: TripLog,
     stats: Stats,
     // This cycle.
@@ -529,10 +538,10 @@ impl Monitor {
             lim,
             kin,
             identity,
-            latch: if lim.require_ready {
-                Latch::NotReady
+            state: if lim.require_ready {
+                MonitorState::NotReady
             } else {
-                Latch::Armed
+                MonitorState::Armed
             },
             log: TripLog::default(),
             stats: Stats::default(),
@@ -657,16 +666,17 @@ impl Monitor {
         self.latched
     }
 
-    pub fn state(&self) -> MonitorState {
-        self.latch.state()
-    }
     /// The state with its data (the trip record while tripped).
-    pub fn latch(&self) -> &Latch {
-        &self.latch
+    pub fn state(&self) -> &MonitorState {
+        &self.state
+    }
+    /// The state without its data.
+    pub fn state_code(&self) -> StateCode {
+        self.state.state_code()
     }
     /// The trip that latched the current e-stop (None while not tripped).
     pub fn trip(&self) -> Option<&TripRecord> {
-        self.latch.trip()
+        self.state.trip()
     }
     pub fn trip_log(&self) -> &TripLog {
         &self.log
@@ -689,10 +699,10 @@ impl Monitor {
 
     /// The safety heartbeat to send this cycle (`counter` +1 per pair sent).
     pub fn heartbeat(&self, counter: u16) -> SafetyHeartbeat {
-        let (state, cause) = match &self.latch {
-            Latch::Tripped(t) => (SafetyState::Stop, t.fault.cause.code()),
-            Latch::NotReady => (SafetyState::Stop, 0),
-            Latch::Armed => (SafetyState::Run, 0),
+        let (state, cause) = match &self.state {
+            MonitorState::Tripped(t) => (SafetyState::Stop, t.fault.cause.code()),
+            MonitorState::NotReady => (SafetyState::Stop, 0),
+            MonitorState::Armed => (SafetyState::Run, 0),
         };
         SafetyHeartbeat {
             state,
@@ -943,7 +953,7 @@ impl Monitor {
         self.feedback_count += 1;
         self.seen_feedback = true;
         self.stats.feedback_checked += 1;
-        if self.latch.is_tripped() {
+        if self.state.is_tripped() {
             self.reset_evidence_feedback(fb);
         }
         if !self.lim.check_following_error
@@ -1263,18 +1273,18 @@ impl Monitor {
         }
         let mut new_trip = None;
         let mut became_ready = false;
-        if self.latch.is_tripped() {
+        if self.state.is_tripped() {
             self.update_evidence(now_ns, &readiness);
         }
         if let Some(first) = self.first {
             self.clear_streak = 0;
-            if !self.latch.is_tripped() {
+            if !self.state.is_tripped() {
                 let rec = TripRecord {
                     fault: first,
                     detected_ns: now_ns,
                     cycle: self.stats.cycles,
                 };
-                self.latch = Latch::Tripped(rec);
+                self.state = MonitorState::Tripped(rec);
                 self.log.push(rec);
                 new_trip = Some(rec);
                 self.latched = self.faults;
@@ -1282,8 +1292,8 @@ impl Monitor {
             }
         } else {
             self.clear_streak = self.clear_streak.saturating_add(1);
-            if self.latch == Latch::NotReady && readiness.ready() {
-                self.latch = Latch::Armed;
+            if self.state == MonitorState::NotReady && readiness.ready() {
+                self.state = MonitorState::Armed;
                 became_ready = true;
             }
         }
@@ -1300,7 +1310,7 @@ impl Monitor {
             self.plan = PlanWatch::default();
         }
         let report = CycleReport {
-            state: self.latch.state(),
+            state: self.state.state_code(),
             new_trip,
             faults: self.faults,
             setpoints: self.new_setpoints,
@@ -1377,10 +1387,10 @@ impl Monitor {
     /// many cycles ([`authority::verify`]). Accepting advances the reset epoch. While armed or
     /// not ready nothing changes.
     pub fn request_reset(&mut self) -> ResetDecision {
-        match self.latch {
-            Latch::NotReady => ResetDecision::NotReady,
-            Latch::Armed => ResetDecision::NotTripped,
-            Latch::Tripped(_) => {
+        match self.state {
+            MonitorState::NotReady => ResetDecision::NotReady,
+            MonitorState::Armed => ResetDecision::NotTripped,
+            MonitorState::Tripped(_) => {
                 let need = self.lim.reset_clear_cycles;
                 match authority::verify(
                     self.latched,
@@ -1400,10 +1410,10 @@ impl Monitor {
         }
     }
 
-    /// Leaves the latch: the only transition out of [`Latch::Tripped`] (which drops the trip
+    /// Leaves the latch: the only transition out of [`MonitorState::Tripped`] (which drops the trip
     /// record with it), and it needs the token only [`authority::verify`] mints.
     fn release(&mut self, _token: authority::ResetToken) {
-        self.latch = Latch::Armed;
+        self.state = MonitorState::Armed;
         self.latched.clear();
         self.evidence = [0; 32];
     }

@@ -6,7 +6,7 @@ use crs_test_support::alloc::{CountingAlloc, count_allocations};
 use safety_monitor::config;
 use safety_monitor::identity::platform_identity;
 use safety_monitor::kinematics::StandardKinematics;
-use safety_monitor::{Limits, Monitor, MonitorState};
+use safety_monitor::{Limits, Monitor, StateCode};
 use std::path::PathBuf;
 
 #[global_allocator]
@@ -56,12 +56,12 @@ fn a_cycle_allocates_nothing() {
                 }
             }
             m.end_cycle(cycle * 15_000_000);
-            if cycle > 510 && m.state() == MonitorState::Tripped {
+            if cycle > 510 && m.state().is_tripped() {
                 m.request_reset();
             }
         }
     });
     assert_eq!(m.trip_log().total(), 1);
-    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.state_code(), StateCode::Armed);
     assert_eq!(n, 0, "{n} allocations in 1000 cycles");
 }

@@ -8,8 +8,8 @@ use proptest::prelude::*;
 use safety_monitor::config::{self, MonitorConfig};
 use safety_monitor::identity::platform_identity;
 use safety_monitor::kinematics::StandardKinematics;
-use safety_monitor::monitor::{HISTORY, Latch, Limits};
-use safety_monitor::{Cause, Monitor, MonitorState, ResetDecision};
+use safety_monitor::monitor::{HISTORY, Limits};
+use safety_monitor::{Cause, Monitor, MonitorState, ResetDecision, StateCode};
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
@@ -91,7 +91,7 @@ fn offset_101_mm_trips_99_mm_does_not_on_every_cable() {
             let mut m = monitor();
             m.on_setpoint(&sp(1, HOME, cable, sign * 0.099));
             let r = m.end_cycle(1);
-            assert_eq!(r.state, MonitorState::Armed, "99 mm on cable {cable}");
+            assert_eq!(r.state, StateCode::Armed, "99 mm on cable {cable}");
             assert!(r.faults.is_empty());
             m.on_setpoint(&sp(2, HOME, cable, sign * 0.101));
             let r = m.end_cycle(2);
@@ -106,7 +106,7 @@ fn offset_101_mm_trips_99_mm_does_not_on_every_cable() {
                 t.fault.value
             );
             assert_eq!(t.fault.limit, 0.1);
-            assert_eq!(m.state(), MonitorState::Tripped);
+            assert_eq!(m.state_code(), StateCode::Tripped);
         }
     }
 }
@@ -191,9 +191,9 @@ fn sequence_gaps_are_counted_over_the_window() {
         // One lost setpoint per cycle.
         seq = good_cycle(&mut m, seq, 0) + 1;
     }
-    assert_eq!(m.state(), MonitorState::Armed, "5 lost: tolerated");
+    assert_eq!(m.state_code(), StateCode::Armed, "5 lost: tolerated");
     good_cycle(&mut m, seq, 0);
-    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.state_code(), StateCode::Armed);
     let r = {
         m.on_setpoint(&sp(seq + 15 + 1, HOME, 0, 0.0));
         m.end_cycle(0)
@@ -211,7 +211,7 @@ fn sequence_gaps_are_counted_over_the_window() {
             seq = good_cycle(&mut m, seq, 0);
         }
     }
-    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.state_code(), StateCode::Armed);
 }
 
 #[test]
@@ -260,7 +260,7 @@ fn an_announced_end_of_stream_disarms_silence_and_a_new_stream_rearms() {
     let mut seq = good_cycle(&mut m, 1, 0);
     m.on_identity(&PlatformIdentity::new(platform_identity(&c.platform), 8));
     seq = good_cycle(&mut m, seq, 0);
-    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.state_code(), StateCode::Armed);
     let _ = seq;
     m.end_cycle(0);
     assert_eq!(
@@ -295,7 +295,7 @@ fn identity_mismatch_and_missing_identity_trip() {
     let mut seq = 1;
     for _ in 0..10 {
         seq = good_cycle(&mut m, seq, 0);
-        assert_eq!(m.state(), MonitorState::Armed);
+        assert_eq!(m.state_code(), StateCode::Armed);
     }
     good_cycle(&mut m, seq, 0);
     assert_eq!(m.trip().unwrap().fault.cause, Cause::IdentityMissing);
@@ -310,7 +310,7 @@ fn motion_needs_a_verified_identity_holding_does_not() {
     let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
     // Holding setpoints without an identity: within the grace, no trip.
     let seq = good_cycle(&mut m, 1, 15_000_000);
-    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.state_code(), StateCode::Armed);
     // The first setpoint that moves (1 mm in x) trips in this very cycle, not after the grace.
     let mut moved = HOME;
     moved[0] += 0.001;
@@ -366,7 +366,7 @@ fn following_error_and_feedback_silence_trip() {
     let mut seq = 17;
     for k in 0..4 {
         seq = good_cycle(&mut m, seq, 0);
-        assert_eq!(m.state() == MonitorState::Tripped, k == 3, "cycle {k}");
+        assert_eq!(m.state_code() == StateCode::Tripped, k == 3, "cycle {k}");
     }
     assert_eq!(m.trip().unwrap().fault.cause, Cause::FeedbackSilence);
 }
@@ -423,12 +423,12 @@ fn reset_is_refused_while_the_cause_persists_and_accepted_after() {
     assert_eq!(m.request_reset(), ResetDecision::Accepted { epoch: e0 + 1 });
     assert_eq!(m.reset_epoch(), e0 + 1);
     assert_eq!(m.heartbeat(2).epoch, e0 + 1);
-    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.state_code(), StateCode::Armed);
     assert!(m.trip().is_none());
     // Leaving the latch drops its record with it (the log keeps it).
-    assert_eq!(*m.latch(), Latch::Armed);
+    assert_eq!(*m.state(), MonitorState::Armed);
     good_cycle(&mut m, seq, 0);
-    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.state_code(), StateCode::Armed);
     assert_eq!(m.trip_log().total(), 1);
     let rec = m.trip_log().last().unwrap();
     assert_eq!(rec.fault.cause, Cause::NonFinite);
@@ -449,11 +449,12 @@ fn the_latch_holds_the_first_cause_and_logs_every_trip() {
         (Cause::DqLimit, Some(5), 7)
     );
     // The record lives in the state (issue 14): the tripped state carries the same record.
-    match m.latch() {
-        Latch::Tripped(rec) => assert_eq!(rec, t),
+    match m.state() {
+        MonitorState::Tripped(rec) => assert_eq!(rec, t),
         other => panic!("not tripped: {other:?}"),
     }
-    assert_eq!(m.latch().state(), MonitorState::Tripped);
+    assert_eq!(m.state().state_code(), StateCode::Tripped);
+    assert_eq!(m.state().code(), crs_ipc::monitor_state::TRIPPED);
     let hb = m.heartbeat(3);
     assert_eq!(hb.state, can_transport::safety_frame::SafetyState::Stop);
     assert_eq!(hb.cause, Cause::DqLimit.code());
@@ -828,7 +829,7 @@ fn forces_inside_the_limits_and_short_transients_do_not_trip() {
         m.on_force(2, 4000.0, t + 11 * MS);
         t += 15 * MS;
     }
-    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.state_code(), StateCode::Armed);
     assert!(m.stats().forces_checked > 0);
 }
 
@@ -1112,7 +1113,7 @@ fn feedback_whose_applied_setpoint_is_unknown_trips_after_n_cycles() {
         m.on_feedback(&feedback(applied, &q));
         seq = good_cycle(&mut m, seq, u64::from(k + 1) * 15 * MS);
     }
-    assert_eq!(m.state(), MonitorState::Armed, "{:?}", m.trip());
+    assert_eq!(m.state_code(), StateCode::Armed, "{:?}", m.trip());
 }
 
 #[test]
@@ -1143,7 +1144,7 @@ fn the_monitor_starts_not_ready_and_arms_only_when_every_drive_is_verified() {
         StandardKinematics::new(&c.platform),
         platform_identity(&c.platform),
     );
-    assert_eq!(m.state(), MonitorState::NotReady);
+    assert_eq!(m.state_code(), StateCode::NotReady);
     assert_eq!(m.heartbeat(1).state, SafetyState::Stop);
     assert_eq!(m.request_reset(), ResetDecision::NotReady);
     let mut t = 0;
@@ -1159,18 +1160,18 @@ fn the_monitor_starts_not_ready_and_arms_only_when_every_drive_is_verified() {
     };
     // Nothing heard from the drives yet: not ready.
     for _ in 0..5 {
-        assert_eq!(cycle(&mut m, 0, true).state, MonitorState::NotReady);
+        assert_eq!(cycle(&mut m, 0, true).state, StateCode::NotReady);
     }
     // One drive silent: not ready.
-    assert_eq!(cycle(&mut m, 7, true).state, MonitorState::NotReady);
+    assert_eq!(cycle(&mut m, 7, true).state, StateCode::NotReady);
     // Drives pre-operational (heartbeat, no NMT start yet): not ready.
-    assert_eq!(cycle(&mut m, 8, false).state, MonitorState::NotReady);
+    assert_eq!(cycle(&mut m, 8, false).state, StateCode::NotReady);
     // The identity is reported but not required (motion-core starts after the drives enable).
     assert!(!m.readiness().identity_verified);
     // Everything verified: armed, RUN.
     let r = cycle(&mut m, 8, true);
     assert!(r.became_ready);
-    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.state_code(), StateCode::Armed);
     assert_eq!(m.heartbeat(2).state, SafetyState::Run);
 }
 
@@ -1201,7 +1202,7 @@ fn a_fault_while_not_ready_latches_and_readiness_names_what_is_missing() {
         .new_trip
         .expect("trips while not ready");
     assert_eq!(t.fault.cause, Cause::DqLimit);
-    assert_eq!(m.state(), MonitorState::Tripped);
+    assert_eq!(m.state_code(), StateCode::Tripped);
 }
 
 /// The shipped config with `key` of `[section]` set to `value` (platform and drives paths
@@ -1304,7 +1305,7 @@ proptest! {
         let mut seq = 1;
         let mut clean_since_fault = u32::MAX;
         for op in ops {
-            let before = (m.state(), m.reset_epoch());
+            let before = (m.state_code(), m.reset_epoch());
             match op {
                 0 | 1 => {
                     seq = good_cycle(&mut m, seq, 0);
@@ -1322,20 +1323,20 @@ proptest! {
                     let d = m.request_reset();
                     match d {
                         ResetDecision::Accepted { epoch } => {
-                            prop_assert_eq!(before.0, MonitorState::Tripped);
+                            prop_assert_eq!(before.0, StateCode::Tripped);
                             prop_assert!(clean_since_fault >= 3);
                             prop_assert_eq!(epoch, before.1 + 1);
                             prop_assert_eq!(m.reset_epoch(), epoch);
-                            prop_assert_eq!(m.state(), MonitorState::Armed);
+                            prop_assert_eq!(m.state_code(), StateCode::Armed);
                             prop_assert_eq!(m.heartbeat(0).epoch, epoch);
                         }
                         ResetDecision::NotTripped => {
-                            prop_assert_eq!(before.0, MonitorState::Armed);
-                            prop_assert_eq!((m.state(), m.reset_epoch()), before);
+                            prop_assert_eq!(before.0, StateCode::Armed);
+                            prop_assert_eq!((m.state_code(), m.reset_epoch()), before);
                         }
                         _ => {
-                            prop_assert_eq!((m.state(), m.reset_epoch()), before);
-                            prop_assert!(before.0 == MonitorState::Tripped && clean_since_fault < 3);
+                            prop_assert_eq!((m.state_code(), m.reset_epoch()), before);
+                            prop_assert!(before.0 == StateCode::Tripped && clean_since_fault < 3);
                         }
                     }
                     continue;
@@ -1460,7 +1461,7 @@ fn stopping_is_accepted_only_at_the_end_of_the_announced_plan() {
     for _ in 0..100 {
         assert!(m.end_cycle(0).faults.is_empty());
     }
-    assert_eq!(m.state(), MonitorState::Armed);
+    assert_eq!(m.state_code(), StateCode::Armed);
 }
 
 /// The state codes on the process bus are the contract's (crs_ipc::monitor_state, which
@@ -1469,13 +1470,13 @@ fn stopping_is_accepted_only_at_the_end_of_the_announced_plan() {
 fn state_codes_are_the_contract_constants() {
     use crs_ipc::monitor_state::{ARMED, NOT_READY, TRIPPED};
     for (s, code) in [
-        (MonitorState::Armed, ARMED),
-        (MonitorState::Tripped, TRIPPED),
-        (MonitorState::NotReady, NOT_READY),
+        (StateCode::Armed, ARMED),
+        (StateCode::Tripped, TRIPPED),
+        (StateCode::NotReady, NOT_READY),
     ] {
         assert_eq!(s.code(), code);
-        assert_eq!(MonitorState::from_code(code), Some(s));
+        assert_eq!(StateCode::from_code(code), Some(s));
     }
-    assert_eq!(MonitorState::from_code(0), None);
-    assert_eq!(MonitorState::from_code(4), None);
+    assert_eq!(StateCode::from_code(0), None);
+    assert_eq!(StateCode::from_code(4), None);
 }
