@@ -63,7 +63,7 @@ pub fn foreign_publisher(st: &mut Stack) -> Res<Outcome> {
 /// not when motion-core starts.
 pub fn heartbeat_config_crc_mismatch(st: &mut Stack) -> Res<Outcome> {
     st.wait("the monitor RUN (every drive operational)", 30.0, |s| {
-        Ok(s.monitor_state == Some(safety_monitor::MonitorState::Armed.code()))
+        Ok(s.monitor_state == Some(safety_monitor::StateCode::Armed.code()))
     })?;
     st.start_motion_core()?;
     // Watch for 3 s of monitor cycles: no drive enabled, none following, drive-io never
