@@ -306,3 +306,34 @@ fn arrival_ns(frame: &can_transport::RxFrame, rt_minus_mono: i128) -> u64 {
         None => frame.rx_monotonic_ns,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use can_transport::{CanFrame, RxFrame};
+
+    fn rx(read_ns: u64, kernel_rt: Option<u64>) -> RxFrame {
+        RxFrame {
+            frame: CanFrame::new(0x80, &[]).unwrap(),
+            rx_monotonic_ns: read_ns,
+            kernel_rx_realtime_ns: kernel_rt,
+        }
+    }
+
+    /// A frame that waited 700 ms in the socket while the emulator was not scheduled is handled
+    /// at its kernel arrival time, converted to the monotonic clock; never later than its
+    /// receipt; the receipt where the transport has no kernel stamp.
+    #[test]
+    fn a_queued_frame_is_handled_at_its_arrival_time() {
+        let offset: i128 = 1_700_000_000_000_000_000; // realtime − monotonic
+        let read = 10_000_000_000u64;
+        let arrived = read - 700_000_000;
+        let kernel = (i128::from(arrived) + offset) as u64;
+        assert_eq!(arrival_ns(&rx(read, Some(kernel)), offset), arrived);
+        // A realtime clock step cannot put the arrival after the receipt.
+        assert_eq!(arrival_ns(&rx(read, Some(kernel)), offset - 1_000_000_000), read);
+        assert_eq!(arrival_ns(&rx(read, None), offset), read);
+        let now_offset = realtime_minus_monotonic_ns();
+        assert!(now_offset > 0, "{now_offset}");
+    }
+}
