@@ -28,7 +28,61 @@ use nalgebra::{Vector3, Vector6};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-type BoxErr = Box<dyn std::error::Error>;
+/// Why commissioning could not measure or write its result.
+#[derive(Debug, thiserror::Error)]
+pub enum CommissionError {
+    /// The daemon TOML, its platform TOML or the plant TOML (names its file and key).
+    #[error(transparent)]
+    Config(#[from] cdpr_model::config::ConfigError),
+    /// Creating the output directory or writing a result file (`path`).
+    #[error("{source}")]
+    Output {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Writing the commissioning tour.
+    #[error(transparent)]
+    Tour(#[from] crate::campaign::CampaignError),
+    /// The run of the stack.
+    #[error(transparent)]
+    Run(#[from] sim_run::SimError),
+    /// The run stopped (e-stops, a stopped drive bus): its rest points are not a measurement.
+    #[error(
+        "the commissioning run did not complete cleanly ({estops} e-stop(s){}): nothing was measured",
+        if *bus_stopped { ", the drive bus stopped" } else { "" }
+    )]
+    NotClean { estops: u64, bus_stopped: bool },
+    /// The recorded data set (names its file and line).
+    #[error(transparent)]
+    Dataset(#[from] crs_dataset::DatasetError),
+    /// The daemon's waypoint file (its planned tour, eq. 3.42).
+    #[error(transparent)]
+    Waypoints(#[from] motion_core::daemon::trajectory::WaypointError),
+    #[error("the recording has no rest point with force readings")]
+    NoRestPoints,
+    #[error("no rest point at the set-up pose (eq. 6.21) was recorded")]
+    NoSetupRestPoint,
+    /// The wrench or the cable offsets at the set-up pose (eq. 6.23/6.24).
+    #[error(transparent)]
+    Kinematics(#[from] cdpr_model::kinematics::KinematicsError),
+    /// Mass and COG from the rest points.
+    #[error(transparent)]
+    Payload(#[from] load_tracking::payload::PayloadError),
+    /// The simulated plant (its true payload).
+    #[error(transparent)]
+    Plant(#[from] sim_plant::PlantError),
+    /// Serialising commission.json.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+}
+
+fn output(path: &Path) -> impl FnOnce(std::io::Error) -> CommissionError + '_ {
+    move |source| CommissionError::Output {
+        path: path.to_path_buf(),
+        source,
+    }
+}
 
 /// What to run and how strict the check is.
 #[derive(Clone, Debug)]
@@ -96,11 +150,11 @@ pub fn tour(x0: &Pose, offset_m: f64, tilt_rad: f64) -> Vec<Pose> {
 }
 
 /// Runs the commissioning on the stack `c.sim` describes.
-pub fn run(c: &CommissionConfig) -> Result<Commission, BoxErr> {
-    let daemon = motion_core::daemon::config::load(&c.sim.config).map_err(|e| e.to_string())?;
+pub fn run(c: &CommissionConfig) -> Result<Commission, CommissionError> {
+    let daemon = motion_core::daemon::config::load(&c.sim.config)?;
     let platform = load_platform(&daemon.platform)?;
     let x0 = platform.home;
-    std::fs::create_dir_all(&c.sim.out)?;
+    std::fs::create_dir_all(&c.sim.out).map_err(output(&c.sim.out))?;
     let poses = tour(&x0, c.offset_m, c.tilt_rad);
     let wps: Vec<Waypoint> = poses
         .iter()
@@ -126,22 +180,18 @@ pub fn run(c: &CommissionConfig) -> Result<Commission, BoxErr> {
     sim.check = false;
     let sum = sim_run::execute(&sim)?;
     if sum.estops > 0 || sum.bus_stopped_during_run.is_some() {
-        return Err(format!(
-            "the commissioning run did not complete cleanly ({} e-stop(s){}): nothing was measured",
-            sum.estops,
-            if sum.bus_stopped_during_run.is_some() {
-                ", the drive bus stopped"
-            } else {
-                ""
-            }
-        )
-        .into());
+        return Err(CommissionError::NotClean {
+            estops: sum.estops,
+            bus_stopped: sum.bus_stopped_during_run.is_some(),
+        });
     }
     let ds = load_dataset(&record)?;
     analyse(&platform, &daemon_tour(&daemon)?, &ds, c, Some(&sim.plant))
 }
 
-fn daemon_tour(d: &motion_core::daemon::config::DaemonConfig) -> Result<Vec<Pose>, BoxErr> {
+fn daemon_tour(
+    d: &motion_core::daemon::config::DaemonConfig,
+) -> Result<Vec<Pose>, CommissionError> {
     match &d.trajectory.waypoints {
         Some(p) => Ok(read_waypoints(p)?.into_iter().map(|w| w.pose).collect()),
         None => Ok(Vec::new()),
@@ -173,7 +223,7 @@ pub fn analyse(
     ds: &crs_dataset::Dataset,
     c: &CommissionConfig,
     plant: Option<&Path>,
-) -> Result<Commission, BoxErr> {
+) -> Result<Commission, CommissionError> {
     let model = &platform.model;
     let x0 = platform.home;
     let mut data = Data::new(model);
@@ -192,7 +242,7 @@ pub fn analyse(
         })
         .collect();
     if rest.is_empty() {
-        return Err("the recording has no rest point with force readings".into());
+        return Err(CommissionError::NoRestPoints);
     }
     // The set-up pose is found by the reference (the tracker sees it within its noise).
     let Some(setup_forces) = ds.samples.iter().find_map(|s| {
@@ -202,7 +252,7 @@ pub fn analyse(
             .then_some(s.forces.as_ref())
             .flatten()
     }) else {
-        return Err("no rest point at the set-up pose (eq. 6.21) was recorded".into());
+        return Err(CommissionError::NoSetupRestPoint);
     };
     let w = wrench_from_forces(model, &mut data, &x0, setup_forces)?;
     let q_off = setup::cable_offsets(model, &mut data, &x0, setup_forces)?;
@@ -364,14 +414,12 @@ pub fn to_toml(c: &Commission) -> String {
 }
 
 /// Writes `commission.toml` and `commission.json` into `out`; returns the TOML path.
-pub fn write(c: &Commission, out: &Path) -> Result<PathBuf, BoxErr> {
-    std::fs::create_dir_all(out)?;
+pub fn write(c: &Commission, out: &Path) -> Result<PathBuf, CommissionError> {
+    std::fs::create_dir_all(out).map_err(output(out))?;
     let path = out.join("commission.toml");
-    std::fs::write(&path, to_toml(c))?;
-    std::fs::write(
-        out.join("commission.json"),
-        serde_json::to_string_pretty(c)?,
-    )?;
+    std::fs::write(&path, to_toml(c)).map_err(output(&path))?;
+    let json = out.join("commission.json");
+    std::fs::write(&json, serde_json::to_string_pretty(c)?).map_err(output(&json))?;
     Ok(path)
 }
 

@@ -206,7 +206,8 @@ fn bench(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
         baseline_seeds: a.baseline_seeds,
         first_seed: a.first_seed,
         explain_misses: a.explain_misses,
-    })
+    })?;
+    Ok(())
 }
 
 /// Identifies from `base`, writes the report, plots, calibrated.toml and the side file into
