@@ -126,9 +126,33 @@ pub struct Commission {
     pub configured: (f64, [f64; 2]),
     /// The simulated plant's true payload, when the run is simulated (mass kg, COG m).
     pub truth: Option<(f64, [f64; 3])>,
-    /// eq. 3.42 along the daemon's tour, or why it could not be chosen.
-    pub f_ini: Result<InitialTension, String>,
+    /// eq. 3.42 along the daemon's tour, or why it could not be chosen (in the JSON as
+    /// `{"Err": "<message>"}`).
+    #[serde(serialize_with = "serialize_f_ini")]
+    pub f_ini: Result<InitialTension, InitialTensionError>,
     pub verdict: Verdict,
+}
+
+/// Why eq. 3.42 gave no initial tension for the measured load.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum InitialTensionError {
+    /// The model with the measured wrench w_e (eq. 6.23) is not valid.
+    #[error(transparent)]
+    MeasuredModel(#[from] cdpr_model::ModelError),
+    /// eq. 3.42 along the tour.
+    #[error(transparent)]
+    Setup(#[from] setup::SetupError),
+}
+
+/// `f_ini` as serde writes a `Result`, the error as its message.
+fn serialize_f_ini<S: serde::Serializer>(
+    r: &Result<InitialTension, InitialTensionError>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    match r {
+        Ok(t) => s.serialize_newtype_variant("Result", 0, "Ok", t),
+        Err(e) => s.serialize_newtype_variant("Result", 1, "Err", &e.to_string()),
+    }
 }
 
 /// The commissioning tour around the set-up pose x0: x0, four level offsets, two tilts (roll,
@@ -279,10 +303,13 @@ pub fn analyse(
     let mut measured = model.params().clone();
     measured.w_e = w;
     let f_ini = cdpr_model::Model::new(measured)
-        .map_err(|e| e.to_string())
+        .map_err(InitialTensionError::from)
         .and_then(|mm| {
-            setup::initial_tension(&mm, &x0, &sampled_path(&x0, planned_tour))
-                .map_err(|e| e.to_string())
+            Ok(setup::initial_tension(
+                &mm,
+                &x0,
+                &sampled_path(&x0, planned_tour),
+            )?)
         });
     let mut why = Vec::new();
     let dm = fit.mass_kg - m_cfg;
@@ -407,7 +434,7 @@ pub fn to_toml(c: &Commission) -> String {
             );
         }
         Err(e) => {
-            let _ = writeln!(s, "\n[initial_tension]\nfailed = {e:?}");
+            let _ = writeln!(s, "\n[initial_tension]\nfailed = {:?}", e.to_string());
         }
     }
     s
@@ -459,12 +486,17 @@ mod tests {
             },
             configured: (764.5, [0.08, 0.0]),
             truth: None,
-            f_ini: Err("the path is empty".into()),
+            f_ini: Err(setup::SetupError::EmptyPath.into()),
             verdict: Verdict::Refused(vec!["payload mass differs".into()]),
         };
         let t: toml::Table = to_toml(&c).parse().expect("valid TOML");
         assert_eq!(t["verdict"]["ready"].as_bool(), Some(false));
         assert_eq!(t["payload"]["cog_m"][2].as_str(), Some("not observable"));
-        assert!(t["initial_tension"]["failed"].as_str().is_some());
+        assert_eq!(
+            t["initial_tension"]["failed"].as_str(),
+            Some("the path is empty")
+        );
+        let json = serde_json::to_value(&c).expect("serialisable");
+        assert_eq!(json["f_ini"]["Err"].as_str(), Some("the path is empty"));
     }
 }
