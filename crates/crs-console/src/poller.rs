@@ -26,7 +26,8 @@ fn to_json(s: &Status) -> SharedJson<str> {
 /// A request from the web side to the poller thread.
 pub enum Request {
     /// Publish an operator e-stop; answer with the event's sequence number.
-    Stop(oneshot::Sender<Result<u64, String>>),
+    /// The error is iceoryx2's (publishing the event or waking the listeners).
+    Stop(oneshot::Sender<Result<u64, crs_ipc::IpcError>>),
     /// The trip log.
     Trips(oneshot::Sender<Vec<TripEntry>>),
 }
@@ -112,8 +113,7 @@ pub fn start(
                         let r = ev_pub
                             .publish(&e)
                             .and_then(|_| wake.notify())
-                            .map(|_| stop_seq)
-                            .map_err(|e| e.to_string());
+                            .map(|_| stop_seq);
                         match &r {
                             Ok(_) => tracing::warn!("STOP requested from the operator console: e-stop published"),
                             Err(e) => tracing::error!(error = %e, "STOP request from the console could not be published"),

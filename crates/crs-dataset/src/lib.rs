@@ -103,24 +103,85 @@ impl Dataset {
 const POSE_COLS: [&str; 6] = ["x", "y", "z", "phi_x", "phi_y", "phi_z"];
 
 /// A malformed data set.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Debug)]
 pub struct DatasetError {
     pub file: String,
     /// 1-based line, when the problem is on one line.
     pub line: Option<usize>,
-    pub message: String,
+    pub problem: Problem,
 }
 
 impl fmt::Display for DatasetError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self.line {
-            Some(l) => write!(f, "{}:{l}: {}", self.file, self.message),
-            None => write!(f, "{}: {}", self.file, self.message),
+            Some(l) => write!(f, "{}:{l}: {}", self.file, self.problem),
+            None => write!(f, "{}: {}", self.file, self.problem),
         }
     }
 }
 
-impl std::error::Error for DatasetError {}
+impl std::error::Error for DatasetError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        Some(&self.problem)
+    }
+}
+
+/// What is wrong with a data set being read ([`DatasetError`] adds the file and line).
+#[derive(Debug, thiserror::Error)]
+pub enum Problem {
+    #[error("cannot open: {0}")]
+    Open(#[source] std::io::Error),
+    #[error("cannot read: {0}")]
+    Read(#[source] std::io::Error),
+    #[error("metadata line must read `# key: value`")]
+    MetadataLine,
+    #[error("unsupported format `{found}` (expected `{expected}`)", expected = FORMAT)]
+    Format { found: String },
+    #[error("unsupported units `{found}` (expected `{expected}`)", expected = UNITS)]
+    Units { found: String },
+    #[error("missing `# format: {expected}` before the header", expected = FORMAT)]
+    MissingFormat,
+    #[error("missing `# units:` declaration before the header (units are never guessed)")]
+    MissingUnits,
+    #[error("end of file before the header row")]
+    NoHeader,
+    #[error("duplicate column `{0}`")]
+    DuplicateColumn(String),
+    #[error("unknown column `{0}`")]
+    UnknownColumn(String),
+    #[error("no `q_cmd_1..q_cmd_m` columns")]
+    NoCableColumns,
+    #[error("`q_cmd_i` columns must be numbered 1..m without gaps")]
+    CableColumnGaps,
+    /// Force columns present but not one per cable, numbered 1..m.
+    #[error("force columns must be `f_1..f_{m}` (one per cable)")]
+    ForceColumns { m: usize },
+    #[error("missing column `{0}`")]
+    MissingColumn(&'static str),
+    #[error("reference pose columns must be all of `x_ref..phi_z_ref` or none")]
+    PartialReference,
+    #[error("expected {expected} fields, got {got}")]
+    FieldCount { expected: usize, got: usize },
+    /// `field` is 1-based, `text` as in the file.
+    #[error("field {field} `{text}` is not a number")]
+    NotANumber { field: usize, text: String },
+    #[error("field {field} `{text}` is not finite")]
+    NotFinite { field: usize, text: String },
+    #[error("field {field} `{text}` is not a non-negative integer")]
+    NotAnInteger { field: usize, text: String },
+    #[error("phase `{0}` is not 0, 1 or 2")]
+    Phase(u64),
+}
+
+/// Why [`write_dataset`] refuses a data set (as the InvalidInput error's payload).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum WriteProblem {
+    /// Sample `sample` does not match the column layout or holds a non-finite number.
+    #[error("sample {sample}: {what}")]
+    Sample { sample: u64, what: &'static str },
+    #[error("invalid metadata key `{0}`")]
+    MetadataKey(String),
+}
 
 /// Writes a data set. Numbers use Rust's shortest round-trip form, so a file read back gives
 /// the identical values. Refuses (InvalidInput, nothing written) a data set whose samples do
@@ -155,9 +216,14 @@ pub fn write_dataset(mut w: impl Write, ds: &Dataset) -> std::io::Result<()> {
     Ok(())
 }
 
-fn check(ds: &Dataset) -> Result<(), String> {
+fn check(ds: &Dataset) -> Result<(), WriteProblem> {
     for s in &ds.samples {
-        let bad = |what: &str| Err(format!("sample {}: {what}", s.sample));
+        let bad = |what: &'static str| {
+            Err(WriteProblem::Sample {
+                sample: s.sample,
+                what,
+            })
+        };
         if s.q_cmd.len() != ds.m {
             return bad("q_cmd has the wrong length");
         }
@@ -181,7 +247,7 @@ fn check(ds: &Dataset) -> Result<(), String> {
     }
     for (k, v) in &ds.metadata {
         if k.is_empty() || k.contains(':') || k.contains('\n') || k == "format" || k == "units" {
-            return Err(format!("invalid metadata key `{k}`"));
+            return Err(WriteProblem::MetadataKey(k.clone()));
         }
         let _ = v;
     }
@@ -203,7 +269,7 @@ pub fn load_dataset(path: impl AsRef<Path>) -> Result<Dataset, DatasetError> {
     let f = std::fs::File::open(path).map_err(|e| DatasetError {
         file: name.clone(),
         line: None,
-        message: format!("cannot open: {e}"),
+        problem: Problem::Open(e),
     })?;
     read_dataset(BufReader::new(f), &name)
 }
@@ -212,10 +278,10 @@ pub fn load_dataset(path: impl AsRef<Path>) -> Result<Dataset, DatasetError> {
 /// declarations, unknown, duplicate or missing columns, rows with the wrong number of fields,
 /// unparsable or non-finite numbers, cable columns not numbered 1..m.
 pub fn read_dataset(r: impl BufRead, name: &str) -> Result<Dataset, DatasetError> {
-    let err = |line: Option<usize>, message: String| DatasetError {
+    let err = |line: Option<usize>, problem: Problem| DatasetError {
         file: name.to_string(),
         line,
-        message,
+        problem,
     };
     let mut metadata = Vec::new();
     let mut format_seen = false;
@@ -226,7 +292,7 @@ pub fn read_dataset(r: impl BufRead, name: &str) -> Result<Dataset, DatasetError
     for (n, line) in r.lines().enumerate() {
         let ln = n + 1;
         lines_read = ln;
-        let line = line.map_err(|e| err(Some(ln), format!("cannot read: {e}")))?;
+        let line = line.map_err(|e| err(Some(ln), Problem::Read(e)))?;
         let line = line.trim_end_matches('\r');
         if line.trim().is_empty() {
             continue;
@@ -240,10 +306,7 @@ pub fn read_dataset(r: impl BufRead, name: &str) -> Result<Dataset, DatasetError
                 continue;
             }
             let Some((k, v)) = c.split_once(':') else {
-                return Err(err(
-                    Some(ln),
-                    "metadata line must read `# key: value`".into(),
-                ));
+                return Err(err(Some(ln), Problem::MetadataLine));
             };
             let (k, v) = (k.trim(), v.trim());
             match k {
@@ -251,7 +314,9 @@ pub fn read_dataset(r: impl BufRead, name: &str) -> Result<Dataset, DatasetError
                     if v != FORMAT {
                         return Err(err(
                             Some(ln),
-                            format!("unsupported format `{v}` (expected `{FORMAT}`)"),
+                            Problem::Format {
+                                found: v.to_string(),
+                            },
                         ));
                     }
                     format_seen = true;
@@ -260,7 +325,9 @@ pub fn read_dataset(r: impl BufRead, name: &str) -> Result<Dataset, DatasetError
                     if v != UNITS {
                         return Err(err(
                             Some(ln),
-                            format!("unsupported units `{v}` (expected `{UNITS}`)"),
+                            Problem::Units {
+                                found: v.to_string(),
+                            },
                         ));
                     }
                     units_seen = true;
@@ -272,13 +339,10 @@ pub fn read_dataset(r: impl BufRead, name: &str) -> Result<Dataset, DatasetError
         match &layout {
             None => {
                 if !format_seen {
-                    return Err(err(
-                        Some(ln),
-                        format!("missing `# format: {FORMAT}` before the header"),
-                    ));
+                    return Err(err(Some(ln), Problem::MissingFormat));
                 }
                 if !units_seen {
-                    return Err(err(Some(ln), "missing `# units:` declaration before the header (units are never guessed)".into()));
+                    return Err(err(Some(ln), Problem::MissingUnits));
                 }
                 layout = Some(Layout::parse(line).map_err(|m| err(Some(ln), m))?);
             }
@@ -286,10 +350,7 @@ pub fn read_dataset(r: impl BufRead, name: &str) -> Result<Dataset, DatasetError
         }
     }
     let Some(lay) = layout else {
-        return Err(err(
-            Some(lines_read.max(1)),
-            "end of file before the header row".into(),
-        ));
+        return Err(err(Some(lines_read.max(1)), Problem::NoHeader));
     };
     Ok(Dataset {
         metadata,
@@ -319,12 +380,12 @@ fn numbered(col: &str, prefix: &str) -> Option<usize> {
 }
 
 impl Layout {
-    fn parse(header: &str) -> Result<Self, String> {
+    fn parse(header: &str) -> Result<Self, Problem> {
         let cols: Vec<&str> = header.split(',').map(|c| c.trim()).collect();
         let mut seen = std::collections::HashSet::new();
         for c in &cols {
             if !seen.insert(*c) {
-                return Err(format!("duplicate column `{c}`"));
+                return Err(Problem::DuplicateColumn(c.to_string()));
             }
         }
         let find = |name: &str| cols.iter().position(|c| *c == name);
@@ -342,32 +403,30 @@ impl Layout {
             } else if let Some(i) = numbered(c, "f_") {
                 f.push((i, k));
             } else {
-                return Err(format!("unknown column `{c}`"));
+                return Err(Problem::UnknownColumn(c.to_string()));
             }
         }
         q.sort();
         f.sort();
         let m = q.len();
         if m == 0 {
-            return Err("no `q_cmd_1..q_cmd_m` columns".into());
+            return Err(Problem::NoCableColumns);
         }
         if q.iter().enumerate().any(|(j, (i, _))| *i != j + 1) {
-            return Err("`q_cmd_i` columns must be numbered 1..m without gaps".into());
+            return Err(Problem::CableColumnGaps);
         }
         let f = if f.is_empty() {
             None
         } else {
             if f.len() != m || f.iter().enumerate().any(|(j, (i, _))| *i != j + 1) {
-                return Err(format!(
-                    "force columns must be `f_1..f_{m}` (one per cable)"
-                ));
+                return Err(Problem::ForceColumns { m });
             }
             Some(f.into_iter().map(|(_, k)| k).collect())
         };
-        let sample = find("sample").ok_or("missing column `sample`")?;
+        let sample = find("sample").ok_or(Problem::MissingColumn("sample"))?;
         let mut x = [0; 6];
         for (j, p) in POSE_COLS.iter().enumerate() {
-            x[j] = find(p).ok_or_else(|| format!("missing column `{p}`"))?;
+            x[j] = find(p).ok_or(Problem::MissingColumn(p))?;
         }
         let refs: Vec<Option<usize>> = POSE_COLS
             .iter()
@@ -382,7 +441,7 @@ impl Layout {
             }
             Some(r)
         } else {
-            return Err("reference pose columns must be all of `x_ref..phi_z_ref` or none".into());
+            return Err(Problem::PartialReference);
         };
         Ok(Layout {
             n_cols: cols.len(),
@@ -397,34 +456,34 @@ impl Layout {
         })
     }
 
-    fn row(&self, line: &str) -> Result<Sample, String> {
+    fn row(&self, line: &str) -> Result<Sample, Problem> {
         let fields: Vec<&str> = line.split(',').map(|c| c.trim()).collect();
         if fields.len() != self.n_cols {
-            return Err(format!(
-                "expected {} fields, got {}",
-                self.n_cols,
-                fields.len()
-            ));
+            return Err(Problem::FieldCount {
+                expected: self.n_cols,
+                got: fields.len(),
+            });
         }
-        let num = |k: usize| -> Result<f64, String> {
-            let v: f64 = fields[k]
-                .parse()
-                .map_err(|_| format!("field {} `{}` is not a number", k + 1, fields[k]))?;
+        let num = |k: usize| -> Result<f64, Problem> {
+            let v: f64 = fields[k].parse().map_err(|_| Problem::NotANumber {
+                field: k + 1,
+                text: fields[k].to_string(),
+            })?;
             if !v.is_finite() {
-                return Err(format!("field {} `{}` is not finite", k + 1, fields[k]));
+                return Err(Problem::NotFinite {
+                    field: k + 1,
+                    text: fields[k].to_string(),
+                });
             }
             Ok(v)
         };
-        let int = |k: usize| -> Result<u64, String> {
-            fields[k].parse().map_err(|_| {
-                format!(
-                    "field {} `{}` is not a non-negative integer",
-                    k + 1,
-                    fields[k]
-                )
+        let int = |k: usize| -> Result<u64, Problem> {
+            fields[k].parse().map_err(|_| Problem::NotAnInteger {
+                field: k + 1,
+                text: fields[k].to_string(),
             })
         };
-        let pose = |ix: &[usize; 6]| -> Result<Pose, String> {
+        let pose = |ix: &[usize; 6]| -> Result<Pose, Problem> {
             let mut a = [0.0; 6];
             for (j, k) in ix.iter().enumerate() {
                 a[j] = num(*k)?;
@@ -439,7 +498,7 @@ impl Layout {
                 u8::try_from(c)
                     .ok()
                     .and_then(Phase::from_code)
-                    .ok_or_else(|| format!("phase `{c}` is not 0, 1 or 2"))?
+                    .ok_or(Problem::Phase(c))?
             }
         };
         Ok(Sample {

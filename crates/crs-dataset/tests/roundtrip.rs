@@ -73,7 +73,7 @@ fn minimal_file_without_optional_columns_reads() {
 fn err_of(t: &str) -> (Option<usize>, String) {
     let e = read_dataset(t.as_bytes(), "bad.csv").unwrap_err();
     assert!(e.to_string().starts_with("bad.csv"));
-    (e.line, e.message)
+    (e.line, e.problem.to_string())
 }
 
 #[test]

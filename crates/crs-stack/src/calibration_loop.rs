@@ -37,7 +37,153 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-type BoxErr = Box<dyn std::error::Error>;
+/// Why the closed loop stopped: refused inputs, a step that failed, or (with
+/// `--min-improvement`) a calibration that did not help enough.
+#[derive(Debug, thiserror::Error)]
+pub enum LoopError {
+    /// `--dwell-s` must exceed `--settle-s`, which must be positive.
+    #[error("--dwell-s ({dwell_s}) must exceed --settle-s ({settle_s}) > 0")]
+    Dwell { dwell_s: f64, settle_s: f64 },
+    /// An input file given on the command line does not exist.
+    #[error("{}: no such file", path.display())]
+    NoSuchFile { path: PathBuf },
+    /// A platform, plant or daemon TOML (names its file and key).
+    #[error(transparent)]
+    Config(#[from] cdpr_model::config::ConfigError),
+    /// The plant is not built on the nominal platform.
+    #[error(
+        "{}: the plant's nominal platform ({}) is not {}",
+        plant.display(),
+        plant_platform.display(),
+        platform.display()
+    )]
+    PlantPlatform {
+        plant: PathBuf,
+        plant_platform: PathBuf,
+        platform: PathBuf,
+    },
+    /// The campaign's waypoint file.
+    #[error(transparent)]
+    Waypoints(#[from] trajectory::WaypointError),
+    #[error("--max-poses must be ≥ 1")]
+    MaxPoses,
+    #[error("{poses} poses are too few for a held-out split every {holdout_every}")]
+    TooFewPoses { poses: usize, holdout_every: u64 },
+    /// Reading `path` (a template, a platform to pin) or resolving it to an absolute path.
+    #[error("{}: {source}", path.display())]
+    File {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A template is not TOML.
+    #[error("{}: {source}", template.display())]
+    TemplateToml {
+        template: PathBuf,
+        #[source]
+        source: toml::de::Error,
+    },
+    /// A template lacks a table the loop fills in.
+    #[error("{}: no [{table}] table", template.display())]
+    NoTable { template: PathBuf, table: String },
+    /// A written TOML could not be formatted.
+    #[error(transparent)]
+    TomlOut(#[from] toml::ser::Error),
+    /// Creating an output directory or writing an output file (`path`).
+    #[error("{source}")]
+    Output {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Writing or timing the campaign.
+    #[error(transparent)]
+    Campaign(#[from] crate::campaign::CampaignError),
+    /// The controller cannot be configured for the nominal platform.
+    #[error(transparent)]
+    Configure(#[from] lifecycle::ConfigureError),
+    /// The nominal controller refuses the campaign.
+    #[error("{}: the plan is refused: {source}", campaign.display())]
+    PlanRefused {
+        campaign: PathBuf,
+        #[source]
+        source: lifecycle::PlanRefused,
+    },
+    /// The calibrated controller refuses the campaign.
+    #[error("the calibrated model {} refuses the campaign: {source}", calibrated.display())]
+    CalibratedRefuses {
+        calibrated: PathBuf,
+        #[source]
+        source: lifecycle::PlanRefused,
+    },
+    /// The surrogate fit.
+    #[error(transparent)]
+    Fit(#[from] surrogate::FitError),
+    /// Saving the surrogate to `path`.
+    #[error("{}: {source}", path.display())]
+    SaveSurrogate {
+        path: PathBuf,
+        #[source]
+        source: surrogate::FileError,
+    },
+    /// A run of the stack.
+    #[error(transparent)]
+    Run(#[from] sim_run::SimError),
+    /// A run completed with stops, faults or refused references (`fails`), logs in `dir`.
+    #[error("the {name} run failed: {} (logs in {})", fails.join("; "), dir.display())]
+    RunFailed {
+        name: String,
+        fails: Vec<String>,
+        dir: PathBuf,
+    },
+    /// A run did not record a rest point at every pose.
+    #[error(
+        "the {label} run recorded {recorded} rest points for {poses} poses ({skipped} skipped): see {}",
+        dir.display()
+    )]
+    RestPoints {
+        label: String,
+        recorded: usize,
+        poses: usize,
+        skipped: usize,
+        dir: PathBuf,
+    },
+    /// The before-run's recording.
+    #[error(transparent)]
+    Dataset(#[from] crs_dataset::DatasetError),
+    /// The before-run's recording does not give observations.
+    #[error("{}: {source}", record.display())]
+    Observations {
+        record: PathBuf,
+        #[source]
+        source: calibrate::observation::ObservationError,
+    },
+    /// The identification and its report.
+    #[error(transparent)]
+    Identify(#[from] crate::calibration_output::OutputError),
+    /// Serialising report.json.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+    /// `--min-improvement` not reached.
+    #[error(
+        "the measured mean position error dropped by {improvement:.2}×, less than --min-improvement {min}"
+    )]
+    NotImproved { improvement: f64, min: f64 },
+}
+
+fn output(path: &Path) -> impl FnOnce(std::io::Error) -> LoopError + '_ {
+    move |source| LoopError::Output {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+fn file(path: &Path) -> impl FnOnce(std::io::Error) -> LoopError + '_ {
+    move |source| LoopError::File {
+        path: path.to_path_buf(),
+        source,
+    }
+}
 
 /// The two steps of the loop an operator also runs by hand.
 pub trait LoopTools {
@@ -46,7 +192,7 @@ pub trait LoopTools {
         &mut self,
         pf: &Platform,
         opts: &surrogate::FitOptions,
-    ) -> Result<(surrogate::Surrogate, surrogate::FitReport), BoxErr>;
+    ) -> Result<(surrogate::Surrogate, surrogate::FitReport), surrogate::FitError>;
     /// `crs calibrate run --no-extension --holdout-every … --ridge-kf …` from `nominal` on
     /// the recorded observations, writing its report and calibrated.toml into `out`.
     #[allow(clippy::too_many_arguments)]
@@ -59,7 +205,7 @@ pub trait LoopTools {
         holdout_every: u64,
         ridge_kf: f64,
         command: &str,
-    ) -> Result<PipelineReport, BoxErr>;
+    ) -> Result<PipelineReport, crate::calibration_output::OutputError>;
 }
 
 /// The loop's tools from this library: the surrogate fit of `crs surrogate fit`
@@ -76,12 +222,12 @@ impl LoopTools for StackTools<'_> {
         &mut self,
         pf: &Platform,
         opts: &surrogate::FitOptions,
-    ) -> Result<(surrogate::Surrogate, surrogate::FitReport), BoxErr> {
+    ) -> Result<(surrogate::Surrogate, surrogate::FitReport), surrogate::FitError> {
         self.progress
             .start(&format!("fitting the surrogate of `{}`", pf.name));
         let r = crate::surrogate_evaluation::fit_platform(pf, opts);
         self.progress.finish();
-        Ok(r?)
+        r
     }
 
     fn identify(
@@ -93,7 +239,7 @@ impl LoopTools for StackTools<'_> {
         _holdout_every: u64,
         ridge_kf: f64,
         command: &str,
-    ) -> Result<PipelineReport, BoxErr> {
+    ) -> Result<PipelineReport, crate::calibration_output::OutputError> {
         let cfg = calibrate::pipeline::PipelineConfig {
             ridge_kf,
             no_extension: true,
@@ -169,16 +315,17 @@ pub struct LoopOptions {
     pub out: PathBuf,
 }
 
-fn abs(p: &Path) -> Result<PathBuf, String> {
-    std::fs::canonicalize(p).map_err(|e| format!("{}: {e}", p.display()))
+fn abs(p: &Path) -> Result<PathBuf, LoopError> {
+    std::fs::canonicalize(p).map_err(file(p))
 }
 
 /// A TOML template as a table; errors name the file.
-fn read_template(template: &Path) -> Result<toml::Table, String> {
-    let text =
-        std::fs::read_to_string(template).map_err(|e| format!("{}: {e}", template.display()))?;
-    text.parse()
-        .map_err(|e| format!("{}: {e}", template.display()))
+fn read_template(template: &Path) -> Result<toml::Table, LoopError> {
+    let text = std::fs::read_to_string(template).map_err(file(template))?;
+    text.parse().map_err(|source| LoopError::TemplateToml {
+        template: template.to_path_buf(),
+        source,
+    })
 }
 
 /// The `[name]` table of a template (must exist).
@@ -186,14 +333,17 @@ fn section<'a>(
     t: &'a mut toml::Table,
     name: &str,
     template: &Path,
-) -> Result<&'a mut toml::Table, String> {
+) -> Result<&'a mut toml::Table, LoopError> {
     t.get_mut(name)
         .and_then(|v| v.as_table_mut())
-        .ok_or_else(|| format!("{}: no [{name}] table", template.display()))
+        .ok_or_else(|| LoopError::NoTable {
+            template: template.to_path_buf(),
+            table: name.to_string(),
+        })
 }
 
 /// An absolute path as a TOML string (the written files live elsewhere than the template).
-fn path_value(p: &Path) -> Result<toml::Value, String> {
+fn path_value(p: &Path) -> Result<toml::Value, LoopError> {
     Ok(toml::Value::String(abs(p)?.display().to_string()))
 }
 
@@ -203,7 +353,7 @@ fn write_from_template(
     t: &toml::Table,
     what: &str,
     template: &Path,
-) -> Result<(), BoxErr> {
+) -> Result<(), LoopError> {
     let body = toml::to_string(t)?;
     std::fs::write(
         out,
@@ -211,8 +361,8 @@ fn write_from_template(
             "# {what} TOML written by `crs calibrate loop` from {}.\n{body}",
             template.display()
         ),
-    )?;
-    Ok(())
+    )
+    .map_err(output(out))
 }
 
 /// The daemon TOML of one run: the template with platform, surrogate and waypoints replaced.
@@ -222,7 +372,7 @@ fn write_daemon_toml(
     platform: &Path,
     surrogate: Option<&Path>,
     waypoints: &Path,
-) -> Result<(), BoxErr> {
+) -> Result<(), LoopError> {
     let mut t = read_template(template)?;
     let d = section(&mut t, "daemon", template)?;
     d.insert("platform".into(), path_value(platform)?);
@@ -237,7 +387,7 @@ fn write_daemon_toml(
     section(&mut t, "trajectory", template)?.insert("waypoints".into(), path_value(waypoints)?);
     write_from_template(out, &t, "motion-core daemon", template)?;
     // The daemon's loader must accept it.
-    motion_core::daemon::config::load(out).map_err(|e| e.to_string())?;
+    motion_core::daemon::config::load(out)?;
     Ok(())
 }
 
@@ -247,14 +397,14 @@ fn write_monitor_toml(
     out: &Path,
     platform: &Path,
     drives: &Path,
-) -> Result<(), BoxErr> {
+) -> Result<(), LoopError> {
     let mut t = read_template(template)?;
     let mon = section(&mut t, "monitor", template)?;
     mon.insert("platform".into(), path_value(platform)?);
     // The closed loop's simulated runs use the platform they were told to (the nominal or the
     // calibrated one): this run's monitor accepts exactly that file (issue 16; on a robot the
     // operator accepts with `safety-monitor accept`, which shows the diff first).
-    let bytes = std::fs::read(platform).map_err(|e| format!("{}: {e}", platform.display()))?;
+    let bytes = std::fs::read(platform).map_err(file(platform))?;
     mon.insert(
         "platform_sha256".into(),
         toml::Value::String(safety_monitor::identity::hex(
@@ -275,7 +425,7 @@ fn maybe_fit_surrogate(
     a: &LoopOptions,
     out: &Path,
     commands: &mut Vec<String>,
-) -> Result<Option<surrogate::FitReport>, BoxErr> {
+) -> Result<Option<surrogate::FitReport>, LoopError> {
     if !with_sg {
         return Ok(None);
     }
@@ -302,7 +452,7 @@ fn write_run_configs(
     platform: &Path,
     surrogate: Option<&Path>,
     campaign: &Path,
-) -> Result<(PathBuf, PathBuf), BoxErr> {
+) -> Result<(PathBuf, PathBuf), LoopError> {
     let (daemon, monitor) = (
         dir.join("motion-core.toml"),
         dir.join("safety-monitor.toml"),
@@ -313,17 +463,17 @@ fn write_run_configs(
 }
 
 /// A run must have recorded a rest point at every pose of the campaign.
-fn all_rest_points(label: &str, sum: &Summary, poses: usize, dir: &Path) -> Result<(), BoxErr> {
+fn all_rest_points(label: &str, sum: &Summary, poses: usize, dir: &Path) -> Result<(), LoopError> {
     if sum.rest.rest_points == poses {
         return Ok(());
     }
-    Err(format!(
-        "the {label} run recorded {} rest points for {poses} poses ({} skipped): see {}",
-        sum.rest.rest_points,
-        sum.rest_points_skipped,
-        dir.display()
-    )
-    .into())
+    Err(LoopError::RestPoints {
+        label: label.to_string(),
+        recorded: sum.rest.rest_points,
+        poses,
+        skipped: sum.rest_points_skipped,
+        dir: dir.to_path_buf(),
+    })
 }
 
 /// Fits the surrogate of `platform` (as `crs surrogate fit` with the default degree and margin).
@@ -332,7 +482,7 @@ fn fit_surrogate(
     platform: &Path,
     validation_samples: usize,
     out: &Path,
-) -> Result<surrogate::FitReport, BoxErr> {
+) -> Result<surrogate::FitReport, LoopError> {
     let pf = load_platform(platform)?;
     let opts = surrogate::FitOptions {
         validation_samples,
@@ -340,8 +490,10 @@ fn fit_surrogate(
         ..surrogate::FitOptions::default()
     };
     let (sg, report) = tools.fit_surrogate(&pf, &opts)?;
-    sg.save(out)
-        .map_err(|e| format!("{}: {e}", out.display()))?;
+    sg.save(out).map_err(|source| LoopError::SaveSurrogate {
+        path: out.to_path_buf(),
+        source,
+    })?;
     Ok(report)
 }
 
@@ -399,7 +551,7 @@ fn stack_run(
     record: &Path,
     timeout_s: f64,
     name: &str,
-) -> Result<(Summary, usize), BoxErr> {
+) -> Result<(Summary, usize), LoopError> {
     let args = SimOptions {
         config: daemon_toml.to_path_buf(),
         drives: a.drives.clone(),
@@ -456,25 +608,23 @@ fn stack_run(
         ));
     }
     if !fails.is_empty() {
-        return Err(format!(
-            "the {name} run failed: {} (logs in {})",
-            fails.join("; "),
-            dir.display()
-        )
-        .into());
+        return Err(LoopError::RunFailed {
+            name: name.to_string(),
+            fails,
+            dir: dir.to_path_buf(),
+        });
     }
     Ok((sum, attempt + 1))
 }
 
 /// Runs the closed loop (see the module doc) and writes its report.
-pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Result<(), BoxErr> {
+pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Result<(), LoopError> {
     let t_start = Instant::now();
     if !(a.dwell_s.is_finite() && a.settle_s > 0.0 && a.dwell_s > a.settle_s) {
-        return Err(format!(
-            "--dwell-s ({}) must exceed --settle-s ({}) > 0",
-            a.dwell_s, a.settle_s
-        )
-        .into());
+        return Err(LoopError::Dwell {
+            dwell_s: a.dwell_s,
+            settle_s: a.settle_s,
+        });
     }
     for f in [
         &a.platform,
@@ -485,45 +635,41 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
         &a.drives,
     ] {
         if !f.is_file() {
-            return Err(format!("{}: no such file", f.display()).into());
+            return Err(LoopError::NoSuchFile { path: f.clone() });
         }
     }
     let nominal = load_platform(&a.platform)?;
     let pcfg = sim_plant::load_plant(&a.plant)?;
     if pcfg.platform.model.identity_hex() != nominal.model.identity_hex() {
-        return Err(format!(
-            "{}: the plant's nominal platform ({}) is not {}",
-            a.plant.display(),
-            pcfg.platform_path.display(),
-            a.platform.display()
-        )
-        .into());
+        return Err(LoopError::PlantPlatform {
+            plant: a.plant.clone(),
+            plant_platform: pcfg.platform_path.clone(),
+            platform: a.platform.clone(),
+        });
     }
-    let daemon_tpl =
-        motion_core::daemon::config::load(&a.daemon_config).map_err(|e| e.to_string())?;
+    let daemon_tpl = motion_core::daemon::config::load(&a.daemon_config)?;
     let mut wps = trajectory::read_waypoints(&a.campaign)?;
     if let Some(n) = a.max_poses {
         if n == 0 {
-            return Err("--max-poses must be ≥ 1".into());
+            return Err(LoopError::MaxPoses);
         }
         wps.truncate(n);
     }
     let holdout = a.holdout_every;
     if holdout != 0 && wps.len() < 2 * holdout as usize {
-        return Err(format!(
-            "{} poses are too few for a held-out split every {holdout}",
-            wps.len()
-        )
-        .into());
+        return Err(LoopError::TooFewPoses {
+            poses: wps.len(),
+            holdout_every: holdout,
+        });
     }
-    std::fs::create_dir_all(&a.out)?;
+    std::fs::create_dir_all(&a.out).map_err(output(&a.out))?;
     let (dir_b, dir_i, dir_a) = (
         a.out.join("before"),
         a.out.join("identification"),
         a.out.join("after"),
     );
     for d in [&dir_b, &dir_i, &dir_a] {
-        std::fs::create_dir_all(d)?;
+        std::fs::create_dir_all(d).map_err(output(d))?;
     }
     // The campaign as run (first N poses).
     let campaign = a.out.join("campaign.csv");
@@ -539,7 +685,10 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
     let nominal_checks = lifecycle::configure_checks(&daemon_tpl, &nominal)?;
     nominal_checks
         .verify_plan(&wps)
-        .map_err(|e| format!("{}: the plan is refused: {e}", a.campaign.display()))?;
+        .map_err(|source| LoopError::PlanRefused {
+            campaign: a.campaign.clone(),
+            source,
+        })?;
     let (_, plan_s) = timed_waypoints(
         nominal.home,
         &wps,
@@ -618,8 +767,10 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
     // 3. Identification from the nominal model.
     step(3, "identification from the nominal model on the recording");
     let ds = crs_dataset::load_dataset(&rec_b)?;
-    let obs =
-        from_dataset(&ds, nominal.model.m()).map_err(|e| format!("{}: {e}", rec_b.display()))?;
+    let obs = from_dataset(&ds, nominal.model.m()).map_err(|source| LoopError::Observations {
+        record: rec_b.clone(),
+        source,
+    })?;
     let (train, held) = split(&obs, holdout);
     let cal_cmd = format!(
         "crs calibrate run --platform {} --data {} --holdout-every {holdout} --no-extension --ridge-kf {} --out {}",
@@ -660,11 +811,9 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
     )?;
     lifecycle::configure_checks(&daemon_tpl, &cal_pf)?
         .verify_plan(&wps)
-        .map_err(|e| {
-            format!(
-                "the calibrated model {} refuses the campaign: {e}",
-                calibrated.display()
-            )
+        .map_err(|source| LoopError::CalibratedRefuses {
+            calibrated: calibrated.clone(),
+            source,
         })?;
     println!(
         "  {} (platform `{}`), {}",
@@ -736,11 +885,11 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
         commands,
     };
     let md = markdown(&report);
-    std::fs::write(a.out.join("report.md"), &md)?;
-    std::fs::write(
-        a.out.join("report.json"),
-        serde_json::to_string_pretty(&report)?,
-    )?;
+    let md_file = a.out.join("report.md");
+    std::fs::write(&md_file, &md).map_err(output(&md_file))?;
+    let json_file = a.out.join("report.json");
+    std::fs::write(&json_file, serde_json::to_string_pretty(&report)?)
+        .map_err(output(&json_file))?;
     println!("\n{}", before_after_table(&report));
     println!(
         "measured mean position error {:.2} mm → {:.2} mm ({:.1}×) in {:.0} s; report {}",
@@ -753,11 +902,10 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
     if let Some(f) = a.min_improvement
         && (report.improvement_position_mean.is_nan() || report.improvement_position_mean < f)
     {
-        return Err(format!(
-            "the measured mean position error dropped by {:.2}×, less than --min-improvement {f}",
-            report.improvement_position_mean
-        )
-        .into());
+        return Err(LoopError::NotImproved {
+            improvement: report.improvement_position_mean,
+            min: f,
+        });
     }
     Ok(())
 }

@@ -28,7 +28,61 @@ use nalgebra::{Vector3, Vector6};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-type BoxErr = Box<dyn std::error::Error>;
+/// Why commissioning could not measure or write its result.
+#[derive(Debug, thiserror::Error)]
+pub enum CommissionError {
+    /// The daemon TOML, its platform TOML or the plant TOML (names its file and key).
+    #[error(transparent)]
+    Config(#[from] cdpr_model::config::ConfigError),
+    /// Creating the output directory or writing a result file (`path`).
+    #[error("{source}")]
+    Output {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Writing the commissioning tour.
+    #[error(transparent)]
+    Tour(#[from] crate::campaign::CampaignError),
+    /// The run of the stack.
+    #[error(transparent)]
+    Run(#[from] sim_run::SimError),
+    /// The run stopped (e-stops, a stopped drive bus): its rest points are not a measurement.
+    #[error(
+        "the commissioning run did not complete cleanly ({estops} e-stop(s){}): nothing was measured",
+        if *bus_stopped { ", the drive bus stopped" } else { "" }
+    )]
+    NotClean { estops: u64, bus_stopped: bool },
+    /// The recorded data set (names its file and line).
+    #[error(transparent)]
+    Dataset(#[from] crs_dataset::DatasetError),
+    /// The daemon's waypoint file (its planned tour, eq. 3.42).
+    #[error(transparent)]
+    Waypoints(#[from] motion_core::daemon::trajectory::WaypointError),
+    #[error("the recording has no rest point with force readings")]
+    NoRestPoints,
+    #[error("no rest point at the set-up pose (eq. 6.21) was recorded")]
+    NoSetupRestPoint,
+    /// The wrench or the cable offsets at the set-up pose (eq. 6.23/6.24).
+    #[error(transparent)]
+    Kinematics(#[from] cdpr_model::kinematics::KinematicsError),
+    /// Mass and COG from the rest points.
+    #[error(transparent)]
+    Payload(#[from] load_tracking::payload::PayloadError),
+    /// The simulated plant (its true payload).
+    #[error(transparent)]
+    Plant(#[from] sim_plant::PlantError),
+    /// Serialising commission.json.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+}
+
+fn output(path: &Path) -> impl FnOnce(std::io::Error) -> CommissionError + '_ {
+    move |source| CommissionError::Output {
+        path: path.to_path_buf(),
+        source,
+    }
+}
 
 /// What to run and how strict the check is.
 #[derive(Clone, Debug)]
@@ -72,9 +126,33 @@ pub struct Commission {
     pub configured: (f64, [f64; 2]),
     /// The simulated plant's true payload, when the run is simulated (mass kg, COG m).
     pub truth: Option<(f64, [f64; 3])>,
-    /// eq. 3.42 along the daemon's tour, or why it could not be chosen.
-    pub f_ini: Result<InitialTension, String>,
+    /// eq. 3.42 along the daemon's tour, or why it could not be chosen (in the JSON as
+    /// `{"Err": "<message>"}`).
+    #[serde(serialize_with = "serialize_f_ini")]
+    pub f_ini: Result<InitialTension, InitialTensionError>,
     pub verdict: Verdict,
+}
+
+/// Why eq. 3.42 gave no initial tension for the measured load.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum InitialTensionError {
+    /// The model with the measured wrench w_e (eq. 6.23) is not valid.
+    #[error(transparent)]
+    MeasuredModel(#[from] cdpr_model::ModelError),
+    /// eq. 3.42 along the tour.
+    #[error(transparent)]
+    Setup(#[from] setup::SetupError),
+}
+
+/// `f_ini` as serde writes a `Result`, the error as its message.
+fn serialize_f_ini<S: serde::Serializer>(
+    r: &Result<InitialTension, InitialTensionError>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    match r {
+        Ok(t) => s.serialize_newtype_variant("Result", 0, "Ok", t),
+        Err(e) => s.serialize_newtype_variant("Result", 1, "Err", &e.to_string()),
+    }
 }
 
 /// The commissioning tour around the set-up pose x0: x0, four level offsets, two tilts (roll,
@@ -96,11 +174,11 @@ pub fn tour(x0: &Pose, offset_m: f64, tilt_rad: f64) -> Vec<Pose> {
 }
 
 /// Runs the commissioning on the stack `c.sim` describes.
-pub fn run(c: &CommissionConfig) -> Result<Commission, BoxErr> {
-    let daemon = motion_core::daemon::config::load(&c.sim.config).map_err(|e| e.to_string())?;
+pub fn run(c: &CommissionConfig) -> Result<Commission, CommissionError> {
+    let daemon = motion_core::daemon::config::load(&c.sim.config)?;
     let platform = load_platform(&daemon.platform)?;
     let x0 = platform.home;
-    std::fs::create_dir_all(&c.sim.out)?;
+    std::fs::create_dir_all(&c.sim.out).map_err(output(&c.sim.out))?;
     let poses = tour(&x0, c.offset_m, c.tilt_rad);
     let wps: Vec<Waypoint> = poses
         .iter()
@@ -126,22 +204,18 @@ pub fn run(c: &CommissionConfig) -> Result<Commission, BoxErr> {
     sim.check = false;
     let sum = sim_run::execute(&sim)?;
     if sum.estops > 0 || sum.bus_stopped_during_run.is_some() {
-        return Err(format!(
-            "the commissioning run did not complete cleanly ({} e-stop(s){}): nothing was measured",
-            sum.estops,
-            if sum.bus_stopped_during_run.is_some() {
-                ", the drive bus stopped"
-            } else {
-                ""
-            }
-        )
-        .into());
+        return Err(CommissionError::NotClean {
+            estops: sum.estops,
+            bus_stopped: sum.bus_stopped_during_run.is_some(),
+        });
     }
     let ds = load_dataset(&record)?;
     analyse(&platform, &daemon_tour(&daemon)?, &ds, c, Some(&sim.plant))
 }
 
-fn daemon_tour(d: &motion_core::daemon::config::DaemonConfig) -> Result<Vec<Pose>, BoxErr> {
+fn daemon_tour(
+    d: &motion_core::daemon::config::DaemonConfig,
+) -> Result<Vec<Pose>, CommissionError> {
     match &d.trajectory.waypoints {
         Some(p) => Ok(read_waypoints(p)?.into_iter().map(|w| w.pose).collect()),
         None => Ok(Vec::new()),
@@ -173,7 +247,7 @@ pub fn analyse(
     ds: &crs_dataset::Dataset,
     c: &CommissionConfig,
     plant: Option<&Path>,
-) -> Result<Commission, BoxErr> {
+) -> Result<Commission, CommissionError> {
     let model = &platform.model;
     let x0 = platform.home;
     let mut data = Data::new(model);
@@ -192,7 +266,7 @@ pub fn analyse(
         })
         .collect();
     if rest.is_empty() {
-        return Err("the recording has no rest point with force readings".into());
+        return Err(CommissionError::NoRestPoints);
     }
     // The set-up pose is found by the reference (the tracker sees it within its noise).
     let Some(setup_forces) = ds.samples.iter().find_map(|s| {
@@ -202,7 +276,7 @@ pub fn analyse(
             .then_some(s.forces.as_ref())
             .flatten()
     }) else {
-        return Err("no rest point at the set-up pose (eq. 6.21) was recorded".into());
+        return Err(CommissionError::NoSetupRestPoint);
     };
     let w = wrench_from_forces(model, &mut data, &x0, setup_forces)?;
     let q_off = setup::cable_offsets(model, &mut data, &x0, setup_forces)?;
@@ -229,10 +303,13 @@ pub fn analyse(
     let mut measured = model.params().clone();
     measured.w_e = w;
     let f_ini = cdpr_model::Model::new(measured)
-        .map_err(|e| e.to_string())
+        .map_err(InitialTensionError::from)
         .and_then(|mm| {
-            setup::initial_tension(&mm, &x0, &sampled_path(&x0, planned_tour))
-                .map_err(|e| e.to_string())
+            Ok(setup::initial_tension(
+                &mm,
+                &x0,
+                &sampled_path(&x0, planned_tour),
+            )?)
         });
     let mut why = Vec::new();
     let dm = fit.mass_kg - m_cfg;
@@ -357,21 +434,19 @@ pub fn to_toml(c: &Commission) -> String {
             );
         }
         Err(e) => {
-            let _ = writeln!(s, "\n[initial_tension]\nfailed = {e:?}");
+            let _ = writeln!(s, "\n[initial_tension]\nfailed = {:?}", e.to_string());
         }
     }
     s
 }
 
 /// Writes `commission.toml` and `commission.json` into `out`; returns the TOML path.
-pub fn write(c: &Commission, out: &Path) -> Result<PathBuf, BoxErr> {
-    std::fs::create_dir_all(out)?;
+pub fn write(c: &Commission, out: &Path) -> Result<PathBuf, CommissionError> {
+    std::fs::create_dir_all(out).map_err(output(out))?;
     let path = out.join("commission.toml");
-    std::fs::write(&path, to_toml(c))?;
-    std::fs::write(
-        out.join("commission.json"),
-        serde_json::to_string_pretty(c)?,
-    )?;
+    std::fs::write(&path, to_toml(c)).map_err(output(&path))?;
+    let json = out.join("commission.json");
+    std::fs::write(&json, serde_json::to_string_pretty(c)?).map_err(output(&json))?;
     Ok(path)
 }
 
@@ -411,12 +486,17 @@ mod tests {
             },
             configured: (764.5, [0.08, 0.0]),
             truth: None,
-            f_ini: Err("the path is empty".into()),
+            f_ini: Err(setup::SetupError::EmptyPath.into()),
             verdict: Verdict::Refused(vec!["payload mass differs".into()]),
         };
         let t: toml::Table = to_toml(&c).parse().expect("valid TOML");
         assert_eq!(t["verdict"]["ready"].as_bool(), Some(false));
         assert_eq!(t["payload"]["cog_m"][2].as_str(), Some("not observable"));
-        assert!(t["initial_tension"]["failed"].as_str().is_some());
+        assert_eq!(
+            t["initial_tension"]["failed"].as_str(),
+            Some("the path is empty")
+        );
+        let json = serde_json::to_value(&c).expect("serialisable");
+        assert_eq!(json["f_ini"]["Err"].as_str(), Some("the path is empty"));
     }
 }

@@ -132,13 +132,39 @@ fn scenario_effects(effect: Option<Effect>, reference: &Effects, u: f64) -> Effe
     fx
 }
 
+/// Why the benchmark could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// The nominal platform or the reference plant TOML (names its file and key).
+    #[error(transparent)]
+    Config(#[from] cdpr_model::config::ConfigError),
+    /// `--scenarios` names no catalogue effect (nor `baseline`).
+    #[error("--scenarios: unknown scenario `{0}`")]
+    UnknownScenario(String),
+    /// A scenario's plant refuses to start.
+    #[error(transparent)]
+    Plant(#[from] sim_plant::PlantError),
+    /// A scenario's recording campaign.
+    #[error(transparent)]
+    Campaign(#[from] sim_plant::CampaignError),
+    /// A recorded data set does not give observations.
+    #[error(transparent)]
+    Observations(#[from] calibrate::observation::ObservationError),
+    /// The calibration pipeline.
+    #[error(transparent)]
+    Pipeline(#[from] calibrate::FitError),
+    /// The pipeline report has no optimal elastostatic step to compare with.
+    #[error("no elastostatic step")]
+    NoElastostaticStep,
+}
+
 fn record(
     platform: &Platform,
     path: &std::path::Path,
     effects: &Effects,
     poses: usize,
     seed: u64,
-) -> Result<Vec<Observation>, Box<dyn std::error::Error>> {
+) -> Result<Vec<Observation>, BenchError> {
     let mut cfg = PlantConfig::ideal(platform.clone(), path.to_path_buf());
     cfg.effects = effects.clone();
     cfg.seed = seed;
@@ -190,7 +216,7 @@ fn label(e: Option<Effect>) -> &'static str {
     e.map_or("baseline", |e| e.name())
 }
 
-pub fn run(a: &BenchConfig) -> Result<(), Box<dyn std::error::Error>> {
+pub fn run(a: &BenchConfig) -> Result<(), BenchError> {
     let platform = load_platform(&a.platform)?;
     let reference = sim_plant::load_plant(&a.plant)?.effects;
     let all: Vec<Option<Effect>> = std::iter::once(None)
@@ -204,7 +230,7 @@ pub fn run(a: &BenchConfig) -> Result<(), Box<dyn std::error::Error>> {
                 "baseline" => Ok(None),
                 s => Effect::from_name(s)
                     .map(Some)
-                    .ok_or_else(|| format!("--scenarios: unknown scenario `{s}`")),
+                    .ok_or_else(|| BenchError::UnknownScenario(s.to_string())),
             })
             .collect::<Result<_, _>>()?,
     };
@@ -237,7 +263,7 @@ pub fn run(a: &BenchConfig) -> Result<(), Box<dyn std::error::Error>> {
             let seconds = t0.elapsed().as_secs_f64();
             let base = rep
                 .stage("optimal elastostatic")
-                .ok_or("no elastostatic step")?;
+                .ok_or(BenchError::NoElastostaticStep)?;
             let fin = rep.final_stage();
             let fk_failed = rep.stages.iter().any(|st| st.failed());
             let mut non_physical = Vec::new();

@@ -96,27 +96,48 @@ pub fn devices(dir: &Path) -> Vec<PathBuf> {
     v
 }
 
+/// Why no game controller could be flown; each message says what to do.
+#[derive(Debug, thiserror::Error)]
+pub enum GamepadError {
+    /// No `js*` device in `dir`.
+    #[error(
+        "no game controller found ({}/js* does not exist): connect one (USB or Bluetooth; \
+         the kernel's joydev module must be loaded) or fly a pilot CSV or a script \
+         (--pilot FILE.csv | script:walls)",
+        dir.display()
+    )]
+    NoController { dir: PathBuf },
+    /// The device exists but does not open (usually permissions).
+    #[error(
+        "game controller {}: cannot open: {source} (permissions: the user needs the `input` group)",
+        path.display()
+    )]
+    Open {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The reader thread did not start.
+    #[error("{0}")]
+    Thread(#[source] std::io::Error),
+}
+
 /// Opens the first game controller; without one, an error that says what to do.
-pub fn open() -> Result<Box<dyn LivePilot>, String> {
+pub fn open() -> Result<Box<dyn LivePilot>, GamepadError> {
     open_in(Path::new(JOYSTICK_DIR))
 }
 
 /// [`open`] in another directory (tests).
-pub fn open_in(dir: &Path) -> Result<Box<dyn LivePilot>, String> {
+pub fn open_in(dir: &Path) -> Result<Box<dyn LivePilot>, GamepadError> {
     let Some(path) = devices(dir).into_iter().next() else {
-        return Err(format!(
-            "no game controller found ({}/js* does not exist): connect one (USB or Bluetooth; \
-             the kernel's joydev module must be loaded) or fly a pilot CSV or a script \
-             (--pilot FILE.csv | script:walls)",
-            dir.display()
-        ));
+        return Err(GamepadError::NoController {
+            dir: dir.to_path_buf(),
+        });
     };
-    let mut file = std::fs::File::open(&path).map_err(|e| {
-        format!(
-            "game controller {}: cannot open: {e} (permissions: the user needs the `input` group)",
-            path.display()
-        )
-    })?;
+    let mut file = match std::fs::File::open(&path) {
+        Ok(f) => f,
+        Err(source) => return Err(GamepadError::Open { path, source }),
+    };
     let axes = Arc::new(Axes::default());
     let a = axes.clone();
     std::thread::Builder::new()
@@ -129,7 +150,7 @@ pub fn open_in(dir: &Path) -> Result<Box<dyn LivePilot>, String> {
             // Unplugged or read error: hands off.
             a.centre();
         })
-        .map_err(|e| e.to_string())?;
+        .map_err(GamepadError::Thread)?;
     Ok(Box::new(Gamepad(axes)))
 }
 
@@ -170,6 +191,8 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("crs-no-js-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let e = open_in(&dir).err().unwrap();
+        assert!(matches!(e, GamepadError::NoController { .. }), "{e}");
+        let e = e.to_string();
         assert!(
             e.starts_with("no game controller found") && e.contains("--pilot FILE.csv"),
             "{e}"

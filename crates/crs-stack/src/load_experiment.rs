@@ -21,7 +21,44 @@ use sim_plant::config::Load;
 use sim_plant::{Plant, load_plant};
 use std::path::{Path, PathBuf};
 
-type BoxErr = Box<dyn std::error::Error>;
+/// Why the walk could not be run on the plant.
+#[derive(Debug, thiserror::Error)]
+pub enum WalkError {
+    /// The plant TOML or the controller's platform TOML (names its file and key).
+    #[error(transparent)]
+    Config(#[from] cdpr_model::config::ConfigError),
+    /// The plant refuses to start, to tension at home or to settle for the baseline.
+    #[error(transparent)]
+    Plant(#[from] sim_plant::PlantError),
+    /// The load tracker's baseline (eq. 5.10) at the home pose.
+    #[error(transparent)]
+    Baseline(#[from] cdpr_model::kinematics::KinematicsError),
+    /// Not one sample gave an estimate.
+    #[error("no estimate in {samples} samples")]
+    NoEstimate { samples: usize },
+}
+
+/// Why the walk's files could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum WalkWriteError {
+    /// Creating the output directory or writing `path`.
+    #[error("{source}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Serialising walk.json.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+    /// Drawing walk.svg (`path`).
+    #[error("{source}")]
+    Plot {
+        path: PathBuf,
+        #[source]
+        source: plotters::drawing::DrawingAreaErrorKind<std::io::Error>,
+    },
+}
 
 /// What to run.
 #[derive(Clone, Debug)]
@@ -127,12 +164,19 @@ impl std::fmt::Display for WalkResult {
 }
 
 /// Writes `walk.svg` ([`plot`]) and `walk.json` into `out`; returns their paths.
-pub fn write(r: &WalkResult, out: &Path) -> Result<(PathBuf, PathBuf), BoxErr> {
-    std::fs::create_dir_all(out)?;
+pub fn write(r: &WalkResult, out: &Path) -> Result<(PathBuf, PathBuf), WalkWriteError> {
+    std::fs::create_dir_all(out).map_err(|source| WalkWriteError::Write {
+        path: out.to_path_buf(),
+        source,
+    })?;
     let svg = out.join("walk.svg");
-    plot(r, &svg)?;
+    if let Err(source) = plot(r, &svg) {
+        return Err(WalkWriteError::Plot { path: svg, source });
+    }
     let json = out.join("walk.json");
-    std::fs::write(&json, serde_json::to_string_pretty(r)?)?;
+    if let Err(source) = std::fs::write(&json, serde_json::to_string_pretty(r)?) {
+        return Err(WalkWriteError::Write { path: json, source });
+    }
     Ok((svg, json))
 }
 
@@ -158,7 +202,7 @@ fn path_at(c: &WalkConfig, s: f64) -> [f64; 2] {
 }
 
 /// Runs the walk on the plant.
-pub fn run(c: &WalkConfig) -> Result<WalkResult, BoxErr> {
+pub fn run(c: &WalkConfig) -> Result<WalkResult, WalkError> {
     let base_cfg = load_plant(&c.plant)?;
     let control: Platform = match &c.control {
         Some(p) => load_platform(p)?,
@@ -261,7 +305,9 @@ pub fn run(c: &WalkConfig) -> Result<WalkResult, BoxErr> {
         .collect();
     let failed = samples.len() - errs.len();
     if errs.is_empty() {
-        return Err(format!("no estimate in {} samples", samples.len()).into());
+        return Err(WalkError::NoEstimate {
+            samples: samples.len(),
+        });
     }
     errs.sort_by(f64::total_cmp);
     let ne = errs.len() as f64;
@@ -281,7 +327,10 @@ pub fn run(c: &WalkConfig) -> Result<WalkResult, BoxErr> {
 }
 
 /// The walk as an SVG: the walked path and the estimates (top view of the cabin floor).
-pub fn plot(r: &WalkResult, path: &Path) -> Result<(), BoxErr> {
+pub fn plot(
+    r: &WalkResult,
+    path: &Path,
+) -> Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
     use plotters::prelude::*;
     let root = SVGBackend::new(path, (720, 600)).into_drawing_area();
     root.fill(&WHITE)?;

@@ -83,41 +83,106 @@ fn names() -> String {
     KNOWN.iter().map(|k| k.name).collect::<Vec<_>>().join(", ")
 }
 
+/// The known platforms' TOML files under the configuration directory `dir`.
+fn platform_files(dir: &Path) -> String {
+    KNOWN
+        .iter()
+        .map(|k| dir.join(k.platform).display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Why `--platform` names no platform set ([`resolve`]); each message lists the known ones.
+#[derive(Debug, thiserror::Error)]
+pub enum ResolveError {
+    /// Neither a known name nor a path.
+    #[error(
+        "--platform {choice}: unknown platform (known: {}; or the path of one of their platform TOML files)",
+        names()
+    )]
+    Unknown { choice: String },
+    /// A path that does not resolve (missing file, unreadable directory).
+    #[error("--platform {choice}: {source}")]
+    Path {
+        choice: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A platform TOML that is none of the known sets' (`dir`: the configuration directory).
+    #[error(
+        "--platform {choice}: no stack configuration is set up for this platform TOML (known: {}, \
+         with {}); give its daemon, plant and monitor configs with --config, --plant and \
+         --monitor-config instead",
+        names(),
+        platform_files(dir)
+    )]
+    NotSetUp { choice: String, dir: PathBuf },
+}
+
+/// The safety monitor would supervise another platform than the daemon runs
+/// ([`check_monitor_platform`]).
+#[derive(Debug, thiserror::Error)]
+pub enum MonitorPlatformError {
+    /// The monitor configuration (or its platform file) does not load.
+    #[error(transparent)]
+    Load(#[from] safety_monitor::config::ConfigError),
+    /// The monitor's platform is not the daemon's (compared by the monitor's identity).
+    #[error(
+        "{}: [monitor] platform = {} is not the platform motion-core runs ({}: [daemon] \
+         platform = {}); the monitor would trip on the platform identity. Use the monitor \
+         config of that platform (crs sim --platform {})",
+        monitor_config.display(),
+        monitor_platform.display(),
+        daemon_config.display(),
+        daemon_platform.display(),
+        names().replace(", ", "|")
+    )]
+    Mismatch {
+        monitor_config: PathBuf,
+        monitor_platform: PathBuf,
+        daemon_config: PathBuf,
+        daemon_platform: PathBuf,
+    },
+}
+
+/// The plant TOML `plant` does not load ([`plant_platform_note`]).
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {source}", plant.display())]
+pub struct PlantLoadError {
+    pub plant: PathBuf,
+    /// Boxed: the loader's error is large and this one travels inside [`SelectError`].
+    #[source]
+    pub source: Box<cdpr_model::config::ConfigError>,
+}
+
 /// `choice` is a platform name of [`KNOWN`] or the path of one of their platform TOML files
 /// (any spelling of the path: compared after resolving it); `dir` is the configuration
 /// directory. Anything else is an error that lists what is known.
-pub fn resolve(choice: &str, dir: &Path) -> Result<StackConfigs, String> {
+pub fn resolve(choice: &str, dir: &Path) -> Result<StackConfigs, ResolveError> {
     if let Some(k) = KNOWN.iter().find(|k| k.name == choice) {
         return Ok(k.configs(dir));
     }
     let path = Path::new(choice);
     let looks_like_path = choice.ends_with(".toml") || choice.contains('/');
     if !looks_like_path {
-        return Err(format!(
-            "--platform {choice}: unknown platform (known: {}; or the path of one of their platform TOML files)",
-            names()
-        ));
+        return Err(ResolveError::Unknown {
+            choice: choice.to_string(),
+        });
     }
-    let wanted = path
-        .canonicalize()
-        .map_err(|e| format!("--platform {choice}: {e}"))?;
+    let wanted = path.canonicalize().map_err(|source| ResolveError::Path {
+        choice: choice.to_string(),
+        source,
+    })?;
     for k in &KNOWN {
         let c = k.configs(dir);
         if c.platform.canonicalize().is_ok_and(|p| p == wanted) {
             return Ok(c);
         }
     }
-    Err(format!(
-        "--platform {choice}: no stack configuration is set up for this platform TOML (known: {}, \
-         with {}); give its daemon, plant and monitor configs with --config, --plant and \
-         --monitor-config instead",
-        names(),
-        KNOWN
-            .iter()
-            .map(|k| dir.join(k.platform).display().to_string())
-            .collect::<Vec<_>>()
-            .join(", ")
-    ))
+    Err(ResolveError::NotSetUp {
+        choice: choice.to_string(),
+        dir: dir.to_path_buf(),
+    })
 }
 
 /// The safety monitor must supervise the daemon's platform: its own parser's identity of the
@@ -128,20 +193,16 @@ pub fn check_monitor_platform(
     daemon_config: &Path,
     daemon_platform_file: &Path,
     daemon_platform: &Platform,
-) -> Result<(), String> {
-    let mon = safety_monitor::config::load(monitor_config).map_err(|e| e.to_string())?;
+) -> Result<(), MonitorPlatformError> {
+    let mon = safety_monitor::config::load(monitor_config)?;
     let monitor_id = safety_monitor::identity::platform_identity(&mon.platform);
     if monitor_id != daemon_platform.identity() {
-        return Err(format!(
-            "{}: [monitor] platform = {} is not the platform motion-core runs ({}: [daemon] \
-             platform = {}); the monitor would trip on the platform identity. Use the monitor \
-             config of that platform (crs sim --platform {})",
-            monitor_config.display(),
-            mon.platform_file.display(),
-            daemon_config.display(),
-            daemon_platform_file.display(),
-            names().replace(", ", "|")
-        ));
+        return Err(MonitorPlatformError::Mismatch {
+            monitor_config: monitor_config.to_path_buf(),
+            monitor_platform: mon.platform_file,
+            daemon_config: daemon_config.to_path_buf(),
+            daemon_platform: daemon_platform_file.to_path_buf(),
+        });
     }
     Ok(())
 }
@@ -152,8 +213,11 @@ pub fn plant_platform_note(
     plant: &Path,
     daemon_platform_file: &Path,
     daemon_platform: &Platform,
-) -> Result<Option<String>, String> {
-    let cfg = sim_plant::load_plant(plant).map_err(|e| format!("{}: {e}", plant.display()))?;
+) -> Result<Option<String>, PlantLoadError> {
+    let cfg = sim_plant::load_plant(plant).map_err(|source| PlantLoadError {
+        plant: plant.to_path_buf(),
+        source: Box::new(source),
+    })?;
     if cfg.platform.model.identity() == daemon_platform.model.identity() {
         return Ok(None);
     }
@@ -171,8 +235,8 @@ pub fn plant_platform_note(
 #[derive(Debug, thiserror::Error)]
 pub enum SelectError {
     /// `--platform` names no known platform (the message lists them).
-    #[error("{0}")]
-    Platform(String),
+    #[error(transparent)]
+    Platform(#[from] ResolveError),
     /// The daemon TOML or a platform TOML.
     #[error(transparent)]
     Config(#[from] cdpr_model::config::ConfigError),
@@ -188,8 +252,8 @@ pub enum SelectError {
         runs_file: String,
     },
     /// The plant TOML.
-    #[error("{0}")]
-    Plant(String),
+    #[error(transparent)]
+    Plant(#[from] PlantLoadError),
     #[error(transparent)]
     Timing(#[from] crate::timing::TimingError),
 }
@@ -251,7 +315,7 @@ pub fn plant_note_for_daemon(
 ) -> Result<Option<String>, SelectError> {
     let daemon = motion_core::daemon::config::load(daemon_config)?;
     let platform = cdpr_model::config::load_platform(&daemon.platform)?;
-    plant_platform_note(plant, &daemon.platform, &platform).map_err(SelectError::Plant)
+    Ok(plant_platform_note(plant, &daemon.platform, &platform)?)
 }
 
 /// The set of configs of a run: `platform`'s; without it the set of the platform the daemon
@@ -263,7 +327,7 @@ pub fn select(
     dir: &Path,
 ) -> Result<StackConfigs, SelectError> {
     if let Some(p) = platform {
-        let set = resolve(p, dir).map_err(SelectError::Platform)?;
+        let set = resolve(p, dir)?;
         if let Some(config) = config {
             let daemon = motion_core::daemon::config::load(config)?;
             let runs = cdpr_model::config::load_platform(&daemon.platform)?;
@@ -321,11 +385,18 @@ mod tests {
     fn unknown_platforms_are_refused_listing_the_known_ones() {
         let dir = config_dir();
         let e = resolve("zeppelin", &dir).unwrap_err();
+        assert!(matches!(e, ResolveError::Unknown { .. }), "{e}");
+        let e = e.to_string();
         assert!(e.contains("icosahedron, helicopter"), "{e}");
         let other = dir.join("crs-nominal.toml");
         let e = resolve(other.to_str().unwrap(), &dir).unwrap_err();
+        assert!(matches!(e, ResolveError::NotSetUp { .. }), "{e}");
+        let e = e.to_string();
         assert!(e.contains("no stack configuration"), "{e}");
+        assert!(e.contains("helicopter.toml"), "{e}");
         let e = resolve("config/nope.toml", &dir).unwrap_err();
+        assert!(matches!(e, ResolveError::Path { .. }), "{e}");
+        let e = e.to_string();
         assert!(e.contains("nope.toml"), "{e}");
     }
 
@@ -344,12 +415,14 @@ mod tests {
             );
             check_monitor_platform(&s.monitor, &s.daemon, &daemon.platform, &pf).unwrap();
             assert_eq!(
-                plant_platform_note(&s.plant, &daemon.platform, &pf),
-                Ok(None)
+                plant_platform_note(&s.plant, &daemon.platform, &pf).unwrap(),
+                None
             );
             for o in sets.iter().filter(|o| o.name != s.name) {
                 let e = check_monitor_platform(&o.monitor, &s.daemon, &daemon.platform, &pf)
                     .unwrap_err();
+                assert!(matches!(e, MonitorPlatformError::Mismatch { .. }), "{e}");
+                let e = e.to_string();
                 assert!(e.contains("[monitor] platform"), "{e}");
                 let note = plant_platform_note(&o.plant, &daemon.platform, &pf).unwrap();
                 assert!(note.is_some_and(|n| n.contains(&pf.name)));

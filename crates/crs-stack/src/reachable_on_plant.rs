@@ -16,6 +16,26 @@ use model_analysis::reachable::{self, PlantMeasurement, Prediction, ReachableRep
 pub use model_analysis::reachable::{Measured, payload_step};
 use nalgebra::Vector3;
 
+/// Why the reachable workspace could not be predicted or measured.
+#[derive(Debug, thiserror::Error)]
+pub enum ReachableError {
+    /// The plant TOML (names its file and key).
+    #[error(transparent)]
+    PlantConfig(#[from] cdpr_model::config::ConfigError),
+    /// The plant's model with the payload step added.
+    #[error(transparent)]
+    PayloadModel(#[from] cdpr_model::ModelError),
+    /// The plant refuses to start or to tension its cables at home.
+    #[error(transparent)]
+    Plant(#[from] sim_plant::PlantError),
+    /// The controller's inverse kinematics at home.
+    #[error(transparent)]
+    Home(#[from] cdpr_model::kinematics::KinematicsError),
+    /// The model's prediction.
+    #[error(transparent)]
+    Prediction(#[from] model_analysis::AnalysisError),
+}
+
 /// Measures `refs` on the plant `plant_path`; returns the measurements and, when the plant is
 /// built on another platform file than the controller's `platform_path`, a note saying so.
 pub fn measure_with_plant(
@@ -24,7 +44,7 @@ pub fn measure_with_plant(
     pf: &Platform,
     refs: &[Pose],
     f_ini: &[f64],
-) -> Result<(Vec<Measured>, Option<String>), Box<dyn std::error::Error>> {
+) -> Result<(Vec<Measured>, Option<String>), ReachableError> {
     let cfg = sim_plant::load_plant(plant_path)?;
     let note = if let (Ok(a), Ok(b)) = (
         cfg.platform_path.canonicalize(),
@@ -93,7 +113,7 @@ pub fn measure_prediction(
     platform_path: &Path,
     pf: &Platform,
     pred: &Prediction,
-) -> Result<(PlantMeasurement, Option<String>), Box<dyn std::error::Error>> {
+) -> Result<(PlantMeasurement, Option<String>), ReachableError> {
     let t0 = std::time::Instant::now();
     let (measured, note) =
         measure_with_plant(plant_path, platform_path, pf, &pred.refs, &pred.f_ini)?;
@@ -116,7 +136,7 @@ pub fn analyse(
     phi: &Vector3<f64>,
     resolution: usize,
     plant: Option<&Path>,
-) -> Result<(ReachableReport, Option<String>), Box<dyn std::error::Error>> {
+) -> Result<(ReachableReport, Option<String>), ReachableError> {
     let pred = reachable::predict(pf, &bounds, phi, resolution)?;
     let (measured, note) = match plant {
         Some(p) => {

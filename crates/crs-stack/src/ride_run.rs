@@ -88,15 +88,41 @@ pub struct PreparedRide {
     pub describe: String,
 }
 
+/// Why a ride could not be prepared, flown or plotted.
+#[derive(Debug, thiserror::Error)]
+pub enum RideError {
+    /// The ride TOML (names its file and key).
+    #[error(transparent)]
+    Settings(#[from] ride_physics::settings::SettingsError),
+    /// The pilot CSV or script (names its file/line or the script).
+    #[error(transparent)]
+    Pilot(#[from] ride_physics::pilot::PilotError),
+    /// No game controller to fly.
+    #[error(transparent)]
+    Gamepad(#[from] crate::gamepad::GamepadError),
+    /// The model thread's iceoryx2 node or publisher.
+    #[error(transparent)]
+    Ipc(#[from] crs_ipc::IpcError),
+    #[error("cannot start the ride thread: {0}")]
+    Spawn(#[source] std::io::Error),
+    #[error("the ride thread panicked")]
+    Panicked,
+    /// Writing the path plot `path`.
+    #[error("{}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
 /// Loads the ride TOML for `platform` and the pilot's input; every error names its file.
-pub fn prepare(spec: &RideSpec, platform: &Platform) -> Result<PreparedRide, String> {
+pub fn prepare(spec: &RideSpec, platform: &Platform) -> Result<PreparedRide, RideError> {
     let file = spec.settings.display().to_string();
-    let model = HoverSettings::load(&spec.settings)
-        .and_then(|s| s.model(platform, &file))
-        .map_err(|e| e.to_string())?;
+    let model = HoverSettings::load(&spec.settings).and_then(|s| s.model(platform, &file))?;
     let (pilot, duration_s) = match &spec.pilot {
         PilotSpec::Csv(p) => {
-            let t = PilotTrack::read_csv(p).map_err(|e| e.to_string())?;
+            let t = PilotTrack::read_csv(p)?;
             let d = t.duration_s();
             (Pilot::Track(t), d)
         }
@@ -105,7 +131,7 @@ pub fn prepare(spec: &RideSpec, platform: &Platform) -> Result<PreparedRide, Str
             push_s,
             release_s,
         } => {
-            let t = PilotTrack::script(name, *push_s, *release_s).map_err(|e| e.to_string())?;
+            let t = PilotTrack::script(name, *push_s, *release_s)?;
             let d = t.duration_s();
             (Pilot::Track(t), d)
         }
@@ -138,7 +164,7 @@ pub struct RideSummary {
 /// The running source.
 pub struct RideThread {
     stop: Arc<AtomicBool>,
-    handle: std::thread::JoinHandle<Result<(RideSummary, Vec<PathPoint>), String>>,
+    handle: std::thread::JoinHandle<Result<(RideSummary, Vec<PathPoint>), RideError>>,
 }
 
 /// Starts the 1 kHz model thread publishing on the run's iceoryx2 prefix, from `home`.
@@ -146,14 +172,14 @@ pub fn start(
     ride: PreparedRide,
     prefix: &str,
     home: cdpr_model::Pose,
-) -> Result<RideThread, String> {
+) -> Result<RideThread, RideError> {
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();
     let prefix = prefix.to_string();
     let handle = std::thread::Builder::new()
         .name("crs-ride".into())
         .spawn(move || fly(ride, &prefix, home, &s))
-        .map_err(|e| format!("cannot start the ride thread: {e}"))?;
+        .map_err(RideError::Spawn)?;
     Ok(RideThread { stop, handle })
 }
 
@@ -164,11 +190,9 @@ impl RideThread {
     }
 
     /// Stops (if still flying) and returns the flight.
-    pub fn join(self) -> Result<(RideSummary, Vec<PathPoint>), String> {
+    pub fn join(self) -> Result<(RideSummary, Vec<PathPoint>), RideError> {
         self.stop.store(true, Ordering::Relaxed);
-        self.handle
-            .join()
-            .map_err(|_| "the ride thread panicked".to_string())?
+        self.handle.join().map_err(|_| RideError::Panicked)?
     }
 }
 
@@ -179,9 +203,9 @@ fn fly(
     prefix: &str,
     home: cdpr_model::Pose,
     stop: &AtomicBool,
-) -> Result<(RideSummary, Vec<PathPoint>), String> {
-    let node = IpcNode::with_prefix("crs-ride", prefix).map_err(|e| e.to_string())?;
-    let publisher = node.publisher::<CueingPose>().map_err(|e| e.to_string())?;
+) -> Result<(RideSummary, Vec<PathPoint>), RideError> {
+    let node = IpcNode::with_prefix("crs-ride", prefix)?;
+    let publisher = node.publisher::<CueingPose>()?;
     let model = ride.model;
     let mut state = HoverState::at_rest(&home);
     let mut sum = RideSummary {
@@ -244,7 +268,7 @@ pub fn write_svg(
     summary: &mut RideSummary,
     hover: &[PathPoint],
     reference: &[[f64; 3]],
-) -> Result<(), String> {
+) -> Result<(), RideError> {
     let reg = &platform.region;
     summary.wall_margin_mm = [0, 1, 2].map(|k| (model.walls.min[k] - reg.position.min[k]) * 1e3);
     let svg = path_svg(
@@ -264,7 +288,9 @@ pub fn write_svg(
         reference,
     );
     let p = out.join("ride-path.svg");
-    std::fs::write(&p, svg).map_err(|e| format!("{}: {e}", p.display()))?;
+    if let Err(source) = std::fs::write(&p, svg) {
+        return Err(RideError::Write { path: p, source });
+    }
     summary.path_svg = Some(p);
     Ok(())
 }

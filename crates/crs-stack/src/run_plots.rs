@@ -128,7 +128,27 @@ impl RunRecord {
     }
 }
 
-type Plot = Result<(), Box<dyn std::error::Error>>;
+/// What one plot's drawing returns: plotters' error of the SVG backend (file I/O).
+type Plot = Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>>;
+
+/// Why the run's plots could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum RunPlotError {
+    /// Drawing the SVG `file`.
+    #[error("{source}")]
+    Draw {
+        file: PathBuf,
+        #[source]
+        source: plotters::drawing::DrawingAreaErrorKind<std::io::Error>,
+    },
+    /// Writing `index.html` (`file`).
+    #[error("{source}")]
+    Write {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
 
 fn draw_events<DB: plotters::prelude::DrawingBackend>(
     chart: &mut plotters::prelude::ChartContext<
@@ -141,7 +161,7 @@ fn draw_events<DB: plotters::prelude::DrawingBackend>(
     >,
     events: &[(f64, String, String)],
     y: (f64, f64),
-) -> Plot
+) -> Result<(), plotters::drawing::DrawingAreaErrorKind<DB::ErrorType>>
 where
     DB::ErrorType: 'static,
 {
@@ -408,11 +428,20 @@ pub fn write(
     out: &Path,
     r: &RunRecord,
     summary: &serde_json::Value,
-) -> Result<PathBuf, Box<dyn std::error::Error>> {
-    pose_plot(r, &out.join("pose.svg"))?;
-    force_plot(r, &out.join("forces.svg"))?;
-    loop_plot(r, &out.join("loop.svg"))?;
-    events_plot(r, &out.join("events.svg"))?;
+) -> Result<PathBuf, RunPlotError> {
+    type Draw = fn(&RunRecord, &Path) -> Plot;
+    let plots: [(&str, Draw); 4] = [
+        ("pose.svg", pose_plot),
+        ("forces.svg", force_plot),
+        ("loop.svg", loop_plot),
+        ("events.svg", events_plot),
+    ];
+    for (name, plot) in plots {
+        let file = out.join(name);
+        if let Err(source) = plot(r, &file) {
+            return Err(RunPlotError::Draw { file, source });
+        }
+    }
     let mut rows = String::new();
     if let Some(obj) = summary.as_object() {
         for (k, v) in obj {
@@ -463,7 +492,12 @@ pub fn write(
 "#
     );
     let index = out.join("index.html");
-    std::fs::write(&index, html)?;
+    if let Err(source) = std::fs::write(&index, html) {
+        return Err(RunPlotError::Write {
+            file: index,
+            source,
+        });
+    }
     Ok(index)
 }
 

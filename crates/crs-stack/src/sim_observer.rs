@@ -38,7 +38,7 @@ impl SimObserver {
 }
 
 impl RunObserver for SimObserver {
-    fn started(&mut self, run: &RunStart<'_>) -> Result<(), Box<dyn std::error::Error>> {
+    fn started(&mut self, run: &RunStart<'_>) -> Result<(), crate::sim_run::ObserverError> {
         if let Some(req) = &self.console_request {
             let cfg = console_config(
                 req.addr,

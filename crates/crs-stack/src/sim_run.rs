@@ -205,7 +205,7 @@ pub struct RunStart<'a> {
 /// it sees every sample the launcher receives, on the launcher's thread, and is told when the
 /// run is over. It never talks to the processes of the stack.
 pub trait RunObserver {
-    fn started(&mut self, _run: &RunStart<'_>) -> Result<(), Box<dyn std::error::Error>> {
+    fn started(&mut self, _run: &RunStart<'_>) -> Result<(), ObserverError> {
         Ok(())
     }
     fn setpoint(&mut self, _sp: &JointSetpoint) {}
@@ -220,9 +220,169 @@ pub trait RunObserver {
 pub struct NoObserver;
 impl RunObserver for NoObserver {}
 
+/// Why an observer could not start following a run.
+#[derive(Debug, thiserror::Error)]
+pub enum ObserverError {
+    /// The operator console did not start (address in use, ...).
+    #[error(transparent)]
+    Console(#[from] crs_console::ConsoleError),
+}
+
+/// Why a run of the stack failed: refused before anything started (bad inputs, a missing
+/// binary, configs that disagree) or ended other than by motion-core finishing its plan.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// The running executable's path (where the stack's binaries are looked for).
+    #[error("{0}")]
+    CurrentExe(#[source] std::io::Error),
+    /// The directory of the running executable.
+    #[error("cannot locate the binary directory")]
+    NoBinDir,
+    /// A binary of the stack is not built.
+    #[error(
+        "{} not found: build the stack first (`cargo build --release --workspace --bins`) or pass --bin-dir",
+        exe.display()
+    )]
+    MissingBinary { exe: PathBuf },
+    /// The daemon TOML or its platform TOML (names the file and key).
+    #[error(transparent)]
+    Config(#[from] cdpr_model::config::ConfigError),
+    /// A config file given on the command line does not exist.
+    #[error("{}: no such file", path.display())]
+    NoSuchFile { path: PathBuf },
+    /// The drives config does not load.
+    #[error("{}: {source}", drives.display())]
+    Drives {
+        drives: PathBuf,
+        #[source]
+        source: drive_io::config::ConfigError,
+    },
+    /// The drives wait for the monitor's heartbeat but no monitor runs (`monitor_exe`: the
+    /// binary that is not built; None: `--no-monitor`).
+    #[error(
+        "{}: [safety_heartbeat] is set, so the drives stay braked without the safety monitor's \
+         heartbeat; {}. Use a drives config without [safety_heartbeat] to run without it",
+        drives.display(),
+        match monitor_exe {
+            None => "--no-monitor was given".to_string(),
+            Some(exe) => format!("{} is not built", exe.display()),
+        }
+    )]
+    HeartbeatWithoutMonitor {
+        drives: PathBuf,
+        monitor_exe: Option<PathBuf>,
+    },
+    #[error("--hold-s must be ≥ 0 and --timeout-s > 0")]
+    BadDurations { hold_s: f64, timeout_s: f64 },
+    /// `--settle-s` (the rest recorder).
+    #[error(transparent)]
+    Recording(#[from] crate::rest_recording::RecordingError),
+    #[error(
+        "--hold-s {hold_s} < --settle-s {settle_s}: the last waypoint could not become a rest point"
+    )]
+    HoldShorterThanSettle { hold_s: f64, settle_s: f64 },
+    /// The controller cannot be configured for the daemon's platform.
+    #[error(transparent)]
+    Configure(#[from] motion_core::daemon::lifecycle::ConfigureError),
+    /// The monitor config does not load.
+    #[error(transparent)]
+    MonitorConfig(#[from] safety_monitor::config::ConfigError),
+    /// The monitor times pose velocities with another period than motion-core's loop.
+    #[error(
+        "{}: [motion] setpoint_period_ms = {setpoint_period_ms} but motion-core ({}) runs its loop every \
+         {loop_ms} ms; set setpoint_period_ms = {loop_ms} (the monitor times the pose's \
+         velocity by it)",
+        monitor_config.display(),
+        daemon_config.display()
+    )]
+    MonitorPeriod {
+        monitor_config: PathBuf,
+        daemon_config: PathBuf,
+        setpoint_period_ms: f64,
+        loop_ms: f64,
+    },
+    /// The monitor would supervise another platform.
+    #[error(transparent)]
+    MonitorPlatform(#[from] crate::platforms::MonitorPlatformError),
+    /// The hover ride (settings, pilot, thread, plot).
+    #[error(transparent)]
+    Ride(#[from] crate::ride_run::RideError),
+    #[error(
+        "--source helicopter flies the hover model: --waypoints, --dwell-s and --record belong to the waypoint plan"
+    )]
+    RideWithWaypointPlan,
+    #[error("the controller refuses the home pose: {0}")]
+    HomePose(#[source] motion_core::daemon::cycle::Rejection),
+    /// A file or directory of the run's output (`path`).
+    #[error("{source}")]
+    Output {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The waypoint file (`--dwell-s`).
+    #[error(transparent)]
+    Waypoints(#[from] trajectory::WaypointError),
+    /// Timing or writing the waypoints (`--dwell-s`).
+    #[error(transparent)]
+    Campaign(#[from] crate::campaign::CampaignError),
+    #[error("--dwell-s needs waypoints (--waypoints or [trajectory].waypoints)")]
+    DwellWithoutWaypoints,
+    #[error(transparent)]
+    Transport(#[from] crate::transport::BadTransport),
+    /// The launcher's own iceoryx2 node or subscribers.
+    #[error(transparent)]
+    Ipc(#[from] crs_ipc::IpcError),
+    #[error(transparent)]
+    Observer(#[from] ObserverError),
+    #[error(transparent)]
+    Spawn(#[from] supervisor::SpawnError),
+    /// A child exited while the launcher waited for `what` (`log_tail`: its last log lines).
+    #[error("{name} exited ({status}) while waiting for {what}:\n{log_tail}")]
+    ExitedWhileWaiting {
+        name: &'static str,
+        status: std::process::ExitStatus,
+        what: String,
+        log_tail: String,
+    },
+    #[error("interrupted")]
+    InterruptedWhileWaiting,
+    #[error("timed out after {secs} s waiting for {what}")]
+    WaitTimeout { secs: f64, what: String },
+    #[error("interrupted (Ctrl-C): stopped all processes")]
+    Interrupted,
+    /// A child other than a successfully finished motion-core exited during the run.
+    #[error("{name} exited ({status}); stopping the stack:\n{log_tail}")]
+    Exited {
+        name: &'static str,
+        status: std::process::ExitStatus,
+        log_tail: String,
+    },
+    #[error("timed out after {timeout_s} s")]
+    Timeout { timeout_s: f64 },
+    /// Writing the recorded data set `path` (`--record`).
+    #[error("{}: {source}", path.display())]
+    Record {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Summary(#[from] serde_json::Error),
+    #[error("the run produced no plant states or no setpoints")]
+    NoSamples,
+}
+
+fn output(path: &Path) -> impl FnOnce(std::io::Error) -> SimError + '_ {
+    move |source| SimError::Output {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
 /// Runs the stack once as `crs sim` does (without the --check verdict): starts the processes,
 /// follows the run, stops everything, prints and writes the summary (and the recording).
-pub fn execute(a: &SimOptions) -> Result<Summary, Box<dyn std::error::Error>> {
+pub fn execute(a: &SimOptions) -> Result<Summary, SimError> {
     execute_observed(a, &mut NoObserver)
 }
 
@@ -230,66 +390,61 @@ pub fn execute(a: &SimOptions) -> Result<Summary, Box<dyn std::error::Error>> {
 pub fn execute_observed(
     a: &SimOptions,
     observer: &mut dyn RunObserver,
-) -> Result<Summary, Box<dyn std::error::Error>> {
+) -> Result<Summary, SimError> {
     let run_no = RUNS.fetch_add(1, Ordering::Relaxed);
     let bin_dir = match &a.bin_dir {
         Some(d) => d.clone(),
-        None => std::env::current_exe()?
+        None => std::env::current_exe()
+            .map_err(SimError::CurrentExe)?
             .parent()
             .map(Path::to_path_buf)
-            .ok_or("cannot locate the binary directory")?,
+            .ok_or(SimError::NoBinDir)?,
     };
     let exe = |name: &str| bin_dir.join(name);
     for need in ["motion-core", "drive-io", "sim-plant"] {
         if !exe(need).is_file() {
-            return Err(format!(
-                "{} not found: build the stack first (`cargo build --release --workspace --bins`) or pass --bin-dir",
-                exe(need).display()
-            )
-            .into());
+            return Err(SimError::MissingBinary { exe: exe(need) });
         }
     }
     let with_monitor = !a.no_monitor && exe("safety-monitor").is_file();
     // Validate the inputs before anything starts.
-    let daemon = motion_core::daemon::config::load(&a.config).map_err(|e| e.to_string())?;
+    let daemon = motion_core::daemon::config::load(&a.config)?;
     let platform = load_platform(&daemon.platform)?;
     let p = platform.model.params();
     let (f_min, f_max) = (p.f_min, p.f_max);
     for f in [&a.drives, &a.plant] {
         if !f.is_file() {
-            return Err(format!("{}: no such file", f.display()).into());
+            return Err(SimError::NoSuchFile { path: f.clone() });
         }
     }
     // Drives that validate the monitor's safety heartbeat never enable without it: refuse the
     // run up front instead of letting drive-io time out waiting for operational drives.
-    let drives_cfg = drive_io::config::DrivesConfig::load(&a.drives)
-        .map_err(|e| format!("{}: {e}", a.drives.display()))?;
+    let drives_cfg =
+        drive_io::config::DrivesConfig::load(&a.drives).map_err(|source| SimError::Drives {
+            drives: a.drives.clone(),
+            source,
+        })?;
     if drives_cfg.safety_heartbeat.is_some() && !with_monitor {
-        return Err(format!(
-            "{}: [safety_heartbeat] is set, so the drives stay braked without the safety monitor's \
-             heartbeat; {}. Use a drives config without [safety_heartbeat] to run without it",
-            a.drives.display(),
-            if a.no_monitor {
-                "--no-monitor was given".to_string()
-            } else {
-                format!("{} is not built", exe("safety-monitor").display())
-            }
-        )
-        .into());
+        return Err(SimError::HeartbeatWithoutMonitor {
+            drives: a.drives.clone(),
+            monitor_exe: (!a.no_monitor).then(|| exe("safety-monitor")),
+        });
     }
     if !(a.hold_s.is_finite() && a.hold_s >= 0.0 && a.timeout_s > 0.0) {
-        return Err("--hold-s must be ≥ 0 and --timeout-s > 0".into());
+        return Err(SimError::BadDurations {
+            hold_s: a.hold_s,
+            timeout_s: a.timeout_s,
+        });
     }
     let mut recorder = match &a.record {
         Some(_) => Some(RestRecorder::new(a.settle_s)?.averaging_forces(a.record_mean_forces)),
         None => None,
     };
     if a.record.is_some() && a.hold_s < a.settle_s {
-        return Err(format!(
-            "--hold-s {} < --settle-s {}: the last waypoint could not become a rest point",
-            a.hold_s, a.settle_s
-        )
-        .into());
+        return Err(SimError::HoldShorterThanSettle {
+            hold_s: a.hold_s,
+            settle_s: a.settle_s,
+        });
     }
     // The controller's command at home (the drives are homed to it) and, with --dwell-s, the
     // waypoints timed for a rest at each.
@@ -308,12 +463,10 @@ pub fn execute_observed(
         None => None,
     };
     if ride.is_some() && (a.record.is_some() || a.dwell_s.is_some() || a.waypoints.is_some()) {
-        return Err("--source helicopter flies the hover model: --waypoints, --dwell-s and --record belong to the waypoint plan".into());
+        return Err(SimError::RideWithWaypointPlan);
     }
-    let home_q = configured
-        .home_command()
-        .map_err(|e| format!("the controller refuses the home pose: {e}"))?;
-    std::fs::create_dir_all(&a.out)?;
+    let home_q = configured.home_command().map_err(SimError::HomePose)?;
+    std::fs::create_dir_all(&a.out).map_err(output(&a.out))?;
     let waypoint_file = a.waypoints.clone().or(daemon.trajectory.waypoints.clone());
     let waypoints_arg = match (a.dwell_s, &waypoint_file) {
         (Some(dwell), Some(file)) => {
@@ -342,7 +495,7 @@ pub fn execute_observed(
             Some(path)
         }
         (Some(_), None) => {
-            return Err("--dwell-s needs waypoints (--waypoints or [trajectory].waypoints)".into());
+            return Err(SimError::DwellWithoutWaypoints);
         }
         (None, _) => a.waypoints.clone(),
     };
@@ -392,18 +545,21 @@ pub fn execute_observed(
             let t0 = Instant::now();
             while !ready() {
                 if let Some(e) = stack.exited() {
-                    return Err(format!(
-                        "{} exited ({}) while waiting for {what}:\n{}",
-                        e.name,
-                        e.status,
-                        supervisor::log_tail(&e.log, 15)
-                    ));
+                    return Err(SimError::ExitedWhileWaiting {
+                        name: e.name,
+                        status: e.status,
+                        what: what.to_string(),
+                        log_tail: supervisor::log_tail(&e.log, 15),
+                    });
                 }
                 if supervisor::interrupted() {
-                    return Err("interrupted".to_string());
+                    return Err(SimError::InterruptedWhileWaiting);
                 }
                 if t0.elapsed().as_secs_f64() > secs {
-                    return Err(format!("timed out after {secs} s waiting for {what}"));
+                    return Err(SimError::WaitTimeout {
+                        secs,
+                        what: what.to_string(),
+                    });
                 }
                 std::thread::sleep(Duration::from_millis(10));
             }
@@ -538,7 +694,7 @@ pub fn execute_observed(
     let mut was_running = false;
     let mut bus_stop: Option<(u64, u32)> = None;
     let t0 = Instant::now();
-    let result: Result<(), String> = loop {
+    let result: Result<(), SimError> = loop {
         std::thread::sleep(Duration::from_millis(5));
         while let Ok(Some(sp)) = setpoints.receive() {
             observer.setpoint(&sp);
@@ -632,25 +788,26 @@ pub fn execute_observed(
             );
             match crate::ride_run::start(r, &prefix, platform.home) {
                 Ok(t) => ride_thread = Some(t),
-                Err(e) => break Err(e),
+                Err(e) => break Err(e.into()),
             }
         }
         if supervisor::interrupted() {
-            break Err("interrupted (Ctrl-C): stopped all processes".into());
+            break Err(SimError::Interrupted);
         }
         if let Some(e) = stack.exited() {
             if e.name == "motion-core" && e.status.success() {
                 break Ok(());
             }
-            break Err(format!(
-                "{} exited ({}); stopping the stack:\n{}",
-                e.name,
-                e.status,
-                supervisor::log_tail(&e.log, 20)
-            ));
+            break Err(SimError::Exited {
+                name: e.name,
+                status: e.status,
+                log_tail: supervisor::log_tail(&e.log, 20),
+            });
         }
         if t0.elapsed().as_secs_f64() > a.timeout_s {
-            break Err(format!("timed out after {} s", a.timeout_s));
+            break Err(SimError::Timeout {
+                timeout_s: a.timeout_s,
+            });
         }
     };
     // Let the last plant states arrive, then stop everything.
@@ -733,9 +890,12 @@ pub fn execute_observed(
         ];
         let ds = to_dataset(&r.samples, m, meta)?;
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir)?;
+            std::fs::create_dir_all(dir).map_err(output(dir))?;
         }
-        crs_dataset::save_dataset(path, &ds).map_err(|e| format!("{}: {e}", path.display()))?;
+        crs_dataset::save_dataset(path, &ds).map_err(|source| SimError::Record {
+            path: path.clone(),
+            source,
+        })?;
         println!(
             "recorded {} rest points to {}",
             r.samples.len(),
@@ -744,12 +904,12 @@ pub fn execute_observed(
         sum.record = Some(path.clone());
     }
     let json = a.out.join("summary.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&sum)?)?;
+    std::fs::write(&json, serde_json::to_string_pretty(&sum)?).map_err(output(&json))?;
     println!("summary written to {}", json.display());
     observer.finished(&a.out, &sum);
     result?;
     if sum.plant_samples == 0 || sum.setpoints == 0 {
-        return Err("the run produced no plant states or no setpoints".into());
+        return Err(SimError::NoSamples);
     }
     Ok(sum)
 }
@@ -871,17 +1031,16 @@ fn check_monitor_period(
     monitor_config: &std::path::Path,
     daemon_config: &std::path::Path,
     loop_period_s: f64,
-) -> Result<(), String> {
-    let mon = safety_monitor::config::load(monitor_config).map_err(|e| e.to_string())?;
+) -> Result<(), SimError> {
+    let mon = safety_monitor::config::load(monitor_config)?;
     let (sp_ms, loop_ms) = (mon.motion.setpoint_period_ms, loop_period_s * 1e3);
     if mon.motion.check && (sp_ms - loop_ms).abs() > 1e-6 * loop_ms {
-        return Err(format!(
-            "{}: [motion] setpoint_period_ms = {sp_ms} but motion-core ({}) runs its loop every \
-             {loop_ms} ms; set setpoint_period_ms = {loop_ms} (the monitor times the pose's \
-             velocity by it)",
-            monitor_config.display(),
-            daemon_config.display()
-        ));
+        return Err(SimError::MonitorPeriod {
+            monitor_config: monitor_config.to_path_buf(),
+            daemon_config: daemon_config.to_path_buf(),
+            setpoint_period_ms: sp_ms,
+            loop_ms,
+        });
     }
     Ok(())
 }

@@ -9,7 +9,44 @@ use sim_plant::{Plant, load_plant};
 use std::path::Path;
 use surrogate::{FitOptions, Region, Surrogate, fit};
 
-type BoxErr = Box<dyn std::error::Error>;
+/// Why a surrogate evaluation on the plant could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum EvaluationError {
+    /// `--grid` outside 2..=25.
+    #[error("--grid must lie in 2..=25, got {grid}")]
+    Grid { grid: usize },
+    /// The plant TOML (names its file and key).
+    #[error(transparent)]
+    PlantConfig(#[from] cdpr_model::config::ConfigError),
+    /// The plant and the platform have different cable counts.
+    #[error(
+        "plant {} has {plant_cables} cables, platform {platform} has {platform_cables}",
+        plant.display()
+    )]
+    CableCount {
+        plant: std::path::PathBuf,
+        plant_cables: usize,
+        platform: String,
+        platform_cables: usize,
+    },
+    /// The platform has no `[home] f_ini_n`.
+    #[error(
+        "platform `{platform}` has no [home] f_ini_n: the kinematic controller needs the initial tension (eq. 6.22)"
+    )]
+    NoInitialTension { platform: String },
+    /// The plant refuses to start, to tension at home or to settle at the set-up command.
+    #[error(transparent)]
+    Plant(#[from] sim_plant::PlantError),
+    /// The reference forces f_ref (eq. 3.41) at a pose.
+    #[error(transparent)]
+    ReferenceForces(#[from] cdpr_model::offset_target::OffsetTargetError),
+    /// The controller's inverse kinematics.
+    #[error(transparent)]
+    Kinematics(#[from] cdpr_model::kinematics::KinematicsError),
+    /// The surrogate refuses a pose.
+    #[error("surrogate: {0}")]
+    Surrogate(#[source] surrogate::EvalError),
+}
 
 /// The fit of `crs surrogate fit`: target q_off from [`OffsetTarget`] over the platform region.
 pub fn fit_platform(
@@ -169,28 +206,27 @@ pub fn evaluate(
     sg: &Surrogate,
     plant_path: &Path,
     grid: usize,
-) -> Result<Evaluation, BoxErr> {
+) -> Result<Evaluation, EvaluationError> {
     if !(2..=25).contains(&grid) {
-        return Err(format!("--grid must lie in 2..=25, got {grid}").into());
+        return Err(EvaluationError::Grid { grid });
     }
     let cfg = load_plant(plant_path)?;
     let plant_name = cfg.name.clone();
     let m = pf.model.m();
     if cfg.platform.model.m() != m {
-        return Err(format!(
-            "plant {} has {} cables, platform {} has {m}",
-            plant_path.display(),
-            cfg.platform.model.m(),
-            pf.name
-        )
-        .into());
+        return Err(EvaluationError::CableCount {
+            plant: plant_path.to_path_buf(),
+            plant_cables: cfg.platform.model.m(),
+            platform: pf.name.clone(),
+            platform_cables: m,
+        });
     }
-    let f_ini = pf.f_ini.clone().ok_or_else(|| {
-        format!(
-            "platform `{}` has no [home] f_ini_n: the kinematic controller needs the initial tension (eq. 6.22)",
-            pf.name
-        )
-    })?;
+    let f_ini = pf
+        .f_ini
+        .clone()
+        .ok_or_else(|| EvaluationError::NoInitialTension {
+            platform: pf.name.clone(),
+        })?;
     let mut plant = Plant::new(cfg)?;
     let (lo, hi) = region_box(&pf.region);
     let mut poses = Vec::new();
@@ -226,7 +262,7 @@ pub fn evaluate(
     }
     let p = pf.model.params();
     let mut data = Data::new(&pf.model);
-    let mut run = |use_surrogate: bool| -> Result<Tracking, BoxErr> {
+    let mut run = |use_surrogate: bool| -> Result<Tracking, EvaluationError> {
         // Set-up at home (sec. 6.1, eq. 3.14/6.24): the operator tensions the cables at the home
         // pose and zeroes the cable offsets there. The kinematic controller is set up with the
         // spec's initial tension f_ini (eq. 6.22); the surrogate controller with its own
@@ -242,7 +278,7 @@ pub fn evaluate(
         let mut sg_home = vec![0.0; m];
         if use_surrogate {
             sg.eval(&pf.home.to_array(), &mut sg_home)
-                .map_err(|e| format!("surrogate: {e}"))?;
+                .map_err(EvaluationError::Surrogate)?;
         }
         let q_setup: Vec<f64> = (0..m)
             .map(|i| setup.q_cmd[i] - data.q[i] - sg_home[i])
@@ -253,11 +289,11 @@ pub fn evaluate(
         let mut q = vec![0.0; m];
         let mut qs = vec![0.0; m];
         let mut off = vec![0.0; m];
-        let mut command = |x: &Pose, q: &mut [f64]| -> Result<(), BoxErr> {
+        let mut command = |x: &Pose, q: &mut [f64]| -> Result<(), EvaluationError> {
             kinematics::inverse(&pf.model, &mut data, x)?;
             if use_surrogate {
                 sg.eval(&x.to_array(), &mut off)
-                    .map_err(|e| format!("surrogate: {e}"))?;
+                    .map_err(EvaluationError::Surrogate)?;
             } else {
                 off.fill(0.0);
             }

@@ -5,7 +5,37 @@ use crate::surrogate_evaluation::{Evaluation, stats};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-type BoxErr = Box<dyn std::error::Error>;
+/// Why the report could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// Creating the report directory or writing one of its files (`path`).
+    #[error("{source}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Formatting the Markdown table.
+    #[error(transparent)]
+    Format(#[from] std::fmt::Error),
+    /// Serialising report.json.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+    /// Drawing tracking.svg (`path`).
+    #[error("{}: {source}", path.display())]
+    Plot {
+        path: PathBuf,
+        #[source]
+        source: plotters::drawing::DrawingAreaErrorKind<std::io::Error>,
+    },
+}
+
+fn write_err(path: &Path) -> impl FnOnce(std::io::Error) -> ReportError + '_ {
+    move |source| ReportError::Write {
+        path: path.to_path_buf(),
+        source,
+    }
+}
 
 /// What [`write`] wrote: the Markdown table (also in report.md) and the files.
 pub struct Written {
@@ -27,8 +57,8 @@ pub fn write(
     ev: &Evaluation,
     dir: &Path,
     fit: Option<&surrogate::FitReport>,
-) -> Result<Written, BoxErr> {
-    std::fs::create_dir_all(dir)?;
+) -> Result<Written, ReportError> {
+    std::fs::create_dir_all(dir).map_err(write_err(dir))?;
     let mut md = String::new();
     writeln!(
         md,
@@ -76,10 +106,14 @@ pub fn write(
             f.0, f.1, f.2, p.0, p.2, o.0, o.2, t.reachable, ev.wrench_feasible, t.failed
         )?;
     }
-    std::fs::write(dir.join("report.md"), &md)?;
-    std::fs::write(dir.join("report.json"), serde_json::to_string_pretty(ev)?)?;
+    let md_file = dir.join("report.md");
+    std::fs::write(&md_file, &md).map_err(write_err(&md_file))?;
+    let json_file = dir.join("report.json");
+    std::fs::write(&json_file, serde_json::to_string_pretty(ev)?).map_err(write_err(&json_file))?;
     let svg = dir.join("tracking.svg");
-    plot(ev, &svg).map_err(|e| format!("{}: {e}", svg.display()))?;
+    if let Err(source) = plot(ev, &svg) {
+        return Err(ReportError::Plot { path: svg, source });
+    }
     Ok(Written {
         markdown: md,
         files: vec![dir.join("report.md"), dir.join("report.json"), svg],
@@ -87,7 +121,10 @@ pub fn write(
 }
 
 /// Two panels: sorted force error and sorted position error of both controllers.
-fn plot(ev: &Evaluation, path: &Path) -> Result<(), Box<dyn std::error::Error>> {
+fn plot(
+    ev: &Evaluation,
+    path: &Path,
+) -> Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
     use plotters::prelude::*;
     let root = SVGBackend::new(path, (1000, 420)).into_drawing_area();
     root.fill(&WHITE)?;

@@ -122,7 +122,16 @@ pub struct Opts {
     pub(crate) json: bool,
 }
 
-pub(crate) fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Error>> {
+/// A pipeline option of `crs calibrate run` out of its range.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum OptsError {
+    #[error("--ridge-kf: {0} is not a finite λ ≥ 0")]
+    RidgeKf(f64),
+    #[error("--candidates: unknown effect `{0}`")]
+    UnknownCandidate(String),
+}
+
+pub(crate) fn config(o: &Opts) -> Result<PipelineConfig, OptsError> {
     let mut cfg = PipelineConfig::default();
     cfg.weights.wrench = o.w_wrench;
     cfg.weights.length = o.w_length;
@@ -130,7 +139,7 @@ pub(crate) fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Err
     cfg.lasso_b = o.lasso_b;
     match o.ridge_kf {
         Some(l) if !(l.is_finite() && l >= 0.0) => {
-            return Err(format!("--ridge-kf: {l} is not a finite λ ≥ 0").into());
+            return Err(OptsError::RidgeKf(l));
         }
         Some(l) => cfg.ridge_kf = l,
         None => cfg.ridge_kf_auto = true,
@@ -144,8 +153,7 @@ pub(crate) fn config(o: &Opts) -> Result<PipelineConfig, Box<dyn std::error::Err
         cfg.select.candidates = c
             .iter()
             .map(|n| {
-                Effect::from_name(n.trim())
-                    .ok_or_else(|| format!("--candidates: unknown effect `{n}`"))
+                Effect::from_name(n.trim()).ok_or_else(|| OptsError::UnknownCandidate(n.clone()))
             })
             .collect::<Result<_, _>>()?;
     }
@@ -206,7 +214,8 @@ fn bench(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
         baseline_seeds: a.baseline_seeds,
         first_seed: a.first_seed,
         explain_misses: a.explain_misses,
-    })
+    })?;
+    Ok(())
 }
 
 /// Identifies from `base`, writes the report, plots, calibrated.toml and the side file into

@@ -114,7 +114,8 @@ pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
     let mut tools = StackTools {
         progress: &mut progress,
     };
-    crs_stack::calibration_loop::run_loop(a.options(), command, &mut tools)
+    crs_stack::calibration_loop::run_loop(a.options(), command, &mut tools)?;
+    Ok(())
 }
 
 #[derive(clap::Args, Debug)]

@@ -24,6 +24,17 @@ pub struct RideArgs {
     pub(crate) ride_config: PathBuf,
 }
 
+/// Ride flags that do not go together.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum RideFlagError {
+    #[error("--flight-s must be > 0")]
+    FlightS(f64),
+    #[error("--source helicopter needs --pilot FILE.csv | script:walls | script:corners | gamepad")]
+    NoPilot,
+    #[error("--pilot needs --source helicopter")]
+    PilotWithoutRide,
+}
+
 impl RideArgs {
     /// The platform `--source helicopter` flies when `--platform` is not given.
     pub(crate) fn default_platform(&self) -> Option<String> {
@@ -31,22 +42,19 @@ impl RideArgs {
     }
 
     /// The ride of the run, checked for consistent flags.
-    pub(crate) fn spec(&self) -> Result<Option<RideSpec>, String> {
+    pub(crate) fn spec(&self) -> Result<Option<RideSpec>, RideFlagError> {
         match (self.source.as_str(), &self.pilot) {
             ("helicopter", Some(p)) => {
                 if !(self.flight_s.is_finite() && self.flight_s > 0.0) {
-                    return Err("--flight-s must be > 0".into());
+                    return Err(RideFlagError::FlightS(self.flight_s));
                 }
                 Ok(Some(RideSpec {
                     settings: self.ride_config.clone(),
                     pilot: PilotSpec::parse(p, self.flight_s),
                 }))
             }
-            ("helicopter", None) => Err(
-                "--source helicopter needs --pilot FILE.csv | script:walls | script:corners | gamepad"
-                    .into(),
-            ),
-            (_, Some(_)) => Err("--pilot needs --source helicopter".into()),
+            ("helicopter", None) => Err(RideFlagError::NoPilot),
+            (_, Some(_)) => Err(RideFlagError::PilotWithoutRide),
             _ => Ok(None),
         }
     }

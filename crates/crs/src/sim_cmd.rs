@@ -95,9 +95,18 @@ pub struct SimArgs {
     pub(crate) ride: crate::ride_cmd::RideArgs,
 }
 
+/// The flags of `crs sim` do not give a run: the config set, or the ride flags.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum SimArgsError {
+    #[error(transparent)]
+    Configs(#[from] platforms::SelectError),
+    #[error(transparent)]
+    Ride(#[from] crate::ride_cmd::RideFlagError),
+}
+
 impl SimArgs {
     /// The run's options.
-    pub(crate) fn options(&self) -> Result<SimOptions, Box<dyn std::error::Error>> {
+    pub(crate) fn options(&self) -> Result<SimOptions, SimArgsError> {
         // The platform's set of configs (`--platform`'s, else that of the `--config` daemon),
         // single files replaced by the flags, as the timing profile runs them.
         let platform = self.platform.clone().or(self.ride.default_platform());

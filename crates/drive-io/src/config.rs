@@ -116,15 +116,20 @@ pub enum SyncSource {
 }
 
 impl std::str::FromStr for SyncSource {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownSyncSource;
+    fn from_str(s: &str) -> Result<Self, UnknownSyncSource> {
         match s {
             "setpoint" => Ok(Self::Setpoint),
             "clock" => Ok(Self::Clock),
-            _ => Err(format!("{s:?}: expected \"setpoint\" or \"clock\"")),
+            _ => Err(UnknownSyncSource(s.to_string())),
         }
     }
 }
+
+/// A `sync_source` name that is neither `setpoint` nor `clock` (the name as given).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0:?}: expected \"setpoint\" or \"clock\"")]
+pub struct UnknownSyncSource(pub String);
 
 fn d_setpoint_wait() -> u32 {
     // A quarter period: past motion-core's usual lateness on a loaded host (loop lateness p99

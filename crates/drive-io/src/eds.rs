@@ -181,24 +181,41 @@ impl OdEntry {
         self.default.map_or(0, |v| v.eval(node_id))
     }
     /// Checks `value` against the data type and the EDS limits; the reason if out of range.
-    pub fn check_range(&self, value: i64) -> Result<(), String> {
+    pub fn check_range(&self, value: i64) -> Result<(), RangeError> {
         if let Some((lo, hi)) = self.data_type.range()
             && !(lo..=hi).contains(&value)
         {
-            return Err(format!("{value} does not fit {:?}", self.data_type));
+            return Err(RangeError::DataType {
+                value,
+                data_type: self.data_type,
+            });
         }
-        if let Some(lo) = self.low
-            && value < lo
+        if let Some(low) = self.low
+            && value < low
         {
-            return Err(format!("{value} below the EDS LowLimit {lo}"));
+            return Err(RangeError::BelowLowLimit { value, low });
         }
-        if let Some(hi) = self.high
-            && value > hi
+        if let Some(high) = self.high
+            && value > high
         {
-            return Err(format!("{value} above the EDS HighLimit {hi}"));
+            return Err(RangeError::AboveHighLimit { value, high });
         }
         Ok(())
     }
+}
+
+/// Why a value does not fit an object-dictionary entry ([`OdEntry::check_range`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum RangeError {
+    /// Outside the range of the entry's CiA 301 data type.
+    #[error("{value} does not fit {data_type:?}")]
+    DataType { value: i64, data_type: DataType },
+    /// Below the EDS `LowLimit`.
+    #[error("{value} below the EDS LowLimit {low}")]
+    BelowLowLimit { value: i64, low: i64 },
+    /// Above the EDS `HighLimit`.
+    #[error("{value} above the EDS HighLimit {high}")]
+    AboveHighLimit { value: i64, high: i64 },
 }
 
 /// An object (index) with its name and object type (7 VAR, 8 ARRAY, 9 RECORD).

@@ -9,8 +9,54 @@
 
 use crate::config::{self, sha256_of};
 use crate::identity::{hex, platform_identity};
-use crate::platform::{PlatformParams, load_platform, parse_platform};
+use crate::platform::{PlatformError, PlatformParams, load_platform, parse_platform};
 use std::path::{Path, PathBuf};
+
+/// Why an accept run failed; nothing of the monitor's configuration has changed unless the
+/// variant says so.
+#[derive(Debug, thiserror::Error)]
+pub enum AcceptError {
+    /// Reading or writing `path` failed.
+    #[error("{}: {source}", path.display())]
+    File {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Creating the `accepted/` directory or moving a finished file into place failed.
+    #[error("{source}")]
+    Place {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The monitor configuration has no `[monitor] platform` key.
+    #[error("{}: no [monitor] platform", config.display())]
+    NoPlatformKey { config: PathBuf },
+    /// The candidate platform file is not UTF-8 text.
+    #[error("{}: not UTF-8 text", candidate.display())]
+    NotUtf8 { candidate: PathBuf },
+    /// The monitor's own parser refuses the candidate.
+    #[error(transparent)]
+    Candidate(#[from] PlatformError),
+    /// The edited configuration does not load with the monitor's loader (the old one stays).
+    #[error("the accepted configuration would not load: {0}")]
+    EditedConfig(#[source] config::ConfigError),
+}
+
+fn file_err(path: &Path) -> impl FnOnce(std::io::Error) -> AcceptError + '_ {
+    move |source| AcceptError::File {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+fn place_err(path: &Path) -> impl FnOnce(std::io::Error) -> AcceptError + '_ {
+    move |source| AcceptError::Place {
+        path: path.to_path_buf(),
+        source,
+    }
+}
 
 /// What an accept run found (and did).
 #[derive(Debug, Clone)]
@@ -191,20 +237,24 @@ fn with_platform(text: &str, platform: &str, sha: &str) -> String {
 
 /// Shows (and with `apply` performs) the acceptance of `candidate` for the monitor
 /// configuration `config_path`.
-pub fn accept(config_path: &Path, candidate: &Path, apply: bool) -> Result<AcceptReport, String> {
-    let text = std::fs::read_to_string(config_path)
-        .map_err(|e| format!("{}: {e}", config_path.display()))?;
-    let platform_key = monitor_key(&text, "platform")
-        .ok_or_else(|| format!("{}: no [monitor] platform", config_path.display()))?;
+pub fn accept(
+    config_path: &Path,
+    candidate: &Path,
+    apply: bool,
+) -> Result<AcceptReport, AcceptError> {
+    let text = std::fs::read_to_string(config_path).map_err(file_err(config_path))?;
+    let platform_key =
+        monitor_key(&text, "platform").ok_or_else(|| AcceptError::NoPlatformKey {
+            config: config_path.to_path_buf(),
+        })?;
     let pinned = monitor_key(&text, "platform_sha256").unwrap_or_default();
     let dir = config_path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let current = dir.join(&platform_key);
-    let new_bytes =
-        std::fs::read(candidate).map_err(|e| format!("{}: {e}", candidate.display()))?;
-    let new_text = String::from_utf8(new_bytes.clone())
-        .map_err(|_| format!("{}: not UTF-8 text", candidate.display()))?;
-    let new =
-        parse_platform(&new_text, &candidate.display().to_string()).map_err(|e| e.to_string())?;
+    let new_bytes = std::fs::read(candidate).map_err(file_err(candidate))?;
+    let new_text = String::from_utf8(new_bytes.clone()).map_err(|_| AcceptError::NotUtf8 {
+        candidate: candidate.to_path_buf(),
+    })?;
+    let new = parse_platform(&new_text, &candidate.display().to_string())?;
     let new_sha256 = hex(&sha256_of(&new_bytes));
     let (current_status, old) = match std::fs::read(&current) {
         Err(_) => ("missing", None),
@@ -240,20 +290,21 @@ pub fn accept(config_path: &Path, candidate: &Path, apply: bool) -> Result<Accep
         .unwrap_or_else(|| "safety-monitor".into());
     let rel = format!("accepted/{stem}.platform.toml");
     let copy = dir.join(&rel);
-    std::fs::create_dir_all(copy.parent().unwrap_or(&dir)).map_err(|e| e.to_string())?;
+    let copy_dir = copy.parent().unwrap_or(&dir);
+    std::fs::create_dir_all(copy_dir).map_err(place_err(copy_dir))?;
     let tmp_copy = copy.with_extension("toml.new");
-    std::fs::write(&tmp_copy, &new_bytes).map_err(|e| format!("{}: {e}", tmp_copy.display()))?;
-    std::fs::rename(&tmp_copy, &copy).map_err(|e| e.to_string())?;
+    std::fs::write(&tmp_copy, &new_bytes).map_err(file_err(&tmp_copy))?;
+    std::fs::rename(&tmp_copy, &copy).map_err(place_err(&copy))?;
     // The edited configuration must load with the monitor's own loader before it replaces
     // the old one (checked as a temporary file in the same directory: same relative paths).
     let edited = with_platform(&text, &rel, &new_sha256);
     let tmp_cfg = dir.join(format!(".{stem}.accept.toml"));
-    std::fs::write(&tmp_cfg, &edited).map_err(|e| format!("{}: {e}", tmp_cfg.display()))?;
+    std::fs::write(&tmp_cfg, &edited).map_err(file_err(&tmp_cfg))?;
     if let Err(e) = config::load(&tmp_cfg) {
         let _ = std::fs::remove_file(&tmp_cfg);
-        return Err(format!("the accepted configuration would not load: {e}"));
+        return Err(AcceptError::EditedConfig(e));
     }
-    std::fs::rename(&tmp_cfg, config_path).map_err(|e| e.to_string())?;
+    std::fs::rename(&tmp_cfg, config_path).map_err(place_err(config_path))?;
     report.written = Some(copy);
     Ok(report)
 }

@@ -391,7 +391,45 @@ pub struct Unreachable {
     pub pose_index: usize,
     pub phase: Phase,
     pub pose_ref: Pose,
-    pub reason: String,
+    pub reason: SkipReason,
+}
+
+/// Why a campaign step was skipped (recorded in the data set's `# unreachable:` lines).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SkipReason {
+    /// The control model has no inverse kinematics / elastostatics at the reference pose.
+    #[error("control model: {0}")]
+    ControlModel(#[source] cdpr_model::kinematics::KinematicsError),
+    /// The control model's force distribution (eq. 3.41) failed.
+    #[error("control model force distribution: {0}")]
+    ForceDistribution(#[source] cdpr_model::statics::StaticsError),
+    /// The control model's force distribution (eq. 3.41) is infeasible (cables 1-based).
+    #[error(
+        "control model force distribution (eq. 3.41) infeasible: cable {cable_lo} at {f_lo:.1} N, cable {cable_hi} at {f_hi:.1} N"
+    )]
+    Infeasible {
+        cable_lo: usize,
+        f_lo: f64,
+        cable_hi: usize,
+        f_hi: f64,
+    },
+    /// The plant found no equilibrium for the command.
+    #[error("plant: {0}")]
+    Plant(#[source] crate::plant::PlantError),
+    /// A true cable force below the limit (eq. 3.29, 3.33); cable 1-based.
+    #[error("force limits: cable {cable} carries {force_n:.1} N < {limit_n} N")]
+    BelowLimit {
+        cable: usize,
+        force_n: f64,
+        limit_n: f64,
+    },
+    /// A true cable force above the limit; cable 1-based.
+    #[error("force limits: cable {cable} carries {force_n:.1} N > {limit_n} N")]
+    AboveLimit {
+        cable: usize,
+        force_n: f64,
+        limit_n: f64,
+    },
 }
 
 /// Result of a campaign.
@@ -480,7 +518,7 @@ pub fn run_campaign(
     let mut f_ref = vec![0.0; m];
     let mut sample = 0u64;
     for (k, x_ref) in campaign.poses.poses().iter().enumerate() {
-        let mut skip = |phase, reason: String| {
+        let mut skip = |phase, reason: SkipReason| {
             unreachable.push(Unreachable {
                 pose_index: k,
                 phase,
@@ -496,7 +534,7 @@ pub fn run_campaign(
                         q_cmd[i] = data.q[i] + q_off[i];
                     }
                 })
-                .map_err(|e| format!("control model: {e}")),
+                .map_err(SkipReason::ControlModel),
             ControlKind::Elastostatic => {
                 command_elastostatic(control, &mut data, x_ref, &mut f_ref, &mut q_cmd)
             }
@@ -573,20 +611,22 @@ fn visit(
     q: &[f64],
     f_lo: f64,
     f_hi: f64,
-) -> Result<crate::plant::Equilibrium, String> {
-    let eq = plant.step(q).map_err(|e| format!("plant: {e}"))?;
+) -> Result<crate::plant::Equilibrium, SkipReason> {
+    let eq = plant.step(q).map_err(SkipReason::Plant)?;
     for (i, f) in eq.forces.iter().enumerate() {
         if *f < f_lo {
-            return Err(format!(
-                "force limits: cable {} carries {f:.1} N < {f_lo} N",
-                i + 1
-            ));
+            return Err(SkipReason::BelowLimit {
+                cable: i + 1,
+                force_n: *f,
+                limit_n: f_lo,
+            });
         }
         if *f > f_hi {
-            return Err(format!(
-                "force limits: cable {} carries {f:.1} N > {f_hi} N",
-                i + 1
-            ));
+            return Err(SkipReason::AboveLimit {
+                cable: i + 1,
+                force_n: *f,
+                limit_n: f_hi,
+            });
         }
     }
     Ok(eq)
@@ -599,22 +639,21 @@ fn command_elastostatic(
     x: &Pose,
     f_ref: &mut [f64],
     q_cmd: &mut [f64],
-) -> Result<(), String> {
+) -> Result<(), SkipReason> {
     let model = &control.model;
     let p = model.params();
-    kinematics::inverse(model, data, x).map_err(|e| format!("control model: {e}"))?;
+    kinematics::inverse(model, data, x).map_err(SkipReason::ControlModel)?;
     let fd = statics::force_distribution(data, &p.w_e, p.f_min, p.f_max, f_ref)
-        .map_err(|e| format!("control model force distribution: {e}"))?;
+        .map_err(SkipReason::ForceDistribution)?;
     if !fd.feasible {
-        return Err(format!(
-            "control model force distribution (eq. 3.41) infeasible: cable {} at {:.1} N, cable {} at {:.1} N",
-            fd.cable_lo + 1,
-            fd.f_lo,
-            fd.cable_hi + 1,
-            fd.f_hi
-        ));
+        return Err(SkipReason::Infeasible {
+            cable_lo: fd.cable_lo + 1,
+            f_lo: fd.f_lo,
+            cable_hi: fd.cable_hi + 1,
+            f_hi: fd.f_hi,
+        });
     }
-    elastostatics::inverse(model, data, x, f_ref, q_cmd).map_err(|e| format!("control model: {e}"))
+    elastostatics::inverse(model, data, x, f_ref, q_cmd).map_err(SkipReason::ControlModel)
 }
 
 /// Pose error statistics (eq. 3.3) of measured against reference poses.

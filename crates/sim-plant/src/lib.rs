@@ -34,8 +34,8 @@ pub mod oracle_check;
 pub mod plant;
 
 pub use campaign::{
-    CampaignConfig, CampaignError, CampaignResult, ControlKind, PoseErrors, PoseSet, Unreachable,
-    load_campaign, parse_campaign, pose_errors, run_campaign,
+    CampaignConfig, CampaignError, CampaignResult, ControlKind, PoseErrors, PoseSet, SkipReason,
+    Unreachable, load_campaign, parse_campaign, pose_errors, run_campaign,
 };
 pub use config::{Effects, PlantConfig, load_plant, parse_plant};
 pub use plant::{Equilibrium, Plant, PlantError, PlantState, SensorReading, TensionSetup};

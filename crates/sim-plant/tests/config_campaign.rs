@@ -7,7 +7,9 @@ mod common;
 use common::*;
 use crs_dataset::Phase;
 use sim_plant::campaign::parse_campaign;
-use sim_plant::{CampaignConfig, ControlKind, Plant, PoseSet, load_campaign, run_campaign};
+use sim_plant::{
+    CampaignConfig, ControlKind, Plant, PoseSet, SkipReason, load_campaign, run_campaign,
+};
 
 const MINI: &str = "[plant]\nname = \"t\"\nplatform = \"../crs-nominal.toml\"\n";
 
@@ -121,7 +123,12 @@ fn unreachable_poses_are_bookkept_with_reason_and_not_sampled() {
     let p = control.model.params();
     for u in &res.unreachable {
         assert!(
-            u.reason.contains("force limits") || u.reason.contains("plant:"),
+            matches!(
+                u.reason,
+                SkipReason::BelowLimit { .. }
+                    | SkipReason::AboveLimit { .. }
+                    | SkipReason::Plant(_)
+            ),
             "{}",
             u.reason
         );
@@ -133,14 +140,47 @@ fn unreachable_poses_are_bookkept_with_reason_and_not_sampled() {
         );
     }
     // the rejected ones really violate the limits on the plant: re-check one from scratch
-    let u = res
+    let (cable, force_n, limit_n) = res
         .unreachable
         .iter()
-        .find(|u| u.reason.contains("force limits"))
+        .find_map(|u| match u.reason {
+            SkipReason::BelowLimit {
+                cable,
+                force_n,
+                limit_n,
+            } => {
+                assert!(force_n < limit_n);
+                Some((cable, force_n, limit_n))
+            }
+            SkipReason::AboveLimit {
+                cable,
+                force_n,
+                limit_n,
+            } => {
+                assert!(force_n > limit_n);
+                Some((cable, force_n, limit_n))
+            }
+            _ => None,
+        })
         .unwrap();
+    assert!(limit_n == p.f_min || limit_n == p.f_max);
     assert!(
-        u.reason.contains(&format!("{}", p.f_min)) || u.reason.contains(&format!("{}", p.f_max))
+        (1..=control.model.m()).contains(&cable),
+        "cable {cable}, {force_n} N"
     );
+    let text = res
+        .unreachable
+        .iter()
+        .find(|u| {
+            matches!(
+                u.reason,
+                SkipReason::BelowLimit { .. } | SkipReason::AboveLimit { .. }
+            )
+        })
+        .unwrap()
+        .reason
+        .to_string();
+    assert!(text.starts_with("force limits: cable "), "{text}");
     // every unreachable pose is listed in the file's metadata too
     let listed = res
         .dataset

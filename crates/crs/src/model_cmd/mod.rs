@@ -35,19 +35,38 @@ pub struct PoseArgs {
     rotation_deg: Option<Vec<f64>>,
 }
 
+/// A vector flag (`--position-m`, `--rotation-deg`, `--min-m`, ...) that is not three finite
+/// numbers.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum TripleError {
+    #[error("{flag} takes 3 comma-separated values, got {got}")]
+    Count { flag: &'static str, got: usize },
+    #[error("{flag} values must be finite")]
+    NotFinite { flag: &'static str },
+}
+
+/// The platform of `--platform` or the pose of the pose flags could not be used.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum AtPoseError {
+    #[error(transparent)]
+    Platform(#[from] cdpr_model::config::ConfigError),
+    #[error(transparent)]
+    Pose(#[from] TripleError),
+}
+
 /// Three comma-separated numbers from a flag, or a clear error naming the flag.
-fn triple(flag: &str, v: &[f64]) -> Result<Vector3<f64>, Box<dyn Error>> {
+fn triple(flag: &'static str, v: &[f64]) -> Result<Vector3<f64>, TripleError> {
     if v.len() != 3 {
-        return Err(format!("{flag} takes 3 comma-separated values, got {}", v.len()).into());
+        return Err(TripleError::Count { flag, got: v.len() });
     }
     if v.iter().any(|x| !x.is_finite()) {
-        return Err(format!("{flag} values must be finite").into());
+        return Err(TripleError::NotFinite { flag });
     }
     Ok(Vector3::new(v[0], v[1], v[2]))
 }
 
 impl PoseArgs {
-    pub(crate) fn pose(&self, pf: &Platform) -> Result<Pose, Box<dyn Error>> {
+    pub(crate) fn pose(&self, pf: &Platform) -> Result<Pose, TripleError> {
         let r = match &self.position_m {
             Some(v) => triple("--position-m", v)?,
             None => pf.home.r,
@@ -78,7 +97,7 @@ pub struct AtPose {
 }
 
 impl AtPose {
-    fn load(&self) -> Result<(Platform, Pose), Box<dyn Error>> {
+    fn load(&self) -> Result<(Platform, Pose), AtPoseError> {
         let pf = load(&self.common)?;
         let x = self.pose.pose(&pf)?;
         Ok((pf, x))
@@ -272,6 +291,6 @@ impl WorkspaceArgs {
     }
 }
 
-pub(crate) fn load(c: &Common) -> Result<Platform, Box<dyn Error>> {
-    Ok(load_platform(&c.platform)?)
+pub(crate) fn load(c: &Common) -> Result<Platform, cdpr_model::config::ConfigError> {
+    load_platform(&c.platform)
 }

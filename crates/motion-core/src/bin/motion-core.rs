@@ -271,9 +271,11 @@ fn run(args: Args) -> Result<(), String> {
         duration_s = plan.duration_s,
         "plan verified (workspace, limits, eq. 3.29)"
     );
-    let plan_error = Arc::new(std::sync::Mutex::new(None::<String>));
+    let plan_error = Arc::new(std::sync::Mutex::new(
+        None::<motion_core::daemon::trajectory::PlanningFailed>,
+    ));
     let pe = plan_error.clone();
-    let on_plan_error = move |e: String| {
+    let on_plan_error = move |e: motion_core::daemon::trajectory::PlanningFailed| {
         tracing::error!("planner: {e}");
         *pe.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
     };

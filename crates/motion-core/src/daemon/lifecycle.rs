@@ -372,7 +372,7 @@ impl Configured {
     pub fn activate(
         self,
         waypoints: Vec<Waypoint>,
-        on_error: impl Fn(String) + Send + 'static,
+        on_error: impl Fn(PlanningFailed) + Send + 'static,
     ) -> HardLoop {
         let sampler = trajectory::spawn_planner(
             self.platform.home,

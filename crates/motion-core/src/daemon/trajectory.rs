@@ -219,7 +219,7 @@ pub fn spawn_planner(
     waypoints: Vec<Waypoint>,
     limits: PlannerLimits,
     period_s: f64,
-    on_error: impl Fn(String) + Send + 'static,
+    on_error: impl Fn(PlanningFailed) + Send + 'static,
 ) -> Sampler {
     let full = Arc::new(ArrayQueue::new(CHUNKS));
     let empty = Arc::new(ArrayQueue::new(CHUNKS));
@@ -337,10 +337,10 @@ fn plan(
     period_s: f64,
     full: &ArrayQueue<Box<Chunk>>,
     empty: &ArrayQueue<Box<Chunk>>,
-) -> Result<(), String> {
+) -> Result<(), PlanningFailed> {
     let mut chunk: Option<Box<Chunk>> = None;
     let wait = || std::thread::sleep(std::time::Duration::from_micros(500));
-    plan_samples::<String>(start, waypoints, lim, period_s, |_, r| {
+    plan_samples::<PlanningFailed>(start, waypoints, lim, period_s, |_, r| {
         let c = loop {
             if let Some(c) = chunk.as_mut() {
                 break c;
