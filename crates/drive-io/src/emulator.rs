@@ -331,7 +331,10 @@ mod tests {
         let kernel = (i128::from(arrived) + offset) as u64;
         assert_eq!(arrival_ns(&rx(read, Some(kernel)), offset), arrived);
         // A realtime clock step cannot put the arrival after the receipt.
-        assert_eq!(arrival_ns(&rx(read, Some(kernel)), offset - 1_000_000_000), read);
+        assert_eq!(
+            arrival_ns(&rx(read, Some(kernel)), offset - 1_000_000_000),
+            read
+        );
         assert_eq!(arrival_ns(&rx(read, None), offset), read);
         let now_offset = realtime_minus_monotonic_ns();
         assert!(now_offset > 0, "{now_offset}");
