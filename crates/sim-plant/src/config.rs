@@ -227,8 +227,8 @@ struct RawMeta {
 #[serde(deny_unknown_fields)]
 struct RawGeometry {
     enabled: bool,
-    frame_anchor_offsets_m: Option<Spanned<Vec<[f64; 3]>>>,
-    platform_anchor_offsets_m: Option<Spanned<Vec<[f64; 3]>>>,
+    frame_anchor_offsets_m: Option<Spanned<Vec<Spanned<Vec<f64>>>>>,
+    platform_anchor_offsets_m: Option<Spanned<Vec<Spanned<Vec<f64>>>>>,
 }
 
 #[derive(Deserialize)]
@@ -236,7 +236,7 @@ struct RawGeometry {
 struct RawPulleys {
     enabled: bool,
     radius_m: Spanned<PerCable>,
-    swivel_axes: Spanned<Vec<[f64; 3]>>,
+    swivel_axes: Spanned<Vec<Spanned<Vec<f64>>>>,
 }
 
 #[derive(Deserialize)]
@@ -287,8 +287,8 @@ struct RawWinch {
 struct RawLoad {
     enabled: bool,
     mass_kg: Spanned<f64>,
-    center_of_gravity_m: Spanned<[f64; 3]>,
-    extra_wrench_n_nm: Option<Spanned<[f64; 6]>>,
+    center_of_gravity_m: Spanned<Vec<f64>>,
+    extra_wrench_n_nm: Option<Spanned<Vec<f64>>>,
     gravity_m_per_s2: Option<Spanned<f64>>,
 }
 
@@ -392,9 +392,12 @@ impl Locator<'_> {
         Ok(vals)
     }
 
+    /// One row per cable, each exactly three finite numbers; a bad row is named `key[i]` at
+    /// its own line and column. (Not serde's `[f64; 3]`: under `toml` it reads the first three
+    /// elements and ignores the rest, so a row typed with a fourth coordinate loaded silently.)
     pub fn vec3s(
         &self,
-        v: &Spanned<Vec<[f64; 3]>>,
+        v: &Spanned<Vec<Spanned<Vec<f64>>>>,
         key: &str,
         m: usize,
     ) -> Result<Vec<Vector3<f64>>, ConfigError> {
@@ -406,12 +409,31 @@ impl Locator<'_> {
                 format!("has {} entries but there are {m} cables", xs.len()),
             ));
         }
-        for (i, p) in xs.iter().enumerate() {
-            if !p.iter().all(|c| c.is_finite()) {
-                return Err(self.err(v.span(), format!("{key}[{i}]"), "must be finite"));
-            }
+        xs.iter()
+            .enumerate()
+            .map(|(i, row)| self.fixed::<3>(row, &format!("{key}[{i}]")))
+            .map(|r| r.map(|p| Vector3::new(p[0], p[1], p[2])))
+            .collect()
+    }
+
+    /// Exactly `N` finite numbers, or an error naming `key` at the array.
+    pub fn fixed<const N: usize>(
+        &self,
+        v: &Spanned<Vec<f64>>,
+        key: &str,
+    ) -> Result<[f64; N], ConfigError> {
+        let xs = v.get_ref();
+        let arr: [f64; N] = xs.as_slice().try_into().map_err(|_| {
+            self.err(
+                v.span(),
+                key,
+                format!("has {} values, expected {N}", xs.len()),
+            )
+        })?;
+        if !arr.iter().all(|c| c.is_finite()) {
+            return Err(self.err(v.span(), key, "must be finite"));
         }
-        Ok(xs.iter().map(|p| Vector3::new(p[0], p[1], p[2])).collect())
+        Ok(arr)
     }
 }
 
@@ -565,21 +587,9 @@ pub fn parse_plant(text: &str, file: &str, base_dir: &Path) -> Result<PlantConfi
         });
     }
     if let Some(l) = raw.load.filter(|l| l.enabled) {
-        let c = l.center_of_gravity_m.get_ref();
-        if !c.iter().all(|x| x.is_finite()) {
-            return Err(loc.err(
-                l.center_of_gravity_m.span(),
-                "load.center_of_gravity_m",
-                "must be finite",
-            ));
-        }
+        let c = loc.fixed::<3>(&l.center_of_gravity_m, "load.center_of_gravity_m")?;
         let w = match &l.extra_wrench_n_nm {
-            Some(w) => {
-                if !w.get_ref().iter().all(|x| x.is_finite()) {
-                    return Err(loc.err(w.span(), "load.extra_wrench_n_nm", "must be finite"));
-                }
-                Vector6::from_row_slice(w.get_ref())
-            }
+            Some(w) => Vector6::from_row_slice(&loc.fixed::<6>(w, "load.extra_wrench_n_nm")?),
             None => Vector6::zeros(),
         };
         fx.load = Some(Load {

@@ -63,6 +63,39 @@ fn plant_toml_errors_name_file_key_and_line() {
     assert!(plant_from(MINI).unwrap().effects.enabled_names().is_empty());
 }
 
+/// A row of the wrong length is refused at that row (serde's [f64; 3] under toml read the first
+/// three values of a row typed with a fourth and dropped it silently).
+#[test]
+fn rows_of_the_wrong_length_are_refused_at_the_row() {
+    let row = |i: usize| {
+        if i == 2 {
+            "  [0.01, 0.0, 0.0, 9.0],\n".to_string()
+        } else {
+            "  [0.0, 0.0, 0.0],\n".to_string()
+        }
+    };
+    let rows: String = (0..8).map(row).collect();
+    let e = plant_from(&format!(
+        "{MINI}[geometry_deviation]\nenabled = true\nframe_anchor_offsets_m = [\n{rows}]\n"
+    ))
+    .unwrap_err();
+    assert_eq!(e.key, "geometry_deviation.frame_anchor_offsets_m[2]", "{e}");
+    assert_eq!(e.line, Some(9), "{e}");
+    assert!(e.message.contains("has 4 values, expected 3"), "{e}");
+    let e = plant_from(&format!(
+        "{MINI}[load]\nenabled = true\nmass_kg = 500.0\ncenter_of_gravity_m = [0.0, 0.0, 0.1]\nextra_wrench_n_nm = [1.0, 2.0, 3.0, 4.0, 5.0]\n"
+    ))
+    .unwrap_err();
+    assert_eq!(e.key, "load.extra_wrench_n_nm", "{e}");
+    assert!(e.message.contains("has 5 values, expected 6"), "{e}");
+    let e = plant_from(&format!(
+        "{MINI}[load]\nenabled = true\nmass_kg = 500.0\ncenter_of_gravity_m = [0.0, nan, 0.1]\n"
+    ))
+    .unwrap_err();
+    assert_eq!(e.key, "load.center_of_gravity_m", "{e}");
+    assert!(e.message.contains("finite"), "{e}");
+}
+
 #[test]
 fn campaign_toml_errors_and_defaults() {
     let dir = config_dir().join("plant");
