@@ -725,7 +725,7 @@ fn dynamics(loc: &Locator, d: &RawDynamics, w_e: Vector6<f64>) -> Result<RigidBo
             d.mass_kg.span(),
             "dynamics.mass_kg",
             format!(
-                "the platform with payload weighs {:.0} N ({:.1} kg × {GRAVITY_M_PER_S2} m/s²), but                  load.wrench_n_nm carries {:.0} N: they must agree within 2 %",
+                "the platform with payload weighs {:.0} N ({:.1} kg × {GRAVITY_M_PER_S2} m/s²), but load.wrench_n_nm carries {:.0} N: they must agree within 2 %",
                 -weight[2], total.mass_kg, -w_e[2]
             ),
         ));
@@ -737,13 +737,20 @@ fn dynamics(loc: &Locator, d: &RawDynamics, w_e: Vector6<f64>) -> Result<RigidBo
             d.center_of_gravity_m.span(),
             "dynamics.center_of_gravity_m",
             format!(
-                "the weight at the centre of gravity [{:.3}, {:.3}, {:.3}] m exerts a torque [{:.0},                  {:.0}, {:.0}] N·m, but load.wrench_n_nm carries [{:.0}, {:.0}, {:.0}] N·m",
+                "the weight at the centre of gravity [{:.3}, {:.3}, {:.3}] m exerts a torque [{:.0}, {:.0}, {:.0}] N·m, but load.wrench_n_nm carries [{:.0}, {:.0}, {:.0}] N·m",
                 total.cog_m.x, total.cog_m.y, total.cog_m.z, weight[3], weight[4], weight[5], w_e[3],
                 w_e[4], w_e[5]
             ),
         ));
     }
     Ok(total)
+}
+
+/// The span of row `i` of an array of rows, else of the whole array.
+fn row_span(rows: &Rows, i: usize) -> Range<usize> {
+    rows.get_ref()
+        .get(i)
+        .map_or_else(|| rows.span(), |r| r.span())
 }
 
 fn model_error(loc: &Locator, raw: &RawPlatform, e: ModelError) -> ConfigError {
@@ -753,13 +760,15 @@ fn model_error(loc: &Locator, raw: &RawPlatform, e: ModelError) -> ConfigError {
             g.frame_anchors_m.span(),
             "geometry.frame_anchors_m".to_string(),
         ),
-        ModelError::DuplicateAnchor { what: "a", i, .. } => (
-            g.frame_anchors_m.span(),
-            format!("geometry.frame_anchors_m[{i}]"),
+        // The later of the two coinciding rows (the one typed as a copy), at that row, as the
+        // monitor's reader names it.
+        ModelError::DuplicateAnchor { what: "a", j, .. } => (
+            row_span(&g.frame_anchors_m, *j),
+            format!("geometry.frame_anchors_m[{j}]"),
         ),
-        ModelError::DuplicateAnchor { i, .. } => (
-            g.platform_anchors_m.span(),
-            format!("geometry.platform_anchors_m[{i}]"),
+        ModelError::DuplicateAnchor { j, .. } => (
+            row_span(&g.platform_anchors_m, *j),
+            format!("geometry.platform_anchors_m[{j}]"),
         ),
         ModelError::NonPositiveStiffness(i) => (
             raw.elasticity.k_f_n.span(),

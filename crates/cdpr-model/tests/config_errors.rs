@@ -71,6 +71,21 @@ fn geometry_errors_name_the_key() {
     let t4 = base().replace("[ 5.016,  7.555,  6.503]", "[-5.380,  7.677,  6.524]");
     let e = parse_platform(&t4, "x.toml").unwrap_err();
     assert!(e.message.contains("coincide"), "{e}");
+    // Named at the later row, the copy (as the monitor's reader names it).
+    let later = t4
+        .lines()
+        .position(|l| l.contains("[-5.380,  7.677,  6.524]"))
+        .map(|first| {
+            first
+                + 1
+                + t4.lines()
+                    .skip(first + 1)
+                    .position(|l| l.contains("[-5.380,  7.677,  6.524]"))
+                    .expect("two coinciding rows")
+        })
+        .unwrap();
+    assert_eq!(e.line, Some(later + 1), "{e}");
+    assert!(e.key.starts_with("geometry.frame_anchors_m["), "{e}");
     // Wrong arity of a point.
     let t5 = base().replace("[ 5.016,  7.555,  6.503]", "[ 5.016,  7.555]");
     assert!(parse_platform(&t5, "x.toml").is_err());
