@@ -851,10 +851,11 @@ pub fn execute_observed(
         sum.rest_points_skipped = r.skipped.len();
     }
     if sum.estops > 0 && with_monitor {
-        sum.monitor_trips = log_lines(&a.out.join("safety-monitor.log"), "SAFETY TRIP", 4);
+        sum.monitor_trips =
+            supervisor::log_lines(&a.out.join("safety-monitor.log"), "SAFETY TRIP", 4);
     }
     if sum.bus_stopped_during_run.is_some() {
-        sum.bus_stop_reasons = log_lines(&a.out.join("drive-io.log"), " ERROR ", 2);
+        sum.bus_stop_reasons = supervisor::log_lines(&a.out.join("drive-io.log"), " ERROR ", 2);
     }
     print_summary(&sum);
     if let (Some(path), Some(r), Ok(())) = (&a.record, &recorder, &result) {
@@ -912,23 +913,6 @@ pub fn execute_observed(
         return Err(SimError::NoSamples);
     }
     Ok(sum)
-}
-
-/// The first `n` lines of a child's log that contain `needle`, from the level on (without the
-/// timestamp): the monitor's trip records, drive-io's stop reasons, so a summary with a stop
-/// says which check fired and with what value.
-fn log_lines(log: &Path, needle: &str, n: usize) -> Vec<String> {
-    let text = std::fs::read_to_string(log).unwrap_or_default();
-    text.lines()
-        .filter(|l| l.contains(needle))
-        .take(n)
-        .map(|l| {
-            l.split_once(' ')
-                .map_or(l, |(_, rest)| rest)
-                .trim()
-                .to_string()
-        })
-        .collect()
 }
 
 fn print_summary(s: &Summary) {

@@ -55,6 +55,18 @@ fn split(dx: &[f64; 6]) -> (DVec3, DVec3) {
     )
 }
 
+/// U(base moved by dx) as a function of the increment dx = (δr, δω).
+fn around<'a>(
+    robot: &'a Robot,
+    q_theta: &'a [f64],
+    base: PoseQ,
+) -> impl Fn(&[f64; 6]) -> Result<f64, OracleError> + 'a {
+    move |dx| {
+        let (dr, dw) = split(dx);
+        potential(robot, q_theta, &base, dr, dw)
+    }
+}
+
 fn gradient(
     u: &impl Fn(&[f64; 6]) -> Result<f64, OracleError>,
     h: f64,
@@ -137,10 +149,7 @@ pub fn equilibrium(
     let mut converged = false;
     for it in 1..=opts.max_iterations {
         iterations = it;
-        let u = |dx: &[f64; 6]| {
-            let (dr, dw) = split(dx);
-            potential(robot, q_theta, &base, dr, dw)
-        };
+        let u = around(robot, q_theta, base);
         let u0 = u(&[0.0; 6])?;
         let g = gradient(&u, opts.gradient_step)?;
         let h = hessian(&u, u0, opts.hessian_step)?;
@@ -222,11 +231,7 @@ pub fn equilibrium(
     if forces.iter().all(|f| *f == 0.0) {
         return Err(OracleError::AllSlack);
     }
-    let u = |dx: &[f64; 6]| {
-        let (dr, dw) = split(dx);
-        potential(robot, q_theta, &base, dr, dw)
-    };
-    let g = gradient(&u, opts.gradient_step)?;
+    let g = gradient(&around(robot, q_theta, base), opts.gradient_step)?;
     Ok(Equilibrium {
         pose: base.to_array(),
         pose_q: base,

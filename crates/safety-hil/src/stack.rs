@@ -307,6 +307,32 @@ impl Stack {
         Ok(())
     }
 
+    /// The stop the drives' own safety watch makes (no monitor, or an invalid pair): their
+    /// watch trips, they brake, and drive-io e-stops on its own watch. Returns the emulator's
+    /// status after the stop (its `safety_tripped_ns`) and the time the drives stopped.
+    pub fn stopped_by_the_drives_watch(&mut self) -> Res<(EmuStatus, u64)> {
+        self.wait("the drives' safety watch to trip", 10.0, |s| {
+            Ok(s.emu()?.safety_trips > 0)
+        })?;
+        let stopped = self.require_braked()?;
+        let e = self.emu()?;
+        self.wait("drive-io e-stopped by its own watch", 10.0, |s| {
+            Ok(s.bus_state() == Some(BusState::EStop))
+        })?;
+        Ok((e, stopped))
+    }
+
+    /// motion-core's state from a heartbeat newer than the monitor's next one (its stage
+    /// publishes every few cycles, so an older one may still describe the state before).
+    pub fn fresh_motion_state(&mut self) -> Res<Option<u32>> {
+        let h0 = self.monitor_heartbeats;
+        self.motion_state = None;
+        self.wait("motion-core's heartbeat", 10.0, |s| {
+            Ok(s.motion_state.is_some() && s.monitor_heartbeats > h0)
+        })?;
+        Ok(self.motion_state)
+    }
+
     /// Waits for braked drives (none following, all at rest), then requires NO motion over
     /// 0.5 s. Returns the time the last drive stopped following (CLOCK_MONOTONIC ns).
     pub fn require_braked(&mut self) -> Res<u64> {

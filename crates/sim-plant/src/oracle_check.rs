@@ -120,7 +120,7 @@ pub fn conservative_twin(config: &PlantConfig) -> (PlantConfig, Vec<&'static str
                 // rotation, and a potential.
                 let weight = -w[2];
                 if w[0] == 0.0 && w[1] == 0.0 && weight > 0.0 && w[5] == 0.0 {
-                    let g = 9.81;
+                    let g = crate::config::STANDARD_GRAVITY;
                     fx.load = Some(Load {
                         mass: weight / g,
                         center_of_gravity: Vector3::new(w[4] / weight, -w[3] / weight, 0.0),
@@ -220,31 +220,41 @@ pub fn compare(
     Ok((dp, dr, df))
 }
 
-/// Poses of the check: home and six around it (±0.2 m along each axis with a few degrees of
-/// rotation), those inside the platform's region.
-fn poses(config: &PlantConfig) -> Vec<Pose> {
-    let home = config.platform.home;
-    let d = 2.0_f64.to_radians();
-    let offsets = [
+/// The poses of the check as offsets from home (m, rad): home and six around it, ±0.2 m along
+/// each axis with a few degrees of rotation.
+const OFFSETS: [[f64; 6]; 7] = {
+    const D: f64 = 2.0 * std::f64::consts::PI / 180.0;
+    [
         [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        [0.2, 0.0, 0.0, d, 0.0, 0.0],
-        [-0.2, 0.0, 0.0, 0.0, -d, 0.0],
-        [0.0, 0.2, 0.0, 0.0, 0.0, d],
-        [0.0, -0.2, 0.0, -d, d, 0.0],
-        [0.0, 0.0, 0.2, 0.0, d, -d],
-        [0.15, -0.15, -0.2, d, 0.0, d],
-    ];
-    offsets
+        [0.2, 0.0, 0.0, D, 0.0, 0.0],
+        [-0.2, 0.0, 0.0, 0.0, -D, 0.0],
+        [0.0, 0.2, 0.0, 0.0, 0.0, D],
+        [0.0, -0.2, 0.0, -D, D, 0.0],
+        [0.0, 0.0, 0.2, 0.0, D, -D],
+        [0.15, -0.15, -0.2, D, 0.0, D],
+    ]
+};
+
+/// The poses of [`OFFSETS`] inside the platform's region.
+fn poses(config: &PlantConfig) -> Vec<Pose> {
+    let home = config.platform.home.to_array();
+    OFFSETS
         .iter()
-        .map(|o| {
-            let mut x = home.to_array();
-            for (v, d) in x.iter_mut().zip(o) {
-                *v += d;
-            }
-            Pose::from_array(x)
-        })
+        .map(|o| Pose::from_array(std::array::from_fn(|k| home[k] + o[k])))
         .filter(|p| config.platform.region.contains(p))
         .collect()
+}
+
+/// The set-up forces of the check: the platform's `f_ini`, else (f_min + f_max)/2 per cable
+/// (the plant projects them onto its equilibrium, eq. 3.19).
+pub fn set_up_forces(plant: &Plant) -> Vec<f64> {
+    let params = plant.physical_model().params();
+    plant
+        .config()
+        .platform
+        .f_ini
+        .clone()
+        .unwrap_or_else(|| vec![0.5 * (params.f_min + params.f_max); params.a.len()])
 }
 
 /// Builds the twin and compares plant and oracle at the poses around home, each set up with
@@ -255,16 +265,10 @@ pub fn check_against_oracle(config: &PlantConfig) -> Result<OracleAgreement, Ora
     let poses = poses(&twin);
     let mut plant = Plant::new(twin)?;
     let robot = oracle_robot(&plant)?;
-    let params = plant.physical_model().params();
-    let f_ini = plant
-        .config()
-        .platform
-        .f_ini
-        .clone()
-        .unwrap_or_else(|| vec![0.5 * (params.f_min + params.f_max); params.a.len()]);
+    let f_ini = set_up_forces(&plant);
     let mut out = OracleAgreement {
         poses: 0,
-        skipped: 7 - poses.len(),
+        skipped: OFFSETS.len() - poses.len(),
         max_position_m: 0.0,
         max_rotation_rad: 0.0,
         max_force_n: 0.0,

@@ -56,13 +56,7 @@ fn random_commands_agree_on_the_helicopter_twin() {
     let mut plant = Plant::new(twin).unwrap();
     let robot = oracle_check::oracle_robot(&plant).unwrap();
     let home = plant.config().platform.home;
-    let m = plant.m();
-    let f_ini = plant
-        .config()
-        .platform
-        .f_ini
-        .clone()
-        .unwrap_or_else(|| vec![5000.0; m]);
+    let f_ini = oracle_check::set_up_forces(&plant);
     let q0 = plant.setup_tension(&home, &f_ini).unwrap().q_cmd;
     let mut state: u64 = 0x9e37_79b9_7f4a_7c15;
     let mut uniform = || {
@@ -97,13 +91,7 @@ fn a_different_robot_is_seen() {
     assert!(twin.effects.pulleys.is_some(), "crs-like has pulleys");
     let mut plant = Plant::new(twin).unwrap();
     let home = plant.config().platform.home;
-    let m = plant.m();
-    let f_ini = plant
-        .config()
-        .platform
-        .f_ini
-        .clone()
-        .unwrap_or_else(|| vec![5000.0; m]);
+    let f_ini = oracle_check::set_up_forces(&plant);
     let q = plant.setup_tension(&home, &f_ini).unwrap().q_cmd;
     let right = oracle_check::oracle_robot(&plant).unwrap();
     let (dp, _, _) = oracle_check::compare(&mut plant, &right, &q).unwrap();

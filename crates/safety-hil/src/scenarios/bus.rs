@@ -5,7 +5,7 @@ use crate::Res;
 use crate::configs::home_length;
 use crate::scenarios::{Outcome, ms};
 use crate::stack::{Stack, open_bus};
-use crs_ipc::{BusState, monotonic_ns};
+use crs_ipc::monotonic_ns;
 use safety_monitor::Cause;
 use std::sync::atomic::Ordering;
 
@@ -30,14 +30,7 @@ pub fn corrupted_safety_frame(st: &mut Stack) -> Res<Outcome> {
     let t0 = monotonic_ns();
     bus.send(&a).map_err(|e| e.to_string())?;
     bus.send(&b).map_err(|e| e.to_string())?;
-    st.wait("the drives' safety watch to trip", 10.0, |s| {
-        Ok(s.emu()?.safety_trips > 0)
-    })?;
-    let stopped = st.require_braked()?;
-    let e = st.emu()?;
-    st.wait("drive-io e-stopped by its own watch", 10.0, |s| {
-        Ok(s.bus_state() == Some(BusState::EStop))
-    })?;
+    let (e, stopped) = st.stopped_by_the_drives_watch()?;
     Ok(Outcome {
         cause: "drives: invalid pair (inverse mismatch)".into(),
         detect_ms: ms(t0, e.safety_tripped_ns),

@@ -167,13 +167,7 @@ pub fn tampered_safety_config(st: &mut Stack) -> Res<Outcome> {
     let cfg2 = st.dir.join("safety-monitor-check-off.toml");
     std::fs::write(&cfg2, off).map_err(|e| e.to_string())?;
     refuses(st, &cfg2, "can.check_rpdo")?;
-    st.wait("the drives' safety watch to trip", 10.0, |s| {
-        Ok(s.emu()?.safety_trips > 0)
-    })?;
-    let stopped = st.require_braked()?;
-    st.wait("drive-io e-stopped by its own watch", 10.0, |s| {
-        Ok(s.bus_state() == Some(BusState::EStop))
-    })?;
+    let (_, stopped) = st.stopped_by_the_drives_watch()?;
     Ok(Outcome {
         cause: "monitor refused both tampered configs".into(),
         detect_ms: None,

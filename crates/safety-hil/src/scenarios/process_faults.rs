@@ -79,14 +79,7 @@ pub fn kill_monitor(st: &mut Stack) -> Res<Outcome> {
     let t0 = monotonic_ns();
     st.signal("safety-monitor", libc::SIGKILL)?;
     st.reap("safety-monitor");
-    st.wait("the drives' safety watch to trip", 10.0, |s| {
-        Ok(s.emu()?.safety_trips > 0)
-    })?;
-    let stopped = st.require_braked()?;
-    let e = st.emu()?;
-    st.wait("drive-io e-stopped by its own watch", 10.0, |s| {
-        Ok(s.bus_state() == Some(BusState::EStop))
-    })?;
+    let (e, stopped) = st.stopped_by_the_drives_watch()?;
     Ok(Outcome {
         cause: "drives: safety heartbeat timeout".into(),
         detect_ms: ms(t0, e.safety_tripped_ns),

@@ -180,15 +180,11 @@ pub fn forged_reset_ignored(st: &mut Stack) -> Res<Outcome> {
     })?;
     require_still_latched(st, "reset forged with another source")?;
     // motion-core's heartbeat after the forgeries (its stage publishes every few cycles).
-    let h0 = st.monitor_heartbeats;
-    st.motion_state = None;
-    st.wait("motion-core's heartbeat", 10.0, |s| {
-        Ok(s.motion_state.is_some() && s.monitor_heartbeats > h0)
-    })?;
-    if st.motion_state != Some(crs_ipc::motion_state::ESTOPPED) {
+    let state = st.fresh_motion_state()?;
+    if state != Some(crs_ipc::motion_state::ESTOPPED) {
         return Err(format!(
             "motion-core left its latch on a forged reset (state {:?})",
-            st.motion_state
+            state
         ));
     }
     // The monitor's source claimed, with a newer epoch: not on the bus, so drive-io and the
@@ -203,15 +199,11 @@ pub fn forged_reset_ignored(st: &mut Stack) -> Res<Outcome> {
         |s| Ok(s.monitor_estops.len() > n_estops),
     )?;
     require_still_latched(st, "reset forged with the monitor's source")?;
-    let h0 = st.monitor_heartbeats;
-    st.motion_state = None;
-    st.wait("motion-core's heartbeat", 10.0, |s| {
-        Ok(s.motion_state.is_some() && s.monitor_heartbeats > h0)
-    })?;
-    if st.motion_state != Some(crs_ipc::motion_state::ESTOPPED) {
+    let state = st.fresh_motion_state()?;
+    if state != Some(crs_ipc::motion_state::ESTOPPED) {
         return Err(format!(
             "motion-core should be e-stopped again after the monitor's answer (state {:?})",
-            st.motion_state
+            state
         ));
     }
     spy_pairs(st, bus.as_mut(), &mut spy, 3)?;
@@ -300,13 +292,7 @@ pub fn replayed_heartbeat_after_monitor_death(st: &mut Stack) -> Res<Outcome> {
     let t0 = monotonic_ns();
     st.signal("safety-monitor", libc::SIGKILL)?;
     st.reap("safety-monitor");
-    st.wait("the drives' safety watch to trip", 10.0, |s| {
-        Ok(s.emu()?.safety_trips > 0)
-    })?;
-    st.wait("drive-io e-stopped by its own watch", 10.0, |s| {
-        Ok(s.bus_state() == Some(BusState::EStop))
-    })?;
-    let stopped = st.require_braked()?;
+    let (_, stopped) = st.stopped_by_the_drives_watch()?;
     // A release would show as the watch permitting during the replay, and afterwards as one
     // more Permit -> Inhibit transition (the replay ends, the validation time runs out).
     let trips0 = st.emu()?.safety_trips;
