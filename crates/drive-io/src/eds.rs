@@ -5,9 +5,14 @@
 //! `ParameterName`, `ObjectType`, `DataType`, `AccessType`, `DefaultValue`, `PDOMapping`,
 //! `LowLimit`, `HighLimit` (and a DCF's `ParameterValue`); numbers are decimal, `0x` hex or
 //! `0` octal (CiA 306 §4.6.3), and may be `$NODEID+...` expressions (evaluated per node with
-//! [`OdEntry::default_for`]). Every error names the line. [`Eds::write_dcf`] writes the DCF of
-//! a commissioned node: the EDS text with `ParameterValue=` on every configured entry and a
-//! `[DeviceComissioning]` section (CiA 306 §5; the spelling is the standard's).
+//! [`OdEntry::default_for`]). Every error names the line. ARRAY objects written compactly
+//! (`CompactSubObj=N`, CiA 306 §4.5.2.2, with the optional `[XXXXName]` / `[XXXXValue]`
+//! sections) are expanded into their sub-indices 0..=N, as Lely and python canopen read them.
+//! String and domain values are kept as text ([`OdEntry::default_text`]).
+//! [`Eds::write_dcf`] writes the DCF of a commissioned node: the EDS text with
+//! `ParameterValue=` on every configured entry (signed types as signed decimals, compact
+//! objects written out as `[XXXXsubN]` sections) and a `[DeviceComissioning]` section (CiA 306
+//! §5; the spelling is the standard's).
 //!
 //! The simulated winch's EDS is `config/eds/crs-winch.eds` ([`Eds::builtin_winch`]).
 
@@ -81,6 +86,32 @@ impl DataType {
     }
     pub fn is_signed(self) -> bool {
         matches!(self, Self::Integer8 | Self::Integer16 | Self::Integer32)
+    }
+    /// VISIBLE_STRING, OCTET_STRING, UNICODE_STRING or DOMAIN: a byte string of any length
+    /// (segmented SDO).
+    pub fn is_string(self) -> bool {
+        matches!(self, Self::Other(0x0009 | 0x000A | 0x000B | 0x000F))
+    }
+    /// The value's bytes from its EDS text: VISIBLE_STRING as written, OCTET_STRING/DOMAIN as
+    /// hex digits (python canopen's and Lely's reading), UNICODE_STRING as UTF-16LE. None if
+    /// the text is not valid for the type or the type is no string.
+    pub fn text_bytes(self, text: &str) -> Option<Vec<u8>> {
+        match self {
+            Self::Other(0x0009) => Some(text.as_bytes().to_vec()),
+            Self::Other(0x000A | 0x000F) => {
+                let t: String = text.chars().filter(|c| !c.is_whitespace()).collect();
+                let t = t.strip_prefix("0x").unwrap_or(&t);
+                if t.len() % 2 != 0 {
+                    return None;
+                }
+                (0..t.len())
+                    .step_by(2)
+                    .map(|i| u8::from_str_radix(t.get(i..i + 2)?, 16).ok())
+                    .collect()
+            }
+            Self::Other(0x000B) => Some(text.encode_utf16().flat_map(u16::to_le_bytes).collect()),
+            _ => None,
+        }
     }
     /// The value range of the integer types.
     pub fn range(self) -> Option<(i64, i64)> {
@@ -166,6 +197,8 @@ pub struct OdEntry {
     pub data_type: DataType,
     pub access: Access,
     pub default: Option<EdsValue>,
+    /// The `DefaultValue` as written (the value of string and domain entries).
+    pub default_text: Option<String>,
     /// A DCF's configured value.
     pub parameter_value: Option<EdsValue>,
     pub pdo_mappable: bool,
@@ -223,6 +256,8 @@ pub enum RangeError {
 pub struct OdObject {
     pub name: String,
     pub object_type: u8,
+    /// `CompactSubObj=N`: an ARRAY of N equal sub-indices described in its object section.
+    pub compact: Option<u8>,
 }
 
 #[derive(Debug, Clone)]
@@ -348,6 +383,49 @@ impl Eds {
             }
             s.lines.push(raw.to_string());
         }
+        // `[XXXXName]` / `[XXXXValue]`: per-sub names and (DCF) values of compact arrays.
+        let mut compact_names: BTreeMap<u16, BTreeMap<u8, String>> = BTreeMap::new();
+        let mut compact_values: BTreeMap<u16, BTreeMap<u8, (String, usize)>> = BTreeMap::new();
+        for s in &sections {
+            let lower = s.name.to_ascii_lowercase();
+            let (idx, into_names) = if let Some(i) = lower.strip_suffix("name") {
+                (i, true)
+            } else if let Some(i) = lower.strip_suffix("value") {
+                (i, false)
+            } else {
+                continue;
+            };
+            if idx.len() != 4 || !idx.chars().all(|c| c.is_ascii_hexdigit()) {
+                continue;
+            }
+            let index = u16::from_str_radix(idx, 16).map_err(|e| err(s.line, e.to_string()))?;
+            for (k, l) in s.lines.iter().enumerate() {
+                let t = l.trim();
+                if t.is_empty() || t.starts_with(';') {
+                    continue;
+                }
+                let (key, value) = t.split_once('=').unwrap_or((t, ""));
+                let key = key.trim();
+                if key.eq_ignore_ascii_case("NrOfEntries") {
+                    continue;
+                }
+                let Some(sub) = key.parse::<u8>().ok().filter(|n| *n > 0) else {
+                    return Err(err(
+                        s.line + 1 + k,
+                        format!("[{}]: `{key}` is not a sub-index 1..=255", s.name),
+                    ));
+                };
+                let value = value.trim().to_string();
+                if into_names {
+                    compact_names.entry(index).or_default().insert(sub, value);
+                } else {
+                    compact_values
+                        .entry(index)
+                        .or_default()
+                        .insert(sub, (value, s.line + 1 + k));
+                }
+            }
+        }
         let mut objects = BTreeMap::new();
         let mut entries = BTreeMap::new();
         for s in &sections {
@@ -379,16 +457,6 @@ impl Eds {
                 .get("parametername")
                 .map(|(v, _)| v.clone())
                 .ok_or_else(|| err(s.line, format!("[{}] has no ParameterName", s.name)))?;
-            if num("compactsubobj")?.is_some_and(|v| v.value != 0) {
-                return Err(err(
-                    s.line,
-                    format!(
-                        "[{}] uses CompactSubObj, which this parser does not expand: list the \
-                         sub-indices as [{}subN] sections",
-                        s.name, s.name
-                    ),
-                ));
-            }
             let object_type = num("objecttype")?.map_or(7, |v| v.value);
             if !(0..=9).contains(&object_type) {
                 return Err(err(
@@ -396,15 +464,41 @@ impl Eds {
                     format!("[{}] ObjectType {object_type}", s.name),
                 ));
             }
+            let compact = num("compactsubobj")?.map(|v| v.value).filter(|n| *n != 0);
+            if let Some(n) = compact {
+                if sub.is_some() || object_type != 8 {
+                    return Err(err(
+                        s.line,
+                        format!(
+                            "[{}] CompactSubObj belongs to the object section of an ARRAY \
+                             (ObjectType=0x8)",
+                            s.name
+                        ),
+                    ));
+                }
+                if !(1..=254).contains(&n) {
+                    return Err(err(
+                        s.line,
+                        format!("[{}] CompactSubObj={n}: must be 1..=254", s.name),
+                    ));
+                }
+                if num("subnumber")?.is_some_and(|v| v.value != 0) {
+                    return Err(err(
+                        s.line,
+                        format!("[{}] has both SubNumber and CompactSubObj", s.name),
+                    ));
+                }
+            }
             if sub.is_none() {
                 objects.insert(
                     index,
                     OdObject {
                         name: name.clone(),
                         object_type: object_type as u8,
+                        compact: compact.map(|n| n as u8),
                     },
                 );
-                if object_type == 8 || object_type == 9 {
+                if (object_type == 8 || object_type == 9) && compact.is_none() {
                     continue; // ARRAY/RECORD: the data are in the [XXXXsubN] sections
                 }
             }
@@ -426,10 +520,14 @@ impl Eds {
             let entry = OdEntry {
                 index,
                 sub: sub.unwrap_or(0),
-                name,
+                name: name.clone(),
                 data_type: DataType::from_code(data_type.value as u16),
                 access,
                 default: num("defaultvalue").unwrap_or(None),
+                default_text: keys
+                    .get("defaultvalue")
+                    .map(|(v, _)| v.clone())
+                    .filter(|v| !v.is_empty()),
                 parameter_value: num("parametervalue").unwrap_or(None),
                 pdo_mappable: pdo,
                 low: num("lowlimit")?.map(|v| v.value),
@@ -455,7 +553,50 @@ impl Eds {
                     ));
                 }
             }
-            entries.insert((index, entry.sub), entry);
+            let Some(n) = compact else {
+                entries.insert((index, entry.sub), entry);
+                continue;
+            };
+            // CompactSubObj=n: sub 0 holds n, subs 1..=n share the object's description.
+            let n = n as u8;
+            entries.insert(
+                (index, 0),
+                OdEntry {
+                    index,
+                    sub: 0,
+                    name: "Highest sub-index supported".into(),
+                    data_type: DataType::Unsigned8,
+                    access: Access::Ro,
+                    default: Some(EdsValue {
+                        value: i64::from(n),
+                        plus_node_id: false,
+                    }),
+                    default_text: Some(n.to_string()),
+                    parameter_value: None,
+                    pdo_mappable: false,
+                    low: None,
+                    high: None,
+                    line: s.line,
+                },
+            );
+            let names = compact_names.get(&index);
+            let values = compact_values.get(&index);
+            for k in 1..=n {
+                let mut e = entry.clone();
+                e.sub = k;
+                e.name = names
+                    .and_then(|m| m.get(&k))
+                    .cloned()
+                    .unwrap_or_else(|| format!("{name}{k}"));
+                e.parameter_value = match values.and_then(|m| m.get(&k)) {
+                    None => None,
+                    Some((v, _)) if v.is_empty() => None,
+                    Some((v, l)) => Some(parse_number(v).ok_or_else(|| {
+                        err(*l, format!("[{index:04X}Value] {k}: not a number: `{v}`"))
+                    })?),
+                };
+                entries.insert((index, k), e);
+            }
         }
         for ((index, sub), e) in &entries {
             if *sub != 0 && !objects.contains_key(index) {
@@ -504,26 +645,60 @@ impl Eds {
         baudrate_kbit: u32,
         configured: &[(u16, u8, u32)],
     ) -> String {
+        let values: Vec<(u16, u8, DcfValue)> = configured
+            .iter()
+            .map(|&(i, s, v)| (i, s, DcfValue::Raw(v)))
+            .collect();
+        self.write_dcf_values(node_id, node_name, baudrate_kbit, &values)
+    }
+
+    /// [`Eds::write_dcf`] with byte-string values too (segmented parameters). Values of signed
+    /// types are written as signed decimals (`-1234`), unsigned ones as hex, strings as text
+    /// (VISIBLE_STRING) or hex digits (OCTET_STRING, DOMAIN); compact arrays are written out as
+    /// `[XXXXsubN]` sections so every sub-index can carry its own `ParameterValue`.
+    pub fn write_dcf_values(
+        &self,
+        node_id: u8,
+        node_name: &str,
+        baudrate_kbit: u32,
+        configured: &[(u16, u8, DcfValue)],
+    ) -> String {
         let mut out = String::new();
         let _ = writeln!(
             out,
             "; DCF written by drive-io from {} for node {node_id}",
             self.file
         );
+        let value_of = |index: u16, sub: u8| -> Option<String> {
+            let e = self.entry(index, sub)?;
+            configured
+                .iter()
+                .rev()
+                .find(|(i, s2, _)| *i == index && *s2 == sub)
+                .and_then(|(_, _, v)| dcf_value_text(e.data_type, v))
+        };
+        let is_compact_aux = |name: &str| {
+            let lower = name.to_ascii_lowercase();
+            let idx = lower
+                .strip_suffix("name")
+                .or_else(|| lower.strip_suffix("value"));
+            idx.and_then(|i| u16::from_str_radix(i, 16).ok().filter(|_| i.len() == 4))
+                .and_then(|i| self.object(i))
+                .is_some_and(|o| o.compact.is_some())
+        };
         for s in &self.sections {
-            if s.name.eq_ignore_ascii_case("DeviceComissioning") {
+            if s.name.eq_ignore_ascii_case("DeviceComissioning") || is_compact_aux(&s.name) {
+                continue;
+            }
+            let key = object_section(&s.name);
+            if let Some((index, None)) = key
+                && let Some(n) = self.object(index).and_then(|o| o.compact)
+            {
+                self.write_compact(&mut out, s, index, n, &value_of);
                 continue;
             }
             let _ = writeln!(out, "[{}]", s.name);
-            let key = object_section(&s.name);
-            let value = key.and_then(|(index, sub)| {
-                let sub = sub.unwrap_or(0);
-                configured
-                    .iter()
-                    .rev()
-                    .find(|(i, s2, _)| *i == index && *s2 == sub)
-                    .map(|&(_, _, v)| v)
-            });
+            let value = key.and_then(|(index, sub)| value_of(index, sub.unwrap_or(0)));
             for l in &s.lines {
                 let k = l
                     .split_once('=')
@@ -537,7 +712,7 @@ impl Eds {
                 let _ = writeln!(out, "{l}");
             }
             if let Some(v) = value {
-                let _ = writeln!(out, "ParameterValue=0x{v:X}");
+                let _ = writeln!(out, "ParameterValue={v}");
             }
             let _ = writeln!(out);
         }
@@ -550,6 +725,104 @@ impl Eds {
         let _ = writeln!(out, "CANopenManager=0");
         let _ = writeln!(out, "LSS_SerialNumber=0");
         out
+    }
+
+    /// A `CompactSubObj=n` array written out: the object section with `SubNumber=n+1`, then
+    /// `[XXXXsub0]` (n) and `[XXXXsub1..n]` with the shared description and each sub's value.
+    fn write_compact(
+        &self,
+        out: &mut String,
+        s: &Section,
+        index: u16,
+        n: u8,
+        value_of: &dyn Fn(u16, u8) -> Option<String>,
+    ) {
+        const PER_SUB: [&str; 7] = [
+            "datatype",
+            "accesstype",
+            "defaultvalue",
+            "pdomapping",
+            "lowlimit",
+            "highlimit",
+            "parametervalue",
+        ];
+        let key_of = |l: &str| {
+            l.split_once('=')
+                .map(|(k, _)| k.trim().to_ascii_lowercase())
+                .unwrap_or_default()
+        };
+        let _ = writeln!(out, "[{}]", s.name);
+        for l in s.lines.iter().filter(|l| !l.trim().is_empty()) {
+            let k = key_of(l);
+            if !PER_SUB.contains(&k.as_str()) && k != "compactsubobj" {
+                let _ = writeln!(out, "{l}");
+            }
+        }
+        let _ = writeln!(out, "SubNumber={}\n", u16::from(n) + 1);
+        let _ = writeln!(
+            out,
+            "[{index:04X}sub0]\nParameterName=Highest sub-index supported\nObjectType=0x7\n\
+             DataType=0x0005\nAccessType=ro\nDefaultValue={n}\nPDOMapping=0\n"
+        );
+        for k in 1..=n {
+            let _ = writeln!(out, "[{index:04X}sub{k:X}]");
+            if let Some(e) = self.entry(index, k) {
+                let _ = writeln!(out, "ParameterName={}\nObjectType=0x7", e.name);
+            }
+            for l in s.lines.iter().filter(|l| !l.trim().is_empty()) {
+                let key = key_of(l);
+                if PER_SUB.contains(&key.as_str()) && key != "parametervalue" {
+                    let _ = writeln!(out, "{}", l.trim());
+                }
+            }
+            let value = value_of(index, k).or_else(|| {
+                self.entry(index, k)
+                    .and_then(|e| e.parameter_value)
+                    .map(|v| dcf_number_text(v))
+            });
+            if let Some(v) = value {
+                let _ = writeln!(out, "ParameterValue={v}");
+            }
+            let _ = writeln!(out);
+        }
+    }
+}
+
+/// A value drive-io configured in a node, as its DCF records it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DcfValue {
+    /// The raw little-endian bits of a value of an expedited type.
+    Raw(u32),
+    /// A byte string (segmented transfer).
+    Bytes(Vec<u8>),
+}
+
+/// `ParameterValue` text of `v` for an entry of type `t` (None if they do not go together).
+fn dcf_value_text(t: DataType, v: &DcfValue) -> Option<String> {
+    match v {
+        // Signed types as signed decimals: CiA 306 numbers are values, not bit patterns
+        // (Lely's dcfchk rejects 0xF8... for an INTEGER32, python canopen reads it unsigned).
+        DcfValue::Raw(raw) if t.is_signed() => Some(t.to_i64(*raw).to_string()),
+        DcfValue::Raw(raw) if t.size().is_some() => Some(format!("0x{raw:X}")),
+        DcfValue::Bytes(b) if t == DataType::Other(0x0009) => std::str::from_utf8(b)
+            .ok()
+            .filter(|s| !s.contains(['\n', '\r']))
+            .map(str::to_string),
+        DcfValue::Bytes(b) if t.is_string() => {
+            Some(b.iter().map(|x| format!("{x:02X}")).collect::<String>())
+        }
+        _ => None,
+    }
+}
+
+/// A number from the EDS as DCF text (`$NODEID+0x180` kept relative).
+fn dcf_number_text(v: EdsValue) -> String {
+    if v.plus_node_id {
+        format!("$NODEID+0x{:X}", v.value)
+    } else if v.value < 0 {
+        v.value.to_string()
+    } else {
+        format!("0x{:X}", v.value)
     }
 }
 
@@ -640,12 +913,19 @@ mod tests {
         )
         .unwrap_err();
         assert_eq!((e.line, e.file.as_str()), (3, "a.eds"));
+        // CompactSubObj needs an ARRAY and the sub description.
+        let e = Eds::parse(
+            "[1016]\nParameterName=x\nObjectType=0x9\nCompactSubObj=2\n",
+            "a.eds",
+        )
+        .unwrap_err();
+        assert!(e.reason.contains("CompactSubObj"), "{e}");
         let e = Eds::parse(
             "[1016]\nParameterName=x\nObjectType=0x8\nCompactSubObj=2\n",
             "a.eds",
         )
         .unwrap_err();
-        assert!(e.reason.contains("CompactSubObj"), "{e}");
+        assert!(e.reason.contains("DataType"), "{e}");
         let e = Eds::parse("x=1\n", "a.eds").unwrap_err();
         assert_eq!(e.line, 1);
         let e = Eds::parse("[1000\n", "a.eds").unwrap_err();
@@ -687,6 +967,74 @@ mod tests {
         );
         assert!(back.entry(0x6060, 0).unwrap().parameter_value.is_none());
         assert!(dcf.contains("[DeviceComissioning]\nNodeID=0x03"));
+    }
+
+    const COMPACT: &str = "[1016]\nParameterName=Consumer heartbeat time\nObjectType=0x8\n\
+        CompactSubObj=3\nDataType=0x0007\nAccessType=rw\nDefaultValue=0\nPDOMapping=0\n\
+        [1016Name]\nNrOfEntries=1\n2=Second consumer\n\
+        [1016Value]\nNrOfEntries=1\n3=0x007F0064\n\
+        [607D]\nParameterName=Software position limit\nObjectType=0x8\nSubNumber=2\n\
+        [607Dsub0]\nParameterName=n\nDataType=0x0005\nAccessType=ro\nDefaultValue=1\n\
+        [607Dsub1]\nParameterName=Min\nDataType=0x0004\nAccessType=rw\nDefaultValue=0\n\
+        [1008]\nParameterName=Manufacturer device name\nDataType=0x0009\nAccessType=const\n\
+        DefaultValue=ACME CSP-2000 servo\n";
+
+    #[test]
+    fn compact_arrays_expand_into_their_sub_indices() {
+        let eds = Eds::parse(COMPACT, "vendor.eds").unwrap();
+        let sub0 = eds.entry(0x1016, 0).unwrap();
+        assert_eq!((sub0.default_for(1), sub0.data_type), (3, DataType::Unsigned8));
+        assert!(!sub0.access.writable());
+        for k in 1..=3 {
+            let e = eds.entry(0x1016, k).unwrap();
+            assert_eq!((e.data_type, e.access), (DataType::Unsigned32, Access::Rw));
+        }
+        assert!(eds.entry(0x1016, 4).is_none());
+        assert_eq!(eds.entry(0x1016, 1).unwrap().name, "Consumer heartbeat time1");
+        assert_eq!(eds.entry(0x1016, 2).unwrap().name, "Second consumer");
+        assert_eq!(
+            eds.entry(0x1016, 3).unwrap().parameter_value.unwrap().value,
+            0x007F_0064
+        );
+        assert_eq!(eds.object(0x1016).unwrap().compact, Some(3));
+        let name = eds.entry(0x1008, 0).unwrap();
+        assert!(name.data_type.is_string());
+        assert_eq!(name.default_text.as_deref(), Some("ACME CSP-2000 servo"));
+        assert_eq!(
+            name.data_type.text_bytes("ACME").unwrap(),
+            b"ACME".to_vec()
+        );
+        assert_eq!(
+            DataType::Other(0x000A).text_bytes("0A ff").unwrap(),
+            vec![0x0A, 0xFF]
+        );
+    }
+
+    #[test]
+    fn dcf_writes_signed_values_signed_and_compact_arrays_out() {
+        let eds = Eds::parse(COMPACT, "vendor.eds").unwrap();
+        let dcf = eds.write_dcf_values(
+            5,
+            "winch 5",
+            1000,
+            &[
+                (0x607D, 1, DcfValue::Raw((-1_234_567i32) as u32)),
+                (0x1016, 1, DcfValue::Raw(0x007F_00C8)),
+            ],
+        );
+        assert!(dcf.contains("ParameterValue=-1234567"), "{dcf}");
+        assert!(!dcf.contains("CompactSubObj"), "{dcf}");
+        assert!(!dcf.contains("[1016Name]"), "{dcf}");
+        assert!(dcf.contains("SubNumber=4"), "{dcf}");
+        let back = Eds::parse(&dcf, "node05.dcf").unwrap();
+        let pv = |i, s| back.entry(i, s).unwrap().parameter_value.map(|v| v.value);
+        assert_eq!(pv(0x607D, 1), Some(-1_234_567));
+        assert_eq!(pv(0x1016, 1), Some(0x007F_00C8));
+        assert_eq!(pv(0x1016, 2), None);
+        assert_eq!(pv(0x1016, 3), Some(0x007F_0064));
+        assert_eq!(back.entry(0x1016, 2).unwrap().name, "Second consumer");
+        assert_eq!(back.entry(0x1016, 0).unwrap().default_for(1), 3);
+        assert_eq!(back.object(0x1016).unwrap().compact, None);
     }
 
     #[test]
