@@ -20,6 +20,7 @@ pub mod master;
 pub mod reset;
 pub mod runner;
 pub mod safety_watch;
+pub mod sdo;
 pub mod slave;
 pub mod sync_clock;
 
