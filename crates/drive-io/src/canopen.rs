@@ -89,6 +89,12 @@ pub const CW_DISABLE_VOLTAGE: u16 = 0x0000;
 pub const CW_QUICK_STOP: u16 = 0x0002;
 pub const CW_FAULT_RESET: u16 = 0x0080;
 
+// ---- CiA 402 statusword bits of cyclic synchronous position mode ----
+/// Bit 12 in CSP: the drive follows the target position (0: target ignored).
+pub const SW_FOLLOWS_TARGET: u16 = 0x1000;
+/// Bit 13 in CSP: following error.
+pub const SW_FOLLOWING_ERROR: u16 = 0x2000;
+
 /// CiA 402 drive state, decoded from the statusword.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Ds402State {

@@ -1,5 +1,9 @@
 //! Drive bus configuration (config/drives.toml): transport, timing, per-winch scaling.
 
+use crate::commissioning::Parameter;
+use crate::force_sensor::{ForceSensorConfig, ForceSource};
+use crate::identity::Identity;
+use crate::mapping::{MappingMode, ObjectRef, PdoSpec};
 use can_transport::TransportSpec;
 use crs_ipc::MAX_CABLES;
 use serde::Deserialize;
@@ -102,6 +106,14 @@ pub struct BusConfig {
     /// setpoint before it sends SYNC on its own clock (µs, < sync_period_us / 2).
     #[serde(default = "d_setpoint_wait")]
     pub setpoint_wait_us: u32,
+    /// The cable deceleration of a quick stop (m/s²), written to every drive's 0x6085 in
+    /// counts/s² (0x605A = 6 ramps down on it). Default: the CRS's 14 m/s² (thesis table 5.1).
+    #[serde(default = "d_qs_decel")]
+    pub quick_stop_deceleration_m_per_s2: f64,
+}
+
+fn d_qs_decel() -> f64 {
+    14.0
 }
 
 /// What starts drive-io's cycle ([`BusConfig::sync_source`], [`crate::sync_clock`]).
@@ -190,7 +202,7 @@ fn d_force_limit() -> f64 {
     14_000.0
 }
 
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct WinchConfig {
     /// CANopen node id (1..=127), unique.
@@ -209,6 +221,39 @@ pub struct WinchConfig {
     /// Largest cable length this winch may be commanded to (m); also bounds the i32 count range.
     #[serde(default = "d_lmax")]
     pub max_cable_length_m: f64,
+    /// This drive's EDS (relative to the TOML); absent = `bus.eds`, else the simulated winch's.
+    #[serde(default)]
+    pub eds: Option<String>,
+    /// Device type / identity / device name the drive must report before it is configured.
+    #[serde(default)]
+    pub identity: Identity,
+    /// `"default"` (drive-io writes its CSP mapping), `"fixed"` (the drive's, from its EDS) or
+    /// `"custom"` (the `rpdo` / `tpdo` lists). Absent: custom with lists, else default.
+    #[serde(default)]
+    pub mapping: Option<MappingMode>,
+    /// `[[winch.rpdo]]`: a custom RPDO mapping (controlword 0x6040, target 0x607A).
+    #[serde(default)]
+    pub rpdo: Vec<PdoSpec>,
+    /// `[[winch.tpdo]]`: a custom TPDO mapping (0x6041, 0x6064, 0x606C, the force object).
+    #[serde(default)]
+    pub tpdo: Vec<PdoSpec>,
+    /// Where the cable force comes from: `"drive"` (its `force_object`) or the node id of a
+    /// `[[force_sensor]]`. Absent: the force sensor of this cable if there is one, else the drive.
+    #[serde(default)]
+    pub force: Option<ForceSource>,
+    /// The drive's force object (with `force = "drive"`); default 0x2110sub0.
+    #[serde(default)]
+    pub force_object: Option<ObjectRef>,
+    /// Newtons per unit of `force_object` (default 0.001: mN).
+    #[serde(default)]
+    pub force_n_per_unit: Option<f64>,
+    /// Default mapping: velocity actual (TPDO2) every n-th SYNC. Default 10, or 1 when TPDO2
+    /// also carries the drive's force (drive-io's hard force limit needs it every SYNC).
+    #[serde(default)]
+    pub feedback_every_n_syncs: Option<u8>,
+    /// Vendor parameters written at start-up (after the PDOs, before the mode) and read back.
+    #[serde(default)]
+    pub parameters: Vec<Parameter>,
 }
 
 fn d_lmax() -> f64 {
@@ -253,6 +298,9 @@ pub struct DrivesConfig {
     /// to start without it ([`DrivesConfig::require_safety_heartbeat`], issue 16).
     #[serde(default)]
     pub safety_heartbeat: Option<crate::safety_watch::SafetyWatchConfig>,
+    /// `[[force_sensor]]`: force-measuring nodes (one per pulley load cell, CiA 404).
+    #[serde(default, rename = "force_sensor")]
+    pub force_sensors: Vec<ForceSensorConfig>,
     /// Directory of the TOML file (set by [`DrivesConfig::load`]): relative paths resolve here.
     #[serde(skip)]
     pub base_dir: Option<std::path::PathBuf>,
@@ -283,6 +331,32 @@ impl DrivesConfig {
         match &self.bus.eds {
             Some(p) => crate::eds::Eds::load(&self.resolve(p)),
             None => Ok(crate::eds::Eds::builtin_winch().clone()),
+        }
+    }
+
+    /// The EDS of winch `i` (`winch[i].eds`, else `bus.eds`, else the simulated winch's).
+    pub fn load_winch_eds(&self, i: usize) -> Result<crate::eds::Eds, crate::eds::EdsError> {
+        match self.winches.get(i).and_then(|w| w.eds.as_ref()) {
+            Some(p) => crate::eds::Eds::load(&self.resolve(p)),
+            None => self.load_eds(),
+        }
+    }
+
+    /// The EDS of force sensor `j` (`force_sensor[j].eds`, else the built-in CiA 404 load cell).
+    pub fn load_sensor_eds(&self, j: usize) -> Result<crate::eds::Eds, crate::eds::EdsError> {
+        match self.force_sensors.get(j).and_then(|s| s.eds.as_ref()) {
+            Some(p) => crate::eds::Eds::load(&self.resolve(p)),
+            None => Ok(crate::eds::Eds::builtin_load_cell().clone()),
+        }
+    }
+
+    /// Where cable `i`'s (0-based) force comes from: the index of its `[[force_sensor]]`, or
+    /// None for the drive's own force object.
+    pub fn force_sensor_of(&self, i: usize) -> Option<usize> {
+        match self.winches.get(i)?.force {
+            Some(ForceSource::Drive) => None,
+            Some(ForceSource::Sensor(n)) => self.force_sensors.iter().position(|s| s.node_id == n),
+            None => self.force_sensors.iter().position(|s| s.cable == i + 1),
         }
     }
 
@@ -415,6 +489,41 @@ impl DrivesConfig {
                 return Err(invalid(
                     f("max_cable_length_m"),
                     "0..max cable length does not fit the i32 position range (0x607A) with this scaling/offset",
+                ));
+            }
+            crate::commissioning::validate_winch(self, i).map_err(|(k, r)| invalid(k, r))?;
+        }
+        if !(b.quick_stop_deceleration_m_per_s2.is_finite()
+            && b.quick_stop_deceleration_m_per_s2 > 0.0)
+        {
+            return Err(invalid(
+                "bus.quick_stop_deceleration_m_per_s2",
+                "must be finite and > 0",
+            ));
+        }
+        for (j, s) in self.force_sensors.iter().enumerate() {
+            s.validate(
+                j,
+                self.winches.len(),
+                b.sync_period_us,
+                b.heartbeat_timeout_ms,
+            )
+            .map_err(|(k, r)| invalid(k, r))?;
+            if s.node_id == b.master_node_id
+                || self.winches.iter().any(|w| w.node_id == s.node_id)
+                || self.force_sensors[..j]
+                    .iter()
+                    .any(|o| o.node_id == s.node_id)
+            {
+                return Err(invalid(
+                    format!("force_sensor[{j}].node_id"),
+                    format!("node id {} used twice", s.node_id),
+                ));
+            }
+            if self.force_sensors[..j].iter().any(|o| o.cable == s.cable) {
+                return Err(invalid(
+                    format!("force_sensor[{j}].cable"),
+                    format!("cable {} has two force sensors", s.cable),
                 ));
             }
         }

@@ -23,6 +23,11 @@ use std::fmt::Write as _;
 pub const BUILTIN_WINCH_EDS: &str = include_str!("../../../config/eds/crs-winch.eds");
 /// Name reported for the built-in EDS.
 pub const BUILTIN_WINCH_EDS_NAME: &str = "config/eds/crs-winch.eds (built in)";
+/// The simulated pulley load cell's EDS (CiA 404), compiled in: the default of a
+/// `[[force_sensor]]` that names none.
+pub const BUILTIN_LOAD_CELL_EDS: &str = include_str!("../../../config/eds/crs-load-cell.eds");
+/// Name reported for the built-in load cell EDS.
+pub const BUILTIN_LOAD_CELL_EDS_NAME: &str = "config/eds/crs-load-cell.eds (built in)";
 
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{file}:{line}: {reason}")]
@@ -331,6 +336,15 @@ impl Eds {
         static EDS: std::sync::OnceLock<Eds> = std::sync::OnceLock::new();
         EDS.get_or_init(|| {
             Eds::parse(BUILTIN_WINCH_EDS, BUILTIN_WINCH_EDS_NAME)
+                .expect("the built-in EDS is checked by the eds unit tests")
+        })
+    }
+
+    /// The simulated pulley load cell's EDS (`config/eds/crs-load-cell.eds`, compiled in).
+    pub fn builtin_load_cell() -> &'static Eds {
+        static EDS: std::sync::OnceLock<Eds> = std::sync::OnceLock::new();
+        EDS.get_or_init(|| {
+            Eds::parse(BUILTIN_LOAD_CELL_EDS, BUILTIN_LOAD_CELL_EDS_NAME)
                 .expect("the built-in EDS is checked by the eds unit tests")
         })
     }
@@ -900,6 +914,11 @@ mod tests {
         assert!(!eds.entry(0x6064, 0).unwrap().access.writable());
         assert_eq!(eds.object(0x1600).unwrap().object_type, 9);
         assert!(eds.describe(0x1600, 1).contains("RPDO1 mapping"));
+        let cell = Eds::builtin_load_cell();
+        assert_eq!(cell.entry(0x1000, 0).unwrap().default_for(1), 0x0002_0194);
+        let pv = cell.entry(0x9130, 1).unwrap();
+        assert!(pv.pdo_mappable && pv.data_type == DataType::Integer32);
+        assert_eq!(cell.entry(0x6131, 1).unwrap().default_for(1), 0x0021_0000);
     }
 
     #[test]
@@ -983,14 +1002,20 @@ mod tests {
     fn compact_arrays_expand_into_their_sub_indices() {
         let eds = Eds::parse(COMPACT, "vendor.eds").unwrap();
         let sub0 = eds.entry(0x1016, 0).unwrap();
-        assert_eq!((sub0.default_for(1), sub0.data_type), (3, DataType::Unsigned8));
+        assert_eq!(
+            (sub0.default_for(1), sub0.data_type),
+            (3, DataType::Unsigned8)
+        );
         assert!(!sub0.access.writable());
         for k in 1..=3 {
             let e = eds.entry(0x1016, k).unwrap();
             assert_eq!((e.data_type, e.access), (DataType::Unsigned32, Access::Rw));
         }
         assert!(eds.entry(0x1016, 4).is_none());
-        assert_eq!(eds.entry(0x1016, 1).unwrap().name, "Consumer heartbeat time1");
+        assert_eq!(
+            eds.entry(0x1016, 1).unwrap().name,
+            "Consumer heartbeat time1"
+        );
         assert_eq!(eds.entry(0x1016, 2).unwrap().name, "Second consumer");
         assert_eq!(
             eds.entry(0x1016, 3).unwrap().parameter_value.unwrap().value,
@@ -1000,10 +1025,7 @@ mod tests {
         let name = eds.entry(0x1008, 0).unwrap();
         assert!(name.data_type.is_string());
         assert_eq!(name.default_text.as_deref(), Some("ACME CSP-2000 servo"));
-        assert_eq!(
-            name.data_type.text_bytes("ACME").unwrap(),
-            b"ACME".to_vec()
-        );
+        assert_eq!(name.data_type.text_bytes("ACME").unwrap(), b"ACME".to_vec());
         assert_eq!(
             DataType::Other(0x000A).text_bytes("0A ff").unwrap(),
             vec![0x0A, 0xFF]

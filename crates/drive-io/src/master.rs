@@ -1,24 +1,30 @@
 //! CiA 402 master core: pure logic (frames in, frames out), no I/O, no allocation per cycle.
 //! [`crate::runner`] ties it to a bus, the 1 ms SYNC timer and iceoryx2.
 //!
-//! Sequence: NMT reset-communication -> wait boot-up of every drive -> SDO: 0x1017 heartbeat
-//! producer time, 0x6060 = 8 (CSP), read back 0x6061 -> NMT start -> SYNC every period, RPDO
-//! controlword walks each drive to Operation Enabled holding its actual position -> Ready ->
-//! Running on the first new setpoint. Any of: stale setpoints, e-stop event, heartbeat loss,
+//! Sequence: NMT reset-communication (per node) -> wait boot-up of every drive and force
+//! sensor -> SDO start-up script of each ([`crate::commissioning`]: identity checks first, then
+//! PDOs, heartbeats, option codes, mode; read-back) -> NMT start (per node) -> SYNC every
+//! period, RPDOs (encoded from each drive's mapping) walk each drive to Operation Enabled
+//! holding its actual position -> Ready -> Running on the first new setpoint. TPDOs are
+//! decoded from each node's mapping; cable forces come from the drive or its force sensor. Any of: stale setpoints, e-stop event, heartbeat loss,
 //! EMCY, drive fault bit, invalid setpoint => quick stop ALL drives and hold (latched until the
 //! safety monitor's reset, [`Master::reset`] with a [`ResetGrant`]).
 
 use crate::canopen::*;
-use crate::commissioning::SdoOp;
+use crate::commissioning::{NodeKind, Plan, SdoOp};
 use crate::config::{DrivesConfig, WinchConfig};
 use crate::eds::{Eds, sdo_abort_text};
+use crate::mapping::Decoded;
 use crate::reset::ResetGrant;
+use crate::sdo::{ClientStep, SdoClient};
 use can_transport::RxFrame;
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, JointSetpoint, MAX_CABLES, StateEvent, fault_code,
 };
 
 const SDO_RETRIES: u8 = 3;
+/// Drives and force sensors.
+const MAX_NODES: usize = 2 * MAX_CABLES;
 
 /// Why a drive's start-up configuration failed (what, where, the drive's answer).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,6 +47,25 @@ pub enum CommissioningFault {
     },
     /// No answer after the retries.
     Timeout { node: u8, index: u16, sub: u8 },
+    /// An identity (or unit) check failed before anything was written: a wrong or swapped
+    /// device on this node id.
+    Check {
+        node: u8,
+        index: u16,
+        sub: u8,
+        expected: u32,
+        found: u32,
+    },
+    /// The device name (a string) differs from drives.toml (the found text is in the node's
+    /// SDO client).
+    CheckText { node: u8, index: u16, sub: u8 },
+    /// The node broke the SDO protocol (drive-io aborted with this code).
+    Protocol {
+        node: u8,
+        index: u16,
+        sub: u8,
+        code: u32,
+    },
 }
 
 /// Master construction failed: the EDS cannot be read or does not suit the configuration.
@@ -50,6 +75,8 @@ pub enum SetupError {
     Eds(#[from] crate::eds::EdsError),
     #[error(transparent)]
     Plan(#[from] crate::commissioning::PlanError),
+    #[error("TPDO COB-ID 0x{cob_id:03X} is configured for node {a} and node {b}")]
+    CobCollision { cob_id: u16, a: u8, b: u8 },
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -66,13 +93,18 @@ struct DriveView {
     have_tpdo1: bool,
     position: i32,
     velocity: i32,
-    force_mn: i32,
     rx_ns: u64,
     /// Next step of the drive's start-up script ([`crate::commissioning::plan`]).
     sdo: usize,
     sdo_outstanding: bool,
     sdo_sent_ns: u64,
     sdo_tries: u8,
+    /// The next request of a segmented transfer (sent by the next cycle).
+    sdo_next: Option<[u8; 8]>,
+    /// Last TPDO with the velocity / the cable force, and the force (N).
+    vel_rx_ns: u64,
+    force_rx_ns: u64,
+    force_n: f64,
 }
 
 impl DriveView {
@@ -89,12 +121,15 @@ impl DriveView {
             have_tpdo1: false,
             position: 0,
             velocity: 0,
-            force_mn: 0,
             rx_ns: 0,
             sdo: 0,
             sdo_outstanding: false,
             sdo_sent_ns: 0,
             sdo_tries: 0,
+            sdo_next: None,
+            vel_rx_ns: 0,
+            force_rx_ns: 0,
+            force_n: 0.0,
         }
     }
 }
@@ -112,9 +147,16 @@ enum Phase {
 /// The master's per-bus state. Create once (allocates), then call [`Master::on_frame`],
 /// [`Master::on_event`] and [`Master::cycle`]; none of these allocate.
 pub struct Master {
-    eds: Eds,
-    /// Per drive (cable order): the SDO start-up script.
-    plans: Vec<Vec<SdoOp>>,
+    /// Per node (the drives in cable order, then the force sensors): start-up script and PDO
+    /// mapping.
+    plans: Vec<Plan>,
+    /// All nodes (drives and force sensors); `drives[..m]` are the drives.
+    n: usize,
+    sdo_client: [SdoClient; MAX_NODES],
+    /// Per cable: the node (index into `drives`) whose TPDO carries its force.
+    force_node: [usize; MAX_CABLES],
+    /// (COB-ID, node index) of every used TPDO, sorted by COB-ID.
+    tpdo_cobs: Vec<(u16, usize)>,
     commissioning_fault: Option<CommissioningFault>,
     master_node_id: u8,
     master_hb_ns: u64,
@@ -129,7 +171,7 @@ pub struct Master {
     /// The drives were NMT-stopped by an escalation: the next reset starts them again.
     nmt_stopped: bool,
     restart_nmt: bool,
-    winches: [WinchConfig; MAX_CABLES],
+    winches: Vec<WinchConfig>,
     m: usize,
     sync_period_ns: u64,
     stale_cycles: u32,
@@ -137,8 +179,8 @@ pub struct Master {
     boot_timeout_ns: u64,
     sdo_timeout_ns: u64,
     max_step_counts: [f64; MAX_CABLES],
-    force_limit_mn: i64,
-    drives: [DriveView; MAX_CABLES],
+    force_limit_n: f64,
+    drives: [DriveView; MAX_NODES],
     phase: Phase,
     boot_start_ns: Option<u64>,
     cycle: u64,
@@ -159,29 +201,54 @@ pub struct Master {
 }
 
 impl Master {
-    /// A master for `cfg`'s drives, configured from the EDS `cfg.bus.eds` (else the simulated
-    /// winch's); fails if the EDS cannot be read or lacks what the configuration needs.
+    /// A master for `cfg`'s drives and force sensors, each configured from its EDS
+    /// (`winch[i].eds`, else `bus.eds`, else the simulated winch's; a force sensor's, else the
+    /// simulated load cell's); fails if an EDS cannot be read or lacks what the configuration
+    /// needs.
     pub fn new(cfg: &DrivesConfig) -> Result<Self, SetupError> {
-        let eds = cfg.load_eds()?;
-        Self::with_eds(cfg, eds)
+        Self::from_plans(cfg, crate::commissioning::plan_all(cfg, None)?)
     }
 
-    /// A master whose drives are described by `eds`.
+    /// A master whose drives are all described by `eds` (force sensors by their own).
     pub fn with_eds(cfg: &DrivesConfig, eds: Eds) -> Result<Self, SetupError> {
-        let plans = cfg
-            .winches
-            .iter()
-            .take(MAX_CABLES)
-            .map(|w| crate::commissioning::plan(&eds, w, &cfg.bus))
-            .collect::<Result<Vec<_>, _>>()?;
+        Self::from_plans(cfg, crate::commissioning::plan_all(cfg, Some(&eds))?)
+    }
+
+    fn from_plans(cfg: &DrivesConfig, plans: Vec<Plan>) -> Result<Self, SetupError> {
         let m = cfg.winches.len().min(MAX_CABLES);
-        let mut winches = [cfg.winches[0]; MAX_CABLES];
-        winches[..m].copy_from_slice(&cfg.winches[..m]);
-        let mut drives = [DriveView::new(0); MAX_CABLES];
+        let n = plans.len().min(MAX_NODES);
+        let winches = cfg.winches[..m].to_vec();
+        let mut drives = [DriveView::new(0); MAX_NODES];
         let mut max_step_counts = [0.0; MAX_CABLES];
         let period_s = f64::from(cfg.bus.sync_period_us) * 1e-6;
+        for (d, p) in drives.iter_mut().zip(&plans).take(n) {
+            *d = DriveView::new(p.node);
+        }
+        let mut force_node = [0usize; MAX_CABLES];
+        for (i, f) in force_node.iter_mut().enumerate().take(m) {
+            *f = cfg.force_sensor_of(i).map_or(i, |j| m + j);
+        }
+        let mut tpdo_cobs: Vec<(u16, usize)> = plans
+            .iter()
+            .take(n)
+            .enumerate()
+            .flat_map(|(k, p)| {
+                p.mapping
+                    .pdos
+                    .iter()
+                    .filter(|p| p.used && p.direction == crate::mapping::Direction::FromNode)
+                    .map(move |p| (p.cob_id, k))
+            })
+            .collect();
+        tpdo_cobs.sort_unstable();
+        if let Some(w) = tpdo_cobs.windows(2).find(|w| w[0].0 == w[1].0) {
+            return Err(SetupError::CobCollision {
+                cob_id: w[0].0,
+                a: plans[w[0].1].node,
+                b: plans[w[1].1].node,
+            });
+        }
         for i in 0..m {
-            drives[i] = DriveView::new(winches[i].node_id);
             // Largest step per SYNC period at max cable speed.
             max_step_counts[i] =
                 cfg.bus.max_cable_speed_m_per_s * period_s * winches[i].counts_per_m();
@@ -191,8 +258,11 @@ impl Master {
             ..Default::default()
         };
         Ok(Self {
-            eds,
             plans,
+            n,
+            sdo_client: [SdoClient::default(); MAX_NODES],
+            force_node,
+            tpdo_cobs,
             commissioning_fault: None,
             master_node_id: cfg.bus.master_node_id,
             master_hb_ns: u64::from(cfg.bus.master_heartbeat_ms) * 1_000_000,
@@ -211,7 +281,7 @@ impl Master {
             boot_timeout_ns: u64::from(cfg.bus.boot_timeout_ms) * 1_000_000,
             sdo_timeout_ns: u64::from(cfg.bus.sdo_timeout_ms) * 1_000_000,
             max_step_counts,
-            force_limit_mn: (cfg.bus.force_hard_limit_n * 1000.0) as i64,
+            force_limit_n: cfg.bus.force_hard_limit_n,
             drives,
             phase: Phase::Boot,
             boot_start_ns: None,
@@ -232,9 +302,14 @@ impl Master {
         })
     }
 
-    /// The EDS the drives were configured from.
+    /// The start-up plan of every node: the drives in cable order, then the force sensors.
+    pub fn plans(&self) -> &[Plan] {
+        &self.plans[..self.n]
+    }
+
+    /// The EDS the first drive was configured from (every node's: [`Master::plans`]).
     pub fn eds(&self) -> &Eds {
-        &self.eds
+        &self.plans[0].eds
     }
 
     /// The first start-up configuration failure, if any (start-up stopped there).
@@ -242,54 +317,141 @@ impl Master {
         self.commissioning_fault
     }
 
-    /// The failure as a sentence naming drive, object (EDS name) and the CiA 301 abort text.
+    fn plan_of(&self, node: u8) -> Option<(usize, &Plan)> {
+        self.plans.iter().enumerate().find(|(_, p)| p.node == node)
+    }
+
+    /// The failure as a sentence naming the node, the object (EDS name) and the CiA 301 abort
+    /// text, or for a failed check the expected and the found value and the TOML key.
     pub fn describe_commissioning_fault(&self) -> Option<String> {
         let f = self.commissioning_fault?;
+        let node = match f {
+            CommissioningFault::Abort { node, .. }
+            | CommissioningFault::Readback { node, .. }
+            | CommissioningFault::Timeout { node, .. }
+            | CommissioningFault::Check { node, .. }
+            | CommissioningFault::CheckText { node, .. }
+            | CommissioningFault::Protocol { node, .. } => node,
+        };
+        let (k, plan) = self.plan_of(node)?;
+        let (kind, eds) = (plan.kind, &plan.eds);
         Some(match f {
             CommissioningFault::Abort {
-                node,
                 index,
                 sub,
                 write,
                 code,
+                ..
             } => format!(
-                "drive node {node} refused SDO {} of {}: abort code 0x{code:08X} ({}) [EDS {}]",
+                "{kind} node {node} refused SDO {} of {}: abort code 0x{code:08X} ({}) [EDS {}]",
                 if write { "write" } else { "read" },
-                self.eds.describe(index, sub),
+                eds.describe(index, sub),
                 sdo_abort_text(code),
-                self.eds.file
+                eds.file
             ),
             CommissioningFault::Readback {
-                node,
                 index,
                 sub,
                 wrote,
                 read,
+                ..
             } => format!(
-                "drive node {node}: {} reads back 0x{read:X} after drive-io wrote 0x{wrote:X}",
-                self.eds.describe(index, sub)
+                "{kind} node {node}: {} reads back 0x{read:X} after drive-io wrote 0x{wrote:X}",
+                eds.describe(index, sub)
             ),
-            CommissioningFault::Timeout { node, index, sub } => format!(
-                "drive node {node}: no SDO answer for {} after {SDO_RETRIES} tries",
-                self.eds.describe(index, sub)
+            CommissioningFault::Timeout { index, sub, .. } => format!(
+                "{kind} node {node}: no SDO answer for {} after {SDO_RETRIES} tries",
+                eds.describe(index, sub)
+            ),
+            CommissioningFault::Check {
+                index,
+                sub,
+                expected,
+                found,
+                ..
+            } => format!(
+                "{kind} node {node}: {} is 0x{found:08X}, drives.toml {} expects \
+                 0x{expected:08X}: a wrong or swapped device on node {node}? Start-up stopped \
+                 before anything was written [EDS {}]",
+                eds.describe(index, sub),
+                plan.check_key(index, sub),
+                eds.file
+            ),
+            CommissioningFault::CheckText { index, sub, .. } => {
+                let expected = plan
+                    .ops
+                    .iter()
+                    .find_map(|op| match *op {
+                        SdoOp::VerifyBytes {
+                            index: i,
+                            sub: s,
+                            at,
+                            len,
+                            check: true,
+                        } if (i, s) == (index, sub) => Some(plan.bytes(at, len)),
+                        _ => None,
+                    })
+                    .unwrap_or(&[]);
+                format!(
+                    "{kind} node {node}: {} is {:?}, drives.toml {} expects {:?}: a wrong or \
+                     swapped device on node {node}? Start-up stopped before anything was \
+                     written [EDS {}]",
+                    eds.describe(index, sub),
+                    String::from_utf8_lossy(self.sdo_client[k].data()),
+                    plan.check_key(index, sub),
+                    String::from_utf8_lossy(expected),
+                    eds.file
+                )
+            }
+            CommissioningFault::Protocol {
+                index, sub, code, ..
+            } => format!(
+                "{kind} node {node}: SDO transfer of {} broke the protocol; drive-io aborted it \
+                 with 0x{code:08X} ({})",
+                eds.describe(index, sub),
+                sdo_abort_text(code)
             ),
         })
     }
 
-    /// `(index, sub, value)` configured in drive `i` (for its DCF); empty until it is done.
-    pub fn configured_values(&self, i: usize) -> Vec<(u16, u8, u32)> {
+    /// `(index, sub, value)` configured in node `i` (drives first, then force sensors; for
+    /// its DCF); empty until it is done.
+    pub fn configured_values(&self, i: usize) -> Vec<(u16, u8, crate::eds::DcfValue)> {
         match (self.plans.get(i), self.drives.get(i)) {
-            (Some(p), Some(d)) if d.sdo >= p.len() => crate::commissioning::configured_values(p),
+            (Some(p), Some(d)) if d.sdo >= p.ops.len() => p.configured_values(),
             _ => Vec::new(),
         }
     }
 
-    /// True once every drive finished its start-up script.
-    pub fn configured(&self) -> bool {
-        (0..self.m).all(|i| self.drives[i].sdo >= self.plans[i].len())
+    /// The DCF of node `i` (drives first, then force sensors) once it is configured: its node
+    /// id and the text.
+    pub fn dcf(&self, i: usize, baudrate_kbit: u32) -> Option<(u8, String)> {
+        let p = self.plans.get(i)?;
+        if self.drives[i].sdo < p.ops.len() {
+            return None;
+        }
+        let name = match p.kind {
+            NodeKind::Drive { cable } => format!("winch {}", cable + 1),
+            NodeKind::ForceSensor { cable } => format!("force sensor of cable {}", cable + 1),
+        };
+        Some((
+            p.node,
+            p.eds
+                .write_dcf_values(p.node, &name, baudrate_kbit, &p.configured_values()),
+        ))
     }
 
-    /// Node ids in cable order.
+    /// Number of nodes (drives and force sensors).
+    pub fn node_count(&self) -> usize {
+        self.n
+    }
+
+    /// True once every node finished its start-up script.
+    pub fn configured(&self) -> bool {
+        (0..self.n).all(|i| self.drives[i].sdo >= self.plans[i].ops.len())
+    }
+
+    /// Drive node ids in cable order.
     pub fn node_ids(&self) -> impl Iterator<Item = u8> + '_ {
         self.drives[..self.m].iter().map(|d| d.node)
     }
@@ -366,16 +528,67 @@ impl Master {
     }
 
     fn index_of(&self, node: u8) -> Option<usize> {
-        self.drives[..self.m].iter().position(|d| d.node == node)
+        self.drives[..self.n].iter().position(|d| d.node == node)
+    }
+
+    /// A TPDO of a node's mapping: decoded as mapped (never by fixed offsets); the cable
+    /// force checked against the hard limit. False if `cob` is no configured TPDO.
+    fn on_tpdo(&mut self, cob: u16, data: &[u8], rx_ns: u64) -> bool {
+        let Ok(k) = self.tpdo_cobs.binary_search_by_key(&cob, |&(c, _)| c) else {
+            return false;
+        };
+        let i = self.tpdo_cobs[k].1;
+        let Some(pdo) = self.plans[i].mapping.tpdo(cob) else {
+            return false;
+        };
+        let mut got = Decoded::default();
+        if !pdo.decode(data, &mut got) {
+            // Shorter than its mapping: not processed (CiA 301); the PDO timeout catches a
+            // node that only sends such frames.
+            return true;
+        }
+        let scale = self.plans[i].mapping.force_n_per_unit;
+        let booting = matches!(self.phase, Phase::Boot | Phase::Configure | Phase::Enable);
+        let d = &mut self.drives[i];
+        if let Some(sw) = got.statusword {
+            d.statusword = sw;
+            d.rx_ns = rx_ns;
+            d.have_tpdo1 = true;
+        }
+        if let Some(p) = got.position {
+            d.position = p;
+        }
+        if let Some(v) = got.velocity {
+            d.velocity = v;
+            d.vel_rx_ns = rx_ns;
+        }
+        if let Some(f) = got.force {
+            let f = f * scale;
+            d.force_n = f;
+            d.force_rx_ns = rx_ns;
+            // Second, independent channel to the monitor's force supervision: beyond the
+            // winches' rating (or a sensor reading that large negative) stop at once.
+            if !(f.abs() <= self.force_limit_n) && !booting {
+                let node = d.node;
+                tracing::error!(node, force_n = f, "cable force beyond the hard limit");
+                self.stop(BusState::Fault, fault_code::FORCE_LIMIT, node);
+            }
+        }
+        true
     }
 
     /// Handles one received frame.
     pub fn on_frame(&mut self, rx: &RxFrame) {
+        let f = &rx.frame;
+        if !f.is_extended()
+            && !f.is_rtr()
+            && self.on_tpdo(f.id() as u16, f.data(), rx.rx_monotonic_ns)
+        {
+            return;
+        }
         let msg = decode(&rx.frame);
         let node = match msg {
-            Message::Tpdo1 { node, .. }
-            | Message::Tpdo2 { node, .. }
-            | Message::Emcy { node, .. }
+            Message::Emcy { node, .. }
             | Message::SdoResponse { node, .. }
             | Message::Heartbeat { node, .. } => node,
             _ => return,
@@ -384,34 +597,6 @@ impl Master {
         let booting = matches!(self.phase, Phase::Boot | Phase::Configure | Phase::Enable);
         let d = &mut self.drives[i];
         match msg {
-            Message::Tpdo1 {
-                statusword,
-                position_counts,
-                ..
-            } => {
-                d.statusword = statusword;
-                d.position = position_counts;
-                d.rx_ns = rx.rx_monotonic_ns;
-                d.have_tpdo1 = true;
-            }
-            Message::Tpdo2 {
-                velocity_counts_per_s,
-                force_mn,
-                ..
-            } => {
-                d.velocity = velocity_counts_per_s;
-                d.force_mn = force_mn;
-                // Second, independent channel to the monitor's force supervision: beyond the
-                // winches' rating (or a sensor reading that large negative) stop at once.
-                if i64::from(force_mn).abs() > self.force_limit_mn && !booting {
-                    tracing::error!(
-                        node,
-                        force_n = f64::from(force_mn) * 1e-3,
-                        "cable force beyond the hard limit"
-                    );
-                    self.stop(BusState::Fault, fault_code::FORCE_LIMIT, node);
-                }
-            }
             Message::Heartbeat { state, .. } => {
                 d.last_hb_ns = rx.rx_monotonic_ns;
                 d.last_hb_state = state;
@@ -420,10 +605,10 @@ impl Master {
                 if self.phase == Phase::Boot {
                     d.booted = true;
                 } else if state == NmtState::BootUp.code() && !booting {
-                    // A drive rebooted under us: it lost its configuration and enable state.
+                    // A node rebooted under us: it lost its configuration and enable state.
                     tracing::error!(
                         node,
-                        "drive booted mid-run (boot-up message): its configuration is lost; fault"
+                        "node booted mid-run (boot-up message): its configuration is lost; fault"
                     );
                     self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, node);
                 }
@@ -449,9 +634,42 @@ impl Master {
         }
     }
 
+    /// The SDO request starting step `op` of node `i`'s script.
+    fn start_sdo(&mut self, i: usize, op: SdoOp) -> [u8; 8] {
+        let c = &mut self.sdo_client[i];
+        match op {
+            SdoOp::Write {
+                index,
+                sub,
+                value,
+                len,
+            } => c
+                .download(
+                    index,
+                    sub,
+                    &value.to_le_bytes()[..usize::from(len.clamp(1, 4))],
+                )
+                .unwrap_or_default(),
+            SdoOp::WriteBytes {
+                index,
+                sub,
+                at,
+                len,
+            } => {
+                let (a, l) = (usize::from(at), usize::from(len));
+                let bytes = self.plans[i].bytes.get(a..a + l).unwrap_or(&[]);
+                c.download(index, sub, bytes).unwrap_or_default()
+            }
+            SdoOp::Verify { index, sub, .. }
+            | SdoOp::Check { index, sub, .. }
+            | SdoOp::VerifyBytes { index, sub, .. }
+            | SdoOp::Read { index, sub } => c.upload(index, sub),
+        }
+    }
+
     fn on_sdo(&mut self, i: usize, data: &[u8; 8]) {
         let d = self.drives[i];
-        let Some(&op) = self.plans[i].get(d.sdo) else {
+        let Some(&op) = self.plans[i].ops.get(d.sdo) else {
             return;
         };
         if !d.sdo_outstanding {
@@ -459,66 +677,120 @@ impl Master {
         }
         let node = d.node;
         let (index, sub) = op.index_sub();
-        let resp = parse_sdo_response(data);
-        let ok = match (op, resp) {
-            (SdoOp::Write { .. }, SdoResponse::DownloadOk { index: ri, sub: rs })
-                if (ri, rs) == (index, sub) =>
-            {
-                true
+        match self.sdo_client[i].on_response(data) {
+            // Stray or mismatched response: ignore, the timeout handles a silent node.
+            ClientStep::Ignored => return,
+            ClientStep::Send(next) => {
+                // The next segment goes out with the next cycle (a segmented answer is
+                // followed to its end, never taken for a timeout).
+                self.drives[i].sdo_next = Some(next);
+                return;
             }
-            (
-                SdoOp::Verify { value, len, .. },
-                SdoResponse::UploadOk {
-                    index: ri,
-                    sub: rs,
-                    value: got,
-                },
-            ) if (ri, rs) == (index, sub) => {
-                let mask = if len >= 4 {
-                    u32::MAX
-                } else {
-                    (1u32 << (8 * u32::from(len))) - 1
-                };
-                if got & mask != value & mask {
-                    self.commissioning_failed(CommissioningFault::Readback {
-                        node,
-                        index,
-                        sub,
-                        wrote: value & mask,
-                        read: got & mask,
-                    });
-                    return;
-                }
-                true
+            ClientStep::Aborted(code) if matches!(op, SdoOp::Read { .. }) => {
+                // Informational (device name, versions): the node need not have it.
+                tracing::warn!(
+                    node,
+                    object = %self.plans[i].eds.describe(index, sub),
+                    code = format_args!("{code:#010x}"),
+                    reason = sdo_abort_text(code),
+                    "node refused an informational read"
+                );
+                let d = &mut self.drives[i];
+                d.sdo_outstanding = false;
+                d.sdo_tries = 0;
+                d.sdo += 1;
+                return;
             }
-            (
-                _,
-                SdoResponse::Abort {
-                    index: ri,
-                    sub: rs,
-                    code,
-                },
-            ) if (ri, rs) == (index, sub) => {
+            ClientStep::Aborted(code) => {
                 self.commissioning_failed(CommissioningFault::Abort {
                     node,
                     index,
                     sub,
-                    write: matches!(op, SdoOp::Write { .. }),
+                    write: op.is_write(),
                     code,
                 });
                 return;
             }
-            _ => false, // stray or mismatched response: ignore, timeout handles it
-        };
-        if ok {
-            let d = &mut self.drives[i];
-            d.sdo_outstanding = false;
-            d.sdo_tries = 0;
-            d.sdo += 1;
-            if (index, sub) == (OD_PRODUCER_HEARTBEAT_MS, 0) && matches!(op, SdoOp::Write { .. }) {
-                // The drive produces heartbeats at the configured period from now on.
-                d.hb_monitored = true;
+            ClientStep::Failed { code, abort } => {
+                self.drives[i].sdo_next = Some(abort);
+                self.commissioning_failed(CommissioningFault::Protocol {
+                    node,
+                    index,
+                    sub,
+                    code,
+                });
+                return;
             }
+            ClientStep::Done => {}
+        }
+        let c = &self.sdo_client[i];
+        let masked = |v: u32, len: u8| {
+            if len >= 4 {
+                v
+            } else {
+                v & ((1u32 << (8 * u32::from(len))) - 1)
+            }
+        };
+        match op {
+            SdoOp::Verify { value, len, .. } => {
+                let got = masked(c.data_u32(), len);
+                if got != masked(value, len) {
+                    self.commissioning_failed(CommissioningFault::Readback {
+                        node,
+                        index,
+                        sub,
+                        wrote: masked(value, len),
+                        read: got,
+                    });
+                    return;
+                }
+            }
+            SdoOp::Check { value, len, .. } => {
+                let got = masked(c.data_u32(), len);
+                if got != masked(value, len) {
+                    self.commissioning_failed(CommissioningFault::Check {
+                        node,
+                        index,
+                        sub,
+                        expected: masked(value, len),
+                        found: got,
+                    });
+                    return;
+                }
+            }
+            SdoOp::VerifyBytes { at, len, check, .. } => {
+                if c.data() != self.plans[i].bytes(at, len) {
+                    self.commissioning_failed(if check {
+                        CommissioningFault::CheckText { node, index, sub }
+                    } else {
+                        CommissioningFault::Readback {
+                            node,
+                            index,
+                            sub,
+                            wrote: 0,
+                            read: 0,
+                        }
+                    });
+                    return;
+                }
+            }
+            SdoOp::Read { .. } => {
+                tracing::info!(
+                    node,
+                    object = %self.plans[i].eds.describe(index, sub),
+                    value = %String::from_utf8_lossy(c.data()),
+                    "node reports"
+                );
+            }
+            SdoOp::Write { .. } | SdoOp::WriteBytes { .. } => {}
+        }
+        let d = &mut self.drives[i];
+        d.sdo_outstanding = false;
+        d.sdo_tries = 0;
+        d.sdo += 1;
+        if (index, sub) == (OD_PRODUCER_HEARTBEAT_MS, 0) && op.is_write() {
+            // The node produces heartbeats at the configured period from now on.
+            d.hb_monitored = true;
         }
     }
 
@@ -546,7 +818,10 @@ impl Master {
         let node = match f {
             CommissioningFault::Abort { node, .. }
             | CommissioningFault::Readback { node, .. }
-            | CommissioningFault::Timeout { node, .. } => node,
+            | CommissioningFault::Timeout { node, .. }
+            | CommissioningFault::Check { node, .. }
+            | CommissioningFault::CheckText { node, .. }
+            | CommissioningFault::Protocol { node, .. } => node,
         };
         self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
     }
@@ -583,7 +858,7 @@ impl Master {
     }
 
     fn heartbeats_fresh(&self, now_ns: u64) -> bool {
-        self.drives[..self.m]
+        self.drives[..self.n]
             .iter()
             .all(|d| !d.hb_monitored || now_ns.saturating_sub(d.last_hb_ns) <= self.hb_timeout_ns)
     }
@@ -606,8 +881,8 @@ impl Master {
             };
         }
 
-        // Heartbeat consumer (CiA 301 §7.2.8.3.2.2), active per drive once its producer time is set.
-        for i in 0..self.m {
+        // Heartbeat consumer (CiA 301 §7.2.8.3.2.2), active per node once its producer time is set.
+        for i in 0..self.n {
             let d = self.drives[i];
             if d.hb_monitored
                 && !d.hb_lost
@@ -621,15 +896,19 @@ impl Master {
         if matches!(self.phase, Phase::Boot | Phase::Configure | Phase::Enable)
             && now_ns.saturating_sub(boot_start) > self.boot_timeout_ns
         {
-            let node = self.drives[..self.m]
+            let m = self.m;
+            let node = self.drives[..self.n]
                 .iter()
                 .zip(&self.plans)
-                .find(|(d, plan)| {
+                .enumerate()
+                .find(|(k, (d, plan))| {
                     !d.booted
-                        || d.sdo < plan.len()
-                        || Ds402State::from_statusword(d.statusword) != Ds402State::OperationEnabled
+                        || d.sdo < plan.ops.len()
+                        || (*k < m
+                            && Ds402State::from_statusword(d.statusword)
+                                != Ds402State::OperationEnabled)
                 })
-                .map_or(0, |(d, _)| d.node);
+                .map_or(0, |(_, (d, _))| d.node);
             tracing::error!(node, phase = ?self.phase, "boot timeout");
             self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
         }
@@ -637,10 +916,14 @@ impl Master {
         match self.phase {
             Phase::Boot => {
                 if self.cycle == 1 {
-                    out.push(nmt(NMT_RESET_COMM, 0));
+                    // Addressed per node: other devices on the bus (the safety monitor's I/O,
+                    // another master's nodes) are not drive-io's to reset.
+                    for d in &self.drives[..self.n] {
+                        out.push(nmt(NMT_RESET_COMM, d.node));
+                    }
                 }
-                if self.drives[..self.m].iter().all(|d| d.booted) {
-                    for d in &mut self.drives[..self.m] {
+                if self.drives[..self.n].iter().all(|d| d.booted) {
+                    for d in &mut self.drives[..self.n] {
                         d.last_hb_ns = now_ns;
                     }
                     self.set_phase(Phase::Configure);
@@ -649,10 +932,18 @@ impl Master {
             Phase::Configure => {
                 let sdo_timeout = self.sdo_timeout_ns;
                 let mut timed_out = None;
-                for (i, d) in self.drives[..self.m].iter_mut().enumerate() {
-                    let Some(&op) = self.plans[i].get(d.sdo) else {
+                for i in 0..self.n {
+                    let d = self.drives[i];
+                    let Some(&op) = self.plans[i].ops.get(d.sdo) else {
                         continue;
                     };
+                    let rx_cob = COB_SDO_RX_BASE + u16::from(d.node);
+                    if let Some(next) = self.drives[i].sdo_next.take() {
+                        // The next segment of a segmented transfer.
+                        out.push(can_transport::CanFrame::new_std_lossy(rx_cob, &next));
+                        self.drives[i].sdo_sent_ns = now_ns;
+                        continue;
+                    }
                     if d.sdo_outstanding && now_ns.saturating_sub(d.sdo_sent_ns) < sdo_timeout {
                         continue;
                     }
@@ -665,15 +956,10 @@ impl Master {
                         });
                         continue;
                     }
-                    out.push(match op {
-                        SdoOp::Write {
-                            index,
-                            sub,
-                            value,
-                            len,
-                        } => sdo_download(d.node, index, sub, value, len),
-                        SdoOp::Verify { index, sub, .. } => sdo_upload(d.node, index, sub),
-                    });
+                    // A new transfer, or the whole transfer again after a timeout.
+                    let req = self.start_sdo(i, op);
+                    out.push(can_transport::CanFrame::new_std_lossy(rx_cob, &req));
+                    let d = &mut self.drives[i];
                     d.sdo_outstanding = true;
                     d.sdo_sent_ns = now_ns;
                     d.sdo_tries += 1;
@@ -681,29 +967,40 @@ impl Master {
                 if let Some(f) = timed_out {
                     self.commissioning_failed(f);
                 } else if self.configured() {
-                    tracing::info!(eds = %self.eds.file, "all drives configured and verified");
-                    out.push(nmt(NMT_START, 0));
+                    tracing::info!(
+                        nodes = self.n,
+                        "all drives and force sensors identified, configured and verified"
+                    );
+                    for d in &self.drives[..self.n] {
+                        out.push(nmt(NMT_START, d.node));
+                    }
                     self.set_phase(Phase::Enable);
                 }
             }
             Phase::Enable => {
                 if std::mem::take(&mut self.restart_nmt) {
-                    out.push(nmt(NMT_START, 0));
+                    for d in &self.drives[..self.m] {
+                        out.push(nmt(NMT_START, d.node));
+                    }
                 }
                 let mut all_enabled = true;
                 for i in 0..self.m {
                     let d = self.drives[i];
                     let st = Ds402State::from_statusword(d.statusword);
-                    // After an NMT restart, wait for the heartbeat to say operational too.
+                    // After an NMT restart, wait for the heartbeat to say operational too; in
+                    // CSP, wait for statusword bit 12 (the drive follows the target).
                     all_enabled &= d.have_tpdo1
                         && st == Ds402State::OperationEnabled
+                        && d.statusword & SW_FOLLOWS_TARGET != 0
                         && (!d.seen_operational || d.last_hb_state == NmtState::Operational.code());
                     if d.have_tpdo1 {
                         // Enable while holding the actual position: the drive must not jump.
                         self.target[i] = d.position;
-                        out.push(rpdo1(d.node, enable_step(st, self.toggle), d.position));
+                        self.push_rpdos(i, enable_step(st, self.toggle), d.position, out);
                     }
                 }
+                // The force sensors report too before the drives count as ready.
+                all_enabled &= (self.m..self.n).all(|k| self.drives[k].force_rx_ns > 0);
                 out.push(sync());
                 if all_enabled {
                     self.setpoint_age = 0;
@@ -727,11 +1024,7 @@ impl Master {
                 }
                 if matches!(self.phase, Phase::Ready | Phase::Running) {
                     for i in 0..self.m {
-                        out.push(rpdo1(
-                            self.drives[i].node,
-                            CW_ENABLE_OPERATION,
-                            self.target[i],
-                        ));
+                        self.push_rpdos(i, CW_ENABLE_OPERATION, self.target[i], out);
                     }
                     out.push(sync());
                 } else {
@@ -761,6 +1054,7 @@ impl Master {
             use Ds402State::*;
             d.have_tpdo1
                 && d.rx_ns > since
+                && d.vel_rx_ns > since
                 && d.velocity == 0
                 && matches!(
                     Ds402State::from_statusword(d.statusword),
@@ -790,7 +1084,9 @@ impl Master {
                     "quick stop not acknowledged in time: escalating to NMT stop (0x6007 action)"
                 );
             }
-            out.push(nmt(NMT_STOP, 0));
+            for d in &self.drives[..self.m] {
+                out.push(nmt(NMT_STOP, d.node));
+            }
             self.nmt_stopped = true;
             self.qs_stage = 1;
         } else if self.qs_stage == 1 && elapsed > 2 * self.quick_stop_timeout_ns {
@@ -816,11 +1112,18 @@ impl Master {
         self.qs_stage
     }
 
+    /// Drive `i`'s RPDOs carrying `controlword` and `target_counts`, as its mapping says.
+    fn push_rpdos(&self, i: usize, controlword: u16, target_counts: i32, out: &mut FrameBuf) {
+        for p in self.plans[i].mapping.rpdos() {
+            out.push(p.encode(controlword, target_counts));
+        }
+    }
+
     fn push_quick_stop(&mut self, out: &mut FrameBuf) {
         // Keep SYNC running so the drives keep reporting; hold the last target.
         if self.drives[..self.m].iter().any(|d| d.have_tpdo1) {
             for i in 0..self.m {
-                out.push(rpdo1(self.drives[i].node, CW_QUICK_STOP, self.target[i]));
+                self.push_rpdos(i, CW_QUICK_STOP, self.target[i], out);
             }
             out.push(sync());
         }
@@ -840,8 +1143,35 @@ impl Master {
             if d.seen_operational && d.last_hb_state != NmtState::Operational.code() {
                 self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, d.node);
             }
-            if now_ns.saturating_sub(d.rx_ns) > self.hb_timeout_ns {
+            // CSP (CiA 402 statusword bits 12/13): the drive must follow the target and report
+            // no following error.
+            if d.statusword & SW_FOLLOWS_TARGET == 0 {
+                tracing::error!(
+                    node = d.node,
+                    statusword = format_args!("{:#06x}", d.statusword),
+                    "drive ignores the target position (statusword bit 12 clear in CSP)"
+                );
+                self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, d.node);
+            }
+            if d.statusword & SW_FOLLOWING_ERROR != 0 {
+                tracing::error!(
+                    node = d.node,
+                    statusword = format_args!("{:#06x}", d.statusword),
+                    "drive reports a following error (statusword bit 13 in CSP)"
+                );
+                self.stop(BusState::Fault, fault_code::DRIVE_FAULT_BIT, d.node);
+            }
+            let stale = |t: u64| now_ns.saturating_sub(t) > self.hb_timeout_ns;
+            if stale(d.rx_ns) || stale(d.vel_rx_ns) {
                 tracing::error!(node = d.node, "TPDO timeout");
+                self.stop(BusState::Fault, fault_code::PDO_TIMEOUT, d.node);
+            }
+        }
+        // Every cable's force, from its drive or its force sensor.
+        for i in 0..self.m {
+            let d = self.drives[self.force_node[i]];
+            if now_ns.saturating_sub(d.force_rx_ns) > self.hb_timeout_ns {
+                tracing::error!(node = d.node, cable = i + 1, "cable force TPDO timeout");
                 self.stop(BusState::Fault, fault_code::PDO_TIMEOUT, d.node);
             }
         }
@@ -944,7 +1274,7 @@ impl Master {
             let w = &self.winches[i];
             f.cable_length_m[i] = w.counts_to_length(d.position);
             f.cable_velocity_m_per_s[i] = w.counts_per_s_to_m_per_s(d.velocity);
-            f.cable_force_n[i] = f64::from(d.force_mn) * 1e-3;
+            f.cable_force_n[i] = self.drives[self.force_node[i]].force_n;
             f.rx_timestamp_ns[i] = d.rx_ns;
             f.statusword[i] = d.statusword;
         }

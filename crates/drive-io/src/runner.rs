@@ -34,7 +34,8 @@ pub enum RunError {
     },
 }
 
-/// Writes `node<NN>.dcf` for every configured drive into `dir` (once, after start-up).
+/// Writes `node<NN>.dcf` for every configured drive and force sensor into `dir` (once, after
+/// start-up).
 pub fn write_dcfs(master: &Master, dir: &std::path::Path) -> Result<(), RunError> {
     let dcf_err = |path: &std::path::Path, source| RunError::Dcf {
         path: path.display().to_string(),
@@ -42,13 +43,7 @@ pub fn write_dcfs(master: &Master, dir: &std::path::Path) -> Result<(), RunError
     };
     std::fs::create_dir_all(dir).map_err(|e| dcf_err(dir, e))?;
     let kbit = 1000;
-    for (i, node) in master.node_ids().enumerate() {
-        let text = master.eds().write_dcf(
-            node,
-            &format!("winch {}", i + 1),
-            kbit,
-            &master.configured_values(i),
-        );
+    for (node, text) in (0..master.node_count()).filter_map(|i| master.dcf(i, kbit)) {
         let path = dir.join(format!("node{node:02}.dcf"));
         std::fs::write(&path, text).map_err(|e| dcf_err(&path, e))?;
     }
@@ -111,7 +106,9 @@ pub fn run(
     // Wake sleeping watchers on stops only (rare): notify() costs 10-30 us, never per cycle.
     let wakeup = ipc.wakeup_notifier()?;
     let mut master = Master::new(cfg)?;
-    tracing::info!(eds = %master.eds().file, "drives configured from their EDS");
+    for p in master.plans() {
+        tracing::info!(node = p.node, kind = %p.kind, eds = %p.eds.file, "configured from its EDS");
+    }
     let mut dcf_pending = cfg.bus.dcf_dir.as_ref().map(|d| cfg.resolve(d));
     let period = master.sync_period_ns();
     let mut out = FrameBuf::default();

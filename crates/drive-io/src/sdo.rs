@@ -589,10 +589,7 @@ mod tests {
         ));
         // A response for another object is not this transfer's.
         c.upload(0x1008, 0);
-        assert_eq!(
-            c.on_response(&header(0x43, 0x1009, 0)),
-            ClientStep::Ignored
-        );
+        assert_eq!(c.on_response(&header(0x43, 0x1009, 0)), ClientStep::Ignored);
         // Nothing running: ignored.
         let mut idle = SdoClient::default();
         assert_eq!(idle.on_response(&header(0x60, 1, 0)), ClientStep::Ignored);

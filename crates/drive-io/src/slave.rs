@@ -1,5 +1,6 @@
 //! Drive-side (slave) emulation of a CiA 402 winch drive in cyclic synchronous position mode, for
-//! simulated plants and test doubles. The slave handles NMT, SDO (expedited), RPDO/SYNC, produces
+//! simulated plants and test doubles. The slave handles NMT, SDO (expedited and segmented: the
+//! string objects of its EDS such as 0x1008), RPDO/SYNC, produces
 //! heartbeats and TPDOs; the PHYSICS is the embedder's: on every SYNC it reads
 //! [`DriveSlave::demand`], integrates its model, feeds back [`DriveSlave::set_actual`] and calls
 //! [`DriveSlave::transmit_pdos`].
@@ -21,6 +22,7 @@
 use crate::canopen::*;
 use crate::eds::{Access, DataType, Eds};
 use crate::safety_watch::{InhibitReason, SafetyWatch, SafetyWatchConfig};
+use crate::sdo::{ObjectAccess, SDO_MAX, SdoServer};
 use can_transport::CanFrame;
 
 /// What the drive asks its motor/physics to do this SYNC period.
@@ -54,6 +56,16 @@ struct OdSlot {
     high: Option<i64>,
     default: u32,
     value: u32,
+}
+
+/// A string or domain entry (served by segmented SDO).
+#[derive(Debug, Clone)]
+struct StringSlot {
+    index: u16,
+    sub: u8,
+    access: Access,
+    default: Vec<u8>,
+    value: Vec<u8>,
 }
 
 /// Up to this many objects per PDO (the EDS may declare more mapping sub-indices; 8 bytes
@@ -99,6 +111,9 @@ pub struct DriveSlave {
     /// ([`crate::safety_watch`]); forces Quick Stop Active and blocks enabling.
     safety_inhibit: bool,
     od: Vec<OdSlot>,
+    /// String and domain entries of the EDS (0x1008 ...): (index, sub, access, default, value).
+    strings: Vec<StringSlot>,
+    sdo_server: SdoServer,
     rpdo: [PdoRuntime; 4],
     tpdo: [PdoRuntime; 4],
     sync_cob: u16,
@@ -145,6 +160,24 @@ impl DriveSlave {
                 }
             })
             .collect();
+        let strings = eds
+            .entries()
+            .filter(|e| e.data_type.is_string())
+            .map(|e| {
+                let v = e
+                    .default_text
+                    .as_deref()
+                    .and_then(|t| e.data_type.text_bytes(t))
+                    .unwrap_or_default();
+                StringSlot {
+                    index: e.index,
+                    sub: e.sub,
+                    access: e.access,
+                    default: v.clone(),
+                    value: v,
+                }
+            })
+            .collect();
         let mut s = Self {
             node,
             nmt: NmtState::BootUp,
@@ -162,6 +195,8 @@ impl DriveSlave {
             error_code: 0,
             safety_inhibit: false,
             od,
+            strings,
+            sdo_server: SdoServer::default(),
             rpdo: [PdoRuntime::default(); 4],
             tpdo: [PdoRuntime::default(); 4],
             sync_cob: COB_SYNC,
@@ -565,6 +600,9 @@ impl DriveSlave {
                 for o in &mut self.od {
                     o.value = o.default;
                 }
+                for o in &mut self.strings {
+                    o.value = o.default.clone();
+                }
                 self.mode = 0;
                 self.last_controlword = 0;
                 self.refresh();
@@ -636,43 +674,28 @@ impl DriveSlave {
     }
 
     fn sdo(&mut self, data: &[u8; 8], out: &mut FrameBuf) {
-        let n = self.node;
-        match parse_sdo_request(data) {
-            SdoRequest::Download {
-                index,
-                sub,
-                value,
-                len,
-            } => {
-                let resp = match self.sdo_write(index, sub, value, len) {
-                    Ok(()) => sdo_download_ok(n, index, sub),
-                    Err(code) => sdo_abort(n, index, sub, code),
-                };
-                out.push(resp);
-            }
-            SdoRequest::Upload { index, sub } => {
-                let resp = match self.sdo_read(index, sub) {
-                    Ok((value, len)) => sdo_upload_ok(n, index, sub, value, len),
-                    Err(code) => sdo_abort(n, index, sub, code),
-                };
-                out.push(resp);
-            }
-            SdoRequest::Unsupported { index, sub } => {
-                out.push(sdo_abort(n, index, sub, SDO_ABORT_COMMAND))
-            }
+        let mut server = std::mem::take(&mut self.sdo_server);
+        let resp = server.handle(data, self);
+        self.sdo_server = server;
+        if let Some(r) = resp {
+            out.push(CanFrame::new_std_lossy(
+                COB_SDO_TX_BASE + u16::from(self.node),
+                &r,
+            ));
         }
     }
 
     /// Abort code for an object/sub-index that is not there.
     fn missing(&self, index: u16) -> u32 {
-        if self.od.iter().any(|o| o.index == index) {
+        if self.od.iter().any(|o| o.index == index) || self.strings.iter().any(|o| o.index == index)
+        {
             SDO_ABORT_NO_SUB
         } else {
             SDO_ABORT_NO_OBJECT
         }
     }
 
-    fn sdo_read(&self, index: u16, sub: u8) -> Result<(u32, u8), u32> {
+    fn read_value(&self, index: u16, sub: u8) -> Result<(u32, u8), u32> {
         let Some(i) = self.slot(index, sub) else {
             return Err(self.missing(index));
         };
@@ -685,7 +708,7 @@ impl DriveSlave {
     }
 
     /// An SDO download checked against the EDS entry (CiA 301 abort codes).
-    fn sdo_write(&mut self, index: u16, sub: u8, value: u32, len: u8) -> Result<(), u32> {
+    fn write_value(&mut self, index: u16, sub: u8, value: u32, len: u8) -> Result<(), u32> {
         let Some(i) = self.slot(index, sub) else {
             return Err(self.missing(index));
         };
@@ -801,6 +824,51 @@ impl DriveSlave {
         }
         self.set_raw(index, sub, value);
         Ok(())
+    }
+}
+
+impl ObjectAccess for DriveSlave {
+    fn sdo_read(&mut self, index: u16, sub: u8, out: &mut [u8; SDO_MAX]) -> Result<usize, u32> {
+        if let Some(s) = self
+            .strings
+            .iter()
+            .find(|s| (s.index, s.sub) == (index, sub))
+        {
+            if !s.access.readable() {
+                return Err(SDO_ABORT_WRITE_ONLY);
+            }
+            let n = s.value.len().min(SDO_MAX);
+            out[..n].copy_from_slice(&s.value[..n]);
+            return Ok(n);
+        }
+        let (value, len) = self.read_value(index, sub)?;
+        let n = usize::from(len);
+        out[..n].copy_from_slice(&value.to_le_bytes()[..n]);
+        Ok(n)
+    }
+
+    fn sdo_write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), u32> {
+        if let Some(s) = self
+            .strings
+            .iter_mut()
+            .find(|s| (s.index, s.sub) == (index, sub))
+        {
+            if !s.access.writable() {
+                return Err(SDO_ABORT_READ_ONLY);
+            }
+            s.value = data.to_vec();
+            return Ok(());
+        }
+        if data.is_empty() || data.len() > 4 {
+            // An integer object: the length does not match (an unknown object: not there).
+            return Err(match self.slot(index, sub) {
+                Some(_) => SDO_ABORT_LENGTH,
+                None => self.missing(index),
+            });
+        }
+        let mut b = [0u8; 4];
+        b[..data.len()].copy_from_slice(data);
+        self.write_value(index, sub, u32::from_le_bytes(b), data.len() as u8)
     }
 }
 

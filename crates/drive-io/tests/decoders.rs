@@ -54,7 +54,7 @@ proptest! {
     #[test]
     fn length_counts_round_trip(l in 0.0f64..30.0, sign in prop_oneof![Just(1i8), Just(-1i8)], off in -1_000_000i64..1_000_000) {
         let cfg = DrivesConfig::parse(&GOOD.replace("sign = 1", &format!("sign = {sign}\noffset_counts = {off}"))).unwrap();
-        let w = cfg.winches[0];
+        let w = cfg.winches[0].clone();
         let c = w.length_to_counts(l).unwrap();
         prop_assert!((w.counts_to_length(c) - l).abs() <= 0.5 / w.counts_per_m() + 1e-12);
     }
@@ -63,7 +63,7 @@ proptest! {
 #[test]
 fn good_config_and_scaling() {
     let cfg = DrivesConfig::parse(GOOD).unwrap();
-    let w = cfg.winches[0];
+    let w = cfg.winches[0].clone();
     // One drum revolution = pi * 0.305 m = gear * cpr counts.
     let rev = std::f64::consts::PI * 0.305;
     assert_eq!(w.length_to_counts(rev), Some(10 * 1048576));

@@ -85,7 +85,7 @@ impl Sim {
                     continue;
                 }
                 if self.slaves[i].handle_frame(f, self.now, &mut s_out) == SlaveEvent::Sync {
-                    let w = self.cfg.winches[i];
+                    let w = self.cfg.winches[i].clone();
                     match self.slaves[i].demand() {
                         MotionDemand::Follow { target_counts } => {
                             self.axes[i].step(Some(w.counts_to_length(target_counts)), 1e-3)
@@ -139,8 +139,9 @@ impl Sim {
 fn boot_sequence_uses_nmt_sdo_and_ds402() {
     let mut s = Sim::new();
     s.boot();
-    // NMT reset comm first (after drive-io's own heartbeat), the SDO start-up script from the
-    // EDS (PDO mapping, 0x1017, 0x6060=8, read-backs), NMT start, then RPDO/SYNC.
+    // NMT reset comm first (after drive-io's own heartbeat), addressed to each drive (never
+    // broadcast), the SDO start-up script from the EDS (PDO mapping, 0x1017, 0x6060=8,
+    // read-backs), NMT start per drive, then RPDO/SYNC.
     let first = s
         .log
         .iter()
@@ -150,9 +151,20 @@ fn boot_sequence_uses_nmt_sdo_and_ds402() {
         first,
         Message::Nmt {
             command: canopen::NMT_RESET_COMM,
-            node: 0
+            node: 1
         }
     ));
+    let nmt_nodes = |command| {
+        s.log
+            .iter()
+            .filter_map(|m| match m {
+                Message::Nmt { command: c, node } if *c == command => Some(*node),
+                _ => None,
+            })
+            .collect::<Vec<u8>>()
+    };
+    assert_eq!(nmt_nodes(canopen::NMT_RESET_COMM), vec![1, 2, 3, 4]);
+    assert_eq!(nmt_nodes(canopen::NMT_START), vec![1, 2, 3, 4]);
     let sdo_mode = s.log.iter().filter(|m| matches!(m, Message::SdoRequest { data, .. } if data[0] == 0x2F && data[1] == 0x60 && data[2] == 0x60 && data[4] == 8)).count();
     assert_eq!(sdo_mode, 4, "one 0x6060 = 8 write per drive");
     // TPDO2 mapping entry 2 = 0x2110 (pulley force, 32 bit) written and read back per drive.
@@ -665,17 +677,27 @@ fn an_unacknowledged_quick_stop_escalates_to_nmt_stop_then_heartbeat_inhibit() {
     for _ in 0..10 {
         s.step(None);
     }
-    // Stage 1: NMT stop of all drives; the live ones act per 0x6007 = 2 (disable voltage).
+    // Stage 1: NMT stop of every drive (addressed to each); the live ones act per 0x6007 = 2
+    // (disable voltage).
     assert_eq!(s.master.quick_stop_stage(), 1);
+    for node in 1..=4 {
+        assert_eq!(
+            count(&s.log, |m| *m
+                == Message::Nmt {
+                    command: canopen::NMT_STOP,
+                    node
+                }),
+            1
+        );
+    }
     assert_eq!(
-        count(&s.log, |m| matches!(
-            m,
-            Message::Nmt {
+        count(&s.log, |m| *m
+            == Message::Nmt {
                 command: canopen::NMT_STOP,
                 node: 0
-            }
-        )),
-        1
+            }),
+        0,
+        "no broadcast"
     );
     assert_eq!(s.slaves[0].nmt_state(), canopen::NmtState::Stopped);
     assert_eq!(s.slaves[0].ds402_state(), Ds402State::SwitchOnDisabled);
@@ -732,16 +754,16 @@ fn reset_after_an_escalation_restarts_the_drives_and_the_heartbeat() {
         }
     }
     assert_eq!(s.master.state(), BusState::Ready);
-    assert_eq!(
-        count(&s.log, |m| matches!(
-            m,
-            Message::Nmt {
-                command: canopen::NMT_START,
-                node: 0
-            }
-        )),
-        1
-    );
+    for node in 1..=4 {
+        assert_eq!(
+            count(&s.log, |m| *m
+                == Message::Nmt {
+                    command: canopen::NMT_START,
+                    node
+                }),
+            1
+        );
+    }
     assert!(
         count(&s.log, |m| matches!(
             m,

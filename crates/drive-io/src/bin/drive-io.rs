@@ -115,23 +115,58 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-/// `--print-plan`: what drive-io will write and read back in every drive, with EDS names.
+/// `--print-plan`: what drive-io will check, write and read back in every drive and force
+/// sensor, with EDS names, and the PDO frames each puts on the bus.
 fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
-    let eds = cfg.load_eds()?;
-    println!("# EDS: {}", eds.file);
-    for w in &cfg.winches {
-        let ops = drive_io::commissioning::plan(&eds, w, &cfg.bus)?;
-        println!("# drive node {} ({} SDO transfers)", w.node_id, ops.len());
-        for op in ops {
+    use drive_io::commissioning::SdoOp;
+    use drive_io::mapping::{Direction, Transmission};
+    for plan in drive_io::commissioning::plan_all(cfg, None)? {
+        let (n, eds) = (plan.node, &plan.eds);
+        println!(
+            "# {} node {n} ({}), EDS {} ({} SDO transfers)",
+            plan.kind,
+            plan.key,
+            eds.file,
+            plan.ops.len()
+        );
+        for op in &plan.ops {
             let (index, sub) = op.index_sub();
-            let (what, value) = match op {
-                drive_io::commissioning::SdoOp::Write { value, .. } => ("write ", value),
-                drive_io::commissioning::SdoOp::Verify { value, .. } => ("verify", value),
+            let text = |at, len| String::from_utf8_lossy(plan.bytes(at, len)).into_owned();
+            let (what, value) = match *op {
+                SdoOp::Write { value, .. } => ("write ", format!("0x{value:08X}")),
+                SdoOp::Verify { value, .. } => ("verify", format!("0x{value:08X}")),
+                SdoOp::Check { value, .. } => ("check ", format!("0x{value:08X}")),
+                SdoOp::WriteBytes { at, len, .. } => ("write ", format!("{:?}", text(at, len))),
+                SdoOp::VerifyBytes { at, len, check, .. } => (
+                    if check { "check " } else { "verify" },
+                    format!("{:?}", text(at, len)),
+                ),
+                SdoOp::Read { .. } => ("read  ", String::new()),
+            };
+            println!("{n:3} {what} {value:10}  {}", eds.describe(index, sub));
+        }
+        for f in plan.pdo_frames() {
+            let dir = match f.direction {
+                Direction::ToNode => "RPDO (drive-io sends)",
+                Direction::FromNode => "TPDO (node sends)",
+            };
+            let when = match f.transmission {
+                Transmission::Sync { every: 1 } => "every SYNC".to_string(),
+                Transmission::Sync { every } => format!("every {every}th SYNC"),
+                Transmission::Event {
+                    inhibit_us,
+                    event_timer_ms,
+                } => format!("on change, inhibit {inhibit_us} us, event timer {event_timer_ms} ms"),
             };
             println!(
-                "{:3} {what} 0x{value:08X}  {}",
-                w.node_id,
-                eds.describe(index, sub)
+                "{n:3} frame  0x{:03X} DLC {} {dir}, {when}{}",
+                f.cob_id,
+                f.dlc,
+                if f.used {
+                    ""
+                } else {
+                    " (unused, cannot be disabled)"
+                }
             );
         }
     }
