@@ -5,8 +5,9 @@
 use crate::canopen::{Ds402State, NmtState};
 use crate::config::{DrivesConfig, WinchConfig};
 use crate::eds::{Eds, EdsError};
+use crate::force_node::ForceNode;
 use crate::safety_watch::SafetyWatchConfig;
-use crate::slave::{DriveBank, MotionDemand, WinchAxis};
+use crate::slave::{DriveBank, DriveSlave, MotionDemand, WinchAxis};
 use can_transport::CanBus;
 use crs_ipc::MAX_CABLES;
 use std::sync::Arc;
@@ -33,12 +34,22 @@ pub struct EmulatorConfig {
     pub safety_watch: Option<SafetyWatchConfig>,
     /// The drives' EDS (drives.toml `bus.eds`, else the simulated winch's).
     pub eds: Eds,
+    /// Per winch: its own EDS (`winch[i].eds`); a winch without one uses `eds`.
+    pub winch_eds: Vec<Eds>,
+    /// The `[[force_sensor]]` nodes (simulated load cells) and the cable (0-based) each
+    /// measures: they report the emulator's force stand-in of that cable.
+    pub force_nodes: Vec<(usize, ForceNode)>,
 }
 
 impl EmulatorConfig {
-    /// Fails only if `bus.eds` cannot be read.
+    /// Fails only if an EDS cannot be read (or a force sensor's has no process value).
     pub fn from_drives(cfg: &DrivesConfig, initial_length_m: f64) -> Result<Self, EdsError> {
+        let bank = DriveBank::from_config(cfg, cfg.bus.heartbeat_producer_ms)?;
         Ok(Self {
+            winch_eds: (0..cfg.winches.len())
+                .map(|i| cfg.load_winch_eds(i))
+                .collect::<Result<_, _>>()?,
+            force_nodes: bank.force_nodes().to_vec(),
             winches: cfg.winches.clone(),
             initial_length_m: vec![initial_length_m; cfg.winches.len()],
             sync_period_s: f64::from(cfg.bus.sync_period_us) * 1e-6,
@@ -146,7 +157,18 @@ pub fn run(
 ) -> Result<(), can_transport::CanError> {
     let m = cfg.winches.len().min(MAX_CABLES);
     let ids: Vec<u8> = cfg.winches.iter().take(m).map(|w| w.node_id).collect();
-    let mut bank = DriveBank::with_eds(&ids, &cfg.eds, cfg.default_heartbeat_ms);
+    let slaves = ids
+        .iter()
+        .enumerate()
+        .map(|(i, &n)| {
+            DriveSlave::with_eds(
+                n,
+                cfg.winch_eds.get(i).unwrap_or(&cfg.eds),
+                cfg.default_heartbeat_ms,
+            )
+        })
+        .collect();
+    let mut bank = DriveBank::from_nodes(slaves, cfg.force_nodes.clone());
     if let Some(sw) = cfg.safety_watch {
         bank.enable_safety_watch(sw);
         control.safety_inhibit.store(true, Ordering::Release);

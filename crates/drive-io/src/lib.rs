@@ -14,6 +14,7 @@ pub mod commissioning;
 pub mod config;
 pub mod eds;
 pub mod emulator;
+pub mod force_node;
 pub mod force_sensor;
 pub mod hil;
 pub mod identity;

@@ -999,8 +999,12 @@ impl Master {
                         self.push_rpdos(i, enable_step(st, self.toggle), d.position, out);
                     }
                 }
-                // The force sensors report too before the drives count as ready.
-                all_enabled &= (self.m..self.n).all(|k| self.drives[k].force_rx_ns > 0);
+                // Every TPDO drive-io supervises has arrived (the velocity may come every n-th
+                // SYNC only; the forces from the drives or their force sensors).
+                all_enabled &= self.drives[..self.m].iter().all(|d| d.vel_rx_ns > 0)
+                    && self.force_node[..self.m]
+                        .iter()
+                        .all(|&k| self.drives[k].force_rx_ns > 0);
                 out.push(sync());
                 if all_enabled {
                     self.setpoint_age = 0;

@@ -21,6 +21,7 @@
 
 use crate::canopen::*;
 use crate::eds::{Access, DataType, Eds};
+use crate::force_node::ForceNode;
 use crate::safety_watch::{InhibitReason, SafetyWatch, SafetyWatchConfig};
 use crate::sdo::{ObjectAccess, SDO_MAX, SdoServer};
 use can_transport::CanFrame;
@@ -337,6 +338,16 @@ impl DriveSlave {
     /// 0x607D (min, max) in counts.
     pub fn software_position_limits(&self) -> (i32, i32) {
         self.position_limits
+    }
+    /// 0x6085 in counts/s² (None if the EDS has no such object): the embedder's quick stop
+    /// ramp.
+    pub fn quick_stop_deceleration(&self) -> Option<u32> {
+        self.raw(0x6085, 0)
+    }
+    /// Sets a process value the device's own firmware produces (a measured value mapped into
+    /// a TPDO, e.g. a load cell's 0x9130sub1); ignored if the object is not there.
+    pub fn set_process_value(&mut self, index: u16, sub: u8, raw: u32) {
+        self.set_raw(index, sub, raw);
     }
 
     /// Power-on: emits the boot-up message and enters pre-operational.
@@ -948,6 +959,8 @@ impl WinchAxis {
 /// ```
 pub struct DriveBank {
     slaves: Vec<DriveSlave>,
+    /// Force-measuring nodes and the cable (0-based) each measures.
+    force_nodes: Vec<(usize, ForceNode)>,
     out: FrameBuf,
     watch: Option<SafetyWatch>,
 }
@@ -964,9 +977,65 @@ impl DriveBank {
                 .iter()
                 .map(|&n| DriveSlave::with_eds(n, eds, heartbeat_ms))
                 .collect(),
+            force_nodes: Vec::new(),
             out: FrameBuf::default(),
             watch: None,
         }
+    }
+    /// The drives of `cfg` (each with its EDS: `winch[i].eds`, `bus.eds` or the simulated
+    /// winch's) and its `[[force_sensor]]` nodes (each with its EDS, else the simulated load
+    /// cell's), in cable order. Fails if an EDS cannot be read or a sensor's EDS has no
+    /// process value of the configured channel.
+    pub fn from_config(
+        cfg: &crate::config::DrivesConfig,
+        heartbeat_ms: u16,
+    ) -> Result<Self, crate::eds::EdsError> {
+        let mut slaves = Vec::with_capacity(cfg.winches.len());
+        for (i, w) in cfg.winches.iter().enumerate() {
+            slaves.push(DriveSlave::with_eds(
+                w.node_id,
+                &cfg.load_winch_eds(i)?,
+                heartbeat_ms,
+            ));
+        }
+        let mut force_nodes = Vec::with_capacity(cfg.force_sensors.len());
+        for (j, s) in cfg.force_sensors.iter().enumerate() {
+            let eds = cfg.load_sensor_eds(j)?;
+            let node = ForceNode::new(s.node_id, &eds, s.object.sub, heartbeat_ms).ok_or_else(
+                || crate::eds::EdsError {
+                    file: eds.file.clone(),
+                    line: 0,
+                    reason: format!(
+                        "force_sensor[{j}]: no analog input process value (0x9130/0x7130/0x6130) \
+                         sub {}",
+                        s.object.sub
+                    ),
+                },
+            )?;
+            force_nodes.push((s.cable - 1, node));
+        }
+        Ok(Self {
+            slaves,
+            force_nodes,
+            out: FrameBuf::default(),
+            watch: None,
+        })
+    }
+    /// A bank of these drives and force nodes (cable order; force nodes with their cable).
+    pub fn from_nodes(slaves: Vec<DriveSlave>, force_nodes: Vec<(usize, ForceNode)>) -> Self {
+        Self {
+            slaves,
+            force_nodes,
+            out: FrameBuf::default(),
+            watch: None,
+        }
+    }
+    /// The force-measuring nodes and the cable (0-based) each measures.
+    pub fn force_nodes(&self) -> &[(usize, ForceNode)] {
+        &self.force_nodes
+    }
+    pub fn force_nodes_mut(&mut self) -> &mut [(usize, ForceNode)] {
+        &mut self.force_nodes
     }
     /// Makes every drive validate the safety monitor's doubled heartbeat (drives.toml
     /// `[safety_heartbeat]`): without a valid RUN pair within the validation time, or on an
@@ -999,10 +1068,13 @@ impl DriveBank {
     pub fn is_empty(&self) -> bool {
         self.slaves.is_empty()
     }
-    /// Power-on of all drives (boot-up messages).
+    /// Power-on of all drives and force nodes (boot-up messages).
     pub fn start(&mut self, now_ns: u64) {
         for s in &mut self.slaves {
             s.start(now_ns, &mut self.out);
+        }
+        for (_, f) in &mut self.force_nodes {
+            f.start(now_ns, &mut self.out);
         }
     }
     /// Handles one frame for every drive; true if it was a SYNC that the drives act on (step the
@@ -1015,6 +1087,9 @@ impl DriveBank {
         let mut sync = false;
         for s in &mut self.slaves {
             sync |= s.handle_frame(frame, now_ns, &mut self.out) == SlaveEvent::Sync;
+        }
+        for (_, f) in &mut self.force_nodes {
+            sync |= f.handle_frame(frame, now_ns, &mut self.out);
         }
         sync
     }
@@ -1035,11 +1110,18 @@ impl DriveBank {
         if let Some(s) = self.slaves.get_mut(i) {
             s.set_actual(position_counts, velocity_counts_per_s, force_mn);
         }
+        // The pulley's load cell measures the same cable force.
+        for (_, f) in self.force_nodes.iter_mut().filter(|(c, _)| *c == i) {
+            f.set_force_n(f64::from(force_mn) * 1e-3);
+        }
     }
-    /// TPDOs of all drives (after the physics step of a SYNC).
+    /// TPDOs of all drives and force nodes (after the physics step of a SYNC).
     pub fn transmit_pdos(&mut self) {
         for s in &mut self.slaves {
             s.transmit_pdos(&mut self.out);
+        }
+        for (_, f) in &mut self.force_nodes {
+            f.transmit_pdos(&mut self.out);
         }
     }
     /// Heartbeats when due; applies the safety-heartbeat validation time if the watch is on.
@@ -1047,6 +1129,9 @@ impl DriveBank {
         self.apply_safety_watch(now_ns);
         for s in &mut self.slaves {
             s.poll(now_ns, &mut self.out);
+        }
+        for (_, f) in &mut self.force_nodes {
+            f.poll(now_ns, &mut self.out);
         }
     }
     /// Sends queued frames; a full TX queue drops the frame (as a CAN controller would).

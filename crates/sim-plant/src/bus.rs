@@ -80,7 +80,8 @@ impl Default for ConfigFiles {
 /// Why the plant cannot be put on the bus. Every variant names the file(s) and key(s).
 #[derive(Debug, thiserror::Error)]
 pub enum BusPlantError {
-    /// The drives' EDS (drives.toml `bus.eds`) cannot be read.
+    /// A drive's or force sensor's EDS (drives.toml `bus.eds`, `winch[i].eds`,
+    /// `force_sensor[j].eds`) cannot be read.
     #[error("{drives}: {source}")]
     Eds {
         drives: String,
@@ -408,14 +409,16 @@ impl PlantBus {
                 plant: files.plant.clone(),
                 source,
             })?;
-        let ids: Vec<u8> = drives.winches.iter().map(|w| w.node_id).collect();
-        // The winches implement the object dictionary of the drives' EDS (drives.toml
-        // `bus.eds`, else the simulated winch's config/eds/crs-winch.eds).
-        let eds = drives.load_eds().map_err(|source| BusPlantError::Eds {
-            drives: files.drives.clone(),
-            source,
-        })?;
-        let mut bank = DriveBank::with_eds(&ids, &eds, opts.default_heartbeat_ms);
+        // The winches implement the object dictionary of their EDS (drives.toml `winch[i].eds`
+        // or `bus.eds`, else the simulated winch's config/eds/crs-winch.eds); the pulleys'
+        // load cells of the `[[force_sensor]]` table report the measured forces too.
+        let mut bank =
+            DriveBank::from_config(drives, opts.default_heartbeat_ms).map_err(|source| {
+                BusPlantError::Eds {
+                    drives: files.drives.clone(),
+                    source,
+                }
+            })?;
         if let Some(sw) = drives.safety_heartbeat {
             // The drives validate the safety monitor's heartbeat like the real ones (drives.toml
             // `[safety_heartbeat]`): without it they quick-stop and the brakes hold.
