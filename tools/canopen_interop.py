@@ -5,16 +5,21 @@ python-can's udp_multicast bus, which can-transport speaks as `pycan-udp:GROUP:P
   drive   CiA 402 drives as python canopen LocalNodes with the object dictionary of the EDS
           (SDO server, NMT slave, heartbeat producer, EMCY producer, PDO maps: python canopen's);
           the CiA 402 device state machine and an ideal CSP axis are the lines below. drive-io
-          (`drive-io-interop`) configures and runs them.
+          (`drive-io-interop`) configures and runs them. With --cells, one CiA 404 load cell per
+          drive (LocalNodes 33.. from config/eds/crs-load-cell.eds) reports the cable force
+          3000 N + 100 N x cable in its process value 0x9130sub1 (0.1 N); --swap N makes drive N
+          answer as another product (0x1018sub2 = 0x00003000).
   master  a python canopen master (RemoteNodes from the same EDS) configures and drives this
           project's `winch-emulator`: NMT, SDO configuration and aborts, its own PDO mapping
           (different from drive-io's), SYNC, CiA 402 enable, motion, quick stop, EMCY
           (following error), heartbeat loss at the drive (0x1016 -> 0x6007).
-  dcf     python canopen imports the DCFs drive-io wrote and checks the configured values.
+  dcf     python canopen imports the DCFs drive-io wrote and checks the configured values
+          (signed values such as 0x607D read back signed).
 
 Run by tools/canopen-interop.sh. Exit status 0 iff every check passed.
 """
 import argparse
+import math
 import struct
 import sys
 import threading
@@ -88,6 +93,8 @@ class Drive:
                 0x607A: lambda: self.pending, 0x6040: lambda: self.cw}
         if subindex == 0 and index in live:
             return live[index]()
+        if (index, subindex) == (0x1018, 2) and self.id == self.a.swap:
+            return 0x00003000  # another product on this node id (firmware constant)
         return None
 
     def on_write(self, index, subindex, od, data):
@@ -266,13 +273,70 @@ class Drive:
                 self.reboot(communication_only=False)
 
 
+class Cell:
+    """A CiA 404 measuring device (pulley load cell) as a python canopen LocalNode: SDO server,
+    NMT slave and heartbeat are python canopen's; TPDOs are sent on SYNC as mapped."""
+
+    def __init__(self, net, node_id, cable, eds):
+        self.net, self.id = net, node_id
+        self.node = canopen.LocalNode(node_id, eds)
+        net.add_node(self.node)
+        self.lock = threading.RLock()
+        # The measured force in the process value's unit (0.1 N per 0x6131/0x6132).
+        self.force_units = round((3000 + 100 * cable) * 10)
+        self.syncs = {}
+        self.subscribed = []
+        self.node.add_read_callback(self.on_read)
+        net.subscribe(0, self.on_nmt)
+        net.subscribe(0x80, self.on_sync)
+
+    def on_read(self, index, subindex, od):
+        if index == 0x9130 and subindex == 1:
+            return self.force_units
+        return None
+
+    def on_nmt(self, can_id, data, ts):
+        if len(data) != 2 or data[1] not in (0, self.id):
+            return
+        if data[0] in (0x81, 0x82):
+            with self.lock:
+                for index in list(self.node.data_store):
+                    if data[0] == 0x81 or 0x1000 <= index < 0x2000:
+                        del self.node.data_store[index]
+            self.net.send_message(0x700 + self.id, [0])  # boot-up
+            self.node.nmt.send_command(0x80)
+        elif data[0] == 0x01:
+            with self.lock:
+                self.node.tpdo.read(from_od=False)
+
+    def on_sync(self, can_id, data, ts):
+        if self.node.nmt.state != "OPERATIONAL":
+            return
+        with self.lock:
+            for m in [m for m in self.node.tpdo.map.values() if m.enabled]:
+                tt = m.trans_type or 0
+                if not 1 <= tt <= 240:
+                    continue
+                n = self.syncs.get(m.cob_id, 0) + 1
+                self.syncs[m.cob_id] = 0 if n >= tt else n
+                if n < tt:
+                    continue
+                for var in m.map:
+                    v = self.on_read(var.index, var.subindex, None)
+                    if v is not None:
+                        var.raw = v
+                m.transmit()
+
+
 def run_drives(a):
     net = connect(a)
     drives = [Drive(net, n, a.eds, a) for n in range(1, a.drives + 1)]
-    for d in drives:
+    cells = [Cell(net, 32 + n, n, a.cell_eds) for n in range(1, a.drives + 1)] if a.cells else []
+    for d in drives + cells:
         d.net.send_message(0x700 + d.id, [0])  # power-on boot-up
         d.node.nmt.send_command(0x80)
-    print(f"python canopen {canopen.__version__}: {len(drives)} LocalNode drives from {a.eds}", flush=True)
+    print(f"python canopen {canopen.__version__}: {len(drives)} LocalNode drives from {a.eds}"
+          f"{f', {len(cells)} CiA 404 load cells from {a.cell_eds}' if cells else ''}", flush=True)
     t_end = time.monotonic() + a.seconds
     while time.monotonic() < t_end:
         for d in drives:
@@ -423,13 +487,31 @@ def run_master(a):
 # ---------------------------------------------------------------- DCF check
 def check_dcf(a):
     check = Checks()
+    cpm = 10 * 1048576 / (math.pi * 0.305)  # drive-io-interop's scaling, counts per metre
     for n in range(1, a.drives + 1):
         path = f"{a.dcf_dir}/node{n:02}.dcf"
         od = canopen.import_od(path, n)
-        check(od[0x1A01][2].value == 0x21100020, f"{path}: TPDO2 entry 2 = 0x2110 (ParameterValue)")
+        if a.vendor:
+            check(od[0x1A01][1].value == 0x606C0020 and od[0x1A01][0].value == 1,
+                  f"{path}: TPDO2 = velocity actual alone (no force object)")
+            check(od[0x1801][2].value == 10, f"{path}: TPDO2 every 10th SYNC")
+            check(od[0x1401][1].value & 0x80000000 != 0, f"{path}: stray RPDO2 disabled")
+            check(od[0x2000].value == f"CRS winch {n} (cable {n})", f"{path}: 0x2000 = {od[0x2000].value!r}")
+        else:
+            check(od[0x1A01][2].value == 0x21100020, f"{path}: TPDO2 entry 2 = 0x2110 (ParameterValue)")
         check(od[0x1800][1].value == 0x180 + n, f"{path}: TPDO1 COB-ID 0x{0x180 + n:X}")
         check(od[0x6060].value == 8 and od[0x6007].value == 2, f"{path}: 0x6060 = 8, 0x6007 = 2")
+        check(od[0x60C2][2].value == -3, f"{path}: 0x60C2sub2 = {od[0x60C2][2].value} (-3: ms)")
+        sign, offset = (1, 0) if n % 2 == 1 else (-1, 200_000_000)
+        ends = [offset, offset + sign * 30.0 * cpm]
+        lo = round(min(ends))
+        check(abs(od[0x607D][1].value - lo) <= 1, f"{path}: 0x607Dsub1 = {od[0x607D][1].value} (signed, want {lo})")
         check(od.node_id == n, f"{path}: [DeviceComissioning] NodeID {n}")
+    for n in range(33, 33 + a.drives) if a.vendor else []:
+        path = f"{a.dcf_dir}/node{n:02}.dcf"
+        od = canopen.import_od(path, n)
+        check(od[0x1A00][1].value == 0x91300120, f"{path}: load cell TPDO1 = 0x9130sub1")
+        check(od[0x1017].value == 20, f"{path}: heartbeat 20 ms")
     return 1 if check.failed else 0
 
 
@@ -446,6 +528,10 @@ def main():
     p.add_argument("--after", type=float, default=0.5)
     p.add_argument("--seconds", type=float, default=20)
     p.add_argument("--dcf-dir")
+    p.add_argument("--cells", action="store_true")
+    p.add_argument("--cell-eds", default="config/eds/crs-load-cell.eds")
+    p.add_argument("--swap", type=int, default=0)
+    p.add_argument("--vendor", action="store_true")
     a = p.parse_args()
     return {"drive": run_drives, "master": run_master, "dcf": check_dcf}[a.role](a)
 

@@ -193,6 +193,7 @@ fn boot(x: &mut External) -> Res<Vec<f64>> {
 /// the PDOs, then an e-stop: every drive acknowledges the quick stop in its statusword and
 /// reports velocity 0.
 pub fn scenario_run(cfg: DrivesConfig, prefix: &str) -> Res<String> {
+    let x_cells = cfg.force_sensors.len();
     let mut x = External::start(cfg, prefix)?;
     let l0 = boot(&mut x)?;
     let goal: Vec<f64> = l0.iter().map(|l| l + 0.05).collect();
@@ -201,6 +202,18 @@ pub fn scenario_run(cfg: DrivesConfig, prefix: &str) -> Res<String> {
         l0.iter().map(|l| l + 0.05 * s).collect()
     })?;
     let f = x.stream(Duration::from_millis(100), |_| goal.clone())?;
+    // Forces from the load cells where the configuration has them: the python CiA 404 nodes
+    // report 3000 N + 100 N × cable (in 0.1 N), drive-io scales them with n_per_unit.
+    for s in &x.cfg.force_sensors {
+        let i = s.cable - 1;
+        let want = 3000.0 + 100.0 * s.cable as f64;
+        if (f.cable_force_n[i] - want).abs() > 0.05 {
+            return Err(format!(
+                "cable {}: force {} N from load cell node {}, the cell reports {want} N",
+                s.cable, f.cable_force_n[i], s.node_id
+            ));
+        }
+    }
     if BusState::from_u32(f.bus_state) != Some(BusState::Running) {
         return Err(format!(
             "not Running after the stream: {:?}",
@@ -239,8 +252,13 @@ pub fn scenario_run(cfg: DrivesConfig, prefix: &str) -> Res<String> {
     }
     x.shutdown()?;
     Ok(format!(
-        "{} drives configured, followed 50 mm to < 1 um, quick stop acknowledged",
-        goal.len()
+        "{} drives configured, followed 50 mm to < 1 um, quick stop acknowledged{}",
+        goal.len(),
+        if x_cells > 0 {
+            format!(", forces from {x_cells} load cells")
+        } else {
+            String::new()
+        }
     ))
 }
 

@@ -302,6 +302,14 @@ impl DriveSlave {
         self.raw(index, sub)
     }
 
+    /// Current value of a string or domain object (0x1008 ...).
+    pub fn od_bytes(&self, index: u16, sub: u8) -> Option<&[u8]> {
+        self.strings
+            .iter()
+            .find(|s| (s.index, s.sub) == (index, sub))
+            .map(|s| s.value.as_slice())
+    }
+
     /// Safety inhibit from the safety-heartbeat watch: while set, an enabled drive is put into
     /// Quick Stop Active (decelerate, then the brake holds) and no controlword can enable it.
     /// Clearing it does not re-enable anything (the master must).

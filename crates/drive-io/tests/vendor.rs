@@ -200,9 +200,13 @@ impl Rig {
 
 #[test]
 fn vendor_drives_with_load_cells_boot_follow_and_report_the_cells_forces() {
-    let cfg = config("");
+    // A vendor string parameter (13 bytes: segmented download, read back segmented).
+    let cfg = config("parameters = [{ object = \"0x2000\", value = \"CRS cable one\" }]");
     let mut r = Rig::new(cfg, &[vendor_eds(), vendor_eds()]);
     r.boot();
+    assert_eq!(r.drives[0].od_bytes(0x2000, 0), Some(&b"CRS cable one"[..]));
+    assert_eq!(r.drives[1].od_bytes(0x2000, 0), Some(&b"axis"[..]));
+    assert!(r.sdo_requests(1).iter().any(|d| d[0] == 0x21 && d[4] == 13));
     // Identity first: the first requests to drive 1 upload 0x1000, 0x1018 sub 1/2, then the
     // device name (segmented: the answer is 0x41 and segments follow).
     let req = r.sdo_requests(1);

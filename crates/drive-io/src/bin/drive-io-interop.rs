@@ -12,7 +12,7 @@ struct Args {
     /// python-can bus, e.g. pycan-udp:239.74.163.2:43113
     #[arg(long)]
     transport: String,
-    /// run | emcy | heartbeat | reboot | refused
+    /// run | emcy | heartbeat | reboot | refused | swapped
     #[arg(long)]
     scenario: String,
     /// Number of drives (node ids 1..=N).
@@ -31,6 +31,14 @@ struct Args {
     /// The EMCY code the python side sends (emcy), e.g. 0x2310.
     #[arg(long, default_value = "0x2310", value_parser = parse_u16)]
     code: u16,
+    /// Force sensors: one CiA 404 load cell per drive (node ids 33..), EDS
+    /// config/eds/crs-load-cell.eds, the cable forces from them.
+    #[arg(long)]
+    cells: bool,
+    /// The vendor drive's identity (config/eds/vendor-csp-drive.eds) checked at boot, and its
+    /// string parameter 0x2000 written (segmented).
+    #[arg(long)]
+    vendor_identity: bool,
 }
 
 fn parse_u16(s: &str) -> Result<u16, String> {
@@ -67,6 +75,26 @@ fn config(a: &Args) -> Result<drive_io::DrivesConfig, String> {
             "[[winch]]\nnode_id = {n}\ndrum_diameter_m = 0.305\ngear_ratio = 10.0\n\
              counts_per_rev = 1048576\nsign = {sign}\noffset_counts = {offset}\n"
         ));
+        if a.vendor_identity {
+            text.push_str(&format!(
+                "identity = {{ device_type = 0x00020192, vendor_id = 0x0000ACE1, \
+                 product_code = 0x00002000, revision = 0x00040002, \
+                 device_name = \"ACME CSP-2000 servo drive\" }}\n\
+                 parameters = [{{ object = \"0x2000\", value = \"CRS winch {n} (cable {n})\" }}]\n"
+            ));
+        }
+    }
+    if a.cells {
+        let cell_eds = abs("config/eds/crs-load-cell.eds")?;
+        for n in 1..=a.drives {
+            text.push_str(&format!(
+                "[[force_sensor]]\nnode_id = {}\ncable = {n}\neds = \"{cell_eds}\"\n\
+                 n_per_unit = 0.1\nphysical_unit = 0x00210000\ndecimal_digits = 1\n\
+                 identity = {{ device_type = 0x00020194, product_code = 0x0043524C, \
+                 device_name = \"CRS pulley load cell\" }}\n",
+                32 + u16::from(n)
+            ));
+        }
     }
     drive_io::DrivesConfig::parse(&text).map_err(|e| e.to_string())
 }
@@ -92,6 +120,19 @@ fn main() -> ExitCode {
                 "0x6065",
                 "0x06020000",
                 "object does not exist",
+            ],
+        ),
+        // The python side answers as another product on node 2 (a swapped drive).
+        "swapped" => interop::scenario_refused(
+            cfg,
+            &prefix,
+            &[
+                "drive node 2",
+                "0x1018sub2",
+                "is 0x00003000",
+                "expects 0x00002000",
+                "winch[1].identity.product_code",
+                "before anything was written",
             ],
         ),
         s => Err(format!("unknown scenario {s}")),
