@@ -226,6 +226,17 @@ impl Plan {
     }
 }
 
+/// One PDO drive-io writes (default or custom mapping).
+struct LayoutEntry {
+    direction: Direction,
+    number: u16,
+    cob_id: u16,
+    objects: Vec<ObjectRef>,
+    transmission_type: u8,
+    inhibit_us: Option<u32>,
+    event_ms: Option<u16>,
+}
+
 struct Builder<'a> {
     eds: &'a Eds,
     node: u8,
@@ -696,19 +707,20 @@ impl Builder<'_> {
     /// A written mapping (default or custom): builds and writes every PDO of `layout`.
     fn written(
         &mut self,
-        layout: &[(
-            Direction,
-            u16,
-            u16,
-            Vec<ObjectRef>,
-            u8,
-            Option<u32>,
-            Option<u16>,
-        )],
+        layout: &[LayoutEntry],
         assign: &dyn Fn(ObjectRef) -> Role,
     ) -> Result<Vec<Pdo>, PlanError> {
         let mut pdos = Vec::new();
-        for (k, (dir, n, cob, objects, tt, inhibit, event)) in layout.iter().enumerate() {
+        for (k, e) in layout.iter().enumerate() {
+            let (dir, n, cob, objects, tt, inhibit, event) = (
+                &e.direction,
+                &e.number,
+                &e.cob_id,
+                &e.objects,
+                &e.transmission_type,
+                &e.inhibit_us,
+                &e.event_ms,
+            );
             let key = match dir {
                 Direction::ToNode => format!(".rpdo[{k}]"),
                 Direction::FromNode => format!(".tpdo[{k}]"),
@@ -865,14 +877,13 @@ pub fn validate_winch(cfg: &DrivesConfig, i: usize) -> Result<(), (String, Strin
             }
             Some(_) => {}
         },
-        Some(ForceSource::Drive) => {
-            if cfg.force_sensors.iter().any(|s| s.cable == i + 1) {
-                return Err((
-                    f("force"),
-                    format!("\"drive\", but a [[force_sensor]] measures cable {}", i + 1),
-                ));
-            }
+        Some(ForceSource::Drive) if cfg.force_sensors.iter().any(|s| s.cable == i + 1) => {
+            return Err((
+                f("force"),
+                format!("\"drive\", but a [[force_sensor]] measures cable {}", i + 1),
+            ));
         }
+        Some(ForceSource::Drive) => {}
         None => {}
     }
     if cfg.force_sensor_of(i).is_some()
@@ -934,16 +945,14 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
         MappingMode::Default => {
             let layout: Vec<_> = default_drive_layout(force_obj, feedback_every)
                 .into_iter()
-                .map(|p| {
-                    (
-                        p.direction,
-                        p.number,
-                        p.cob_base + u16::from(n),
-                        p.objects,
-                        p.transmission_type,
-                        None,
-                        None,
-                    )
+                .map(|p| LayoutEntry {
+                    direction: p.direction,
+                    number: p.number,
+                    cob_id: p.cob_base + u16::from(n),
+                    objects: p.objects,
+                    transmission_type: p.transmission_type,
+                    inhibit_us: None,
+                    event_ms: None,
                 })
                 .collect();
             b.written(&layout, &assign)?
@@ -956,15 +965,15 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
                         .cob_id
                         .or_else(|| predefined_cob_base(dir, p.number).map(|c| c + u16::from(n)))
                         .unwrap_or(0);
-                    layout.push((
-                        dir,
-                        p.number,
-                        cob,
-                        p.objects.clone(),
-                        p.transmission_type.unwrap_or(1),
-                        p.inhibit_time_us,
-                        p.event_timer_ms,
-                    ));
+                    layout.push(LayoutEntry {
+                        direction: dir,
+                        number: p.number,
+                        cob_id: cob,
+                        objects: p.objects.clone(),
+                        transmission_type: p.transmission_type.unwrap_or(1),
+                        inhibit_us: p.inhibit_time_us,
+                        event_ms: p.event_timer_ms,
+                    });
                 }
             }
             b.written(&layout, &assign)?
@@ -1191,15 +1200,15 @@ pub fn plan_force_sensor(cfg: &DrivesConfig, j: usize, eds: &Eds) -> Result<Plan
                 })
                 .unwrap_or(0);
             b.written(
-                &[(
-                    Direction::FromNode,
-                    s.tpdo,
-                    cob,
-                    vec![object],
-                    s.every_n_syncs,
-                    None,
-                    None,
-                )],
+                &[LayoutEntry {
+                    direction: Direction::FromNode,
+                    number: s.tpdo,
+                    cob_id: cob,
+                    objects: vec![object],
+                    transmission_type: s.every_n_syncs,
+                    inhibit_us: None,
+                    event_ms: None,
+                }],
                 &assign,
             )?
         }

@@ -106,7 +106,7 @@ impl DataType {
             Self::Other(0x000A | 0x000F) => {
                 let t: String = text.chars().filter(|c| !c.is_whitespace()).collect();
                 let t = t.strip_prefix("0x").unwrap_or(&t);
-                if t.len() % 2 != 0 {
+                if !t.len().is_multiple_of(2) {
                     return None;
                 }
                 (0..t.len())
@@ -792,7 +792,7 @@ impl Eds {
             let value = value_of(index, k).or_else(|| {
                 self.entry(index, k)
                     .and_then(|e| e.parameter_value)
-                    .map(|v| dcf_number_text(v))
+                    .map(dcf_number_text)
             });
             if let Some(v) = value {
                 let _ = writeln!(out, "ParameterValue={v}");

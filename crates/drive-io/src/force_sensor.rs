@@ -169,9 +169,7 @@ impl ForceSensorConfig {
                 "\"default\" or \"fixed\" (a force sensor maps one object)".into(),
             ));
         }
-        self.identity
-            .validate(&format!("force_sensor[{j}]"))
-            .map_err(|(k, r)| (k, r))
+        self.identity.validate(&format!("force_sensor[{j}]"))
     }
 }
 

@@ -568,7 +568,7 @@ impl Master {
             d.force_rx_ns = rx_ns;
             // Second, independent channel to the monitor's force supervision: beyond the
             // winches' rating (or a sensor reading that large negative) stop at once.
-            if !(f.abs() <= self.force_limit_n) && !booting {
+            if (f.is_nan() || f.abs() > self.force_limit_n) && !booting {
                 let node = d.node;
                 tracing::error!(node, force_n = f, "cable force beyond the hard limit");
                 self.stop(BusState::Fault, fault_code::FORCE_LIMIT, node);

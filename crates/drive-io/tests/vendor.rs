@@ -103,11 +103,11 @@ impl Rig {
         for c in &mut r.cells {
             c.start(r.now, &mut out);
         }
-        r.to_master(&out);
+        r.deliver(&out);
         r
     }
 
-    fn to_master(&mut self, out: &FrameBuf) {
+    fn deliver(&mut self, out: &FrameBuf) {
         for f in out.as_slice() {
             self.frames.push(*f);
             self.log.push(canopen::decode(f));
@@ -158,7 +158,7 @@ impl Rig {
         for c in &mut self.cells {
             c.poll(self.now, &mut s_out);
         }
-        self.to_master(&s_out);
+        self.deliver(&s_out);
     }
 
     fn boot(&mut self) {
@@ -296,8 +296,8 @@ fn vendor_drives_with_load_cells_boot_follow_and_report_the_cells_forces() {
     }
     let f = *r.master.feedback();
     assert_eq!(BusState::from_u32(f.bus_state), Some(BusState::Running));
-    for i in 0..2 {
-        assert!((f.cable_length_m[i] - (l0[i] + 0.02)).abs() < 1e-6, "{i}");
+    for (i, l) in l0.iter().enumerate() {
+        assert!((f.cable_length_m[i] - (l + 0.02)).abs() < 1e-6, "{i}");
     }
     assert_eq!(f.cable_force_n[0], 3000.0);
     assert!((f.cable_force_n[1] - 4500.5).abs() < 1e-9);
@@ -388,7 +388,7 @@ fn statusword_bit_13_or_a_cell_beyond_the_force_limit_stops_every_drive() {
     let tpdo = CanFrame::new(0x182, &[sw[0], sw[1], pos[0], pos[1], pos[2], pos[3]]).unwrap();
     let mut out = FrameBuf::default();
     out.push(tpdo);
-    r.to_master(&out);
+    r.deliver(&out);
     r.step(None);
     let f = *r.master.feedback();
     assert_eq!(BusState::from_u32(f.bus_state), Some(BusState::Fault));
@@ -518,7 +518,8 @@ fn a_fixed_mapping_is_adopted_and_checked() {
     );
     let mut r = Rig::new(cfg, &[fixed_eds, vendor_eds()]);
     r.boot();
-    let sp = r.setpoint(1, &r.master.feedback().cable_length_m[..2].to_vec());
+    let l0 = r.master.feedback().cable_length_m;
+    let sp = r.setpoint(1, &l0[..2]);
     r.step(Some(&sp));
     assert_eq!(r.master.state(), BusState::Running);
     let _ = std::fs::remove_file(eds_path);
