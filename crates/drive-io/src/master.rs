@@ -55,6 +55,8 @@ pub enum SetupError {
 #[derive(Debug, Clone, Copy)]
 struct DriveView {
     node: u8,
+    /// The drive's CAN interface (index into `DrivesConfig::interfaces()`).
+    iface: u8,
     booted: bool,
     hb_monitored: bool,
     last_hb_ns: u64,
@@ -76,9 +78,10 @@ struct DriveView {
 }
 
 impl DriveView {
-    fn new(node: u8) -> Self {
+    fn new(node: u8, iface: u8) -> Self {
         Self {
             node,
+            iface,
             booted: false,
             hb_monitored: false,
             last_hb_ns: 0,
@@ -129,8 +132,10 @@ pub struct Master {
     /// The drives were NMT-stopped by an escalation: the next reset starts them again.
     nmt_stopped: bool,
     restart_nmt: bool,
-    winches: [WinchConfig; MAX_CABLES],
+    winches: Vec<WinchConfig>,
     m: usize,
+    /// Number of CAN interfaces.
+    interfaces: usize,
     sync_period_ns: u64,
     stale_cycles: u32,
     hb_timeout_ns: u64,
@@ -175,13 +180,12 @@ impl Master {
             .map(|w| crate::commissioning::plan(&eds, w, &cfg.bus))
             .collect::<Result<Vec<_>, _>>()?;
         let m = cfg.winches.len().min(MAX_CABLES);
-        let mut winches = [cfg.winches[0]; MAX_CABLES];
-        winches[..m].copy_from_slice(&cfg.winches[..m]);
-        let mut drives = [DriveView::new(0); MAX_CABLES];
+        let winches: Vec<WinchConfig> = cfg.winches[..m].to_vec();
+        let mut drives = [DriveView::new(0, 0); MAX_CABLES];
         let mut max_step_counts = [0.0; MAX_CABLES];
         let period_s = f64::from(cfg.bus.sync_period_us) * 1e-6;
         for i in 0..m {
-            drives[i] = DriveView::new(winches[i].node_id);
+            drives[i] = DriveView::new(winches[i].node_id, cfg.winch_interface(i) as u8);
             // Largest step per SYNC period at max cable speed.
             max_step_counts[i] =
                 cfg.bus.max_cable_speed_m_per_s * period_s * winches[i].counts_per_m();
@@ -205,6 +209,7 @@ impl Master {
             restart_nmt: false,
             winches,
             m,
+            interfaces: cfg.interfaces().len(),
             sync_period_ns: cfg.sync_period_ns(),
             stale_cycles: cfg.bus.stale_setpoint_cycles,
             hb_timeout_ns: u64::from(cfg.bus.heartbeat_timeout_ms) * 1_000_000,
@@ -365,12 +370,26 @@ impl Master {
         }
     }
 
-    fn index_of(&self, node: u8) -> Option<usize> {
-        self.drives[..self.m].iter().position(|d| d.node == node)
+    fn index_of(&self, iface: usize, node: u8) -> Option<usize> {
+        self.drives[..self.m]
+            .iter()
+            .position(|d| d.node == node && usize::from(d.iface) == iface)
     }
 
-    /// Handles one received frame.
-    pub fn on_frame(&mut self, rx: &RxFrame) {
+    /// Number of CAN interfaces the master runs.
+    pub fn interfaces(&self) -> usize {
+        self.interfaces
+    }
+
+    /// Node ids and interface (index) of every drive, in cable order.
+    pub fn drives_on_interfaces(&self) -> impl Iterator<Item = (usize, u8)> + '_ {
+        self.drives[..self.m]
+            .iter()
+            .map(|d| (usize::from(d.iface), d.node))
+    }
+
+    /// Handles one frame received on interface `iface`.
+    pub fn on_frame(&mut self, iface: usize, rx: &RxFrame) {
         let msg = decode(&rx.frame);
         let node = match msg {
             Message::Tpdo1 { node, .. }
@@ -380,7 +399,9 @@ impl Master {
             | Message::Heartbeat { node, .. } => node,
             _ => return,
         };
-        let Some(i) = self.index_of(node) else { return };
+        let Some(i) = self.index_of(iface, node) else {
+            return;
+        };
         let booting = matches!(self.phase, Phase::Boot | Phase::Configure | Phase::Enable);
         let d = &mut self.drives[i];
         match msg {
@@ -590,7 +611,7 @@ impl Master {
 
     /// One SYNC cycle at time `now_ns`: consumes the newest setpoint (if any), writes RPDOs and
     /// the SYNC into `out`, updates the feedback.
-    pub fn cycle(&mut self, now_ns: u64, setpoint: Option<&JointSetpoint>, out: &mut FrameBuf) {
+    pub fn cycle(&mut self, now_ns: u64, setpoint: Option<&JointSetpoint>, out: &mut BusFrames) {
         self.cycle += 1;
         self.toggle = !self.toggle;
         self.applied_this_cycle = false;
@@ -598,7 +619,7 @@ impl Master {
         // drive-io's own heartbeat (the drives' 0x1016 consumer watches it), unless withheld
         // as the last escalation of a stop.
         if !self.hb_inhibit && now_ns >= self.next_master_hb_ns {
-            out.push(heartbeat(self.master_node_id, NmtState::Operational));
+            out.push_all(heartbeat(self.master_node_id, NmtState::Operational));
             self.next_master_hb_ns = if now_ns - self.next_master_hb_ns > self.master_hb_ns {
                 now_ns + self.master_hb_ns
             } else {
@@ -637,7 +658,7 @@ impl Master {
         match self.phase {
             Phase::Boot => {
                 if self.cycle == 1 {
-                    out.push(nmt(NMT_RESET_COMM, 0));
+                    out.push_all(nmt(NMT_RESET_COMM, 0));
                 }
                 if self.drives[..self.m].iter().all(|d| d.booted) {
                     for d in &mut self.drives[..self.m] {
@@ -665,15 +686,18 @@ impl Master {
                         });
                         continue;
                     }
-                    out.push(match op {
-                        SdoOp::Write {
-                            index,
-                            sub,
-                            value,
-                            len,
-                        } => sdo_download(d.node, index, sub, value, len),
-                        SdoOp::Verify { index, sub, .. } => sdo_upload(d.node, index, sub),
-                    });
+                    out.push(
+                        usize::from(d.iface),
+                        match op {
+                            SdoOp::Write {
+                                index,
+                                sub,
+                                value,
+                                len,
+                            } => sdo_download(d.node, index, sub, value, len),
+                            SdoOp::Verify { index, sub, .. } => sdo_upload(d.node, index, sub),
+                        },
+                    );
                     d.sdo_outstanding = true;
                     d.sdo_sent_ns = now_ns;
                     d.sdo_tries += 1;
@@ -682,13 +706,13 @@ impl Master {
                     self.commissioning_failed(f);
                 } else if self.configured() {
                     tracing::info!(eds = %self.eds.file, "all drives configured and verified");
-                    out.push(nmt(NMT_START, 0));
+                    out.push_all(nmt(NMT_START, 0));
                     self.set_phase(Phase::Enable);
                 }
             }
             Phase::Enable => {
                 if std::mem::take(&mut self.restart_nmt) {
-                    out.push(nmt(NMT_START, 0));
+                    out.push_all(nmt(NMT_START, 0));
                 }
                 let mut all_enabled = true;
                 for i in 0..self.m {
@@ -701,10 +725,13 @@ impl Master {
                     if d.have_tpdo1 {
                         // Enable while holding the actual position: the drive must not jump.
                         self.target[i] = d.position;
-                        out.push(rpdo1(d.node, enable_step(st, self.toggle), d.position));
+                        out.push(
+                            usize::from(d.iface),
+                            rpdo1(d.node, enable_step(st, self.toggle), d.position),
+                        );
                     }
                 }
-                out.push(sync());
+                out.request_sync();
                 if all_enabled {
                     self.setpoint_age = 0;
                     self.set_phase(Phase::Ready);
@@ -727,13 +754,13 @@ impl Master {
                 }
                 if matches!(self.phase, Phase::Ready | Phase::Running) {
                     for i in 0..self.m {
-                        out.push(rpdo1(
-                            self.drives[i].node,
-                            CW_ENABLE_OPERATION,
-                            self.target[i],
-                        ));
+                        let d = &self.drives[i];
+                        out.push(
+                            usize::from(d.iface),
+                            rpdo1(d.node, CW_ENABLE_OPERATION, self.target[i]),
+                        );
                     }
-                    out.push(sync());
+                    out.request_sync();
                 } else {
                     self.push_quick_stop(out);
                 }
@@ -752,7 +779,7 @@ impl Master {
     /// Otherwise escalate: NMT stop all (the drives act per 0x6007: disable voltage, the brake
     /// holds), and if the heartbeats do not report NMT stopped within another timeout, withhold
     /// drive-io's heartbeat (their 0x1016 consumers time out and act per 0x6007 again).
-    fn supervise_quick_stop(&mut self, now_ns: u64, out: &mut FrameBuf) {
+    fn supervise_quick_stop(&mut self, now_ns: u64, out: &mut BusFrames) {
         if self.qs_stage == 3 || self.m == 0 {
             return;
         }
@@ -790,7 +817,7 @@ impl Master {
                     "quick stop not acknowledged in time: escalating to NMT stop (0x6007 action)"
                 );
             }
-            out.push(nmt(NMT_STOP, 0));
+            out.push_all(nmt(NMT_STOP, 0));
             self.nmt_stopped = true;
             self.qs_stage = 1;
         } else if self.qs_stage == 1 && elapsed > 2 * self.quick_stop_timeout_ns {
@@ -816,13 +843,17 @@ impl Master {
         self.qs_stage
     }
 
-    fn push_quick_stop(&mut self, out: &mut FrameBuf) {
+    fn push_quick_stop(&mut self, out: &mut BusFrames) {
         // Keep SYNC running so the drives keep reporting; hold the last target.
         if self.drives[..self.m].iter().any(|d| d.have_tpdo1) {
             for i in 0..self.m {
-                out.push(rpdo1(self.drives[i].node, CW_QUICK_STOP, self.target[i]));
+                let d = &self.drives[i];
+                out.push(
+                    usize::from(d.iface),
+                    rpdo1(d.node, CW_QUICK_STOP, self.target[i]),
+                );
             }
-            out.push(sync());
+            out.request_sync();
         }
     }
 
