@@ -646,3 +646,43 @@ mod tests {
         );
     }
 }
+
+/// drive-io's SYNC schedule (`sync_source = "isochronous"`): the SYNC is the bus clock, sent at
+/// `t0_ns + k · period_ns` (CLOCK_MONOTONIC; k ≥ 0, some k skipped after a stall, never an
+/// interval below 0.9 periods). motion-core places its tick `sync_lead_us` before each SYNC so
+/// the newest setpoint makes the next one. Announced at start and about once per second.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[type_name("crs_ipc::SyncSchedule.v1")]
+#[repr(C)]
+pub struct SyncSchedule {
+    pub version: u32,
+    pub _reserved: u32,
+    /// A SYNC instant of the schedule, ns.
+    pub t0_ns: u64,
+    /// SYNC period, ns.
+    pub period_ns: u64,
+    /// Strictly increasing per announcement.
+    pub sequence: u64,
+}
+
+impl SyncSchedule {
+    pub fn new(t0_ns: u64, period_ns: u64, sequence: u64) -> Self {
+        Self {
+            version: CONTRACT_VERSION,
+            _reserved: 0,
+            t0_ns,
+            period_ns,
+            sequence,
+        }
+    }
+
+    /// The phase of the schedule, shifted by `offset_ns` (may be negative), in [0, period).
+    /// `None` for a zero period.
+    pub fn phase_ns(&self, offset_ns: i64) -> Option<u64> {
+        if self.period_ns == 0 {
+            return None;
+        }
+        let p = i128::from(self.period_ns);
+        Some((i128::from(self.t0_ns) + i128::from(offset_ns)).rem_euclid(p) as u64)
+    }
+}

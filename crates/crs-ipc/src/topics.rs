@@ -136,3 +136,13 @@ topic!(
     publishers = 1,
     subscribers = 8
 );
+// drive-io -> motion-core: the isochronous SYNC schedule, about once per second (history 1 so a
+// motion-core that starts later learns it at the next announcement).
+topic!(
+    SyncSchedule,
+    "crs/v1/sync_schedule",
+    buffer = 4,
+    history = 1,
+    publishers = 1,
+    subscribers = 8
+);

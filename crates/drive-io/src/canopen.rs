@@ -573,6 +573,7 @@ pub fn parse_sdo_response(d: &[u8; 8]) -> SdoResponse {
 }
 
 /// Fixed-capacity frame output buffer: the per-SYNC path collects frames here without allocating.
+#[derive(Debug, Clone)]
 pub struct FrameBuf {
     frames: [CanFrame; Self::CAPACITY],
     len: usize,
@@ -614,5 +615,73 @@ impl FrameBuf {
     /// Frames that did not fit (a programming error if ever non-zero).
     pub fn dropped(&self) -> u32 {
         self.dropped
+    }
+}
+
+/// The frames of one drive-io cycle on every CAN interface (index = the interface's position
+/// in `DrivesConfig::interfaces()`), plus whether the cycle ends with a SYNC on every interface
+/// (sent by the runner: right after the frames, or at the isochronous SYNC instant).
+#[derive(Debug, Clone)]
+pub struct BusFrames {
+    bufs: [FrameBuf; crate::config::MAX_INTERFACES],
+    interfaces: usize,
+    sync: bool,
+}
+
+impl BusFrames {
+    /// Buffers for `interfaces` interfaces (1..=MAX_INTERFACES; clamped).
+    pub fn new(interfaces: usize) -> Self {
+        Self {
+            bufs: std::array::from_fn(|_| FrameBuf::default()),
+            interfaces: interfaces.clamp(1, crate::config::MAX_INTERFACES),
+            sync: false,
+        }
+    }
+    /// Number of interfaces.
+    pub fn interfaces(&self) -> usize {
+        self.interfaces
+    }
+    /// Queues `f` on interface `iface` (out-of-range indices go to the last interface's
+    /// buffer's drop count: a programming error).
+    pub fn push(&mut self, iface: usize, f: CanFrame) {
+        let i = iface.min(self.interfaces - 1);
+        self.bufs[i].push(f);
+    }
+    /// Queues `f` on every interface.
+    pub fn push_all(&mut self, f: CanFrame) {
+        for b in &mut self.bufs[..self.interfaces] {
+            b.push(f);
+        }
+    }
+    /// The cycle ends with a SYNC on every interface.
+    pub fn request_sync(&mut self) {
+        self.sync = true;
+    }
+    pub fn sync_requested(&self) -> bool {
+        self.sync
+    }
+    /// The frames queued on interface `iface`.
+    pub fn on(&self, iface: usize) -> &[CanFrame] {
+        self.bufs.get(iface).map_or(&[], FrameBuf::as_slice)
+    }
+    /// Every queued frame with its interface, interface by interface (tests, single-bus rigs).
+    pub fn iter(&self) -> impl Iterator<Item = (usize, &CanFrame)> + '_ {
+        self.bufs[..self.interfaces]
+            .iter()
+            .enumerate()
+            .flat_map(|(i, b)| b.as_slice().iter().map(move |f| (i, f)))
+    }
+    pub fn clear(&mut self) {
+        for b in &mut self.bufs[..self.interfaces] {
+            b.clear();
+        }
+        self.sync = false;
+    }
+    pub fn is_empty(&self) -> bool {
+        self.bufs[..self.interfaces].iter().all(FrameBuf::is_empty) && !self.sync
+    }
+    /// Frames that did not fit (a programming error if ever non-zero).
+    pub fn dropped(&self) -> u32 {
+        self.bufs.iter().map(FrameBuf::dropped).sum()
     }
 }

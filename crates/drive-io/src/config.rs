@@ -30,11 +30,51 @@ fn invalid(field: impl Into<String>, reason: impl Into<String>) -> ConfigError {
     }
 }
 
+/// At most this many CAN interfaces (`[[bus.interface]]`) per drive-io: PCIe/USB CAN cards
+/// have 1–4 channels, two cards 8.
+pub const MAX_INTERFACES: usize = 8;
+
+/// One CAN interface of the drive bus system (`[[bus.interface]]`): its transport, bit rate and
+/// load budget. The drives on it are the `[[winch]]` entries naming it.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct InterfaceConfig {
+    /// Name the `[[winch]]` entries refer to (`interface = "can0"`), unique.
+    pub name: String,
+    /// `socketcan:<iface>`, `udpbus:<group>:<port>`, `udp:<local>-><remote>`, `wire:<socket>`.
+    pub transport: String,
+    /// Nominal bit rate of the interface (classic CAN: at most 1 Mbit/s), bit/s.
+    #[serde(default = "d_bitrate")]
+    pub bitrate_bit_per_s: u32,
+    /// Load budget: the configuration's frames may fill at most this share of the bus
+    /// (worst-case bit stuffing, [`crate::budget`]); may be set below the default, never above.
+    #[serde(default = "d_budget")]
+    pub budget_percent: f64,
+}
+
+fn d_bitrate() -> u32 {
+    1_000_000
+}
+/// The largest load budget any interface may have, percent of the bit rate.
+pub const MAX_BUDGET_PERCENT: f64 = 70.0;
+fn d_budget() -> f64 {
+    MAX_BUDGET_PERCENT
+}
+
+/// Name of the one interface of a configuration that gives only `bus.transport`.
+pub const SINGLE_INTERFACE_NAME: &str = "can0";
+
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct BusConfig {
-    /// `socketcan:<iface>`, `udpbus:<group>:<port>` or `udp:<local>-><remote>`.
-    pub transport: String,
+    /// Shorthand for a single interface: `socketcan:<iface>`, `udpbus:<group>:<port>`,
+    /// `udp:<local>-><remote>`, `wire:<socket>` (named [`SINGLE_INTERFACE_NAME`], 1 Mbit/s).
+    /// Exactly one of `transport` and `[[bus.interface]]` is given.
+    #[serde(default)]
+    pub transport: Option<String>,
+    /// The CAN interfaces (`[[bus.interface]]`), when there are several.
+    #[serde(default, rename = "interface")]
+    pub interfaces: Vec<InterfaceConfig>,
     /// SYNC period (µs); 1000 = the 1 ms loop of thesis §5.6.
     #[serde(default = "d_sync")]
     pub sync_period_us: u32,
@@ -96,16 +136,28 @@ pub struct BusConfig {
     /// its heartbeat).
     #[serde(default = "d_qs_timeout")]
     pub quick_stop_timeout_ms: u32,
-    /// What starts a cycle (RPDOs + SYNC): `setpoint` = motion-core's "setpoint published"
-    /// notification, within the same period (phase-locked; its own clock takes over when a
-    /// setpoint is `setpoint_wait_us` late), or `clock` = drive-io's own free-running 1 ms
-    /// timer (a setpoint waits up to one period for the next tick).
+    /// What times the cycle (docs/can-protocol.md "Cycle timing"): `isochronous` (default) =
+    /// drive-io's SYNC is the bus clock, strictly periodic; it announces its schedule, motion-core
+    /// ticks `sync_lead_us` before each SYNC and drive-io sends the RPDOs as soon as the setpoint
+    /// arrives (at the latest `rpdo_guard_us` before the SYNC, holding); `setpoint` = RPDOs and
+    /// SYNC start on motion-core's "setpoint published" notification (own clock as fallback after
+    /// `setpoint_wait_us`); `clock` = drive-io's free-running timer sends RPDOs then SYNC.
     #[serde(default)]
     pub sync_source: SyncSource,
     /// With `sync_source = "setpoint"`: how long past its nominal tick drive-io waits for the
     /// setpoint before it sends SYNC on its own clock (µs, < sync_period_us / 2).
     #[serde(default = "d_setpoint_wait")]
     pub setpoint_wait_us: u32,
+    /// With `sync_source = "isochronous"`: the RPDOs of a cycle are sent at the latest this long
+    /// before the SYNC they belong to (µs) — holding the last target if no new setpoint came —
+    /// so they are off the wire before it (the bus budget's worst-case RPDO window must fit).
+    #[serde(default = "d_rpdo_guard")]
+    pub rpdo_guard_us: u32,
+    /// With `sync_source = "isochronous"`: drive-io sleeps until this long before each SYNC and
+    /// then waits actively, so the SYNC leaves at its instant (timer wake-up jitter is tens of
+    /// µs even with SCHED_FIFO). 0 = no active wait.
+    #[serde(default = "d_sync_spin")]
+    pub sync_spin_us: u32,
     /// The cable deceleration of a quick stop (m/s²), written to every drive's 0x6085 in
     /// counts/s² (0x605A = 6 ramps down on it). Default: the CRS's 14 m/s² (thesis table 5.1).
     #[serde(default = "d_qs_decel")]
@@ -120,17 +172,30 @@ fn d_qs_decel() -> f64 {
 #[derive(Debug, Clone, Copy, Default, Deserialize, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum SyncSource {
-    /// Phase-locked to motion-core's setpoint stream (own clock as fallback).
+    /// drive-io's SYNC is the bus clock (strictly periodic, announced); RPDOs on the setpoint.
     #[default]
+    Isochronous,
+    /// Phase-locked to motion-core's setpoint stream (own clock as fallback).
     Setpoint,
     /// drive-io's own free-running timer.
     Clock,
+}
+
+impl SyncSource {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Isochronous => "isochronous",
+            Self::Setpoint => "setpoint",
+            Self::Clock => "clock",
+        }
+    }
 }
 
 impl std::str::FromStr for SyncSource {
     type Err = UnknownSyncSource;
     fn from_str(s: &str) -> Result<Self, UnknownSyncSource> {
         match s {
+            "isochronous" => Ok(Self::Isochronous),
             "setpoint" => Ok(Self::Setpoint),
             "clock" => Ok(Self::Clock),
             _ => Err(UnknownSyncSource(s.to_string())),
@@ -138,10 +203,20 @@ impl std::str::FromStr for SyncSource {
     }
 }
 
-/// A `sync_source` name that is neither `setpoint` nor `clock` (the name as given).
+/// A `sync_source` name that is not one of the three (the name as given).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{0:?}: expected \"setpoint\" or \"clock\"")]
+#[error("{0:?}: expected \"isochronous\", \"setpoint\" or \"clock\"")]
 pub struct UnknownSyncSource(pub String);
+
+fn d_rpdo_guard() -> u32 {
+    // Two drives' RPDOs (2 × 115 bit) plus a frame in transmission (135 bit) at 1 Mbit/s is
+    // 365 µs; 400 µs leaves the cycle's RPDOs off the wire before the SYNC.
+    400
+}
+
+fn d_sync_spin() -> u32 {
+    100
+}
 
 fn d_setpoint_wait() -> u32 {
     // A quarter period: past motion-core's usual lateness on a loaded host (loop lateness p99
@@ -205,7 +280,10 @@ fn d_force_limit() -> f64 {
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct WinchConfig {
-    /// CANopen node id (1..=127), unique.
+    /// The `[[bus.interface]]` the drive is on (may be omitted with a single interface).
+    #[serde(default)]
+    pub interface: Option<String>,
+    /// CANopen node id (1..=127), unique on its interface.
     pub node_id: u8,
     /// Drum diameter (m); one drum revolution winds π·d of cable.
     pub drum_diameter_m: f64,
@@ -367,18 +445,251 @@ impl DrivesConfig {
         Ok(cfg)
     }
 
+    /// The CAN interfaces: `[[bus.interface]]`, or the one named [`SINGLE_INTERFACE_NAME`]
+    /// that `bus.transport` describes.
+    pub fn interfaces(&self) -> Vec<InterfaceConfig> {
+        match &self.bus.transport {
+            Some(t) if self.bus.interfaces.is_empty() => vec![InterfaceConfig {
+                name: SINGLE_INTERFACE_NAME.to_string(),
+                transport: t.clone(),
+                bitrate_bit_per_s: d_bitrate(),
+                budget_percent: d_budget(),
+            }],
+            _ => self.bus.interfaces.clone(),
+        }
+    }
+
+    /// The transport of every interface, in `interfaces()` order.
+    pub fn transports(&self) -> Result<Vec<TransportSpec>, ConfigError> {
+        let single = self.bus.interfaces.is_empty();
+        self.interfaces()
+            .iter()
+            .enumerate()
+            .map(|(i, itf)| {
+                itf.transport
+                    .parse()
+                    .map_err(|e: can_transport::SpecError| {
+                        let key = if single {
+                            "bus.transport".to_string()
+                        } else {
+                            format!("bus.interface[{i}].transport")
+                        };
+                        invalid(key, e.to_string())
+                    })
+            })
+            .collect()
+    }
+
+    /// The transport of a configuration with exactly one interface (test rigs that run one bus).
     pub fn transport(&self) -> Result<TransportSpec, ConfigError> {
-        self.bus
-            .transport
-            .parse()
-            .map_err(|e: can_transport::SpecError| invalid("bus.transport", e.to_string()))
+        let mut t = self.transports()?;
+        if t.len() != 1 {
+            return Err(invalid(
+                "bus.interface",
+                format!(
+                    "this tool runs one CAN interface, the configuration has {}",
+                    t.len()
+                ),
+            ));
+        }
+        Ok(t.remove(0))
+    }
+
+    /// Index (in `interfaces()` order) of the interface of winch `i`.
+    pub fn winch_interface(&self, i: usize) -> usize {
+        let itfs = self.interfaces();
+        self.winches
+            .get(i)
+            .and_then(|w| w.interface.as_deref())
+            .and_then(|n| itfs.iter().position(|itf| itf.name == n))
+            .unwrap_or(0)
+    }
+
+    /// Index (in `interfaces()` order) of the interface of force sensor `j`.
+    pub fn sensor_interface(&self, j: usize) -> usize {
+        let itfs = self.interfaces();
+        self.force_sensors
+            .get(j)
+            .and_then(|s| s.interface.as_deref())
+            .and_then(|n| itfs.iter().position(|itf| itf.name == n))
+            .unwrap_or(0)
+    }
+
+    /// Replaces interface transports from command-line overrides: `NAME=SPEC` per interface,
+    /// or a bare `SPEC` when the configuration has a single interface. Validates the result.
+    pub fn override_transports(&mut self, overrides: &[String]) -> Result<(), ConfigError> {
+        if overrides.is_empty() {
+            return Ok(());
+        }
+        for o in overrides {
+            match o.split_once('=') {
+                Some((name, spec)) if !name.contains(':') => {
+                    if self.bus.interfaces.is_empty() {
+                        if name != SINGLE_INTERFACE_NAME {
+                            return Err(invalid(
+                                "--transport",
+                                format!(
+                                    "{name:?}: the configuration has one interface, named \
+                                     {SINGLE_INTERFACE_NAME:?}"
+                                ),
+                            ));
+                        }
+                        self.bus.transport = Some(spec.to_string());
+                    } else {
+                        let itf = self
+                            .bus
+                            .interfaces
+                            .iter_mut()
+                            .find(|i| i.name == name)
+                            .ok_or_else(|| {
+                                invalid(
+                                    "--transport",
+                                    format!("{name:?}: no [[bus.interface]] of that name"),
+                                )
+                            })?;
+                        itf.transport = spec.to_string();
+                    }
+                }
+                _ if self.interfaces().len() == 1 => {
+                    if self.bus.interfaces.is_empty() {
+                        self.bus.transport = Some(o.clone());
+                    } else {
+                        self.bus.interfaces[0].transport = o.clone();
+                    }
+                }
+                _ => {
+                    return Err(invalid(
+                        "--transport",
+                        format!(
+                            "{o:?}: with several interfaces give NAME=SPEC for each (names: {})",
+                            self.interfaces()
+                                .iter()
+                                .map(|i| i.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
+                }
+            }
+        }
+        self.validate()
+    }
+
+    fn validate_interfaces(&self) -> Result<(), ConfigError> {
+        let b = &self.bus;
+        match (&b.transport, b.interfaces.is_empty()) {
+            (None, true) => {
+                return Err(invalid(
+                    "bus.transport",
+                    "missing: give bus.transport (one interface) or [[bus.interface]] tables",
+                ));
+            }
+            (Some(_), false) => {
+                return Err(invalid(
+                    "bus.transport",
+                    "give either bus.transport (one interface) or [[bus.interface]] tables, not both",
+                ));
+            }
+            _ => {}
+        }
+        let itfs = self.interfaces();
+        if itfs.len() > MAX_INTERFACES {
+            return Err(invalid(
+                "bus.interface",
+                format!("at most {MAX_INTERFACES} interfaces, got {}", itfs.len()),
+            ));
+        }
+        let specs = self.transports()?;
+        for (i, itf) in itfs.iter().enumerate() {
+            let key = |k: &str| {
+                if b.interfaces.is_empty() {
+                    format!("bus.{k}")
+                } else {
+                    format!("bus.interface[{i}].{k}")
+                }
+            };
+            if itf.name.is_empty()
+                || !itf
+                    .name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+            {
+                return Err(invalid(
+                    key("name"),
+                    format!("{:?}: must be non-empty letters, digits, - or _", itf.name),
+                ));
+            }
+            if itfs[..i].iter().any(|o| o.name == itf.name) {
+                return Err(invalid(key("name"), format!("{:?} used twice", itf.name)));
+            }
+            if specs[..i].contains(&specs[i]) {
+                return Err(invalid(
+                    key("transport"),
+                    format!("{} is also the transport of another interface", specs[i]),
+                ));
+            }
+            if !(10_000..=1_000_000).contains(&itf.bitrate_bit_per_s) {
+                return Err(invalid(
+                    key("bitrate_bit_per_s"),
+                    "must be in 10000..=1000000 (classic CAN)",
+                ));
+            }
+            if !(itf.budget_percent.is_finite()
+                && itf.budget_percent > 0.0
+                && itf.budget_percent <= MAX_BUDGET_PERCENT)
+            {
+                return Err(invalid(
+                    key("budget_percent"),
+                    format!(
+                        "must be > 0 and <= {MAX_BUDGET_PERCENT} (it may be set below the \
+                         default, never above)"
+                    ),
+                ));
+            }
+        }
+        for (i, w) in self.winches.iter().enumerate() {
+            match &w.interface {
+                None if itfs.len() > 1 => {
+                    return Err(invalid(
+                        format!("winch[{i}].interface"),
+                        "missing: with several [[bus.interface]] tables every winch names its interface",
+                    ));
+                }
+                Some(n) if !itfs.iter().any(|itf| &itf.name == n) => {
+                    return Err(invalid(
+                        format!("winch[{i}].interface"),
+                        format!(
+                            "{n:?}: no such interface (interfaces: {})",
+                            itfs.iter()
+                                .map(|i| i.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
+                }
+                _ => {}
+            }
+        }
+        Ok(())
     }
 
     pub fn validate(&self) -> Result<(), ConfigError> {
         let b = &self.bus;
-        self.transport()?;
+        self.validate_interfaces()?;
         if !(250..=100_000).contains(&b.sync_period_us) {
             return Err(invalid("bus.sync_period_us", "must be in 250..=100000"));
+        }
+        if b.rpdo_guard_us == 0 || b.rpdo_guard_us > b.sync_period_us / 2 {
+            return Err(invalid(
+                "bus.rpdo_guard_us",
+                "must be > 0 and <= bus.sync_period_us / 2",
+            ));
+        }
+        if b.sync_spin_us >= b.sync_period_us / 4 {
+            return Err(invalid(
+                "bus.sync_spin_us",
+                "must be < bus.sync_period_us / 4",
+            ));
         }
         if b.setpoint_wait_us == 0 || b.setpoint_wait_us >= b.sync_period_us / 2 {
             return Err(invalid(
@@ -463,10 +774,13 @@ impl DrivesConfig {
             if !(1..=127).contains(&w.node_id) {
                 return Err(invalid(f("node_id"), "must be in 1..=127"));
             }
-            if self.winches[..i].iter().any(|o| o.node_id == w.node_id) {
+            let itf = self.winch_interface(i);
+            if (0..i)
+                .any(|o| self.winches[o].node_id == w.node_id && self.winch_interface(o) == itf)
+            {
                 return Err(invalid(
                     f("node_id"),
-                    format!("node id {} used twice", w.node_id),
+                    format!("node id {} used twice on one interface", w.node_id),
                 ));
             }
             for (name, v) in [
@@ -509,15 +823,34 @@ impl DrivesConfig {
                 b.heartbeat_timeout_ms,
             )
             .map_err(|(k, r)| invalid(k, r))?;
+            let itfs = self.interfaces();
+            match &s.interface {
+                None if itfs.len() > 1 => {
+                    return Err(invalid(
+                        format!("force_sensor[{j}].interface"),
+                        "missing: with several [[bus.interface]] tables every force sensor names \
+                         its interface",
+                    ));
+                }
+                Some(n) if !itfs.iter().any(|itf| &itf.name == n) => {
+                    return Err(invalid(
+                        format!("force_sensor[{j}].interface"),
+                        format!("{n:?}: no such interface"),
+                    ));
+                }
+                _ => {}
+            }
+            let k = self.sensor_interface(j);
             if s.node_id == b.master_node_id
-                || self.winches.iter().any(|w| w.node_id == s.node_id)
-                || self.force_sensors[..j]
-                    .iter()
-                    .any(|o| o.node_id == s.node_id)
+                || (0..self.winches.len())
+                    .any(|i| self.winch_interface(i) == k && self.winches[i].node_id == s.node_id)
+                || (0..j).any(|o| {
+                    self.sensor_interface(o) == k && self.force_sensors[o].node_id == s.node_id
+                })
             {
                 return Err(invalid(
                     format!("force_sensor[{j}].node_id"),
-                    format!("node id {} used twice", s.node_id),
+                    format!("node id {} used twice on one interface", s.node_id),
                 ));
             }
             if self.force_sensors[..j].iter().any(|o| o.cable == s.cable) {

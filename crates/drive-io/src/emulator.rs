@@ -2,13 +2,14 @@
 //! kinematically ([`WinchAxis`]) toward its target. It is not the plant (that is crates/sim-plant);
 //! it exists so drive-io can be tested without the physics.
 
+use crate::bank_set::DriveBanks;
 use crate::canopen::{Ds402State, NmtState};
 use crate::config::{DrivesConfig, WinchConfig};
 use crate::eds::{Eds, EdsError};
 use crate::force_node::ForceNode;
 use crate::safety_watch::SafetyWatchConfig;
-use crate::slave::{DriveBank, DriveSlave, MotionDemand, WinchAxis};
-use can_transport::CanBus;
+use crate::slave::{MotionDemand, WinchAxis};
+use can_transport::{CanBus, RxEvent};
 use crs_ipc::MAX_CABLES;
 use std::sync::Arc;
 use std::sync::atomic::{
@@ -19,6 +20,8 @@ use std::time::Duration;
 /// Emulator parameters (SI).
 #[derive(Debug, Clone)]
 pub struct EmulatorConfig {
+    /// The drives configuration (interfaces, node ids, scaling).
+    pub drives: DrivesConfig,
     pub winches: Vec<WinchConfig>,
     pub initial_length_m: Vec<f64>,
     /// Physics step per SYNC (s): the drive interpolates over one SYNC period (CSP).
@@ -36,20 +39,20 @@ pub struct EmulatorConfig {
     pub eds: Eds,
     /// Per winch: its own EDS (`winch[i].eds`); a winch without one uses `eds`.
     pub winch_eds: Vec<Eds>,
-    /// The `[[force_sensor]]` nodes (simulated load cells) and the cable (0-based) each
-    /// measures: they report the emulator's force stand-in of that cable.
-    pub force_nodes: Vec<(usize, ForceNode)>,
+    /// The `[[force_sensor]]` nodes (simulated load cells): interface, cable (0-based) and
+    /// node; they report the emulator's force stand-in of that cable.
+    pub force_nodes: Vec<(usize, usize, ForceNode)>,
 }
 
 impl EmulatorConfig {
     /// Fails only if an EDS cannot be read (or a force sensor's has no process value).
     pub fn from_drives(cfg: &DrivesConfig, initial_length_m: f64) -> Result<Self, EdsError> {
-        let bank = DriveBank::from_config(cfg, cfg.bus.heartbeat_producer_ms)?;
         Ok(Self {
+            drives: cfg.clone(),
             winch_eds: (0..cfg.winches.len())
                 .map(|i| cfg.load_winch_eds(i))
                 .collect::<Result<_, _>>()?,
-            force_nodes: bank.force_nodes().to_vec(),
+            force_nodes: DriveBanks::force_nodes(cfg, cfg.bus.heartbeat_producer_ms)?,
             winches: cfg.winches.clone(),
             initial_length_m: vec![initial_length_m; cfg.winches.len()],
             sync_period_s: f64::from(cfg.bus.sync_period_us) * 1e-6,
@@ -149,26 +152,24 @@ impl EmulatorControl {
     }
 }
 
-/// Runs the emulator until `control.stop` is set. Bus errors other than a full TX queue end it.
-pub fn run(
-    mut bus: impl CanBus,
+/// Runs the emulator until `control.stop` is set, answering as the drives of every interface
+/// (`buses[k]` = interface k of `cfg.drives`). Bus errors other than a full TX queue end it.
+pub fn run<B: CanBus>(
+    mut buses: Vec<B>,
     cfg: &EmulatorConfig,
     control: &EmulatorControl,
 ) -> Result<(), can_transport::CanError> {
     let m = cfg.winches.len().min(MAX_CABLES);
-    let ids: Vec<u8> = cfg.winches.iter().take(m).map(|w| w.node_id).collect();
-    let slaves = ids
-        .iter()
-        .enumerate()
-        .map(|(i, &n)| {
-            DriveSlave::with_eds(
-                n,
-                cfg.winch_eds.get(i).unwrap_or(&cfg.eds),
-                cfg.default_heartbeat_ms,
-            )
-        })
-        .collect();
-    let mut bank = DriveBank::from_nodes(slaves, cfg.force_nodes.clone());
+    let mut bank = DriveBanks::from_parts(
+        &cfg.drives,
+        &cfg.winch_eds,
+        cfg.force_nodes.clone(),
+        cfg.default_heartbeat_ms,
+    );
+    // Interval between the SYNCs of each interface: a CSP drive interpolates over the time
+    // that really passed (on the wire model, SYNC jitter shows as motion).
+    let mut last_sync: Vec<Option<u64>> = vec![None; bank.interfaces()];
+    let mut cursor = 0usize;
     if let Some(sw) = cfg.safety_watch {
         bank.enable_safety_watch(sw);
         control.safety_inhibit.store(true, Ordering::Release);
@@ -187,7 +188,7 @@ pub fn run(
         bank.set_actual(i, c, 0, (cfg.pretension_n * 1000.0) as i32);
     }
     bank.start(crs_ipc::monotonic_ns());
-    let publish = |bank: &DriveBank, axes: &[WinchAxis], now: u64| {
+    let publish = |bank: &DriveBanks, axes: &[WinchAxis], now: u64| {
         for (i, ax) in axes.iter().enumerate() {
             let d = match bank.demand(i) {
                 MotionDemand::Follow { .. } => DEMAND_FOLLOW,
@@ -206,12 +207,10 @@ pub fn run(
         }
     };
     publish(&bank, &axes, crs_ipc::monotonic_ns());
-    // Frames handled at most before the watches are judged (a flooded bus cannot stall us).
-    const MAX_BACKLOG: usize = 512;
     let mut last_pass_ns = crs_ipc::monotonic_ns();
     let mut last_stall_log_ns = 0u64;
     while !control.stop.load(Ordering::Acquire) {
-        bank.flush(&mut bus)?;
+        bank.flush(&mut buses)?;
         // The emulated drives are hardware with their own CPUs: they see each frame when it
         // arrives on the bus, not when this process (on a non-real-time host, or in the TCG
         // guest) gets round to reading it. So every frame is handled at its ARRIVAL time —
@@ -223,20 +222,29 @@ pub fn run(
         // queued (the guest safety-hil flakes of forged_stopping and
         // forged_rpdo_other_enabling_controlword, "safety heartbeat invalid or missing:
         // Timeout").
-        let mut rx = bus.recv_timeout(Duration::from_millis(2))?;
+        let mut rx = can_transport::recv_any(&mut buses, Duration::from_millis(2), &mut cursor)?;
         let rt_minus_mono = realtime_minus_monotonic_ns();
         let mut handled = 0;
         let mut bus_time_ns = 0;
-        while let Some(frame) = rx {
+        while let Some((iface, ev)) = rx {
+            let RxEvent::Frame(frame) = ev else {
+                handled += 1;
+                rx = next_event(&mut buses, handled, &mut cursor)?;
+                continue;
+            };
             let at = arrival_ns(&frame, rt_minus_mono);
             bus_time_ns = at;
-            if bank.handle_frame(&frame.frame, at) {
+            if bank.handle_frame(iface, &frame.frame, at) {
+                let dt = sync_interval_s(&mut last_sync[iface], at, cfg.sync_period_s);
                 for (i, (w, ax)) in cfg.winches.iter().zip(axes.iter_mut()).enumerate() {
+                    if bank.interface_of(i) != Some(iface) {
+                        continue;
+                    }
                     match bank.demand(i) {
                         MotionDemand::Follow { target_counts } => {
-                            ax.step(Some(w.counts_to_length(target_counts)), cfg.sync_period_s)
+                            ax.step(Some(w.counts_to_length(target_counts)), dt)
                         }
-                        MotionDemand::QuickStop => ax.step(None, cfg.sync_period_s),
+                        MotionDemand::QuickStop => ax.step(None, dt),
                         MotionDemand::Hold => ax.hold(),
                     }
                     let pos = w
@@ -250,17 +258,15 @@ pub fn run(
                         control.reported_force_mn(i, (force * 1000.0) as i32),
                     );
                 }
-                bank.transmit_pdos();
+                bank.transmit_pdos_on(iface);
                 // The answer to this SYNC goes out now, not after the backlog.
-                bank.flush(&mut bus)?;
-                control.syncs.fetch_add(1, Ordering::AcqRel);
+                bank.flush(&mut buses)?;
+                if iface == 0 {
+                    control.syncs.fetch_add(1, Ordering::AcqRel);
+                }
             }
             handled += 1;
-            rx = if handled < MAX_BACKLOG {
-                bus.try_recv()?
-            } else {
-                None
-            };
+            rx = next_event(&mut buses, handled, &mut cursor)?;
         }
         let now = crs_ipc::monotonic_ns();
         // Judged at the bus time handled so far while frames are still queued (the backlog
@@ -298,13 +304,43 @@ pub fn run(
             control.safety_trips.fetch_add(1, Ordering::AcqRel);
             control.safety_tripped_ns.store(at_ns, Ordering::Release);
         }
-        if let Some(w) = bank.safety_watch() {
-            let inhibit = w.state() != crate::safety_watch::WatchState::Permit;
-            control.safety_inhibit.store(inhibit, Ordering::Release);
+        if bank.has_safety_watch() {
+            control
+                .safety_inhibit
+                .store(!bank.safety_permits(), Ordering::Release);
         }
         publish(&bank, &axes, now);
     }
     Ok(())
+}
+
+/// The next queued event of any bus, unless the backlog cap is reached.
+fn next_event<B: CanBus>(
+    buses: &mut [B],
+    handled: usize,
+    cursor: &mut usize,
+) -> Result<Option<(usize, RxEvent)>, can_transport::CanError> {
+    if handled >= MAX_BACKLOG {
+        return Ok(None);
+    }
+    can_transport::recv_any(buses, Duration::ZERO, cursor)
+}
+
+/// Frames handled at most before the watches are judged (a flooded bus cannot stall us).
+const MAX_BACKLOG: usize = 512;
+
+/// The time since the previous SYNC of an interface (at `at_ns`), s: the real interval, within
+/// [0.25, 4] nominal periods (the first SYNC, or one after a pause, counts as nominal).
+fn sync_interval_s(last: &mut Option<u64>, at_ns: u64, nominal_s: f64) -> f64 {
+    let dt = match last.replace(at_ns) {
+        Some(prev) if at_ns > prev => (at_ns - prev) as f64 * 1e-9,
+        _ => nominal_s,
+    };
+    if dt > 4.0 * nominal_s {
+        nominal_s
+    } else {
+        dt.max(0.25 * nominal_s)
+    }
 }
 
 /// CLOCK_REALTIME − CLOCK_MONOTONIC now, ns: converts the kernel's receive stamps (realtime)

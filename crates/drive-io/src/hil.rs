@@ -70,9 +70,9 @@ pub struct Rig {
 
 impl Rig {
     /// Starts the emulator and drive-io on `transport`, with iceoryx2 services under `prefix`;
-    /// drive-io phase-locked to the setpoints (the default `sync_source`).
+    /// drive-io's SYNC isochronous (the default `sync_source`).
     pub fn start(transport: &str, prefix: &str) -> Res<Rig> {
-        Self::start_with(transport, prefix, SyncSource::Setpoint)
+        Self::start_with(transport, prefix, SyncSource::Isochronous)
     }
 
     /// [`Rig::start`] with drive-io's cycle started by `sync`.
@@ -89,7 +89,9 @@ impl Rig {
         let c2 = control.clone();
         let emu = std::thread::Builder::new()
             .name("winch-emulator".into())
-            .spawn(move || emulator::run(emu_bus, &ecfg, &c2).map_err(|e| format!("emulator: {e}")))
+            .spawn(move || {
+                emulator::run(vec![emu_bus], &ecfg, &c2).map_err(|e| format!("emulator: {e}"))
+            })
             .map_err(|e| e.to_string())?;
         let node = IpcNode::with_prefix("hil-test", prefix).map_err(|e| e.to_string())?;
         let setpoints = node
@@ -106,7 +108,7 @@ impl Rig {
             .name("drive-io".into())
             .spawn(move || {
                 let ipc = IpcNode::with_prefix("drive-io", &prefix2).map_err(|e| e.to_string())?;
-                runner::run(&cfg2, dio_bus, &ipc, &s2).map_err(|e| format!("drive-io: {e}"))
+                runner::run(&cfg2, vec![dio_bus], &ipc, &s2).map_err(|e| format!("drive-io: {e}"))
             })
             .map_err(|e| e.to_string())?;
         Ok(Rig {
@@ -649,14 +651,19 @@ pub fn scenario_estop(transport: &str, prefix: &str) -> Res<String> {
     Ok("e-stop -> all QuickStopActive and holding; reset -> Ready, all Operation Enabled".into())
 }
 
-/// Phase lock (issue 20 item 3): with `sync_source = "setpoint"` every published setpoint
-/// starts a drive-io cycle (RPDOs + SYNC) of its own; with `"clock"` none does, the same stream
+/// Phase lock: with `sync_source = "setpoint"` every published setpoint starts a drive-io cycle
+/// (RPDOs + SYNC) of its own; with `"isochronous"` every setpoint starts the RPDOs of the next
+/// SYNC (the SYNC itself stays on drive-io's grid); with `"clock"` none does, the same stream
 /// is applied on drive-io's own ticks. Setpoints 5 ms apart, so the count holds in emulated
 /// time too (no latency is asserted here; bus-latency-bench measures it on the host).
 pub fn scenario_phase_lock(transport: &str, prefix: &str) -> Res<String> {
     const N: u64 = 100;
     let mut report = Vec::new();
-    for sync in [SyncSource::Setpoint, SyncSource::Clock] {
+    for sync in [
+        SyncSource::Isochronous,
+        SyncSource::Setpoint,
+        SyncSource::Clock,
+    ] {
         let mut rig = Rig::start_with(transport, &format!("{prefix}{sync:?}/"), sync)?;
         rig.boot()?;
         let hold = rig.initial;
@@ -678,7 +685,9 @@ pub fn scenario_phase_lock(transport: &str, prefix: &str) -> Res<String> {
         let s = rig.shutdown()?;
         let ok = match sync {
             // A notification is lost only when drive-io was not scheduled for a whole 5 ms.
-            SyncSource::Setpoint => s.setpoint_cycles >= N * 9 / 10 && s.clock_cycles > 0,
+            SyncSource::Setpoint | SyncSource::Isochronous => {
+                s.setpoint_cycles >= N * 9 / 10 && s.clock_cycles > 0
+            }
             SyncSource::Clock => s.setpoint_cycles == 0,
         };
         if !ok {

@@ -54,9 +54,9 @@ impl External {
                     Some(path) => {
                         let b = can_transport::LoggingBus::create(bus, path.as_ref())
                             .map_err(|e| e.to_string())?;
-                        runner::run(&cfg2, b, &ipc, &s2)
+                        runner::run(&cfg2, vec![b], &ipc, &s2)
                     }
-                    None => runner::run(&cfg2, bus, &ipc, &s2),
+                    None => runner::run(&cfg2, vec![bus], &ipc, &s2),
                 }
                 .map_err(|e| e.to_string())
             })

@@ -9,6 +9,7 @@
 //!   [`sync_clock`]: when a cycle starts (phase-locked to the setpoints, or free-running).
 //! * [`hil`]: hardware-in-the-loop scenarios run on the host (UDP bus) and in the vcan VM.
 
+pub mod bank_set;
 pub mod canopen;
 pub mod commissioning;
 pub mod config;

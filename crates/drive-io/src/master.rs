@@ -75,13 +75,15 @@ pub enum SetupError {
     Eds(#[from] crate::eds::EdsError),
     #[error(transparent)]
     Plan(#[from] crate::commissioning::PlanError),
-    #[error("TPDO COB-ID 0x{cob_id:03X} is configured for node {a} and node {b}")]
+    #[error("TPDO COB-ID 0x{cob_id:03X} is configured for node {a} and node {b} on one interface")]
     CobCollision { cob_id: u16, a: u8, b: u8 },
 }
 
 #[derive(Debug, Clone, Copy)]
 struct DriveView {
     node: u8,
+    /// The drive's CAN interface (index into `DrivesConfig::interfaces()`).
+    iface: u8,
     booted: bool,
     hb_monitored: bool,
     last_hb_ns: u64,
@@ -108,9 +110,10 @@ struct DriveView {
 }
 
 impl DriveView {
-    fn new(node: u8) -> Self {
+    fn new(node: u8, iface: u8) -> Self {
         Self {
             node,
+            iface,
             booted: false,
             hb_monitored: false,
             last_hb_ns: 0,
@@ -155,8 +158,8 @@ pub struct Master {
     sdo_client: [SdoClient; MAX_NODES],
     /// Per cable: the node (index into `drives`) whose TPDO carries its force.
     force_node: [usize; MAX_CABLES],
-    /// (COB-ID, node index) of every used TPDO, sorted by COB-ID.
-    tpdo_cobs: Vec<(u16, usize)>,
+    /// ((interface, COB-ID), node index) of every used TPDO, sorted.
+    tpdo_cobs: Vec<((u8, u16), usize)>,
     commissioning_fault: Option<CommissioningFault>,
     master_node_id: u8,
     master_hb_ns: u64,
@@ -173,6 +176,8 @@ pub struct Master {
     restart_nmt: bool,
     winches: Vec<WinchConfig>,
     m: usize,
+    /// Number of CAN interfaces.
+    interfaces: usize,
     sync_period_ns: u64,
     stale_cycles: u32,
     hb_timeout_ns: u64,
@@ -218,32 +223,38 @@ impl Master {
         let m = cfg.winches.len().min(MAX_CABLES);
         let n = plans.len().min(MAX_NODES);
         let winches = cfg.winches[..m].to_vec();
-        let mut drives = [DriveView::new(0); MAX_NODES];
+        let mut drives = [DriveView::new(0, 0); MAX_NODES];
         let mut max_step_counts = [0.0; MAX_CABLES];
         let period_s = f64::from(cfg.bus.sync_period_us) * 1e-6;
-        for (d, p) in drives.iter_mut().zip(&plans).take(n) {
-            *d = DriveView::new(p.node);
+        for (k, (d, p)) in drives.iter_mut().zip(&plans).take(n).enumerate() {
+            let iface = if k < m {
+                cfg.winch_interface(k)
+            } else {
+                cfg.sensor_interface(k - m)
+            };
+            *d = DriveView::new(p.node, iface as u8);
         }
         let mut force_node = [0usize; MAX_CABLES];
         for (i, f) in force_node.iter_mut().enumerate().take(m) {
             *f = cfg.force_sensor_of(i).map_or(i, |j| m + j);
         }
-        let mut tpdo_cobs: Vec<(u16, usize)> = plans
+        let mut tpdo_cobs: Vec<((u8, u16), usize)> = plans
             .iter()
             .take(n)
             .enumerate()
             .flat_map(|(k, p)| {
+                let iface = drives[k].iface;
                 p.mapping
                     .pdos
                     .iter()
                     .filter(|p| p.used && p.direction == crate::mapping::Direction::FromNode)
-                    .map(move |p| (p.cob_id, k))
+                    .map(move |p| ((iface, p.cob_id), k))
             })
             .collect();
         tpdo_cobs.sort_unstable();
         if let Some(w) = tpdo_cobs.windows(2).find(|w| w[0].0 == w[1].0) {
             return Err(SetupError::CobCollision {
-                cob_id: w[0].0,
+                cob_id: w[0].0.1,
                 a: plans[w[0].1].node,
                 b: plans[w[1].1].node,
             });
@@ -275,6 +286,7 @@ impl Master {
             restart_nmt: false,
             winches,
             m,
+            interfaces: cfg.interfaces().len(),
             sync_period_ns: cfg.sync_period_ns(),
             stale_cycles: cfg.bus.stale_setpoint_cycles,
             hb_timeout_ns: u64::from(cfg.bus.heartbeat_timeout_ms) * 1_000_000,
@@ -527,14 +539,37 @@ impl Master {
         }
     }
 
-    fn index_of(&self, node: u8) -> Option<usize> {
-        self.drives[..self.n].iter().position(|d| d.node == node)
+    fn index_of(&self, iface: usize, node: u8) -> Option<usize> {
+        self.drives[..self.n]
+            .iter()
+            .position(|d| d.node == node && usize::from(d.iface) == iface)
+    }
+
+    /// Number of CAN interfaces the master runs.
+    pub fn interfaces(&self) -> usize {
+        self.interfaces
+    }
+
+    /// Node ids and interface (index) of every drive, in cable order.
+    pub fn drives_on_interfaces(&self) -> impl Iterator<Item = (usize, u8)> + '_ {
+        self.drives[..self.m]
+            .iter()
+            .map(|d| (usize::from(d.iface), d.node))
+    }
+
+    /// Node ids and interface (index) of every node drive-io runs: the drives in cable order,
+    /// then the force sensors.
+    pub fn nodes_on_interfaces(&self) -> impl Iterator<Item = (usize, u8)> + '_ {
+        self.drives[..self.n]
+            .iter()
+            .map(|d| (usize::from(d.iface), d.node))
     }
 
     /// A TPDO of a node's mapping: decoded as mapped (never by fixed offsets); the cable
     /// force checked against the hard limit. False if `cob` is no configured TPDO.
-    fn on_tpdo(&mut self, cob: u16, data: &[u8], rx_ns: u64) -> bool {
-        let Ok(k) = self.tpdo_cobs.binary_search_by_key(&cob, |&(c, _)| c) else {
+    fn on_tpdo(&mut self, iface: usize, cob: u16, data: &[u8], rx_ns: u64) -> bool {
+        let key = (iface as u8, cob);
+        let Ok(k) = self.tpdo_cobs.binary_search_by_key(&key, |&(c, _)| c) else {
             return false;
         };
         let i = self.tpdo_cobs[k].1;
@@ -577,12 +612,12 @@ impl Master {
         true
     }
 
-    /// Handles one received frame.
-    pub fn on_frame(&mut self, rx: &RxFrame) {
+    /// Handles one frame received on interface `iface`.
+    pub fn on_frame(&mut self, iface: usize, rx: &RxFrame) {
         let f = &rx.frame;
         if !f.is_extended()
             && !f.is_rtr()
-            && self.on_tpdo(f.id() as u16, f.data(), rx.rx_monotonic_ns)
+            && self.on_tpdo(iface, f.id() as u16, f.data(), rx.rx_monotonic_ns)
         {
             return;
         }
@@ -593,7 +628,9 @@ impl Master {
             | Message::Heartbeat { node, .. } => node,
             _ => return,
         };
-        let Some(i) = self.index_of(node) else { return };
+        let Some(i) = self.index_of(iface, node) else {
+            return;
+        };
         let booting = matches!(self.phase, Phase::Boot | Phase::Configure | Phase::Enable);
         let d = &mut self.drives[i];
         match msg {
@@ -865,7 +902,7 @@ impl Master {
 
     /// One SYNC cycle at time `now_ns`: consumes the newest setpoint (if any), writes RPDOs and
     /// the SYNC into `out`, updates the feedback.
-    pub fn cycle(&mut self, now_ns: u64, setpoint: Option<&JointSetpoint>, out: &mut FrameBuf) {
+    pub fn cycle(&mut self, now_ns: u64, setpoint: Option<&JointSetpoint>, out: &mut BusFrames) {
         self.cycle += 1;
         self.toggle = !self.toggle;
         self.applied_this_cycle = false;
@@ -873,7 +910,7 @@ impl Master {
         // drive-io's own heartbeat (the drives' 0x1016 consumer watches it), unless withheld
         // as the last escalation of a stop.
         if !self.hb_inhibit && now_ns >= self.next_master_hb_ns {
-            out.push(heartbeat(self.master_node_id, NmtState::Operational));
+            out.push_all(heartbeat(self.master_node_id, NmtState::Operational));
             self.next_master_hb_ns = if now_ns - self.next_master_hb_ns > self.master_hb_ns {
                 now_ns + self.master_hb_ns
             } else {
@@ -919,7 +956,7 @@ impl Master {
                     // Addressed per node: other devices on the bus (the safety monitor's I/O,
                     // another master's nodes) are not drive-io's to reset.
                     for d in &self.drives[..self.n] {
-                        out.push(nmt(NMT_RESET_COMM, d.node));
+                        out.push(usize::from(d.iface), nmt(NMT_RESET_COMM, d.node));
                     }
                 }
                 if self.drives[..self.n].iter().all(|d| d.booted) {
@@ -940,7 +977,8 @@ impl Master {
                     let rx_cob = COB_SDO_RX_BASE + u16::from(d.node);
                     if let Some(next) = self.drives[i].sdo_next.take() {
                         // The next segment of a segmented transfer.
-                        out.push(can_transport::CanFrame::new_std_lossy(rx_cob, &next));
+                        let f = can_transport::CanFrame::new_std_lossy(rx_cob, &next);
+                        out.push(usize::from(d.iface), f);
                         self.drives[i].sdo_sent_ns = now_ns;
                         continue;
                     }
@@ -958,7 +996,8 @@ impl Master {
                     }
                     // A new transfer, or the whole transfer again after a timeout.
                     let req = self.start_sdo(i, op);
-                    out.push(can_transport::CanFrame::new_std_lossy(rx_cob, &req));
+                    let f = can_transport::CanFrame::new_std_lossy(rx_cob, &req);
+                    out.push(usize::from(d.iface), f);
                     let d = &mut self.drives[i];
                     d.sdo_outstanding = true;
                     d.sdo_sent_ns = now_ns;
@@ -972,7 +1011,7 @@ impl Master {
                         "all drives and force sensors identified, configured and verified"
                     );
                     for d in &self.drives[..self.n] {
-                        out.push(nmt(NMT_START, d.node));
+                        out.push(usize::from(d.iface), nmt(NMT_START, d.node));
                     }
                     self.set_phase(Phase::Enable);
                 }
@@ -980,7 +1019,7 @@ impl Master {
             Phase::Enable => {
                 if std::mem::take(&mut self.restart_nmt) {
                     for d in &self.drives[..self.m] {
-                        out.push(nmt(NMT_START, d.node));
+                        out.push(usize::from(d.iface), nmt(NMT_START, d.node));
                     }
                 }
                 let mut all_enabled = true;
@@ -1005,7 +1044,7 @@ impl Master {
                     && self.force_node[..self.m]
                         .iter()
                         .all(|&k| self.drives[k].force_rx_ns > 0);
-                out.push(sync());
+                out.request_sync();
                 if all_enabled {
                     self.setpoint_age = 0;
                     self.set_phase(Phase::Ready);
@@ -1030,7 +1069,7 @@ impl Master {
                     for i in 0..self.m {
                         self.push_rpdos(i, CW_ENABLE_OPERATION, self.target[i], out);
                     }
-                    out.push(sync());
+                    out.request_sync();
                 } else {
                     self.push_quick_stop(out);
                 }
@@ -1049,7 +1088,7 @@ impl Master {
     /// Otherwise escalate: NMT stop all (the drives act per 0x6007: disable voltage, the brake
     /// holds), and if the heartbeats do not report NMT stopped within another timeout, withhold
     /// drive-io's heartbeat (their 0x1016 consumers time out and act per 0x6007 again).
-    fn supervise_quick_stop(&mut self, now_ns: u64, out: &mut FrameBuf) {
+    fn supervise_quick_stop(&mut self, now_ns: u64, out: &mut BusFrames) {
         if self.qs_stage == 3 || self.m == 0 {
             return;
         }
@@ -1089,7 +1128,7 @@ impl Master {
                 );
             }
             for d in &self.drives[..self.m] {
-                out.push(nmt(NMT_STOP, d.node));
+                out.push(usize::from(d.iface), nmt(NMT_STOP, d.node));
             }
             self.nmt_stopped = true;
             self.qs_stage = 1;
@@ -1117,19 +1156,20 @@ impl Master {
     }
 
     /// Drive `i`'s RPDOs carrying `controlword` and `target_counts`, as its mapping says.
-    fn push_rpdos(&self, i: usize, controlword: u16, target_counts: i32, out: &mut FrameBuf) {
+    fn push_rpdos(&self, i: usize, controlword: u16, target_counts: i32, out: &mut BusFrames) {
+        let iface = usize::from(self.drives[i].iface);
         for p in self.plans[i].mapping.rpdos() {
-            out.push(p.encode(controlword, target_counts));
+            out.push(iface, p.encode(controlword, target_counts));
         }
     }
 
-    fn push_quick_stop(&mut self, out: &mut FrameBuf) {
+    fn push_quick_stop(&mut self, out: &mut BusFrames) {
         // Keep SYNC running so the drives keep reporting; hold the last target.
         if self.drives[..self.m].iter().any(|d| d.have_tpdo1) {
             for i in 0..self.m {
                 self.push_rpdos(i, CW_QUICK_STOP, self.target[i], out);
             }
-            out.push(sync());
+            out.request_sync();
         }
     }
 

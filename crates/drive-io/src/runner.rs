@@ -1,16 +1,15 @@
 //! The drive-io process loop: SYNC timer + bus + iceoryx2 around [`Master`].
 
-use crate::canopen::FrameBuf;
-use crate::config::DrivesConfig;
-use crate::config::SyncSource;
+use crate::canopen::{BusFrames, sync};
+use crate::config::{DrivesConfig, MAX_INTERFACES, SyncSource};
 use crate::master::Master;
 use crate::reset::{Ignored, ResetGate, is_reset_event};
 use crate::safety_watch::SafetyWatch;
-use crate::sync_clock::SyncClock;
-use can_transport::{CanBus, CanError, RxEvent, wait_readable_any};
+use crate::sync_clock::{IsoClock, IsoDue, SyncClock};
+use can_transport::{CanBus, CanError, CanFrame, RxEvent, wait_readable_any};
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, ProcessId,
-    SetpointReadyListener, StateEvent, monotonic_ns,
+    SetpointReadyListener, StateEvent, SyncSchedule, monotonic_ns,
 };
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -26,6 +25,9 @@ pub enum RunError {
     /// A drive refused (or did not keep) its start-up configuration: start-up stops.
     #[error("drive start-up configuration failed: {0}")]
     Commissioning(String),
+    /// One bus must be opened per configured interface.
+    #[error("drive-io runs {configured} CAN interface(s) but {opened} bus(es) were opened")]
+    Interfaces { configured: usize, opened: usize },
     #[error("writing the DCF {path}: {source}")]
     Dcf {
         path: String,
@@ -79,17 +81,137 @@ pub struct RunSummary {
     pub overruns: u32,
     pub final_state: BusState,
     pub tx_full_drops: u64,
-    /// Cycles started by motion-core's setpoint notification / by drive-io's own clock.
+    /// Cycles started by motion-core's setpoint notification / by drive-io's own clock (in
+    /// isochronous mode: at the guard time before the SYNC, holding).
     pub setpoint_cycles: u64,
     pub clock_cycles: u64,
+    /// SYNC frames sent (per interface, counted once per instant).
+    pub syncs: u64,
+    /// Isochronous mode: how late the SYNC left drive-io after its instant, worst case, ns.
+    pub sync_late_max_ns: u64,
 }
 
-/// Runs drive-io until `stop` is set: waits for each SYNC tick while processing received frames,
-/// then reads the newest setpoint and e-stop events, writes RPDOs + SYNC, publishes feedback.
-/// No allocation per cycle (iceoryx2 loan/receive and the fixed [`FrameBuf`] only).
-pub fn run(
+/// Which scheduler times the cycles ([`crate::sync_clock`]).
+enum Schedule {
+    /// `clock` / `setpoint`: the cycle sends its RPDOs and then the SYNC at once.
+    Free(SyncClock),
+    /// `isochronous`: the SYNC is the bus clock; the cycle only sends RPDOs.
+    Iso(IsoClock),
+}
+
+impl Schedule {
+    fn wake_at_ns(&self) -> u64 {
+        match self {
+            Schedule::Free(c) => c.wake_at_ns(),
+            Schedule::Iso(c) => c.wake_at_ns(),
+        }
+    }
+    fn notified(&mut self) {
+        match self {
+            Schedule::Free(c) => c.notified(),
+            Schedule::Iso(c) => c.notified(),
+        }
+    }
+    /// The setpoint event failed: run on drive-io's own clock for good.
+    fn degrade(&mut self) {
+        if let Schedule::Free(c) = self {
+            c.degrade_to_clock();
+        }
+        // Isochronous: the guard time already starts every cycle without notifications.
+    }
+    fn counts(&self) -> (u64, u64) {
+        match self {
+            Schedule::Free(c) => (c.locked_cycles(), c.clock_cycles()),
+            Schedule::Iso(c) => (c.locked_cycles(), c.guard_cycles()),
+        }
+    }
+}
+
+/// The CAN side of the runner: one bus per interface, in `DrivesConfig::interfaces()` order.
+struct Buses<B: CanBus> {
+    buses: Vec<B>,
+    /// Readiness descriptors (-1 for unused slots); `None` if a transport has none.
+    fds: Option<[std::os::fd::RawFd; MAX_INTERFACES]>,
+    tx_full: u64,
+}
+
+impl<B: CanBus> Buses<B> {
+    fn new(mut buses: Vec<B>) -> Self {
+        let mut fds = [-1; MAX_INTERFACES];
+        let mut all = true;
+        for (i, b) in buses.iter_mut().enumerate() {
+            // Bus-off / error-passive stop every drive (Master::on_bus_error).
+            if let Err(e) = b.subscribe_bus_errors() {
+                tracing::warn!(error = %e, interface = b.interface(), "CAN error frames not available on this transport");
+            }
+            match b.readiness_fd() {
+                Some(fd) => fds[i] = fd,
+                None => all = false,
+            }
+        }
+        Self {
+            buses,
+            fds: all.then_some(fds),
+            tx_full: 0,
+        }
+    }
+
+    fn send(&mut self, iface: usize, f: &CanFrame) -> Result<(), CanError> {
+        match self.buses[iface].send(f) {
+            Ok(()) => Ok(()),
+            Err(CanError::TxFull { .. }) => {
+                self.tx_full += 1;
+                Ok(())
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Sends the cycle's frames, interface by interface (each interface's queue is its own
+    /// FIFO, so the RPDOs go before a SYNC queued after them).
+    fn send_frames(&mut self, out: &BusFrames) -> Result<(), CanError> {
+        for i in 0..self.buses.len() {
+            for f in out.on(i) {
+                self.send(i, f)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn send_sync(&mut self) -> Result<(), CanError> {
+        let s = sync();
+        for i in 0..self.buses.len() {
+            self.send(i, &s)?;
+        }
+        Ok(())
+    }
+
+    /// Handles what is queued on every bus, at most [`MAX_DRAIN_PER_CYCLE`] events each.
+    fn drain(
+        &mut self,
+        master: &mut Master,
+        mut watch: Option<&mut SafetyWatch>,
+    ) -> Result<(), CanError> {
+        for (i, bus) in self.buses.iter_mut().enumerate() {
+            for _ in 0..MAX_DRAIN_PER_CYCLE {
+                match bus.try_recv_event()? {
+                    Some(ev) => on_rx(i, ev, master, watch.as_deref_mut()),
+                    None => break,
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Runs drive-io until `stop` is set: one cycle per SYNC period over every CAN interface of
+/// `buses` (one per `cfg.interfaces()` entry, in that order), handling received frames while it
+/// waits; each cycle reads the newest setpoint and e-stop events, writes RPDOs, publishes
+/// feedback; the SYNC goes on every interface at the same instant. No allocation per cycle
+/// (iceoryx2 loan/receive and the fixed [`BusFrames`] only).
+pub fn run<B: CanBus>(
     cfg: &DrivesConfig,
-    mut bus: impl CanBus,
+    buses: Vec<B>,
     ipc: &IpcNode,
     stop: &AtomicBool,
 ) -> Result<RunSummary, RunError> {
@@ -97,6 +219,13 @@ pub fn run(
     // closely as the scheduler allows. The prctl only fails for an invalid argument; say so.
     if let Err(e) = crs_rt::set_timer_slack(1) {
         tracing::warn!(error = %e, "timer slack not tightened: SYNC ticks may be up to 50 µs late");
+    }
+    let n_itf = cfg.interfaces().len();
+    if buses.len() != n_itf || n_itf == 0 || n_itf > MAX_INTERFACES {
+        return Err(RunError::Interfaces {
+            configured: n_itf,
+            opened: buses.len(),
+        });
     }
     let setpoints = ipc.subscriber::<JointSetpoint>()?;
     let events = ipc.subscriber::<StateEvent>()?;
@@ -111,11 +240,12 @@ pub fn run(
     }
     let mut dcf_pending = cfg.bus.dcf_dir.as_ref().map(|d| cfg.resolve(d));
     let period = master.sync_period_ns();
-    let mut out = FrameBuf::default();
+    let mut out = BusFrames::new(n_itf);
     let mut event_seq = 0u64;
-    let mut tx_full = 0u64;
     let mut overruns = 0u32;
     let mut cycles = 0u64;
+    let mut syncs = 0u64;
+    let mut sync_late_max_ns = 0u64;
     // Optional validation of the safety monitor's doubled heartbeat (drives.toml
     // `[safety_heartbeat]`): without a valid RUN pair within the validation time the bus is
     // e-stopped and resets are refused.
@@ -128,70 +258,89 @@ pub fn run(
              (source and epoch, not authenticated; bench setups only)"
         );
     }
-    // Reset authority (issue 16): the latch is left only with the monitor's reset event whose
-    // epoch the watch verified on CAN, newer than the epoch in force.
+    // Reset authority: the latch is left only with the monitor's reset event whose epoch the
+    // watch verified on CAN, newer than the epoch in force.
     let mut gate = ResetGate::new();
     let mut pending_reset: Option<(StateEvent, u64)> = None;
     let mut ignored_resets = 0u64;
-    // Bus-off / error-passive stop every drive (Master::on_bus_error).
-    if let Err(e) = bus.subscribe_bus_errors() {
-        tracing::warn!(error = %e, "CAN error frames not available on this transport");
-    }
-    // Phase lock (issue 20 item 3, crate::sync_clock): wait on the CAN socket and motion-core's
-    // "setpoint published" event in one ppoll.
-    let mut clock = SyncClock::new(
-        cfg.bus.sync_source,
-        period,
-        u64::from(cfg.bus.setpoint_wait_us) * 1000,
-        monotonic_ns(),
-    );
+    let mut buses = Buses::new(buses);
+    let start_ns = monotonic_ns();
+    let mut schedule = match cfg.bus.sync_source {
+        SyncSource::Isochronous => Schedule::Iso(IsoClock::new(
+            period,
+            u64::from(cfg.bus.rpdo_guard_us) * 1000,
+            u64::from(cfg.bus.sync_spin_us) * 1000,
+            start_ns,
+        )),
+        source => Schedule::Free(SyncClock::new(
+            source,
+            period,
+            u64::from(cfg.bus.setpoint_wait_us) * 1000,
+            start_ns,
+        )),
+    };
+    let schedule_pub = match &schedule {
+        Schedule::Iso(_) => Some(ipc.publisher::<SyncSchedule>()?),
+        Schedule::Free(_) => None,
+    };
+    let mut schedule_seq = 0u64;
+    // The "setpoint published" event (all modes but clock): a cycle starts on it.
     let ready_port = match cfg.bus.sync_source {
-        SyncSource::Setpoint => Some(ipc.setpoint_ready_listener()?),
+        SyncSource::Setpoint | SyncSource::Isochronous => Some(ipc.setpoint_ready_listener()?),
         SyncSource::Clock => None,
     };
     // Dropped to None (own clock for good) if the event channel fails.
     let mut ready = ready_port.as_ref();
-    let bus_fd = bus.readiness_fd();
-    tracing::info!(sync_source = ?cfg.bus.sync_source, multiplexed = bus_fd.is_some(), "cycle timing");
+    tracing::info!(
+        sync_source = cfg.bus.sync_source.name(),
+        interfaces = n_itf,
+        multiplexed = buses.fds.is_some(),
+        "cycle timing"
+    );
     while !stop.load(Ordering::Relaxed) {
-        // Wait for the cycle, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
+        // Wait for what is due next, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
         let mut now = monotonic_ns();
         loop {
-            let wake = clock.wake_at_ns();
+            let wake = schedule.wake_at_ns();
             if now >= wake {
                 break;
             }
             let left = Duration::from_nanos(wake - now);
-            match (ready, bus_fd) {
-                (Some(listener), Some(fd)) => {
-                    let [can, note] =
-                        wait_readable_any([fd, listener.raw_fd()], left).map_err(|e| {
-                            CanError::Io {
-                                iface: bus.interface().to_string(),
-                                op: "ppoll",
-                                source: e,
-                            }
-                        })?;
-                    if note && drain_ready(listener, &mut clock) {
+            match buses.fds {
+                Some(bus_fds) => {
+                    let mut fds = [-1; MAX_INTERFACES + 1];
+                    fds[..MAX_INTERFACES].copy_from_slice(&bus_fds);
+                    if let Some(l) = ready {
+                        fds[MAX_INTERFACES] = l.raw_fd();
+                    }
+                    let readable = wait_readable_any(fds, left).map_err(|e| CanError::Io {
+                        iface: buses.buses[0].interface().to_string(),
+                        op: "ppoll",
+                        source: e,
+                    })?;
+                    if readable[MAX_INTERFACES]
+                        && let Some(l) = ready
+                        && drain_ready(l, &mut schedule)
+                    {
                         ready = None;
                     }
-                    if can {
-                        drain_bus(&mut bus, &mut master, watch.as_mut())?;
+                    if readable[..MAX_INTERFACES].iter().any(|r| *r) {
+                        buses.drain(&mut master, watch.as_mut())?;
                     }
                 }
-                _ => {
-                    // No descriptor to multiplex (or clock mode): receive until the tick, and
-                    // look at the event every 50 µs.
-                    let slice = if ready.is_some() {
-                        left.min(Duration::from_micros(50))
+                None => {
+                    // A transport without a descriptor: receive in slices of 50 µs.
+                    let slice = left.min(Duration::from_micros(50));
+                    if buses.buses.len() == 1 {
+                        if let Some(ev) = buses.buses[0].recv_event_timeout(slice)? {
+                            on_rx(0, ev, &mut master, watch.as_mut());
+                        }
                     } else {
-                        left
-                    };
-                    if let Some(ev) = bus.recv_event_timeout(slice)? {
-                        on_rx(ev, &mut master, watch.as_mut());
+                        std::thread::sleep(slice);
+                        buses.drain(&mut master, watch.as_mut())?;
                     }
-                    if let Some(listener) = ready
-                        && drain_ready(listener, &mut clock)
+                    if let Some(l) = ready
+                        && drain_ready(l, &mut schedule)
                     {
                         ready = None;
                     }
@@ -199,16 +348,47 @@ pub fn run(
             }
             now = monotonic_ns();
         }
+        // Isochronous: the SYNC instant (after the period's cycle) is its own step.
+        if let Schedule::Iso(iso) = &mut schedule
+            && iso.due(now) == IsoDue::Sync
+        {
+            // Active wait for the instant: the timer's wake-up jitter must not reach the wire.
+            let at = iso.sync_at_ns();
+            let mut t = now;
+            while t < at {
+                std::hint::spin_loop();
+                t = monotonic_ns();
+            }
+            if out.sync_requested() {
+                buses.send_sync()?;
+                syncs += 1;
+            }
+            let sent = monotonic_ns();
+            sync_late_max_ns = sync_late_max_ns.max(sent.saturating_sub(at));
+            let skipped = iso.sync_sent(sent);
+            if skipped > 0 {
+                overruns = overruns.saturating_add(skipped);
+                master.add_overruns(skipped);
+            }
+            continue;
+        }
         // Drain what is already queued (after a preemption the wait loop above is skipped):
         // judging heartbeats/TPDOs before reading them would fault on our own lateness.
         // Bounded so a flooded bus cannot stall the cycle.
-        drain_bus(&mut bus, &mut master, watch.as_mut())?;
+        buses.drain(&mut master, watch.as_mut())?;
         // Cycle time = after the drain, so every frame handled is older than the cycle.
         let cycle_now = monotonic_ns();
-        let (_trigger, missed) = clock.start(now);
-        if missed > 0 {
-            overruns = overruns.saturating_add(missed);
-            master.add_overruns(missed);
+        match &mut schedule {
+            Schedule::Free(clock) => {
+                let (_trigger, missed) = clock.start(now);
+                if missed > 0 {
+                    overruns = overruns.saturating_add(missed);
+                    master.add_overruns(missed);
+                }
+            }
+            Schedule::Iso(iso) => {
+                iso.cycle_started();
+            }
         }
         cycles += 1;
 
@@ -280,12 +460,10 @@ pub fn run(
         });
         out.clear();
         master.cycle(cycle_now, sp.as_ref(), &mut out);
-        for f in out.as_slice() {
-            match bus.send(f) {
-                Ok(()) => {}
-                Err(CanError::TxFull { .. }) => tx_full += 1,
-                Err(e) => return Err(e.into()),
-            }
+        buses.send_frames(&out)?;
+        if matches!(schedule, Schedule::Free(_)) && out.sync_requested() {
+            buses.send_sync()?;
+            syncs += 1;
         }
         master.mark_written(monotonic_ns());
         if let Some(msg) = master.describe_commissioning_fault() {
@@ -312,45 +490,41 @@ pub fn run(
             hb.overruns = overruns;
             heartbeat.publish(&hb)?;
         }
+        if let (Some(p), Schedule::Iso(iso)) = (&schedule_pub, &schedule)
+            && (cycles == 1 || cycles.is_multiple_of(1000))
+        {
+            schedule_seq += 1;
+            p.publish(&SyncSchedule::new(iso.sync_at_ns(), period, schedule_seq))?;
+        }
     }
+    let (setpoint_cycles, clock_cycles) = schedule.counts();
     tracing::info!(
-        setpoint_cycles = clock.locked_cycles(),
-        clock_cycles = clock.clock_cycles(),
+        setpoint_cycles,
+        clock_cycles,
+        syncs,
+        sync_late_max_us = sync_late_max_ns as f64 / 1000.0,
         "cycles started by a setpoint / by drive-io's own clock"
     );
     Ok(RunSummary {
         cycles,
         overruns,
         final_state: master.state(),
-        tx_full_drops: tx_full,
-        setpoint_cycles: clock.locked_cycles(),
-        clock_cycles: clock.clock_cycles(),
+        tx_full_drops: buses.tx_full,
+        setpoint_cycles,
+        clock_cycles,
+        syncs,
+        sync_late_max_ns,
     })
 }
 
-/// Handles what is queued on the bus, at most [`MAX_DRAIN_PER_CYCLE`] events.
-fn drain_bus(
-    bus: &mut impl CanBus,
-    master: &mut Master,
-    mut watch: Option<&mut SafetyWatch>,
-) -> Result<(), CanError> {
-    for _ in 0..MAX_DRAIN_PER_CYCLE {
-        match bus.try_recv_event()? {
-            Some(ev) => on_rx(ev, master, watch.as_deref_mut()),
-            None => break,
-        }
-    }
-    Ok(())
-}
-
 /// One received frame or bus error into the safety watch and the master.
-fn on_rx(ev: RxEvent, master: &mut Master, watch: Option<&mut SafetyWatch>) {
+fn on_rx(iface: usize, ev: RxEvent, master: &mut Master, watch: Option<&mut SafetyWatch>) {
     match ev {
         RxEvent::Frame(rx) => {
             if let Some(w) = watch {
                 w.on_frame(&rx.frame, rx.rx_monotonic_ns);
             }
-            master.on_frame(&rx);
+            master.on_frame(iface, &rx);
         }
         RxEvent::BusError(e) => master.on_bus_error(&e.error),
     }
@@ -358,16 +532,16 @@ fn on_rx(ev: RxEvent, master: &mut Master, watch: Option<&mut SafetyWatch>) {
 
 /// Drains the "setpoint published" event into the clock. True if the event channel failed:
 /// drive-io then runs on its own clock for good (SYNC never stops for an IPC error).
-fn drain_ready(listener: &SetpointReadyListener, clock: &mut SyncClock) -> bool {
+fn drain_ready(listener: &SetpointReadyListener, schedule: &mut Schedule) -> bool {
     match listener.drain() {
         Ok(true) => {
-            clock.notified();
+            schedule.notified();
             false
         }
         Ok(false) => false,
         Err(e) => {
-            tracing::error!(error = %e, "setpoint event failed: SYNC on drive-io's own clock from now on");
-            clock.degrade_to_clock();
+            tracing::error!(error = %e, "setpoint event failed: cycles on drive-io's own clock from now on");
+            schedule.degrade();
             true
         }
     }

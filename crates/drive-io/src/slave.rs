@@ -990,46 +990,8 @@ impl DriveBank {
             watch: None,
         }
     }
-    /// The drives of `cfg` (each with its EDS: `winch[i].eds`, `bus.eds` or the simulated
-    /// winch's) and its `[[force_sensor]]` nodes (each with its EDS, else the simulated load
-    /// cell's), in cable order. Fails if an EDS cannot be read or a sensor's EDS has no
-    /// process value of the configured channel.
-    pub fn from_config(
-        cfg: &crate::config::DrivesConfig,
-        heartbeat_ms: u16,
-    ) -> Result<Self, crate::eds::EdsError> {
-        let mut slaves = Vec::with_capacity(cfg.winches.len());
-        for (i, w) in cfg.winches.iter().enumerate() {
-            slaves.push(DriveSlave::with_eds(
-                w.node_id,
-                &cfg.load_winch_eds(i)?,
-                heartbeat_ms,
-            ));
-        }
-        let mut force_nodes = Vec::with_capacity(cfg.force_sensors.len());
-        for (j, s) in cfg.force_sensors.iter().enumerate() {
-            let eds = cfg.load_sensor_eds(j)?;
-            let node = ForceNode::new(s.node_id, &eds, s.object.sub, heartbeat_ms).ok_or_else(
-                || crate::eds::EdsError {
-                    file: eds.file.clone(),
-                    line: 0,
-                    reason: format!(
-                        "force_sensor[{j}]: no analog input process value (0x9130/0x7130/0x6130) \
-                         sub {}",
-                        s.object.sub
-                    ),
-                },
-            )?;
-            force_nodes.push((s.cable - 1, node));
-        }
-        Ok(Self {
-            slaves,
-            force_nodes,
-            out: FrameBuf::default(),
-            watch: None,
-        })
-    }
-    /// A bank of these drives and force nodes (cable order; force nodes with their cable).
+    /// A bank of these drives and force nodes (drives in cable order; each force node with the
+    /// cable it measures, as [`DriveBank::set_cell_force`] names it).
     pub fn from_nodes(slaves: Vec<DriveSlave>, force_nodes: Vec<(usize, ForceNode)>) -> Self {
         Self {
             slaves,
@@ -1118,9 +1080,11 @@ impl DriveBank {
         if let Some(s) = self.slaves.get_mut(i) {
             s.set_actual(position_counts, velocity_counts_per_s, force_mn);
         }
-        // The pulley's load cell measures the same cable force.
-        for (_, f) in self.force_nodes.iter_mut().filter(|(c, _)| *c == i) {
-            f.set_force_n(f64::from(force_mn) * 1e-3);
+    }
+    /// The force the load cells of `cable` measure (N), reported in their next TPDOs.
+    pub fn set_cell_force(&mut self, cable: usize, force_n: f64) {
+        for (_, f) in self.force_nodes.iter_mut().filter(|(c, _)| *c == cable) {
+            f.set_force_n(force_n);
         }
     }
     /// TPDOs of all drives and force nodes (after the physics step of a SYNC).

@@ -132,6 +132,148 @@ impl SyncClock {
     }
 }
 
+/// What the isochronous scheduler wants done now ([`IsoClock::due`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum IsoDue {
+    /// Nothing yet: wait until [`IsoClock::wake_at_ns`] (or a notification).
+    Wait,
+    /// Run the cycle (its RPDOs belong to the next SYNC): a setpoint arrived, or the guard
+    /// time before the SYNC is reached without one.
+    Cycle,
+    /// Wait actively until [`IsoClock::sync_at_ns`], then send the SYNC.
+    Sync,
+}
+
+/// The isochronous schedule (`sync_source = "isochronous"`): drive-io's SYNC is the bus clock,
+/// sent at `t0 + k·period` whatever motion-core does (a CSP drive interpolates assuming a
+/// constant SYNC period, so SYNC jitter is velocity ripple on the cables). Each period has one
+/// cycle (the RPDOs for the next SYNC), started by motion-core's "setpoint published"
+/// notification, or `guard` before the SYNC without one (holding the last target, like EtherCAT
+/// distributed clocks or Lely's SYNC producer, which never wait for the application). After a
+/// stall no SYNC is sent closer than 0.9 periods to the previous one: grid instants are skipped
+/// (counted), never compressed. Pure logic; the runner does the waiting.
+#[derive(Clone, Debug)]
+pub struct IsoClock {
+    period_ns: u64,
+    guard_ns: u64,
+    spin_ns: u64,
+    /// The next SYNC instant on the grid.
+    next_sync_ns: u64,
+    /// The cycle for `next_sync_ns` ran.
+    cycle_done: bool,
+    pending: bool,
+    last_sync_ns: Option<u64>,
+    locked: u64,
+    on_guard: u64,
+    skipped: u64,
+}
+
+impl IsoClock {
+    /// First SYNC one period after `now_ns` (the grid's origin).
+    pub fn new(period_ns: u64, guard_ns: u64, spin_ns: u64, now_ns: u64) -> Self {
+        Self {
+            period_ns,
+            guard_ns: guard_ns.min(period_ns / 2),
+            spin_ns: spin_ns.min(period_ns / 4),
+            next_sync_ns: now_ns + period_ns,
+            cycle_done: false,
+            pending: false,
+            last_sync_ns: None,
+            locked: 0,
+            on_guard: 0,
+            skipped: 0,
+        }
+    }
+
+    /// The next SYNC instant.
+    pub fn sync_at_ns(&self) -> u64 {
+        self.next_sync_ns
+    }
+
+    pub fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    /// A "setpoint published" notification arrived.
+    pub fn notified(&mut self) {
+        self.pending = true;
+    }
+
+    /// Until when to wait for frames and notifications.
+    pub fn wake_at_ns(&self) -> u64 {
+        let spin_from = self.next_sync_ns - self.spin_ns;
+        if self.cycle_done {
+            spin_from
+        } else if self.pending {
+            0
+        } else {
+            spin_from.min(self.next_sync_ns - self.guard_ns)
+        }
+    }
+
+    /// What is due at `now_ns`. The cycle comes first: a SYNC is never sent before its
+    /// period's cycle ran (even when drive-io was preempted past both).
+    pub fn due(&self, now_ns: u64) -> IsoDue {
+        if !self.cycle_done && (self.pending || now_ns >= self.next_sync_ns - self.guard_ns) {
+            IsoDue::Cycle
+        } else if now_ns >= self.next_sync_ns - self.spin_ns {
+            IsoDue::Sync
+        } else {
+            IsoDue::Wait
+        }
+    }
+
+    /// The period's cycle starts: what triggered it.
+    pub fn cycle_started(&mut self) -> Trigger {
+        self.cycle_done = true;
+        if std::mem::take(&mut self.pending) {
+            self.locked += 1;
+            Trigger::Setpoint
+        } else {
+            self.on_guard += 1;
+            Trigger::Clock
+        }
+    }
+
+    /// The SYNC was sent at `at_ns`: advances the grid. Returns the grid instants skipped (an
+    /// overrun: drive-io was late by more than 0.1 period, so the next SYNC moves to the first
+    /// grid instant at least 0.9 periods after this one).
+    pub fn sync_sent(&mut self, at_ns: u64) -> u32 {
+        let min_next = at_ns + self.period_ns - self.period_ns / 10;
+        let mut next = self.next_sync_ns + self.period_ns;
+        let mut skipped = 0u32;
+        while next < min_next {
+            next += self.period_ns;
+            skipped = skipped.saturating_add(1);
+        }
+        self.skipped += u64::from(skipped);
+        self.next_sync_ns = next;
+        self.last_sync_ns = Some(at_ns);
+        self.cycle_done = false;
+        skipped
+    }
+
+    /// Cycles started by a setpoint notification.
+    pub fn locked_cycles(&self) -> u64 {
+        self.locked
+    }
+
+    /// Cycles started at the guard time without a new setpoint.
+    pub fn guard_cycles(&self) -> u64 {
+        self.on_guard
+    }
+
+    /// Grid instants skipped after stalls.
+    pub fn skipped_syncs(&self) -> u64 {
+        self.skipped
+    }
+
+    /// A SYNC instant of the grid (for the announcement of the schedule).
+    pub fn grid_origin_ns(&self) -> u64 {
+        self.next_sync_ns
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -249,5 +391,105 @@ mod tests {
         s.notified();
         assert_eq!(s.wake_at_ns(), MS);
         assert_eq!(s.start(MS).0, Trigger::Clock);
+    }
+
+    /// Drives the isochronous clock like the runner: setpoint notifications at `notes`, the
+    /// SYNC sent `late(k)` after its instant. Returns (sync times, cycle triggers).
+    fn simulate_iso(
+        c: &mut IsoClock,
+        notes: &[u64],
+        until: u64,
+        late: impl Fn(usize) -> u64,
+    ) -> (Vec<u64>, Vec<Trigger>) {
+        let (mut syncs, mut trig) = (Vec::new(), Vec::new());
+        let mut i = 0;
+        let mut now = 0;
+        loop {
+            let wake = c.wake_at_ns().max(now);
+            if i < notes.len() && notes[i] <= wake {
+                now = now.max(notes[i]);
+                c.notified();
+                i += 1;
+            } else {
+                now = wake;
+            }
+            if now > until {
+                break;
+            }
+            match c.due(now) {
+                IsoDue::Cycle => trig.push(c.cycle_started()),
+                IsoDue::Sync => {
+                    let at = c.sync_at_ns().max(now) + late(syncs.len());
+                    now = at;
+                    syncs.push(at);
+                    c.sync_sent(at);
+                }
+                IsoDue::Wait => {}
+            }
+        }
+        (syncs, trig)
+    }
+
+    #[test]
+    fn isochronous_sync_is_periodic_whatever_the_setpoints_do() {
+        let mut c = IsoClock::new(MS, 400 * US, 100 * US, 0);
+        // Setpoints 500 µs before each SYNC, but jittering ±200 µs and with a 5 ms stall.
+        let mut notes: Vec<u64> = (0..20)
+            .filter(|k| !(8..13).contains(k))
+            .map(|k| k * MS + 500 * US + (k % 3) * 150 * US)
+            .collect();
+        notes.sort_unstable();
+        let (syncs, trig) = simulate_iso(&mut c, &notes, 20 * MS, |_| 0);
+        for (k, t) in syncs.iter().enumerate() {
+            assert_eq!(
+                *t,
+                (k as u64 + 1) * MS,
+                "SYNC {k} off its instant: {syncs:?}"
+            );
+        }
+        // One cycle per SYNC; the stall's periods ran on the guard.
+        assert!(
+            (syncs.len()..=syncs.len() + 1).contains(&trig.len()),
+            "{trig:?}"
+        );
+        assert!(c.guard_cycles() >= 5, "{trig:?}");
+        assert_eq!(c.skipped_syncs(), 0);
+    }
+
+    #[test]
+    fn a_setpoint_too_late_for_its_sync_goes_to_the_next_one() {
+        let mut c = IsoClock::new(MS, 400 * US, 100 * US, 0);
+        // 300 µs before SYNC 2 (at 2 ms): past the 400 µs guard, so SYNC 2's cycle already ran
+        // on the guard and this setpoint starts SYNC 3's cycle.
+        let notes = [MS + 700 * US];
+        let (_, trig) = simulate_iso(&mut c, &notes, 3 * MS + 700 * US, |_| 0);
+        assert_eq!(
+            trig,
+            vec![
+                Trigger::Clock,
+                Trigger::Clock,
+                Trigger::Setpoint,
+                Trigger::Clock
+            ]
+        );
+    }
+
+    #[test]
+    fn a_late_sync_never_makes_the_next_interval_short() {
+        let mut c = IsoClock::new(MS, 400 * US, 100 * US, 0);
+        // SYNC 3 goes out 2.35 ms late (drive-io preempted), every other one on time.
+        let (syncs, _) = simulate_iso(&mut c, &[], 10 * MS, |k| if k == 2 { 2350 * US } else { 0 });
+        for w in syncs.windows(2) {
+            assert!(
+                w[1] - w[0] >= MS * 9 / 10,
+                "interval {} µs: {syncs:?}",
+                (w[1] - w[0]) / US
+            );
+        }
+        // Back on the grid afterwards, with the skipped instants counted.
+        assert!(syncs.iter().skip(3).all(|t| t % MS == 0), "{syncs:?}");
+        // The SYNC of 3 ms left at 5.35 ms; 4, 5 and 6 ms are skipped (6 ms would be 0.65
+        // periods later), the next is 7 ms.
+        assert_eq!(c.skipped_syncs(), 3);
     }
 }

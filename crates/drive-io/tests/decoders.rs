@@ -54,7 +54,7 @@ proptest! {
     #[test]
     fn length_counts_round_trip(l in 0.0f64..30.0, sign in prop_oneof![Just(1i8), Just(-1i8)], off in -1_000_000i64..1_000_000) {
         let cfg = DrivesConfig::parse(&GOOD.replace("sign = 1", &format!("sign = {sign}\noffset_counts = {off}"))).unwrap();
-        let w = cfg.winches[0].clone();
+        let w = &cfg.winches[0];
         let c = w.length_to_counts(l).unwrap();
         prop_assert!((w.counts_to_length(c) - l).abs() <= 0.5 / w.counts_per_m() + 1e-12);
     }
@@ -63,14 +63,30 @@ proptest! {
 #[test]
 fn good_config_and_scaling() {
     let cfg = DrivesConfig::parse(GOOD).unwrap();
-    let w = cfg.winches[0].clone();
+    let w = &cfg.winches[0];
     // One drum revolution = pi * 0.305 m = gear * cpr counts.
     let rev = std::f64::consts::PI * 0.305;
     assert_eq!(w.length_to_counts(rev), Some(10 * 1048576));
     assert_eq!(cfg.bus.sync_period_us, 1000);
-    // Phase-locked by default (issue 20 item 3).
-    assert_eq!(cfg.bus.sync_source, drive_io::config::SyncSource::Setpoint);
-    assert_eq!(cfg.bus.setpoint_wait_us, 250);
+    // The SYNC is the bus clock by default; one interface named can0 at 1 Mbit/s, 70 % budget.
+    assert_eq!(
+        cfg.bus.sync_source,
+        drive_io::config::SyncSource::Isochronous
+    );
+    assert_eq!(
+        (cfg.bus.setpoint_wait_us, cfg.bus.rpdo_guard_us),
+        (250, 400)
+    );
+    let itf = cfg.interfaces();
+    assert_eq!(itf.len(), 1);
+    assert_eq!(
+        (
+            itf[0].name.as_str(),
+            itf[0].bitrate_bit_per_s,
+            itf[0].budget_percent
+        ),
+        ("can0", 1_000_000, 70.0)
+    );
     assert!(w.length_to_counts(-0.1).is_none() && w.length_to_counts(f64::NAN).is_none());
 }
 
@@ -122,6 +138,99 @@ fn errors_name_the_field() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("sgn") && e.contains("line"), "{e}");
+}
+
+/// Several interfaces: winches name theirs, node ids repeat across interfaces, transports
+/// are overridden per interface, and every mistake names its key.
+const TWO: &str = r#"
+[bus]
+[[bus.interface]]
+name = "can0"
+transport = "udpbus:239.255.70.1:20000"
+[[bus.interface]]
+name = "can1"
+transport = "udpbus:239.255.70.1:20001"
+bitrate_bit_per_s = 500000
+budget_percent = 60
+[[winch]]
+interface = "can0"
+node_id = 1
+drum_diameter_m = 0.305
+gear_ratio = 10.0
+counts_per_rev = 1048576
+sign = 1
+[[winch]]
+interface = "can1"
+node_id = 1
+drum_diameter_m = 0.305
+gear_ratio = 10.0
+counts_per_rev = 1048576
+sign = -1
+"#;
+
+#[test]
+fn several_interfaces() {
+    let mut cfg = DrivesConfig::parse(TWO).unwrap();
+    assert_eq!(cfg.interfaces().len(), 2);
+    assert_eq!((cfg.winch_interface(0), cfg.winch_interface(1)), (0, 1));
+    assert_eq!(cfg.transports().unwrap().len(), 2);
+    // A single-bus tool refuses it, naming why.
+    let e = cfg.transport().unwrap_err().to_string();
+    assert!(e.contains("bus.interface") && e.contains("2"), "{e}");
+    cfg.override_transports(&["can1=udpbus:239.255.70.1:20009".into()])
+        .unwrap();
+    assert_eq!(cfg.interfaces()[1].transport, "udpbus:239.255.70.1:20009");
+    let e = cfg
+        .override_transports(&["udpbus:239.255.70.1:20010".into()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("NAME=SPEC"), "{e}");
+    let e = cfg
+        .override_transports(&["can7=udpbus:239.255.70.1:20010".into()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("can7"), "{e}");
+    let cases = [
+        (
+            TWO.replace(
+                "interface = \"can1\"\nnode_id",
+                "interface = \"can9\"\nnode_id",
+            ),
+            "winch[1].interface",
+        ),
+        (
+            TWO.replacen("interface = \"can0\"\n", "", 1),
+            "winch[0].interface",
+        ),
+        (
+            TWO.replace("name = \"can1\"", "name = \"can0\""),
+            "bus.interface[1].name",
+        ),
+        (TWO.replace("20001", "20000"), "bus.interface[1].transport"),
+        (
+            TWO.replace("budget_percent = 60", "budget_percent = 80"),
+            "bus.interface[1].budget_percent",
+        ),
+        (
+            TWO.replace("bitrate_bit_per_s = 500000", "bitrate_bit_per_s = 2000000"),
+            "bus.interface[1].bitrate_bit_per_s",
+        ),
+        (
+            TWO.replace("[bus]", "[bus]\ntransport = \"udpbus:239.255.70.1:20005\""),
+            "bus.transport",
+        ),
+        (
+            TWO.replace(
+                "interface = \"can1\"\nnode_id",
+                "interface = \"can0\"\nnode_id",
+            ),
+            "winch[1].node_id",
+        ),
+    ];
+    for (text, field) in cases {
+        let e = DrivesConfig::parse(&text).unwrap_err().to_string();
+        assert!(e.contains(field), "{field}: {e}");
+    }
 }
 
 #[test]

@@ -2,7 +2,7 @@
 
 use can_transport::RxFrame;
 use crs_ipc::{BusState, JointSetpoint, fault_code};
-use drive_io::canopen::{self, Ds402State, FrameBuf, Message};
+use drive_io::canopen::{self, BusFrames, Ds402State, FrameBuf, Message};
 use drive_io::eds::{BUILTIN_WINCH_EDS, Eds};
 use drive_io::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
 use drive_io::{DrivesConfig, Master, hil};
@@ -63,29 +63,37 @@ impl Sim {
 
     fn deliver_to_master(&mut self, out: &FrameBuf) {
         for f in out.as_slice() {
-            self.master.on_frame(&RxFrame {
-                frame: *f,
-                rx_monotonic_ns: self.now,
-                kernel_rx_realtime_ns: None,
-            });
+            self.master.on_frame(
+                0,
+                &RxFrame {
+                    frame: *f,
+                    rx_monotonic_ns: self.now,
+                    kernel_rx_realtime_ns: None,
+                },
+            );
         }
     }
 
     /// One 1 ms cycle: master -> slaves -> physics -> slaves -> master.
     fn step(&mut self, sp: Option<&JointSetpoint>) {
         self.now += 1_000_000;
-        let mut m_out = FrameBuf::default();
-        self.master.cycle(self.now, sp, &mut m_out);
+        let mut out = BusFrames::new(1);
+        self.master.cycle(self.now, sp, &mut out);
         self.master.mark_written(self.now);
+        // One interface: its frames, then the SYNC the cycle asks for (as the runner sends).
+        let mut m_out: Vec<can_transport::CanFrame> = out.on(0).to_vec();
+        if out.sync_requested() {
+            m_out.push(canopen::sync());
+        }
         let mut s_out = FrameBuf::default();
-        for f in m_out.as_slice() {
+        for f in &m_out {
             self.log.push(canopen::decode(f));
             for i in 0..self.slaves.len() {
                 if self.dead == Some(i) {
                     continue;
                 }
                 if self.slaves[i].handle_frame(f, self.now, &mut s_out) == SlaveEvent::Sync {
-                    let w = self.cfg.winches[i].clone();
+                    let w = &self.cfg.winches[i];
                     match self.slaves[i].demand() {
                         MotionDemand::Follow { target_counts } => {
                             self.axes[i].step(Some(w.counts_to_length(target_counts)), 1e-3)

@@ -5,7 +5,7 @@
 
 use can_transport::{CanFrame, RxFrame};
 use crs_ipc::{BusState, JointSetpoint, fault_code};
-use drive_io::canopen::{self, Ds402State, FrameBuf, Message};
+use drive_io::canopen::{self, BusFrames, Ds402State, FrameBuf, Message};
 use drive_io::eds::Eds;
 use drive_io::force_node::ForceNode;
 use drive_io::mapping::{Direction, Transmission};
@@ -111,22 +111,30 @@ impl Rig {
         for f in out.as_slice() {
             self.frames.push(*f);
             self.log.push(canopen::decode(f));
-            self.master.on_frame(&RxFrame {
-                frame: *f,
-                rx_monotonic_ns: self.now,
-                kernel_rx_realtime_ns: None,
-            });
+            self.master.on_frame(
+                0,
+                &RxFrame {
+                    frame: *f,
+                    rx_monotonic_ns: self.now,
+                    kernel_rx_realtime_ns: None,
+                },
+            );
         }
     }
 
     /// One 1 ms cycle: master -> nodes -> physics -> nodes -> master.
     fn step(&mut self, sp: Option<&JointSetpoint>) {
         self.now += 1_000_000;
-        let mut m_out = FrameBuf::default();
-        self.master.cycle(self.now, sp, &mut m_out);
+        let mut out = BusFrames::new(1);
+        self.master.cycle(self.now, sp, &mut out);
         self.master.mark_written(self.now);
+        // One interface: its frames, then the SYNC the cycle asks for (as the runner sends).
+        let mut m_out: Vec<CanFrame> = out.on(0).to_vec();
+        if out.sync_requested() {
+            m_out.push(canopen::sync());
+        }
         let mut s_out = FrameBuf::default();
-        for f in m_out.as_slice() {
+        for f in &m_out {
             self.frames.push(*f);
             self.log.push(canopen::decode(f));
             for i in 0..self.drives.len() {

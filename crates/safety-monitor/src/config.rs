@@ -119,8 +119,11 @@ pub struct FeedbackSection {
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct CanSection {
-    /// `socketcan:<iface>` / `udpbus:<group>:<port>` / `udp:<l>-><r>` (overridden by --transport).
-    pub transport: String,
+    /// Optional: the transport of a drives file with ONE interface (overridden by --transport).
+    /// Absent: every interface's transport as the drives file gives it (`bus.transport` or
+    /// `[[bus.interface]]`); the monitor observes every interface the drives are on.
+    #[serde(default)]
+    pub transport: Option<String>,
     /// drives TOML (node ids and length <-> counts scaling), relative to the config file.
     pub drives: PathBuf,
     /// COB-ID of the safety heartbeat's normal frame; the inverse uses `+ 1` (CiA 304 SRDO 1).
@@ -346,9 +349,11 @@ fn d_feedback() -> FeedbackSection {
     }
 }
 
-/// One winch as the monitor needs it: node id and the counts -> length scaling.
+/// One winch as the monitor needs it: its interface, node id and the counts -> length scaling.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Winch {
+    /// Index into [`MonitorConfig::interfaces`].
+    pub interface: usize,
     pub node_id: u8,
     /// counts per metre of cable (gear · counts/rev / (π · drum diameter)).
     pub counts_per_m: f64,
@@ -363,14 +368,51 @@ impl Winch {
     }
 }
 
+/// One CAN interface of the drives (the drives file's `bus.transport` or `[[bus.interface]]`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Interface {
+    pub name: String,
+    pub transport: String,
+}
+
+/// What the monitor reads from the drives file: the interfaces and the winches on them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Drives {
+    pub interfaces: Vec<Interface>,
+    /// In cable order (cable i = i-th `[[winch]]`).
+    pub winches: Vec<Winch>,
+}
+
+/// Name of the single interface a drives file with only `bus.transport` describes (drive-io's
+/// name for it, so `--transport can0=…` means the same in every process).
+pub const SINGLE_INTERFACE_NAME: &str = "can0";
+
 #[derive(Deserialize)]
 struct RawDrives {
+    #[serde(default)]
+    bus: RawBus,
     #[serde(rename = "winch")]
     winches: Vec<RawWinch>,
 }
 
+#[derive(Deserialize, Default)]
+struct RawBus {
+    #[serde(default)]
+    transport: Option<String>,
+    #[serde(default, rename = "interface")]
+    interfaces: Vec<RawInterface>,
+}
+
+#[derive(Deserialize)]
+struct RawInterface {
+    name: String,
+    transport: String,
+}
+
 #[derive(Deserialize)]
 struct RawWinch {
+    #[serde(default)]
+    interface: Option<String>,
     node_id: i64,
     drum_diameter_m: f64,
     gear_ratio: f64,
@@ -393,6 +435,8 @@ pub struct MonitorConfig {
     pub platform_file: PathBuf,
     pub platform: PlatformParams,
     pub drives_file: PathBuf,
+    /// The CAN interfaces the drives are on (the monitor observes and stops every one).
+    pub interfaces: Vec<Interface>,
     /// In cable order (cable i = i-th `[[winch]]`).
     pub winches: Vec<Winch>,
     /// CRC-32 of the safety parameter set: the bytes of this file, the platform file and the
@@ -618,9 +662,10 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         ));
     }
     let c = &raw.can;
-    c.transport
-        .parse::<can_transport::TransportSpec>()
-        .map_err(|e| bad("can.transport", e.to_string()))?;
+    if let Some(t) = &c.transport {
+        t.parse::<can_transport::TransportSpec>()
+            .map_err(|e| bad("can.transport", e.to_string()))?;
+    }
     if c.safety_cob_id == 0 || c.safety_cob_id >= 0x7FC || c.safety_cob_id.is_multiple_of(2) {
         return Err(bad(
             "can.safety_cob_id",
@@ -737,7 +782,25 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
     }
     let drives_file = relative_to(path, &c.drives);
     named("can.drives", &drives_file)?;
-    let winches = load_drives(&drives_file)?;
+    let Drives {
+        mut interfaces,
+        winches,
+    } = load_drives(&drives_file)?;
+    if let Some(t) = &raw.can.transport {
+        if interfaces.len() != 1 {
+            return Err(ConfigError::Invalid {
+                file: path.display().to_string(),
+                key: "can.transport".into(),
+                reason: format!(
+                    "the drives file {} has {} interfaces: the monitor takes their transports \
+                     from it (remove can.transport; override with --transport NAME=SPEC)",
+                    drives_file.display(),
+                    interfaces.len()
+                ),
+            });
+        }
+        interfaces[0].transport = t.clone();
+    }
     if winches.len() != platform.cables() {
         return Err(ConfigError::Invalid {
             file: drives_file.display().to_string(),
@@ -792,31 +855,136 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         platform_file,
         platform,
         drives_file,
+        interfaces,
         winches,
     })
 }
 
-/// Reads node ids and scaling from a drives TOML (the `[[winch]]` entries; other tables are
-/// drive-io's business and ignored here).
-pub fn load_drives(path: &Path) -> Result<Vec<Winch>, ConfigError> {
+impl MonitorConfig {
+    /// Replaces interface transports from command-line overrides: `NAME=SPEC` per interface,
+    /// or a bare SPEC when there is one interface.
+    pub fn override_transports(&mut self, overrides: &[String]) -> Result<(), ConfigError> {
+        let bad = |reason: String| ConfigError::Invalid {
+            file: "command line".into(),
+            key: "--transport".into(),
+            reason,
+        };
+        for o in overrides {
+            let (idx, spec) = match o.split_once('=') {
+                Some((name, spec)) if !name.contains(':') => (
+                    self.interfaces
+                        .iter()
+                        .position(|i| i.name == name)
+                        .ok_or_else(|| bad(format!("{name:?}: no such interface")))?,
+                    spec,
+                ),
+                _ if self.interfaces.len() == 1 => (0, o.as_str()),
+                _ => {
+                    return Err(bad(format!(
+                        "{o:?}: with several interfaces give NAME=SPEC for each"
+                    )));
+                }
+            };
+            spec.parse::<can_transport::TransportSpec>()
+                .map_err(|e| bad(format!("{o:?}: {e}")))?;
+            self.interfaces[idx].transport = spec.to_string();
+        }
+        Ok(())
+    }
+
+    /// The transport of every interface, in order.
+    pub fn transports(&self) -> Result<Vec<can_transport::TransportSpec>, ConfigError> {
+        self.interfaces
+            .iter()
+            .enumerate()
+            .map(|(i, itf)| {
+                itf.transport
+                    .parse()
+                    .map_err(|e: can_transport::SpecError| ConfigError::Invalid {
+                        file: self.drives_file.display().to_string(),
+                        key: format!("bus.interface[{i}].transport"),
+                        reason: e.to_string(),
+                    })
+            })
+            .collect()
+    }
+}
+
+/// Reads the interfaces, node ids and scaling from a drives TOML (`bus.transport` or
+/// `[[bus.interface]]`, the `[[winch]]` entries; everything else is drive-io's business and
+/// ignored here).
+pub fn load_drives(path: &Path) -> Result<Drives, ConfigError> {
     let text = read(path)?;
     let raw: RawDrives = toml::from_str(&text).map_err(|e| parse_err(path, &text, e))?;
     let file = path.display().to_string();
-    let mut out = Vec::with_capacity(raw.winches.len());
+    let invalid = |key: String, reason: String| ConfigError::Invalid {
+        file: file.clone(),
+        key,
+        reason,
+    };
+    let interfaces: Vec<Interface> = match (&raw.bus.transport, raw.bus.interfaces.is_empty()) {
+        (Some(t), true) => vec![Interface {
+            name: SINGLE_INTERFACE_NAME.into(),
+            transport: t.clone(),
+        }],
+        (None, false) => raw
+            .bus
+            .interfaces
+            .iter()
+            .map(|i| Interface {
+                name: i.name.clone(),
+                transport: i.transport.clone(),
+            })
+            .collect(),
+        (None, true) => {
+            return Err(invalid(
+                "bus.transport".into(),
+                "missing: bus.transport or [[bus.interface]] tables".into(),
+            ));
+        }
+        (Some(_), false) => {
+            return Err(invalid(
+                "bus.transport".into(),
+                "give either bus.transport or [[bus.interface]] tables, not both".into(),
+            ));
+        }
+    };
+    for (i, itf) in interfaces.iter().enumerate() {
+        if interfaces[..i].iter().any(|o| o.name == itf.name) {
+            return Err(invalid(
+                format!("bus.interface[{i}].name"),
+                format!("{:?} used twice", itf.name),
+            ));
+        }
+    }
+    let mut out: Vec<Winch> = Vec::with_capacity(raw.winches.len());
     for (i, w) in raw.winches.iter().enumerate() {
         let bad = |k: &str, r: &str| ConfigError::Invalid {
             file: file.clone(),
             key: format!("winch[{i}].{k}"),
             reason: r.to_string(),
         };
+        let interface = match &w.interface {
+            None if interfaces.len() == 1 => 0,
+            None => {
+                return Err(bad(
+                    "interface",
+                    "missing (the drives have several interfaces)",
+                ));
+            }
+            Some(n) => interfaces
+                .iter()
+                .position(|itf| &itf.name == n)
+                .ok_or_else(|| bad("interface", "no [[bus.interface]] of that name"))?,
+        };
         if !(1..=127).contains(&w.node_id) {
             return Err(bad("node_id", "must be in 1..=127"));
         }
         if out
             .iter()
-            .any(|o: &Winch| i64::from(o.node_id) == w.node_id)
+            .any(|o: &Winch| i64::from(o.node_id) == w.node_id && o.interface == interface)
         {
-            return Err(bad("node_id", "used twice"));
+            return Err(bad("node_id", "used twice on one interface"));
         }
         for (k, v) in [
             ("drum_diameter_m", w.drum_diameter_m),
@@ -831,6 +999,7 @@ pub fn load_drives(path: &Path) -> Result<Vec<Winch>, ConfigError> {
             return Err(bad("sign", "must be 1 or -1"));
         }
         out.push(Winch {
+            interface,
             node_id: w.node_id as u8,
             counts_per_m: w.gear_ratio * w.counts_per_rev
                 / (std::f64::consts::PI * w.drum_diameter_m),
@@ -845,7 +1014,10 @@ pub fn load_drives(path: &Path) -> Result<Vec<Winch>, ConfigError> {
             reason: format!("need 1..={} [[winch]] entries", crs_ipc::MAX_CABLES),
         });
     }
-    Ok(out)
+    Ok(Drives {
+        interfaces,
+        winches: out,
+    })
 }
 
 /// SHA-256 of a file's bytes (the accepted-platform hash).

@@ -32,7 +32,7 @@ use crate::kinematics::StandardKinematics;
 use crate::monitor::{Limits, Monitor, ResetDecision, StateCode};
 use crate::stop_path::{StopCounts, StopPath, StopStage};
 use crate::trip::{Cause, TripRecord};
-use can_transport::{CanBus, CanError, RxEvent, TransportSpec, safety_frame};
+use can_transport::{CanBus, CanError, RxEvent, safety_frame};
 use crossbeam::queue::ArrayQueue;
 use crs_ipc::{
     DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, MAX_CABLES,
@@ -128,6 +128,8 @@ pub enum DaemonError {
     Ipc(#[from] IpcError),
     #[error(transparent)]
     Can(#[from] CanError),
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
     #[error("{0}")]
     Other(String),
 }
@@ -152,6 +154,8 @@ pub struct Summary {
 
 #[derive(Debug, Clone, Copy)]
 struct Obs {
+    /// The CAN interface it was seen on.
+    iface: u8,
     what: Observed,
     rx_ns: u64,
 }
@@ -161,10 +165,11 @@ struct Obs {
 /// monitor ~16 % of a core, see benches/RESULTS.md ("Safety monitor")).
 const READER_BATCH: Duration = Duration::from_millis(3);
 
-/// Reads the bus on its own socket and queues RPDO targets, drive heartbeats, forces and the
-/// controller's error frames (subscribed when the socket was opened).
+/// Reads every interface on its own sockets and queues RPDO targets, drive heartbeats, forces
+/// and the controllers' error frames (subscribed when the sockets were opened). A batch counts
+/// as complete when every interface was drained.
 fn bus_reader(
-    mut bus: Box<dyn CanBus>,
+    mut buses: Vec<Box<dyn CanBus>>,
     queue: Arc<ArrayQueue<Obs>>,
     stop: Arc<AtomicBool>,
     health: Arc<ReaderHealth>,
@@ -177,29 +182,38 @@ fn bus_reader(
         if now > next + 100_000_000 {
             next = now;
         }
-        loop {
-            let (what, rx_ns) = match bus.try_recv_event() {
-                Ok(Some(RxEvent::Frame(rx))) => match bus_frames::observe(&rx.frame) {
-                    Some(what) => (what, rx.rx_monotonic_ns),
-                    None => continue,
-                },
-                Ok(Some(RxEvent::BusError(e))) => {
-                    (Observed::BusError(e.error.condition()), e.rx_monotonic_ns)
+        let mut complete = true;
+        for (iface, bus) in buses.iter_mut().enumerate() {
+            loop {
+                let (what, rx_ns) = match bus.try_recv_event() {
+                    Ok(Some(RxEvent::Frame(rx))) => match bus_frames::observe(&rx.frame) {
+                        Some(what) => (what, rx.rx_monotonic_ns),
+                        None => continue,
+                    },
+                    Ok(Some(RxEvent::BusError(e))) => {
+                        (Observed::BusError(e.error.condition()), e.rx_monotonic_ns)
+                    }
+                    Ok(None) => break,
+                    Err(e) => {
+                        health.errors.fetch_add(1, Ordering::Relaxed);
+                        tracing::error!(error = %e, interface = iface, "bus reader: receive failed");
+                        complete = false;
+                        std::thread::sleep(Duration::from_millis(50));
+                        break;
+                    }
+                };
+                let obs = Obs {
+                    iface: iface as u8,
+                    what,
+                    rx_ns,
+                };
+                if queue.push(obs).is_err() {
+                    health.dropped.fetch_add(1, Ordering::Relaxed);
                 }
-                Ok(None) => {
-                    health.batches.fetch_add(1, Ordering::Relaxed);
-                    break;
-                }
-                Err(e) => {
-                    health.errors.fetch_add(1, Ordering::Relaxed);
-                    tracing::error!(error = %e, "bus reader: receive failed");
-                    std::thread::sleep(Duration::from_millis(50));
-                    break;
-                }
-            };
-            if queue.push(Obs { what, rx_ns }).is_err() {
-                health.dropped.fetch_add(1, Ordering::Relaxed);
             }
+        }
+        if complete {
+            health.batches.fetch_add(1, Ordering::Relaxed);
         }
     }
 }
@@ -241,32 +255,57 @@ fn append_line(path: &std::path::Path, text: &str) {
     }
 }
 
-/// Runs the monitor until `stop` is set. `transport` overrides `[can].transport`.
-pub fn run(
-    cfg: &MonitorConfig,
-    transport: &TransportSpec,
-    ipc: &IpcNode,
-    stop: &AtomicBool,
-) -> Result<Summary, DaemonError> {
-    let tx = can_transport::open(transport)?;
-    let rx = can_transport::open(transport)?;
+/// One socket per interface, in `MonitorConfig::interfaces` order.
+pub type Sockets = Vec<Box<dyn CanBus>>;
+
+/// Opens a sending and a receiving socket on every interface of `cfg` (in order).
+pub fn open_buses(cfg: &MonitorConfig) -> Result<(Sockets, Sockets), DaemonError> {
+    let specs = cfg.transports()?;
+    let mut tx = Vec::with_capacity(specs.len());
+    let mut rx = Vec::with_capacity(specs.len());
+    for spec in &specs {
+        tx.push(can_transport::open(spec)?);
+        rx.push(can_transport::open(spec)?);
+    }
+    Ok((tx, rx))
+}
+
+/// Runs the monitor on every interface of `cfg` until `stop` is set.
+pub fn run(cfg: &MonitorConfig, ipc: &IpcNode, stop: &AtomicBool) -> Result<Summary, DaemonError> {
+    let (tx, rx) = open_buses(cfg)?;
     run_on(cfg, tx, rx, ipc, stop)
 }
 
-/// [`run`] on given sockets: `tx` sends the stop frames and the heartbeat, `rx` is the bus
-/// reader's (it subscribes to the controller's error frames). Tests and the HIL matrix pass
-/// a failing `tx` ([`crate::stop_path::FailingSends`]).
+/// [`run`] on given sockets, one of each per interface (`cfg.interfaces` order): `tx` send the
+/// stop frames and the heartbeat, `rx` are the bus reader's (they subscribe to the
+/// controllers' error frames). Tests and the HIL matrix pass a failing `tx`
+/// ([`crate::stop_path::FailingSends`]).
 pub fn run_on(
     cfg: &MonitorConfig,
-    mut tx: Box<dyn CanBus>,
-    mut rx: Box<dyn CanBus>,
+    tx: Sockets,
+    mut rx: Sockets,
     ipc: &IpcNode,
     stop: &AtomicBool,
 ) -> Result<Summary, DaemonError> {
+    if tx.len() != cfg.interfaces.len() || rx.len() != cfg.interfaces.len() {
+        return Err(DaemonError::Other(format!(
+            "{} interfaces configured, {} sending / {} receiving sockets given",
+            cfg.interfaces.len(),
+            tx.len(),
+            rx.len()
+        )));
+    }
     // Error frames (bus-off, error-passive) are a trip cause: without the subscription the
     // monitor could not see them, so a transport that cannot carry them is refused.
-    rx.subscribe_bus_errors()?;
-    let transport = tx.interface().to_string();
+    for b in &mut rx {
+        b.subscribe_bus_errors()?;
+    }
+    let transport = tx
+        .iter()
+        .map(|b| b.interface().to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let mut tx = crate::tx_buses::TxBuses::new(tx);
     let identity = platform_identity(&cfg.platform);
     let kin = StandardKinematics::new(&cfg.platform);
     let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity)
@@ -361,7 +400,11 @@ pub fn run_on(
     let mut drive_state_ns = [0u64; MAX_CABLES];
     // After an accepted reset: (NMT start time, cycles since).
     let mut resetting: Option<(u64, u32)> = None;
-    let node_index = |node: u8| winches.iter().position(|w| w.node_id == node);
+    let node_index = |iface: u8, node: u8| {
+        winches
+            .iter()
+            .position(|w| w.node_id == node && w.interface == usize::from(iface))
+    };
     let mut deadline = monotonic_ns() + period;
     let mut last_overrun_log_ns = 0u64;
 
@@ -481,7 +524,7 @@ pub fn run_on(
                     controlword,
                     target_counts,
                 } => {
-                    if let Some(i) = node_index(node) {
+                    if let Some(i) = node_index(o.iface, node) {
                         last_target[i] = Some(target_counts);
                         if bus_frames::enables_operation(controlword) {
                             let l = winches[i].counts_to_length_m(target_counts);
@@ -490,7 +533,7 @@ pub fn run_on(
                     }
                 }
                 Observed::Heartbeat { node, state } => {
-                    if let Some(i) = node_index(node) {
+                    if let Some(i) = node_index(o.iface, node) {
                         drive_state[i] = state;
                         drive_state_ns[i] = o.rx_ns;
                         monitor.on_drive_report(
@@ -501,7 +544,7 @@ pub fn run_on(
                     }
                 }
                 Observed::Force { node, force_mn } => {
-                    if let Some(i) = node_index(node) {
+                    if let Some(i) = node_index(o.iface, node) {
                         monitor.on_force(i, f64::from(force_mn) * 1e-3, o.rx_ns);
                     }
                 }
@@ -553,11 +596,11 @@ pub fn run_on(
             // Stop path first: quick stop to every drive, then NMT stop all (retried and
             // escalated when unsent: stop_path).
             for (i, w) in winches.iter().enumerate() {
-                if let Some(t) = last_target[i] {
-                    stops.quick_stop(tx.as_mut(), w.node_id, t);
+                if let (Some(t), Some(bus)) = (last_target[i], tx.on(w.interface)) {
+                    stops.quick_stop(bus, w.node_id, t);
                 }
             }
-            stops.nmt_stop(tx.as_mut());
+            stops.nmt_stop(&mut tx);
             resetting = None;
             event_seq += 1;
             let ev = estop_event(&rec, event_seq);
@@ -571,7 +614,7 @@ pub fn run_on(
                 append_trip_log(p, &rec);
             }
         } else if report.state == StateCode::Tripped {
-            stops.nmt_stop(tx.as_mut());
+            stops.nmt_stop(&mut tx);
             if foreign_reset && let Some(rec) = monitor.trip() {
                 event_seq += 1;
                 let ev = estop_event(rec, event_seq);
@@ -611,7 +654,7 @@ pub fn run_on(
                         epoch,
                         "reset ACCEPTED: new reset epoch, NMT start, releasing the stack"
                     );
-                    stops.other(tx.as_mut(), &bus_frames::nmt(bus_frames::NMT_START, 0));
+                    stops.other(&mut tx, &bus_frames::nmt(bus_frames::NMT_START, 0));
                     resetting = Some((now, 0));
                 }
             }
@@ -641,11 +684,11 @@ pub fn run_on(
         // The fail-safe heartbeat: every cycle, STOP while tripped, after the signature (a
         // consumer counts a RUN pair only with a recent signature of its own CRC).
         for f in &signature {
-            stops.other(tx.as_mut(), f);
+            stops.other(&mut tx, f);
         }
         let tripped = monitor.state().is_tripped();
         let stage = stops.heartbeat(
-            tx.as_mut(),
+            &mut tx,
             &safety_frame::encode(&monitor.heartbeat(counter), cob),
             tripped,
         );

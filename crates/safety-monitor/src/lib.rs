@@ -34,6 +34,7 @@ pub mod ownership;
 pub mod platform;
 pub mod stop_path;
 pub mod trip;
+pub mod tx_buses;
 
 pub use monitor::{Limits, Monitor, MonitorState, ResetDecision, StateCode};
 pub use trip::{Cause, Fault, TripRecord};

@@ -55,6 +55,7 @@ impl Rig {
         let cfg_path =
             PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/safety-monitor.toml");
         let mut cfg = config::load(&cfg_path).unwrap();
+        cfg.override_transports(&[transport.to_string()]).unwrap();
         cfg.monitor.rt_priority = 0;
         // The test process itself publishes the setpoints and the identity (issue 16: the
         // stream owners are checked by executable).
@@ -81,10 +82,11 @@ impl Rig {
                 if fail_nmt {
                     let tx = can_transport::open(&t).map_err(|e| e.to_string())?;
                     let rx = can_transport::open(&t).map_err(|e| e.to_string())?;
-                    let tx = Box::new(safety_monitor::stop_path::FailingSends::new(tx, 0));
-                    daemon::run_on(&cfg, tx, rx, &ipc, &stop).map_err(|e| e.to_string())
+                    let tx: Box<dyn can_transport::CanBus> =
+                        Box::new(safety_monitor::stop_path::FailingSends::new(tx, 0));
+                    daemon::run_on(&cfg, vec![tx], vec![rx], &ipc, &stop).map_err(|e| e.to_string())
                 } else {
-                    daemon::run(&cfg, &t, &ipc, &stop).map_err(|e| e.to_string())
+                    daemon::run(&cfg, &ipc, &stop).map_err(|e| e.to_string())
                 }
             })
         };

@@ -53,9 +53,10 @@ use can_transport::{CanBus, CanError, CanFrame};
 use cdpr_model::config::Platform;
 use cdpr_model::{Data, Pose, kinematics};
 use crs_ipc::{CONTRACT_VERSION, MAX_CABLES, PlantTruth, TrackerPose};
+use drive_io::bank_set::DriveBanks;
 use drive_io::canopen::Ds402State;
 use drive_io::config::{DrivesConfig, WinchConfig};
-use drive_io::slave::{DriveBank, MotionDemand};
+use drive_io::slave::MotionDemand;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -269,7 +270,10 @@ pub struct BusStats {
 pub struct PlantBus {
     plant: Plant,
     winches: Vec<WinchConfig>,
-    bank: DriveBank,
+    bank: DriveBanks,
+    /// CLOCK_MONOTONIC time of the last SYNC on each interface (its drives interpolate over
+    /// the time that really passed since).
+    last_sync_ns: Vec<Option<u64>>,
     /// Winch axes in drive coordinates (what the encoders read, m).
     axes: Vec<CspWinch>,
     q_off: Vec<f64>,
@@ -410,15 +414,17 @@ impl PlantBus {
                 source,
             })?;
         // The winches implement the object dictionary of their EDS (drives.toml `winch[i].eds`
-        // or `bus.eds`, else the simulated winch's config/eds/crs-winch.eds); the pulleys'
-        // load cells of the `[[force_sensor]]` table report the measured forces too.
+        // or `bus.eds`, else the simulated winch's config/eds/crs-winch.eds), one bank of drives
+        // per CAN interface; the pulleys' load cells of the `[[force_sensor]]` table report the
+        // measured forces too.
         let mut bank =
-            DriveBank::from_config(drives, opts.default_heartbeat_ms).map_err(|source| {
+            DriveBanks::from_config(drives, opts.default_heartbeat_ms).map_err(|source| {
                 BusPlantError::Eds {
                     drives: files.drives.clone(),
                     source,
                 }
             })?;
+        let interfaces = bank.interfaces();
         if let Some(sw) = drives.safety_heartbeat {
             // The drives validate the safety monitor's heartbeat like the real ones (drives.toml
             // `[safety_heartbeat]`): without it they quick-stop and the brakes hold.
@@ -443,6 +449,7 @@ impl PlantBus {
             plant,
             winches: drives.winches.clone(),
             bank,
+            last_sync_ns: vec![None; interfaces],
             axes,
             q_off,
             home_drive,
@@ -474,10 +481,44 @@ impl PlantBus {
         self.bank.start(now_ns);
     }
 
-    /// Handles one received frame for every drive; true if it was a SYNC the drives act on:
-    /// then run [`PlantBus::cycle`] with the SYNC period and [`PlantBus::transmit_pdos`].
-    pub fn handle_frame(&mut self, frame: &CanFrame, now_ns: u64) -> bool {
-        self.bank.handle_frame(frame, now_ns)
+    /// Handles one frame received on interface `iface` (at `now_ns`, its arrival); true if it
+    /// was a SYNC the drives of that interface act on: then move them with
+    /// [`PlantBus::advance_interface`] and, once every interface has had its SYNC of the
+    /// instant, settle and [`PlantBus::transmit_pdos`].
+    pub fn handle_frame(&mut self, iface: usize, frame: &CanFrame, now_ns: u64) -> bool {
+        self.bank.handle_frame(iface, frame, now_ns)
+    }
+
+    /// Number of CAN interfaces the drives are on.
+    pub fn interfaces(&self) -> usize {
+        self.bank.interfaces()
+    }
+
+    /// Moves the winches of interface `iface` for its SYNC received at `sync_ns`: each CSP
+    /// drive latched its new target at the SYNC and interpolates towards it over the nominal
+    /// period (0x60C2) for the time that REALLY passed since the previous SYNC of the
+    /// interface — a late SYNC leaves the winch at its target for the rest of the interval,
+    /// an early one cuts the interpolation short, so SYNC jitter shows as motion (velocity
+    /// ripple, tracking error) as it does on real drives. Returns that interval, s.
+    pub fn advance_interface(&mut self, iface: usize, sync_ns: u64) -> f64 {
+        let nominal = self.opts.sync_period_s;
+        let dt = match self
+            .last_sync_ns
+            .get_mut(iface)
+            .and_then(|l| l.replace(sync_ns))
+        {
+            // A first SYNC, or one after a pause (drive-io restarted): one nominal period.
+            Some(prev) if sync_ns > prev && ((sync_ns - prev) as f64) * 1e-9 <= 4.0 * nominal => {
+                (sync_ns - prev) as f64 * 1e-9
+            }
+            _ => nominal,
+        };
+        for i in 0..self.axes.len() {
+            if self.bank.interface_of(i) == Some(iface) {
+                self.step_winch(i, dt, nominal);
+            }
+        }
+        dt
     }
 
     /// One plant cycle of `dt_s` seconds at `now_ns` (CLOCK_MONOTONIC, for the payload stamps):
@@ -497,34 +538,39 @@ impl PlantBus {
             0.0
         };
         for i in 0..self.axes.len() {
-            let w = &self.winches[i];
-            let ax = &mut self.axes[i];
-            match self.bank.demand(i) {
-                MotionDemand::Follow { target_counts } => {
-                    if dt > 0.0 {
-                        // Software position limits of the drive: never beyond the drum range.
-                        let t = w
-                            .counts_to_length(target_counts)
-                            .clamp(0.0, w.max_cable_length_m);
-                        ax.follow(t, dt);
-                    }
-                    self.braked[i] = false;
-                }
-                MotionDemand::QuickStop => {
-                    if dt > 0.0 {
-                        ax.quick_stop(dt);
-                    }
-                    // Decelerated to rest: the brake holds (quick stop option code 6).
-                    self.braked[i] = ax.velocity_m_per_s == 0.0;
-                }
-                MotionDemand::Hold => {
-                    ax.hold();
-                    self.braked[i] = true;
-                }
-            }
-            self.q_cmd[i] = ax.length_m + self.q_off[i];
+            self.step_winch(i, dt, dt);
         }
         self.stats.cycles += 1;
+    }
+
+    /// One winch for `dt` seconds; a following drive interpolates its target over `interp`.
+    fn step_winch(&mut self, i: usize, dt: f64, interp: f64) {
+        let w = &self.winches[i];
+        let ax = &mut self.axes[i];
+        match self.bank.demand(i) {
+            MotionDemand::Follow { target_counts } => {
+                if dt > 0.0 {
+                    // Software position limits of the drive: never beyond the drum range.
+                    let t = w
+                        .counts_to_length(target_counts)
+                        .clamp(0.0, w.max_cable_length_m);
+                    ax.follow_interpolated(t, interp, dt);
+                }
+                self.braked[i] = false;
+            }
+            MotionDemand::QuickStop => {
+                if dt > 0.0 {
+                    ax.quick_stop(dt);
+                }
+                // Decelerated to rest: the brake holds (quick stop option code 6).
+                self.braked[i] = ax.velocity_m_per_s == 0.0;
+            }
+            MotionDemand::Hold => {
+                ax.hold();
+                self.braked[i] = true;
+            }
+        }
+        self.q_cmd[i] = ax.length_m + self.q_off[i];
     }
 
     /// Settles the platform for the lengths the winches hold now (the equilibrium is solved
@@ -652,6 +698,11 @@ impl PlantBus {
         self.bank.transmit_pdos();
     }
 
+    /// TPDOs of the drives on interface `iface`.
+    pub fn transmit_pdos_on(&mut self, iface: usize) {
+        self.bank.transmit_pdos_on(iface);
+    }
+
     /// Heartbeats when due.
     pub fn poll(&mut self, now_ns: u64) {
         self.bank.poll(now_ns);
@@ -659,21 +710,20 @@ impl PlantBus {
 
     /// Earliest heartbeat due time of all drives (CLOCK_MONOTONIC ns), if any drive produces one.
     pub fn next_heartbeat_ns(&self) -> Option<u64> {
-        (0..self.bank.len())
-            .filter_map(|i| self.bank.slave(i).and_then(|s| s.next_heartbeat_ns()))
-            .min()
+        self.bank.next_heartbeat_ns()
     }
 
-    /// Sends the queued frames (a full TX queue drops frames, as a CAN controller would).
-    pub fn flush(&mut self, bus: &mut (impl CanBus + ?Sized)) -> Result<(), CanError> {
-        self.bank.flush(&mut BusRef(bus))
+    /// Sends the queued frames of every interface on its bus (`buses[k]` = interface k; a full
+    /// TX queue drops frames, as a CAN controller would).
+    pub fn flush<B: CanBus>(&mut self, buses: &mut [B]) -> Result<(), CanError> {
+        self.bank.flush(buses)
     }
 
     /// The drives (for fault injection and state inspection).
-    pub fn drives(&self) -> &DriveBank {
+    pub fn drives(&self) -> &DriveBanks {
         &self.bank
     }
-    pub fn drives_mut(&mut self) -> &mut DriveBank {
+    pub fn drives_mut(&mut self) -> &mut DriveBanks {
         &mut self.bank
     }
 
@@ -772,6 +822,12 @@ impl CspWinch {
     /// One period `dt` (> 0) towards `target_m`, the target latched at this SYNC.
     pub fn follow(&mut self, target_m: f64, dt: f64) {
         let prev = self.prev_target_m.unwrap_or(target_m);
+        self.follow_from(prev, target_m, dt);
+    }
+
+    /// Moves over `dt` from the reference `prev` towards `target_m` (velocity feed-forward
+    /// plus the bounded correction of the error left at `prev`).
+    fn follow_from(&mut self, prev: f64, target_m: f64, dt: f64) {
         self.prev_target_m = Some(target_m);
         let a = self.max_accel_m_per_s2;
         let v_ff = (target_m - prev) / dt;
@@ -786,6 +842,22 @@ impl CspWinch {
         let v_des = (v_ff + v_corr).clamp(-self.max_speed_m_per_s, self.max_speed_m_per_s);
         self.velocity_m_per_s += (v_des - self.velocity_m_per_s).clamp(-a * dt, a * dt);
         self.length_m += self.velocity_m_per_s * dt;
+    }
+
+    /// The SYNC latched `target_m`; the drive interpolates from its previous target to it over
+    /// `interp` (its interpolation period, 0x60C2) and the motor follows that reference for
+    /// `dt` (the time until the next SYNC really came): with `dt` = `interp` this is
+    /// [`CspWinch::follow`]; over a longer interval the winch arrives at the target only at its
+    /// end (slower on average), a shorter one stops part-way (the next interpolation starts
+    /// from there).
+    pub fn follow_interpolated(&mut self, target_m: f64, interp: f64, dt: f64) {
+        let prev = self.prev_target_m.unwrap_or(target_m);
+        let reached = if interp > 0.0 {
+            (dt / interp).min(1.0)
+        } else {
+            1.0
+        };
+        self.follow_from(prev, prev + (target_m - prev) * reached, dt);
     }
 
     /// Quick stop: decelerate at the maximum deceleration to rest.
@@ -811,25 +883,6 @@ fn counts_saturating(w: &WinchConfig, length_m: f64) -> i32 {
         .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
 }
 
-/// Adapter so an unsized bus (`Box<dyn CanBus>`, `&mut dyn CanBus`) can be flushed by the
-/// `impl CanBus` bound of [`DriveBank::flush`].
-struct BusRef<'a, B: CanBus + ?Sized>(&'a mut B);
-
-impl<B: CanBus + ?Sized> CanBus for BusRef<'_, B> {
-    fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
-        self.0.send(frame)
-    }
-    fn recv_timeout(
-        &mut self,
-        timeout: Duration,
-    ) -> Result<Option<can_transport::RxFrame>, CanError> {
-        self.0.recv_timeout(timeout)
-    }
-    fn interface(&self) -> &str {
-        self.0.interface()
-    }
-}
-
 // ---------------------------------------------------------------------------------------------
 // Process loop
 
@@ -852,18 +905,22 @@ pub struct LoopSummary {
     pub stats: BusStats,
 }
 
-/// Runs the plant on `bus` until `stop` is set.
+/// Runs the plant on `buses` (`buses[k]` = CAN interface k of the drives config) until `stop`
+/// is set.
 ///
-/// The winches step once per SYNC by the SYNC period (CSP drives interpolate per SYNC). After
-/// the frames waiting on the bus are handled, the platform settles once and the TPDOs go out
-/// (with a solver slower than the SYNC period, e.g. an unoptimised build, the plant thus keeps
-/// the winch motion exact and answers at a lower rate instead of falling ever further behind).
-/// While no SYNC arrives for three SYNC periods (drive-io not started, or stopped) the plant
-/// runs free every `period` (no TPDOs), so the ground truth keeps flowing and quick stops
-/// complete. After every settle `publish` gets the truth and the tracker reading. Bus errors
-/// other than a full TX queue end the loop.
-pub fn run(
-    bus: &mut (impl CanBus + ?Sized),
+/// At each SYNC the drives of its interface latch their targets and their winches move over
+/// the time since that interface's previous SYNC ([`PlantBus::advance_interface`]). drive-io
+/// sends the SYNC on every interface at the same instant; once each interface has had its SYNC
+/// of the instant (or `SYNC_GATHER` after the first, if one is missing), the platform settles
+/// once and every drive's TPDOs go out. With a solver slower than the SYNC period (e.g. an
+/// unoptimised build), SYNCs that queued up are all applied to the winches and the platform
+/// settles once, so the winch motion stays exact and the plant answers at a lower rate instead
+/// of falling ever further behind. While no SYNC arrives for three SYNC periods (drive-io not
+/// started, or stopped) the plant runs free every `period` (no TPDOs), so the ground truth
+/// keeps flowing and quick stops complete. After every settle `publish` gets the truth and the
+/// tracker reading. Bus errors other than a full TX queue end the loop.
+pub fn run<B: CanBus>(
+    buses: &mut [B],
     plant: &mut PlantBus,
     period: Duration,
     stop: &AtomicBool,
@@ -873,45 +930,70 @@ pub fn run(
     let period_s = period_ns as f64 * 1e-9;
     let sync_s = plant.options().sync_period_s;
     let quiet_ns = ((3.0 * sync_s * 1e9) as u64).max(period_ns);
+    // How long the SYNCs of one instant may arrive apart on the interfaces (drive-io sends them
+    // back to back; a quarter period covers its sends and the wire's arbitration).
+    let gather_ns = ((0.25 * sync_s * 1e9) as u64).max(1);
+    let n_itf = plant.interfaces().max(1);
     let mut summary = LoopSummary::default();
     let now = crs_ipc::monotonic_ns();
     plant.start(now);
     let mut next_free = now + period_ns;
     let mut last_settle = now;
+    // Interfaces whose SYNC of the current instant was handled, and when the first came.
+    let mut synced = vec![false; n_itf];
+    let mut first_sync_ns: Option<u64> = None;
+    let mut cursor = 0usize;
     publish(plant.truth(), plant.tracker());
     while !stop.load(Ordering::Relaxed) {
-        plant.flush(bus)?;
+        plant.flush(buses)?;
         let now = crs_ipc::monotonic_ns();
-        let due = plant
+        let mut due = plant
             .next_heartbeat_ns()
             .map_or(next_free, |h| h.min(next_free));
-        let mut rx = bus.recv_timeout(Duration::from_nanos(due.saturating_sub(now)))?;
+        if let Some(t) = first_sync_ns {
+            due = due.min(t + gather_ns);
+        }
+        let mut rx = can_transport::recv_any(
+            buses,
+            Duration::from_nanos(due.saturating_sub(now)),
+            &mut cursor,
+        )?;
         let mut syncs = 0u64;
         let mut handled = 0;
-        while let Some(f) = rx {
-            summary.frames_received += 1;
+        while let Some((iface, ev)) = rx {
             handled += 1;
-            if plant.handle_frame(&f.frame, crs_ipc::monotonic_ns()) {
-                // The drives latched new targets: move the winches over this SYNC period now,
-                // before a later RPDO in the queue replaces the pending target.
-                plant.advance(sync_s);
-                syncs += 1;
+            if let can_transport::RxEvent::Frame(f) = ev {
+                summary.frames_received += 1;
+                if plant.handle_frame(iface, &f.frame, f.rx_monotonic_ns) {
+                    // The drives latched new targets: move the winches over this SYNC period
+                    // now, before a later RPDO in the queue replaces the pending target.
+                    plant.advance_interface(iface, f.rx_monotonic_ns);
+                    syncs += 1;
+                    if let Some(s) = synced.get_mut(iface) {
+                        *s = true;
+                    }
+                    first_sync_ns.get_or_insert(f.rx_monotonic_ns);
+                }
             }
             if handled >= MAX_DRAIN {
                 break;
             }
-            rx = bus.try_recv()?;
+            rx = can_transport::recv_any(buses, Duration::ZERO, &mut cursor)?;
         }
         let now = crs_ipc::monotonic_ns();
-        if syncs > 0 {
+        summary.syncs += syncs;
+        let instant_complete =
+            synced.iter().all(|s| *s) || first_sync_ns.is_some_and(|t| now >= t + gather_ns);
+        if first_sync_ns.is_some() && instant_complete {
             plant.settle(now, (now - last_settle) as f64 * 1e-9);
             plant.transmit_pdos();
             publish(plant.truth(), plant.tracker());
             last_settle = now;
-            summary.syncs += syncs;
             summary.sync_settles += 1;
             next_free = now + quiet_ns;
-        } else if now >= next_free {
+            synced.iter_mut().for_each(|s| *s = false);
+            first_sync_ns = None;
+        } else if first_sync_ns.is_none() && now >= next_free {
             plant.advance(period_s);
             plant.settle(now, (now - last_settle) as f64 * 1e-9);
             publish(plant.truth(), plant.tracker());
@@ -926,7 +1008,7 @@ pub fn run(
         }
         plant.poll(now);
     }
-    plant.flush(bus)?;
+    plant.flush(buses)?;
     summary.stats = plant.stats();
     Ok(summary)
 }

@@ -112,24 +112,34 @@ impl Rig {
     }
 
     fn deliver_to_master(&mut self) {
-        self.plant.flush(&mut self.wire).unwrap();
+        self.plant
+            .flush(std::slice::from_mut(&mut self.wire))
+            .unwrap();
         for f in self.wire.0.drain(..) {
-            self.master.on_frame(&RxFrame {
-                frame: f,
-                rx_monotonic_ns: self.now,
-                kernel_rx_realtime_ns: None,
-            });
+            self.master.on_frame(
+                0,
+                &RxFrame {
+                    frame: f,
+                    rx_monotonic_ns: self.now,
+                    kernel_rx_realtime_ns: None,
+                },
+            );
         }
     }
 
     /// One SYNC period: master cycle -> drives -> plant cycle + TPDOs -> master.
     fn step(&mut self, sp: Option<&JointSetpoint>) {
         self.now += 1_000_000;
-        let mut out = canopen::FrameBuf::default();
+        let mut out = canopen::BusFrames::new(1);
         self.master.cycle(self.now, sp, &mut out);
         self.master.mark_written(self.now);
-        for f in out.as_slice() {
-            if self.plant.handle_frame(f, self.now) {
+        // One interface: its frames, then the SYNC the cycle asks for (as the runner sends).
+        let mut frames: Vec<CanFrame> = out.on(0).to_vec();
+        if out.sync_requested() {
+            frames.push(canopen::sync());
+        }
+        for f in &frames {
+            if self.plant.handle_frame(0, f, self.now) {
                 let rep = self.plant.cycle(self.now, 1e-3);
                 if rep.solved {
                     self.solved.push(self.plant.plant_lengths().to_vec());
@@ -553,12 +563,14 @@ impl Raw {
         }
     }
     fn send(&mut self, f: CanFrame) -> Option<bus::CycleReport> {
-        let r = self.plant.handle_frame(&f, self.now).then(|| {
+        let r = self.plant.handle_frame(0, &f, self.now).then(|| {
             let r = self.plant.cycle(self.now, 1e-3);
             self.plant.transmit_pdos();
             r
         });
-        self.plant.flush(&mut self.wire).unwrap();
+        self.plant
+            .flush(std::slice::from_mut(&mut self.wire))
+            .unwrap();
         r
     }
     fn sync(&mut self) -> bus::CycleReport {
@@ -756,14 +768,14 @@ fn bus_input_never_panics_and_targets_are_clamped() {
             let mut r = Raw::new(plant_cfg("icosahedron-ideal.toml"));
             for (id, data, dt) in fs {
                 let f = CanFrame::new(id as u16, &data).unwrap();
-                if r.plant.handle_frame(&f, r.now) {
+                if r.plant.handle_frame(0, &f, r.now) {
                     r.plant.cycle(r.now, dt);
                     r.plant.transmit_pdos();
                 }
                 r.now += 1_000_000;
                 r.plant.cycle(r.now, dt);
                 r.plant.poll(r.now);
-                r.plant.flush(&mut r.wire).unwrap();
+                r.plant.flush(std::slice::from_mut(&mut r.wire)).unwrap();
             }
             let t = r.plant.truth();
             prop_assert!(t.pose.iter().all(|v| v.is_finite()));
@@ -885,7 +897,7 @@ fn run_loop_with_drive_io_over_udp_follows_setpoints() {
     let transport = format!("udpbus:239.255.70.3:{port}");
     let prefix = format!("simplant/{}/", std::process::id());
     let mut d = drives();
-    d.bus.transport = transport.clone();
+    d.bus.transport = Some(transport.clone());
     // Lenient timing: the host is shared and not real time (behaviour is asserted, not timing).
     d.bus.heartbeat_timeout_ms = 500;
     d.bus.stale_setpoint_cycles = 200;
@@ -903,7 +915,7 @@ fn run_loop_with_drive_io_over_udp_follows_setpoints() {
     let (t2, s2) = (truth.clone(), stop.clone());
     let plant_thread = std::thread::spawn(move || {
         bus::run(
-            &mut plant_bus_ep,
+            std::slice::from_mut(&mut plant_bus_ep),
             &mut plant,
             Duration::from_millis(1),
             &s2,
@@ -913,7 +925,7 @@ fn run_loop_with_drive_io_over_udp_follows_setpoints() {
     let (d2, s3, p2) = (d.clone(), stop.clone(), prefix.clone());
     let dio_thread = std::thread::spawn(move || {
         let ipc = IpcNode::with_prefix("drive-io", &p2).map_err(|e| e.to_string())?;
-        drive_io::runner::run(&d2, dio_bus, &ipc, &s3).map_err(|e| e.to_string())
+        drive_io::runner::run(&d2, vec![dio_bus], &ipc, &s3).map_err(|e| e.to_string())
     });
     let node = IpcNode::with_prefix("bus-test", &prefix).unwrap();
     let setpoints = node.publisher::<JointSetpoint>().unwrap();
@@ -1086,19 +1098,19 @@ fn drives_with_a_safety_heartbeat_watch_stay_braked_without_the_monitor() {
     let start = plant.plant_lengths().to_vec();
     let mut now = 0;
     plant.start(now);
-    plant.handle_frame(&canopen::nmt(canopen::NMT_START, 0), now);
+    plant.handle_frame(0, &canopen::nmt(canopen::NMT_START, 0), now);
     for n in 1..=8u8 {
-        plant.handle_frame(&canopen::sdo_download(n, 0x6060, 0, 8, 1), now);
+        plant.handle_frame(0, &canopen::sdo_download(n, 0x6060, 0, 8, 1), now);
     }
     for cw in [0x06, 0x07, 0x0F, 0x0F, 0x0F] {
         for i in 0..8 {
-            plant.handle_frame(&canopen::rpdo1(i as u8 + 1, cw, 0), now);
+            plant.handle_frame(0, &canopen::rpdo1(i as u8 + 1, cw, 0), now);
         }
         now += 1_000_000;
-        assert!(plant.handle_frame(&canopen::sync(), now));
+        assert!(plant.handle_frame(0, &canopen::sync(), now));
         let r = plant.cycle(now, 1e-3);
         assert!(r.braked && !r.solved);
-        plant.flush(&mut wire).unwrap();
+        plant.flush(std::slice::from_mut(&mut wire)).unwrap();
     }
     for i in 0..8 {
         let s = plant.drives().slave(i).unwrap();
@@ -1131,9 +1143,9 @@ fn winches_refuse_a_monitor_with_another_srdo_configuration() {
         let mut wire = VecBus::default();
         let mut now = 0;
         plant.start(now);
-        plant.handle_frame(&canopen::nmt(canopen::NMT_START, 0), now);
+        plant.handle_frame(0, &canopen::nmt(canopen::NMT_START, 0), now);
         for n in 1..=8u8 {
-            plant.handle_frame(&canopen::sdo_download(n, 0x6060, 0, 8, 1), now);
+            plant.handle_frame(0, &canopen::sdo_download(n, 0x6060, 0, 8, 1), now);
         }
         for k in 0..40u16 {
             now += 15_000_000;
@@ -1152,15 +1164,15 @@ fn winches_refuse_a_monitor_with_another_srdo_configuration() {
                 .into_iter()
                 .chain(safety_frame::encode(&hb, own.cob_id))
             {
-                plant.handle_frame(&f, now);
+                plant.handle_frame(0, &f, now);
             }
             let cw = [0x06, 0x07, 0x0F][usize::from(k.min(2))];
             for i in 0..8 {
-                plant.handle_frame(&canopen::rpdo1(i as u8 + 1, cw, 0), now);
+                plant.handle_frame(0, &canopen::rpdo1(i as u8 + 1, cw, 0), now);
             }
-            assert!(plant.handle_frame(&canopen::sync(), now));
+            assert!(plant.handle_frame(0, &canopen::sync(), now));
             plant.cycle(now, 1e-3);
-            plant.flush(&mut wire).unwrap();
+            plant.flush(std::slice::from_mut(&mut wire)).unwrap();
         }
         (0..8)
             .filter(|&i| {

@@ -111,6 +111,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!(
             "| {} | {:.1} µs | {:.1} µs | {:.1} µs | {:.1} µs | {:.1} µs | {} / {} | {} |",
             match mode {
+                SyncSource::Isochronous => "isochronous (SYNC is the bus clock)",
                 SyncSource::Setpoint => "setpoint (phase-locked)",
                 SyncSource::Clock => "clock (free-running)",
             },
@@ -197,14 +198,14 @@ fn run_mode(
     let rt = args.rt_priority;
     let emu = std::thread::spawn(move || {
         pin(cpu);
-        emulator::run(emu_bus, &ecfg, &c2)
+        emulator::run(vec![emu_bus], &ecfg, &c2)
     });
     let stop = Arc::new(AtomicBool::new(false));
     let (s2, cfg2, p2) = (stop.clone(), cfg.clone(), prefix.clone());
     let dio = std::thread::spawn(move || -> Result<runner::RunSummary, String> {
         place(cpu, rt);
         let ipc = IpcNode::with_prefix("drive-io", &p2).map_err(|e| e.to_string())?;
-        runner::run(&cfg2, dio_bus, &ipc, &s2).map_err(|e| e.to_string())
+        runner::run(&cfg2, vec![dio_bus], &ipc, &s2).map_err(|e| e.to_string())
     });
     let node = IpcNode::with_prefix("bench", &prefix)?;
     let fb = node.subscriber::<DriveFeedback>()?;

@@ -12,9 +12,10 @@ struct Args {
     /// Drive bus configuration (TOML).
     #[arg(long, default_value = "config/drives.toml")]
     config: PathBuf,
-    /// Override `bus.transport` (e.g. socketcan:can0, udpbus:239.255.70.1:20000).
+    /// Override an interface's transport: `NAME=SPEC` (repeat per interface), or a bare SPEC
+    /// when the configuration has one interface (e.g. socketcan:can0, wire:/run/crs/can0.sock).
     #[arg(long)]
-    transport: Option<String>,
+    transport: Vec<String>,
     /// iceoryx2 service-name prefix (default: $CRS_IPC_PREFIX or none).
     #[arg(long)]
     ipc_prefix: Option<String>,
@@ -61,10 +62,7 @@ fn main() -> ExitCode {
 
 fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut cfg = DrivesConfig::load(&args.config)?;
-    if let Some(t) = args.transport {
-        cfg.bus.transport = t;
-        cfg.validate()?;
-    }
+    cfg.override_transports(&args.transport)?;
     if let Some(e) = args.eds {
         // A path given on the command line is relative to the working directory.
         cfg.bus.eds = Some(std::path::absolute(e)?.display().to_string());
@@ -75,7 +73,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     if args.print_plan {
         return print_plan(&cfg);
     }
-    let spec = cfg.transport()?;
+    let specs = cfg.transports()?;
     if cfg.require_safety_heartbeat(args.bench_without_safety_heartbeat)? {
         tracing::error!(
             "BENCH OVERRIDE {}: running WITHOUT the safety monitor's heartbeat; a dead or absent \
@@ -96,21 +94,25 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         Some(p) => crs_ipc::IpcNode::with_prefix("drive-io", &p)?,
         None => crs_ipc::IpcNode::new("drive-io")?,
     };
-    let bus = can_transport::open(&spec)?;
+    let mut buses: Vec<Box<dyn can_transport::CanBus>> = Vec::with_capacity(specs.len());
+    for spec in &specs {
+        let bus = can_transport::open(spec)?;
+        buses.push(match &cfg.bus.candump_log {
+            // One file for every interface (append mode: each interface's lines stay whole,
+            // their order across interfaces is that of the buffer flushes).
+            Some(path) => Box::new(can_transport::LoggingBus::create(bus, path.as_ref())?),
+            None => bus,
+        });
+    }
     if let Some(p) = args.rt_priority {
         crs_rt::make_realtime(p, args.cpu)?;
         tracing::info!(priority = p, cpu = ?args.cpu, "SCHED_FIFO + mlockall");
     }
-    tracing::info!(transport = %spec, drives = cfg.winches.len(), "drive-io starting");
-    let summary = match &cfg.bus.candump_log {
-        Some(path) => runner::run(
-            &cfg,
-            can_transport::LoggingBus::create(bus, path.as_ref())?,
-            &ipc,
-            &STOP,
-        )?,
-        None => runner::run(&cfg, bus, &ipc, &STOP)?,
-    };
+    for (itf, spec) in cfg.interfaces().iter().zip(&specs) {
+        tracing::info!(interface = %itf.name, transport = %spec, "CAN interface");
+    }
+    tracing::info!(drives = cfg.winches.len(), "drive-io starting");
+    let summary = runner::run(&cfg, buses, &ipc, &STOP)?;
     tracing::info!(?summary, "drive-io stopped");
     Ok(())
 }

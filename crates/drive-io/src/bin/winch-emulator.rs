@@ -14,8 +14,9 @@ use std::time::Duration;
 struct Args {
     #[arg(long, default_value = "config/drives.toml")]
     config: PathBuf,
+    /// Override an interface's transport: `NAME=SPEC` per interface, or a bare SPEC with one.
     #[arg(long)]
-    transport: Option<String>,
+    transport: Vec<String>,
     /// Initial cable length of every winch (m).
     #[arg(long, default_value_t = 5.0)]
     initial_length_m: f64,
@@ -56,10 +57,7 @@ fn main() -> ExitCode {
 
 fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut cfg = DrivesConfig::load(&args.config)?;
-    if let Some(t) = args.transport {
-        cfg.bus.transport = t;
-        cfg.validate()?;
-    }
+    cfg.override_transports(&args.transport)?;
     if !(args.initial_length_m.is_finite() && args.initial_length_m >= 0.0) {
         return Err("--initial-length-m must be finite and >= 0".into());
     }
@@ -73,7 +71,11 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         .into());
     }
     let ecfg = EmulatorConfig::from_drives(&cfg, args.initial_length_m)?;
-    let bus = can_transport::open(&cfg.transport()?)?;
+    let buses = cfg
+        .transports()?
+        .iter()
+        .map(can_transport::open)
+        .collect::<Result<Vec<_>, _>>()?;
     let control = EmulatorControl::new();
     if let Some(i) = args.mute_heartbeat_index {
         let c = control.clone();
@@ -107,7 +109,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
             "emulation loop SCHED_FIFO + mlockall"
         );
     }
-    emulator::run(bus, &ecfg, &control)?;
+    emulator::run(buses, &ecfg, &control)?;
     control.stop.store(true, Ordering::Release);
     Ok(())
 }

@@ -26,9 +26,11 @@ struct Args {
     /// Monitor TOML.
     #[arg(long, default_value = "config/safety-monitor.toml", global = true)]
     config: PathBuf,
-    /// Drive bus, overrides `[can].transport`: socketcan:<iface> | udpbus:<group>:<port> | udp:<l>-><r>.
+    /// Override an interface's transport: `NAME=SPEC` per interface (names from the drives
+    /// file), or a bare SPEC when there is one: socketcan:<iface> | udpbus:<group>:<port> |
+    /// udp:<l>-><r> | wire:<socket>.
     #[arg(long)]
-    transport: Option<String>,
+    transport: Vec<String>,
     /// iceoryx2 service-name prefix (default: $CRS_IPC_PREFIX or none).
     #[arg(long, global = true)]
     ipc_prefix: Option<String>,
@@ -164,25 +166,27 @@ fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
             Ok(ExitCode::SUCCESS)
         }
         None => {
-            let cfg = safety_monitor::config::load(&args.config)?;
-            let t = args.transport.unwrap_or_else(|| cfg.can.transport.clone());
-            let spec: can_transport::TransportSpec = t.parse()?;
+            let mut cfg = safety_monitor::config::load(&args.config)?;
+            cfg.override_transports(&args.transport)?;
             // SAFETY: the handler only stores to an atomic (async-signal-safe).
             unsafe {
                 libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
                 libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
             }
             let ipc = node("safety-monitor", &args.ipc_prefix)?;
-            let tx = can_transport::open(&spec)?;
-            let rx = can_transport::open(&spec)?;
-            let tx: Box<dyn can_transport::CanBus> = if args.inject_nmt_stop_unsent {
+            let (tx, rx) = daemon::open_buses(&cfg)?;
+            let tx: Vec<Box<dyn can_transport::CanBus>> = if args.inject_nmt_stop_unsent {
                 tracing::error!(
                     "FAULT INJECTION: every NMT stop of this monitor fails to send (test only)"
                 );
-                Box::new(safety_monitor::stop_path::FailingSends::new(
-                    tx,
-                    u32::from(safety_monitor::bus_frames::COB_NMT),
-                ))
+                tx.into_iter()
+                    .map(|b| {
+                        Box::new(safety_monitor::stop_path::FailingSends::new(
+                            b,
+                            u32::from(safety_monitor::bus_frames::COB_NMT),
+                        )) as Box<dyn can_transport::CanBus>
+                    })
+                    .collect()
             } else {
                 tx
             };

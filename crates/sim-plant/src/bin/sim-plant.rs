@@ -33,9 +33,10 @@ struct Args {
     /// plant's nominal platform). Must be the one motion-core runs.
     #[arg(long)]
     control_platform: Option<PathBuf>,
-    /// Override `bus.transport` of the drives config (socketcan:vcan0, udpbus:239.255.70.1:20000).
+    /// Override an interface's transport: `NAME=SPEC` per interface, or a bare SPEC when the
+    /// drives config has one interface (socketcan:vcan0, udpbus:239.255.70.1:20000, wire:PATH).
     #[arg(long)]
-    transport: Option<String>,
+    transport: Vec<String>,
     /// iceoryx2 service-name prefix (default: $CRS_IPC_PREFIX or none).
     #[arg(long)]
     ipc_prefix: Option<String>,
@@ -86,14 +87,11 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     // Plant TOML errors carry file:line:column and the key (motion-core's ConfigError).
     let plant_cfg = load_plant(&args.plant)?;
     let mut drives = DrivesConfig::load(&args.drives).map_err(|e| format!("{drives_file}: {e}"))?;
-    if let Some(t) = &args.transport {
-        drives.bus.transport = t.clone();
-        drives
-            .validate()
-            .map_err(|e| format!("--transport {t:?}: {e}"))?;
-    }
-    let spec = drives
-        .transport()
+    drives
+        .override_transports(&args.transport)
+        .map_err(|e| format!("--transport {:?}: {e}", args.transport))?;
+    let specs = drives
+        .transports()
         .map_err(|e| format!("{drives_file}: {e}"))?;
     let (control, control_file) = match &args.control_platform {
         Some(p) => (load_platform(p)?, p.display().to_string()),
@@ -164,13 +162,16 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     let truth_pub = ipc.publisher::<PlantTruth>()?;
     let tracker_pub = ipc.publisher::<TrackerPose>()?;
     let heartbeat_pub = ipc.publisher::<Heartbeat>()?;
-    let mut bus = can_transport::open(&spec).map_err(|e| format!("transport {spec}: {e}"))?;
+    let mut buses = specs
+        .iter()
+        .map(|spec| can_transport::open(spec).map_err(|e| format!("transport {spec}: {e}")))
+        .collect::<Result<Vec<_>, _>>()?;
     if let Some(p) = args.rt_priority {
         crs_rt::make_realtime(p, args.cpu)?;
         tracing::info!(priority = p, cpu = ?args.cpu, "SCHED_FIFO + mlockall");
     }
     tracing::info!(
-        transport = %spec,
+        transports = %specs.iter().map(ToString::to_string).collect::<Vec<_>>().join(", "),
         period_us = args.period_us,
         truth = truth_pub.service_name(),
         tracker = tracker_pub.service_name(),
@@ -180,7 +181,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut was_braked = None;
     let mut was_converged = true;
     let summary = bus::run(
-        &mut bus,
+        &mut buses,
         &mut plant,
         Duration::from_micros(u64::from(args.period_us)),
         &STOP,
