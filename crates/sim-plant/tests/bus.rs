@@ -93,8 +93,12 @@ impl Rig {
         Self::with_plant(control, plant)
     }
 
-    fn with_plant(control: Platform, mut plant: PlantBus) -> Self {
-        let master = Master::new(&drives()).unwrap();
+    fn with_plant(control: Platform, plant: PlantBus) -> Self {
+        Self::with_drives(control, plant, &drives())
+    }
+
+    fn with_drives(control: Platform, mut plant: PlantBus, d: &DrivesConfig) -> Self {
+        let master = Master::new(d).unwrap();
         let now = 1_000_000_000;
         plant.start(now);
         let mut r = Self {
@@ -1270,4 +1274,44 @@ fn slack_and_overload_raise_drive_faults_that_drive_io_sees() {
             .map(|f| f.round())
             .collect::<Vec<_>>()
     );
+}
+
+/// The pulleys' load cells on the bus (`[[force_sensor]]`, CiA 404): the plant plays them next
+/// to the drives and drive-io's feedback forces are theirs — the plant's sensor readings to the
+/// load cell's 0.1 N resolution — while the winches' own force object is not used.
+#[test]
+fn force_sensors_on_the_bus_report_the_plants_forces() {
+    let mut text = std::fs::read_to_string(config_dir().join("drives.toml")).unwrap();
+    for cable in 1..=8 {
+        text.push_str(&format!(
+            "\n[[force_sensor]]\nnode_id = {}\ncable = {cable}\nn_per_unit = 0.1\n\
+             identity = {{ device_type = 0x00020194 }}\n",
+            32 + cable
+        ));
+    }
+    let mut d = DrivesConfig::parse(&text).unwrap();
+    d.safety_heartbeat = None;
+    let cfg = plant_cfg("icosahedron-ideal.toml");
+    let control = cfg.platform.clone();
+    let plant = PlantBus::new(cfg, &control, &d, BusOptions::new(&d, &control)).unwrap();
+    let mut rig = Rig::with_drives(control, plant, &d);
+    rig.boot();
+    // The drives' TPDO2 carries the velocity only: no force object mapped (the default
+    // mapping, forces from the cells), velocity every 10th SYNC.
+    let drive = rig.plant.drives().slave(0).unwrap();
+    assert_eq!(drive.od_value(0x1A01, 0), Some(1));
+    assert_eq!(drive.od_value(0x1801, 2), Some(10));
+    rig.move_by([0.0, 0.0, 0.03, 0.0, 0.0, 0.0], 200, 50);
+    let f = *rig.feedback();
+    assert_eq!(BusState::from_u32(f.bus_state), Some(BusState::Running));
+    let measured = rig.plant.measured_forces().to_vec();
+    for (i, m) in measured.iter().enumerate() {
+        assert!(
+            (f.cable_force_n[i] - m).abs() <= 0.05 + 1e-9,
+            "cable {}: feedback {} N, load cell measured {m} N",
+            i + 1,
+            f.cable_force_n[i]
+        );
+    }
+    assert!(measured.iter().all(|m| *m > 100.0), "{measured:?}");
 }
