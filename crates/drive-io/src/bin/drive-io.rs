@@ -134,10 +134,15 @@ fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
         for op in &plan.ops {
             let (index, sub) = op.index_sub();
             let text = |at, len| String::from_utf8_lossy(plan.bytes(at, len)).into_owned();
+            // Signed objects as signed decimals, the rest as the hex the drive manuals use.
+            let num = |v: u32| match eds.entry(index, sub).map(|e| e.data_type) {
+                Some(t) if t.is_signed() => t.to_i64(v).to_string(),
+                _ => format!("0x{v:08X}"),
+            };
             let (what, value) = match *op {
-                SdoOp::Write { value, .. } => ("write ", format!("0x{value:08X}")),
-                SdoOp::Verify { value, .. } => ("verify", format!("0x{value:08X}")),
-                SdoOp::Check { value, .. } => ("check ", format!("0x{value:08X}")),
+                SdoOp::Write { value, .. } => ("write ", num(value)),
+                SdoOp::Verify { value, .. } => ("verify", num(value)),
+                SdoOp::Check { value, .. } => ("check ", num(value)),
                 SdoOp::WriteBytes { at, len, .. } => ("write ", format!("{:?}", text(at, len))),
                 SdoOp::VerifyBytes { at, len, check, .. } => (
                     if check { "check " } else { "verify" },
