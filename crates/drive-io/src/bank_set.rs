@@ -139,6 +139,12 @@ impl DriveBanks {
             b.enable_safety_watch(cfg);
         }
     }
+    /// Safe torque off of every drive on every interface (the safety I/O node's outputs).
+    pub fn set_sto(&mut self, active: bool) {
+        for b in &mut self.banks {
+            b.set_sto(active);
+        }
+    }
     /// True while the watch of every interface permits motion (or no watch is enabled).
     pub fn safety_permits(&self) -> bool {
         self.banks.iter().all(|b| {

@@ -1279,6 +1279,59 @@ pub fn plan_all(
     Ok(plans)
 }
 
+/// The plans' PDO frames in the bus budget's terms ([`crate::budget::budget`]): per cable its
+/// drive's frames, and every force sensor as an extra node (interface, node id, frames,
+/// heartbeat period ms). An event-driven TPDO counts as one frame every
+/// max(1, ⌊inhibit time / SYNC period⌋) SYNCs — its worst case when the inhibit time is at least
+/// one period; with a shorter inhibit time it may come more often than that.
+#[allow(clippy::type_complexity)]
+pub fn budget_frames(
+    cfg: &DrivesConfig,
+    plans: &[Plan],
+) -> (
+    Vec<Vec<crate::budget::PdoFrame>>,
+    Vec<(usize, u8, Vec<crate::budget::PdoFrame>, f64)>,
+) {
+    let period_us = cfg.bus.sync_period_us.max(1);
+    let convert = |p: &Plan| -> Vec<crate::budget::PdoFrame> {
+        p.pdo_frames()
+            .iter()
+            .map(|f| crate::budget::PdoFrame {
+                cob_id: f.cob_id,
+                dlc: f.dlc,
+                rpdo: f.direction == Direction::ToNode,
+                every_n_sync: match f.transmission {
+                    Transmission::Sync { every } => u16::from(every.max(1)),
+                    Transmission::Event { inhibit_us, .. } => {
+                        u16::try_from((inhibit_us / period_us).max(1)).unwrap_or(u16::MAX)
+                    }
+                },
+            })
+            .collect()
+    };
+    let mut drives = Vec::new();
+    let mut extra = Vec::new();
+    for p in plans {
+        match p.kind {
+            NodeKind::Drive { .. } => drives.push(convert(p)),
+            NodeKind::ForceSensor { .. } => {
+                let j = cfg
+                    .force_sensors
+                    .iter()
+                    .position(|s| s.node_id == p.node)
+                    .unwrap_or(0);
+                extra.push((
+                    cfg.sensor_interface(j),
+                    p.node,
+                    convert(p),
+                    f64::from(cfg.bus.heartbeat_producer_ms),
+                ));
+            }
+        }
+    }
+    (drives, extra)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1424,6 +1477,45 @@ mod tests {
         let eds = Eds::parse(&text, "vendor.eds").unwrap();
         let e = plan_drive(&c2, 0, &eds).unwrap_err().to_string();
         assert!(e.contains("0x6007") && e.contains("HighLimit"), "{e}");
+    }
+
+    /// The simulated winch's default mapping is the layout the budget assumes today; a vendor
+    /// drive with a load cell has 6 + 6 B every SYNC, 4 B every 10th, and the cell's 4 B.
+    #[test]
+    fn budget_frames_are_the_configured_mappings() {
+        let c = cfg();
+        let plans = plan_all(&c, None).unwrap();
+        let (drives, extra) = budget_frames(&c, &plans);
+        assert_eq!(drives, vec![crate::budget::fixed_layout(3)]);
+        assert!(extra.is_empty());
+        let vendor = format!(
+            "{}/../../config/eds/vendor-csp-drive.eds",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let c = DrivesConfig::parse(&format!(
+            "[bus]\ntransport = \"udpbus:239.255.70.1:20000\"\neds = \"{vendor}\"\n\
+             [[winch]]\nnode_id = 3\ndrum_diameter_m = 0.305\ngear_ratio = 10.0\n\
+             counts_per_rev = 1048576\nsign = 1\n\
+             [[force_sensor]]\nnode_id = 40\ncable = 1\nn_per_unit = 0.1\nevery_n_syncs = 2\n"
+        ))
+        .unwrap();
+        let plans = plan_all(&c, None).unwrap();
+        let (drives, extra) = budget_frames(&c, &plans);
+        let f = |cob_id, dlc, rpdo, every_n_sync| crate::budget::PdoFrame {
+            cob_id,
+            dlc,
+            rpdo,
+            every_n_sync,
+        };
+        assert_eq!(
+            drives[0],
+            vec![
+                f(0x203, 6, true, 1),
+                f(0x183, 6, false, 1),
+                f(0x283, 4, false, 10)
+            ]
+        );
+        assert_eq!(extra, vec![(0, 40, vec![f(0x1A8, 4, false, 2)], 10.0)]);
     }
 
     #[test]

@@ -379,6 +379,10 @@ pub struct DrivesConfig {
     /// `[[force_sensor]]`: force-measuring nodes (one per pulley load cell, CiA 404).
     #[serde(default, rename = "force_sensor")]
     pub force_sensors: Vec<ForceSensorConfig>,
+    /// `[safety_io]`: the safety I/O node that removes the drives' torque (STO) when the
+    /// monitor's heartbeat is missing or says STOP (see [`SafetyIoConfig`]).
+    #[serde(default)]
+    pub safety_io: Option<SafetyIoConfig>,
     /// Directory of the TOML file (set by [`DrivesConfig::load`]): relative paths resolve here.
     #[serde(skip)]
     pub base_dir: Option<std::path::PathBuf>,
@@ -513,6 +517,28 @@ impl DrivesConfig {
             .and_then(|s| s.interface.as_deref())
             .and_then(|n| itfs.iter().position(|itf| itf.name == n))
             .unwrap_or(0)
+    }
+
+    /// Interfaces on which the safety monitor's doubled frames travel: the safety I/O node's
+    /// with `[safety_io]`, else every interface (indices into `interfaces()`).
+    pub fn safety_frame_interfaces(&self) -> Vec<usize> {
+        let itfs = self.interfaces();
+        match &self.safety_io {
+            Some(io) => itfs
+                .iter()
+                .position(|i| i.name == io.interface)
+                .into_iter()
+                .collect(),
+            None => (0..itfs.len()).collect(),
+        }
+    }
+
+    /// Index of the safety I/O node's interface.
+    pub fn safety_io_interface(&self) -> Option<usize> {
+        let io = self.safety_io.as_ref()?;
+        self.interfaces()
+            .iter()
+            .position(|i| i.name == io.interface)
     }
 
     /// Replaces interface transports from command-line overrides: `NAME=SPEC` per interface,
@@ -769,6 +795,37 @@ impl DrivesConfig {
             sh.validate()
                 .map_err(|(field, reason)| invalid(field, reason))?;
         }
+        if let Some(io) = &self.safety_io {
+            let Some(itf) = self.safety_io_interface() else {
+                return Err(invalid(
+                    "safety_io.interface",
+                    format!("{:?}: no such interface", io.interface),
+                ));
+            };
+            if self.safety_heartbeat.is_none() {
+                return Err(invalid(
+                    "safety_io",
+                    "needs [safety_heartbeat]: the node validates the monitor's heartbeat with it",
+                ));
+            }
+            if !(1..=127).contains(&io.node_id)
+                || io.node_id == b.master_node_id
+                || (0..self.winches.len()).any(|i| {
+                    self.winches[i].node_id == io.node_id && self.winch_interface(i) == itf
+                })
+            {
+                return Err(invalid(
+                    "safety_io.node_id",
+                    "must be in 1..=127, not drive-io's node id nor a drive's on its interface",
+                ));
+            }
+            if io.inputs_period_ms == 0 || io.heartbeat_ms == 0 {
+                return Err(invalid(
+                    "safety_io.inputs_period_ms/heartbeat_ms",
+                    "must be >= 1",
+                ));
+            }
+        }
         for (i, w) in self.winches.iter().enumerate() {
             let f = |name: &str| format!("winch[{i}].{name}");
             if !(1..=127).contains(&w.node_id) {
@@ -886,6 +943,44 @@ impl DrivesConfig {
             )),
         }
     }
+}
+
+/// `[safety_io]`: the safety I/O node — a CiA 401 digital I/O module that is a CiA 304 SRDO
+/// consumer of the safety monitor's doubled heartbeat — on its own interface. It validates the
+/// heartbeat as the drives' watch does (`[safety_heartbeat]`: validation time, pair window,
+/// configuration signature) and drives the safe-torque-off (STO) input of every drive: without
+/// a valid RUN pair, or on STOP, torque is removed and the brakes close, whatever the drives'
+/// CANopen state (real CiA 402 drives do not consume 0x101/0x102; their STO input is wired).
+/// Its inputs — the operator's e-stop button and reset key — are reported in its TPDO1.
+/// With this table the monitor's frames travel only on `interface` and the drives do not
+/// validate them; without it (a bench, the old simulated drives) they go on every interface.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SafetyIoConfig {
+    /// The `[[bus.interface]]` of the node (and of the monitor's doubled frames).
+    pub interface: String,
+    /// CANopen node id of the I/O module (1..=127; unique on its interface).
+    pub node_id: u8,
+    /// TPDO1 (inputs and STO output states, 2 bytes) is sent on every change and at least this
+    /// often (event timer, ms).
+    #[serde(default = "d_io_inputs")]
+    pub inputs_period_ms: u16,
+    /// The node's heartbeat producer time (ms).
+    #[serde(default = "d_io_heartbeat")]
+    pub heartbeat_ms: u16,
+}
+
+fn d_io_inputs() -> u16 {
+    10
+}
+fn d_io_heartbeat() -> u16 {
+    10
+}
+
+/// COB-ID of the safety I/O node's TPDO1: [inputs, STO outputs] (bit 0 of the inputs: e-stop
+/// button circuit closed (released), bit 1: reset key turned; outputs: bit 0 = STO released).
+pub fn safety_io_tpdo_cob_id(node_id: u8) -> u16 {
+    0x180 + u16::from(node_id)
 }
 
 /// drive-io's bench-only override: start without `[safety_heartbeat]` (no monitor on the bus).

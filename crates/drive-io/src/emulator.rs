@@ -3,10 +3,12 @@
 //! it exists so drive-io can be tested without the physics.
 
 use crate::bank_set::DriveBanks;
+use crate::canopen::FrameBuf;
 use crate::canopen::{Ds402State, NmtState};
 use crate::config::{DrivesConfig, WinchConfig};
 use crate::eds::{Eds, EdsError};
 use crate::force_node::ForceNode;
+use crate::safety_io::SafetyIoNode;
 use crate::safety_watch::SafetyWatchConfig;
 use crate::slave::{MotionDemand, WinchAxis};
 use can_transport::{CanBus, RxEvent};
@@ -42,6 +44,9 @@ pub struct EmulatorConfig {
     /// The `[[force_sensor]]` nodes (simulated load cells): interface, cable (0-based) and
     /// node; they report the emulator's force stand-in of that cable.
     pub force_nodes: Vec<(usize, usize, ForceNode)>,
+    /// The safety I/O node (drives.toml `[safety_io]`) the emulator plays too: with it the
+    /// drives ignore the monitor's frames and the node drives their STO inputs.
+    pub safety_io: Option<crate::config::SafetyIoConfig>,
 }
 
 impl EmulatorConfig {
@@ -63,6 +68,7 @@ impl EmulatorConfig {
             damping_n_per_m_per_s: 100.0,
             safety_watch: cfg.safety_heartbeat,
             eds: cfg.load_eds()?,
+            safety_io: cfg.safety_io.clone(),
         })
     }
 }
@@ -90,6 +96,11 @@ pub struct EmulatorControl {
     /// safety HIL matrix needs; the emulator has no physics).
     force_override_mask: AtomicU32,
     force_override_mn: [AtomicI32; MAX_CABLES],
+    /// Safety I/O node inputs: bit 0 e-stop circuit OPEN (button pressed), bit 1 reset key
+    /// turned (0 = released button, key at rest: the default).
+    pub io_inputs: AtomicU8,
+    /// Safety I/O node: STO released (torque permitted) now.
+    pub sto_released: AtomicBool,
 }
 
 /// Motion demand codes in [`EmulatorControl::demand_code`].
@@ -170,9 +181,25 @@ pub fn run<B: CanBus>(
     // that really passed (on the wire model, SYNC jitter shows as motion).
     let mut last_sync: Vec<Option<u64>> = vec![None; bank.interfaces()];
     let mut cursor = 0usize;
-    if let Some(sw) = cfg.safety_watch {
-        bank.enable_safety_watch(sw);
-        control.safety_inhibit.store(true, Ordering::Release);
+    // With a safety I/O node the drives are real CiA 402 drives: they ignore the monitor's
+    // frames, the node drives their STO inputs; otherwise they validate the heartbeat.
+    let mut io = match (&cfg.safety_io, cfg.safety_watch) {
+        (Some(io_cfg), Some(sw)) => cfg
+            .drives
+            .safety_io_interface()
+            .map(|iface| (iface, SafetyIoNode::new(io_cfg, sw), FrameBuf::default())),
+        _ => None,
+    };
+    match (cfg.safety_watch, &io) {
+        (Some(sw), None) => {
+            bank.enable_safety_watch(sw);
+            control.safety_inhibit.store(true, Ordering::Release);
+        }
+        (_, Some(_)) => {
+            bank.set_sto(true);
+            control.safety_inhibit.store(true, Ordering::Release);
+        }
+        _ => {}
     }
     let mut axes: Vec<WinchAxis> = (0..m)
         .map(|i| {
@@ -188,6 +215,9 @@ pub fn run<B: CanBus>(
         bank.set_actual(i, c, 0, (cfg.pretension_n * 1000.0) as i32);
     }
     bank.start(crs_ipc::monotonic_ns());
+    if let Some((_, node, out)) = io.as_mut() {
+        node.start(crs_ipc::monotonic_ns(), out);
+    }
     let publish = |bank: &DriveBanks, axes: &[WinchAxis], now: u64| {
         for (i, ax) in axes.iter().enumerate() {
             let d = match bank.demand(i) {
@@ -211,6 +241,7 @@ pub fn run<B: CanBus>(
     let mut last_stall_log_ns = 0u64;
     while !control.stop.load(Ordering::Acquire) {
         bank.flush(&mut buses)?;
+        flush_io(&mut io, &mut buses)?;
         // The emulated drives are hardware with their own CPUs: they see each frame when it
         // arrives on the bus, not when this process (on a non-real-time host, or in the TCG
         // guest) gets round to reading it. So every frame is handled at its ARRIVAL time —
@@ -234,6 +265,12 @@ pub fn run<B: CanBus>(
             };
             let at = arrival_ns(&frame, rt_minus_mono);
             bus_time_ns = at;
+            if let Some((io_iface, node, out)) = io.as_mut()
+                && *io_iface == iface
+            {
+                node.handle_frame(&frame.frame, at, out);
+                bank.set_sto(!node.sto_released());
+            }
             if bank.handle_frame(iface, &frame.frame, at) {
                 let dt = sync_interval_s(&mut last_sync[iface], at, cfg.sync_period_s);
                 for (i, (w, ax)) in cfg.winches.iter().zip(axes.iter_mut()).enumerate() {
@@ -294,6 +331,24 @@ pub fn run<B: CanBus>(
                 s.set_heartbeat_muted(mute & (1 << i) != 0);
             }
         }
+        if let Some((_, node, out)) = io.as_mut() {
+            let inputs = control.io_inputs.load(Ordering::Acquire);
+            node.set_inputs(inputs & 1 == 0, inputs & 2 != 0);
+            node.poll(judge_at, out);
+            let released = node.sto_released();
+            bank.set_sto(!released);
+            control.sto_released.store(released, Ordering::Release);
+            control.safety_inhibit.store(!released, Ordering::Release);
+            if let Some((reason, at_ns)) = node.watch_mut().take_trip() {
+                tracing::error!(
+                    ?reason,
+                    at_ns,
+                    "safety I/O node: heartbeat invalid or missing, STO"
+                );
+                control.safety_trips.fetch_add(1, Ordering::AcqRel);
+                control.safety_tripped_ns.store(at_ns, Ordering::Release);
+            }
+        }
         bank.poll(judge_at);
         if let Some((reason, at_ns)) = bank.take_safety_trip() {
             tracing::error!(
@@ -310,6 +365,25 @@ pub fn run<B: CanBus>(
                 .store(!bank.safety_permits(), Ordering::Release);
         }
         publish(&bank, &axes, now);
+    }
+    Ok(())
+}
+
+/// Sends the safety I/O node's frames on its interface.
+fn flush_io<B: CanBus>(
+    io: &mut Option<(usize, SafetyIoNode, FrameBuf)>,
+    buses: &mut [B],
+) -> Result<(), can_transport::CanError> {
+    if let Some((iface, _, out)) = io.as_mut() {
+        if let Some(bus) = buses.get_mut(*iface) {
+            for f in out.as_slice() {
+                match bus.send(f) {
+                    Ok(()) | Err(can_transport::CanError::TxFull { .. }) => {}
+                    Err(e) => return Err(e),
+                }
+            }
+        }
+        out.clear();
     }
     Ok(())
 }

@@ -10,6 +10,7 @@
 //! * [`hil`]: hardware-in-the-loop scenarios run on the host (UDP bus) and in the vcan VM.
 
 pub mod bank_set;
+pub mod budget;
 pub mod canopen;
 pub mod commissioning;
 pub mod config;
@@ -24,6 +25,7 @@ pub mod mapping;
 pub mod master;
 pub mod reset;
 pub mod runner;
+pub mod safety_io;
 pub mod safety_watch;
 pub mod sdo;
 pub mod slave;

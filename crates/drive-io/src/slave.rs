@@ -111,6 +111,8 @@ pub struct DriveSlave {
     /// Safe-torque path: set while the safety heartbeat is missing/invalid/STOP
     /// ([`crate::safety_watch`]); forces Quick Stop Active and blocks enabling.
     safety_inhibit: bool,
+    /// Safe torque off: the STO input (wired from the safety I/O node) is active.
+    sto: bool,
     od: Vec<OdSlot>,
     /// String and domain entries of the EDS (0x1008 ...): (index, sub, access, default, value).
     strings: Vec<StringSlot>,
@@ -195,6 +197,7 @@ impl DriveSlave {
             force_mn: 0,
             error_code: 0,
             safety_inhibit: false,
+            sto: false,
             od,
             strings,
             sdo_server: SdoServer::default(),
@@ -322,6 +325,31 @@ impl DriveSlave {
 
     pub fn safety_inhibited(&self) -> bool {
         self.safety_inhibit
+    }
+
+    /// Safe torque off (the drive's STO input, wired from the safety I/O node): while active
+    /// the power stage is off — the drive drops to Switch On Disabled at once (no ramp: stop
+    /// category 0, the brake closes) and cannot be switched on, whatever the controlword or
+    /// the NMT state. Releasing it enables nothing (the master must).
+    pub fn set_sto(&mut self, active: bool) {
+        self.sto = active;
+        if active {
+            self.drop_power_stage();
+        }
+    }
+
+    pub fn sto_active(&self) -> bool {
+        self.sto
+    }
+
+    fn drop_power_stage(&mut self) {
+        use Ds402State::*;
+        if matches!(
+            self.state,
+            ReadyToSwitchOn | SwitchedOn | OperationEnabled | QuickStopActive
+        ) {
+            self.state = SwitchOnDisabled;
+        }
     }
 
     pub fn node_id(&self) -> u8 {
@@ -677,6 +705,10 @@ impl DriveSlave {
             Fault if fault_reset_edge => SwitchOnDisabled,
             s => s,
         };
+        if self.sto {
+            // STO: the power stage stays off.
+            self.drop_power_stage();
+        }
         if self.safety_inhibit && self.state == OperationEnabled {
             // No enabling without a valid safety heartbeat.
             self.state = if before == OperationEnabled {
@@ -1014,6 +1046,12 @@ impl DriveBank {
         self.watch = Some(SafetyWatch::new(cfg));
         for s in &mut self.slaves {
             s.set_safety_inhibit(true);
+        }
+    }
+    /// Safe torque off of every drive (their STO inputs, wired from the safety I/O node).
+    pub fn set_sto(&mut self, active: bool) {
+        for s in &mut self.slaves {
+            s.set_sto(active);
         }
     }
     /// The safety-heartbeat watch, if enabled.

@@ -293,7 +293,8 @@ fn publish_stage_ends_the_stream_after_the_last_setpoint() {
     }
     let mut log = Log::default();
     // Stop already set: the stage runs no periodic pass, only the final drain.
-    run_publish_stage(&outbox, &stats, &mut log, 0, 1_000_000, 0, 10, &stop);
+    let timeline = motion_core::daemon::timeline::Timeline::new(1_000_000);
+    run_publish_stage(&outbox, &stats, &mut log, 0, &timeline, 0, 10, &stop);
     // One "setpoint published" notification per pass, after its setpoints (drive-io's
     // phase-locked cycle reads them when woken), none for a pass without setpoints.
     assert_eq!(

@@ -379,6 +379,11 @@ pub struct Interface {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Drives {
     pub interfaces: Vec<Interface>,
+    /// Interfaces of the doubled safety frames: the safety I/O node's (`[safety_io]`), else
+    /// every interface (indices into `interfaces`).
+    pub safety_interfaces: Vec<usize>,
+    /// The safety I/O node (interface index, node id), if the drives have one.
+    pub safety_io: Option<(usize, u8)>,
     /// In cable order (cable i = i-th `[[winch]]`).
     pub winches: Vec<Winch>,
 }
@@ -391,6 +396,8 @@ pub const SINGLE_INTERFACE_NAME: &str = "can0";
 struct RawDrives {
     #[serde(default)]
     bus: RawBus,
+    #[serde(default)]
+    safety_io: Option<RawSafetyIo>,
     #[serde(rename = "winch")]
     winches: Vec<RawWinch>,
 }
@@ -401,6 +408,12 @@ struct RawBus {
     transport: Option<String>,
     #[serde(default, rename = "interface")]
     interfaces: Vec<RawInterface>,
+}
+
+#[derive(Deserialize)]
+struct RawSafetyIo {
+    interface: String,
+    node_id: i64,
 }
 
 #[derive(Deserialize)]
@@ -437,6 +450,10 @@ pub struct MonitorConfig {
     pub drives_file: PathBuf,
     /// The CAN interfaces the drives are on (the monitor observes and stops every one).
     pub interfaces: Vec<Interface>,
+    /// Where the doubled safety frames travel (see [`Drives::safety_interfaces`]).
+    pub safety_interfaces: Vec<usize>,
+    /// The safety I/O node (interface index, node id), if any.
+    pub safety_io: Option<(usize, u8)>,
     /// In cable order (cable i = i-th `[[winch]]`).
     pub winches: Vec<Winch>,
     /// CRC-32 of the safety parameter set: the bytes of this file, the platform file and the
@@ -784,6 +801,8 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
     named("can.drives", &drives_file)?;
     let Drives {
         mut interfaces,
+        safety_interfaces,
+        safety_io,
         winches,
     } = load_drives(&drives_file)?;
     if let Some(t) = &raw.can.transport {
@@ -856,6 +875,8 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         platform,
         drives_file,
         interfaces,
+        safety_interfaces,
+        safety_io,
         winches,
     })
 }
@@ -1014,8 +1035,35 @@ pub fn load_drives(path: &Path) -> Result<Drives, ConfigError> {
             reason: format!("need 1..={} [[winch]] entries", crs_ipc::MAX_CABLES),
         });
     }
+    let safety_io = match &raw.safety_io {
+        None => None,
+        Some(io) => {
+            let iface = interfaces
+                .iter()
+                .position(|i| i.name == io.interface)
+                .ok_or_else(|| {
+                    invalid(
+                        "safety_io.interface".into(),
+                        format!("{:?}: no such interface", io.interface),
+                    )
+                })?;
+            if !(1..=127).contains(&io.node_id) {
+                return Err(invalid(
+                    "safety_io.node_id".into(),
+                    "must be in 1..=127".into(),
+                ));
+            }
+            Some((iface, io.node_id as u8))
+        }
+    };
+    let safety_interfaces = match safety_io {
+        Some((iface, _)) => vec![iface],
+        None => (0..interfaces.len()).collect(),
+    };
     Ok(Drives {
         interfaces,
+        safety_interfaces,
+        safety_io,
         winches: out,
     })
 }

@@ -305,7 +305,7 @@ pub fn run_on(
         .map(|b| b.interface().to_string())
         .collect::<Vec<_>>()
         .join(", ");
-    let mut tx = crate::tx_buses::TxBuses::new(tx);
+    let mut tx = crate::tx_buses::TxBuses::new(tx, &cfg.safety_interfaces);
     let identity = platform_identity(&cfg.platform);
     let kin = StandardKinematics::new(&cfg.platform);
     let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity)
@@ -684,11 +684,11 @@ pub fn run_on(
         // The fail-safe heartbeat: every cycle, STOP while tripped, after the signature (a
         // consumer counts a RUN pair only with a recent signature of its own CRC).
         for f in &signature {
-            stops.other(&mut tx, f);
+            stops.other(&mut tx.safety(), f);
         }
         let tripped = monitor.state().is_tripped();
         let stage = stops.heartbeat(
-            &mut tx,
+            &mut tx.safety(),
             &safety_frame::encode(&monitor.heartbeat(counter), cob),
             tripped,
         );

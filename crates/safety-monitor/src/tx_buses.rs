@@ -18,45 +18,41 @@ pub struct TxBuses {
     buses: Vec<Box<dyn CanBus>>,
     /// The frame of the last send that failed somewhere, and the interfaces still missing it.
     pending: Option<(CanFrame, u8)>,
+    /// Interfaces where the doubled safety frames travel (bit k = interface k).
+    safety_mask: u8,
 }
 
 impl TxBuses {
-    /// `buses[k]` = interface k (at most [`MAX_INTERFACES`]; more are ignored).
-    pub fn new(mut buses: Vec<Box<dyn CanBus>>) -> Self {
+    /// `buses[k]` = interface k (at most [`MAX_INTERFACES`]; more are ignored); the safety
+    /// frames go on `safety_interfaces` (every interface if empty).
+    pub fn new(mut buses: Vec<Box<dyn CanBus>>, safety_interfaces: &[usize]) -> Self {
         buses.truncate(MAX_INTERFACES);
+        let all = mask_of(buses.len());
+        let safety_mask = match safety_interfaces
+            .iter()
+            .filter(|k| **k < buses.len())
+            .fold(0u8, |m, k| m | (1 << k))
+        {
+            0 => all,
+            m => m,
+        };
         Self {
             buses,
             pending: None,
+            safety_mask,
         }
     }
 
-    pub fn len(&self) -> usize {
-        self.buses.len()
+    /// The interfaces of the safety frames (the safety I/O node's), as a bus of its own.
+    pub fn safety(&mut self) -> Subset<'_> {
+        let m = self.safety_mask;
+        Subset(self, m)
     }
 
-    pub fn is_empty(&self) -> bool {
-        self.buses.is_empty()
-    }
-
-    /// The sending socket of interface `iface` (a drive's own frames: its quick stop).
-    pub fn on(&mut self, iface: usize) -> Option<&mut dyn CanBus> {
-        match self.buses.get_mut(iface) {
-            Some(b) => Some(b.as_mut()),
-            None => None,
-        }
-    }
-}
-
-impl CanBus for TxBuses {
-    fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
-        let all = if self.buses.len() >= 8 {
-            u8::MAX
-        } else {
-            (1u8 << self.buses.len()) - 1
-        };
+    fn send_masked(&mut self, frame: &CanFrame, mask: u8) -> Result<(), CanError> {
         let targets = match self.pending {
-            Some((f, missing)) if f == *frame => missing,
-            _ => all,
+            Some((f, missing)) if f == *frame => missing & mask,
+            _ => mask,
         };
         let mut missing = 0u8;
         let mut other: Option<CanError> = None;
@@ -86,6 +82,48 @@ impl CanBus for TxBuses {
                 iface: self.interface().to_string(),
             }))
         }
+    }
+
+    pub fn len(&self) -> usize {
+        self.buses.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.buses.is_empty()
+    }
+
+    /// The sending socket of interface `iface` (a drive's own frames: its quick stop).
+    pub fn on(&mut self, iface: usize) -> Option<&mut dyn CanBus> {
+        match self.buses.get_mut(iface) {
+            Some(b) => Some(b.as_mut()),
+            None => None,
+        }
+    }
+}
+
+fn mask_of(n: usize) -> u8 {
+    if n >= 8 { u8::MAX } else { (1u8 << n) - 1 }
+}
+
+/// Some of the interfaces, as one bus (the safety frames' interfaces).
+pub struct Subset<'a>(&'a mut TxBuses, u8);
+
+impl CanBus for Subset<'_> {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
+        self.0.send_masked(frame, self.1)
+    }
+    fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<RxFrame>, CanError> {
+        self.0.recv_timeout(timeout)
+    }
+    fn interface(&self) -> &str {
+        self.0.interface()
+    }
+}
+
+impl CanBus for TxBuses {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
+        let all = mask_of(self.buses.len());
+        self.send_masked(frame, all)
     }
 
     /// The monitor never receives on its sending sockets (its reader has its own).
@@ -143,7 +181,7 @@ mod tests {
                 }) as Box<dyn CanBus>
             })
             .collect();
-        let mut tx = TxBuses::new(buses);
+        let mut tx = TxBuses::new(buses, &[1]);
         let f = CanFrame::new(0x101, &[1, 2, 3]).unwrap();
         assert!(tx.send(&f).is_err(), "interface 1 refused it");
         tx.send(&f).unwrap();
@@ -161,5 +199,10 @@ mod tests {
         tx.on(2).unwrap().send(&q).unwrap();
         assert_eq!(logs[2].lock().unwrap().len(), 3);
         assert_eq!(logs[0].lock().unwrap().len(), 2);
+        // The safety frames go to the safety interface only.
+        let h = CanFrame::new(0x102, &[9; 8]).unwrap();
+        tx.safety().send(&h).unwrap();
+        assert_eq!(logs[1].lock().unwrap().last(), Some(&h));
+        assert_ne!(logs[0].lock().unwrap().last(), Some(&h));
     }
 }

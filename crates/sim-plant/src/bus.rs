@@ -55,7 +55,9 @@ use cdpr_model::{Data, Pose, kinematics};
 use crs_ipc::{CONTRACT_VERSION, MAX_CABLES, PlantTruth, TrackerPose};
 use drive_io::bank_set::DriveBanks;
 use drive_io::canopen::Ds402State;
+use drive_io::canopen::FrameBuf;
 use drive_io::config::{DrivesConfig, WinchConfig};
+use drive_io::safety_io::SafetyIoNode;
 use drive_io::slave::MotionDemand;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -274,6 +276,8 @@ pub struct PlantBus {
     /// CLOCK_MONOTONIC time of the last SYNC on each interface (its drives interpolate over
     /// the time that really passed since).
     last_sync_ns: Vec<Option<u64>>,
+    /// The safety I/O node (drives.toml `[safety_io]`): its interface, the node, its frames.
+    safety_io: Option<(usize, SafetyIoNode, FrameBuf)>,
     /// Winch axes in drive coordinates (what the encoders read, m).
     axes: Vec<CspWinch>,
     q_off: Vec<f64>,
@@ -425,9 +429,24 @@ impl PlantBus {
                 }
             })?;
         let interfaces = bank.interfaces();
-        if let Some(sw) = drives.safety_heartbeat {
-            // The drives validate the safety monitor's heartbeat like the real ones (drives.toml
-            // `[safety_heartbeat]`): without it they quick-stop and the brakes hold.
+        // With a safety I/O node the drives are real CiA 402 drives: they ignore the monitor's
+        // frames and the node removes their torque through STO; without one the simulated
+        // drives validate the monitor's heartbeat themselves (their own watch).
+        let safety_io = match (
+            &drives.safety_io,
+            drives.safety_heartbeat,
+            drives.safety_io_interface(),
+        ) {
+            (Some(io), Some(watch), Some(iface)) => {
+                bank.set_sto(true);
+                Some((iface, SafetyIoNode::new(io, watch), FrameBuf::default()))
+            }
+            _ => None,
+        };
+        if let (Some(sw), None) = (drives.safety_heartbeat, &safety_io) {
+            // The simulated drives validate the safety monitor's heartbeat (drives.toml
+            // `[safety_heartbeat]` without `[safety_io]`): without it they quick-stop and the
+            // brakes hold.
             bank.enable_safety_watch(sw);
         }
         let axes = home_drive
@@ -450,6 +469,7 @@ impl PlantBus {
             winches: drives.winches.clone(),
             bank,
             last_sync_ns: vec![None; interfaces],
+            safety_io,
             axes,
             q_off,
             home_drive,
@@ -479,6 +499,25 @@ impl PlantBus {
     /// Power-on of all drives (boot-up messages queued; send with [`PlantBus::flush`]).
     pub fn start(&mut self, now_ns: u64) {
         self.bank.start(now_ns);
+        if let Some((_, node, out)) = self.safety_io.as_mut() {
+            node.start(now_ns, out);
+        }
+        self.apply_sto();
+    }
+
+    /// The drives' STO inputs follow the safety I/O node's outputs (hard-wired).
+    fn apply_sto(&mut self) {
+        if let Some((_, node, _)) = &self.safety_io {
+            self.bank.set_sto(!node.sto_released());
+        }
+    }
+
+    /// The safety I/O node, if the drives config has one (its inputs: e-stop, reset key).
+    pub fn safety_io(&self) -> Option<&SafetyIoNode> {
+        self.safety_io.as_ref().map(|(_, n, _)| n)
+    }
+    pub fn safety_io_mut(&mut self) -> Option<&mut SafetyIoNode> {
+        self.safety_io.as_mut().map(|(_, n, _)| n)
     }
 
     /// Handles one frame received on interface `iface` (at `now_ns`, its arrival); true if it
@@ -486,6 +525,12 @@ impl PlantBus {
     /// [`PlantBus::advance_interface`] and, once every interface has had its SYNC of the
     /// instant, settle and [`PlantBus::transmit_pdos`].
     pub fn handle_frame(&mut self, iface: usize, frame: &CanFrame, now_ns: u64) -> bool {
+        if let Some((io_iface, node, out)) = self.safety_io.as_mut()
+            && *io_iface == iface
+        {
+            node.handle_frame(frame, now_ns, out);
+            self.apply_sto();
+        }
         self.bank.handle_frame(iface, frame, now_ns)
     }
 
@@ -703,20 +748,40 @@ impl PlantBus {
         self.bank.transmit_pdos_on(iface);
     }
 
-    /// Heartbeats when due.
+    /// Heartbeats when due; the safety I/O node's validation time and TPDO.
     pub fn poll(&mut self, now_ns: u64) {
+        if let Some((_, node, out)) = self.safety_io.as_mut() {
+            node.poll(now_ns, out);
+        }
+        self.apply_sto();
         self.bank.poll(now_ns);
     }
 
     /// Earliest heartbeat due time of all drives (CLOCK_MONOTONIC ns), if any drive produces one.
     pub fn next_heartbeat_ns(&self) -> Option<u64> {
-        self.bank.next_heartbeat_ns()
+        let io = self.safety_io.as_ref().map(|(_, n, _)| n.next_due_ns());
+        match (self.bank.next_heartbeat_ns(), io) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     /// Sends the queued frames of every interface on its bus (`buses[k]` = interface k; a full
     /// TX queue drops frames, as a CAN controller would).
     pub fn flush<B: CanBus>(&mut self, buses: &mut [B]) -> Result<(), CanError> {
-        self.bank.flush(buses)
+        self.bank.flush(buses)?;
+        if let Some((iface, _, out)) = self.safety_io.as_mut() {
+            let r = match buses.get_mut(*iface) {
+                Some(bus) => out.as_slice().iter().try_for_each(|f| match bus.send(f) {
+                    Ok(()) | Err(CanError::TxFull { .. }) => Ok(()),
+                    Err(e) => Err(e),
+                }),
+                None => Ok(()),
+            };
+            out.clear();
+            r?;
+        }
+        Ok(())
     }
 
     /// The drives (for fault injection and state inspection).

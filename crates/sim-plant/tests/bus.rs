@@ -1315,3 +1315,138 @@ fn force_sensors_on_the_bus_report_the_plants_forces() {
     }
     assert!(measured.iter().all(|m| *m > 100.0), "{measured:?}");
 }
+
+/// Drives that ignore the monitor's frames (real CiA 402 drives) behind a safety I/O node: the
+/// node on its own interface validates the monitor's doubled heartbeat and drives their STO
+/// inputs. RUN pairs on the safety interface let the drives be enabled; the same RUN pairs on
+/// the drives' own interface do nothing; when the pairs stop, torque is removed within the
+/// validation time (Switch On Disabled, brakes closed) and no controlword enables again.
+#[test]
+fn drives_without_a_heartbeat_watch_are_stopped_by_the_safety_io_nodes_sto() {
+    use can_transport::safety_frame::{self, ConfigSignature, SafetyHeartbeat, SafetyState};
+    let mut d = DrivesConfig::load(&config_dir().join("drives.toml")).unwrap();
+    let own = d.safety_heartbeat.unwrap();
+    let transport = d.interfaces()[0].transport.clone();
+    d.bus.transport = None;
+    d.bus.interfaces = vec![
+        drive_io::config::InterfaceConfig {
+            name: "can0".into(),
+            transport,
+            bitrate_bit_per_s: 1_000_000,
+            budget_percent: 70.0,
+        },
+        drive_io::config::InterfaceConfig {
+            name: "safety".into(),
+            transport: "udpbus:239.255.70.1:20999".into(),
+            bitrate_bit_per_s: 1_000_000,
+            budget_percent: 70.0,
+        },
+    ];
+    for w in &mut d.winches {
+        w.interface = Some("can0".into());
+    }
+    d.safety_io = Some(drive_io::config::SafetyIoConfig {
+        interface: "safety".into(),
+        node_id: 0x30,
+        inputs_period_ms: 10,
+        heartbeat_ms: 10,
+    });
+    d.validate().unwrap();
+    let run = |pairs_on: usize, cycles: u16, plant: &mut PlantBus, now: &mut u64, k0: u16| {
+        let mut wire = vec![VecBus::default(), VecBus::default()];
+        for k in k0..k0 + cycles {
+            *now += 15_000_000;
+            let sig = ConfigSignature {
+                srdo_crc: own.srdo_crc(),
+                safety_params_crc: 0,
+            };
+            let hb = SafetyHeartbeat {
+                state: SafetyState::Run,
+                cause: 0,
+                counter: k,
+                epoch: 7,
+            };
+            for f in sig
+                .encode(own.cob_id)
+                .into_iter()
+                .chain(safety_frame::encode(&hb, own.cob_id))
+            {
+                plant.handle_frame(pairs_on, &f, *now);
+            }
+            // As drive-io does: the controlword follows each drive's statusword.
+            for i in 0..8 {
+                let s = plant.drives().slave(i).unwrap();
+                let cw = canopen::enable_step(s.ds402_state(), k % 2 == 0);
+                // Holding the actual position, as drive-io does while enabling.
+                let hold = s.od_value(0x6064, 0).unwrap_or(0) as i32;
+                plant.handle_frame(0, &canopen::rpdo1(i as u8 + 1, cw, hold), *now);
+            }
+            assert!(plant.handle_frame(0, &canopen::sync(), *now));
+            plant.cycle(*now, 1e-3);
+            plant.poll(*now);
+            plant.flush(&mut wire).unwrap();
+        }
+        (0..8)
+            .filter(|&i| {
+                plant.drives().slave(i).unwrap().ds402_state() == Ds402State::OperationEnabled
+            })
+            .count()
+    };
+    let start = |plant: &mut PlantBus, now: u64| {
+        plant.start(now);
+        for iface in 0..2 {
+            plant.handle_frame(iface, &canopen::nmt(canopen::NMT_START, 0), now);
+        }
+        for n in 1..=8u8 {
+            plant.handle_frame(0, &canopen::sdo_download(n, 0x6060, 0, 8, 1), now);
+        }
+    };
+    let cfg = plant_cfg("icosahedron-ideal.toml");
+    let control = cfg.platform.clone();
+    // The monitor's frames on the drives' interface: the drives do not read them, the node
+    // does not see them.
+    let mut plant =
+        PlantBus::new(cfg.clone(), &control, &d, BusOptions::new(&d, &control)).unwrap();
+    let mut now = 0;
+    start(&mut plant, now);
+    assert_eq!(
+        run(0, 20, &mut plant, &mut now, 0),
+        0,
+        "STO held without the node's RUN"
+    );
+    assert!(plant.drives().slave(0).unwrap().sto_active());
+    // On the safety interface: the node releases STO, the drives enable.
+    let mut plant = PlantBus::new(cfg, &control, &d, BusOptions::new(&d, &control)).unwrap();
+    let mut now = 0;
+    start(&mut plant, now);
+    assert_eq!(run(1, 20, &mut plant, &mut now, 0), 8);
+    assert!(plant.safety_io().unwrap().sto_released());
+    // The monitor falls silent: within the validation time (50 ms) every drive loses torque.
+    let mut wire = vec![VecBus::default(), VecBus::default()];
+    let mut silent = 0;
+    while plant.safety_io().unwrap().sto_released() {
+        now += 1_000_000;
+        silent += 1;
+        assert!(plant.handle_frame(0, &canopen::sync(), now));
+        plant.cycle(now, 1e-3);
+        plant.poll(now);
+        plant.flush(&mut wire).unwrap();
+        assert!(
+            silent <= own.validation_time_ms + 1,
+            "STO not applied after {silent} ms"
+        );
+    }
+    for i in 0..8 {
+        let s = plant.drives().slave(i).unwrap();
+        assert_eq!(s.ds402_state(), Ds402State::SwitchOnDisabled, "drive {i}");
+        assert!(matches!(s.demand(), drive_io::slave::MotionDemand::Hold));
+    }
+    // Enable operation is refused while STO holds.
+    for i in 0..8 {
+        plant.handle_frame(0, &canopen::rpdo1(i as u8 + 1, 0x06, 0), now);
+        plant.handle_frame(0, &canopen::rpdo1(i as u8 + 1, 0x0F, 0), now);
+    }
+    assert!(
+        (0..8).all(|i| plant.drives().slave(i).unwrap().ds402_state() != Ds402State::OperationEnabled)
+    );
+}

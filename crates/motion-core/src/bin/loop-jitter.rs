@@ -366,6 +366,8 @@ fn run(args: Args) -> Result<ExitCode, String> {
     let t0 = now_ns() + 10 * period_ns;
     let mut next = t0 - t0 % period_ns + period_ns;
     let mut bare_overruns = 0u64;
+    // Its own grid: no drive bus announces a SYNC schedule here.
+    let timeline = motion_core::daemon::timeline::Timeline::new(period_ns);
     for _ in 0..pairs {
         // Daemon block: the real loop until `after_cycle` stops it at the block's end.
         let end = next + block_ns;
@@ -374,7 +376,7 @@ fn run(args: Args) -> Result<ExitCode, String> {
         daemon::run_timed(
             &mut hard_loop,
             next,
-            period_ns,
+            &timeline,
             &mut sink,
             &mut cmds,
             &stats,

@@ -4,11 +4,13 @@ use cdpr_model::config::load_platform;
 use clap::Parser;
 use crs_ipc::{
     CueingPose, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlatformId,
-    PlatformIdentity, ProcessId, StateEvent, TopicPublisher, TopicSubscriber, WakeupNotifier,
+    PlatformIdentity, ProcessId, StateEvent, SyncSchedule, TopicPublisher, TopicSubscriber,
+    WakeupNotifier,
 };
 use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
 use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
 use motion_core::daemon::stats::LoopStats;
+use motion_core::daemon::timeline::Timeline;
 use motion_core::daemon::trajectory::{self, Waypoint};
 use motion_core::daemon::{
     self, Command, CommandSource, LoopState, ResetGate, ResetIgnored, config, lifecycle, outbox,
@@ -68,6 +70,10 @@ struct IoxPorts {
     events: TopicPublisher<StateEvent>,
     identity: TopicPublisher<PlatformIdentity>,
     loop_stats: TopicPublisher<LoopStatsSample>,
+    /// drive-io's SYNC schedule (isochronous bus): the loop ticks `sync_lead_ns` before a SYNC.
+    sync_schedule: TopicSubscriber<SyncSchedule>,
+    sync_lead_ns: u64,
+    last_schedule: u64,
     /// "setpoint published" (drive-io's phase-locked cycle follows it).
     setpoint_ready: WakeupNotifier,
     notify_failures: u64,
@@ -125,6 +131,33 @@ impl StagePorts for IoxPorts {
         id.timestamp_ns = crs_ipc::monotonic_ns();
         let _ = self.identity.publish(&id);
         self.announce_plan();
+    }
+    fn sync_schedule(&mut self, timeline: &Timeline) {
+        if self.sync_lead_ns == 0 {
+            return;
+        }
+        match self.sync_schedule.latest() {
+            Ok(Some(s)) if s.sequence != self.last_schedule => {
+                self.last_schedule = s.sequence;
+                let lead = i64::try_from(self.sync_lead_ns).unwrap_or(i64::MAX);
+                match s.phase_ns(-lead) {
+                    Some(phase) if timeline.set_phase(phase, s.period_ns) => {
+                        tracing::info!(
+                            phase_us = phase / 1000,
+                            lead_us = self.sync_lead_ns / 1000,
+                            "loop ticks placed before drive-io's SYNC"
+                        );
+                    }
+                    _ => tracing::warn!(
+                        period_ns = s.period_ns,
+                        loop_period_ns = timeline.period_ns(),
+                        "drive-io's SYNC period differs from the loop's: not aligned"
+                    ),
+                }
+            }
+            Ok(_) => {}
+            Err(e) => tracing::warn!(error = %e, "SYNC schedule ignored"),
+        }
     }
     fn setpoints_sent(&mut self) {
         if let Err(e) = self.setpoint_ready.notify() {
@@ -293,12 +326,15 @@ fn run(args: Args) -> Result<(), String> {
         plan.samples as u64
     };
     let start_ns = realtime::now_ns() + 50_000_000;
+    let timeline = Arc::new(Timeline::new(period_ns));
+    let sync_lead_ns = cfg.sync_lead_ns;
     let outbox = Arc::new(Outbox::new(64));
     let stats = Arc::new(LoopStats::default());
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
     let stage = {
         let outbox = outbox.clone();
         let stats = stats.clone();
+        let timeline = timeline.clone();
         let identity =
             PlatformIdentity::new(PlatformId::new(platform.identity()), model.m() as u32);
         let mut rt = cfg.realtime;
@@ -321,6 +357,11 @@ fn run(args: Args) -> Result<(), String> {
                         loop_stats: node
                             .publisher::<LoopStatsSample>()
                             .map_err(|e| e.to_string())?,
+                        sync_schedule: node
+                            .subscriber::<SyncSchedule>()
+                            .map_err(|e| e.to_string())?,
+                        sync_lead_ns,
+                        last_schedule: 0,
                         setpoint_ready: node
                             .setpoint_ready_notifier()
                             .map_err(|e| e.to_string())?,
@@ -358,7 +399,7 @@ fn run(args: Args) -> Result<(), String> {
                     &stats,
                     &mut ports,
                     start_ns,
-                    period_ns,
+                    &timeline,
                     outbox::PUBLISH_PHASE_NS.min(period_ns / 2),
                     10,
                     &STOP,
@@ -424,7 +465,7 @@ fn run(args: Args) -> Result<(), String> {
     daemon::run_timed(
         &mut hard_loop,
         start_ns,
-        period_ns,
+        &timeline,
         &mut sink,
         &mut cmds,
         &stats,

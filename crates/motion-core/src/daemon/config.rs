@@ -24,6 +24,9 @@ pub struct DaemonConfig {
     /// Optional file the statistics summary is written to (JSON, rewritten each interval).
     pub stats_file: Option<PathBuf>,
     pub realtime: RealtimeSettings,
+    /// How long before drive-io's SYNC the loop ticks when the drive bus announces its
+    /// schedule (`[realtime] sync_lead_us`, ns; 0 = never align, keep the loop's own grid).
+    pub sync_lead_ns: u64,
     pub trajectory: TrajectorySettings,
 }
 
@@ -82,6 +85,14 @@ struct RawRealtime {
     lock_memory: bool,
     #[serde(default = "slack")]
     timer_slack_ns: u64,
+    #[serde(default = "lead")]
+    sync_lead_us: Spanned<u64>,
+}
+
+fn lead() -> Spanned<u64> {
+    // The publish stage's phase (200 µs) + drive-io's wake-up + the cycle's RPDOs on the wire
+    // (2 drives: 230 µs at 1 Mbit/s) + margin: docs/can-protocol.md "Cycle timing".
+    Spanned::new(0..0, 700)
 }
 
 fn zero() -> Spanned<i32> {
@@ -155,6 +166,18 @@ pub fn parse(text: &str, file: &str, base: &Path) -> Result<DaemonConfig, Config
             format!("must be -1 (no pinning) or a CPU number, got {cpu}"),
         ));
     }
+    let lead_us = *rt.sync_lead_us.get_ref();
+    if lead_us >= period_us {
+        return Err(err(
+            text,
+            file,
+            rt.sync_lead_us.span(),
+            "realtime.sync_lead_us",
+            format!(
+                "must be below realtime.period_us ({period_us} µs; 0 = no alignment), got {lead_us}"
+            ),
+        ));
+    }
     let tr = &raw.trajectory;
     let frac = |v: &Spanned<f64>, key: &str| -> Result<f64, ConfigError> {
         let x = *v.get_ref();
@@ -211,6 +234,7 @@ pub fn parse(text: &str, file: &str, base: &Path) -> Result<DaemonConfig, Config
             lock_memory: rt.lock_memory,
             timer_slack_ns: rt.timer_slack_ns.max(1),
         },
+        sync_lead_ns: lead_us * 1000,
         trajectory: TrajectorySettings {
             velocity_scale: frac(&tr.velocity_scale, "trajectory.velocity_scale")?,
             acceleration_scale: frac(&tr.acceleration_scale, "trajectory.acceleration_scale")?,

@@ -14,6 +14,7 @@ pub mod lifecycle;
 pub mod outbox;
 pub mod realtime;
 pub mod stats;
+pub mod timeline;
 pub mod trajectory;
 
 use crs_ipc::JointSetpoint;
@@ -279,18 +280,21 @@ impl HardLoop {
 }
 
 /// Runs `hard_loop` on the absolute-deadline timer until `stop` is set or `until` returns true.
-/// The first cycle runs at `start_ns` (CLOCK_MONOTONIC), so other stages can share the timeline.
+/// The first cycle runs at `start_ns` (CLOCK_MONOTONIC), so other stages can share the timeline;
+/// each next deadline follows `timeline`'s phase when one is announced (the drive bus's SYNC
+/// less the lead, [`timeline`]).
 #[allow(clippy::too_many_arguments)]
 pub fn run_timed(
     hard_loop: &mut HardLoop,
     start_ns: u64,
-    period_ns: u64,
+    timeline: &timeline::Timeline,
     sink: &mut impl SetpointSink,
     commands: &mut impl CommandSource,
     stats: &LoopStats,
     stop: &AtomicBool,
     mut after_cycle: impl FnMut(&HardLoop, u64),
 ) {
+    let period_ns = timeline.period_ns();
     let mut deadline = start_ns;
     while !stop.load(Ordering::Relaxed) {
         realtime::sleep_until(deadline);
@@ -307,5 +311,6 @@ pub fn run_timed(
             let missed = (done - deadline) / period_ns + 1;
             deadline += missed * period_ns;
         }
+        deadline = timeline.align(deadline, 0);
     }
 }

@@ -90,6 +90,9 @@ pub trait StagePorts {
     /// phase-locked SYNC, issue 20 item 3). Here in the stage, not the hard loop: a notify is
     /// a syscall (10–30 µs).
     fn setpoints_sent(&mut self) {}
+    /// Once per pass: the drive bus's newest SYNC schedule, if one was announced, into
+    /// `timeline` (the loop ticks its lead before each SYNC, [`super::timeline`]).
+    fn sync_schedule(&mut self, _timeline: &super::timeline::Timeline) {}
 }
 
 /// One pass of the publish stage: drains the outbox, then heartbeat/state bookkeeping.
@@ -127,18 +130,20 @@ pub fn publish_pass(
 }
 
 /// Runs the publish stage on the loop's timeline shifted by `phase_ns` until `stop` is set.
-/// Drains once more after `stop` so the last setpoints are not lost.
+/// Drains once more after `stop` so the last setpoints are not lost. Each pass also lets the
+/// ports learn the drive bus's SYNC schedule into `timeline` ([`StagePorts::sync_schedule`]).
 #[allow(clippy::too_many_arguments)]
 pub fn run_publish_stage(
     outbox: &Outbox,
     stats: &LoopStats,
     ports: &mut impl StagePorts,
     start_ns: u64,
-    period_ns: u64,
+    timeline: &super::timeline::Timeline,
     phase_ns: u64,
     heartbeat_every_cycles: u64,
     stop: &AtomicBool,
 ) {
+    let period_ns = timeline.period_ns();
     let mut last_cycles = 0;
     let mut last_state = LoopState::Running.code();
     let mut deadline = start_ns + phase_ns;
@@ -159,11 +164,13 @@ pub fn run_publish_stage(
             ports.loop_stats(stats, outbox);
             ports.announce();
         }
+        ports.sync_schedule(timeline);
         deadline += period_ns;
         let now = super::realtime::now_ns();
         if now > deadline {
             deadline += (now - deadline) / period_ns * period_ns + period_ns;
         }
+        deadline = timeline.align(deadline, phase_ns);
     }
     publish_pass(
         outbox,

@@ -1,0 +1,689 @@
+//! The bus budget: what a configuration puts on each CAN interface, in bits on the wire and
+//! time, against a load budget — refused above it, naming the interface and the frames that
+//! fill it (`drive-io --print-plan` prints it; [`crate::master::Master::new`] and `crs sim`
+//! refuse an over-budget configuration before anything starts).
+//!
+//! Bits are counted with worst-case bit stuffing: a frame of n
+//! data bytes with an 11-bit identifier occupies at most 8n + 47 + ⌊(34 + 8n − 1)/4⌋ bit times
+//! including the 3-bit intermission (Davis et al. 2007, eq. 4).
+//!
+//! Per interface and per second: SYNC every period; every PDO of every node at its rate (every
+//! SYNC, every n-th SYNC); every node's heartbeat (drives at `heartbeat_producer_ms`, drive-io at
+//! `master_heartbeat_ms`); the safety monitor's two doubled frames (heartbeat pair and
+//! configuration signature pair) per refresh time where they are sent; and headroom for what
+//! is not periodic: one EMCY per node per [`EMCY_RESERVE_PERIOD_MS`] and one expedited SDO
+//! exchange per [`SDO_RESERVE_PERIOD_MS`].
+//!
+//! Two checks per interface:
+//! * **load**: Σ bits/s ÷ bit rate ≤ `budget_percent` (≤ 70 %);
+//! * **cycle**: in the worst SYNC period (every every-n-th PDO due at once) the synchronous
+//!   frames plus two frames of blocking fit the period, and with an isochronous SYNC the
+//!   cycle's RPDOs — behind one blocking frame and every higher-priority frame that can be
+//!   pending then (the safety pairs, an EMCY) — are off the wire within `rpdo_guard_us`.
+
+use crate::config::{DrivesConfig, SyncSource};
+
+/// Worst-case bits on the wire of a classic CAN data frame with an 11-bit identifier and
+/// `dlc` data bytes, stuff bits and the 3-bit intermission included (Davis et al. 2007).
+fn worst_case_bits(dlc: u8) -> u32 {
+    let n = u32::from(dlc.min(8));
+    8 * n + 47 + (34 + 8 * n - 1) / 4
+}
+
+/// Headroom for EMCY: one 8-byte EMCY per node per this period (a drive's EMCY inhibit time,
+/// 0x1015, is typically 10–100 ms; faults are rare, bursts are what matters).
+pub const EMCY_RESERVE_PERIOD_MS: f64 = 100.0;
+/// Headroom for SDO while running (diagnostics): one expedited request and response per
+/// this period on each interface.
+pub const SDO_RESERVE_PERIOD_MS: f64 = 10.0;
+
+/// Who sends a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sender {
+    /// drive-io (the master).
+    Master,
+    /// A drive or measuring node (node id).
+    Node(u8),
+    /// The safety monitor.
+    Monitor,
+    /// Headroom for aperiodic traffic.
+    Reserve,
+}
+
+/// When a frame is sent.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Rate {
+    /// In every n-th SYNC period (1 = every period): part of the synchronous cycle.
+    EverySync(u16),
+    /// Periodically with this period, at any phase to the SYNC (heartbeats, the monitor's).
+    Every { ms: f64 },
+}
+
+/// What a node sends and receives in PDOs, for the budget (COB-ID, data bytes, rate).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PdoFrame {
+    pub cob_id: u16,
+    pub dlc: u8,
+    /// RPDO (master → node) or TPDO (node → master).
+    pub rpdo: bool,
+    /// Every n-th SYNC (1 = every SYNC).
+    pub every_n_sync: u16,
+}
+
+/// One line of an interface's budget.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Line {
+    pub what: String,
+    pub sender: Sender,
+    pub cob_id: u16,
+    pub dlc: u8,
+    pub rate: Rate,
+    /// Worst-case bits on the wire per frame (stuffing and intermission included).
+    pub bits: u32,
+    /// Frames per second.
+    pub per_s: f64,
+}
+
+impl Line {
+    pub fn bits_per_s(&self) -> f64 {
+        f64::from(self.bits) * self.per_s
+    }
+    fn rpdo(&self) -> bool {
+        self.what.starts_with("RPDO")
+    }
+}
+
+/// The budget of one interface.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InterfaceBudget {
+    pub name: String,
+    pub bitrate_bit_per_s: u32,
+    pub budget_percent: f64,
+    pub period_us: u32,
+    pub lines: Vec<Line>,
+    /// Isochronous SYNC: the guard before the SYNC by which the RPDOs must be off the wire, µs.
+    pub rpdo_guard_us: Option<u32>,
+}
+
+impl InterfaceBudget {
+    fn bit_us(&self) -> f64 {
+        1e6 / f64::from(self.bitrate_bit_per_s)
+    }
+    /// Bits per second of every line.
+    pub fn bits_per_s(&self) -> f64 {
+        self.lines.iter().map(Line::bits_per_s).sum()
+    }
+    /// Load, percent of the bit rate.
+    pub fn load_percent(&self) -> f64 {
+        100.0 * self.bits_per_s() / f64::from(self.bitrate_bit_per_s)
+    }
+    /// The longest frame on the interface (what can block any other), bits.
+    fn blocking_bits(&self) -> u32 {
+        self.lines.iter().map(|l| l.bits).max().unwrap_or(0)
+    }
+    /// Bits of the synchronous frames in the worst SYNC period (every every-n-th PDO due).
+    pub fn worst_cycle_sync_bits(&self) -> u32 {
+        self.lines
+            .iter()
+            .filter(|l| matches!(l.rate, Rate::EverySync(_)))
+            .map(|l| l.bits)
+            .sum()
+    }
+    /// Time of the worst synchronous cycle plus two blocking frames, µs.
+    pub fn worst_cycle_us(&self) -> f64 {
+        f64::from(self.worst_cycle_sync_bits() + 2 * self.blocking_bits()) * self.bit_us()
+    }
+    /// Worst time from queueing the cycle's RPDOs to the last one off the wire, µs: one
+    /// blocking frame, every periodic frame of higher priority (lower COB-ID) that may be
+    /// pending at any time (the safety pairs where they travel), then the RPDOs. EMCY headroom
+    /// is not counted here: an EMCY means a stop, and the cycle it delays is not a normal one.
+    pub fn rpdo_window_us(&self) -> f64 {
+        let rpdos: Vec<&Line> = self.lines.iter().filter(|l| l.rpdo()).collect();
+        let Some(lowest) = rpdos.iter().map(|l| l.cob_id).max() else {
+            return 0.0;
+        };
+        let own: u32 = rpdos.iter().map(|l| l.bits).sum();
+        let higher: u32 = self
+            .lines
+            .iter()
+            .filter(|l| {
+                matches!(l.rate, Rate::Every { .. })
+                    && l.cob_id < lowest
+                    && l.sender != Sender::Reserve
+            })
+            .map(|l| l.bits)
+            .sum();
+        f64::from(self.blocking_bits() + higher + own) * self.bit_us()
+    }
+    /// Why this interface's configuration cannot run, if it cannot.
+    pub fn check(&self) -> Result<(), BudgetError> {
+        let load = self.load_percent();
+        if load > self.budget_percent {
+            return Err(BudgetError::Load {
+                interface: self.name.clone(),
+                load_percent: load,
+                budget_percent: self.budget_percent,
+                top: self.top_frames(4),
+            });
+        }
+        let cycle = self.worst_cycle_us();
+        if cycle > f64::from(self.period_us) {
+            return Err(BudgetError::Cycle {
+                interface: self.name.clone(),
+                cycle_us: cycle,
+                period_us: self.period_us,
+                top: self.top_frames(4),
+            });
+        }
+        if let Some(guard) = self.rpdo_guard_us {
+            let w = self.rpdo_window_us();
+            if w > f64::from(guard) {
+                return Err(BudgetError::RpdoWindow {
+                    interface: self.name.clone(),
+                    window_us: w,
+                    guard_us: guard,
+                });
+            }
+        }
+        Ok(())
+    }
+    /// The `n` kinds of frame that take most of the bus, as "what (share %)".
+    fn top_frames(&self, n: usize) -> String {
+        // Group by what the frame is, without the node (all RPDO1 together).
+        let mut groups: Vec<(String, f64)> = Vec::new();
+        for l in &self.lines {
+            let key = l.what.split(" node ").next().unwrap_or(&l.what).to_string();
+            match groups.iter_mut().find(|g| g.0 == key) {
+                Some(g) => g.1 += l.bits_per_s(),
+                None => groups.push((key, l.bits_per_s())),
+            }
+        }
+        groups.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let total = f64::from(self.bitrate_bit_per_s);
+        groups
+            .iter()
+            .take(n)
+            .map(|(k, b)| format!("{k} {:.1} %", 100.0 * b / total))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+impl std::fmt::Display for InterfaceBudget {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "# interface {}: {} kbit/s, SYNC every {} µs, budget {:.0} %",
+            self.name,
+            self.bitrate_bit_per_s / 1000,
+            self.period_us,
+            self.budget_percent
+        )?;
+        writeln!(
+            f,
+            "#   {:<34} {:>6} {:>4} {:>14} {:>9} {:>10} {:>7}",
+            "frame", "COB-ID", "DLC", "rate", "bit/frame", "bit/s", "load %"
+        )?;
+        let total = f64::from(self.bitrate_bit_per_s);
+        for l in &self.lines {
+            let rate = match l.rate {
+                Rate::EverySync(1) => "every SYNC".to_string(),
+                Rate::EverySync(n) => format!("every {n}. SYNC"),
+                Rate::Every { ms } => format!("every {ms} ms"),
+            };
+            writeln!(
+                f,
+                "#   {:<34} {:>#6x} {:>4} {:>14} {:>9} {:>10.0} {:>7.2}",
+                l.what,
+                l.cob_id,
+                l.dlc,
+                rate,
+                l.bits,
+                l.bits_per_s(),
+                100.0 * l.bits_per_s() / total
+            )?;
+        }
+        writeln!(
+            f,
+            "#   load {:.1} % of {:.0} % budget; worst SYNC period {:.0} µs of {} µs (synchronous \
+             frames {} bit + 2 blocking frames)",
+            self.load_percent(),
+            self.budget_percent,
+            self.worst_cycle_us(),
+            self.period_us,
+            self.worst_cycle_sync_bits()
+        )?;
+        if let Some(g) = self.rpdo_guard_us {
+            writeln!(
+                f,
+                "#   RPDO window (worst case, queued to last RPDO off the wire) {:.0} µs of the \
+                 {g} µs guard before the SYNC",
+                self.rpdo_window_us()
+            )?;
+        }
+        match self.check() {
+            Ok(()) => writeln!(f, "#   fits"),
+            Err(e) => writeln!(f, "#   REFUSED: {e}"),
+        }
+    }
+}
+
+/// A configuration that does not fit its bus.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BudgetError {
+    #[error(
+        "CAN interface {interface:?}: the configuration needs {load_percent:.1} % of the bus \
+         (worst-case bit stuffing), above its budget of {budget_percent:.0} %; most of it: {top}. \
+         Spread the drives over more interfaces, send feedback every n-th SYNC, or map fewer \
+         objects (docs/can-protocol.md \"Bus budget\")"
+    )]
+    Load {
+        interface: String,
+        load_percent: f64,
+        budget_percent: f64,
+        top: String,
+    },
+    #[error(
+        "CAN interface {interface:?}: the worst SYNC period needs {cycle_us:.0} µs on the wire \
+         (synchronous frames plus blocking), more than the {period_us} µs period; most of it: \
+         {top}"
+    )]
+    Cycle {
+        interface: String,
+        cycle_us: f64,
+        period_us: u32,
+        top: String,
+    },
+    #[error(
+        "CAN interface {interface:?}: the cycle's RPDOs need up to {window_us:.0} µs to leave the \
+         wire (behind blocking and higher-priority frames), more than bus.rpdo_guard_us = \
+         {guard_us} µs before the SYNC: they would miss it"
+    )]
+    RpdoWindow {
+        interface: String,
+        window_us: f64,
+        guard_us: u32,
+    },
+}
+
+/// The budget of every interface of `cfg`, the drives' PDOs given by `pdo_frames(cable)`
+/// (from each drive's configured mapping) and extra measuring nodes by `extra_nodes`
+/// (interface, node id, its PDOs, heartbeat period ms).
+pub fn budget(
+    cfg: &DrivesConfig,
+    pdo_frames: impl Fn(usize) -> Vec<PdoFrame>,
+    extra_nodes: &[(usize, u8, Vec<PdoFrame>, f64)],
+) -> Vec<InterfaceBudget> {
+    let b = &cfg.bus;
+    let itfs = cfg.interfaces();
+    let period_s = f64::from(b.sync_period_us) * 1e-6;
+    let mut out: Vec<InterfaceBudget> = itfs
+        .iter()
+        .map(|itf| InterfaceBudget {
+            name: itf.name.clone(),
+            bitrate_bit_per_s: itf.bitrate_bit_per_s,
+            budget_percent: itf.budget_percent,
+            period_us: b.sync_period_us,
+            lines: Vec::new(),
+            rpdo_guard_us: (b.sync_source == SyncSource::Isochronous).then_some(b.rpdo_guard_us),
+        })
+        .collect();
+    let line = |what: String, sender, cob_id: u16, dlc: u8, rate: Rate| {
+        let per_s = match rate {
+            Rate::EverySync(n) => 1.0 / (period_s * f64::from(n.max(1))),
+            Rate::Every { ms } => 1000.0 / ms,
+        };
+        Line {
+            what,
+            sender,
+            cob_id,
+            dlc,
+            rate,
+            bits: worst_case_bits(dlc),
+            per_s,
+        }
+    };
+    let safety_itfs = cfg.safety_frame_interfaces();
+    for (ib_index, ib) in out.iter_mut().enumerate() {
+        ib.lines.push(line(
+            "SYNC".into(),
+            Sender::Master,
+            0x080,
+            0,
+            Rate::EverySync(1),
+        ));
+        ib.lines.push(line(
+            "heartbeat drive-io".into(),
+            Sender::Master,
+            0x700 + u16::from(b.master_node_id),
+            1,
+            Rate::Every {
+                ms: f64::from(b.master_heartbeat_ms),
+            },
+        ));
+        ib.lines.push(line(
+            "SDO headroom (request + response)".into(),
+            Sender::Reserve,
+            0x600,
+            8,
+            Rate::Every {
+                ms: SDO_RESERVE_PERIOD_MS / 2.0,
+            },
+        ));
+        if let Some(sh) = cfg
+            .safety_heartbeat
+            .as_ref()
+            .filter(|_| safety_itfs.contains(&ib_index))
+        {
+            // Two doubled frames per refresh time: the configuration signature pair, then the
+            // heartbeat pair (docs/safety-monitor.md).
+            for (k, what) in [
+                "safety heartbeat",
+                "safety heartbeat (inverse)",
+                "safety signature",
+                "safety signature (inverse)",
+            ]
+            .iter()
+            .enumerate()
+            {
+                ib.lines.push(line(
+                    (*what).into(),
+                    Sender::Monitor,
+                    sh.cob_id + k as u16,
+                    8,
+                    Rate::Every {
+                        ms: f64::from(sh.refresh_time_ms),
+                    },
+                ));
+            }
+        }
+    }
+    let mut node_lines = |iface: usize, node: u8, what: &str, pdos: &[PdoFrame], hb_ms: f64| {
+        let Some(ib) = out.get_mut(iface) else {
+            return;
+        };
+        for (k, p) in pdos.iter().enumerate() {
+            let name = if p.rpdo {
+                format!("RPDO{} node {node}", k + 1)
+            } else {
+                format!("TPDO{} node {node}", k + 1)
+            };
+            ib.lines.push(line(
+                name,
+                if p.rpdo {
+                    Sender::Master
+                } else {
+                    Sender::Node(node)
+                },
+                p.cob_id,
+                p.dlc,
+                Rate::EverySync(p.every_n_sync),
+            ));
+        }
+        ib.lines.push(line(
+            format!("heartbeat {what} node {node}"),
+            Sender::Node(node),
+            0x700 + u16::from(node),
+            1,
+            Rate::Every { ms: hb_ms },
+        ));
+        ib.lines.push(line(
+            format!("EMCY headroom node {node}"),
+            Sender::Reserve,
+            0x080 + u16::from(node),
+            8,
+            Rate::Every {
+                ms: EMCY_RESERVE_PERIOD_MS,
+            },
+        ));
+    };
+    for (i, w) in cfg.winches.iter().enumerate() {
+        node_lines(
+            cfg.winch_interface(i),
+            w.node_id,
+            "drive",
+            &pdo_frames(i),
+            f64::from(b.heartbeat_producer_ms),
+        );
+    }
+    for (iface, node, pdos, hb_ms) in extra_nodes {
+        node_lines(*iface, *node, "node", pdos, *hb_ms);
+    }
+    if let (Some(io), Some(iface)) = (&cfg.safety_io, cfg.safety_io_interface())
+        && let Some(ib) = out.get_mut(iface)
+    {
+        ib.lines.push(line(
+            format!("safety I/O inputs node {}", io.node_id),
+            Sender::Node(io.node_id),
+            crate::config::safety_io_tpdo_cob_id(io.node_id),
+            2,
+            Rate::Every {
+                ms: f64::from(io.inputs_period_ms),
+            },
+        ));
+        ib.lines.push(line(
+            format!("heartbeat safety I/O node {}", io.node_id),
+            Sender::Node(io.node_id),
+            0x700 + u16::from(io.node_id),
+            1,
+            Rate::Every {
+                ms: f64::from(io.heartbeat_ms),
+            },
+        ));
+        ib.lines.push(line(
+            format!("EMCY headroom node {}", io.node_id),
+            Sender::Reserve,
+            0x080 + u16::from(io.node_id),
+            8,
+            Rate::Every {
+                ms: EMCY_RESERVE_PERIOD_MS,
+            },
+        ));
+    }
+    // RPDOs and TPDOs of a node were numbered in one sequence: renumber per direction.
+    for ib in &mut out {
+        renumber(&mut ib.lines);
+    }
+    out
+}
+
+/// "RPDO1, RPDO2 …" and "TPDO1 …" per node, counted per direction.
+fn renumber(lines: &mut [Line]) {
+    let mut counts: Vec<(String, u32)> = Vec::new();
+    for l in lines.iter_mut() {
+        let (kind, rest) = match l.what.split_once("PDO") {
+            Some((k, r)) if k == "R" || k == "T" => (k.to_string(), r.to_string()),
+            _ => continue,
+        };
+        let node = rest.split_once(" node ").map_or("", |x| x.1).to_string();
+        let key = format!("{kind}{node}");
+        let n = match counts.iter_mut().find(|c| c.0 == key) {
+            Some(c) => {
+                c.1 += 1;
+                c.1
+            }
+            None => {
+                counts.push((key, 1));
+                1
+            }
+        };
+        l.what = format!("{kind}PDO{n} node {node}");
+    }
+}
+
+/// The PDO layout drive-io configures today (docs/can-protocol.md): RPDO1 = controlword +
+/// target position (6 B), TPDO1 = statusword + position actual (6 B), TPDO2 = velocity actual +
+/// force (8 B), every SYNC.
+pub fn fixed_layout(node: u8) -> Vec<PdoFrame> {
+    let n = u16::from(node);
+    vec![
+        PdoFrame {
+            cob_id: 0x200 + n,
+            dlc: 6,
+            rpdo: true,
+            every_n_sync: 1,
+        },
+        PdoFrame {
+            cob_id: 0x180 + n,
+            dlc: 6,
+            rpdo: false,
+            every_n_sync: 1,
+        },
+        PdoFrame {
+            cob_id: 0x280 + n,
+            dlc: 8,
+            rpdo: false,
+            every_n_sync: 1,
+        },
+    ]
+}
+
+/// The budget of `cfg` with the PDO layout drive-io configures, every interface checked:
+/// the first interface that does not fit is the error.
+pub fn check(cfg: &DrivesConfig) -> Result<Vec<InterfaceBudget>, BudgetError> {
+    let all = budget(cfg, |i| fixed_layout(cfg.winches[i].node_id), &[]);
+    for ib in &all {
+        ib.check()?;
+    }
+    Ok(all)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn drives(per_interface: &[usize], extra: &str) -> DrivesConfig {
+        let mut t = String::from("[bus]\n");
+        t.push_str(extra);
+        for (k, _) in per_interface.iter().enumerate() {
+            t.push_str(&format!(
+                "[[bus.interface]]\nname = \"can{k}\"\ntransport = \"udpbus:239.255.70.1:{}\"\n",
+                21000 + k
+            ));
+        }
+        let mut node = 0;
+        for (k, n) in per_interface.iter().enumerate() {
+            for _ in 0..*n {
+                node += 1;
+                t.push_str(&format!(
+                    "[[winch]]\ninterface = \"can{k}\"\nnode_id = {node}\ndrum_diameter_m = 0.305\n\
+                     gear_ratio = 10.0\ncounts_per_rev = 1048576\nsign = 1\n"
+                ));
+            }
+        }
+        t.push_str(
+            "[safety_heartbeat]\ncob_id = 0x101\nvalidation_time_ms = 50\npair_window_ms = 10\n\
+             release_pairs = 3\nrefresh_time_ms = 15\n",
+        );
+        DrivesConfig::parse(&t).unwrap()
+    }
+
+    /// The issue's figures: 8 drives with today's three PDOs on one 1 Mbit/s bus need about
+    /// three buses' worth (the cyclic frames alone: 2975 bit per 1 ms cycle).
+    #[test]
+    fn eight_drives_with_three_pdos_on_one_bus_are_refused_naming_the_frames() {
+        let cfg = drives(&[8], "");
+        let all = budget(&cfg, |i| fixed_layout(cfg.winches[i].node_id), &[]);
+        let ib = &all[0];
+        assert_eq!(ib.worst_cycle_sync_bits(), 2975);
+        assert!(ib.load_percent() > 297.0, "{}", ib.load_percent());
+        let e = ib.check().unwrap_err().to_string();
+        assert!(
+            e.contains("\"can0\"") && e.contains("TPDO2") && e.contains("RPDO1"),
+            "{e}"
+        );
+        assert!(check(&cfg).is_err());
+    }
+
+    #[test]
+    fn two_drives_with_three_pdos_are_still_above_the_budget() {
+        let cfg = drives(&[2, 2, 2, 2], "");
+        let all = check(&cfg).unwrap_err();
+        assert!(matches!(all, BudgetError::Load { .. }), "{all}");
+        let b = budget(&cfg, |i| fixed_layout(cfg.winches[i].node_id), &[]);
+        // 55 + 2 × (115 + 115 + 135) = 785 bit of synchronous frames per 1 ms.
+        assert_eq!(b[0].worst_cycle_sync_bits(), 785);
+        assert!(
+            (78.0..90.0).contains(&b[0].load_percent()),
+            "{}",
+            b[0].load_percent()
+        );
+    }
+
+    #[test]
+    fn a_lean_layout_fits_and_a_budget_set_lower_refuses_it() {
+        // RPDO 6 B + TPDO 6 B every SYNC, velocity 4 B every 10th.
+        let lean = |node: u8| {
+            let n = u16::from(node);
+            vec![
+                PdoFrame {
+                    cob_id: 0x200 + n,
+                    dlc: 6,
+                    rpdo: true,
+                    every_n_sync: 1,
+                },
+                PdoFrame {
+                    cob_id: 0x180 + n,
+                    dlc: 6,
+                    rpdo: false,
+                    every_n_sync: 1,
+                },
+                PdoFrame {
+                    cob_id: 0x280 + n,
+                    dlc: 4,
+                    rpdo: false,
+                    every_n_sync: 10,
+                },
+            ]
+        };
+        // With the monitor's pairs on every drive interface the RPDOs can wait behind them.
+        let cfg = drives(&[2, 2, 2, 2], "");
+        let b = budget(&cfg, |i| lean(cfg.winches[i].node_id), &[]);
+        assert!(
+            matches!(b[0].check(), Err(BudgetError::RpdoWindow { .. })),
+            "{}",
+            b[0]
+        );
+        // With a safety I/O node on its own interface they travel there only.
+        let cfg = drives(&[2, 2, 2, 2, 0], "");
+        let mut cfg = cfg;
+        cfg.safety_io = Some(crate::config::SafetyIoConfig {
+            interface: "can4".into(),
+            node_id: 0x30,
+            inputs_period_ms: 10,
+            heartbeat_ms: 10,
+        });
+        cfg.validate().unwrap();
+        let b = budget(&cfg, |i| lean(cfg.winches[i].node_id), &[]);
+        assert!(b[4].lines.iter().any(|l| l.sender == Sender::Monitor));
+        assert!(
+            b[..4]
+                .iter()
+                .all(|ib| ib.lines.iter().all(|l| l.sender != Sender::Monitor))
+        );
+        for ib in &b {
+            ib.check().unwrap_or_else(|e| panic!("{e}\n{ib}"));
+            assert!(ib.load_percent() < 70.0);
+        }
+        let text = b[0].to_string();
+        assert!(
+            text.contains("fits") && text.contains("RPDO window"),
+            "{text}"
+        );
+        let mut tight = cfg.clone();
+        for itf in &mut tight.bus.interfaces {
+            itf.budget_percent = 40.0;
+        }
+        let b = budget(&tight, |i| lean(tight.winches[i].node_id), &[]);
+        assert!(matches!(b[0].check(), Err(BudgetError::Load { .. })));
+        // An RPDO guard too short for two RPDOs behind a blocking frame.
+        let mut short = cfg.clone();
+        short.bus.rpdo_guard_us = 300;
+        let b = budget(&short, |i| lean(short.winches[i].node_id), &[]);
+        assert!(
+            matches!(b[0].check(), Err(BudgetError::RpdoWindow { .. })),
+            "{}",
+            b[0]
+        );
+    }
+}
