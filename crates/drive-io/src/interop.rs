@@ -125,8 +125,9 @@ impl External {
         }
     }
 
-    fn publish(&mut self, lengths: &[f64]) -> Res<()> {
-        self.seq += 1;
+    /// Publishes `lengths` with sequence number `seq` (at least the last one + 1).
+    fn publish(&mut self, lengths: &[f64], seq: u64) -> Res<()> {
+        self.seq = seq.max(self.seq + 1);
         let mut sp = JointSetpoint {
             cable_count: lengths.len() as u32,
             sequence: self.seq,
@@ -144,9 +145,14 @@ impl External {
         mut profile: impl FnMut(f64) -> Vec<f64>,
     ) -> Res<DriveFeedback> {
         let t0 = Instant::now();
+        let base = self.seq;
+        let period_s = self.cfg.sync_period_ns() as f64 * 1e-9;
         loop {
             let t = t0.elapsed().as_secs_f64();
-            self.publish(&profile(t))?;
+            // One sequence number per SYNC period of profile time, as motion-core numbers its
+            // setpoints: a publisher stalled for two periods moves two periods' worth, and
+            // drive-io's step check allows exactly that.
+            self.publish(&profile(t), base + 1 + (t / period_s) as u64)?;
             let f = self.latest(Duration::from_secs(1))?;
             let s = BusState::from_u32(f.bus_state);
             if t0.elapsed() >= d || !matches!(s, Some(BusState::Ready | BusState::Running)) {
