@@ -538,14 +538,36 @@ pub fn fixed_layout(node: u8) -> Vec<PdoFrame> {
     ]
 }
 
-/// The budget of `cfg` with the PDO layout drive-io configures, every interface checked:
-/// the first interface that does not fit is the error.
-pub fn check(cfg: &DrivesConfig) -> Result<Vec<InterfaceBudget>, BudgetError> {
-    let all = budget(cfg, |i| fixed_layout(cfg.winches[i].node_id), &[]);
+/// The budget of `cfg` for the nodes' plans (their configured PDO frames,
+/// [`crate::commissioning::plan_all`]).
+pub fn of_plans(cfg: &DrivesConfig, plans: &[crate::commissioning::Plan]) -> Vec<InterfaceBudget> {
+    let (drives, extra) = crate::commissioning::budget_frames(cfg, plans);
+    budget(
+        cfg,
+        |i| drives.get(i).cloned().unwrap_or_default(),
+        &extra,
+    )
+}
+
+/// The budget of `cfg` with the PDO frames every node will be configured with (reads the
+/// EDS files), every interface checked: the first one that does not fit is the error.
+pub fn check(cfg: &DrivesConfig) -> Result<Vec<InterfaceBudget>, CheckError> {
+    let plans = crate::commissioning::plan_all(cfg, None)?;
+    let all = of_plans(cfg, &plans);
     for ib in &all {
         ib.check()?;
     }
     Ok(all)
+}
+
+/// Why [`check`] refused a configuration.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    /// The nodes' configuration could not be planned (EDS, mapping).
+    #[error(transparent)]
+    Setup(#[from] crate::master::SetupError),
+    #[error(transparent)]
+    Budget(#[from] BudgetError),
 }
 
 #[cfg(test)]
@@ -592,15 +614,15 @@ mod tests {
             e.contains("\"can0\"") && e.contains("TPDO2") && e.contains("RPDO1"),
             "{e}"
         );
-        assert!(check(&cfg).is_err());
+        assert!(matches!(check(&cfg), Err(CheckError::Budget(_))));
     }
 
     #[test]
     fn two_drives_with_three_pdos_are_still_above_the_budget() {
         let cfg = drives(&[2, 2, 2, 2], "");
-        let all = check(&cfg).unwrap_err();
-        assert!(matches!(all, BudgetError::Load { .. }), "{all}");
         let b = budget(&cfg, |i| fixed_layout(cfg.winches[i].node_id), &[]);
+        let e = b[0].check().unwrap_err();
+        assert!(matches!(e, BudgetError::Load { .. }), "{e}");
         // 55 + 2 × (115 + 115 + 135) = 785 bit of synchronous frames per 1 ms.
         assert_eq!(b[0].worst_cycle_sync_bits(), 785);
         assert!(

@@ -1311,15 +1311,14 @@ pub fn budget_frames(
     };
     let mut drives = Vec::new();
     let mut extra = Vec::new();
+    // plan_all: the drives in cable order, then the force sensors in their order.
+    let mut j = 0;
     for p in plans {
         match p.kind {
             NodeKind::Drive { .. } => drives.push(convert(p)),
             NodeKind::ForceSensor { .. } => {
-                let j = cfg
-                    .force_sensors
-                    .iter()
-                    .position(|s| s.node_id == p.node)
-                    .unwrap_or(0);
+                j += 1;
+                let j = j - 1;
                 extra.push((
                     cfg.sensor_interface(j),
                     p.node,
