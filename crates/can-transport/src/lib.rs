@@ -23,6 +23,7 @@ pub mod safety_frame;
 mod socketcan_bus;
 mod spec;
 mod udp;
+pub mod wire;
 
 pub use bus_error::{BusCondition, BusErrorFrame, RxBusError, RxEvent};
 pub use candump::LoggingBus;
@@ -57,6 +58,10 @@ pub enum CanError {
     TxFull { iface: String },
     #[error("{iface:?} cannot carry CAN error frames")]
     NoErrorFrames { iface: String },
+    #[error(
+        "{iface:?} cannot echo transmitted frames (transmit confirmation needs socketcan: or wire:)"
+    )]
+    NoTxEcho { iface: String },
     #[error("invalid frame: {0}")]
     Frame(#[from] FrameError),
 }
@@ -106,6 +111,15 @@ pub trait CanBus: Send {
     fn bus_errors(&self) -> u64 {
         0
     }
+    /// Transmit confirmation: from now on this endpoint's own frames come back through the
+    /// receive calls once they have left the wire, with [`RxFrame::own`] set (SocketCAN:
+    /// `CAN_RAW_RECV_OWN_MSGS`; `wire:`: at the frame's end-of-frame time in the bus model).
+    /// Transports without it refuse ([`CanError::NoTxEcho`]).
+    fn enable_tx_echo(&mut self) -> Result<(), CanError> {
+        Err(CanError::NoTxEcho {
+            iface: self.interface().to_string(),
+        })
+    }
     /// A descriptor that becomes readable when a receive may return something, for waiting
     /// on the bus and other sources in one poll ([`wait_readable_any`]); drain it with
     /// [`CanBus::try_recv_event`] (which may still return `None`: a filtered or malformed
@@ -143,6 +157,9 @@ impl<B: CanBus + ?Sized> CanBus for Box<B> {
     }
     fn bus_errors(&self) -> u64 {
         (**self).bus_errors()
+    }
+    fn enable_tx_echo(&mut self) -> Result<(), CanError> {
+        (**self).enable_tx_echo()
     }
     fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
         (**self).readiness_fd()

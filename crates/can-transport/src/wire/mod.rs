@@ -1,0 +1,5 @@
+//! The drive bus as it is on the wire: frame lengths in bits ([`bits`]), a model of one CAN
+//! bus with bit time, arbitration and per-node transmit queues ([`model`]), and the `wire:`
+//! transport through which a process is one node of a bus the `can-wire` hub runs.
+pub mod bits;
+pub mod model;
