@@ -9,6 +9,8 @@
 //!   like a SocketCAN raw socket), so drive-io, the plant and the safety monitor share one "bus".
 //! * `udp:<local ip:port>-><remote ip:port>`: point-to-point cannelloni, to bridge a real bus
 //!   through a `cannelloni` instance.
+//! * `wire:<socket path>`: a node of a bus with physics (bit time, arbitration, transmit
+//!   queues) that the `can-wire` hub runs; see [`wire`].
 //!
 //! [`candump`] formats/parses can-utils log lines and [`LoggingBus`] logs every frame.
 
@@ -175,6 +177,7 @@ pub fn open(spec: &TransportSpec) -> Result<Box<dyn CanBus>, CanError> {
         TransportSpec::PyCanUdp { group, port } => {
             Box::new(pycan_udp::PyCanUdpBus::open(*group, *port)?)
         }
+        TransportSpec::Wire { path } => Box::new(wire::WireBus::connect(path)?),
     })
 }
 

@@ -306,3 +306,22 @@ fn swapped_statistics_merge_to_the_whole() {
     assert_eq!(total.id_keys[0].unwrap().id, 0x201);
     assert_eq!(b.stats().frames, 0);
 }
+
+#[test]
+fn the_next_decision_is_known_while_a_frame_is_on_the_wire() {
+    let mut b = bus(1_000_000);
+    let a = b.add_node().unwrap();
+    let c = b.add_node().unwrap();
+    b.submit(a, std(0x080, &[]), 0, 1).unwrap();
+    assert!(!b.is_quiet() && b.next_decision_ns() == Some(0));
+    let _ = run(&mut b, 0); // SYNC on the wire, nothing else queued
+    assert_eq!(b.next_decision_ns(), None);
+    b.submit(a, std(0x201, &[]), 10, 2).unwrap(); // behind the SYNC in a's queue
+    assert_eq!(b.next_decision_ns(), Some(51_000)); // the SYNC's free time
+    b.submit(c, std(0x202, &[]), 60_000, 3).unwrap();
+    assert_eq!(b.next_decision_ns(), Some(51_000));
+    assert_eq!(b.next_delivery_ns(), Some(48_000));
+    let d = run(&mut b, 10_000_000);
+    assert_eq!(d.iter().map(|d| d.tag).collect::<Vec<_>>(), vec![1, 2, 3]);
+    assert!(b.is_quiet());
+}

@@ -495,13 +495,15 @@ impl Bus {
         self.in_flight.map(|f| f.eof_ns)
     }
 
-    /// When the next arbitration would take place with what is queued now, if anything is
-    /// queued and the bus is not occupied by a frame still to be delivered.
+    /// When the next arbitration will take place with what is queued now (after the frame on
+    /// the wire, if one is: at its free time at the earliest), if anything is queued besides it.
     pub fn next_decision_ns(&self) -> Option<u64> {
-        if self.in_flight.is_some() {
-            return None;
+        match self.in_flight {
+            Some(f) => self
+                .earliest_waiting(Some(f.node))
+                .map(|t| t.max(f.free_ns)),
+            None => self.earliest_waiting(None).map(|t| t.max(self.free_at_ns)),
         }
-        self.earliest_head().map(|t| t.max(self.free_at_ns))
     }
 
     /// Nothing on the wire and nothing queued: only a new submission makes anything happen.
@@ -510,12 +512,20 @@ impl Bus {
     }
 
     fn earliest_head(&self) -> Option<u64> {
+        self.earliest_waiting(None)
+    }
+
+    /// The earliest submit time among the frames that will compete next: each node's head,
+    /// or for `on_wire` (the node whose head is on the wire) the frame behind it.
+    fn earliest_waiting(&self, on_wire: Option<usize>) -> Option<u64> {
         let qlen = self.cfg.queue_len;
         self.queues[..self.nodes_added]
             .iter()
             .enumerate()
-            .filter(|(_, q)| q.len > 0)
-            .map(|(n, q)| self.slots[n * qlen + q.head].submit_ns)
+            .filter_map(|(n, q)| {
+                let skip = usize::from(on_wire == Some(n));
+                (q.len > skip).then(|| self.slots[n * qlen + (q.head + skip) % qlen].submit_ns)
+            })
             .min()
     }
 
