@@ -94,6 +94,8 @@ pub struct WireBus {
     bitrate_bps: u32,
     counters: Counters,
     sent: u64,
+    /// Frames refused here (queue full), reported to the hub with every record.
+    refused: u32,
     echo: bool,
     errors_subscribed: bool,
     buf: Box<[u8; MAX_MESSAGE]>,
@@ -177,6 +179,7 @@ impl WireBus {
             bitrate_bps: w.bitrate_bps,
             counters,
             sent,
+            refused: 0,
             echo: false,
             errors_subscribed: false,
             buf: Box::new([0; MAX_MESSAGE]),
@@ -200,7 +203,8 @@ impl WireBus {
         self.sent.saturating_sub(self.counters.resolved())
     }
 
-    fn send_record(&self, rec: &[u8; RECORD_LEN]) -> std::io::Result<()> {
+    fn send_record(&self, rec: &mut [u8; RECORD_LEN]) -> std::io::Result<()> {
+        proto::set_refused_total(rec, self.refused);
         // SAFETY: sending a buffer we own on a descriptor we own.
         let n = unsafe {
             libc::send(
@@ -313,6 +317,34 @@ impl WireBus {
     }
 }
 
+impl Drop for WireBus {
+    /// Reports the final refused count (waiting up to 100 ms for room in the socket).
+    fn drop(&mut self) {
+        let tv = libc::timeval {
+            tv_sec: 0,
+            tv_usec: 100_000,
+        };
+        let fd = self.sock.as_raw_fd();
+        // SAFETY: fcntl/setsockopt on our descriptor with a valid timeval.
+        unsafe {
+            let flags = libc::fcntl(fd, libc::F_GETFL);
+            libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK);
+            libc::setsockopt(
+                fd,
+                libc::SOL_SOCKET,
+                libc::SO_SNDTIMEO,
+                (&tv as *const libc::timeval).cast(),
+                std::mem::size_of::<libc::timeval>() as libc::socklen_t,
+            );
+        }
+        let mut rec = [0u8; RECORD_LEN];
+        proto::encode_report(&mut rec);
+        proto::set_refused_total(&mut rec, self.refused);
+        // SAFETY: sending our buffer on our descriptor (blocking up to SO_SNDTIMEO).
+        unsafe { libc::send(fd, rec.as_ptr().cast(), RECORD_LEN, libc::MSG_NOSIGNAL) };
+    }
+}
+
 fn set_nonblocking(fd: RawFd) -> std::io::Result<()> {
     // SAFETY: fcntl on a descriptor we own.
     let flags = unsafe { libc::fcntl(fd, libc::F_GETFL) };
@@ -328,16 +360,17 @@ impl CanBus for WireBus {
         let stamp = monotonic_ns();
         let mut rec = [0u8; RECORD_LEN];
         if self.sent.saturating_sub(self.counters.resolved()) >= self.queue_len {
-            // Tell the hub, so its statistics count the drop (best effort: the hub may be
-            // busy; the refusal stands either way).
+            // Tell the hub, so its statistics count the drop (best effort: when the notice
+            // cannot be sent, the next record's refused count still tells the hub).
+            self.refused = self.refused.wrapping_add(1);
             proto::encode_frame(Kind::Refused, frame, stamp, 0, &mut rec);
-            let _ = self.send_record(&rec);
+            let _ = self.send_record(&mut rec);
             return Err(CanError::TxFull {
                 iface: self.name.clone(),
             });
         }
         proto::encode_frame(Kind::Frame, frame, stamp, self.sent as u32, &mut rec);
-        self.send_record(&rec)
+        self.send_record(&mut rec)
             .map_err(|e| self.map_send_err(e, "send"))?;
         self.sent += 1;
         Ok(())
@@ -398,7 +431,7 @@ impl CanBus for WireBus {
     fn send_bus_error(&mut self, error: &BusErrorFrame) -> Result<(), CanError> {
         let mut rec = [0u8; RECORD_LEN];
         proto::encode_error(error, monotonic_ns(), &mut rec);
-        self.send_record(&rec)
+        self.send_record(&mut rec)
             .map_err(|e| self.map_send_err(e, "send"))
     }
 
@@ -409,7 +442,7 @@ impl CanBus for WireBus {
     fn enable_tx_echo(&mut self) -> Result<(), CanError> {
         let mut rec = [0u8; RECORD_LEN];
         proto::encode_echo_on(&mut rec);
-        self.send_record(&rec)
+        self.send_record(&mut rec)
             .map_err(|e| self.map_send_err(e, "send echo request"))?;
         self.echo = true;
         Ok(())

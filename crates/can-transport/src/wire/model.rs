@@ -490,6 +490,14 @@ impl Bus {
         }
     }
 
+    /// Counts `n` frames the sender refused itself whose identifiers are not known (their
+    /// notices were lost; the node's total stays exact).
+    pub fn record_refused_count(&mut self, node: usize, n: u64) {
+        if let Some(ns) = self.stats.nodes.get_mut(node) {
+            ns.dropped += n;
+        }
+    }
+
     /// When the frame on the wire completes (its end of frame), if one is on the wire.
     pub fn next_delivery_ns(&self) -> Option<u64> {
         self.in_flight.map(|f| f.eof_ns)

@@ -16,7 +16,7 @@
 //! | 4..8 | identifier (error class bits for [`Kind::Error`]) |
 //! | 8..16 | time stamp, CLOCK_MONOTONIC ns: send time to the hub, end of frame from it |
 //! | 16..20 | tag: the sender's frame number ([`Kind::Frame`], [`Kind::Own`]) or the sending node ([`Kind::Rx`]) |
-//! | 20..24 | 0 |
+//! | 20..24 | node → hub: how many frames the node has refused itself so far (all kinds) |
 //! | 24..32 | data |
 //!
 //! The counter table (a memfd the hub maps read-write and each client read-only) holds one
@@ -56,6 +56,8 @@ pub enum Kind {
     Rx = 5,
     /// Hub → node: the node's own frame, off the wire at the stamp (after [`Kind::EchoOn`]).
     Own = 6,
+    /// Node → hub: only the count of refused frames (sent when the node closes).
+    Report = 7,
 }
 
 impl Kind {
@@ -67,6 +69,7 @@ impl Kind {
             4 => Kind::Error,
             5 => Kind::Rx,
             6 => Kind::Own,
+            7 => Kind::Report,
             _ => return None,
         })
     }
@@ -86,6 +89,8 @@ pub enum Record {
         stamp_ns: u64,
     },
     EchoOn,
+    /// The node's count of frames it refused itself ([`Kind::Report`]).
+    Report,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -134,6 +139,23 @@ pub fn encode_echo_on(out: &mut [u8; RECORD_LEN]) {
     out[0] = Kind::EchoOn as u8;
 }
 
+/// Encodes a report (only the refused count, see [`set_refused_total`]).
+pub fn encode_report(out: &mut [u8; RECORD_LEN]) {
+    *out = [0; RECORD_LEN];
+    out[0] = Kind::Report as u8;
+}
+
+/// Node → hub: stamps `out` with the node's count of frames refused so far. Every record
+/// carries it, so the hub's count is exact although a single refusal notice may be lost.
+pub fn set_refused_total(out: &mut [u8; RECORD_LEN], refused: u32) {
+    out[20..24].copy_from_slice(&refused.to_le_bytes());
+}
+
+/// The count [`set_refused_total`] wrote.
+pub fn refused_total(rec: &[u8; RECORD_LEN]) -> u32 {
+    u32::from_le_bytes([rec[20], rec[21], rec[22], rec[23]])
+}
+
 /// Decodes one record; never panics on any input.
 pub fn decode(rec: &[u8; RECORD_LEN]) -> Result<Record, ProtoError> {
     let kind = Kind::from_u8(rec[0]).ok_or(ProtoError::Kind(rec[0]))?;
@@ -144,6 +166,7 @@ pub fn decode(rec: &[u8; RECORD_LEN]) -> Result<Record, ProtoError> {
     let data: &[u8; 8] = rec[24..32].try_into().expect("8 bytes");
     match kind {
         Kind::EchoOn => Ok(Record::EchoOn),
+        Kind::Report => Ok(Record::Report),
         Kind::Error => Ok(Record::Error {
             error: BusErrorFrame::new(id, data),
             stamp_ns,
