@@ -234,11 +234,13 @@ pub struct Delays {
 }
 
 impl Delays {
+    /// Quantiles from the histogram (bucket upper ends, 2 significant digits), never above
+    /// the exact maximum.
     fn of(h: &Histogram<u32>, max: u64) -> Self {
         Self {
             count: h.len(),
-            p50: IdStats::quantile(h, 0.5),
-            p99: IdStats::quantile(h, 0.99),
+            p50: IdStats::quantile(h, 0.5).map(|v| v.min(max)),
+            p99: IdStats::quantile(h, 0.99).map(|v| v.min(max)),
             max,
         }
     }
