@@ -22,7 +22,7 @@ fn model(c: &mut Criterion) {
         |b| {
             b.iter(|| {
                 let t = k * 100_000;
-                let frame = if k % 10 == 0 {
+                let frame = if k.is_multiple_of(10) {
                     CanFrame::new(0x080, &[]).unwrap()
                 } else {
                     CanFrame::new(0x180 + (k % 10) as u16, &[k as u8, 0, 0, 0]).unwrap()
