@@ -165,8 +165,8 @@ pub struct HubConfig {
     /// Hub time runs this far behind the clock: a submission that reaches the hub within it
     /// still competes in the arbitration at its stamp.
     pub lookahead_ns: u64,
-    /// The hub may postpone an event by up to this to handle it in one wake-up with a later
-    /// one (fewer wake-ups, deliveries up to this late in real time; stamps are unaffected).
+    /// The hub wakes this long after the earliest due event and handles everything due by then
+    /// (fewer wake-ups; deliveries up to this late in real time; stamps are unaffected).
     pub coalesce_ns: u64,
     pub stats_path: Option<PathBuf>,
     pub stats_period_ns: u64,

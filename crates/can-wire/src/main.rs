@@ -29,8 +29,10 @@ struct Args {
     /// still competes at its stamp.
     #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u64).range(0..=100_000))]
     lookahead_us: u64,
-    /// Handle events up to this much later to share a wake-up, µs (0: every event on time).
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=10_000))]
+    /// Wake this long after the earliest due event and handle everything due by then in one
+    /// pass, µs: fewer wake-ups (CPU), deliveries up to this late in real time (stamps stay
+    /// exact; a node's answer to a late delivery is stamped late). 0: every event on time.
+    #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u64).range(0..=10_000))]
     coalesce_us: u64,
     /// Written (with "ready") once every socket and interface is open.
     #[arg(long)]
