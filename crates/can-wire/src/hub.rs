@@ -787,6 +787,14 @@ pub fn coalesced_wake(deadlines: &[u64], window: u64) -> Option<u64> {
     deadlines.iter().min().map(|d| d.saturating_add(window))
 }
 
+/// What [`Hub::pass`] keeps between passes (preallocated).
+pub struct LoopState {
+    next_stats: u64,
+    dues: Vec<u64>,
+    pfds: Vec<libc::pollfd>,
+    to_writer: SyncSender<ToWriter>,
+}
+
 /// The running hub.
 pub struct Hub {
     cfg: HubConfig,
@@ -844,75 +852,94 @@ impl Hub {
 
     /// Runs until `stop` is set (SIGTERM/SIGINT), then writes the final statistics.
     pub fn run(mut self, stop: &AtomicBool) -> Result<(), HubError> {
+        let mut st = self.loop_state();
+        while !stop.load(Ordering::Relaxed) {
+            self.pass(&mut st);
+        }
+        self.finish(&st);
+        Ok(())
+    }
+
+    /// The state of [`Hub::run`]'s loop, for driving it pass by pass ([`Hub::pass`]).
+    pub fn loop_state(&self) -> LoopState {
+        let nb = self.buses.len();
+        LoopState {
+            next_stats: crs_rt::now_ns() + self.cfg.stats_period_ns,
+            dues: Vec::with_capacity(nb),
+            pfds: Vec::with_capacity(nb),
+            to_writer: self.writer.sender(),
+        }
+    }
+
+    /// One pass of the loop: read every bus's input, advance the buses that are due, send
+    /// what left the wire, hand the statistics over when their period is up, then sleep to
+    /// the next event. Allocates nothing (but when a node joins or leaves).
+    pub fn pass(&mut self, st: &mut LoopState) {
         let lookahead = self.cfg.lookahead_ns;
         let period = self.cfg.stats_period_ns;
-        let mut next_stats = crs_rt::now_ns() + period;
-        let nb = self.buses.len();
-        let mut dues: Vec<u64> = Vec::with_capacity(nb + 1);
-        let mut pfds: Vec<libc::pollfd> = Vec::with_capacity(nb);
-        let to_writer = self.writer.sender();
-        while !stop.load(Ordering::Relaxed) {
-            let now = crs_rt::now_ns();
-            self.drain_all(now, &to_writer);
-            for b in &mut self.buses {
-                if b.due_at(lookahead).is_some_and(|t| t <= now) {
-                    b.advance(now, lookahead);
-                }
-                b.flush(); // deliveries, and error frames passed through while draining
+        let now = crs_rt::now_ns();
+        self.drain_all(now, &st.to_writer);
+        for b in &mut self.buses {
+            if b.due_at(lookahead).is_some_and(|t| t <= now) {
+                b.advance(now, lookahead);
             }
-            if now >= next_stats {
-                self.exchange_stats(now, false);
-                next_stats += period.max(1);
-                if next_stats <= now {
-                    next_stats = now + period;
-                }
-            }
-            // Next wake-up: the buses' deadlines (coalesced) and the statistics tick.
-            dues.clear();
-            pfds.clear();
-            for b in &self.buses {
-                match b.due_at(lookahead) {
-                    Some(t) => dues.push(t),
-                    None => pfds.push(libc::pollfd {
-                        fd: b.epfd.as_raw_fd(),
-                        events: libc::POLLIN,
-                        revents: 0,
-                    }),
-                }
-            }
-            let wake = coalesced_wake(&dues, self.cfg.coalesce_ns)
-                .map_or(next_stats, |t| t.min(next_stats));
-            self.wakeups += 1;
-            // Input on a quiet bus is stamped ≥ now, so its arbitration is due ≥ now +
-            // lookahead: when the hub wakes anyway by then (plus the coalescing allowance), it
-            // need not wake for the input itself.
-            let horizon = crs_rt::now_ns() + lookahead + self.cfg.coalesce_ns;
-            if pfds.is_empty() || wake <= horizon {
-                crs_rt::sleep_until(wake);
-            } else {
-                let left = wake.saturating_sub(crs_rt::now_ns());
-                let ts = libc::timespec {
-                    tv_sec: (left / 1_000_000_000) as libc::time_t,
-                    tv_nsec: (left % 1_000_000_000) as libc::c_long,
-                };
-                // SAFETY: ppoll over our pollfd array with a valid timespec; EINTR (a signal)
-                // just ends the wait. Whatever became readable is read by the next pass.
-                unsafe {
-                    libc::ppoll(
-                        pfds.as_mut_ptr(),
-                        pfds.len() as libc::nfds_t,
-                        &ts,
-                        std::ptr::null(),
-                    )
-                };
+            b.flush(); // deliveries, and error frames passed through while draining
+        }
+        if now >= st.next_stats {
+            self.exchange_stats(now, false);
+            st.next_stats += period.max(1);
+            if st.next_stats <= now {
+                st.next_stats = now + period;
             }
         }
-        // Read what the nodes sent last, deliver what is complete by now, then the final
-        // statistics.
+        // Next wake-up: the buses' deadlines (coalesced) and the statistics tick.
+        st.dues.clear();
+        st.pfds.clear();
+        for b in &self.buses {
+            match b.due_at(lookahead) {
+                Some(t) => st.dues.push(t),
+                None => st.pfds.push(libc::pollfd {
+                    fd: b.epfd.as_raw_fd(),
+                    events: libc::POLLIN,
+                    revents: 0,
+                }),
+            }
+        }
+        let wake = coalesced_wake(&st.dues, self.cfg.coalesce_ns)
+            .map_or(st.next_stats, |t| t.min(st.next_stats));
+        self.wakeups += 1;
+        // Input on a quiet bus is stamped ≥ now, so its arbitration is due ≥ now + lookahead:
+        // when the hub wakes anyway by then (plus the coalescing allowance), it need not wake
+        // for the input itself.
+        let horizon = crs_rt::now_ns() + lookahead + self.cfg.coalesce_ns;
+        if st.pfds.is_empty() || wake <= horizon {
+            crs_rt::sleep_until(wake);
+        } else {
+            let left = wake.saturating_sub(crs_rt::now_ns());
+            let ts = libc::timespec {
+                tv_sec: (left / 1_000_000_000) as libc::time_t,
+                tv_nsec: (left % 1_000_000_000) as libc::c_long,
+            };
+            // SAFETY: ppoll over our pollfd array with a valid timespec; EINTR (a signal) just
+            // ends the wait. Whatever became readable is read by the next pass.
+            unsafe {
+                libc::ppoll(
+                    st.pfds.as_mut_ptr(),
+                    st.pfds.len() as libc::nfds_t,
+                    &ts,
+                    std::ptr::null(),
+                )
+            };
+        }
+    }
+
+    /// Reads what the nodes sent last, delivers what is complete by now, writes the final
+    /// statistics (and the summary lines), removes the sockets.
+    pub fn finish(mut self, st: &LoopState) {
         let now = crs_rt::now_ns();
-        self.drain_all(now, &to_writer);
+        self.drain_all(now, &st.to_writer);
         for b in &mut self.buses {
-            b.advance(now, lookahead);
+            b.advance(now, self.cfg.lookahead_ns);
             b.flush();
         }
         self.exchange_stats(now, true);
@@ -922,7 +949,13 @@ impl Hub {
             }
         }
         self.writer.finish();
-        Ok(())
+    }
+
+    /// Nodes on bus `bus` now (host: connected clients).
+    pub fn connected(&self, bus: usize) -> usize {
+        self.buses
+            .get(bus)
+            .map_or(0, |b| b.nodes.iter().filter(|n| n.conn.is_some()).count())
     }
 
     /// Reads what arrived on every bus (new connections, hellos, submissions).
