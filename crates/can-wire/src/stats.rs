@@ -280,6 +280,7 @@ pub struct BusJson {
     /// Busy time over the hub's run time.
     pub load_mean: f64,
     pub load_windows: u64,
+    pub load_window_mean: Option<f64>,
     pub load_window_max: Option<f64>,
     pub violations: u64,
     pub violation_max_ns: u64,
@@ -378,6 +379,7 @@ fn snapshot(
                 busy_s: m.busy_ns as f64 * 1e-9,
                 load_mean: m.busy_ns as f64 / elapsed as f64,
                 load_windows: m.windows,
+                load_window_mean: m.window_load_mean(),
                 load_window_max: (m.windows > 0).then_some(m.window_load_max),
                 violations: m.violations,
                 violation_max_ns: m.violation_max_ns,
