@@ -67,7 +67,10 @@ fn the_hub_loop_allocates_nothing_per_frame() {
     });
     let (a, b, received) = traffic.join().unwrap();
     assert_eq!(allocs, 0, "the hub's loop allocated {allocs} times");
-    assert!(received > 2500, "only {received} frames reached the other node");
+    assert!(
+        received > 2500,
+        "only {received} frames reached the other node"
+    );
     drop((a, b));
     hub.finish(&st);
 }
