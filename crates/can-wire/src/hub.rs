@@ -821,10 +821,21 @@ impl Hub {
         // SAFETY: a descriptor epoll_create1 just returned.
         let epfd = unsafe { OwnedFd::from_raw_fd(raw) };
         let (writer, to_writer, spare_rx) = Writer::start(&cfg, t0, scheduler);
-        let mut buses = Vec::with_capacity(cfg.buses.len());
+        let mut buses: Vec<BusRt> = Vec::with_capacity(cfg.buses.len());
         let mut spares = Vec::with_capacity(cfg.buses.len());
         for (i, spec) in cfg.buses.iter().enumerate() {
-            let b = BusRt::open(spec, t0, &to_writer, i, epfd.as_raw_fd())?;
+            let b = match BusRt::open(spec, t0, &to_writer, i, epfd.as_raw_fd()) {
+                Ok(b) => b,
+                Err(e) => {
+                    // Nothing half-applied: the sockets of the buses opened so far go too.
+                    for b in &buses {
+                        if let Io::Host(h) = &b.io {
+                            let _ = std::fs::remove_file(&h.path);
+                        }
+                    }
+                    return Err(e);
+                }
+            };
             let cfgm = b.model.config();
             spares.push(
                 (0..2)
