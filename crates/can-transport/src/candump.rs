@@ -190,7 +190,8 @@ impl<B: CanBus> CanBus for LoggingBus<B> {
     }
     fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<RxFrame>, CanError> {
         let r = self.inner.recv_timeout(timeout)?;
-        if let Some(rx) = &r {
+        // An own frame's echo was logged when it was sent.
+        if let Some(rx) = r.as_ref().filter(|rx| !rx.own) {
             self.log(&rx.frame);
         }
         Ok(r)
@@ -213,7 +214,8 @@ impl<B: CanBus> CanBus for LoggingBus<B> {
     ) -> Result<Option<crate::RxEvent>, CanError> {
         let r = self.inner.recv_event_timeout(timeout)?;
         match &r {
-            Some(crate::RxEvent::Frame(rx)) => self.log(&rx.frame),
+            Some(crate::RxEvent::Frame(rx)) if !rx.own => self.log(&rx.frame),
+            Some(crate::RxEvent::Frame(_)) => {}
             Some(crate::RxEvent::BusError(e)) => {
                 if let Some(w) = self.out.as_mut()
                     && let Err(err) =
@@ -232,5 +234,8 @@ impl<B: CanBus> CanBus for LoggingBus<B> {
     }
     fn bus_errors(&self) -> u64 {
         self.inner.bus_errors()
+    }
+    fn enable_tx_echo(&mut self) -> Result<(), CanError> {
+        self.inner.enable_tx_echo()
     }
 }

@@ -77,20 +77,24 @@ impl CanFrame {
         Self::with_flags(id, extended, true, &[0u8; 8][..len as usize])
     }
 
-    pub fn id(&self) -> u32 {
+    pub const fn id(&self) -> u32 {
         self.id
     }
-    pub fn is_extended(&self) -> bool {
+    pub const fn is_extended(&self) -> bool {
         self.extended
     }
-    pub fn is_rtr(&self) -> bool {
+    pub const fn is_rtr(&self) -> bool {
         self.rtr
     }
-    pub fn len(&self) -> usize {
+    pub const fn len(&self) -> usize {
         self.len as usize
     }
-    pub fn is_empty(&self) -> bool {
+    pub const fn is_empty(&self) -> bool {
         self.len == 0
+    }
+    /// All 8 data bytes: the payload, zero beyond [`CanFrame::len`] and for remote frames.
+    pub const fn raw_data(&self) -> &[u8; 8] {
+        &self.data
     }
     /// Payload bytes (empty for RTR frames).
     pub fn data(&self) -> &[u8] {
@@ -106,8 +110,12 @@ impl CanFrame {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RxFrame {
     pub frame: CanFrame,
-    /// CLOCK_MONOTONIC ns when user space received it.
+    /// CLOCK_MONOTONIC ns when user space received it; on the `wire:` transport the frame's
+    /// end-of-frame time in the bus model (the moment it was complete on the wire).
     pub rx_monotonic_ns: u64,
     /// Kernel receive timestamp (CLOCK_REALTIME ns, SO_TIMESTAMP) where the transport provides it.
     pub kernel_rx_realtime_ns: Option<u64>,
+    /// The receiving endpoint's own frame, echoed back once it left the wire (transmit
+    /// confirmation, after [`crate::CanBus::enable_tx_echo`]); false for every other frame.
+    pub own: bool,
 }

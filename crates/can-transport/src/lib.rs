@@ -9,6 +9,8 @@
 //!   like a SocketCAN raw socket), so drive-io, the plant and the safety monitor share one "bus".
 //! * `udp:<local ip:port>-><remote ip:port>`: point-to-point cannelloni, to bridge a real bus
 //!   through a `cannelloni` instance.
+//! * `wire:<socket path>`: a node of a bus with physics (bit time, arbitration, transmit
+//!   queues) that the `can-wire` hub runs; see [`wire`].
 //!
 //! [`candump`] formats/parses can-utils log lines and [`LoggingBus`] logs every frame.
 
@@ -24,6 +26,7 @@ pub mod safety_frame;
 mod socketcan_bus;
 mod spec;
 mod udp;
+pub mod wire;
 
 pub use bus_error::{BusCondition, BusErrorFrame, RxBusError, RxEvent};
 pub use candump::LoggingBus;
@@ -59,6 +62,10 @@ pub enum CanError {
     TxFull { iface: String },
     #[error("{iface:?} cannot carry CAN error frames")]
     NoErrorFrames { iface: String },
+    #[error(
+        "{iface:?} cannot echo transmitted frames (transmit confirmation needs socketcan: or wire:)"
+    )]
+    NoTxEcho { iface: String },
     #[error("invalid frame: {0}")]
     Frame(#[from] FrameError),
 }
@@ -108,6 +115,15 @@ pub trait CanBus: Send {
     fn bus_errors(&self) -> u64 {
         0
     }
+    /// Transmit confirmation: from now on this endpoint's own frames come back through the
+    /// receive calls once they have left the wire, with [`RxFrame::own`] set (SocketCAN:
+    /// `CAN_RAW_RECV_OWN_MSGS`; `wire:`: at the frame's end-of-frame time in the bus model).
+    /// Transports without it refuse ([`CanError::NoTxEcho`]).
+    fn enable_tx_echo(&mut self) -> Result<(), CanError> {
+        Err(CanError::NoTxEcho {
+            iface: self.interface().to_string(),
+        })
+    }
     /// A descriptor that becomes readable when a receive may return something, for waiting
     /// on the bus and other sources in one poll ([`wait_readable_any`]); drain it with
     /// [`CanBus::try_recv_event`] (which may still return `None`: a filtered or malformed
@@ -146,6 +162,9 @@ impl<B: CanBus + ?Sized> CanBus for Box<B> {
     fn bus_errors(&self) -> u64 {
         (**self).bus_errors()
     }
+    fn enable_tx_echo(&mut self) -> Result<(), CanError> {
+        (**self).enable_tx_echo()
+    }
     fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
         (**self).readiness_fd()
     }
@@ -160,6 +179,7 @@ pub fn open(spec: &TransportSpec) -> Result<Box<dyn CanBus>, CanError> {
         TransportSpec::PyCanUdp { group, port } => {
             Box::new(pycan_udp::PyCanUdpBus::open(*group, *port)?)
         }
+        TransportSpec::Wire { path } => Box::new(wire::WireBus::connect(path)?),
     })
 }
 

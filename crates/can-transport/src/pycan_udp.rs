@@ -342,6 +342,7 @@ impl CanBus for PyCanUdpBus {
                                 frame: m.frame,
                                 rx_monotonic_ns: monotonic_ns(),
                                 kernel_rx_realtime_ns: None,
+                                own: false,
                             }));
                         }
                         Ok(_) => self.rx_errors += 1,

@@ -6,7 +6,7 @@ use crate::poll::wait_readable;
 use crate::{CanBus, CanError, monotonic_ns};
 use socketcan::{CanSocket, EmbeddedFrame, ExtendedId, Id, Socket, SocketOptions, StandardId};
 use std::os::fd::AsRawFd;
-use std::time::{Duration, UNIX_EPOCH};
+use std::time::Duration;
 
 pub struct SocketCanBus {
     sock: CanSocket,
@@ -123,35 +123,39 @@ impl CanBus for SocketCanBus {
         let deadline =
             monotonic_ns().saturating_add(timeout.as_nanos().min(u64::MAX as u128) as u64);
         loop {
-            match self.sock.read_frame_with_timestamp() {
-                Ok((socketcan::CanFrame::Error(e), _)) => {
-                    self.bus_errors += 1;
-                    return Ok(Some(RxEvent::BusError(RxBusError {
-                        error: BusErrorFrame::new(e.error_bits(), e.data()),
-                        rx_monotonic_ns: monotonic_ns(),
-                    })));
-                }
-                Ok((f, ts)) => {
+            match read_raw(self.sock.as_raw_fd()) {
+                Ok(raw) => {
                     let rx_monotonic_ns = monotonic_ns();
-                    match from_socketcan(&f) {
-                        Some(frame) => {
-                            let kernel = ts
-                                .duration_since(UNIX_EPOCH)
-                                .ok()
-                                .map(|d| d.as_nanos() as u64);
-                            return Ok(Some(RxEvent::Frame(RxFrame {
-                                frame,
+                    match socketcan::CanFrame::from(raw.frame) {
+                        socketcan::CanFrame::Error(e) => {
+                            self.bus_errors += 1;
+                            return Ok(Some(RxEvent::BusError(RxBusError {
+                                error: BusErrorFrame::new(e.error_bits(), e.data()),
                                 rx_monotonic_ns,
-                                kernel_rx_realtime_ns: kernel,
                             })));
                         }
-                        None => {
-                            self.rx_errors += 1;
-                            continue;
-                        }
+                        f => match from_socketcan(&f) {
+                            Some(frame) => {
+                                return Ok(Some(RxEvent::Frame(RxFrame {
+                                    frame,
+                                    rx_monotonic_ns,
+                                    kernel_rx_realtime_ns: raw.kernel_realtime_ns,
+                                    own: raw.own,
+                                })));
+                            }
+                            None => {
+                                self.rx_errors += 1;
+                                continue;
+                            }
+                        },
                     }
                 }
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+                Err(e) if e.kind() == std::io::ErrorKind::InvalidData => {
+                    // Not a classic CAN frame (a CAN FD frame has another size): skipped.
+                    self.rx_errors += 1;
+                    continue;
+                }
                 Err(e) => {
                     return Err(CanError::Io {
                         iface: self.iface.clone(),
@@ -172,6 +176,19 @@ impl CanBus for SocketCanBus {
                 },
             )?;
         }
+    }
+
+    /// `CAN_RAW_RECV_OWN_MSGS`: the kernel hands this socket its own frames back once the
+    /// controller reports them sent (on vcan: at once), marked `MSG_CONFIRM` in recvmsg's
+    /// flags, which [`RxFrame::own`] carries.
+    fn enable_tx_echo(&mut self) -> Result<(), CanError> {
+        self.sock
+            .set_recv_own_msgs(true)
+            .map_err(|source| CanError::Io {
+                iface: self.iface.clone(),
+                op: "CAN_RAW_RECV_OWN_MSGS",
+                source,
+            })
     }
 
     /// `CAN_RAW_ERR_FILTER` with every class (`CAN_ERR_MASK`): the kernel delivers the
@@ -229,4 +246,65 @@ impl CanBus for SocketCanBus {
     fn rx_errors(&self) -> u64 {
         self.rx_errors
     }
+}
+
+/// One frame as recvmsg(2) returned it.
+struct RawRead {
+    frame: libc::can_frame,
+    /// SO_TIMESTAMPNS (CLOCK_REALTIME ns), when the socket delivers it.
+    kernel_realtime_ns: Option<u64>,
+    /// `MSG_CONFIRM`: our own frame, echoed after transmission (`CAN_RAW_RECV_OWN_MSGS`).
+    own: bool,
+}
+
+/// Reads one classic frame with its kernel timestamp and flags (the socketcan crate's reader
+/// does not return recvmsg's flags, which carry `MSG_CONFIRM`). Non-blocking per the socket;
+/// a datagram that is not a classic `can_frame` is `InvalidData`.
+fn read_raw(fd: std::os::fd::RawFd) -> std::io::Result<RawRead> {
+    // cmsg space for one timespec (SO_TIMESTAMPNS), 8-byte aligned as cmsghdr requires.
+    #[repr(C, align(8))]
+    struct Ctrl([u8; 64]);
+    let mut ctrl = Ctrl([0; 64]);
+    // SAFETY: can_frame is plain data; all-zero is a valid value.
+    let mut frame: libc::can_frame = unsafe { std::mem::zeroed() };
+    let mut iov = libc::iovec {
+        iov_base: (&mut frame as *mut libc::can_frame).cast(),
+        iov_len: std::mem::size_of::<libc::can_frame>(),
+    };
+    // SAFETY: msghdr is plain data; all-zero is a valid (empty) header.
+    let mut msg: libc::msghdr = unsafe { std::mem::zeroed() };
+    msg.msg_iov = &mut iov;
+    msg.msg_iovlen = 1;
+    msg.msg_control = ctrl.0.as_mut_ptr().cast();
+    msg.msg_controllen = ctrl.0.len() as _;
+    // SAFETY: msg points at one iovec over `frame` and at `ctrl`, both live for the call.
+    let n = unsafe { libc::recvmsg(fd, &mut msg, libc::MSG_TRUNC) };
+    if n < 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    if n as usize != std::mem::size_of::<libc::can_frame>() {
+        return Err(std::io::ErrorKind::InvalidData.into());
+    }
+    let mut kernel_realtime_ns = None;
+    // SAFETY: walking the control messages the kernel wrote into `ctrl` (msg_controllen was
+    // updated by recvmsg); each payload is read unaligned and only when long enough.
+    unsafe {
+        let mut c = libc::CMSG_FIRSTHDR(&msg);
+        while !c.is_null() {
+            if (*c).cmsg_level == libc::SOL_SOCKET
+                && (*c).cmsg_type == libc::SO_TIMESTAMPNS
+                && (*c).cmsg_len as usize
+                    >= libc::CMSG_LEN(std::mem::size_of::<libc::timespec>() as u32) as usize
+            {
+                let ts = std::ptr::read_unaligned(libc::CMSG_DATA(c).cast::<libc::timespec>());
+                kernel_realtime_ns = Some(ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64);
+            }
+            c = libc::CMSG_NXTHDR(&msg, c);
+        }
+    }
+    Ok(RawRead {
+        frame,
+        kernel_realtime_ns,
+        own: msg.msg_flags & libc::MSG_CONFIRM != 0,
+    })
 }

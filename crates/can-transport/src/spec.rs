@@ -2,6 +2,7 @@
 
 use std::fmt;
 use std::net::{Ipv4Addr, SocketAddrV4};
+use std::path::PathBuf;
 use std::str::FromStr;
 
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -18,12 +19,16 @@ pub enum TransportSpec {
         local: SocketAddrV4,
         remote: SocketAddrV4,
     },
+    /// `wire:<socket path>`: one node of a bus the `can-wire` hub runs in its bus model (bit
+    /// time, arbitration, transmit queues).
+    Wire { path: PathBuf },
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
     "invalid transport {input:?}: {reason}. Expected \"socketcan:<iface>\", \
-         \"udpbus:<239.x.y.z>:<port>\", \"pycan-udp:<239.x.y.z>:<port>\" or \"udp:<ip:port>-><ip:port>\""
+         \"udpbus:<239.x.y.z>:<port>\", \"pycan-udp:<239.x.y.z>:<port>\", \"udp:<ip:port>-><ip:port>\" \
+         or \"wire:<socket path>\""
 )]
 pub struct SpecError {
     pub input: String,
@@ -83,6 +88,18 @@ impl FromStr for TransportSpec {
                 let remote = r.parse().map_err(|_| err("remote is not <ipv4>:<port>"))?;
                 Ok(Self::UdpPeer { local, remote })
             }
+            "wire" => {
+                // sun_path holds 108 bytes including the terminating NUL.
+                if rest.is_empty() || rest.len() > 107 {
+                    return Err(err("socket path must be 1..=107 bytes"));
+                }
+                if rest.contains('\0') {
+                    return Err(err("socket path contains a NUL byte"));
+                }
+                Ok(Self::Wire {
+                    path: PathBuf::from(rest),
+                })
+            }
             _ => Err(err("unknown kind")),
         }
     }
@@ -95,6 +112,7 @@ impl fmt::Display for TransportSpec {
             Self::UdpMulticast { group, port } => write!(f, "udpbus:{group}:{port}"),
             Self::UdpPeer { local, remote } => write!(f, "udp:{local}->{remote}"),
             Self::PyCanUdp { group, port } => write!(f, "pycan-udp:{group}:{port}"),
+            Self::Wire { path } => write!(f, "wire:{}", path.display()),
         }
     }
 }

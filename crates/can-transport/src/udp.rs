@@ -210,6 +210,7 @@ impl CanBus for UdpBus {
                         frame,
                         rx_monotonic_ns,
                         kernel_rx_realtime_ns: None,
+                        own: false,
                     }),
                     Item::BusError(error) => {
                         self.bus_errors += 1;

@@ -175,3 +175,26 @@ fn cannelloni_error_frames() {
     assert!(cannelloni::decode_items(&pkt[..pkt.len() - 1], |_| n += 1).is_err());
     assert_eq!(n, 0);
 }
+
+#[test]
+fn wire_spec_names_the_hub_socket() {
+    let s: TransportSpec = "wire:out/sim/can0.sock".parse().unwrap();
+    assert_eq!(
+        s,
+        TransportSpec::Wire {
+            path: "out/sim/can0.sock".into()
+        }
+    );
+    assert_eq!(s.to_string(), "wire:out/sim/can0.sock");
+    let e = "wire:".parse::<TransportSpec>().unwrap_err().to_string();
+    assert!(e.contains("socket path must be 1..=107 bytes"), "{e}");
+    let long = format!("wire:/{}", "x".repeat(107));
+    assert!(long.parse::<TransportSpec>().is_err());
+    assert!(
+        "nope:x"
+            .parse::<TransportSpec>()
+            .unwrap_err()
+            .to_string()
+            .contains("wire:<socket path>")
+    );
+}

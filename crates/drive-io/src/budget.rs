@@ -542,11 +542,7 @@ pub fn fixed_layout(node: u8) -> Vec<PdoFrame> {
 /// [`crate::commissioning::plan_all`]).
 pub fn of_plans(cfg: &DrivesConfig, plans: &[crate::commissioning::Plan]) -> Vec<InterfaceBudget> {
     let (drives, extra) = crate::commissioning::budget_frames(cfg, plans);
-    budget(
-        cfg,
-        |i| drives.get(i).cloned().unwrap_or_default(),
-        &extra,
-    )
+    budget(cfg, |i| drives.get(i).cloned().unwrap_or_default(), &extra)
 }
 
 /// The budget of `cfg` with the PDO frames every node will be configured with (reads the

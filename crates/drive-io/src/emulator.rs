@@ -449,6 +449,7 @@ mod tests {
             frame: CanFrame::new(0x80, &[]).unwrap(),
             rx_monotonic_ns: read_ns,
             kernel_rx_realtime_ns: kernel_rt,
+            own: false,
         }
     }
 

@@ -69,6 +69,7 @@ impl Sim {
                     frame: *f,
                     rx_monotonic_ns: self.now,
                     kernel_rx_realtime_ns: None,
+                    own: false,
                 },
             );
         }

@@ -126,6 +126,7 @@ impl Rig {
                     frame: f,
                     rx_monotonic_ns: self.now,
                     kernel_rx_realtime_ns: None,
+                    own: false,
                 },
             );
         }
