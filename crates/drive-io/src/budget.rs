@@ -3,7 +3,7 @@
 //! fill it (`drive-io --print-plan` prints it; [`crate::master::Master::new`] and `crs sim`
 //! refuse an over-budget configuration before anything starts).
 //!
-//! Bits are counted with worst-case bit stuffing: a frame of n
+//! Bits are counted with worst-case bit stuffing ([`can_transport::wire::bits`]): a frame of n
 //! data bytes with an 11-bit identifier occupies at most 8n + 47 + ⌊(34 + 8n − 1)/4⌋ bit times
 //! including the 3-bit intermission (Davis et al. 2007, eq. 4).
 //!
@@ -22,13 +22,7 @@
 //!   pending then (the safety pairs, an EMCY) — are off the wire within `rpdo_guard_us`.
 
 use crate::config::{DrivesConfig, SyncSource};
-
-/// Worst-case bits on the wire of a classic CAN data frame with an 11-bit identifier and
-/// `dlc` data bytes, stuff bits and the 3-bit intermission included (Davis et al. 2007).
-fn worst_case_bits(dlc: u8) -> u32 {
-    let n = u32::from(dlc.min(8));
-    8 * n + 47 + (34 + 8 * n - 1) / 4
-}
+use can_transport::wire::bits::worst_case_bits;
 
 /// Headroom for EMCY: one 8-byte EMCY per node per this period (a drive's EMCY inhibit time,
 /// 0x1015, is typically 10–100 ms; faults are rare, bursts are what matters).
@@ -339,7 +333,7 @@ pub fn budget(
             cob_id,
             dlc,
             rate,
-            bits: worst_case_bits(dlc),
+            bits: worst_case_bits(false, dlc),
             per_s,
         }
     };
