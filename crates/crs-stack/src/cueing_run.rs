@@ -139,6 +139,13 @@ pub fn prepare(
         }
     }
     let track = VehicleTrack::read_csv(&spec.vehicle)?;
+    let tracker = TrackerLimits {
+        linear_acceleration: pl.linear_acceleration,
+        angular_acceleration: pl.angular_acceleration,
+        period_s: configured.period_s(),
+        lead_s: settings.tracker_lead_s,
+    };
+    let washout = washout.for_tracker(&tracker);
     Ok(PreparedCueing {
         describe: format!(
             "{} ({:.1} s) with {}",
@@ -146,11 +153,7 @@ pub fn prepare(
             track.duration_s(),
             spec.settings.display()
         ),
-        tracker: TrackerLimits {
-            linear_acceleration: pl.linear_acceleration,
-            angular_acceleration: pl.angular_acceleration,
-            period_s: configured.period_s(),
-        },
+        tracker,
         settings,
         washout,
         track,

@@ -54,10 +54,12 @@ pub fn analyse(
     let mut pv: Option<crate::vestibular::Perceiver> = None;
     let mut pc: Option<crate::vestibular::Perceiver> = None;
     for (t, veh, cab) in samples {
-        // Both riders start settled on what they feel first (gravity at rest).
-        let pvs = pv.get_or_insert_with(|| v.perceiver(&veh.specific_force));
+        // Both riders start settled at rest, upright in gravity (not on the first sample: the
+        // cabin may still be finishing its move to the neutral pose).
+        let rest = Vector3::new(0.0, 0.0, cdpr_model::dynamics::GRAVITY_M_PER_S2);
+        let pvs = pv.get_or_insert_with(|| v.perceiver(&rest));
         let (fv, wv) = v.step(pvs, &veh.specific_force, &veh.angular_velocity);
-        let pcs = pc.get_or_insert_with(|| v.perceiver(&cab.specific_force));
+        let pcs = pc.get_or_insert_with(|| v.perceiver(&rest));
         let (fc, wc) = v.step(pcs, &cab.specific_force, &cab.angular_velocity);
         s.t_s.push(t);
         s.vehicle_f.push(veh.specific_force);

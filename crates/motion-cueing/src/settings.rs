@@ -39,6 +39,10 @@ pub struct CueingSettings {
     pub fade_s: f64,
     /// After the drive, run on until the cabin rests at the neutral pose, at most this long, s.
     pub settle_max_s: f64,
+    /// How far ahead of the cueing pose motion-core's tracker is sent, s
+    /// ([`crate::washout::tracker_target`]): a source thread late by less than this does not
+    /// make the tracker brake.
+    pub tracker_lead_s: f64,
 }
 
 #[derive(Deserialize)]
@@ -107,6 +111,7 @@ struct RawRider {
 struct RawRun {
     fade_s: f64,
     settle_max_s: f64,
+    tracker_lead_s: f64,
 }
 
 #[derive(Deserialize)]
@@ -451,6 +456,13 @@ impl CueingSettings {
             perception,
             fade_s: c.range(raw.run.fade_s, "run.fade_s", 0.0, 10.0, false)?,
             settle_max_s: c.range(raw.run.settle_max_s, "run.settle_max_s", 0.0, 120.0, true)?,
+            tracker_lead_s: c.range(
+                raw.run.tracker_lead_s,
+                "run.tracker_lead_s",
+                0.0,
+                0.1,
+                false,
+            )?,
         })
     }
 

@@ -166,6 +166,8 @@ pub struct TrackerLimits {
     pub linear_acceleration: f64,
     pub angular_acceleration: f64,
     pub period_s: f64,
+    /// Send the tracker this far ahead, s (see [`tracker_target`]).
+    pub lead_s: f64,
 }
 
 /// How far inside the configured cueing box the limiter keeps the pose (m or rad): more than
@@ -266,6 +268,34 @@ impl Washout {
         })
     }
 
+    /// The washout for motion-core's tracker `lim`: the limiter's box shrunk by the most the
+    /// tracker, running `lim.lead_s` ahead ([`tracker_target`]), can pass a target the limiter
+    /// brakes to at its edge. Braking at a_b below the tracker's a_tr leaves
+    /// d_b(v) − d_tr(v) = v²(1/a_b − 1/a_tr)/2 of room, so the lead's v τ overshoots by at most
+    /// max_v (v τ − v²(1/a_b − 1/a_tr)/2) = τ²/(2 (1/a_b − 1/a_tr)) (at most v_max τ), plus one
+    /// tracker step a_tr dt² of discrete slack.
+    pub fn for_tracker(mut self, lim: &TrackerLimits) -> Self {
+        let tau = lim.lead_s;
+        for k in 0..6 {
+            let a_tr = if k < 3 {
+                lim.linear_acceleration
+            } else {
+                lim.angular_acceleration
+            };
+            let a_b = self.a_max[k];
+            let room = 1.0 / a_b - 1.0 / a_tr;
+            let mut m = self.v_max[k] * tau;
+            if room > 0.0 {
+                m = m.min(tau * tau / (2.0 * room));
+            }
+            m += a_tr * lim.period_s * lim.period_s;
+            let mid = 0.5 * (self.box_min[k] + self.box_max[k]);
+            self.box_min[k] = (self.box_min[k] + m).min(mid);
+            self.box_max[k] = (self.box_max[k] - m).max(mid);
+        }
+        self
+    }
+
     /// At rest at the neutral pose, the filters settled on a vehicle at rest.
     pub fn at_rest(&self) -> WashoutState {
         WashoutState {
@@ -284,9 +314,13 @@ impl Washout {
 
 /// The target to publish on motion-core's cueing input so that its tracker (which brakes
 /// towards each target at its acceleration limit a, period dt: `motion_core::daemon::cueing`)
-/// moves along `out`'s pose: the pose one tracker period back plus the tracker's braking
-/// distance at the current rate, per coordinate (its speed command then equals the cueing's
-/// rate). Each coordinate is clamped to [lo, hi] (and never beyond the pose itself).
+/// moves along `out`'s pose: per coordinate the pose predicted `lead_s` ahead
+/// (p + v τ + a τ²/2, v + a τ) one tracker period back plus the tracker's braking distance at
+/// that rate (its speed command then equals the cueing's rate). Without the lead (τ = 0) the
+/// tracker lands exactly on the cueing pose, but a source late by one period already makes it
+/// brake (the target is a stop point); with it the tracker runs τ ahead of the cueing pose and
+/// coasts through a late source of up to τ. Each coordinate is clamped to [lo, hi] (and never
+/// beyond the predicted pose itself).
 pub fn tracker_target(
     out: &CueOutput,
     lim: &TrackerLimits,
@@ -294,16 +328,19 @@ pub fn tracker_target(
     hi: &[f64; 6],
 ) -> [f64; 6] {
     let mut t = [0.0; 6];
+    let tau = lim.lead_s;
     for k in 0..6 {
-        let a = if k < 3 {
+        let a_tr = if k < 3 {
             lim.linear_acceleration
         } else {
             lim.angular_acceleration
         };
-        let v = out.velocity[k];
-        let lead = braking_distance(v.abs(), a, lim.period_s) - v.abs() * lim.period_s;
-        t[k] =
-            (out.pose[k] + v.signum() * lead).clamp(lo[k].min(out.pose[k]), hi[k].max(out.pose[k]));
+        let acc = out.acceleration[k];
+        let (lo_k, hi_k) = (lo[k].min(out.pose[k]), hi[k].max(out.pose[k]));
+        let p = (out.pose[k] + out.velocity[k] * tau + 0.5 * acc * tau * tau).clamp(lo_k, hi_k);
+        let v = out.velocity[k] + acc * tau;
+        let lead = braking_distance(v.abs(), a_tr, lim.period_s) - v.abs() * lim.period_s;
+        t[k] = (p + v.signum() * lead).clamp(lo_k, hi_k);
     }
     t
 }

@@ -112,8 +112,11 @@ pub fn fly(
         linear_acceleration: limits.linear_acceleration,
         angular_acceleration: limits.angular_acceleration,
         period_s: loop_period_s,
+        lead_s: settings.tracker_lead_s,
     };
+    // The configured box (what must hold), then the limiter's, shrunk for the tracker's lead.
     let (box_min, box_max) = (washout.box_min, washout.box_max);
+    let washout = washout.for_tracker(&tl);
     let mut src = CueingSource::new(washout, settings, track, pf.home);
     let mut filter = CueingFilter::new(&pf.home, limits, loop_period_s);
     let mut cycle = Cycle::new(pf.model.clone(), pf.limits, pf.region, true);
@@ -175,8 +178,12 @@ pub fn fly(
             f.refused.get_or_insert((f.steps, e));
         }
         let p = r.pose.to_array();
-        for (m, (a, b)) in f.max_tracking.iter_mut().zip(p.iter().zip(&s.cue.pose)) {
-            *m = m.max((a - b).abs());
+        // Against the cueing pose predicted by the tracker lead τ (what the target aims at).
+        let tau = settings.tracker_lead_s;
+        for (c, m) in f.max_tracking.iter_mut().enumerate() {
+            let aim =
+                s.cue.pose[c] + s.cue.velocity[c] * tau + 0.5 * s.cue.acceleration[c] * tau * tau;
+            *m = m.max((p[c] - aim).abs());
         }
         if s.phase == motion_cueing::source::Phase::Drive
             && (0..6).any(|c| p[c] < box_min[c] - 1e-9 || p[c] > box_max[c] + 1e-9)
