@@ -26,7 +26,7 @@ pub struct Panel {
 
 const PANEL_W: f64 = 460.0;
 const PANEL_H: f64 = 170.0;
-const MAX_POINTS: usize = 1500;
+const MAX_POINTS: usize = 500;
 
 pub(crate) fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
