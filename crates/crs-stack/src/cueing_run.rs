@@ -83,7 +83,10 @@ pub enum CueingError {
 /// The validated cueing, checked before anything starts.
 pub struct PreparedCueing {
     pub settings: CueingSettings,
+    /// The washout for motion-core's tracker (its box shrunk for the tracker lead) and as
+    /// configured (the box the workspace use is measured against).
     pub washout: Washout,
+    pub configured_washout: Washout,
     pub track: VehicleTrack,
     pub tracker: TrackerLimits,
     pub feasibility: Feasibility,
@@ -145,8 +148,10 @@ pub fn prepare(
         period_s: configured.period_s(),
         lead_s: settings.tracker_lead_s,
     };
+    let configured_washout = washout.clone();
     let washout = washout.for_tracker(&tracker);
     Ok(PreparedCueing {
+        configured_washout,
         describe: format!(
             "{} ({:.1} s) with {}",
             spec.vehicle.display(),
@@ -235,7 +240,7 @@ pub struct CueingRun {
 impl CueingRun {
     pub fn new(p: PreparedCueing) -> Self {
         Self {
-            washout: p.washout.clone(),
+            washout: p.configured_washout.clone(),
             settings: p.settings.clone(),
             track: p.track.clone(),
             feasibility: p.feasibility,

@@ -29,8 +29,22 @@ fn rel_error(r: &PerceptionReport) -> f64 {
     (e / v).sqrt()
 }
 
+/// Perceived correlation on the profile's main axis (f_x braking/accelerating, f_y otherwise).
+fn main_corr(name: &str, r: &PerceptionReport) -> f64 {
+    let k = if name == "braking" || name == "accelerating" {
+        0
+    } else {
+        1
+    };
+    r.specific_force[k]
+        .perceived
+        .correlation
+        .unwrap_or(f64::NAN)
+}
+
 struct Outcome {
     rel_error: Vec<f64>,
+    main_corr: Vec<f64>,
     reports: Vec<PerceptionReport>,
     /// Largest workspace use per profile: translation (x, y, z) and rotation.
     use_translation: Vec<f64>,
@@ -45,6 +59,7 @@ fn evaluate(st: &CueingSettings, keep: bool, dir: Option<&PathBuf>, label: &str)
     let neutral = motion_cueing::Washout::new(st.washout, pf.home, 1e-3).unwrap();
     let mut o = Outcome {
         rel_error: vec![],
+        main_corr: vec![],
         reports: vec![],
         use_translation: vec![],
         use_rotation: vec![],
@@ -68,6 +83,7 @@ fn evaluate(st: &CueingSettings, keep: bool, dir: Option<&PathBuf>, label: &str)
         o.use_rotation
             .push(u[3..].iter().copied().fold(0.0, f64::max));
         o.rel_error.push(rel_error(&rep));
+        o.main_corr.push(main_corr(p.name, &rep));
         if let (true, Some(d)) = (keep, dir) {
             let svg = perception_svg(
                 &format!(
@@ -152,9 +168,9 @@ fn main() {
     // The sweep: K (x, y) × translational ω_n, from the default tuning.
     println!("\n## Sweep: specific-force gain K (x, y) × translational high-pass ω_n\n");
     println!(
-        "| K | ω_n (rad/s) | mean relative perceived f error | largest translational workspace use | refused |"
+        "| K | ω_n (rad/s) | mean relative perceived f error | mean perceived corr. (main axis) | largest translational workspace use | refused |"
     );
-    println!("|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|");
     let base = std::fs::read_to_string(cfg("cueing.toml")).unwrap();
     let mut pts = Vec::new();
     for k in [0.2, 0.3, 0.5, 0.7, 1.0] {
@@ -184,8 +200,9 @@ fn main() {
             let o = evaluate(&st, false, None, "");
             let mean = o.rel_error.iter().sum::<f64>() / o.rel_error.len() as f64;
             let used = o.use_translation.iter().copied().fold(0.0, f64::max);
+            let corr = o.main_corr.iter().sum::<f64>() / o.main_corr.len() as f64;
             println!(
-                "| {k} | {w} | {mean:.3} | {:.0} % | {} |",
+                "| {k} | {w} | {mean:.3} | {corr:.2} | {:.0} % | {} |",
                 used * 100.0,
                 o.refused
             );
@@ -229,7 +246,7 @@ fn main() {
             all.push((s.0 * 100.0, s.1, format!("shipped: {}", s.2), true));
         }
         let svg = scatter_svg(
-            "Washout trade-off on the nominal icosahedron (4 profiles, through motion-core's tracker and checks)",
+            "Washout trade-off, nominal icosahedron: 4 profiles through motion-core's tracker and checks (sweep blue, shipped red)",
             "largest translational workspace use (% of the cueing box half-width)",
             "mean relative perceived specific-force error (x, y)",
             &all,

@@ -355,7 +355,7 @@ pub fn scatter_svg(
     y_title: &str,
     points: &[(f64, f64, String, bool)],
 ) -> String {
-    let (w, h, l, b, t, r) = (640.0, 420.0, 60.0, 40.0, 30.0, 20.0);
+    let (w, h, l, b, t, r) = (820.0, 440.0, 60.0, 40.0, 30.0, 120.0);
     let mut s = String::new();
     let _ = write!(
         s,

@@ -346,7 +346,8 @@ pub fn tracker_target(
 }
 
 /// Workspace use of `poses`: per coordinate the largest excursion from the neutral pose as a
-/// share of the cueing box's half-width on that side (1 = the box's edge).
+/// share of the cueing box's half-width on that side (1 = the box's edge). `w` is the washout
+/// as configured (before [`Washout::for_tracker`] shrinks its box).
 pub fn workspace_use<'a>(w: &Washout, poses: impl IntoIterator<Item = &'a [f64; 6]>) -> [f64; 6] {
     let n = w.neutral.to_array();
     let mut u = [0.0f64; 6];
