@@ -1,7 +1,7 @@
 //! The cueing output goes through motion-core's own cueing tracker and per-cycle checks
 //! (`Cycle::compute`: region, velocity/acceleration limits, eq. 3.29 with the dynamic wrench
 //! w = w_e + w_in in closed form eq. 3.41) — every shipped vehicle profile, both shipped
-//! tunings, at the spec's 1 ms loop and the stack tests' relaxed 4 ms loop, on the nominal
+//! tunings, at the spec's 1 ms loop (default tuning) and the stack tests' relaxed 4 ms loop, on the nominal
 //! icosahedron and on the calibrated one. No reference may be refused or leave the cueing box;
 //! the tracker must move along the cueing pose; the tilt channel and the cabin's roll/pitch
 //! rate stay below the rotation perception threshold where the vehicle does not rotate; a
@@ -84,7 +84,14 @@ fn every_profile_passes_motion_cores_checks_on_both_platforms_and_loop_periods()
                 let track =
                     motion_cueing::VehicleTrack::read_csv(&cfg(&format!("vehicle/{}.csv", p.name)))
                         .unwrap();
-                for period in [1e-3, 4e-3] {
+                // The spec's 1 ms loop for the default tuning, the stack tests' relaxed 4 ms
+                // loop for both (a debug build checks 30 000 cycles per 1 ms drive).
+                let periods: &[f64] = if tuning == "cueing.toml" {
+                    &[1e-3, 4e-3]
+                } else {
+                    &[4e-3]
+                };
+                for &period in periods {
                     let f = fly(&pf, lim, &st, track.clone(), period);
                     let name = format!("{label} {tuning} {} {} ms", p.name, period * 1e3);
                     check_flight(&name, &f, &pf, 1e-3).unwrap();
