@@ -489,8 +489,9 @@ pub struct Feasibility {
     pub poses: usize,
     /// Smallest static margin (eq. 3.41) over them, N.
     pub min_static_margin_n: f64,
-    /// The largest factor on the limiter's accelerations that keeps them all feasible (∞: no
-    /// `[dynamics]`, static check only; `None` when the platform has no `[dynamics]`).
+    /// The largest factor on the limiter's accelerations (and angular velocity) that keeps
+    /// them all feasible with the dynamic wrench; `None` when the platform has no `[dynamics]`
+    /// (static check only, as motion-core checks such a platform).
     pub acceleration_scale: Option<f64>,
 }
 
@@ -696,4 +697,86 @@ fn check_platform(
         min_static_margin_n: min_margin,
         acceleration_scale,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config(name: &str) -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../config")
+            .join(name)
+    }
+
+    fn text() -> String {
+        std::fs::read_to_string(config("cueing.toml")).unwrap()
+    }
+
+    #[test]
+    fn bad_keys_and_values_are_named() {
+        let e = CueingSettings::parse(&text().replace("[tilt]", "[tilt]\nspeed = 1"), "c.toml")
+            .unwrap_err();
+        assert!(e.line.is_some() && e.message.contains("speed"), "{e}");
+        let e = CueingSettings::parse(
+            &text().replace("max_deg = [2.8, 2.8]", "max_deg = [2.8, 3.5]"),
+            "c.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("c.toml: `tilt.max_deg[1]`: 3.5 exceeds workspace.rotation_max_deg[1]"),
+            "{e}"
+        );
+        let e = CueingSettings::parse(
+            &text().replace("zeta = [1.0, 1.0, 1.0]", "zeta = [1.0, -1.0, 1.0]"),
+            "c.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("`translation.zeta[1]`: must lie in (0, 3]"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_box_about_home_is_refused_as_not_wrench_feasible() {
+        // The icosahedron's feasible set is lopsided around home: the same box there fails
+        // (the reason the shipped tuning cues about a neutral pose).
+        let pf = cdpr_model::config::load_platform(config("icosahedron.toml")).unwrap();
+        let s = CueingSettings::parse(
+            &text()
+                .replace(
+                    "neutral_offset_m = [-0.1, 1.0, -0.55]",
+                    "neutral_offset_m = [0.0, 0.0, 0.0]",
+                )
+                .replace(
+                    "neutral_rotation_deg = [0.0, 0.0, 3.0]",
+                    "neutral_rotation_deg = [0.0, 0.0, 0.0]",
+                ),
+            "c.toml",
+        )
+        .unwrap();
+        let e = s.washout(&pf, 1e-3, "c.toml").unwrap_err().to_string();
+        assert!(
+            e.contains("`workspace`: the cueing box") && e.contains("not wrench feasible"),
+            "{e}"
+        );
+        let (_, f) = CueingSettings::parse(&text(), "c.toml")
+            .unwrap()
+            .washout(&pf, 1e-3, "c.toml")
+            .unwrap();
+        assert!(f.min_static_margin_n > 0.0 && f.acceleration_scale.unwrap() >= FEASIBILITY_MARGIN);
+    }
+
+    #[test]
+    fn braking_distance_inverts_braking_reach() {
+        for v in [0.001, 0.05, 0.4, 1.3] {
+            let d = crate::washout::braking_distance(v, 2.0, 1e-3);
+            let r = crate::washout::braking_reach(d, 2.0, 1e-3);
+            assert!((r - v).abs() < 1e-9, "{v} -> {d} -> {r}");
+        }
+        assert_eq!(crate::washout::braking_reach(-0.1, 2.0, 1e-3), 0.0);
+    }
 }

@@ -185,15 +185,6 @@ impl CueingSource {
         self.track.duration_s()
     }
 
-    /// Length of the move to the neutral pose, s.
-    pub fn to_neutral_s(&self) -> f64 {
-        if self.phase == Phase::ToNeutral {
-            self.transition.duration
-        } else {
-            0.0
-        }
-    }
-
     fn transition_sample(&self, t: f64, tau: f64, drive_t: f64) -> DriveSample {
         let (pose, velocity, acceleration) = self.transition.at(tau);
         let rest = VehicleSample::at_rest(self.washout.params.gravity);
@@ -299,21 +290,6 @@ impl CueingSource {
             cue,
         })
     }
-}
-
-/// Runs a whole drive offline.
-pub fn run_drive(
-    washout: Washout,
-    settings: &CueingSettings,
-    track: VehicleTrack,
-    home: Pose,
-) -> Vec<DriveSample> {
-    let mut s = CueingSource::new(washout, settings, track, home);
-    let mut out = Vec::new();
-    while let Some(x) = s.next_sample() {
-        out.push(x);
-    }
-    out
 }
 
 #[cfg(test)]
