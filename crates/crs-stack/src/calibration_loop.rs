@@ -573,6 +573,7 @@ fn stack_run(
         campaign: Some(name.to_string()),
         rt_priority: (a.rt_priority >= 6).then_some(a.rt_priority),
         ride: None,
+        cueing: None,
     };
     let mut attempt = 0;
     let sum = loop {

@@ -29,6 +29,9 @@
 //!   source on motion-core's cueing input (`crs sim --source helicopter`), and
 //!   [`gamepad`], a game controller as its pilot.
 //! - [`console_setup`]: the operator console of a stack (platform view, plan progress).
+//! - [`cueing_run`]: motion cueing (crate `motion-cueing`) of a vehicle CSV as the run's motion
+//!   source on motion-core's cueing input (`crs sim --source cueing`), and what the rider
+//!   perceived of it.
 //! - [`sim_observer`]: what `crs sim` runs next to the stack: the console and the run's plots.
 //! - [`sim_run`]: one run of the whole simulated stack (`crs sim`), its summary and verdict.
 //! - [`surrogate_evaluation`]: the surrogate fit of a platform and its evaluation on the plant.
@@ -44,6 +47,7 @@ pub mod campaign;
 pub mod commission;
 pub mod commission_report;
 pub mod console_setup;
+pub mod cueing_run;
 pub mod diagnosis_bench;
 pub mod gamepad;
 pub mod load_experiment;

@@ -91,6 +91,9 @@ pub struct SimOptions {
     /// Fly the helicopter hover physics as the motion source instead of the waypoint plan
     /// ([`crate::ride_run`]; motion-core follows it on its cueing input).
     pub ride: Option<crate::ride_run::RideSpec>,
+    /// Drive a vehicle's motion through the motion cueing instead of the waypoint plan
+    /// ([`crate::cueing_run`]; motion-core follows it on its cueing input).
+    pub cueing: Option<crate::cueing_run::CueingSpec>,
 }
 
 /// What a run measured (printed, and written to <out>/summary.json).
@@ -141,6 +144,8 @@ pub struct Summary {
     pub record: Option<PathBuf>,
     /// The hover flight (`--source helicopter`).
     pub ride: Option<crate::ride_run::RideSummary>,
+    /// The motion cueing (`--source cueing`): what it did and what the rider perceived.
+    pub cueing: Option<crate::cueing_run::CueingSummary>,
     pub duration_s: f64,
 }
 
@@ -311,6 +316,9 @@ pub enum SimError {
         "--source helicopter flies the hover model: --waypoints, --dwell-s and --record belong to the waypoint plan"
     )]
     RideWithWaypointPlan,
+    /// The motion cueing (settings, vehicle, thread, figures).
+    #[error(transparent)]
+    Cueing(#[from] crate::cueing_run::CueingError),
     #[error("the controller refuses the home pose: {0}")]
     HomePose(#[source] motion_core::daemon::cycle::Rejection),
     /// A file or directory of the run's output (`path`).
@@ -465,6 +473,20 @@ pub fn execute_observed(
     if ride.is_some() && (a.record.is_some() || a.dwell_s.is_some() || a.waypoints.is_some()) {
         return Err(SimError::RideWithWaypointPlan);
     }
+    let mut cueing = match &a.cueing {
+        Some(_)
+            if ride.is_some()
+                || a.record.is_some()
+                || a.dwell_s.is_some()
+                || a.waypoints.is_some() =>
+        {
+            return Err(crate::cueing_run::CueingError::WithOtherSource.into());
+        }
+        Some(spec) => Some(crate::cueing_run::CueingRun::new(
+            crate::cueing_run::prepare(spec, &platform, &configured)?,
+        )),
+        None => None,
+    };
     let home_q = configured.home_command().map_err(SimError::HomePose)?;
     std::fs::create_dir_all(&a.out).map_err(output(&a.out))?;
     let waypoint_file = a.waypoints.clone().or(daemon.trajectory.waypoints.clone());
@@ -661,7 +683,7 @@ pub fn execute_observed(
         "--exit-after-plan-s".into(),
         a.hold_s.to_string(),
     ];
-    if ride.is_some() {
+    if ride.is_some() || cueing.is_some() {
         mc_args.extend(["--input".into(), "cueing".into()]);
     } else if let Some(w) = &waypoints_arg {
         mc_args.push("--waypoints".into());
@@ -706,6 +728,9 @@ pub fn execute_observed(
             }
             refs.push_back((sp.timestamp_ns, sp.pose));
             last_ref = Some(sp.pose);
+            if let Some(c) = cueing.as_mut() {
+                c.setpoint(&sp);
+            }
             if ride_model.is_some() && sum.setpoints.is_multiple_of(10) {
                 ride_reference.push([sp.pose[0], sp.pose[1], sp.pose[2]]);
             }
@@ -791,6 +816,13 @@ pub fn execute_observed(
                 Err(e) => break Err(e.into()),
             }
         }
+        if let Some(c) = cueing
+            .as_mut()
+            .filter(|c| sum.setpoints > 0 && !c.started())
+            && let Err(e) = c.start(&prefix)
+        {
+            break Err(e.into());
+        }
         if supervisor::interrupted() {
             break Err(SimError::Interrupted);
         }
@@ -820,6 +852,9 @@ pub fn execute_observed(
         let (mut rs, path) = t.join()?;
         crate::ride_run::write_svg(&a.out, &platform, &model, &mut rs, &path, &ride_reference)?;
         sum.ride = Some(rs);
+    }
+    if let Some(c) = cueing.take() {
+        sum.cueing = c.finish(&a.out, configured.period_s())?;
     }
     if n_track > 0 {
         sum.tracking_position_mean_mm = sum_p / n_track as f64 * 1e3;
@@ -981,6 +1016,9 @@ fn print_summary(s: &Summary) {
     );
     for t in &s.monitor_trips {
         println!("  monitor trip: {t}");
+    }
+    if let Some(c) = &s.cueing {
+        crate::cueing_run::print_summary(c);
     }
     if let Some(b) = &s.bus_stopped_during_run {
         println!("  DRIVE BUS STOPPED DURING THE RUN: {b}; the drives held from then on");

@@ -98,6 +98,13 @@ fn the_model_library_and_the_data_format_pull_in_no_ipc_rt_can_or_cli() {
     // The ride physics is a model too: the stack runs it, it knows no IPC or real time.
     forbid("ride-physics", &RUNTIME);
     forbid("ride-physics", &["motion-core", "crs-stack"]);
+    // So is the motion cueing (washout, tilt coordination, vestibular models): the stack runs
+    // it and feeds motion-core, which it only knows through its tests.
+    forbid("motion-cueing", &RUNTIME);
+    forbid(
+        "motion-cueing",
+        &["motion-core", "crs-stack", "sim-plant", "drive-io"],
+    );
     // The model's analyses (`crs model …`) are model too: the plant's measurement is handed in.
     forbid("model-analysis", &RUNTIME);
     forbid(

@@ -3,6 +3,7 @@
 mod calibrate_cmd;
 mod calibrate_loop_cmd;
 mod console_cmd;
+mod cueing_cmd;
 mod gen_cmd;
 mod load_cmd;
 mod model_cmd;

@@ -6,10 +6,12 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct RideArgs {
-    /// What moves the cabin: `waypoints` (the demo trajectory, motion-core's planner) or
+    /// What moves the cabin: `waypoints` (the demo trajectory, motion-core's planner),
     /// `helicopter` (the hover physics with elastic walls, eq. 5.21-5.22, on motion-core's
-    /// cueing input; platform helicopter unless --platform says otherwise).
-    #[arg(long, default_value = "waypoints", value_parser = ["waypoints", "helicopter"])]
+    /// cueing input; platform helicopter unless --platform says otherwise) or `cueing` (a
+    /// vehicle's motion through the classical washout with tilt coordination, --vehicle;
+    /// docs/motion-cueing.md).
+    #[arg(long, default_value = "waypoints", value_parser = ["waypoints", "helicopter", "cueing"])]
     pub(crate) source: String,
     /// The pilot of `--source helicopter`: a pilot CSV (columns t_s,collective,roll,pitch,yaw;
     /// docs/ride-physics.md), `script:walls` / `script:corners` (full stick into every wall /

@@ -93,6 +93,8 @@ pub struct SimArgs {
     pub(crate) console: SimConsoleArgs,
     #[command(flatten)]
     pub(crate) ride: crate::ride_cmd::RideArgs,
+    #[command(flatten)]
+    pub(crate) cueing: crate::cueing_cmd::CueingArgs,
 }
 
 /// The flags of `crs sim` do not give a run: the config set, or the ride flags.
@@ -102,6 +104,8 @@ pub(crate) enum SimArgsError {
     Configs(#[from] platforms::SelectError),
     #[error(transparent)]
     Ride(#[from] crate::ride_cmd::RideFlagError),
+    #[error(transparent)]
+    Cueing(#[from] crate::cueing_cmd::CueingFlagError),
 }
 
 impl SimArgs {
@@ -138,6 +142,7 @@ impl SimArgs {
             campaign: self.campaign.clone(),
             rt_priority: self.rt_priority,
             ride: self.ride.spec()?,
+            cueing: self.cueing.spec(&self.ride.source)?,
         })
     }
 }
