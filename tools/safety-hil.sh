@@ -2,7 +2,7 @@
 # usage: tools/safety-hil.sh [--only SCENARIO]
 #   The safety monitor's fault-injection matrix on real SocketCAN: builds static binaries of
 #   safety-hil (crates/safety-hil), safety-monitor (crates/safety-monitor), drive-io + winch-emulator
-#   (crates/drive-io) and motion-core, and runs `safety-hil --transport socketcan:vcan0` inside
+#   (crates/drive-io), motion-core and can-wire, and runs `safety-hil --buses vcan` inside
 #   the vcan QEMU guest (tools/vcan-vm.sh). Every process runs separately (iceoryx2 + CAN);
 #   each scenario injects one fault (101 mm / 99 mm offsets, frozen and killed motion-core,
 #   killed drive-io, killed monitor, sequence gaps, NaN pose, wrong identity, corrupted safety
@@ -31,14 +31,14 @@ TRIPLE=x86_64-unknown-linux-gnu
 # --target keeps build scripts/proc-macros dynamic while the binaries are static glibc.
 # --workspace: the same feature set in every HIL script, so their builds share all artifacts.
 RUSTFLAGS="-C target-feature=+crt-static" cargo build --profile "$PROFILE" --target "$TRIPLE" \
-  --workspace --bin safety-hil --bin safety-monitor --bin drive-io --bin winch-emulator --bin motion-core
+  --workspace --bin safety-hil --bin safety-monitor --bin drive-io --bin winch-emulator --bin motion-core --bin can-wire
 DIR=$PROFILE; [ "$PROFILE" = dev ] && DIR=debug
 T=${CARGO_TARGET_DIR:-target}/$TRIPLE/$DIR
 LOG=$(mktemp); trap 'rm -f "$LOG"' EXIT
 start=$(date +%s)
-VCAN_EXTRA_BINS="$T/safety-monitor $T/drive-io $T/winch-emulator $T/motion-core" \
+VCAN_EXTRA_BINS="$T/safety-monitor $T/drive-io $T/winch-emulator $T/motion-core $T/can-wire" \
   VCAN_MEM=${VCAN_MEM:-1024} VCAN_TIMEOUT=${VCAN_TIMEOUT:-280} \
-  tools/vcan-vm.sh "$T/safety-hil" --transport socketcan:vcan0 --bin-dir /bin \
+  tools/vcan-vm.sh "$T/safety-hil" --buses vcan --bin-dir /bin \
   --workdir /tmp/safety-hil --guest-tuning --validation-ms "${SAFETY_HIL_VALIDATION_MS:-150}" \
   --silence-cycles "${SAFETY_HIL_SILENCE_CYCLES:-10}" \
   --feedback-silence-cycles "${SAFETY_HIL_FEEDBACK_SILENCE_CYCLES:-20}" \

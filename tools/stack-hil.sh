@@ -2,7 +2,7 @@
 # usage: tools/stack-hil.sh
 #   The full simulated stack on real SocketCAN: builds static binaries of crs, motion-core,
 #   drive-io, sim-plant (and safety-monitor when its binary exists) and runs
-#   `crs sim --platform P --transport socketcan:vcan0 --check` for both cabins (P = icosahedron,
+#   `crs sim --platform P --transport vcan --check` for both cabins (P = icosahedron,
 #   then helicopter) inside one boot of the vcan QEMU guest (tools/vcan-vm.sh), i.e. every
 #   process separately, talking iceoryx2 and CAN. Prints "STACK-HIL: PASS|FAIL".
 #   Timing inside the emulator is not real time: the check asserts behaviour (trajectory done,
@@ -12,7 +12,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 PROFILE=${HIL_PROFILE:-release}
 TRIPLE=x86_64-unknown-linux-gnu
-BINS="crs motion-core drive-io sim-plant"
+BINS="crs motion-core drive-io sim-plant can-wire"
 [ -f crates/safety-monitor/src/main.rs ] || [ -f crates/safety-monitor/src/bin/safety-monitor.rs ] && BINS="$BINS safety-monitor"
 ARGS=(); for b in $BINS; do ARGS+=(--bin "$b"); done
 # --workspace: the same feature set in every HIL script, so their builds share all artifacts.

@@ -49,7 +49,7 @@ fi
 R=$(mktemp -d); trap 'rm -rf "$R"' EXIT
 mkdir -p "$R"/root/{bin,mod,proc,sys,dev,tests,tmp}; ROOT=$R/root
 cp /bin/busybox "$ROOT/bin/"
-for a in sh mount mkdir insmod ip poweroff cut cat; do ln -s busybox "$ROOT/bin/$a"; done
+for a in sh mount mkdir insmod ip poweroff cut cat seq sleep kill tr; do ln -s busybox "$ROOT/bin/$a"; done
 cp "$C"/{can,can-raw,can-dev,vcan}.ko "$ROOT/mod/"
 cp "$BIN" "$ROOT/tests/$(basename "$BIN")"
 for b in "$BIN" ${VCAN_EXTRA_BINS:-}; do

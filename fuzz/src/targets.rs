@@ -368,7 +368,9 @@ pub fn all() -> Vec<Target> {
             run: |b, _| {
                 for f in frames_from(b) {
                     let _ = drive_io::canopen::decode(&f);
-                    let _ = safety_monitor::bus_frames::observe(&f);
+                    for iface in 0..2 {
+                        let _ = safety_monitor::bus_frames::observe(monitor_layout(), iface, &f);
+                    }
                     let mut d = [0u8; 8];
                     let n = f.data().len();
                     d[..n].copy_from_slice(f.data());
@@ -598,4 +600,39 @@ fn dataset_seed(forces: bool) -> Vec<u8> {
     let mut out = Vec::new();
     crs_dataset::write_dataset(&mut out, &ds).expect("seed data set writes");
     out
+}
+
+/// A layout like the shipped one for the monitor's observer: default RPDOs of drives 1-8 on
+/// interface 0, 16-bit load cells 33-36 and drive-measured forces of 5-8 (TPDO2, offset 4).
+fn monitor_layout() -> &'static safety_monitor::bus_layout::BusLayout {
+    use safety_monitor::bus_layout::{BusLayout, ForceLayout, RpdoLayout, Value};
+    static L: std::sync::OnceLock<BusLayout> = std::sync::OnceLock::new();
+    L.get_or_init(|| BusLayout {
+        rpdo: (1..=8).map(|n| RpdoLayout::default_for(0, n)).collect(),
+        force: (0..8u8)
+            .map(|k| {
+                if k < 4 {
+                    ForceLayout {
+                        interface: 0,
+                        cob_id: 0x1A1 + u16::from(k),
+                        len: 2,
+                        at: 0,
+                        value: Value::I16,
+                        n_per_unit: 1.0,
+                        node: 33 + k,
+                    }
+                } else {
+                    ForceLayout {
+                        interface: 0,
+                        cob_id: 0x281 + u16::from(k),
+                        len: 8,
+                        at: 4,
+                        value: Value::I32,
+                        n_per_unit: 0.001,
+                        node: 1 + k,
+                    }
+                }
+            })
+            .collect(),
+    })
 }

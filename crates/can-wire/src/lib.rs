@@ -17,6 +17,8 @@ pub mod config;
 mod counters;
 pub mod hub;
 pub mod stats;
+pub mod thread;
 
 pub use config::{BusSpec, Endpoint, HubConfig};
 pub use hub::{Hub, HubError};
+pub use thread::HubThread;

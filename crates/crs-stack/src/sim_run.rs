@@ -45,7 +45,8 @@ pub struct SimOptions {
     pub drives: PathBuf,
     /// Plant TOML (must be the platform of the daemon TOML).
     pub plant: PathBuf,
-    /// `auto` (vcan0 if present, else the UDP loopback bus), or a transport such as
+    /// `wire` / `auto` (the wire model: a can-wire hub, a bus per interface), `vcan` (the same
+    /// over vcan ports, the QEMU guest), `udpbus` (no bus physics), or transports such as
     /// `socketcan:vcan0` / `udpbus:239.255.70.9:20900`.
     pub transport: String,
     /// Waypoint CSV for the demo trajectory (default: the daemon TOML's).
@@ -146,6 +147,9 @@ pub struct Summary {
     pub ride: Option<crate::ride_run::RideSummary>,
     /// The motion cueing (`--source cueing`): what it did and what the rider perceived.
     pub cueing: Option<crate::cueing_run::CueingSummary>,
+    /// The wire model's final statistics per bus (load, frames dropped at a full transmit
+    /// queue, worst frame latency); empty without the hub (`--transport udpbus` / explicit).
+    pub wire: Vec<crate::transport::WireSummary>,
     pub duration_s: f64,
 }
 
@@ -188,6 +192,12 @@ impl Summary {
         }
         if let Some(b) = &self.bus_stopped_during_run {
             fails.push(format!("drive-io stopped the bus during the run ({b})"));
+        }
+        for w in self.wire.iter().filter(|w| w.dropped > 0) {
+            fails.push(format!(
+                "bus {}: {} frames dropped at a full transmit queue (the bus is overloaded)",
+                w.bus, w.dropped
+            ));
         }
         fails
     }
@@ -338,6 +348,12 @@ pub enum SimError {
     DwellWithoutWaypoints,
     #[error(transparent)]
     Transport(#[from] crate::transport::BadTransport),
+    #[error("{}: {source}", drives.display())]
+    Budget {
+        drives: PathBuf,
+        #[source]
+        source: drive_io::budget::CheckError,
+    },
     /// The launcher's own iceoryx2 node or subscribers.
     #[error(transparent)]
     Ipc(#[from] crs_ipc::IpcError),
@@ -409,7 +425,7 @@ pub fn execute_observed(
             .ok_or(SimError::NoBinDir)?,
     };
     let exe = |name: &str| bin_dir.join(name);
-    for need in ["motion-core", "drive-io", "sim-plant"] {
+    for need in ["motion-core", "drive-io", "sim-plant", "can-wire"] {
         if !exe(need).is_file() {
             return Err(SimError::MissingBinary { exe: exe(need) });
         }
@@ -432,6 +448,13 @@ pub fn execute_observed(
             drives: a.drives.clone(),
             source,
         })?;
+    // The bus budget of every interface, with the frames every node will be configured with:
+    // a layout the wire cannot carry is refused before anything starts.
+    let budgets = drive_io::budget::check(&drives_cfg).map_err(|source| SimError::Budget {
+        drives: a.drives.clone(),
+        source,
+    })?;
+    let bus_mode = transport::BusMode::parse(&a.transport)?;
     if drives_cfg.safety_heartbeat.is_some() && !with_monitor {
         return Err(SimError::HeartbeatWithoutMonitor {
             drives: a.drives.clone(),
@@ -530,10 +553,10 @@ pub fn execute_observed(
         }
         root
     });
-    let transport = transport::choose_transport(&a.transport, run_no)?;
+    let transport = bus_mode.describe();
     let prefix = format!("crs-sim-{}-{run_no}/", std::process::id());
     println!(
-        "crs sim: platform `{}`, transport {transport}, iceoryx2 prefix {prefix}, safety monitor {}",
+        "crs sim: platform `{}`, buses: {transport}, iceoryx2 prefix {prefix}, safety monitor {}",
         platform.name,
         if with_monitor {
             "on"
@@ -592,6 +615,30 @@ pub fn execute_observed(
         Some(p) => vec!["--rt-priority".to_string(), p.to_string()],
         None => Vec::new(),
     };
+    for ib in &budgets {
+        println!(
+            "  bus {}: {:.1} % of {} kbit/s (budget {:.0} %), RPDO window {:.0} µs",
+            ib.name,
+            ib.load_percent(),
+            ib.bitrate_bit_per_s / 1000,
+            ib.budget_percent,
+            ib.rpdo_window_us()
+        );
+    }
+    // The buses first: every CAN node of the run connects to them.
+    let mut nodes = vec!["sim-plant", "drive-io"];
+    if with_monitor {
+        nodes.push("safety-monitor");
+    }
+    let buses = transport::start(
+        &bus_mode,
+        &drives_cfg,
+        &nodes,
+        &mut stack,
+        &exe("can-wire"),
+        &a.out,
+        &format!("{}-{run_no}", std::process::id()),
+    )?;
     stack.spawn(
         "sim-plant",
         &exe("sim-plant"),
@@ -602,8 +649,9 @@ pub fn execute_observed(
                 s(&a.plant),
                 "--drives".into(),
                 s(&a.drives),
-                "--transport".into(),
-                transport.clone(),
+            ],
+            buses.args("sim-plant"),
+            vec![
                 "--control-platform".into(),
                 s(&daemon.platform),
                 "--home-lengths-m".into(),
@@ -634,11 +682,10 @@ pub fn execute_observed(
             "safety-monitor",
             &exe("safety-monitor"),
             &[
-                "--config".into(),
-                s(&a.monitor_config),
-                "--transport".into(),
-                transport.clone(),
-            ],
+                vec!["--config".to_string(), s(&a.monitor_config)],
+                buses.args("safety-monitor"),
+            ]
+            .concat(),
             &[],
         )?;
     }
@@ -647,12 +694,8 @@ pub fn execute_observed(
         &exe("drive-io"),
         &[
             rt_args(rt),
-            vec![
-                "--config".into(),
-                s(&a.drives),
-                "--transport".into(),
-                transport.clone(),
-            ],
+            vec!["--config".into(), s(&a.drives)],
+            buses.args("drive-io"),
             // The heartbeat is mandatory for drive-io (issue 16): only a run without the monitor
             // (--no-monitor, a bench) with a drives config without it takes the bench override.
             if !with_monitor && drives_cfg.safety_heartbeat.is_none() {
@@ -847,7 +890,17 @@ pub fn execute_observed(
     while let Ok(Some(t)) = truth.receive() {
         last_truth = Some(t);
     }
-    stack.stop_all();
+    stack.stop_all_then("can-wire");
+    // The hub stopped last (it started first): its statistics cover the whole run.
+    if let Some(p) = &buses.stats {
+        match transport::read_wire_stats(p) {
+            Some(w) => sum.wire = w,
+            None => println!(
+                "  the wire hub's statistics {} could not be read",
+                p.display()
+            ),
+        }
+    }
     if let (Some(t), Some(model)) = (ride_thread.take(), ride_model) {
         let (mut rs, path) = t.join()?;
         crate::ride_run::write_svg(&a.out, &platform, &model, &mut rs, &path, &ride_reference)?;
@@ -983,6 +1036,24 @@ fn print_summary(s: &Summary) {
             r.rotation_max_deg,
             r.true_position_mean_mm,
             r.true_position_max_mm
+        );
+    }
+    for w in &s.wire {
+        println!(
+            "  bus {}: {} frames, load {:.1} % (busiest second {}), {} dropped at a full queue, \
+             worst frame latency {:.0} µs{}",
+            w.bus,
+            w.frames,
+            w.load_mean_percent,
+            w.load_max_percent
+                .map_or("not measured".to_string(), |x| format!("{x:.1} %")),
+            w.dropped,
+            w.latency_max_us,
+            if w.violations > 0 {
+                format!(", {} late submissions (hub behind)", w.violations)
+            } else {
+                String::new()
+            }
         );
     }
     let ok = s.force_min_n >= s.f_min_n && s.force_max_n <= s.f_max_n;

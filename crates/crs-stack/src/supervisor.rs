@@ -281,6 +281,21 @@ impl Supervisor {
         })
     }
 
+    /// Stops every child but `last` like [`Supervisor::stop_all`], then `last` (the bus hub:
+    /// the others' final frames and goodbyes still travel, its statistics cover everything).
+    pub fn stop_all_then(&mut self, last: &str) {
+        let keep: Option<Proc> = self
+            .procs
+            .iter()
+            .position(|p| p.name == last)
+            .map(|i| self.procs.remove(i));
+        self.stop_all();
+        if let Some(p) = keep {
+            self.procs.push(p);
+            self.stop_all();
+        }
+    }
+
     /// Stops every child, in reverse start order: SIGTERM to all, then waits for each, SIGKILL
     /// after the grace period.
     pub fn stop_all(&mut self) {

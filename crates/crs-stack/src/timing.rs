@@ -80,7 +80,9 @@ impl TimingProfile {
             TimingProfile::Spec => return [Vec::new(), Vec::new(), Vec::new()],
             TimingProfile::Relaxed => {
                 monitor.push(R::one("feedback", "silence_cycles", "10"));
-                monitor.push(R::one("forces", "silence_cycles", "10"));
+                // The load cells report every 5th SYNC (20 ms at the relaxed 4 ms SYNC): the
+                // same 300 ms drive-io allows them (bus.heartbeat_timeout_ms above).
+                monitor.push(R::one("forces", "silence_cycles", "20"));
             }
             TimingProfile::Emulated => {
                 daemon.extend([

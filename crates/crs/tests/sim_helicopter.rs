@@ -29,17 +29,11 @@ fn crs_sim_platform_helicopter_runs_its_tour_clean() {
         "drives.toml",
         "safety-monitor-helicopter.toml",
     );
-    let port = 20000 + (std::process::id() % 20000);
     // The plant is not given: --platform helicopter must pick config/plant/helicopter.toml.
-    let o = sim_command(
-        &crs,
-        &format!("udpbus:239.255.70.13:{port}"),
-        &cfg,
-        &out.join("run"),
-    )
-    .args(["--platform", "helicopter", "--check"])
-    .output()
-    .expect("run crs sim");
+    let o = sim_command(&crs, "wire", &cfg, &out.join("run"))
+        .args(["--platform", "helicopter", "--check"])
+        .output()
+        .expect("run crs sim");
     let text = format!(
         "{}\n{}",
         String::from_utf8_lossy(&o.stdout),
@@ -157,7 +151,7 @@ fn a_wrong_or_contradictory_platform_choice_is_refused_before_anything_starts() 
             .current_dir(root())
             .arg("sim")
             .args(args)
-            .args(["--transport", "udpbus:239.255.70.13:20998", "--out"])
+            .args(["--transport", "wire", "--out"])
             .arg(std::env::temp_dir().join(format!("crs-sim-heli-no-{}", std::process::id())))
             .output()
             .expect("run crs sim");

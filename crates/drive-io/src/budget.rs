@@ -17,9 +17,10 @@
 //! Two checks per interface:
 //! * **load**: Σ bits/s ÷ bit rate ≤ `budget_percent` (≤ 70 %);
 //! * **cycle**: in the worst SYNC period (every every-n-th PDO due at once) the synchronous
-//!   frames plus two frames of blocking fit the period, and with an isochronous SYNC the
-//!   cycle's RPDOs — behind one blocking frame and every higher-priority frame that can be
-//!   pending then (the safety pairs, an EMCY) — are off the wire within `rpdo_guard_us`.
+//!   frames fit the period (with blocking on top they may spill a frame or two into the next
+//!   one: reported), and with an isochronous SYNC the cycle's RPDOs — behind one blocking
+//!   frame and every higher-priority periodic frame that can be pending then (the safety pairs
+//!   where they travel) — are off the wire within `rpdo_guard_us`.
 
 use crate::config::{DrivesConfig, SyncSource};
 use can_transport::wire::bits::worst_case_bits;
@@ -123,9 +124,15 @@ impl InterfaceBudget {
             .map(|l| l.bits)
             .sum()
     }
-    /// Time of the worst synchronous cycle plus two blocking frames, µs.
+    /// Time of the worst synchronous cycle plus two blocking frames (one delaying the SYNC,
+    /// one in the gap before the RPDOs), µs.
     pub fn worst_cycle_us(&self) -> f64 {
         f64::from(self.worst_cycle_sync_bits() + 2 * self.blocking_bits()) * self.bit_us()
+    }
+
+    /// How far the worst period's frames can reach into the next one, µs (0: they fit).
+    pub fn spill_us(&self) -> f64 {
+        (self.worst_cycle_us() - f64::from(self.period_us)).max(0.0)
     }
     /// Worst time from queueing the cycle's RPDOs to the last one off the wire, µs: one
     /// blocking frame, every periodic frame of higher priority (lower COB-ID) that may be
@@ -160,11 +167,15 @@ impl InterfaceBudget {
                 top: self.top_frames(4),
             });
         }
-        let cycle = self.worst_cycle_us();
-        if cycle > f64::from(self.period_us) {
+        // The synchronous frames of the worst period alone must fit it (else they pile up in
+        // every such period); with blocking frames on top they may spill over by a frame or
+        // two — reported, see `spill_us`: the lowest-priority frames of that period then
+        // arrive in the next one.
+        let sync_us = f64::from(self.worst_cycle_sync_bits()) * self.bit_us();
+        if sync_us > f64::from(self.period_us) {
             return Err(BudgetError::Cycle {
                 interface: self.name.clone(),
-                cycle_us: cycle,
+                cycle_us: sync_us,
                 period_us: self.period_us,
                 top: self.top_frames(4),
             });
@@ -222,7 +233,7 @@ impl std::fmt::Display for InterfaceBudget {
         for l in &self.lines {
             let rate = match l.rate {
                 Rate::EverySync(1) => "every SYNC".to_string(),
-                Rate::EverySync(n) => format!("every {n}. SYNC"),
+                Rate::EverySync(n) => format!("every {n}th SYNC"),
                 Rate::Every { ms } => format!("every {ms} ms"),
             };
             writeln!(
@@ -240,12 +251,21 @@ impl std::fmt::Display for InterfaceBudget {
         writeln!(
             f,
             "#   load {:.1} % of {:.0} % budget; worst SYNC period {:.0} µs of {} µs (synchronous \
-             frames {} bit + 2 blocking frames)",
+             frames {} bit + 2 blocking frames){}",
             self.load_percent(),
             self.budget_percent,
             self.worst_cycle_us(),
             self.period_us,
-            self.worst_cycle_sync_bits()
+            self.worst_cycle_sync_bits(),
+            if self.spill_us() > 0.0 {
+                format!(
+                    ": the lowest-priority frames of that period may arrive up to {:.0} µs into \
+                     the next",
+                    self.spill_us()
+                )
+            } else {
+                String::new()
+            }
         )?;
         if let Some(g) = self.rpdo_guard_us {
             writeln!(
@@ -278,9 +298,8 @@ pub enum BudgetError {
         top: String,
     },
     #[error(
-        "CAN interface {interface:?}: the worst SYNC period needs {cycle_us:.0} µs on the wire \
-         (synchronous frames plus blocking), more than the {period_us} µs period; most of it: \
-         {top}"
+        "CAN interface {interface:?}: the synchronous frames of the worst SYNC period need \
+         {cycle_us:.0} µs on the wire, more than the {period_us} µs period; most of it: {top}"
     )]
     Cycle {
         interface: String,
@@ -301,7 +320,7 @@ pub enum BudgetError {
 }
 
 /// The budget of every interface of `cfg`, the drives' PDOs given by `pdo_frames(cable)`
-/// (from each drive's configured mapping) and extra measuring nodes by `extra_nodes`
+/// (from each drive's configured mapping) and the force sensors by `extra_nodes`
 /// (interface, node id, its PDOs, heartbeat period ms).
 pub fn budget(
     cfg: &DrivesConfig,
@@ -441,7 +460,7 @@ pub fn budget(
         );
     }
     for (iface, node, pdos, hb_ms) in extra_nodes {
-        node_lines(*iface, *node, "node", pdos, *hb_ms);
+        node_lines(*iface, *node, "force sensor", pdos, *hb_ms);
     }
     if let (Some(io), Some(iface)) = (&cfg.safety_io, cfg.safety_io_interface())
         && let Some(ib) = out.get_mut(iface)

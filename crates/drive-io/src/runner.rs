@@ -25,6 +25,9 @@ pub enum RunError {
     /// A drive refused (or did not keep) its start-up configuration: start-up stops.
     #[error("drive start-up configuration failed: {0}")]
     Commissioning(String),
+    /// The configuration does not fit its bus budget.
+    #[error(transparent)]
+    Budget(crate::budget::BudgetError),
     /// One bus must be opened per configured interface.
     #[error("drive-io runs {configured} CAN interface(s) but {opened} bus(es) were opened")]
     Interfaces { configured: usize, opened: usize },
@@ -215,6 +218,27 @@ pub fn run<B: CanBus>(
     ipc: &IpcNode,
     stop: &AtomicBool,
 ) -> Result<RunSummary, RunError> {
+    run_with(cfg, buses, ipc, stop, Budget::Enforce)
+}
+
+/// Whether [`run_with`] refuses a configuration above its bus budget.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Budget {
+    /// Refuse it before anything is sent (the daemon, always).
+    Enforce,
+    /// Log the refusal and run anyway: only for the test that shows what such a configuration
+    /// does on the wire model (the daemon binary has no way to ask for this).
+    RunAnywayForTest,
+}
+
+/// [`run`] with a choice of what to do about the bus budget.
+pub fn run_with<B: CanBus>(
+    cfg: &DrivesConfig,
+    buses: Vec<B>,
+    ipc: &IpcNode,
+    stop: &AtomicBool,
+    budget: Budget,
+) -> Result<RunSummary, RunError> {
     // Timer slack 1 ns (kernel default 50 µs), so the ppoll deadline of the SYNC tick is met as
     // closely as the scheduler allows. The prctl only fails for an invalid argument; say so.
     if let Err(e) = crs_rt::set_timer_slack(1) {
@@ -237,6 +261,23 @@ pub fn run<B: CanBus>(
     let mut master = Master::new(cfg)?;
     for p in master.plans() {
         tracing::info!(node = p.node, kind = %p.kind, eds = %p.eds.file, "configured from its EDS");
+    }
+    // The bus budget of the frames these plans produce: refused before anything is sent.
+    for ib in crate::budget::of_plans(cfg, master.plans()) {
+        match (ib.check(), budget) {
+            (Ok(()), _) => tracing::info!(
+                interface = %ib.name,
+                load_percent = format_args!("{:.1}", ib.load_percent()),
+                budget_percent = ib.budget_percent,
+                worst_period_us = format_args!("{:.0}", ib.worst_cycle_us()),
+                rpdo_window_us = format_args!("{:.0}", ib.rpdo_window_us()),
+                "bus budget"
+            ),
+            (Err(e), Budget::Enforce) => return Err(RunError::Budget(e)),
+            (Err(e), Budget::RunAnywayForTest) => {
+                tracing::error!("{e} (running anyway: test of the overload)")
+            }
+        }
     }
     let mut dcf_pending = cfg.bus.dcf_dir.as_ref().map(|d| cfg.resolve(d));
     let period = master.sync_period_ns();

@@ -12,8 +12,11 @@
 //! * **Inputs**: bit 0 = e-stop circuit closed (button released; a normally-closed contact,
 //!   so a broken wire reads as pressed), bit 1 = the operator's reset key turned. Reported in
 //!   TPDO1 `[inputs, outputs]` on every change and at least every `inputs_period_ms`.
-//! * **NMT**: boot-up, pre-operational, operational on NMT start (its own node id or all),
-//!   stopped on NMT stop; heartbeat every `heartbeat_ms`. PDOs only when operational.
+//! * **NMT**: a self-starting device (CiA 302 0x1F80 bit 2: it enters operational on its own
+//!   after boot-up — drive-io, the drives' NMT master, addresses its drives only and never
+//!   resets or starts the safety system's devices); stopped on NMT stop (the monitor's
+//!   emergency stop: STO), operational again on NMT start (the monitor's reset); heartbeat every
+//!   `heartbeat_ms`. PDOs only when operational.
 //!
 //! Pure logic: frames and times in, frames out ([`FrameBuf`]); no I/O, no allocation.
 
@@ -71,10 +74,10 @@ impl SafetyIoNode {
         self.nmt
     }
 
-    /// Power-on: boot-up message, then pre-operational.
+    /// Power-on: boot-up message, then operational on its own (a self-starting device).
     pub fn start(&mut self, now_ns: u64, out: &mut FrameBuf) {
         out.push(heartbeat(self.node, NmtState::BootUp));
-        self.nmt = NmtState::PreOperational;
+        self.nmt = NmtState::Operational;
         self.next_heartbeat_ns = now_ns + self.heartbeat_ns;
         self.outputs = 0;
     }
@@ -226,7 +229,9 @@ mod tests {
         let mut out = FrameBuf::default();
         n.start(0, &mut out);
         assert_eq!(out.as_slice()[0].id(), 0x730);
-        // Pre-operational: RUN pairs alone release nothing.
+        // Self-starting; pre-operational (NMT "enter pre-op"), RUN pairs release nothing.
+        assert_eq!(n.nmt_state(), NmtState::Operational);
+        n.handle_frame(&crate::canopen::nmt(NMT_ENTER_PREOP, 0x30), 0, &mut out);
         let mut t = MS;
         for k in 0..5 {
             monitor_cycle(&mut n, &w, k, SafetyState::Run, t, &mut out);

@@ -5,7 +5,7 @@ use crs_ipc::{BusState, JointSetpoint, fault_code};
 use drive_io::canopen::{self, BusFrames, Ds402State, FrameBuf, Message};
 use drive_io::eds::{BUILTIN_WINCH_EDS, Eds};
 use drive_io::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
-use drive_io::{DrivesConfig, Master, hil};
+use drive_io::{DrivesConfig, Master};
 
 struct Sim {
     cfg: DrivesConfig,
@@ -28,7 +28,7 @@ impl Sim {
 
     /// drive-io configured from `master_eds`, drives implementing `drive_eds`.
     fn with_eds(master_eds: Eds, drive_eds: &Eds) -> Self {
-        let cfg = hil::hil_config("udpbus:239.255.0.1:1");
+        let cfg = rig_config();
         let master = Master::with_eds(&cfg, master_eds).unwrap();
         let slaves = cfg
             .winches
@@ -783,4 +783,24 @@ fn reset_after_an_escalation_restarts_the_drives_and_the_heartbeat() {
         assert_eq!(sl.ds402_state(), Ds402State::OperationEnabled);
         assert_eq!(sl.nmt_state(), canopen::NmtState::Operational);
     }
+}
+
+/// Four winches on one interface, lenient timeouts (virtual time needs none of them tight).
+fn rig_config() -> DrivesConfig {
+    let mut text = String::from(
+        "[bus]\ntransport = \"udpbus:239.255.0.1:1\"\nsync_period_us = 1000\n\
+         stale_setpoint_cycles = 50\nheartbeat_producer_ms = 20\nheartbeat_timeout_ms = 300\n\
+         boot_timeout_ms = 20000\nsdo_timeout_ms = 500\nmax_cable_speed_m_per_s = 5.0\n\
+         drive_heartbeat_consumer_ms = 600\nfollowing_error_window_m = 0.5\n",
+    );
+    for i in 0..4 {
+        let sign = if i % 2 == 0 { 1 } else { -1 };
+        text.push_str(&format!(
+            "[[winch]]\nnode_id = {}\ndrum_diameter_m = 0.305\ngear_ratio = 10.0\n\
+             counts_per_rev = 1048576\nsign = {sign}\noffset_counts = {}\n",
+            i + 1,
+            if sign > 0 { 0 } else { 200_000_000 }
+        ));
+    }
+    DrivesConfig::parse(&text).unwrap()
 }

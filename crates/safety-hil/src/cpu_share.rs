@@ -51,7 +51,7 @@ pub fn cpu_share(args: &Args, secs: f64) -> Res<String> {
         "cpu_share",
         &args.workdir,
         args.bin_dir.clone(),
-        &args.transport,
+        &crate::bus_mode(args)?,
         args.period_us,
         None,
     )?;

@@ -38,10 +38,11 @@ use std::time::Instant;
 
 #[derive(Parser)]
 #[command(about = "Fault-injection matrix of the safety monitor (multi-process, on a CAN bus)")]
-struct Args {
-    /// Bus of every process (socketcan:vcan0 in the VM; udpbus:... on a host without CAN).
-    #[arg(long, default_value = "socketcan:vcan0")]
-    transport: String,
+pub struct Args {
+    /// The scenario's CAN buses: `wire` (the wire model, a hub on unix sockets: any host) or
+    /// `vcan` (a vcan port per process and interface, the hub forwarding: the QEMU guest).
+    #[arg(long, default_value = "wire")]
+    buses: String,
     /// Run only scenarios whose name contains this.
     #[arg(long)]
     only: Option<String>,
@@ -89,6 +90,16 @@ struct Args {
 }
 
 pub type Res<T> = Result<T, String>;
+
+/// The scenarios' bus layout from `--buses`.
+pub fn bus_mode(args: &Args) -> Res<crs_stack::transport::BusMode> {
+    match args.buses.as_str() {
+        "wire" | "vcan" => {
+            crs_stack::transport::BusMode::parse(&args.buses).map_err(|e| e.to_string())
+        }
+        other => Err(format!("--buses {other:?}: wire or vcan")),
+    }
+}
 
 type Scenario = (&'static str, fn(&mut Stack) -> Res<Outcome>);
 
@@ -200,16 +211,24 @@ fn main() -> ExitCode {
         };
     }
     println!(
-        "safety-hil: transport {}; drives' safety-heartbeat validation time {} ms; monitor \
+        "safety-hil: buses {}; drives' safety-heartbeat validation time {} ms; monitor \
          silence {} cycles, feedback silence {} cycles (15 ms cycles); 1 kHz loops at {} µs; \
          workdir {}",
-        args.transport,
+        args.buses,
         args.validation_ms,
         args.silence_cycles,
         args.feedback_silence_cycles,
         args.period_us,
         args.workdir.display()
     );
+    let mode = match bus_mode(&args) {
+        Ok(m) => m,
+        Err(e) => {
+            println!("SAFETY-HIL FAIL setup: {e}");
+            println!("SAFETY-HIL-RESULT FAIL");
+            return ExitCode::FAILURE;
+        }
+    };
     let mut rows = Vec::new();
     let mut all_ok = true;
     for (name, f) in SCENARIOS {
@@ -224,7 +243,7 @@ fn main() -> ExitCode {
                 name,
                 &args.workdir,
                 args.bin_dir.clone(),
-                &args.transport,
+                &mode,
                 args.period_us,
                 args.guest_tuning.then_some(GUEST_EMULATOR_RT_PRIORITY),
             )

@@ -25,7 +25,8 @@ pub struct Stack {
     pub dir: PathBuf,
     pub cfg: PathBuf,
     bin_dir: Option<PathBuf>,
-    pub transport: String,
+    /// The scenario's CAN buses (each process's transports, the wire hub).
+    pub buses: crs_stack::transport::StackBuses,
     pub period_us: u32,
     pub prefix: String,
     procs: Supervisor,
@@ -89,7 +90,7 @@ impl Stack {
         name: &'static str,
         dir: &Path,
         bin_dir: Option<PathBuf>,
-        transport: &str,
+        bus_mode: &crs_stack::transport::BusMode,
         period_us: u32,
         emulator_rt_priority: Option<u32>,
     ) -> Res<Stack> {
@@ -115,15 +116,33 @@ impl Stack {
         // Quiet: this harness's stdout is parsed by the scripts. The grace period bounds the
         // graceful stop of `stop_with_usage` (the CPU measurement); killed processes and the
         // end of a scenario use SIGKILL without grace.
-        let procs = Supervisor::new(&prefix, &sdir)
+        let mut procs = Supervisor::new(&prefix, &sdir)
             .quiet()
             .with_grace(Duration::from_secs(10));
+        // The buses first (the wire hub, or vcan ports it forwards between): every process of
+        // the scenario, the harness itself included (its injections and spying), is a node.
+        let drives = drive_io::config::DrivesConfig::load(&dir.join("drives.toml"))
+            .map_err(|e| e.to_string())?;
+        let hub = match &bin_dir {
+            Some(d) => d.join("can-wire"),
+            None => PathBuf::from("can-wire"),
+        };
+        let buses = crs_stack::transport::start(
+            bus_mode,
+            &drives,
+            &["winch-emulator", "safety-monitor", "drive-io", "safety-hil"],
+            &mut procs,
+            &hub,
+            &sdir,
+            &format!("{}-{n}", std::process::id()),
+        )
+        .map_err(|e| e.to_string())?;
         let mut st = Stack {
             name,
             dir: sdir,
             cfg: dir.to_path_buf(),
             bin_dir,
-            transport: transport.to_string(),
+            buses,
             period_us,
             prefix,
             procs,
@@ -146,8 +165,6 @@ impl Stack {
         let mut emu_args = vec![
             "--config".into(),
             c(emulator_drives(name)),
-            "--transport".into(),
-            st.transport.clone(),
             "--initial-length-m".into(),
             format!("{}", home_length()),
             "--status-file".into(),
@@ -158,16 +175,16 @@ impl Stack {
         if let Some(p) = emulator_rt_priority {
             emu_args.extend(["--rt-priority".into(), p.to_string()]);
         }
+        emu_args.extend(st.buses.args("winch-emulator"));
         st.spawn("winch-emulator", &emu_args)?;
         let mon_args: Vec<String> = vec![
             "--config".into(),
             c(monitor_config(name)),
-            "--transport".into(),
-            st.transport.clone(),
             "--ipc-prefix".into(),
             st.prefix.clone(),
         ]
         .into_iter()
+        .chain(st.buses.args("safety-monitor"))
         .chain(monitor_fault_injection(name).iter().map(|a| a.to_string()))
         .collect();
         st.spawn("safety-monitor", &mon_args)?;
@@ -177,14 +194,15 @@ impl Stack {
         st.wait("the monitor's heartbeat", 20.0, |s| {
             Ok(s.monitor_state.is_some())
         })?;
-        let dio_args = vec![
+        let dio_args: Vec<String> = vec![
             "--config".into(),
             c("drives.toml"),
-            "--transport".into(),
-            st.transport.clone(),
             "--ipc-prefix".into(),
             st.prefix.clone(),
-        ];
+        ]
+        .into_iter()
+        .chain(st.buses.args("drive-io"))
+        .collect();
         st.spawn("drive-io", &dio_args)?;
         if drives_never_ready(name) {
             return Ok(st);
@@ -459,8 +477,15 @@ impl Drop for Stack {
     }
 }
 
-/// A socket of its own on the scenario's bus (injections, spying).
-pub fn open_bus(st: &Stack) -> Res<Box<dyn can_transport::CanBus>> {
-    let spec: can_transport::TransportSpec = st.transport.parse().map_err(|e| format!("{e}"))?;
+/// A socket of the harness's own on the scenario's interface `iface` (`can0`…`can3`,
+/// `safety`): injections, spying.
+pub fn open_bus(st: &Stack, iface: &str) -> Res<Box<dyn can_transport::CanBus>> {
+    let t = st
+        .buses
+        .transports("safety-hil")
+        .into_iter()
+        .find_map(|t| t.strip_prefix(&format!("{iface}=")).map(str::to_string))
+        .ok_or_else(|| format!("no interface {iface:?} in the scenario's buses"))?;
+    let spec: can_transport::TransportSpec = t.parse().map_err(|e| format!("{e}"))?;
     can_transport::open(&spec).map_err(|e| e.to_string())
 }

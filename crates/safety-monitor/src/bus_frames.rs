@@ -1,13 +1,12 @@
 //! The few CANopen frames the monitor sends and reads on the drive bus, encoded here on purpose
 //! (the stop path must not depend on drive-io's code). COB-IDs per docs/can-protocol.md.
 
+use crate::bus_layout::BusLayout;
 use can_transport::CanFrame;
 
 pub const COB_NMT: u16 = 0x000;
 pub const COB_RPDO1_BASE: u16 = 0x200;
 pub const COB_HEARTBEAT_BASE: u16 = 0x700;
-/// TPDO2 of a drive: velocity actual (i32 counts/s) + pulley force sensor (i32 mN).
-pub const COB_TPDO2_BASE: u16 = 0x280;
 pub const NMT_START: u8 = 0x01;
 pub const NMT_STOP: u8 = 0x02;
 /// CiA 402 controlword "quick stop" (bits 1 = 1, 2 = 0).
@@ -40,72 +39,85 @@ pub fn rpdo1(node: u8, controlword: u16, target_counts: i32) -> CanFrame {
 }
 
 /// What the monitor reads from the bus.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Observed {
-    /// RPDO1 from the drive adapter to `node`.
-    Rpdo1 {
-        node: u8,
+    /// The RPDO carrying cable `cable`'s controlword and target (in its configured layout).
+    Rpdo {
+        cable: usize,
         controlword: u16,
         target_counts: i32,
     },
     /// Heartbeat of `node` with its NMT state.
     Heartbeat { node: u8, state: u8 },
-    /// TPDO2 of drive `node`: its measured cable force, mN.
-    Force { node: u8, force_mn: i32 },
+    /// Cable `cable`'s measured force (its drive's object or its load cell), N.
+    Force { cable: usize, force_n: f64 },
     /// An error frame of the bus controller (the reader's socket subscribes to them).
     BusError(can_transport::BusCondition),
 }
 
-/// Decodes an RPDO1 or a heartbeat; anything else (or malformed) is `None`. Never panics.
-pub fn observe(f: &CanFrame) -> Option<Observed> {
+/// Decodes a frame received on interface `iface` with the drives' layout: an RPDO, a force,
+/// a heartbeat; anything else (or malformed) is `None`. Never panics.
+pub fn observe(layout: &BusLayout, iface: usize, f: &CanFrame) -> Option<Observed> {
     if f.is_extended() || f.is_rtr() {
         return None;
     }
+    if let Some((cable, controlword, target_counts)) = layout.rpdo_of(iface, f) {
+        return Some(Observed::Rpdo {
+            cable,
+            controlword,
+            target_counts,
+        });
+    }
+    if let Some((cable, force_n)) = layout.force_of(iface, f) {
+        return Some(Observed::Force { cable, force_n });
+    }
     let id = f.id() as u16;
     let node = (id & 0x7F) as u8;
-    if node == 0 {
-        return None;
-    }
     let d = f.data();
-    match id & 0x780 {
-        COB_RPDO1_BASE if d.len() == 6 => Some(Observed::Rpdo1 {
-            node,
-            controlword: u16::from_le_bytes([d[0], d[1]]),
-            target_counts: i32::from_le_bytes([d[2], d[3], d[4], d[5]]),
-        }),
-        COB_HEARTBEAT_BASE if d.len() == 1 => Some(Observed::Heartbeat {
-            node,
-            state: d[0] & 0x7F,
-        }),
-        COB_TPDO2_BASE if d.len() == 8 => Some(Observed::Force {
-            node,
-            force_mn: i32::from_le_bytes([d[4], d[5], d[6], d[7]]),
-        }),
-        _ => None,
-    }
+    (id & 0x780 == COB_HEARTBEAT_BASE && node != 0 && d.len() == 1).then(|| Observed::Heartbeat {
+        node,
+        state: d[0] & 0x7F,
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bus_layout::{ForceLayout, RpdoLayout, Value};
 
     #[test]
     fn round_trips() {
         assert_eq!(nmt(NMT_STOP, 0).data(), &[2, 0]);
         assert_eq!(nmt(NMT_STOP, 0).id(), 0);
+        let layout = BusLayout {
+            rpdo: (1..=6).map(|n| RpdoLayout::default_for(0, n)).collect(),
+            force: vec![ForceLayout {
+                interface: 0,
+                cob_id: 0x286,
+                len: 8,
+                at: 4,
+                value: Value::I32,
+                n_per_unit: 0.001,
+                node: 6,
+            }],
+        };
         assert_eq!(
-            observe(&rpdo1(5, CW_QUICK_STOP, -7)),
-            Some(Observed::Rpdo1 {
-                node: 5,
+            observe(&layout, 0, &rpdo1(5, CW_QUICK_STOP, -7)),
+            Some(Observed::Rpdo {
+                cable: 4,
                 controlword: 2,
                 target_counts: -7
             })
         );
+        assert_eq!(observe(&layout, 1, &rpdo1(5, CW_QUICK_STOP, -7)), None);
         assert_eq!(
-            observe(&CanFrame::new(0x703, &[0x85]).unwrap()),
+            observe(&layout, 0, &CanFrame::new(0x703, &[0x85]).unwrap()),
             Some(Observed::Heartbeat { node: 3, state: 5 })
         );
-        assert_eq!(observe(&CanFrame::new(0x203, &[1, 2]).unwrap()), None);
+        assert_eq!(
+            observe(&layout, 0, &CanFrame::new(0x203, &[1, 2]).unwrap()),
+            None
+        );
         for cw in [0x000F, 0x001F, 0x007F, 0x010F, 0xFF0F, 0x004F] {
             assert!(enables_operation(cw), "{cw:#06x}");
         }
@@ -117,13 +129,27 @@ mod tests {
         d[..4].copy_from_slice(&123i32.to_le_bytes());
         d[4..].copy_from_slice(&(-4_500_000i32).to_le_bytes());
         assert_eq!(
-            observe(&CanFrame::new(0x286, &d).unwrap()),
+            observe(&layout, 0, &CanFrame::new(0x286, &d).unwrap()),
             Some(Observed::Force {
-                node: 6,
-                force_mn: -4_500_000
+                cable: 0,
+                force_n: -4500.0
             })
         );
-        assert_eq!(observe(&CanFrame::new(0x286, &d[..7]).unwrap()), None);
-        assert_eq!(observe(&CanFrame::new(0x200, &[0; 6]).unwrap()), None);
+        assert_eq!(
+            observe(&layout, 0, &CanFrame::new(0x286, &d[..7]).unwrap()),
+            None
+        );
+        assert_eq!(
+            observe(&layout, 0, &CanFrame::new(0x200, &[0; 6]).unwrap()),
+            None
+        );
+        // Empty frames of every kind (SYNC, NMT, a stray heartbeat id) are nothing.
+        for id in [0x080, 0x000, 0x705, 0x205, 0x286] {
+            assert_eq!(
+                observe(&layout, 0, &CanFrame::new(id, &[]).unwrap()),
+                None,
+                "{id:#x}"
+            );
+        }
     }
 }

@@ -2,6 +2,7 @@
 //! drives TOML it points to (read with the monitor's own parsers). Everything is validated
 //! before anything runs; errors name the file, the key and (for TOML syntax errors) the line.
 
+use crate::bus_layout::{BusLayout, ForceLayout, RpdoLayout, Value, object_value, parse_object};
 use crate::platform::{PlatformError, PlatformParams, load_platform};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -386,6 +387,8 @@ pub struct Drives {
     pub safety_io: Option<(usize, u8)>,
     /// In cable order (cable i = i-th `[[winch]]`).
     pub winches: Vec<Winch>,
+    /// Where each drive's RPDO and each cable's force travel.
+    pub layout: crate::bus_layout::BusLayout,
 }
 
 /// Name of the single interface a drives file with only `bus.transport` describes (drive-io's
@@ -398,6 +401,8 @@ struct RawDrives {
     bus: RawBus,
     #[serde(default)]
     safety_io: Option<RawSafetyIo>,
+    #[serde(default, rename = "force_sensor")]
+    force_sensors: Vec<RawForceSensor>,
     #[serde(rename = "winch")]
     winches: Vec<RawWinch>,
 }
@@ -422,10 +427,57 @@ struct RawInterface {
     transport: String,
 }
 
+/// A `[[force_sensor]]` as the monitor needs it (CiA 404 load cell: its TPDO and scaling).
+#[derive(Deserialize)]
+struct RawForceSensor {
+    node_id: i64,
+    cable: i64,
+    #[serde(default)]
+    interface: Option<String>,
+    #[serde(default)]
+    object: Option<String>,
+    n_per_unit: f64,
+    #[serde(default)]
+    tpdo: Option<i64>,
+    #[serde(default)]
+    cob_id: Option<i64>,
+    #[serde(default)]
+    mapping: Option<String>,
+}
+
+/// `[[winch.rpdo]]` / `[[winch.tpdo]]` of a custom mapping.
+#[derive(Deserialize)]
+struct RawPdo {
+    number: i64,
+    objects: Vec<String>,
+    #[serde(default)]
+    cob_id: Option<i64>,
+}
+
+/// `force = "drive"` or the node id of a `[[force_sensor]]`.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RawForce {
+    Node(i64),
+    Name(String),
+}
+
 #[derive(Deserialize)]
 struct RawWinch {
     #[serde(default)]
     interface: Option<String>,
+    #[serde(default)]
+    mapping: Option<String>,
+    #[serde(default)]
+    rpdo: Vec<RawPdo>,
+    #[serde(default)]
+    tpdo: Vec<RawPdo>,
+    #[serde(default)]
+    force: Option<RawForce>,
+    #[serde(default)]
+    force_object: Option<String>,
+    #[serde(default)]
+    force_n_per_unit: Option<f64>,
     node_id: i64,
     drum_diameter_m: f64,
     gear_ratio: f64,
@@ -454,6 +506,8 @@ pub struct MonitorConfig {
     pub safety_interfaces: Vec<usize>,
     /// The safety I/O node (interface index, node id), if any.
     pub safety_io: Option<(usize, u8)>,
+    /// Where each drive's RPDO and each cable's force travel.
+    pub layout: crate::bus_layout::BusLayout,
     /// In cable order (cable i = i-th `[[winch]]`).
     pub winches: Vec<Winch>,
     /// CRC-32 of the safety parameter set: the bytes of this file, the platform file and the
@@ -804,6 +858,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         safety_interfaces,
         safety_io,
         winches,
+        layout,
     } = load_drives(&drives_file)?;
     if let Some(t) = &raw.can.transport {
         if interfaces.len() != 1 {
@@ -878,6 +933,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         safety_interfaces,
         safety_io,
         winches,
+        layout,
     })
 }
 
@@ -1060,12 +1116,227 @@ pub fn load_drives(path: &Path) -> Result<Drives, ConfigError> {
         Some((iface, _)) => vec![iface],
         None => (0..interfaces.len()).collect(),
     };
+    let layout = bus_layout(&raw, &interfaces, &out, &invalid)?;
     Ok(Drives {
         interfaces,
         safety_interfaces,
         safety_io,
         winches: out,
+        layout,
     })
+}
+
+/// The bytes of a PDO's objects in frame order: (index, sub, offset, value type); the error
+/// names the object the monitor cannot decode.
+fn pdo_objects(objects: &[String]) -> Result<Vec<(u16, u8, usize, Value)>, String> {
+    let mut at = 0;
+    let mut out = Vec::with_capacity(objects.len());
+    for o in objects {
+        let (i, sub) = parse_object(o)
+            .ok_or_else(|| format!("{o:?}: not an object (0xIIII or 0xIIIIsubS)"))?;
+        let v = object_value(i, sub).ok_or_else(|| {
+            format!("{o:?}: the monitor decodes only drive-io's CSP and CiA 404 objects")
+        })?;
+        out.push((i, sub, at, v));
+        at += v.bytes();
+    }
+    if at > 8 {
+        return Err(format!("{at} bytes: more than a CAN frame carries"));
+    }
+    Ok(out)
+}
+
+/// Each drive's RPDO (controlword + target) and each cable's force frame, as drive-io
+/// configures them (docs/can-protocol.md), from the drives file's own keys.
+fn bus_layout(
+    raw: &RawDrives,
+    interfaces: &[Interface],
+    winches: &[Winch],
+    invalid: &dyn Fn(String, String) -> ConfigError,
+) -> Result<BusLayout, ConfigError> {
+    let iface_of = |name: &Option<String>, key: String| -> Result<usize, ConfigError> {
+        match name {
+            None if interfaces.len() == 1 => Ok(0),
+            None => Err(invalid(key, "missing (several interfaces)".into())),
+            Some(n) => interfaces
+                .iter()
+                .position(|i| &i.name == n)
+                .ok_or_else(|| invalid(key, format!("{n:?}: no such interface"))),
+        }
+    };
+    let mut layout = BusLayout::default();
+    for (i, (rw, w)) in raw.winches.iter().zip(winches).enumerate() {
+        let key = |k: &str| format!("winch[{i}].{k}");
+        let n = u16::from(w.node_id);
+        let mode = rw
+            .mapping
+            .as_deref()
+            .unwrap_or(if rw.rpdo.is_empty() && rw.tpdo.is_empty() {
+                "default"
+            } else {
+                "custom"
+            });
+        // The drive's force, if it measures it: (TPDO COB-ID, frame length, offset, type).
+        let force_obj = match &rw.force_object {
+            None => (0x2110, 0),
+            Some(o) => parse_object(o)
+                .ok_or_else(|| invalid(key("force_object"), format!("{o:?}: not an object")))?,
+        };
+        let force_by_drive = match &rw.force {
+            Some(RawForce::Name(s)) if s == "drive" => true,
+            Some(RawForce::Name(s)) => {
+                return Err(invalid(
+                    key("force"),
+                    format!("{s:?}: \"drive\" or a node id"),
+                ));
+            }
+            Some(RawForce::Node(_)) => false,
+            None => !raw.force_sensors.iter().any(|s| s.cable == i as i64 + 1),
+        };
+        let (rpdo, drive_force) = match mode {
+            "default" => {
+                let fv = object_value(force_obj.0, force_obj.1).ok_or_else(|| {
+                    invalid(key("force_object"), "the monitor cannot decode it".into())
+                })?;
+                (
+                    RpdoLayout::default_for(w.interface, w.node_id),
+                    // TPDO2: velocity actual (i32), then the force object.
+                    force_by_drive.then_some((0x280 + n, 4 + fv.bytes(), 4, fv)),
+                )
+            }
+            "custom" => {
+                let mut rpdo = None;
+                for (k, p) in rw.rpdo.iter().enumerate() {
+                    let objs = pdo_objects(&p.objects)
+                        .map_err(|r| invalid(format!("winch[{i}].rpdo[{k}].objects"), r))?;
+                    let cw = objs.iter().find(|o| (o.0, o.1) == (0x6040, 0));
+                    let t = objs.iter().find(|o| (o.0, o.1) == (0x607A, 0));
+                    if let (Some(cw), Some(t)) = (cw, t) {
+                        let cob = p
+                            .cob_id
+                            .map_or(0x200 + 0x100 * (p.number.clamp(1, 4) as u16 - 1) + n, |c| {
+                                (c & 0x7FF) as u16
+                            });
+                        rpdo = Some(RpdoLayout {
+                            interface: w.interface,
+                            cob_id: cob,
+                            len: objs.iter().map(|o| o.3.bytes()).sum(),
+                            controlword_at: cw.2,
+                            target_at: t.2,
+                        });
+                    }
+                }
+                let rpdo = rpdo.ok_or_else(|| {
+                    invalid(
+                        key("rpdo"),
+                        "the monitor needs one RPDO mapping both 0x6040 and 0x607A".into(),
+                    )
+                })?;
+                let mut force = None;
+                if force_by_drive {
+                    for (k, p) in rw.tpdo.iter().enumerate() {
+                        let objs = pdo_objects(&p.objects)
+                            .map_err(|r| invalid(format!("winch[{i}].tpdo[{k}].objects"), r))?;
+                        if let Some(o) = objs.iter().find(|o| (o.0, o.1) == force_obj) {
+                            let cob = p.cob_id.map_or(
+                                0x180 + 0x100 * (p.number.clamp(1, 4) as u16 - 1) + n,
+                                |c| (c & 0x7FF) as u16,
+                            );
+                            force = Some((cob, objs.iter().map(|o| o.3.bytes()).sum(), o.2, o.3));
+                        }
+                    }
+                    if force.is_none() {
+                        return Err(invalid(
+                            key("tpdo"),
+                            "force = \"drive\" but no [[winch.tpdo]] maps the force object".into(),
+                        ));
+                    }
+                }
+                (rpdo, force)
+            }
+            other => {
+                return Err(invalid(
+                    key("mapping"),
+                    format!(
+                        "{other:?}: the monitor decodes \"default\" and \"custom\" mappings only \
+                         (a fixed mapping is in the drive's EDS, which the monitor does not read: \
+                         write it out as mapping = \"custom\")"
+                    ),
+                ));
+            }
+        };
+        layout.rpdo.push(rpdo);
+        if let Some((cob_id, len, at, value)) = drive_force {
+            layout.force.push(ForceLayout {
+                interface: w.interface,
+                cob_id,
+                len,
+                at,
+                value,
+                n_per_unit: rw.force_n_per_unit.unwrap_or(0.001),
+                node: w.node_id,
+            });
+            continue;
+        }
+        // The cable's load cell.
+        let (j, fs) = match &rw.force {
+            Some(RawForce::Node(node)) => raw
+                .force_sensors
+                .iter()
+                .enumerate()
+                .find(|(_, s)| s.node_id == *node)
+                .ok_or_else(|| {
+                    invalid(
+                        key("force"),
+                        format!("no [[force_sensor]] with node_id {node}"),
+                    )
+                })?,
+            _ => raw
+                .force_sensors
+                .iter()
+                .enumerate()
+                .find(|(_, s)| s.cable == i as i64 + 1)
+                .ok_or_else(|| invalid(key("force"), "no force source".into()))?,
+        };
+        let skey = |k: &str| format!("force_sensor[{j}].{k}");
+        if fs.mapping.as_deref().is_some_and(|m| m != "default") {
+            return Err(invalid(
+                skey("mapping"),
+                "the monitor decodes the default mapping of a force sensor only".into(),
+            ));
+        }
+        let (oi, os) = match &fs.object {
+            None => (0x9130, 1),
+            Some(o) => parse_object(o)
+                .ok_or_else(|| invalid(skey("object"), format!("{o:?}: not an object")))?,
+        };
+        let value = object_value(oi, os)
+            .ok_or_else(|| invalid(skey("object"), "not a CiA 404 process value".into()))?;
+        if !(1..=127).contains(&fs.node_id) {
+            return Err(invalid(skey("node_id"), "must be in 1..=127".into()));
+        }
+        if !(fs.n_per_unit.is_finite() && fs.n_per_unit != 0.0) {
+            return Err(invalid(
+                skey("n_per_unit"),
+                "must be finite and not 0".into(),
+            ));
+        }
+        let tpdo = fs.tpdo.unwrap_or(1).clamp(1, 4) as u16;
+        layout.force.push(ForceLayout {
+            interface: iface_of(&fs.interface, skey("interface"))?,
+            cob_id: fs
+                .cob_id
+                .map_or(0x180 + 0x100 * (tpdo - 1) + fs.node_id as u16, |c| {
+                    (c & 0x7FF) as u16
+                }),
+            len: value.bytes(),
+            at: 0,
+            value,
+            n_per_unit: fs.n_per_unit,
+            node: fs.node_id as u8,
+        });
+    }
+    Ok(layout)
 }
 
 /// SHA-256 of a file's bytes (the accepted-platform hash).

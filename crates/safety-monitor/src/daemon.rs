@@ -170,6 +170,7 @@ const READER_BATCH: Duration = Duration::from_millis(3);
 /// as complete when every interface was drained.
 fn bus_reader(
     mut buses: Vec<Box<dyn CanBus>>,
+    layout: crate::bus_layout::BusLayout,
     queue: Arc<ArrayQueue<Obs>>,
     stop: Arc<AtomicBool>,
     health: Arc<ReaderHealth>,
@@ -186,10 +187,12 @@ fn bus_reader(
         for (iface, bus) in buses.iter_mut().enumerate() {
             loop {
                 let (what, rx_ns) = match bus.try_recv_event() {
-                    Ok(Some(RxEvent::Frame(rx))) => match bus_frames::observe(&rx.frame) {
-                        Some(what) => (what, rx.rx_monotonic_ns),
-                        None => continue,
-                    },
+                    Ok(Some(RxEvent::Frame(rx))) => {
+                        match bus_frames::observe(&layout, iface, &rx.frame) {
+                            Some(what) => (what, rx.rx_monotonic_ns),
+                            None => continue,
+                        }
+                    }
                     Ok(Some(RxEvent::BusError(e))) => {
                         (Observed::BusError(e.error.condition()), e.rx_monotonic_ns)
                     }
@@ -330,9 +333,10 @@ pub fn run_on(
     let mut reader_watch = ReaderWatch::new(cfg.can.reader_stall_cycles);
     let reader = {
         let (q, s, d) = (queue.clone(), reader_stop.clone(), health.clone());
+        let layout = cfg.layout.clone();
         std::thread::Builder::new()
             .name("safety-bus-rx".into())
-            .spawn(move || bus_reader(rx, q, s, d))
+            .spawn(move || bus_reader(rx, layout, q, s, d))
             .map_err(|e| DaemonError::Other(format!("spawning the bus reader: {e}")))?
     };
 
@@ -519,12 +523,12 @@ pub fn run_on(
         }
         while let Some(o) = queue.pop() {
             match o.what {
-                Observed::Rpdo1 {
-                    node,
+                Observed::Rpdo {
+                    cable: i,
                     controlword,
                     target_counts,
                 } => {
-                    if let Some(i) = node_index(o.iface, node) {
+                    if i < m {
                         last_target[i] = Some(target_counts);
                         if bus_frames::enables_operation(controlword) {
                             let l = winches[i].counts_to_length_m(target_counts);
@@ -543,9 +547,9 @@ pub fn run_on(
                         );
                     }
                 }
-                Observed::Force { node, force_mn } => {
-                    if let Some(i) = node_index(o.iface, node) {
-                        monitor.on_force(i, f64::from(force_mn) * 1e-3, o.rx_ns);
+                Observed::Force { cable, force_n } => {
+                    if cable < m {
+                        monitor.on_force(cable, force_n, o.rx_ns);
                     }
                 }
                 Observed::BusError(condition) => {
@@ -595,9 +599,9 @@ pub fn run_on(
         if let Some(rec) = report.new_trip {
             // Stop path first: quick stop to every drive, then NMT stop all (retried and
             // escalated when unsent: stop_path).
-            for (i, w) in winches.iter().enumerate() {
-                if let (Some(t), Some(bus)) = (last_target[i], tx.on(w.interface)) {
-                    stops.quick_stop(bus, w.node_id, t);
+            for (i, l) in cfg.layout.rpdo.iter().enumerate() {
+                if let (Some(t), Some(bus)) = (last_target[i], tx.on(l.interface)) {
+                    stops.quick_stop(bus, l, t);
                 }
             }
             stops.nmt_stop(&mut tx);

@@ -133,11 +133,14 @@ impl StopPath {
     }
 
     /// RPDO1 quick stop to `node` (target: the last one seen, so the drive stays where it is).
-    pub fn quick_stop(&mut self, bus: &mut dyn CanBus, node: u8, target_counts: i32) -> bool {
-        let ok = self.send(
-            bus,
-            &bus_frames::rpdo1(node, bus_frames::CW_QUICK_STOP, target_counts),
-        );
+    /// Quick stop to one drive in its RPDO's configured layout, holding `target_counts`.
+    pub fn quick_stop(
+        &mut self,
+        bus: &mut dyn CanBus,
+        rpdo: &crate::bus_layout::RpdoLayout,
+        target_counts: i32,
+    ) -> bool {
+        let ok = self.send(bus, &rpdo.encode(bus_frames::CW_QUICK_STOP, target_counts));
         if !ok {
             self.counts.quick_stop_unsent += 1;
         }
@@ -360,7 +363,11 @@ mod tests {
     fn nothing_sent_leaves_the_watch_timeout_and_says_so() {
         let mut bus = Bus::new(None, u32::MAX);
         let mut p = StopPath::new();
-        assert!(!p.quick_stop(&mut bus, 3, 0));
+        assert!(!p.quick_stop(
+            &mut bus,
+            &crate::bus_layout::RpdoLayout::default_for(0, 3),
+            0
+        ));
         assert!(!p.nmt_stop(&mut bus));
         assert_eq!(
             p.heartbeat(&mut bus, &stop_pair(), true),

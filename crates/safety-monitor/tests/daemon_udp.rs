@@ -42,6 +42,42 @@ struct Rig {
     node_ids: Vec<u8>,
 }
 
+/// The shipped configuration reduced to what this test plays on ONE UDP bus: every drive on
+/// it, each reporting its force in TPDO2 (velocity, then force in mN: the simulated winch's
+/// layout), the monitor's doubled frames on the same bus.
+fn one_bus_with_drive_forces(cfg: &mut config::MonitorConfig, transport: &TransportSpec) {
+    use safety_monitor::bus_layout::{BusLayout, ForceLayout, RpdoLayout, Value};
+    cfg.interfaces = vec![config::Interface {
+        name: "can0".into(),
+        transport: transport.to_string(),
+    }];
+    cfg.safety_interfaces = vec![0];
+    cfg.safety_io = None;
+    for w in &mut cfg.winches {
+        w.interface = 0;
+    }
+    cfg.layout = BusLayout {
+        rpdo: cfg
+            .winches
+            .iter()
+            .map(|w| RpdoLayout::default_for(0, w.node_id))
+            .collect(),
+        force: cfg
+            .winches
+            .iter()
+            .map(|w| ForceLayout {
+                interface: 0,
+                cob_id: 0x280 + u16::from(w.node_id),
+                len: 8,
+                at: 4,
+                value: Value::I32,
+                n_per_unit: 0.001,
+                node: w.node_id,
+            })
+            .collect(),
+    };
+}
+
 impl Rig {
     fn start(name: &str, port: u16) -> Rig {
         Self::start_with(name, port, false)
@@ -55,7 +91,7 @@ impl Rig {
         let cfg_path =
             PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/safety-monitor.toml");
         let mut cfg = config::load(&cfg_path).unwrap();
-        cfg.override_transports(&[transport.to_string()]).unwrap();
+        one_bus_with_drive_forces(&mut cfg, &transport);
         cfg.monitor.rt_priority = 0;
         // The test process itself publishes the setpoints and the identity (issue 16: the
         // stream owners are checked by executable).

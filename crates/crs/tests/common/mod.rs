@@ -25,7 +25,7 @@ pub fn stack_bin_dir(crs: &Path) -> PathBuf {
     bin_dir
 }
 
-/// `crs sim` from the repository root on the CAN-over-UDP bus `transport`, with the daemon,
+/// `crs sim` from the repository root on the buses `transport` (`wire`: the wire model), with the daemon,
 /// drives and monitor configs `cfg` (from [`relaxed_configs`]) and its output in `out`; the
 /// caller adds its own arguments and runs it.
 pub fn sim_command(crs: &Path, transport: &str, cfg: &[PathBuf; 3], out: &Path) -> Command {

@@ -122,7 +122,8 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
 fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
     use drive_io::commissioning::SdoOp;
     use drive_io::mapping::{Direction, Transmission};
-    for plan in drive_io::commissioning::plan_all(cfg, None)? {
+    let plans = drive_io::commissioning::plan_all(cfg, None)?;
+    for plan in &plans {
         let (n, eds) = (plan.node, &plan.eds);
         println!(
             "# {} node {n} ({}), EDS {} ({} SDO transfers)",
@@ -176,6 +177,14 @@ fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
                 }
             );
         }
+    }
+    // The bus budget of every interface with these frames (docs/can-protocol.md "Bus budget").
+    let budgets = drive_io::budget::of_plans(cfg, &plans);
+    for ib in &budgets {
+        print!("{ib}");
+    }
+    for ib in &budgets {
+        ib.check()?;
     }
     Ok(())
 }

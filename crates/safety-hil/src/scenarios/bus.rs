@@ -12,7 +12,7 @@ use std::sync::atomic::Ordering;
 pub fn corrupted_safety_frame(st: &mut Stack) -> Res<Outcome> {
     let _ = st.fake()?.clone();
     st.wait_following(false)?;
-    let mut bus = open_bus(st)?;
+    let mut bus = open_bus(st, "safety")?;
     use can_transport::safety_frame::{SafetyHeartbeat, SafetyState, encode};
     let [a, b] = encode(
         &SafetyHeartbeat {
@@ -52,7 +52,8 @@ pub fn forged_rpdo_other_enabling_controlword(st: &mut Stack) -> Res<Outcome> {
 pub fn forged_rpdo_with(st: &mut Stack, controlword: u16) -> Res<Outcome> {
     let _ = st.fake()?.clone();
     st.wait_following(false)?;
-    let mut bus = open_bus(st)?;
+    // On node 4's interface (cables 3 and 4 are on can1).
+    let mut bus = open_bus(st, crate::configs::drive_interface(3))?;
     // A faulty drive adapter: RPDO1 to node 4 (sign -1, offset 200e6) 300 mm off.
     let counts_per_m = 10.0 * 1_048_576.0 / (std::f64::consts::PI * 0.305);
     let target = 200_000_000.0 - (home_length() + 0.3) * counts_per_m;
@@ -78,7 +79,8 @@ pub fn forged_rpdo_with(st: &mut Stack, controlword: u16) -> Res<Outcome> {
 pub fn can_bus_error(st: &mut Stack, error: can_transport::BusErrorFrame) -> Res<Outcome> {
     let _ = st.fake()?.clone();
     st.wait_following(false)?;
-    let mut bus = open_bus(st)?;
+    // The controller of the first drive bus reports it.
+    let mut bus = open_bus(st, "can0")?;
     let t0 = monotonic_ns();
     bus.send_bus_error(&error).map_err(|e| e.to_string())?;
     let ev = st.monitor_trip(Cause::CanBusError, 10.0)?;

@@ -100,7 +100,11 @@ pub fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
     // sweeps dead nodes) and the SYNC thread that keeps the drives sending forces.
     let node =
         IpcNode::with_prefix("shil-faulty-drive-io", &st.prefix).map_err(|e| e.to_string())?;
-    let mut bus = open_bus(st)?;
+    // SYNC on every drive interface, as drive-io sent it.
+    let mut buses = crate::configs::INTERFACES[..4]
+        .iter()
+        .map(|i| open_bus(st, i))
+        .collect::<Res<Vec<_>>>()?;
     let period = u64::from(st.period_us) * 1000;
     let sync_stop = Arc::new(AtomicBool::new(false));
     let sync = {
@@ -111,7 +115,9 @@ pub fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
             while !stop.load(Ordering::Relaxed) {
                 next += period;
                 crs_rt::sleep_until(next);
-                let _ = bus.send(&f);
+                for bus in &mut buses {
+                    let _ = bus.send(&f);
+                }
             }
         })
     };

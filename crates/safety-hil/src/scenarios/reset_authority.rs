@@ -142,7 +142,7 @@ pub fn require_still_latched(st: &mut Stack, what: &str) -> Res<()> {
 pub fn forged_reset_ignored(st: &mut Stack) -> Res<Outcome> {
     st.start_motion_core()?;
     st.wait_following(true)?;
-    let mut bus = open_bus(st)?;
+    let mut bus = open_bus(st, "safety")?;
     let mut spy = BusSpy::default();
     // The operator's e-stop (the console's stop button): every process stops, the monitor
     // latches it.
@@ -236,7 +236,7 @@ pub fn forged_reset_ignored(st: &mut Stack) -> Res<Outcome> {
 pub fn reset_while_armed_changes_nothing(st: &mut Stack) -> Res<Outcome> {
     let c = st.fake()?.clone();
     st.wait_following(false)?;
-    let mut bus = open_bus(st)?;
+    let mut bus = open_bus(st, "safety")?;
     let mut spy = BusSpy::default();
     spy_pairs(st, bus.as_mut(), &mut spy, 3)?;
     let epoch = spy.last.map(|h| h.epoch).ok_or("no safety pair seen")?;
@@ -282,7 +282,7 @@ pub fn reset_while_armed_changes_nothing(st: &mut Stack) -> Res<Outcome> {
 pub fn replayed_heartbeat_after_monitor_death(st: &mut Stack) -> Res<Outcome> {
     let _ = st.fake()?.clone();
     st.wait_following(false)?;
-    let mut bus = open_bus(st)?;
+    let mut bus = open_bus(st, "safety")?;
     let mut spy = BusSpy {
         keep: 40,
         ..BusSpy::default()

@@ -3,7 +3,7 @@
 
 use clap::Parser;
 use drive_io::DrivesConfig;
-use drive_io::emulator::{self, EmulatorConfig, EmulatorControl};
+use drive_rig::emulator::{self, EmulatorConfig, EmulatorControl};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::Ordering;

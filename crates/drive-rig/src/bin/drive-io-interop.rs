@@ -4,7 +4,7 @@
 //! Driven by tools/canopen-interop.sh (which starts the python drives first).
 
 use clap::Parser;
-use drive_io::interop;
+use drive_rig::interop;
 use std::process::ExitCode;
 
 #[derive(Parser)]

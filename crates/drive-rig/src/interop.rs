@@ -6,13 +6,13 @@
 //! Only what drive-io publishes is observed (feedback, bus state, fault codes, the start-up
 //! error); the drives are another process.
 
-use crate::canopen::Ds402State;
-use crate::config::DrivesConfig;
-use crate::runner;
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, IpcNode, JointSetpoint, ProcessId, StateEvent,
     TopicPublisher, TopicSubscriber, fault_code, monotonic_ns,
 };
+use drive_io::canopen::Ds402State;
+use drive_io::config::DrivesConfig;
+use drive_io::runner;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
@@ -285,7 +285,7 @@ pub fn scenario_emcy(cfg: DrivesConfig, prefix: &str, node: u8, code: u16) -> Re
     x.shutdown()?;
     Ok(format!(
         "EMCY {code:#06x} ({}) from node {node} -> Fault",
-        crate::canopen::emcy_name(code)
+        drive_io::canopen::emcy_name(code)
     ))
 }
 

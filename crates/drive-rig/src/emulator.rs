@@ -2,17 +2,17 @@
 //! kinematically ([`WinchAxis`]) toward its target. It is not the plant (that is crates/sim-plant);
 //! it exists so drive-io can be tested without the physics.
 
-use crate::bank_set::DriveBanks;
-use crate::canopen::FrameBuf;
-use crate::canopen::{Ds402State, NmtState};
-use crate::config::{DrivesConfig, WinchConfig};
-use crate::eds::{Eds, EdsError};
-use crate::force_node::ForceNode;
-use crate::safety_io::SafetyIoNode;
-use crate::safety_watch::SafetyWatchConfig;
-use crate::slave::{MotionDemand, WinchAxis};
 use can_transport::{CanBus, RxEvent};
 use crs_ipc::MAX_CABLES;
+use drive_io::bank_set::DriveBanks;
+use drive_io::canopen::FrameBuf;
+use drive_io::canopen::{Ds402State, NmtState};
+use drive_io::config::{DrivesConfig, WinchConfig};
+use drive_io::eds::{Eds, EdsError};
+use drive_io::force_node::ForceNode;
+use drive_io::safety_io::SafetyIoNode;
+use drive_io::safety_watch::SafetyWatchConfig;
+use drive_io::slave::{MotionDemand, WinchAxis};
 use std::sync::Arc;
 use std::sync::atomic::{
     AtomicBool, AtomicI32, AtomicU8, AtomicU16, AtomicU32, AtomicU64, Ordering,
@@ -46,7 +46,7 @@ pub struct EmulatorConfig {
     pub force_nodes: Vec<(usize, usize, ForceNode)>,
     /// The safety I/O node (drives.toml `[safety_io]`) the emulator plays too: with it the
     /// drives ignore the monitor's frames and the node drives their STO inputs.
-    pub safety_io: Option<crate::config::SafetyIoConfig>,
+    pub safety_io: Option<drive_io::config::SafetyIoConfig>,
 }
 
 impl EmulatorConfig {

@@ -1,20 +1,22 @@
-//! Hardware-in-the-loop scenarios: drive-io (the real [`runner`](crate::runner)) and the winch
+//! Hardware-in-the-loop scenarios: drive-io (the real [`runner`](drive_io::runner)) and the winch
 //! emulator run as threads on a real bus; the scenario plays motion-core over iceoryx2.
 //!
-//! The SAME functions run on the host over the UDP multicast bus (`cargo test -p drive-io`,
-//! tests/hil_udp.rs) and inside the QEMU guest over real vcan (binary `drive-io-hil`, started by
-//! tools/hil-run.sh). Inside the emulator time is not real time, so the scenarios assert
-//! behaviour (states, cycle counts, positions), never latencies; time limits are generous
-//! "give up" bounds only.
+//! The rig is two CAN interfaces with two drives each, on the wire model: the SAME functions
+//! run on the host over the `can-wire` hub (`cargo test -p drive-rig`, tests/hil_wire.rs; the
+//! hub on a thread) and inside the QEMU guest over real vcan (binary `drive-io-hil`, started by
+//! tools/hil-run.sh: every node on its own vcan port, the `can-wire` hub forwarding between
+//! them with the bus's bit time and arbitration). Inside the emulator time is not real time, so
+//! the scenarios assert behaviour (states, cycle counts, positions), never latencies; time
+//! limits are generous "give up" bounds only.
 
-use crate::canopen::{Ds402State, NmtState};
-use crate::config::{DrivesConfig, SyncSource};
 use crate::emulator::{self, EmulatorConfig, EmulatorControl};
-use crate::runner;
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, IpcNode, JointSetpoint, ProcessId, StateEvent,
     TopicPublisher, TopicSubscriber, WakeupNotifier, fault_code, monotonic_ns,
 };
+use drive_io::canopen::{Ds402State, NmtState};
+use drive_io::config::{DrivesConfig, SyncSource};
+use drive_io::runner;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
@@ -22,21 +24,82 @@ use std::time::{Duration, Instant};
 
 /// Number of winches in the HIL rig.
 pub const HIL_WINCHES: usize = 4;
+/// Its CAN interfaces (two drives each).
+pub const HIL_INTERFACES: usize = 2;
 
-/// The HIL bus configuration for `transport`. Timeouts are lenient because the VM is not real time.
-pub fn hil_config(transport: &str) -> DrivesConfig {
-    let mut text = format!(
-        "[bus]\ntransport = \"{transport}\"\nsync_period_us = 1000\nstale_setpoint_cycles = 50\n\
+/// Where a scenario's interfaces are for each of its two nodes: drive-io's transports and the
+/// emulator's, interface by interface. On the host both are the hub's `wire:` sockets; in the
+/// guest each node has its own vcan port of each bus (the hub forwards).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RigBuses {
+    pub drive_io: Vec<String>,
+    pub emulator: Vec<String>,
+}
+
+impl RigBuses {
+    /// Both nodes on the same transports (the host's `wire:` sockets, or a UDP bus).
+    pub fn shared(transports: &[String]) -> Self {
+        Self {
+            drive_io: transports.to_vec(),
+            emulator: transports.to_vec(),
+        }
+    }
+
+    /// `dio=T0,T1;emu=T2,T3` (per node) or `T0,T1` (shared).
+    pub fn parse(arg: &str) -> Res<Self> {
+        let list = |s: &str| s.split(',').map(str::to_string).collect::<Vec<_>>();
+        let r = match arg.split_once(';') {
+            Some((d, e)) => Self {
+                drive_io: list(d.strip_prefix("dio=").ok_or("expected dio=…;emu=…")?),
+                emulator: list(e.strip_prefix("emu=").ok_or("expected dio=…;emu=…")?),
+            },
+            None => Self::shared(&list(arg)),
+        };
+        if r.drive_io.len() != HIL_INTERFACES || r.emulator.len() != HIL_INTERFACES {
+            return fail(format!(
+                "{arg:?}: the rig has {HIL_INTERFACES} interfaces per node"
+            ));
+        }
+        Ok(r)
+    }
+
+    pub fn describe(&self) -> String {
+        if self.drive_io == self.emulator {
+            self.drive_io.join(",")
+        } else {
+            format!(
+                "dio={};emu={}",
+                self.drive_io.join(","),
+                self.emulator.join(",")
+            )
+        }
+    }
+}
+
+/// The HIL drives configuration on `transports` (one per interface): two drives per
+/// interface, velocity and force (the simulated winch's 0x2110) every 5th SYNC, so each bus
+/// stays within its budget. Timeouts are lenient because the VM is not real time.
+pub fn hil_config(transports: &[String]) -> DrivesConfig {
+    let mut text = String::from(
+        "[bus]\nsync_period_us = 1000\nstale_setpoint_cycles = 50\n\
          heartbeat_producer_ms = 20\nheartbeat_timeout_ms = 300\nboot_timeout_ms = 20000\n\
          sdo_timeout_ms = 500\nmax_cable_speed_m_per_s = 5.0\n\
          drive_heartbeat_consumer_ms = 600\n\
-         following_error_window_m = 0.5\n"
+         following_error_window_m = 0.5\n",
     );
+    for (k, t) in transports.iter().enumerate() {
+        text.push_str(&format!(
+            "[[bus.interface]]\nname = \"can{k}\"\ntransport = \"{t}\"\n"
+        ));
+    }
+    let per = HIL_WINCHES.div_ceil(transports.len().max(1));
     for i in 0..HIL_WINCHES {
         let sign = if i % 2 == 0 { 1 } else { -1 };
         text.push_str(&format!(
-            "[[winch]]\nnode_id = {}\ndrum_diameter_m = 0.305\ngear_ratio = 10.0\ncounts_per_rev = 1048576\n\
-             sign = {sign}\noffset_counts = {}\n",
+            "[[winch]]\ninterface = \"can{}\"\nnode_id = {}\ndrum_diameter_m = 0.305\n\
+             gear_ratio = 10.0\ncounts_per_rev = 1048576\nsign = {sign}\noffset_counts = {}\n\
+             force = \"drive\"\nfeedback_every_n_syncs = 5\n",
+            i / per,
             i + 1,
             if sign > 0 { 0 } else { 200_000_000 }
         ));
@@ -69,29 +132,34 @@ pub struct Rig {
 }
 
 impl Rig {
-    /// Starts the emulator and drive-io on `transport`, with iceoryx2 services under `prefix`;
+    /// Starts the emulator and drive-io on `buses`, with iceoryx2 services under `prefix`;
     /// drive-io's SYNC isochronous (the default `sync_source`).
-    pub fn start(transport: &str, prefix: &str) -> Res<Rig> {
-        Self::start_with(transport, prefix, SyncSource::Isochronous)
+    pub fn start(buses: &RigBuses, prefix: &str) -> Res<Rig> {
+        Self::start_with(buses, prefix, SyncSource::Isochronous)
     }
 
     /// [`Rig::start`] with drive-io's cycle started by `sync`.
-    pub fn start_with(transport: &str, prefix: &str, sync: SyncSource) -> Res<Rig> {
-        let mut cfg = hil_config(transport);
+    pub fn start_with(buses: &RigBuses, prefix: &str, sync: SyncSource) -> Res<Rig> {
+        let mut cfg = hil_config(&buses.drive_io);
         cfg.bus.sync_source = sync;
-        let spec = cfg.transport().map_err(|e| e.to_string())?;
-        let mut ecfg = EmulatorConfig::from_drives(&cfg, 5.0).map_err(|e| e.to_string())?;
+        let ecfg_drives = hil_config(&buses.emulator);
+        let open = |cfg: &DrivesConfig, who: &str| -> Res<Vec<Box<dyn can_transport::CanBus>>> {
+            cfg.transports()
+                .map_err(|e| e.to_string())?
+                .iter()
+                .map(|spec| can_transport::open(spec).map_err(|e| format!("{who} bus {spec}: {e}")))
+                .collect()
+        };
+        let mut ecfg = EmulatorConfig::from_drives(&ecfg_drives, 5.0).map_err(|e| e.to_string())?;
         ecfg.initial_length_m = (0..HIL_WINCHES).map(|i| 4.0 + 0.5 * i as f64).collect();
         let control = EmulatorControl::new();
-        // Both ends open their bus before either thread runs: no frame is lost to a late join.
-        let emu_bus = can_transport::open(&spec).map_err(|e| format!("emulator bus: {e}"))?;
-        let dio_bus = can_transport::open(&spec).map_err(|e| format!("drive-io bus: {e}"))?;
+        // Both ends open their buses before either thread runs: no frame is lost to a late join.
+        let emu_bus = open(&ecfg_drives, "emulator")?;
+        let dio_bus = open(&cfg, "drive-io")?;
         let c2 = control.clone();
         let emu = std::thread::Builder::new()
             .name("winch-emulator".into())
-            .spawn(move || {
-                emulator::run(vec![emu_bus], &ecfg, &c2).map_err(|e| format!("emulator: {e}"))
-            })
+            .spawn(move || emulator::run(emu_bus, &ecfg, &c2).map_err(|e| format!("emulator: {e}")))
             .map_err(|e| e.to_string())?;
         let node = IpcNode::with_prefix("hil-test", prefix).map_err(|e| e.to_string())?;
         let setpoints = node
@@ -108,7 +176,7 @@ impl Rig {
             .name("drive-io".into())
             .spawn(move || {
                 let ipc = IpcNode::with_prefix("drive-io", &prefix2).map_err(|e| e.to_string())?;
-                runner::run(&cfg2, vec![dio_bus], &ipc, &s2).map_err(|e| format!("drive-io: {e}"))
+                runner::run(&cfg2, dio_bus, &ipc, &s2).map_err(|e| format!("drive-io: {e}"))
             })
             .map_err(|e| e.to_string())?;
         Ok(Rig {
@@ -364,13 +432,13 @@ pub enum Timing {
 }
 
 /// Boot through NMT + CiA 402, follow a setpoint stream, feedback matches the plant.
-pub fn scenario_follow(transport: &str, prefix: &str) -> Res<String> {
-    scenario_follow_timed(transport, prefix, Timing::RealTime)
+pub fn scenario_follow(buses: &RigBuses, prefix: &str) -> Res<String> {
+    scenario_follow_timed(buses, prefix, Timing::RealTime)
 }
 
 /// [`scenario_follow`] with explicit [`Timing`].
-pub fn scenario_follow_timed(transport: &str, prefix: &str, timing: Timing) -> Res<String> {
-    let mut rig = Rig::start(transport, prefix)?;
+pub fn scenario_follow_timed(buses: &RigBuses, prefix: &str, timing: Timing) -> Res<String> {
+    let mut rig = Rig::start(buses, prefix)?;
     rig.boot()?;
     let init = rig.initial;
     // Raised-cosine moves of 0.1 m, period 1 s: peak 0.31 m/s, 2 m/s^2 (within the drive limits).
@@ -538,8 +606,8 @@ pub fn scenario_follow_timed(transport: &str, prefix: &str, timing: Timing) -> R
 }
 
 /// Setpoints stop -> quick stop after exactly `stale_setpoint_cycles` + 1 cycles, then hold.
-pub fn scenario_stale(transport: &str, prefix: &str) -> Res<String> {
-    let mut rig = Rig::start(transport, prefix)?;
+pub fn scenario_stale(buses: &RigBuses, prefix: &str) -> Res<String> {
+    let mut rig = Rig::start(buses, prefix)?;
     rig.boot()?;
     let init = rig.initial;
     rig.stream(Duration::from_millis(300), |t| init.map(|l| l + 0.2 * t))?;
@@ -567,8 +635,8 @@ pub fn scenario_stale(transport: &str, prefix: &str) -> Res<String> {
 }
 
 /// A drive stops its heartbeat -> drive-io faults and quick-stops ALL drives.
-pub fn scenario_heartbeat_loss(transport: &str, prefix: &str) -> Res<String> {
-    let mut rig = Rig::start(transport, prefix)?;
+pub fn scenario_heartbeat_loss(buses: &RigBuses, prefix: &str) -> Res<String> {
+    let mut rig = Rig::start(buses, prefix)?;
     rig.boot()?;
     let init = rig.initial;
     rig.stream(Duration::from_millis(200), |t| init.map(|l| l + 0.1 * t))?;
@@ -612,8 +680,8 @@ pub fn scenario_heartbeat_loss(transport: &str, prefix: &str) -> Res<String> {
 }
 
 /// An e-stop event on the process bus -> quick stop all, hold; Reset re-enables.
-pub fn scenario_estop(transport: &str, prefix: &str) -> Res<String> {
-    let mut rig = Rig::start(transport, prefix)?;
+pub fn scenario_estop(buses: &RigBuses, prefix: &str) -> Res<String> {
+    let mut rig = Rig::start(buses, prefix)?;
     rig.boot()?;
     let init = rig.initial;
     rig.stream(Duration::from_millis(200), |t| init.map(|l| l - 0.1 * t))?;
@@ -656,7 +724,7 @@ pub fn scenario_estop(transport: &str, prefix: &str) -> Res<String> {
 /// SYNC (the SYNC itself stays on drive-io's grid); with `"clock"` none does, the same stream
 /// is applied on drive-io's own ticks. Setpoints 5 ms apart, so the count holds in emulated
 /// time too (no latency is asserted here; bus-latency-bench measures it on the host).
-pub fn scenario_phase_lock(transport: &str, prefix: &str) -> Res<String> {
+pub fn scenario_phase_lock(buses: &RigBuses, prefix: &str) -> Res<String> {
     const N: u64 = 100;
     let mut report = Vec::new();
     for sync in [
@@ -664,7 +732,7 @@ pub fn scenario_phase_lock(transport: &str, prefix: &str) -> Res<String> {
         SyncSource::Setpoint,
         SyncSource::Clock,
     ] {
-        let mut rig = Rig::start_with(transport, &format!("{prefix}{sync:?}/"), sync)?;
+        let mut rig = Rig::start_with(buses, &format!("{prefix}{sync:?}/"), sync)?;
         rig.boot()?;
         let hold = rig.initial;
         let mut last = 0;
@@ -707,9 +775,10 @@ pub fn scenario_phase_lock(transport: &str, prefix: &str) -> Res<String> {
     ))
 }
 
-/// All scenarios, one transport each (`transports[i]`), printing `HIL PASS|FAIL <name>` markers.
-pub fn run_all(transports: &[String], prefix: &str, timing: Timing) -> bool {
-    type Scenario = fn(&str, &str) -> Res<String>;
+/// All scenarios, one set of buses each (`buses[i]`, reused round robin), printing
+/// `HIL PASS|FAIL <name>` markers.
+pub fn run_all(buses: &[RigBuses], prefix: &str, timing: Timing) -> bool {
+    type Scenario = fn(&RigBuses, &str) -> Res<String>;
     let follow: Scenario = match timing {
         Timing::RealTime => scenario_follow,
         Timing::Emulated => |t, p| scenario_follow_timed(t, p, Timing::Emulated),
@@ -723,17 +792,19 @@ pub fn run_all(transports: &[String], prefix: &str, timing: Timing) -> bool {
     ];
     let mut ok = true;
     for (k, (name, f)) in scenarios.iter().enumerate() {
-        let transport = &transports[k % transports.len()];
+        let b = &buses[k % buses.len()];
         let t0 = Instant::now();
-        match f(transport, &format!("{prefix}{name}/")) {
+        match f(b, &format!("{prefix}{name}/")) {
             Ok(msg) => println!(
-                "HIL PASS {name} [{transport}] ({:.1} s): {msg}",
+                "HIL PASS {name} [{}] ({:.1} s): {msg}",
+                b.describe(),
                 t0.elapsed().as_secs_f64()
             ),
             Err(msg) => {
                 ok = false;
                 println!(
-                    "HIL FAIL {name} [{transport}] ({:.1} s): {msg}",
+                    "HIL FAIL {name} [{}] ({:.1} s): {msg}",
+                    b.describe(),
                     t0.elapsed().as_secs_f64()
                 );
             }
