@@ -263,6 +263,25 @@ fn nothing_depends_on_the_safety_hil() {
 }
 
 #[test]
+fn nothing_links_the_test_rigs_or_the_wire_hub() {
+    // The drive rigs (winch emulator, HIL scenarios, bus bench) are test doubles and the
+    // can-wire hub is the simulated wire: a daemon that linked either could run against a
+    // double in production. crs-stack starts the hub's binary, it does not link it; only the
+    // rigs' bus bench runs a hub in its own process.
+    let (deps, name_of) = graph();
+    for (krate, allowed) in [("drive-rig", &[][..]), ("can-wire", &["drive-rig"][..])] {
+        assert!(name_of.values().any(|n| n == krate), "{krate} missing");
+        for (id, ds) in &deps {
+            assert!(
+                allowed.contains(&name_of[id].as_str()) || !ds.iter().any(|d| name_of[d] == krate),
+                "{} depends on {krate}",
+                name_of[id]
+            );
+        }
+    }
+}
+
+#[test]
 fn calibration_needs_neither_the_simulator_nor_the_bus() {
     forbid(
         "calibrate",

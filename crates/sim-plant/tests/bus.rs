@@ -37,8 +37,31 @@ fn drives() -> DrivesConfig {
         "the stack's drives config validates the safety monitor's heartbeat"
     );
     // These tests exercise the plant without a safety monitor on the bus; the drives' safety
-    // watch has its own tests (drives_with_a_safety_heartbeat_watch_* below, crates/drive-io).
+    // watch has its own tests (drives_with_a_safety_heartbeat_watch_* below, crates/drive-io),
+    // the safety I/O node's STO its own (drives_without_a_heartbeat_watch_*).
     d.safety_heartbeat = None;
+    d.safety_io = None;
+    one_interface(d)
+}
+
+/// The shipped layout (four drive buses of two drives and their load cells) on one
+/// interface: the virtual-time rig and the raw-frame tests speak to interface 0. The budget
+/// is not checked here (Master::new does not; the runner and `crs sim` do).
+fn one_interface(mut d: DrivesConfig) -> DrivesConfig {
+    let transport = d.interfaces()[0].transport.clone();
+    d.bus.transport = None;
+    d.bus.interfaces = vec![drive_io::config::InterfaceConfig {
+        name: "can0".into(),
+        transport,
+        bitrate_bit_per_s: 1_000_000,
+        budget_percent: 70.0,
+    }];
+    for w in &mut d.winches {
+        w.interface = Some("can0".into());
+    }
+    for s in &mut d.force_sensors {
+        s.interface = Some("can0".into());
+    }
     d
 }
 
@@ -1094,7 +1117,10 @@ fn csp_winch_follows_a_moving_target_without_lag_and_stops_at_a_far_one() {
 #[test]
 fn drives_with_a_safety_heartbeat_watch_stay_braked_without_the_monitor() {
     // The stack's drives config as it is: it validates the monitor's heartbeat.
-    let d = DrivesConfig::load(&config_dir().join("drives.toml")).unwrap();
+    // Drives with their own watch of the monitor's frames (no safety I/O node), on one bus.
+    let mut d = DrivesConfig::load(&config_dir().join("drives.toml")).unwrap();
+    d.safety_io = None;
+    let d = one_interface(d);
     assert!(d.safety_heartbeat.is_some());
     let cfg = plant_cfg("icosahedron-ideal.toml");
     let control = cfg.platform.clone();
@@ -1135,7 +1161,10 @@ fn drives_with_a_safety_heartbeat_watch_stay_braked_without_the_monitor() {
 #[test]
 fn winches_refuse_a_monitor_with_another_srdo_configuration() {
     use can_transport::safety_frame::{self, ConfigSignature, SafetyHeartbeat, SafetyState};
-    let d = DrivesConfig::load(&config_dir().join("drives.toml")).unwrap();
+    // Drives with their own watch of the monitor's frames (no safety I/O node), on one bus.
+    let mut d = DrivesConfig::load(&config_dir().join("drives.toml")).unwrap();
+    d.safety_io = None;
+    let d = one_interface(d);
     let own = d.safety_heartbeat.unwrap();
     let other = drive_io::safety_watch::SafetyWatchConfig {
         validation_time_ms: own.validation_time_ms + 100,
