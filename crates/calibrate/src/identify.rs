@@ -366,7 +366,11 @@ pub fn fit(
     if free.is_empty() {
         return Err(FitError::NoParameters);
     }
-    while !spec.quick {
+    loop {
+        // A screening fit keeps the free parameters it is given (see `FitSpec::quick`).
+        if spec.quick {
+            break;
+        }
         if free.is_empty() {
             return Err(FitError::NoParameters);
         }

@@ -211,6 +211,9 @@ pub enum BenchError {
     /// `--kinds` names no kind of the independent generator.
     #[error("--kinds: {0}")]
     Generator(#[from] crate::bench_generator::GeneratorError),
+    /// `--candidates-csv` could not be written.
+    #[error("{path}: {err}")]
+    Write { path: PathBuf, err: std::io::Error },
     /// The independent plant could not record a scenario.
     #[error("independent plant, scenario {scenario} seed {seed}: {err}")]
     IndependentPlant {
@@ -983,11 +986,9 @@ pub fn run(a: &BenchConfig) -> Result<Summary, BenchError> {
             text.push_str(l);
             text.push('\n');
         }
-        std::fs::write(path, text).map_err(|err| {
-            BenchError::Generator(crate::bench_generator::GeneratorError::Write {
-                path: path.clone(),
-                err,
-            })
+        std::fs::write(path, text).map_err(|err| BenchError::Write {
+            path: path.clone(),
+            err,
         })?;
     }
     for g in ["sim-plant", "independent"] {
@@ -1109,6 +1110,19 @@ fn print_summary(s: &Summary, generator: &str, a: &BenchConfig) {
         println!(
             "| drum scale within 20 % of the truth (runs naming the drum of a drum-scale scenario) | {} |",
             ratio(dn, dd)
+        );
+        let big: Vec<&MagnitudeCheck> = runs
+            .iter()
+            .flat_map(|r| r.magnitudes.iter())
+            .filter(|m| m.effect == Effect::Drum && m.magnitude >= DRUM_RESOLVED)
+            .collect();
+        println!(
+            "| … of those with the largest \\|s_i\\| ≥ {:.2} % | {} |",
+            DRUM_RESOLVED * 100.0,
+            ratio(
+                big.iter().filter(|m| m.relative_error <= 0.2).count(),
+                big.len()
+            )
         );
         println!(
             "| hysteresis h within 30 % of the truth (runs naming hysteresis) | {} |",
