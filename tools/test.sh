@@ -19,6 +19,9 @@ python3 -c "import numpy, scipy" 2>/dev/null || pip install -q numpy scipy >/dev
 cargo build -q -p crs --bin crs
 python3 tools/feasibility_vs_scipy.py "${CARGO_TARGET_DIR:-target}/debug/crs" 40
 
+echo "== calibration against scipy least_squares on a data set of the independent benchmark plant"
+python3 tools/calib_vs_scipy.py "${CARGO_TARGET_DIR:-target}/debug/crs"
+
 echo "== CANopen interop: drive-io vs python canopen drives, a python canopen master vs winch-emulator"
 bash tools/canopen-interop.sh
 

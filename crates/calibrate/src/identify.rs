@@ -27,6 +27,11 @@ pub struct FitSpec {
     /// Apply the preconditioning W_pc (eq. 4.42); without it the optimiser works in SI units.
     pub precondition: bool,
     pub lm: LmOptions,
+    /// Screening fit (the diagnosis' candidates): the free parameters as given (the base fit's
+    /// identifiability analysis already fixed what the data do not observe), no condition
+    /// numbers or singular values (NaN / empty), 1σ from the normal matrix. Saves the two
+    /// QR + SVD factorisations that dominate a fit of a few LM iterations.
+    pub quick: bool,
 }
 
 impl FitSpec {
@@ -40,6 +45,7 @@ impl FitSpec {
             min_relative_singular_value: 1e-8,
             precondition: true,
             lm: LmOptions::default(),
+            quick: false,
         }
     }
 }
@@ -146,8 +152,8 @@ impl LsqProblem for Problem<'_> {
     }
 
     fn residual(&mut self, z: &DVector<f64>, r: &mut DVector<f64>) -> Result<(), EvalError> {
-        // Bounded identification: a step that leaves a parameter's physical range is treated
-        // like one outside the model's valid region, so LM damps it back inside.
+        // Bounded identification: LM keeps z in the box (projected steps, [`lm`]); a point
+        // outside it anyway is outside the model's valid region.
         if let Some(k) =
             (0..z.len()).find(|&k| !(z[k] >= self.bounds[k].0 && z[k] <= self.bounds[k].1))
         {
@@ -199,6 +205,10 @@ impl LsqProblem for Problem<'_> {
             j[(off + k, *col)] = (lam * self.lasso_w[k]).sqrt();
         }
         Ok(())
+    }
+
+    fn bounds(&self, k: usize) -> (f64, f64) {
+        self.bounds[k]
     }
 
     fn start_iteration(&mut self, z: &DVector<f64>) -> bool {
@@ -351,9 +361,16 @@ pub fn fit(
     // Identifiability (eq. 4.18–4.23): fix the dominant parameter of every direction the data
     // rows do not observe (regularised parameters are held by their penalty instead).
     let mut fixed = Vec::new();
-    let mut cond_unscaled;
-    let mut cond_scaled;
+    let mut cond_unscaled = f64::NAN;
+    let mut cond_scaled = f64::NAN;
+    if free.is_empty() {
+        return Err(FitError::NoParameters);
+    }
     loop {
+        // A screening fit keeps the free parameters it is given (see `FitSpec::quick`).
+        if spec.quick {
+            break;
+        }
         if free.is_empty() {
             return Err(FitError::NoParameters);
         }
@@ -455,7 +472,11 @@ pub fn fit(
     prob.residual(&res.z, &mut rbuf)?;
     prob.jacobian(&res.z, &mut j)?;
     let jd = j.rows(0, nd).into_owned();
-    let (cond_end, sv) = condition(&jd);
+    let (cond_end, sv) = if spec.quick {
+        (f64::NAN, Vec::new())
+    } else {
+        condition(&jd)
+    };
     // Covariance from the full (regularised) normal matrix.
     let dof = (nd as f64 - free.len() as f64).max(1.0);
     let sigma2 = 2.0 * cost / dof;

@@ -11,6 +11,39 @@ use serde::Serialize;
 /// at which the CRS nominal k_F was measured (eq. 6.19).
 pub const STIFFNESS_REFERENCE_FORCE_N: f64 = 5000.0;
 
+/// Smallest slope dg/df of the tension-dependent stiffness's load g(f) (see [`stiffness_load`]).
+pub const STIFFNESS_MIN_SLOPE: f64 = 0.1;
+
+/// The load of the tension-dependent stiffness candidate, g(f) = f + κ (f − f_s)²/(2 f_s), with
+/// its derivatives (dg/df, dg/dκ). The parabola turns back at f_s (1 − 1/κ) (no elongation
+/// decreases with the force); where its slope falls below [`STIFFNESS_MIN_SLOPE`] it is
+/// continued by its tangent, so g grows with f everywhere — for κ ∈ [−0.9, 0.9] only at forces
+/// beyond 10 kN (κ < 0) or below 0 (κ > 0) — and the forward kinematics never meets a
+/// second root or a vanishing stiffness far from the operating forces.
+#[inline]
+pub fn stiffness_load(kappa: f64, f: f64) -> (f64, f64, f64) {
+    let fs = STIFFNESS_REFERENCE_FORCE_N;
+    let quad = |f: f64| {
+        (
+            f + kappa * (f - fs).powi(2) / (2.0 * fs),
+            1.0 + kappa * (f - fs) / fs,
+            (f - fs).powi(2) / (2.0 * fs),
+        )
+    };
+    if kappa == 0.0 {
+        return (f, 1.0, quad(f).2);
+    }
+    // dg/df = STIFFNESS_MIN_SLOPE at f_c.
+    let fc = fs * (1.0 - (1.0 - STIFFNESS_MIN_SLOPE) / kappa);
+    let beyond = if kappa > 0.0 { f < fc } else { f > fc };
+    if beyond {
+        let (gc, _, dk) = quad(fc);
+        (gc + STIFFNESS_MIN_SLOPE * (f - fc), STIFFNESS_MIN_SLOPE, dk)
+    } else {
+        quad(f)
+    }
+}
+
 /// Lowest physical cable stiffness k_F (N/m), see [`ParamId::bounds`].
 pub const KF_MIN_N: f64 = 0.2e6;
 /// Highest physical cable stiffness k_F (N/m).
@@ -22,6 +55,22 @@ pub const STORED_ROPE_MAX_M: f64 = 100.0;
 pub const DRUM_EPS_MAX: f64 = 0.03;
 /// Largest pulley radius (m).
 pub const PULLEY_RADIUS_MAX_M: f64 = 0.5;
+/// Largest length hysteresis half width |h| (m): a play of 2 cm in a winch is broken.
+pub const HYSTERESIS_LENGTH_MAX_M: f64 = 0.02;
+/// Largest drive-train series compliance (m/N): 100 m of stored rope at the nominal k_F.
+pub const SERIES_COMPLIANCE_MAX_M_PER_N: f64 = 5e-5;
+
+/// Where the hysteresis candidate takes a cable's direction of motion from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+pub enum DirectionSource {
+    /// The change of its measured force since the previous row (loading / unloading).
+    Force,
+    /// The same, a reversal counting once the force moved back beyond the measurement noise
+    /// ([`crate::observation::FORCE_DIRECTION_BAND_N`]).
+    ForceBeyondNoise,
+    /// Its command sequence, held while the command does not change (the winch's direction).
+    Command,
+}
 
 /// One scalar parameter of [`CalModel`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -44,6 +93,12 @@ pub enum ParamId {
     StiffnessKappa,
     /// Hysteresis half width H (N): elongation ∝ f − d H, d = ±1 the direction of motion.
     Hysteresis,
+    /// Length hysteresis h (m, signed): the rope acts h shorter while loading and h longer
+    /// while unloading (a play in the winch or a friction offset), q_θ − d h.
+    HysteresisLength,
+    /// Series compliance of the drive train shared by all cables c_s (m/N): elongation
+    /// f ((q + l_i)/k_F,i + c_s) (eq. 6.18's c_s).
+    SeriesCompliance,
     /// Sag (μ g)² (N²/m²): chord shortening (μ g cos α)² q³ / (24 f²) (Irvine).
     SagW2,
     /// Drum radius error ε_i (1): q_θ = (1 + ε_i) q_cmd + δ_i.
@@ -107,6 +162,8 @@ impl ParamId {
             ParamId::ExtraLength(_) => 10.0,
             ParamId::StiffnessKappa => 0.1,
             ParamId::Hysteresis => 100.0,
+            ParamId::HysteresisLength => 1e-3,
+            ParamId::SeriesCompliance => 1e-6,
             ParamId::SagW2 => 100.0,
             ParamId::DrumScale(_) => 1e-3,
             ParamId::Cog(_) => 0.1,
@@ -138,6 +195,10 @@ impl ParamId {
             // Hysteresis half width: ≥ 0 (the band has a sign by definition), a fraction of
             // the reference force.
             ParamId::Hysteresis => Some((0.0, 0.5 * STIFFNESS_REFERENCE_FORCE_N)),
+            // Length hysteresis: either sign (a play lags, a friction offset may lead).
+            ParamId::HysteresisLength => Some((-HYSTERESIS_LENGTH_MAX_M, HYSTERESIS_LENGTH_MAX_M)),
+            // A compliance is ≥ 0; 100 m of rope at the nominal k_F at most.
+            ParamId::SeriesCompliance => Some((0.0, SERIES_COMPLIANCE_MAX_M_PER_N)),
             // Sag (μ g)² ≥ 0, μ ≤ 5 kg/m (far heavier than a CRS rope).
             ParamId::SagW2 => Some((0.0, (5.0f64 * 9.81).powi(2))),
             // Centre of gravity within the platform's size.
@@ -168,6 +229,8 @@ impl ParamId {
             ParamId::ExtraLength(i) => format!("l_extra_{}", i + 1),
             ParamId::StiffnessKappa => "kappa".into(),
             ParamId::Hysteresis => "H_hyst".into(),
+            ParamId::HysteresisLength => "h_hyst".into(),
+            ParamId::SeriesCompliance => "c_s".into(),
             ParamId::SagW2 => "sag_w2".into(),
             ParamId::DrumScale(i) => format!("drum_eps_{}", i + 1),
             ParamId::Cog(k) => format!("cog.{}", XYZ[k]),
@@ -204,6 +267,12 @@ pub struct CalModel {
     pub extra_length: Vec<f64>,
     pub stiffness_kappa: f64,
     pub hysteresis: f64,
+    /// Length hysteresis h (m), [`ParamId::HysteresisLength`].
+    pub hysteresis_length: f64,
+    /// Where both hysteresis terms take the direction of motion from.
+    pub hysteresis_source: DirectionSource,
+    /// Drive-train series compliance c_s (m/N), [`ParamId::SeriesCompliance`].
+    pub series_compliance: f64,
     pub sag_w2: f64,
     pub drum_scale: Vec<f64>,
     pub cog: Vector3<f64>,
@@ -242,6 +311,9 @@ impl CalModel {
             extra_length: vec![0.0; m],
             stiffness_kappa: 0.0,
             hysteresis: 0.0,
+            hysteresis_length: 0.0,
+            hysteresis_source: DirectionSource::Force,
+            series_compliance: 0.0,
             sag_w2: 0.0,
             drum_scale: vec![0.0; m],
             cog: Vector3::zeros(),
@@ -282,6 +354,8 @@ impl CalModel {
             ParamId::ExtraLength(i) => self.extra_length[i],
             ParamId::StiffnessKappa => self.stiffness_kappa,
             ParamId::Hysteresis => self.hysteresis,
+            ParamId::HysteresisLength => self.hysteresis_length,
+            ParamId::SeriesCompliance => self.series_compliance,
             ParamId::SagW2 => self.sag_w2,
             ParamId::DrumScale(i) => self.drum_scale[i],
             ParamId::Cog(k) => self.cog[k],
@@ -302,6 +376,8 @@ impl CalModel {
             ParamId::ExtraLength(i) => self.extra_length[i] = v,
             ParamId::StiffnessKappa => self.stiffness_kappa = v,
             ParamId::Hysteresis => self.hysteresis = v,
+            ParamId::HysteresisLength => self.hysteresis_length = v,
+            ParamId::SeriesCompliance => self.series_compliance = v,
             ParamId::SagW2 => self.sag_w2 = v,
             ParamId::DrumScale(i) => self.drum_scale[i] = v,
             ParamId::Cog(k) => self.cog[k] = v,
@@ -322,6 +398,18 @@ impl CalModel {
     #[inline]
     pub fn q_theta(&self, i: usize, q_cmd: f64) -> f64 {
         (1.0 + self.drum_scale[i]) * q_cmd + self.offset[i]
+    }
+
+    /// q_θ of sample `o`'s cable i with the length hysteresis: q_θ − d h, d = +1 loading.
+    #[inline]
+    pub fn q_theta_of(&self, i: usize, o: &crate::observation::Observation) -> f64 {
+        self.q_theta(i, o.q_cmd[i]) - self.hysteresis_length * o.loading(self.hysteresis_source, i)
+    }
+
+    /// Compliance of cable i's rope and drive train at free length q: (q + l_i)/k_F,i + c_s.
+    #[inline]
+    pub fn compliance(&self, i: usize, q: f64) -> f64 {
+        (q + self.extra_length[i]) / self.k_f[i] + self.series_compliance
     }
 
     /// Cable force from a force-sensor reading: f = (1 + γ_i) f_M + β_i.

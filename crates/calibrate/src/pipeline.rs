@@ -303,11 +303,20 @@ pub fn run(
     let (spec_e, fit_e, ridge_kf) = if cfg.ridge_kf_auto && !holdout.is_empty() {
         let mut best: Option<(f64, FitSpec, Fit, f64)> = None;
         let mut reference: Option<(f64, f64)> = None;
+        // The sweep's fits after the first are screening fits on the first's free parameters
+        // (its identifiability analysis holds for a ridge that only adds penalty rows); the
+        // chosen λ is refitted in full (condition numbers, singular values) from its optimum.
+        let mut free_sweep: Option<Vec<ParamId>> = None;
         for &lambda in RIDGE_KF_GRID {
             let mut c = cfg.clone();
             c.ridge_kf = lambda;
             let spec = elastostatic_spec(&c, m);
-            let fit = match identify::fit(&nom_e, train, &spec, &mut |it, c| {
+            let mut sweep_spec = spec.clone();
+            if let Some(free) = &free_sweep {
+                sweep_spec.free = free.clone();
+                sweep_spec.quick = true;
+            }
+            let fit = match identify::fit(&nom_e, train, &sweep_spec, &mut |it, c| {
                 progress("elastostatic", it, c)
             }) {
                 Ok(f) => f,
@@ -321,6 +330,7 @@ pub fn run(
                     continue;
                 }
             };
+            free_sweep.get_or_insert_with(|| fit.free.clone());
             let h = validate::evaluate(Kind::Elastostatic, &fit.model, holdout);
             let point = RidgePoint {
                 lambda,
@@ -341,6 +351,15 @@ pub fn run(
             }
         }
         match best {
+            Some((_, spec, fit, lambda)) if fit.cond_end_scaled.is_nan() => {
+                // A screening fit: the full analysis from its optimum (same minimum).
+                match identify::fit(&fit.model, train, &spec, &mut |it, c| {
+                    progress("elastostatic", it, c)
+                }) {
+                    Ok(full) => (spec, full, lambda),
+                    Err(_) => (spec, fit, lambda),
+                }
+            }
             Some((_, spec, fit, lambda)) => (spec, fit, lambda),
             // No λ validated: the configured fit, whose failure the stage reports.
             None => fit_configured(progress)?,
@@ -359,7 +378,7 @@ pub fn run(
     let selection = if cfg.no_extension {
         None
     } else {
-        let sel = effects::select(
+        let mut sel = effects::select(
             fit_e,
             &spec_e,
             train,
@@ -367,6 +386,24 @@ pub fn run(
             &cfg.select,
             &mut |e: Effect| progress(&format!("candidate {}", e.name()), 0, f64::NAN),
         );
+        // The candidates' fits are screening fits: the extended step gets the full analysis
+        // (identifiability, condition numbers, singular values) from its optimum.
+        if !sel.chosen.is_empty() && sel.fit.cond_end_scaled.is_nan() {
+            let mut full = spec_e.clone();
+            full.free = sel.fit.free.clone();
+            if let Ok(f) = identify::fit(&sel.fit.model, train, &full, &mut |it, c| {
+                progress("extended model", it, c)
+            }) {
+                sel.fit = f;
+                let chosen: Vec<(Effect, effects::Form)> = sel
+                    .chosen
+                    .iter()
+                    .copied()
+                    .zip(sel.forms.iter().copied())
+                    .collect();
+                sel.sizes = effects::effect_sizes(&sel.fit, &chosen, train);
+            }
+        }
         if !sel.chosen.is_empty() {
             let names: Vec<&str> = sel.chosen.iter().map(|e| e.name()).collect();
             stages.push(Stage {

@@ -11,6 +11,11 @@ use cdpr_model::ModelError;
 use cdpr_model::config::Platform;
 use std::fmt::Write as _;
 
+/// A figure that may not have been computed (a screening fit has no condition numbers).
+fn finite_or_dash(v: f64, f: impl Fn(f64) -> String) -> String {
+    if v.is_finite() { f(v) } else { "–".into() }
+}
+
 fn fmt_opt(v: Option<f64>, prec: usize) -> String {
     v.map_or("–".into(), |x| format!("{x:.prec$}"))
 }
@@ -137,14 +142,14 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
             let fixed: Vec<String> = f.fixed_unobservable.iter().map(|(p, _)| p.name()).collect();
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {:.3e} | {:.1} | {:.1} | {:.2} | {:.3} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.3} | {} | {} | {} |",
                 st.name,
                 f.free.len(),
                 f.n_residuals,
                 f.iterations,
-                f.cond_start_unscaled,
-                f.cond_start_scaled,
-                f.cond_end_scaled,
+                finite_or_dash(f.cond_start_unscaled, |v| format!("{v:.3e}")),
+                finite_or_dash(f.cond_start_scaled, |v| format!("{v:.1}")),
+                finite_or_dash(f.cond_end_scaled, |v| format!("{v:.1}")),
                 f.rms_wrench,
                 f.rms_length * 1e3,
                 if fixed.is_empty() {
@@ -193,20 +198,52 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
         if sel.chosen.is_empty() {
             s.push_str("No candidate effect is supported by the data: the base elastostatic model is kept.\n\n");
         } else {
-            let names: Vec<&str> = sel.chosen.iter().map(|e| e.name()).collect();
+            let names: Vec<String> = sel
+                .chosen
+                .iter()
+                .zip(&sel.forms)
+                .map(|(e, f)| effect_label(*e, *f))
+                .collect();
             let _ = writeln!(s, "Chosen effects, in order: **{}**.\n", names.join(", "));
+            s.push_str("Sizes in the final model (±1σ from the fit's covariance; \"at bound\" where a parameter rests on its physical range and has no 1σ):\n\n| effect | parameter | value | ±1σ |\n|---|---|---|---|\n");
+            for size in &sel.sizes {
+                for (n, v, sd) in &size.params {
+                    let _ = writeln!(
+                        s,
+                        "| {} | {n} | {v:.4e} | {} |",
+                        effect_label(size.effect, size.form),
+                        if sd.is_finite() && *sd > 0.0 {
+                            format!("{sd:.2e}")
+                        } else {
+                            "at bound or unidentifiable".into()
+                        }
+                    );
+                }
+                if let Some((h, sd)) = size.length_equivalent {
+                    let _ = writeln!(
+                        s,
+                        "| {} | ≙ length offset h (H × mean compliance of the training samples) | {:.3} mm | {:.3} mm |",
+                        effect_label(size.effect, size.form),
+                        h * 1e3,
+                        sd * 1e3
+                    );
+                }
+            }
+            s.push('\n');
         }
         let c = &rep.config.select;
         let _ = writeln!(
             s,
-            "A candidate is judged on what a user cares about: the held-out position and force errors through the model's forward kinematics. It is added when, in the channel where its effect must show (drum: position; force sensors: force; the others: either), the mean error drops by at least {:.0} % (position) or {:.0} % (force) with a paired z ≥ {:.2} over the held-out samples, neither error gets worse by more than {:.0} % (position) / {:.0} % (force), the FK converges on every held-out sample, and no parameter is pressed against a physical range limit away from zero. Among those that pass, the largest combined gain (position + force) is chosen, one per round. The score statistic and the BIC on the training rows are evidence, not gates: the training residual takes the measured forces as inputs, so effects on the predicted forces (hysteresis, sag, pulleys) barely move it. Thresholds from baseline data: docs/calibration.md.\n",
+            "A candidate is judged on what a user cares about: the held-out position and force errors through the model's forward kinematics. It is added when, in the channel where its effect must show (drum: position, or {:.0} % in force — refitting its eight per-cable scales on data without any effect moves the force by up to 31 % —, or {:.0} % in force with a significant score; force sensors: force; the others: either), the mean error drops by at least {:.0} % (position) or {:.0} % (force) with a paired z ≥ {:.2} over the held-out samples, neither error gets worse by more than {:.0} % (position) / {:.0} % (force), the FK converges on every held-out sample, and no parameter is pressed against a physical range limit away from zero. Among those that pass, the one whose signature explains the training rows best (largest BIC drop) is chosen, one per round; when none passes alone, the pairs of the candidates with a significant score are fitted together and a pair is added when it beats each of its members alone. Each candidate is fitted in each of its forms (the lowest BIC represents it) from its parameters at 0 with the base parameters free (a base parameter at its bound can leave it), and again from non-degenerate starts when its parameters do not move; a candidate whose parameters stay at 0 is said so, not given a gain. Thresholds from baseline data: docs/calibration.md.\n",
+            c.min_gain_force_length * 100.0,
+            c.min_gain_force * 100.0,
             c.min_gain_pos * 100.0,
             c.min_gain_force * 100.0,
             c.z_gain,
             c.max_loss_pos * 100.0,
             c.max_loss_force * 100.0
         );
-        s.push_str("| round | effect | k | score | χ² crit | held-out position (mm) before → after, FK | gain (paired z) | held-out force (N) before → after, FK | gain (paired z) | BIC before → after | fitted parameters (±1σ) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        s.push_str("| round | effect (form) | k | score | χ² crit | held-out position (mm) before → after, FK | gain (paired z) | held-out force (N) before → after, FK | gain (paired z) | BIC before → after | fitted parameters (±1σ) | verdict |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for (r, round) in sel.rounds.iter().enumerate() {
             for c in round {
                 let params: Vec<String> = c
@@ -221,19 +258,35 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
                         }
                     })
                     .collect();
+                // A candidate whose parameters stayed at 0 has no model of its own: no
+                // "after" figures, never a 0.0 % gain.
+                let unevaluated = !c.moved;
                 let fk_after = |v: Option<f64>, prec: usize| match (&c.fk_failure, v) {
+                    _ if unevaluated => "not fitted (see verdict)".to_string(),
                     (Some(t), _) => t.clone(),
                     (None, v) => fmt_opt(v, prec),
                 };
                 let gain = |g: Option<f64>, z: Option<f64>| match (g, z) {
+                    _ if unevaluated => "–".into(),
                     (Some(g), Some(z)) => format!("{:+.1} % ({z:.1})", 100.0 * g),
                     _ => "–".into(),
                 };
+                let mut label = effect_label(c.effect, c.form);
+                if let Some((e, f)) = c.pair {
+                    label = format!("{label} + {}", effect_label(e, f));
+                }
+                let mut verdict = c.verdict.clone();
+                if !c.freed.is_empty() {
+                    let _ = write!(verdict, " (took {} off its bound)", c.freed.join(", "));
+                }
+                if c.start.starts_with("restart") {
+                    let _ = write!(verdict, " (fitted from its {})", c.start);
+                }
                 let _ = writeln!(
                     s,
                     "| {} | {} | {} | {:.3e} | {:.1} | {} → {} | {} | {} → {} | {} | {:.1} → {:.1} | {} | {} |",
                     r + 1,
-                    c.effect.name(),
+                    label,
                     c.n_params,
                     c.score,
                     c.score_critical,
@@ -246,7 +299,7 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
                     c.bic_before,
                     c.bic_after,
                     params.join("; "),
-                    c.verdict
+                    verdict
                 );
             }
         }
@@ -365,6 +418,16 @@ pub fn platform_toml(
     )?)
 }
 
+/// An effect with its form, e.g. "hysteresis (±h length offset, direction from the command
+/// sequence)".
+pub fn effect_label(e: Effect, f: crate::effects::Form) -> String {
+    if f.describe().is_empty() {
+        e.name().to_string()
+    } else {
+        format!("{} ({})", e.name(), f.describe())
+    }
+}
+
 /// Side file (TOML) with the cable offsets and every extension parameter of the model.
 pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
     let mut s = String::new();
@@ -390,6 +453,21 @@ pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
         crate::params::STIFFNESS_REFERENCE_FORCE_N
     );
     let _ = writeln!(s, "hysteresis_half_width_n = {:?}", cal.hysteresis);
+    let _ = writeln!(s, "hysteresis_length_m = {:?}", cal.hysteresis_length);
+    let _ = writeln!(
+        s,
+        "hysteresis_direction = {:?}",
+        match cal.hysteresis_source {
+            crate::params::DirectionSource::Force => "force change",
+            crate::params::DirectionSource::ForceBeyondNoise => "force change beyond the noise",
+            crate::params::DirectionSource::Command => "command sequence (held)",
+        }
+    );
+    let _ = writeln!(
+        s,
+        "drive_train_compliance_m_per_n = {:?}",
+        cal.series_compliance
+    );
     let _ = writeln!(s, "sag_weight_squared_n2_per_m2 = {:?}", cal.sag_w2);
     let _ = writeln!(
         s,
@@ -713,7 +791,13 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
     // Scores of the candidates (first round).
     if let Some(r0) = rep.selection.as_ref().and_then(|sel| sel.rounds.first()) {
         {
-            let names: Vec<String> = r0.iter().map(|c| c.effect.name().to_string()).collect();
+            let names: Vec<String> = r0
+                .iter()
+                .map(|c| match c.pair {
+                    Some((e, _)) => format!("{}+{}", c.effect.name(), e.name()),
+                    None => c.effect.name().to_string(),
+                })
+                .collect();
             // The chart shows reductions only: a worse error or one that could not be measured
             // (FK failed) is drawn as 0; the report's table has the signed values.
             let pct = |g: Option<f64>| g.map_or(0.0, |g| (100.0 * g).max(0.0));

@@ -21,7 +21,7 @@
 //! Every column is analytic except the pulley radius (forward difference).
 
 use crate::observation::Observation;
-use crate::params::{CalModel, ParamId, STIFFNESS_REFERENCE_FORCE_N};
+use crate::params::{CalModel, ParamId};
 use cdpr_model::forward::{FkOptions, least_squares};
 use cdpr_model::kinematics::differential;
 use cdpr_model::pose::skew;
@@ -130,12 +130,14 @@ fn key(p: ParamId) -> usize {
         ParamId::ForceGain(i) => 10 * MC + 13 + i,
         ParamId::ForceOffset(i) => 11 * MC + 13 + i,
         ParamId::Flex(i, k) => 12 * MC + 13 + crate::params::FLEX_TERMS * i + k,
+        ParamId::HysteresisLength => (12 + crate::params::FLEX_TERMS) * MC + 13,
+        ParamId::SeriesCompliance => (12 + crate::params::FLEX_TERMS) * MC + 14,
     }
 }
 
 impl Columns {
     pub fn new(free: &[ParamId]) -> Self {
-        let mut table = vec![None; (12 + crate::params::FLEX_TERMS) * MC + 13];
+        let mut table = vec![None; (12 + crate::params::FLEX_TERMS) * MC + 15];
         for (c, p) in free.iter().enumerate() {
             table[key(*p)] = Some(c);
         }
@@ -333,23 +335,21 @@ impl<'a> Evaluator<'a> {
             r[k] = ww * w[k];
         }
         // Elastostatic inverse kinematics, eq. (4.38) second part / eq. (4.39).
-        let fs = STIFFNESS_REFERENCE_FORCE_N;
         let mut dphi_dq = vec![0.0; m];
         let mut dphi_df = vec![0.0; m];
         for i in 0..m {
             let q = data.q[i];
             let fi = f[i];
             let cos2 = 1.0 - data.u[i].z * data.u[i].z;
-            let g = fi + cal.stiffness_kappa * (fi - fs).powi(2) / (2.0 * fs);
-            let load = g - o.direction[i] * cal.hysteresis;
-            let c = (q + cal.extra_length[i]) / cal.k_f[i];
+            let (g, dg, _) = crate::params::stiffness_load(cal.stiffness_kappa, fi);
+            let load = g - o.loading(cal.hysteresis_source, i) * cal.hysteresis;
+            let c = cal.compliance(i, q);
             let sag = cal.sag_w2 * cos2 * q.powi(3) / (24.0 * fi * fi);
             // The flexible correction (not a physical effect; zero unless fitted).
             let (flex, dflex_df, dflex_dq) = cal.flex_term(i, fi, q);
             let phi = q + sag - c * load + flex;
-            r[6 + i] = wq * (phi - cal.q_theta(i, o.q_cmd[i]));
+            r[6 + i] = wq * (phi - cal.q_theta_of(i, o));
             dphi_dq[i] = 1.0 + 3.0 * sag / q - load / cal.k_f[i] + dflex_dq;
-            let dg = 1.0 + cal.stiffness_kappa * (fi - fs) / fs;
             dphi_df[i] = -2.0 * sag / fi - c * dg + dflex_df;
         }
         let Some((j, cols)) = jac else { return };
@@ -439,24 +439,26 @@ impl<'a> Evaluator<'a> {
             );
             let q = data.q[i];
             let fi = f[i];
-            let fs = STIFFNESS_REFERENCE_FORCE_N;
-            let g = fi + cal.stiffness_kappa * (fi - fs).powi(2) / (2.0 * fs);
-            let load = g - o.direction[i] * cal.hysteresis;
+            let (g, _, dg_dkappa) = crate::params::stiffness_load(cal.stiffness_kappa, fi);
+            let d_load = o.loading(cal.hysteresis_source, i);
+            let load = g - d_load * cal.hysteresis;
             let kf = cal.k_f[i];
-            let c = (q + cal.extra_length[i]) / kf;
+            let c = cal.compliance(i, q);
             let cos2 = 1.0 - data.u[i].z * data.u[i].z;
-            put(j, cols, ri, ParamId::KF(i), wq * c * load / kf);
-            put(j, cols, ri, ParamId::Offset(i), -wq);
-            put(j, cols, ri, ParamId::DrumScale(i), -wq * o.q_cmd[i]);
-            put(j, cols, ri, ParamId::ExtraLength(i), -wq * load / kf);
             put(
                 j,
                 cols,
                 ri,
-                ParamId::StiffnessKappa,
-                -wq * c * (fi - fs).powi(2) / (2.0 * fs),
+                ParamId::KF(i),
+                wq * (q + cal.extra_length[i]) / kf * load / kf,
             );
-            put(j, cols, ri, ParamId::Hysteresis, wq * c * o.direction[i]);
+            put(j, cols, ri, ParamId::Offset(i), -wq);
+            put(j, cols, ri, ParamId::DrumScale(i), -wq * o.q_cmd[i]);
+            put(j, cols, ri, ParamId::ExtraLength(i), -wq * load / kf);
+            put(j, cols, ri, ParamId::SeriesCompliance, -wq * load);
+            put(j, cols, ri, ParamId::HysteresisLength, wq * d_load);
+            put(j, cols, ri, ParamId::StiffnessKappa, -wq * c * dg_dkappa);
+            put(j, cols, ri, ParamId::Hysteresis, wq * c * d_load);
             put(
                 j,
                 cols,

@@ -4,7 +4,7 @@
 //! the measured x_M, f_M. Cable-length errors are φ(x_M) − q_θ (eq. 6.6).
 
 use crate::observation::Observation;
-use crate::params::{CalModel, STIFFNESS_REFERENCE_FORCE_N};
+use crate::params::CalModel;
 use crate::residual::{Kind, Weights};
 use cdpr_model::elastostatics::{CableForce, CableLaw};
 use cdpr_model::forward::{FkOptions, elastostatic_with_law, least_squares};
@@ -105,6 +105,8 @@ impl Errors {
 pub struct ExtendedLaw {
     pub k_f: Vec<f64>,
     pub extra: Vec<f64>,
+    /// Drive-train series compliance c_s (m/N).
+    pub series: f64,
     pub kappa: f64,
     pub hysteresis: f64,
     pub sag_w2: f64,
@@ -121,6 +123,7 @@ impl ExtendedLaw {
         Self {
             k_f: cal.k_f.clone(),
             extra: cal.extra_length.clone(),
+            series: cal.series_compliance,
             kappa: cal.stiffness_kappa,
             hysteresis: cal.hysteresis,
             sag_w2: cal.sag_w2,
@@ -136,9 +139,7 @@ impl ExtendedLaw {
     }
 
     fn parts(&self, i: usize, q: f64, f: f64) -> (f64, f64, f64) {
-        let fs = STIFFNESS_REFERENCE_FORCE_N;
-        let g = f + self.kappa * (f - fs).powi(2) / (2.0 * fs);
-        let dg = 1.0 + self.kappa * (f - fs) / fs;
+        let (g, dg, _) = crate::params::stiffness_load(self.kappa, f);
         let s = self.sag_w2 * self.cos2[i] * q.powi(3) / 24.0;
         (g - self.direction[i] * self.hysteresis, dg, s)
     }
@@ -146,7 +147,7 @@ impl ExtendedLaw {
 
 impl CableLaw for ExtendedLaw {
     fn force(&self, i: usize, q: f64, q_theta: f64) -> CableForce {
-        let c = (q + self.extra[i]) / self.k_f[i];
+        let c = (q + self.extra[i]) / self.k_f[i] + self.series;
         let dh = self.direction[i] * self.hysteresis;
         let lin = (q - q_theta) / c + dh;
         if self.kappa == 0.0
@@ -172,7 +173,7 @@ impl CableLaw for ExtendedLaw {
         // u² term would dominate and h would not be monotone. Its bracket is the physical one,
         // a taut cable below 100 kN (a root outside it is an FK failure, reported as such).
         let flexed = self.flex[i] != [0.0; crate::params::FLEX_TERMS];
-        let (mut lo, mut hi) = if sagging {
+        let (mut lo, mut hi): (f64, f64) = if sagging {
             (1e-9, 1e8)
         } else if flexed {
             (0.0, 1e5)
@@ -186,8 +187,16 @@ impl CableLaw for ExtendedLaw {
         } else {
             lin
         };
+        if !(f > lo && f < hi) {
+            f = 0.5 * (lo.max(-1e5) + hi.min(1e5));
+        }
         for _ in 0..100 {
             let (v, dv) = h(f);
+            // An exact root: Newton's next point is this one, which the bracket update below
+            // would have made its own end (and bisection would have walked away from it).
+            if v == 0.0 {
+                break;
+            }
             if v > 0.0 {
                 lo = f;
             } else {
@@ -220,7 +229,7 @@ impl CableLaw for ExtendedLaw {
     }
 
     fn controlled_length(&self, i: usize, q: f64, f: f64) -> f64 {
-        let c = (q + self.extra[i]) / self.k_f[i];
+        let c = (q + self.extra[i]) / self.k_f[i] + self.series;
         let (load, _, s) = self.parts(i, q, f);
         let sag = if s > 0.0 && f > 0.0 { s / (f * f) } else { 0.0 };
         q + sag - c * load + self.flex(i, q, f).0
@@ -253,7 +262,12 @@ pub fn predict(kind: Kind, cal: &CalModel, o: &Observation) -> Result<Prediction
     let model = cal.model()?;
     let mut data = Data::new(&model);
     let m = cal.m();
-    let q_theta: Vec<f64> = (0..m).map(|i| cal.q_theta(i, o.q_cmd[i])).collect();
+    let q_theta: Vec<f64> = (0..m)
+        .map(|i| match kind {
+            Kind::Elastostatic => cal.q_theta_of(i, o),
+            _ => cal.q_theta(i, o.q_cmd[i]),
+        })
+        .collect();
     let guess = o.pose_ref.unwrap_or(o.pose);
     let opts = FkOptions {
         max_iterations: 200,
@@ -269,7 +283,10 @@ pub fn predict(kind: Kind, cal: &CalModel, o: &Observation) -> Result<Prediction
             })
         }
         Kind::Elastostatic => {
-            let mut law = ExtendedLaw::new(cal, &o.direction);
+            let loading: Vec<f64> = (0..m)
+                .map(|i| o.loading(cal.hysteresis_source, i))
+                .collect();
+            let mut law = ExtendedLaw::new(cal, &loading);
             let dependent = cal.sag_w2 != 0.0 || cal.cog != nalgebra::Vector3::zeros();
             let mut x = guess;
             for _ in 0..30 {
@@ -382,6 +399,7 @@ mod tests {
         let mut cal_law = ExtendedLaw {
             k_f: vec![2e6],
             extra: vec![0.0],
+            series: 0.0,
             kappa: 0.0,
             hysteresis: 0.0,
             sag_w2: 0.0,
@@ -405,6 +423,38 @@ mod tests {
         cal_law.flex = vec![[0.0; crate::params::FLEX_TERMS]];
         let qt = cal_law.controlled_length(0, 8.0, 5000.0);
         assert!((cal_law.force(0, 8.0, qt).f - 5000.0).abs() < 1e-6);
+    }
+
+    /// The tension-dependent stiffness's law inverts its controlled length over the whole
+    /// force range for every κ of its range, with the exact-root case (Newton lands on the
+    /// root: the bisection must not walk away from it, which made every FK fail) and beyond
+    /// the parabola's usable branch (its tangent continuation).
+    #[test]
+    fn the_stiffness_law_inverts_its_controlled_length_for_every_kappa() {
+        for kappa in [-0.9, -0.5, -0.17, 0.0, 0.06, 0.1, 0.19, 0.5, 0.9] {
+            let law = ExtendedLaw {
+                k_f: vec![2e6],
+                extra: vec![5.0],
+                series: 1e-6,
+                kappa,
+                hysteresis: 0.0,
+                sag_w2: 0.0,
+                cos2: vec![0.0],
+                direction: vec![0.0],
+                flex: vec![[0.0; crate::params::FLEX_TERMS]],
+            };
+            for f in [200.0, 1000.0, 2500.0, 5000.0, 9000.0, 14000.0, 40000.0] {
+                let q = 8.0;
+                let qt = law.controlled_length(0, q, f);
+                let cf = law.force(0, q, qt);
+                assert!(
+                    (cf.f - f).abs() < 1e-6 * f,
+                    "kappa {kappa}, f {f}: got {}",
+                    cf.f
+                );
+                assert!(cf.df_dqt < 0.0, "kappa {kappa}, f {f}");
+            }
+        }
     }
 
     fn errors(pos: &[f64], force: &[f64]) -> Errors {

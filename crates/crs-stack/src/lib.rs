@@ -40,6 +40,7 @@
 //!   QEMU guest): the relaxed copies of the daemon, drives and monitor configs.
 //! - [`transport`]: which CAN transport a run uses (vcan0 or the UDP loopback bus).
 
+pub mod bench_generator;
 pub mod calibration_demo;
 pub mod calibration_loop;
 pub mod calibration_output;

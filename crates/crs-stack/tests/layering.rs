@@ -203,6 +203,68 @@ fn the_plants_oracle_shares_no_code_with_the_model_library() {
 }
 
 #[test]
+fn the_benchmark_plant_shares_no_code_with_what_it_tests() {
+    // The diagnosis benchmark's independent generator writes the effects a second time: it
+    // must reach neither the candidates it judges (calibrate), nor the simulated plant whose
+    // parameterization they share, nor the model library's equations or nalgebra. It stands
+    // on plant-oracle's energy formulation (glam) and draws its noise with rand.
+    let c = closure("bench-plant");
+    for f in [
+        "calibrate",
+        "sim-plant",
+        "cdpr-model",
+        "nalgebra",
+        "crs-dataset",
+        "motion-core",
+    ] {
+        assert!(!c.contains(f), "bench-plant depends on {f}: {c:?}");
+    }
+    let workspace: Vec<&String> = c
+        .iter()
+        .filter(|n| {
+            ![
+                "plant-oracle",
+                "glam",
+                "rand",
+                "rand_core",
+                "rand_chacha",
+                "rand_distr",
+                "ppv-lite86",
+                "zerocopy",
+                "zerocopy-derive",
+                "getrandom",
+                "libc",
+                "cfg-if",
+                "num-traits",
+                "autocfg",
+                "libm",
+                "wasi",
+                "wasip2",
+                "wit-bindgen",
+                "wit-bindgen-rt",
+                "bitflags",
+                "r-efi",
+                "thiserror",
+                "thiserror-impl",
+                "serde",
+                "serde_core",
+                "serde_derive",
+                "proc-macro2",
+                "quote",
+                "syn",
+                "unicode-ident",
+            ]
+            .contains(&n.as_str())
+        })
+        .collect();
+    assert!(
+        workspace.is_empty(),
+        "bench-plant depends on {workspace:?} beyond plant-oracle, glam, rand"
+    );
+    assert!(c.contains("plant-oracle"), "{c:?}");
+}
+
+#[test]
 fn the_rt_utility_stays_small() {
     // The independent monitor links crs-rt (sleep, priority, affinity, mlock: operating-system
     // plumbing every loop shares). Any dependency crs-rt gained would be linked into the

@@ -10,7 +10,7 @@ use calibrate::repeatability::RepeatabilityConfig;
 use cdpr_model::config::Platform;
 use clap::Args;
 use crs_stack::calibration_output::{self, Identification};
-use crs_stack::diagnosis_bench::{BenchConfig, run as run_bench};
+use crs_stack::diagnosis_bench::{BenchConfig, Generator, run as run_bench};
 use crs_stack::progress::Spinner;
 use std::path::PathBuf;
 
@@ -56,6 +56,66 @@ pub enum CalibrateCommand {
     /// effect plus a baseline, several seeds, randomised magnitudes); prints the confusion
     /// matrix, FK failures and held-out error against the true-effect model.
     BenchDiagnosis(BenchArgs),
+    /// Write one scenario of the independent benchmark plant (crates/bench-plant) as data sets:
+    /// `identification.csv`, `validation.csv` (docs/data-format.md, for `crs calibrate run`)
+    /// and `truth.json` (what the plant carries) in `--out`.
+    Generate(GenerateArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct GenerateArgs {
+    /// Nominal platform (the controller's model and the plant's nominal).
+    #[arg(long, default_value = "config/crs-nominal.toml")]
+    platform: PathBuf,
+    /// Effect kinds (comma separated, one or two): baseline, drum-setup, drum-zero,
+    /// drum-layer, hysteresis-command, hysteresis-command-deadband, hysteresis-force,
+    /// hysteresis-force-deadband, powertrain-rope, powertrain-compliance, stiffness, sag,
+    /// pulleys, load-cog, force-sensors, rehoming.
+    #[arg(long, value_delimiter = ',', required = true)]
+    scenario: Vec<String>,
+    /// Magnitude of each kind as a fraction of its range (0 = barely detectable, 1 = the
+    /// largest a robot of this size shows; log-uniform in between), comma separated.
+    #[arg(long, value_delimiter = ',', default_value = "0.5")]
+    magnitude: Vec<f64>,
+    /// Seed of the plant's deviations, poses and noise.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Reachable poses of the identification campaign (each with a tension test); the
+    /// validation campaign has 3/4 as many.
+    #[arg(long, default_value_t = 40)]
+    poses: usize,
+    /// Output directory.
+    #[arg(long, default_value = "bench-plant-out")]
+    out: PathBuf,
+    /// Write run N of `crs calibrate bench-diagnosis --generator independent` for this
+    /// scenario instead (its plant seed and magnitudes; `--seed` and `--magnitude` are ignored).
+    #[arg(long)]
+    bench_seed: Option<u64>,
+}
+
+fn generate(a: GenerateArgs) -> Result<(), Box<dyn std::error::Error>> {
+    use crs_stack::bench_generator::{kinds, write_scenario};
+    let k = kinds(&a.scenario)?;
+    let (seed, u) = match a.bench_seed {
+        Some(n) => crs_stack::diagnosis_bench::independent_draw(&k, n),
+        None if a.magnitude.len() == 1 && k.len() > 1 => (a.seed, vec![a.magnitude[0]; k.len()]),
+        None => (a.seed, a.magnitude.clone()),
+    };
+    let g = write_scenario(&a.platform, &k, &u, seed, a.poses, &a.out)?;
+    println!(
+        "{}: {} identification rows, {} validation rows ({} / {} steps outside the force limits not sampled); truth in {}",
+        a.out.display(),
+        g.train.rows.len(),
+        g.holdout.rows.len(),
+        g.train.skipped.len(),
+        g.holdout.skipped.len(),
+        a.out.join("truth.json").display()
+    );
+    for (kind, mag) in g.truth.kinds.iter().zip(&g.truth.magnitudes) {
+        let (_, _, unit, what) = kind.range();
+        println!("  {}: {what} = {mag:.4e} {unit}", kind.name());
+    }
+    Ok(())
 }
 
 #[derive(Args, Debug)]
@@ -200,6 +260,22 @@ pub struct BenchArgs {
     /// true effect matters but was not chosen, or where another effect was chosen.
     #[arg(long)]
     explain_misses: bool,
+    /// Scenario generator: `independent` (crates/bench-plant: the effects written a second time,
+    /// sharing no code or parameterization with the candidates — the acceptance), `sim-plant`
+    /// (the simulated plant, same parameterization as the candidates), or `both`.
+    #[arg(long, default_value = "both", value_parser = ["independent", "sim-plant", "both"])]
+    generator: String,
+    /// Independent generator's scenarios (comma separated): kinds (`drum-setup`, …, see `crs
+    /// calibrate generate --help`) and pairs `a+b`; default every kind and six pairs.
+    #[arg(long, value_delimiter = ',')]
+    kinds: Option<Vec<String>>,
+    /// Seeds per two-effect scenario of the independent generator.
+    #[arg(long, default_value_t = 5)]
+    pair_seeds: u64,
+    /// Write every candidate's evidence (each round of each run) to this CSV file: the data
+    /// the selection thresholds are set on.
+    #[arg(long)]
+    candidates_csv: Option<PathBuf>,
 }
 
 fn bench(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
@@ -214,6 +290,15 @@ fn bench(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
         baseline_seeds: a.baseline_seeds,
         first_seed: a.first_seed,
         explain_misses: a.explain_misses,
+        generator: match a.generator.as_str() {
+            "independent" => Generator::Independent,
+            "sim-plant" => Generator::SimPlant,
+            _ => Generator::Both,
+        },
+        kinds: a.kinds,
+        pair_seeds: a.pair_seeds,
+        verbose: true,
+        candidates_csv: a.candidates_csv,
     })?;
     Ok(())
 }
@@ -286,5 +371,6 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
         CalibrateCommand::Loop(a) => crate::calibrate_loop_cmd::run_loop(a, &command),
         CalibrateCommand::Campaign(a) => crate::calibrate_loop_cmd::run_campaign(a),
         CalibrateCommand::BenchDiagnosis(a) => bench(a),
+        CalibrateCommand::Generate(a) => generate(a),
     }
 }
