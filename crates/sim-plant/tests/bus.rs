@@ -30,18 +30,31 @@ fn plant_cfg(name: &str) -> PlantConfig {
     load_plant(config_dir().join("plant").join(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
+/// The simulated winches (force object in their TPDO2) on one interface: the plant on the bus
+/// in virtual time, its drives' own force and fault objects (tests/fixtures/drives-one-bus.toml).
+fn fixture_path() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/drives-one-bus.toml")
+}
+
 fn drives() -> DrivesConfig {
-    let mut d = DrivesConfig::load(&config_dir().join("drives.toml")).expect("config/drives.toml");
+    let mut d = DrivesConfig::load(&fixture_path()).expect("tests/fixtures/drives-one-bus.toml");
     assert!(
         d.safety_heartbeat.is_some(),
-        "the stack's drives config validates the safety monitor's heartbeat"
+        "the drives config validates the safety monitor's heartbeat"
     );
     // These tests exercise the plant without a safety monitor on the bus; the drives' safety
     // watch has its own tests (drives_with_a_safety_heartbeat_watch_* below, crates/drive-io),
-    // the safety I/O node's STO its own (drives_without_a_heartbeat_watch_*).
+    // the safety I/O node's STO its own (drives_without_a_heartbeat_watch_*), both on the
+    // shipped config/drives.toml.
     d.safety_heartbeat = None;
-    d.safety_io = None;
-    one_interface(d)
+    assert!(d.safety_io.is_none() && d.force_sensors.is_empty());
+    d
+}
+
+/// The shipped configuration (vendor drives, load cells, four drive interfaces, the safety I/O
+/// node on a fifth).
+fn shipped() -> DrivesConfig {
+    DrivesConfig::load(&config_dir().join("drives.toml")).expect("config/drives.toml")
 }
 
 /// The shipped layout (four drive buses of two drives and their load cells) on one
@@ -921,29 +934,42 @@ fn binary_rejects_bad_files_naming_them() {
 /// on the UDP multicast bus, setpoints over iceoryx2 as motion-core would publish them.
 #[test]
 fn run_loop_with_drive_io_over_udp_follows_setpoints() {
-    let port = 43000 + (std::process::id() % 1000) as u16 * 2;
-    let transport = format!("udpbus:239.255.70.3:{port}");
+    // The shipped layout (vendor drives and load cells on four interfaces), each interface a
+    // UDP multicast bus of its own; no monitor on the bus (its watch has its own tests).
+    let port = 43000 + (std::process::id() % 500) as u16 * 4;
     let prefix = format!("simplant/{}/", std::process::id());
-    let mut d = drives();
-    d.bus.transport = Some(transport.clone());
+    let mut d = shipped();
+    d.safety_heartbeat = None;
+    d.safety_io = None;
+    d.bus.interfaces.retain(|i| i.name != "safety");
+    for (k, i) in d.bus.interfaces.iter_mut().enumerate() {
+        i.transport = format!("udpbus:239.255.70.3:{}", port + k as u16);
+    }
     // Lenient timing: the host is shared and not real time (behaviour is asserted, not timing).
     d.bus.heartbeat_timeout_ms = 500;
     d.bus.stale_setpoint_cycles = 200;
     d.bus.boot_timeout_ms = 20_000;
     d.bus.sdo_timeout_ms = 500;
     d.validate().unwrap();
+    assert_eq!(d.interfaces().len(), 4);
     let cfg = plant_cfg("icosahedron-ideal.toml");
     let control = cfg.platform.clone();
-    let spec = d.transport().unwrap();
-    let mut plant_bus_ep = can_transport::open(&spec).unwrap();
-    let dio_bus = can_transport::open(&spec).unwrap();
+    let open = |d: &DrivesConfig| -> Vec<_> {
+        d.transports()
+            .unwrap()
+            .iter()
+            .map(|t| can_transport::open(t).unwrap())
+            .collect()
+    };
+    let mut plant_buses = open(&d);
+    let dio_buses = open(&d);
     let mut plant = PlantBus::new(cfg, &control, &d, BusOptions::new(&d, &control)).unwrap();
     let truth = Arc::new(Mutex::new(PlantTruth::default()));
     let stop = Arc::new(AtomicBool::new(false));
     let (t2, s2) = (truth.clone(), stop.clone());
     let plant_thread = std::thread::spawn(move || {
         bus::run(
-            std::slice::from_mut(&mut plant_bus_ep),
+            &mut plant_buses,
             &mut plant,
             Duration::from_millis(1),
             &s2,
@@ -953,7 +979,7 @@ fn run_loop_with_drive_io_over_udp_follows_setpoints() {
     let (d2, s3, p2) = (d.clone(), stop.clone(), prefix.clone());
     let dio_thread = std::thread::spawn(move || {
         let ipc = IpcNode::with_prefix("drive-io", &p2).map_err(|e| e.to_string())?;
-        drive_io::runner::run(&d2, vec![dio_bus], &ipc, &s3).map_err(|e| e.to_string())
+        drive_io::runner::run(&d2, dio_buses, &ipc, &s3).map_err(|e| e.to_string())
     });
     let node = IpcNode::with_prefix("bus-test", &prefix).unwrap();
     let setpoints = node.publisher::<JointSetpoint>().unwrap();
@@ -1038,10 +1064,11 @@ fn run_loop_with_drive_io_over_udp_follows_setpoints() {
                 t.converged, t.braked
             ));
         }
+        // The load cells' 16-bit newtons (every 5th SYNC; the platform is at rest).
         for i in 0..8 {
             if (fb.cable_force_n[i] - t.force_n[i]).abs() > 1.0 {
                 return Err(format!(
-                    "cable {i}: TPDO force {} N vs truth {} N",
+                    "cable {i}: load cell force {} N vs truth {} N",
                     fb.cable_force_n[i], t.force_n[i]
                 ));
             }
@@ -1118,7 +1145,7 @@ fn csp_winch_follows_a_moving_target_without_lag_and_stops_at_a_far_one() {
 fn drives_with_a_safety_heartbeat_watch_stay_braked_without_the_monitor() {
     // The stack's drives config as it is: it validates the monitor's heartbeat.
     // Drives with their own watch of the monitor's frames (no safety I/O node), on one bus.
-    let mut d = DrivesConfig::load(&config_dir().join("drives.toml")).unwrap();
+    let mut d = shipped();
     d.safety_io = None;
     let d = one_interface(d);
     assert!(d.safety_heartbeat.is_some());
@@ -1162,7 +1189,7 @@ fn drives_with_a_safety_heartbeat_watch_stay_braked_without_the_monitor() {
 fn winches_refuse_a_monitor_with_another_srdo_configuration() {
     use can_transport::safety_frame::{self, ConfigSignature, SafetyHeartbeat, SafetyState};
     // Drives with their own watch of the monitor's frames (no safety I/O node), on one bus.
-    let mut d = DrivesConfig::load(&config_dir().join("drives.toml")).unwrap();
+    let mut d = shipped();
     d.safety_io = None;
     let d = one_interface(d);
     let own = d.safety_heartbeat.unwrap();
@@ -1311,7 +1338,7 @@ fn slack_and_overload_raise_drive_faults_that_drive_io_sees() {
 /// load cell's 0.1 N resolution — while the winches' own force object is not used.
 #[test]
 fn force_sensors_on_the_bus_report_the_plants_forces() {
-    let mut text = std::fs::read_to_string(config_dir().join("drives.toml")).unwrap();
+    let mut text = std::fs::read_to_string(fixture_path()).unwrap();
     for cable in 1..=8 {
         text.push_str(&format!(
             "\n[[force_sensor]]\nnode_id = {}\ncable = {cable}\nn_per_unit = 0.1\n\
@@ -1354,27 +1381,14 @@ fn force_sensors_on_the_bus_report_the_plants_forces() {
 #[test]
 fn drives_without_a_heartbeat_watch_are_stopped_by_the_safety_io_nodes_sto() {
     use can_transport::safety_frame::{self, ConfigSignature, SafetyHeartbeat, SafetyState};
-    let mut d = DrivesConfig::load(&config_dir().join("drives.toml")).unwrap();
+    let mut d = one_interface(shipped());
     let own = d.safety_heartbeat.unwrap();
-    let transport = d.interfaces()[0].transport.clone();
-    d.bus.transport = None;
-    d.bus.interfaces = vec![
-        drive_io::config::InterfaceConfig {
-            name: "can0".into(),
-            transport,
-            bitrate_bit_per_s: 1_000_000,
-            budget_percent: 70.0,
-        },
-        drive_io::config::InterfaceConfig {
-            name: "safety".into(),
-            transport: "udpbus:239.255.70.1:20999".into(),
-            bitrate_bit_per_s: 1_000_000,
-            budget_percent: 70.0,
-        },
-    ];
-    for w in &mut d.winches {
-        w.interface = Some("can0".into());
-    }
+    d.bus.interfaces.push(drive_io::config::InterfaceConfig {
+        name: "safety".into(),
+        transport: "udpbus:239.255.70.1:20999".into(),
+        bitrate_bit_per_s: 1_000_000,
+        budget_percent: 70.0,
+    });
     d.safety_io = Some(drive_io::config::SafetyIoConfig {
         interface: "safety".into(),
         node_id: 0x30,
