@@ -197,6 +197,12 @@ impl HardLoop {
         self.sampler.finished()
     }
 
+    /// True once the planner has filled its look-ahead queue or delivered the whole plan
+    /// ([`trajectory::Sampler::look_ahead_full`]).
+    pub fn plan_look_ahead_full(&self) -> bool {
+        self.sampler.look_ahead_full()
+    }
+
     pub fn cycle(&self) -> &Cycle {
         &self.cycle
     }
