@@ -25,7 +25,7 @@ fn closed_loop_on_the_stack_reduces_the_measured_pose_error() {
     stack_bin_dir(&crs);
     let out = std::env::temp_dir().join(format!("crs-loop-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
-    let port = 20000 + (std::process::id() % 20000);
+    let port = crs_test_support::ports::reserve_udp_port();
     let poses = 20;
     let cfg = relaxed_configs(&out.join("cfg"));
     let o = Command::new(&crs)
@@ -46,7 +46,7 @@ fn closed_loop_on_the_stack_reduces_the_measured_pose_error() {
             "--surrogate-validation-samples",
             "300",
             "--transport",
-            &format!("udpbus:239.255.70.9:{port}"),
+            &port.udpbus(9),
             "--daemon-config",
             cfg[0].to_str().unwrap(),
             "--drives",

@@ -13,7 +13,8 @@ fn crs() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_crs"))
 }
 
-fn commission(out: &Path, plant: Option<&Path>, port: u32) -> (bool, String) {
+fn commission(out: &Path, plant: Option<&Path>) -> (bool, String) {
+    let port = crs_test_support::ports::reserve_udp_port();
     let mut c = Command::new(crs());
     c.current_dir(root()).args([
         "commission",
@@ -22,7 +23,7 @@ fn commission(out: &Path, plant: Option<&Path>, port: u32) -> (bool, String) {
         "--timing",
         "relaxed",
         "--transport",
-        &format!("udpbus:239.255.70.17:{port}"),
+        &port.udpbus(17),
         "--dwell-s",
         "1.0",
     ]);
@@ -50,10 +51,9 @@ fn commissioning_finds_the_plants_payload_and_refuses_an_unexpected_rider() {
     stack_bin_dir(&crs());
     let base = std::env::temp_dir().join(format!("crs-commission-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&base);
-    let port = 21000 + std::process::id() % 20000;
 
     // 1. The shipped helicopter plant: its load is the configured one.
-    let (ok, text) = commission(&base.join("ok"), None, port);
+    let (ok, text) = commission(&base.join("ok"), None);
     assert!(ok, "commissioning of the shipped cabin failed:\n{text}");
     assert!(text.contains("PRE-RIDE CHECK: READY"), "{text}");
     let t: toml::Table = std::fs::read_to_string(base.join("ok/commission.toml"))
@@ -94,7 +94,7 @@ fn commissioning_finds_the_plants_payload_and_refuses_an_unexpected_rider() {
     std::fs::create_dir_all(&base).unwrap();
     let heavy_path = base.join("heavy-plant.toml");
     std::fs::write(&heavy_path, heavy).unwrap();
-    let (ok, text) = commission(&base.join("heavy"), Some(&heavy_path), port + 1);
+    let (ok, text) = commission(&base.join("heavy"), Some(&heavy_path));
     assert!(!ok, "an unexpected 60 kg must be refused:\n{text}");
     assert!(text.contains("PRE-RIDE CHECK: REFUSED"), "{text}");
     assert!(text.contains("payload mass"), "{text}");

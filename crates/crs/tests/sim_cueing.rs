@@ -11,19 +11,14 @@ mod common;
 use common::{relaxed_configs_of, root, sim_command, stack_bin_dir};
 use std::path::PathBuf;
 
-fn run(label: &str, daemon: &str, monitor: &str, plant: Option<&str>, port_offset: u32) {
+fn run(label: &str, daemon: &str, monitor: &str, plant: Option<&str>) {
     let crs = PathBuf::from(env!("CARGO_BIN_EXE_crs"));
     stack_bin_dir(&crs);
     let out = std::env::temp_dir().join(format!("crs-sim-cueing-{label}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     let cfg = relaxed_configs_of(&out.join("cfg"), daemon, "drives.toml", monitor);
-    let port = 20000 + (std::process::id() + port_offset) % 20000;
-    let mut c = sim_command(
-        &crs,
-        &format!("udpbus:239.255.70.15:{port}"),
-        &cfg,
-        &out.join("run"),
-    );
+    let port = crs_test_support::ports::reserve_udp_port();
+    let mut c = sim_command(&crs, &port.udpbus(15), &cfg, &out.join("run"));
     c.args([
         "--source",
         "cueing",
@@ -84,13 +79,7 @@ fn run(label: &str, daemon: &str, monitor: &str, plant: Option<&str>, port_offse
 
 #[test]
 fn braking_runs_clean_on_the_nominal_stack() {
-    run(
-        "nominal",
-        "motion-core.toml",
-        "safety-monitor.toml",
-        None,
-        0,
-    );
+    run("nominal", "motion-core.toml", "safety-monitor.toml", None);
 }
 
 #[test]
@@ -101,7 +90,6 @@ fn braking_runs_clean_on_the_calibrated_stack() {
         "motion-core-calibrated.toml",
         "safety-monitor-calibrated.toml",
         Some("config/plant/icosahedron-assembly.toml"),
-        7,
     );
 }
 

@@ -29,17 +29,12 @@ fn crs_sim_platform_helicopter_runs_its_tour_clean() {
         "drives.toml",
         "safety-monitor-helicopter.toml",
     );
-    let port = 20000 + (std::process::id() % 20000);
+    let port = crs_test_support::ports::reserve_udp_port();
     // The plant is not given: --platform helicopter must pick config/plant/helicopter.toml.
-    let o = sim_command(
-        &crs,
-        &format!("udpbus:239.255.70.13:{port}"),
-        &cfg,
-        &out.join("run"),
-    )
-    .args(["--platform", "helicopter", "--check"])
-    .output()
-    .expect("run crs sim");
+    let o = sim_command(&crs, &port.udpbus(13), &cfg, &out.join("run"))
+        .args(["--platform", "helicopter", "--check"])
+        .output()
+        .expect("run crs sim");
     let text = format!(
         "{}\n{}",
         String::from_utf8_lossy(&o.stdout),
@@ -152,12 +147,13 @@ fn the_helicopter_tour_lies_in_its_region() {
 fn a_wrong_or_contradictory_platform_choice_is_refused_before_anything_starts() {
     // The monitor check needs the monitor built (without it the run is refused for that).
     stack_bin_dir(&crs());
+    let port = crs_test_support::ports::reserve_udp_port();
     let run = |args: &[&str]| {
         let o = Command::new(crs())
             .current_dir(root())
             .arg("sim")
             .args(args)
-            .args(["--transport", "udpbus:239.255.70.13:20998", "--out"])
+            .args(["--transport", &port.udpbus(13), "--out"])
             .arg(std::env::temp_dir().join(format!("crs-sim-heli-no-{}", std::process::id())))
             .output()
             .expect("run crs sim");

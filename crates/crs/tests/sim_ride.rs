@@ -23,22 +23,17 @@ fn hover_flight_into_the_corners_runs_clean_on_the_stack() {
         "drives.toml",
         "safety-monitor-helicopter.toml",
     );
-    let port = 20000 + (std::process::id() % 20000);
-    let o = sim_command(
-        &crs,
-        &format!("udpbus:239.255.70.14:{port}"),
-        &cfg,
-        &out.join("run"),
-    )
-    .args([
-        "--source",
-        "helicopter",
-        "--pilot",
-        "config/pilot-demo.csv",
-        "--check",
-    ])
-    .output()
-    .expect("run crs sim");
+    let port = crs_test_support::ports::reserve_udp_port();
+    let o = sim_command(&crs, &port.udpbus(14), &cfg, &out.join("run"))
+        .args([
+            "--source",
+            "helicopter",
+            "--pilot",
+            "config/pilot-demo.csv",
+            "--check",
+        ])
+        .output()
+        .expect("run crs sim");
     let text = format!(
         "{}\n{}",
         String::from_utf8_lossy(&o.stdout),

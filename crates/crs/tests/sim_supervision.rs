@@ -16,6 +16,8 @@ struct Sim {
     lines: mpsc::Receiver<String>,
     log: Vec<String>,
     out: PathBuf,
+    /// The bus's port, reserved while the stack runs.
+    _port: crs_test_support::ports::UdpPort,
 }
 
 impl Sim {
@@ -25,17 +27,12 @@ impl Sim {
         let out = std::env::temp_dir().join(format!("crs-sim-sup-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&out);
         let cfg = relaxed_configs(&out.join("cfg"));
-        let port = 20000 + (std::process::id() % 20000) + if tag == "kill" { 0 } else { 1 };
-        let mut child = sim_command(
-            &crs,
-            &format!("udpbus:239.255.70.11:{port}"),
-            &cfg,
-            &out.join("run"),
-        )
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn crs sim");
+        let port = crs_test_support::ports::reserve_udp_port();
+        let mut child = sim_command(&crs, &port.udpbus(11), &cfg, &out.join("run"))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn crs sim");
         let (tx, lines) = mpsc::channel();
         for stream in [
             Box::new(child.stdout.take().unwrap()) as Box<dyn std::io::Read + Send>,
@@ -53,6 +50,7 @@ impl Sim {
             lines,
             log: Vec::new(),
             out,
+            _port: port,
         }
     }
 
@@ -189,7 +187,8 @@ fn a_monitor_timed_for_another_loop_period_is_refused_before_anything_starts() {
         text.replace("setpoint_period_ms = 4.0", "setpoint_period_ms = 1.0"),
     )
     .unwrap();
-    let o = sim_command(&crs, "udpbus:239.255.70.12:20999", &cfg, &out.join("run"))
+    let port = crs_test_support::ports::reserve_udp_port();
+    let o = sim_command(&crs, &port.udpbus(12), &cfg, &out.join("run"))
         .output()
         .expect("run crs sim");
     let (so, se) = (

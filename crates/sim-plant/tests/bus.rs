@@ -898,8 +898,8 @@ fn binary_rejects_bad_files_naming_them() {
 /// on the UDP multicast bus, setpoints over iceoryx2 as motion-core would publish them.
 #[test]
 fn run_loop_with_drive_io_over_udp_follows_setpoints() {
-    let port = 43000 + (std::process::id() % 1000) as u16 * 2;
-    let transport = format!("udpbus:239.255.70.3:{port}");
+    let port = crs_test_support::ports::reserve_udp_port();
+    let transport = port.udpbus(3);
     let prefix = format!("simplant/{}/", std::process::id());
     let mut d = drives();
     d.bus.transport = Some(transport.clone());
@@ -947,10 +947,11 @@ fn run_loop_with_drive_io_over_udp_follows_setpoints() {
             }
             std::thread::sleep(Duration::from_millis(2));
         }
-        // All drives enabled: the brakes release with the next plant cycle.
+        // All drives enabled: the brakes release with the next plant cycle (the deadline only
+        // stops a hang; a loaded host may take a while to run that cycle).
         let t_rel = Instant::now();
         while truth.lock().unwrap().braked != 0 {
-            if t_rel.elapsed() > Duration::from_secs(2) {
+            if t_rel.elapsed() > Duration::from_secs(30) {
                 return Err("brakes still engaged with all drives enabled".into());
             }
             std::thread::sleep(Duration::from_millis(1));
