@@ -4,13 +4,15 @@ use can_transport::{CanBus, CanError, CanFrame, TransportSpec, open};
 use std::time::Duration;
 
 fn port(offset: u16) -> u16 {
-    // Distinct per test process and test so parallel runs don't share a bus.
+    // Distinct per test process and test so parallel runs don't share a bus (unicast peer
+    // links: a collision fails the bind loudly; the multicast buses use reserved ports).
     30000 + (std::process::id() % 2000) as u16 * 8 + offset
 }
 
 #[test]
 fn three_members_see_each_others_frames_but_not_their_own() {
-    let spec: TransportSpec = format!("udpbus:239.255.70.1:{}", port(0)).parse().unwrap();
+    let port = crs_test_support::ports::reserve_udp_port();
+    let spec: TransportSpec = port.udpbus(2).parse().unwrap();
     let mut a = open(&spec).unwrap();
     let mut b = open(&spec).unwrap();
     let mut c = open(&spec).unwrap();
@@ -48,12 +50,12 @@ fn three_members_see_each_others_frames_but_not_their_own() {
 
 #[test]
 fn malformed_datagram_is_counted_not_delivered() {
-    let p = port(1);
-    let spec: TransportSpec = format!("udpbus:239.255.70.1:{p}").parse().unwrap();
+    let port = crs_test_support::ports::reserve_udp_port();
+    let spec: TransportSpec = port.udpbus(2).parse().unwrap();
     let mut a = open(&spec).unwrap();
     let raw = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     raw.set_multicast_ttl_v4(0).unwrap();
-    raw.send_to(&[2, 0, 0, 0, 5, 1], ("239.255.70.1", p))
+    raw.send_to(&[2, 0, 0, 0, 5, 1], ("239.255.71.2", port.port()))
         .unwrap();
     assert!(
         a.recv_timeout(Duration::from_millis(200))
@@ -110,7 +112,8 @@ fn socketcan_open_reports_missing_can_support_or_works() {
 #[test]
 fn error_frames_travel_on_the_udp_bus_as_typed_events() {
     use can_transport::{BusCondition, BusErrorFrame, RxEvent};
-    let spec: TransportSpec = format!("udpbus:239.255.70.1:{}", port(3)).parse().unwrap();
+    let port = crs_test_support::ports::reserve_udp_port();
+    let spec: TransportSpec = port.udpbus(2).parse().unwrap();
     let mut a = open(&spec).unwrap();
     let mut b = open(&spec).unwrap();
     let mut c = open(&spec).unwrap();
