@@ -433,6 +433,73 @@ const CLAIMS: &[(&str, &str, &str, &str)] = &[
         "README.md",
         "| cable forces (limits 1000 … 9000 N) | {_} … {_} N | {_} … {} N |",
     ),
+    (
+        "calibration-loop",
+        "improvement_position_mean",
+        "README.md",
+        "The measured mean position error is {}× smaller.",
+    ),
+    (
+        "calibration-loop",
+        "identification.holdout_points",
+        "README.md",
+        "Held-out identification figures ({} of the 40 rest points)",
+    ),
+    (
+        "calibration-loop",
+        "identification.step3.pos_mean_mm",
+        "README.md",
+        "rest points): nominal elastostatic {} / {_} mm → optimal",
+    ),
+    (
+        "calibration-loop",
+        "identification.step3.pos_max_mm",
+        "README.md",
+        "rest points): nominal elastostatic {_} / {} mm → optimal",
+    ),
+    (
+        "calibration-loop",
+        "identification.step4.pos_mean_mm",
+        "README.md",
+        "mm → optimal elastostatic {} / {_} mm. These figures",
+    ),
+    (
+        "calibration-loop",
+        "identification.step4.pos_max_mm",
+        "README.md",
+        "mm → optimal elastostatic {_} / {} mm. These figures",
+    ),
+    // The same run in docs/calibration.md.
+    (
+        "calibration-loop",
+        "before.measured_position_mean_mm",
+        "docs/calibration.md",
+        "| measured position error mean / max (mm) | {} / {_} |",
+    ),
+    (
+        "calibration-loop",
+        "after.measured_position_max_mm",
+        "docs/calibration.md",
+        "| measured position error mean / max (mm) | {_} / {_} | {_} / {} |",
+    ),
+    (
+        "calibration-loop",
+        "after.true_position_max_mm",
+        "docs/calibration.md",
+        "| true position error mean / max (mm, plant truth) | {_} / {_} | {_} / {} |",
+    ),
+    (
+        "calibration-loop",
+        "identification.step3.pos_mean_mm",
+        "docs/calibration.md",
+        "nominal elastostatic {} / {_} mm held-out → optimal elastostatic",
+    ),
+    (
+        "calibration-loop",
+        "identification.step4.pos_max_mm",
+        "docs/calibration.md",
+        "mm held-out → optimal elastostatic {_} / {} mm (mean / max)",
+    ),
     // Commissioning on the running stack, README and docs/load-and-commissioning.md.
     (
         "commission",
