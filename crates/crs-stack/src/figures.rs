@@ -114,6 +114,13 @@ pub const GROUPS: &[GroupSpec] = &[
         run: surrogate_fit,
     },
     GroupSpec {
+        name: "cueing-box",
+        command: "crs sim --source cueing (the cueing box's platform check of config/cueing.toml on config/{icosahedron,icosahedron-calibrated}.toml)",
+        in_ci: true,
+        tolerance: 1e-9,
+        run: cueing_box,
+    },
+    GroupSpec {
         name: "surrogate-tracking",
         command: "crs surrogate fit --platform config/crs-nominal.toml --plant config/plant/{crs-ideal,crs-like}.toml",
         in_ci: false,
@@ -309,6 +316,38 @@ fn surrogate_fit(ctx: &Context) -> Result<Figures, FiguresError> {
             &format!("{key}.coefficients_per_cable"),
             r.n_coeffs_per_cable as f64,
         );
+    }
+    Ok((m, BTreeMap::new()))
+}
+
+/// The check `crs sim --source cueing` runs before it starts (`CueingSettings::washout`): the
+/// cueing box's grid wrench feasible at rest (eq. 3.41) and, where the platform has
+/// `[dynamics]`, for the limiter's accelerations (eq. 5.13–5.16).
+fn cueing_box(ctx: &Context) -> Result<Figures, FiguresError> {
+    let f = failed("cueing-box");
+    let file = ctx.root.join("config/cueing.toml");
+    let settings = motion_cueing::CueingSettings::load(&file).map_err(|e| f(e.to_string()))?;
+    let mut m = BTreeMap::new();
+    for (key, platform) in [
+        ("nominal", "icosahedron"),
+        ("calibrated", "icosahedron-calibrated"),
+    ] {
+        let pf =
+            cdpr_model::config::load_platform(ctx.root.join(format!("config/{platform}.toml")))
+                .map_err(|e| f(e.to_string()))?;
+        let (_, feas) = settings
+            .washout(&pf, crate::cueing_run::DT_S, &file.display().to_string())
+            .map_err(|e| f(format!("{platform}: {e}")))?;
+        put(&mut m, &format!("{key}.grid_poses"), feas.poses as f64);
+        put(
+            &mut m,
+            &format!("{key}.min_static_margin_n"),
+            feas.min_static_margin_n,
+        );
+        // Absent for a platform without [dynamics] (checked statically only).
+        if let Some(a) = feas.acceleration_scale {
+            put(&mut m, &format!("{key}.acceleration_scale"), a);
+        }
     }
     Ok((m, BTreeMap::new()))
 }

@@ -68,6 +68,61 @@ const CLAIMS: &[(&str, &str, &str, &str)] = &[
         "README.md",
         "certified Σ|c| {} mm < 90 mm of eq. 5.27",
     ),
+    // The cueing box's platform check, README "Motion cueing" and docs/motion-cueing.md.
+    (
+        "cueing-box",
+        "nominal.grid_poses",
+        "README.md",
+        "wrench feasible on a {}-pose grid for the limiter's",
+    ),
+    (
+        "cueing-box",
+        "nominal.min_static_margin_n",
+        "README.md",
+        "accelerations (static margin ≥ {} N, dynamic scale",
+    ),
+    (
+        "cueing-box",
+        "nominal.acceleration_scale",
+        "README.md",
+        "N, dynamic scale {}). The source publishes",
+    ),
+    (
+        "cueing-box",
+        "nominal.min_static_margin_n",
+        "docs/motion-cueing.md",
+        "| 3375 + 21 on the way from home | {} N |",
+    ),
+    (
+        "cueing-box",
+        "nominal.acceleration_scale",
+        "docs/motion-cueing.md",
+        "| 3375 + 21 on the way from home | {_} N | {} (≥ 1.2 required) |",
+    ),
+    (
+        "cueing-box",
+        "nominal.grid_poses",
+        "docs/motion-cueing.md",
+        "The cueing box's check: nominal {} poses, smallest",
+    ),
+    (
+        "cueing-box",
+        "nominal.min_static_margin_n",
+        "docs/motion-cueing.md",
+        "poses, smallest static margin {} N, acceleration scale",
+    ),
+    (
+        "cueing-box",
+        "nominal.acceleration_scale",
+        "docs/motion-cueing.md",
+        "static margin {_} N, acceleration scale {}; calibrated",
+    ),
+    (
+        "cueing-box",
+        "calibrated.min_static_margin_n",
+        "docs/motion-cueing.md",
+        "acceleration scale {_}; calibrated {} N, static only.",
+    ),
     // The surrogate's tracking table, README.
     (
         "surrogate-tracking",
