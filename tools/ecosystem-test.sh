@@ -25,7 +25,11 @@ echo "-- crs sim with a candump log"
 LOG=$(pwd)/$OUT/bus.candump
 sed "s#^\# candump_log = .*#candump_log = \"$LOG\"#" config/drives.toml > "$OUT/drives.toml"
 grep -q "^candump_log" "$OUT/drives.toml" || { echo "could not enable candump_log in the drives copy"; exit 1; }
-"$BIN/crs" sim --bin-dir "$BIN" --drives "$OUT/drives.toml" --out "$OUT/sim" --check > "$OUT/crs-sim.txt" 2>&1 \
+# --timing relaxed (4 ms loop and SYNC, watchdogs to match): this checks what the tools read in
+# a run's files, not the host's timing; at the spec's 1 ms / 10 ms a stall of this shared host
+# stops the bus in about one run of six (README), which would fail this check for nothing it tests.
+# The tour ends at home: 0.20 / 0.33 mm at rest seen (relaxed runs), the bound 2 mm.
+"$BIN/crs" sim --bin-dir "$BIN" --drives "$OUT/drives.toml" --timing relaxed --out "$OUT/sim" --check --max-static-error-mm 2 > "$OUT/crs-sim.txt" 2>&1 \
   || { tail -30 "$OUT/crs-sim.txt"; exit 1; }
 N=$(grep -c '^(' "$LOG")
 [ "$N" -gt 1000 ] || { echo "candump log has only $N lines"; exit 1; }

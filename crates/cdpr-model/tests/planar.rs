@@ -149,12 +149,15 @@ fn pulleys_shrink_the_physical_workspace_slightly_sec_3_8() {
         100.0 * ratios[0],
         100.0 * ratios[1]
     );
-    // Spec: 98.95 % and 97.54 % — smaller with larger pulleys. Reproduced in direction and
-    // order; the magnitude depends on the pulley placement and the force limits of fig. 3.21,
-    // which the text does not give (we get 99.64 % / 98.87 %, docs/analysis.md).
+    // Spec: 98.95 % and 97.54 % — smaller with larger pulleys. Reproduced in direction, NOT in
+    // magnitude: this model gives 99.64 % / 98.87 % (docs/analysis.md). The text gives neither
+    // the side of the cable the pulley sits on nor the force limits of fig. 3.21; finer grids
+    // (0.05 m: 99.66 / 98.89 %) and other limits ([100, 3000] N: 99.19 / 97.27 %; [100, 8000] N:
+    // 99.89 / 99.47 %) do not reproduce both numbers. So the test pins what this model gives,
+    // to its grid's resolution (one 0.2 m cell of ~67 m² is 0.06 %), not the spec's value.
     assert!(ratios[1] < ratios[0] && ratios[0] < 1.0, "{ratios:?}");
-    assert!((ratios[0] - 0.9895).abs() < 0.01, "{ratios:?}");
-    assert!((ratios[1] - 0.9754).abs() < 0.015, "{ratios:?}");
+    assert!((ratios[0] - 0.9964).abs() < 0.0006, "{ratios:?}");
+    assert!((ratios[1] - 0.9887).abs() < 0.0006, "{ratios:?}");
 }
 
 /// A rigid planar platform (n = 3) in four cables (redundancy 1).

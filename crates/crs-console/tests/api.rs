@@ -104,7 +104,7 @@ fn status_reports_no_stack_then_live_values_and_stop_reaches_the_bus() {
             }
         }
         assert!(
-            t0.elapsed() < Duration::from_secs(20),
+            t0.elapsed() < Duration::from_secs(60),
             "the console never showed live values"
         );
     }
@@ -121,7 +121,7 @@ fn status_reports_no_stack_then_live_values_and_stop_reaches_the_bus() {
             break;
         }
         assert!(
-            t0.elapsed() < Duration::from_secs(10),
+            t0.elapsed() < Duration::from_secs(60),
             "no e-stop on the bus"
         );
         std::thread::sleep(Duration::from_millis(5));
@@ -141,7 +141,7 @@ fn status_reports_no_stack_then_live_values_and_stop_reaches_the_bus() {
             break;
         }
         assert!(
-            t0.elapsed() < Duration::from_secs(10),
+            t0.elapsed() < Duration::from_secs(60),
             "trip log without the stop: {body}"
         );
         std::thread::sleep(Duration::from_millis(20));
@@ -227,8 +227,19 @@ fn live_stream_sends_status_events_and_ends_on_shutdown() {
         assert!(n > 0, "stream ended early");
         buf.extend_from_slice(&chunk[..n]);
     }
-    // Stopping the console ends the open stream instead of waiting for the client.
-    let t0 = Instant::now();
-    console.stop().unwrap();
-    assert!(t0.elapsed() < Duration::from_secs(5));
+    // Stopping the console ends the open stream instead of waiting for the client: stop()
+    // returns while this client still holds the stream open, and the stream then reads EOF
+    // (the deadline below only stops a hang; the stream itself would never end).
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || tx.send(console.stop()).unwrap());
+    rx.recv_timeout(Duration::from_secs(60))
+        .expect("stop() waited for the open stream")
+        .unwrap();
+    loop {
+        match s.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(_) => continue,
+            Err(e) => panic!("the stream did not end with the console: {e}"),
+        }
+    }
 }

@@ -26,8 +26,10 @@
 //! deg × (π/180) than for deg / 180 × π or deg × π / 180, and the axes 2, 4, 6 and 8 give different
 //! unit vectors for x² + y² + z² than for z² + y² + x², x² + (y² + z²), `hypot`, or a multiplication
 //! by 1/‖u‖. The platform has pulleys, per-cable stiffness and an integer (`f_min_n = 200`), so
-//! every branch of the serialisation and of the readers is exercised. The two hashes were computed by a third implementation
-//! (Python's `hashlib`/`struct` over the stated serialisation), not by either side's code.
+//! every branch of the serialisation and of the readers is exercised. The two hashes come from
+//! a third implementation, not from either side's code: `tools/identity_golden.py` (Python's
+//! `tomllib`, `hashlib` and `struct` over [`PLATFORM_TOML`] and the stated serialisation)
+//! prints them, and `tools/test.sh` runs it with `--check` on this file.
 
 /// Number of cables m of the golden platform.
 pub const CABLES: usize = 8;

@@ -4,6 +4,7 @@ mod calibrate_cmd;
 mod calibrate_loop_cmd;
 mod console_cmd;
 mod cueing_cmd;
+mod figures_cmd;
 mod gen_cmd;
 mod load_cmd;
 mod model_cmd;
@@ -53,6 +54,9 @@ enum Command {
     /// The operator console: a web page with the running stack's live state and a stop button
     /// (no reset), JSON at /api/status and /api/trips. Binds 127.0.0.1 unless given a token.
     Console(console_cmd::ConsoleArgs),
+    /// Regenerate the README's headline figures (not timings) into one JSON file:
+    /// benches/figures.json is its last run, checked against the README by the tests.
+    Figures(figures_cmd::FiguresArgs),
     /// Write man pages (crs.1, crs-sim.1, ...) into DIR.
     GenMan {
         /// Output directory.
@@ -73,6 +77,7 @@ fn main() -> ExitCode {
         Command::Load(cmd) => load_cmd::run(cmd),
         Command::Commission(a) => load_cmd::commission(a),
         Command::Console(a) => console_cmd::run(a),
+        Command::Figures(a) => figures_cmd::run(a),
         Command::GenMan { dir } => gen_cmd::gen_man(Cli::command(), &dir)
             .map(|files| println!("wrote {} man pages to {}", files.len(), dir.display()))
             .map_err(Into::into),

@@ -2,7 +2,8 @@
 //! motion-core as separate processes over iceoryx2 and the CAN-over-UDP loopback bus): a short
 //! campaign recorded with the nominal model on the assembled plant, identified, the calibrated
 //! model and its refitted surrogate deployed, the campaign re-run. The measured (tracker) pose
-//! error at the rest points must drop by the stated factor.
+//! error at the rest points must drop by the stated factor, and every re-run of a campaign
+//! (`--retries`) is budgeted, printed and counted.
 //!
 //! The stack's binaries must sit next to this package's `crs` (target/<profile>/), which
 //! `cargo test --workspace` (tools/test.sh) guarantees; with `cargo test -p crs` alone they may
@@ -14,10 +15,15 @@ use std::path::PathBuf;
 use std::process::Command;
 
 /// The measured mean position error after calibration must be at least this many times
-/// smaller than before (20 poses, 15 of them training: 7.32 → 1.30 mm and 7.37 → 1.04 mm,
-/// 5.6–7×, in debug runs; the full 40-pose release run gives 9×, docs/calibration.md). A
-/// broken identification or deployment leaves it near 1×.
-const FACTOR: f64 = 2.0;
+/// smaller than before. This test's campaign (20 poses, 15 of them training, relaxed debug
+/// stack) gave 7.32 → 1.30, 7.37 → 1.04 and 7.26 → 1.00 mm (5.6–7.3×); 4× leaves room for a
+/// loaded host's noisier rest points and still fails a broken identification or deployment
+/// (near 1×). The README's 9× is the full 40-pose release run (`crs figures`, group
+/// `calibration-loop`), not this campaign.
+const FACTOR: f64 = 4.0;
+
+/// Re-runs allowed per campaign run when drive-io stopped the bus (passed as `--retries`).
+const RETRIES: usize = 1;
 
 #[test]
 fn closed_loop_on_the_stack_reduces_the_measured_pose_error() {
@@ -44,6 +50,10 @@ fn closed_loop_on_the_stack_reduces_the_measured_pose_error() {
             "4",
             "--surrogate-validation-samples",
             "300",
+            // A run that drive-io stopped (a stall of this shared host in the setpoint stream)
+            // is run again at most once, printed, and counted in the report: read below.
+            "--retries",
+            &RETRIES.to_string(),
             "--transport",
             "wire",
             "--daemon-config",
@@ -95,6 +105,23 @@ fn closed_loop_on_the_stack_reduces_the_measured_pose_error() {
     if let Some(l) = cal.lines().find(|l| l.starts_with("k_f_n")) {
         eprintln!("identified {l}");
     }
+    // No hidden retries: every extra run the report counts was printed with its cause, and
+    // none went beyond the budget.
+    let attempts = |run: &str| rep[run]["attempts"].as_u64().expect("attempts") as usize;
+    let (att_b, att_a) = (attempts("before"), attempts("after"));
+    let retried = text
+        .matches("run was interrupted: drive-io stopped the bus")
+        .count();
+    eprintln!(
+        "runs needed: before {att_b}, after {att_a} (at most {} each)",
+        RETRIES + 1
+    );
+    assert!(att_b >= 1 && att_a >= 1 && att_b <= RETRIES + 1 && att_a <= RETRIES + 1);
+    assert_eq!(
+        att_b + att_a - 2,
+        retried,
+        "retries counted vs printed:\n{text}"
+    );
     let before = f(&rep["before"]["summary"]["rest"]["position_mean_mm"]);
     let after = f(&rep["after"]["summary"]["rest"]["position_mean_mm"]);
     eprintln!("measured mean position error at the rest points: {before:.2} mm -> {after:.2} mm");

@@ -31,7 +31,14 @@ fn crs_sim_platform_helicopter_runs_its_tour_clean() {
     );
     // The plant is not given: --platform helicopter must pick config/plant/helicopter.toml.
     let o = sim_command(&crs, "wire", &cfg, &out.join("run"))
-        .args(["--platform", "helicopter", "--check"])
+        // The tour ends at home, at rest: 0.41 / 0.44 mm seen (relaxed debug runs); 2 mm is ~4.5×.
+        .args([
+            "--platform",
+            "helicopter",
+            "--check",
+            "--max-static-error-mm",
+            "2",
+        ])
         .output()
         .expect("run crs sim");
     let text = format!(

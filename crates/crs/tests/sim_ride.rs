@@ -30,6 +30,10 @@ fn hover_flight_into_the_corners_runs_clean_on_the_stack() {
             "--pilot",
             "config/pilot-demo.csv",
             "--check",
+            // The flight ends pressed against a wall, where the plant's mm assembly errors
+            // count most: 4.86 / 4.94 mm seen (relaxed debug runs); 10 mm is twice that.
+            "--max-static-error-mm",
+            "10",
         ])
         .output()
         .expect("run crs sim");

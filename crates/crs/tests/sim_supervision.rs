@@ -16,6 +16,8 @@ struct Sim {
     lines: mpsc::Receiver<String>,
     log: Vec<String>,
     out: PathBuf,
+    /// The bus's port, reserved while the stack runs.
+    _port: crs_test_support::ports::UdpPort,
 }
 
 impl Sim {
@@ -47,6 +49,7 @@ impl Sim {
             lines,
             log: Vec::new(),
             out,
+            _port: port,
         }
     }
 

@@ -81,6 +81,29 @@ fn setup(waypoints: Vec<Waypoint>) -> HardLoop {
     HardLoop::new(cycle, sampler)
 }
 
+/// Waits until the planner thread has filled its look-ahead queue (or delivered the whole
+/// plan), so the loop stepped by the test cannot starve before it has read that much. The
+/// deadline only stops a hung planner; nothing depends on how long the wait takes.
+fn wait_for_planner(hl: &HardLoop) {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while !hl.plan_look_ahead_full() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the planner never filled its queue"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+}
+
+/// Largest per-cable difference of two setpoints' lengths, m.
+fn length_change(a: &JointSetpoint, b: &JointSetpoint) -> f64 {
+    a.cable_length_m
+        .iter()
+        .zip(&b.cable_length_m)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
 fn tour() -> Vec<Waypoint> {
     [
         [0.3, 0.0, 2.0],
@@ -166,8 +189,8 @@ fn loop_thread_allocates_nothing_over_many_cycles() {
     let sub = node.subscriber::<JointSetpoint>().unwrap();
     let mut hl = setup(tour());
     let mut cmds = Script(VecDeque::new(), 0);
-    // Let the planner fill its queue so the loop never waits for it.
-    std::thread::sleep(std::time::Duration::from_millis(300));
+    // The planner's queue full before the loop starts (it keeps ahead of the paced loop).
+    wait_for_planner(&hl);
     let cycles = 5000u64;
     let mut received = 0;
     for k in 0..cycles {
@@ -305,21 +328,31 @@ fn publish_stage_ends_the_stream_after_the_last_setpoint() {
 
 #[test]
 fn estop_latches_and_holds_until_reset() {
+    // The same plan twice: `hl` is e-stopped at step 500 and reset at step 1500, `free` runs on.
     let mut hl = setup(tour());
-    std::thread::sleep(std::time::Duration::from_millis(200));
+    let mut free = setup(tour());
+    wait_for_planner(&hl);
+    wait_for_planner(&free);
     let mut sink = Ring(vec![JointSetpoint::default(); 1], 0);
-    let stats = LoopStats::default();
+    let mut free_sink = Ring(vec![JointSetpoint::default(); 1], 0);
+    let (stats, free_stats) = (LoopStats::default(), LoopStats::default());
     let mut cmds = Script(
         VecDeque::from([(500, Command::EStop), (1500, Command::Reset(reset()))]),
         0,
     );
-    let mut before = None;
+    let mut no_cmds = Script(VecDeque::new(), 0);
+    let (mut first, mut before) = (None, None);
     for k in 0..2000u64 {
         cmds.1 = k;
         let st = hl.step(k, &mut sink, &mut cmds, &stats);
+        assert_eq!(
+            free.step(k, &mut free_sink, &mut no_cmds, &free_stats),
+            LoopState::Running
+        );
         let sp = sink.0[0];
         match k {
-            0..=498 => assert_eq!(st, LoopState::Running),
+            0 => first = Some(sp),
+            1..=498 => assert_eq!(st, LoopState::Running),
             499 => before = Some(sp),
             500..=1499 => {
                 assert_eq!(st, LoopState::EStopped);
@@ -342,8 +375,30 @@ fn estop_latches_and_holds_until_reset() {
             }
         }
     }
-    // The plan was moving before the e-stop.
-    assert!(sink.0[0].cable_length_m != JointSetpoint::default().cable_length_m);
+    let (first, before) = (first.unwrap(), before.unwrap());
+    // The plan was moving when the e-stop came: the cables had left their home lengths and
+    // still had velocity.
+    let moved = length_change(&before, &first);
+    assert!(
+        moved > 0.01,
+        "the plan had moved the cables only {moved} m by the e-stop"
+    );
+    assert!(
+        before.cable_velocity_m_per_s.iter().any(|v| v.abs() > 0.01),
+        "not moving at the e-stop: {:?}",
+        before.cable_velocity_m_per_s
+    );
+    // ... and had more to go: the same plan left running moved on from there, so holding after
+    // the reset is the loop refusing to resume it, not a plan that had ended.
+    let would_have = length_change(&free_sink.0[0], &before);
+    assert!(
+        would_have > 0.01,
+        "the plan left running moved only {would_have} m past the e-stop point"
+    );
+    assert!(
+        !hl.plan_finished(),
+        "the held loop read the rest of its plan"
+    );
 }
 
 #[test]

@@ -41,7 +41,10 @@ pub enum Command {
 /// the loop (issue 16: only the safety monitor's reset, with a reset epoch newer than the last
 /// one this loop accepted).
 ///
-/// ```compile_fail
+/// Forging one fails with E0603 (private constructor); `tools/test.sh` checks the code, so a
+/// renamed path (another error) fails the test instead of passing it.
+///
+/// ```compile_fail,E0603
 /// let forged = motion_core::daemon::ResetAuthority(());
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -192,6 +195,12 @@ impl HardLoop {
     /// True once the planner has delivered the whole plan and the loop has read it.
     pub fn plan_finished(&self) -> bool {
         self.sampler.finished()
+    }
+
+    /// True once the planner has filled its look-ahead queue or delivered the whole plan
+    /// ([`trajectory::Sampler::look_ahead_full`]).
+    pub fn plan_look_ahead_full(&self) -> bool {
+        self.sampler.look_ahead_full()
     }
 
     pub fn cycle(&self) -> &Cycle {

@@ -204,6 +204,13 @@ impl Sampler {
         }
     }
 
+    /// True when the planner has queued its whole look-ahead ([`CHUNKS`] chunks not yet taken
+    /// by the loop) or delivered the whole plan: the loop cannot starve before it has consumed
+    /// that much. Lets a caller wait on the condition instead of a guessed time.
+    pub fn look_ahead_full(&self) -> bool {
+        self.done.load(Ordering::Acquire) || self.full.is_full()
+    }
+
     /// True when the planner has delivered everything and the queue is drained.
     pub fn finished(&self) -> bool {
         self.done.load(Ordering::Acquire)
