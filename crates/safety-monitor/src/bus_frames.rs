@@ -195,7 +195,11 @@ mod tests {
         );
         assert!(matches!(
             own_id(0x101, &CanFrame::new(0x104, &[1, 2]).unwrap()),
-            Some(Observed::OwnId { cob_id: 0x104, len: 2, .. })
+            Some(Observed::OwnId {
+                cob_id: 0x104,
+                len: 2,
+                ..
+            })
         ));
         assert_eq!(own_id(0x101, &CanFrame::new(0x105, &[1]).unwrap()), None);
         assert_eq!(own_id(0x101, &CanFrame::new(0x100, &[1]).unwrap()), None);

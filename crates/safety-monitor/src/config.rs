@@ -983,8 +983,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         if rs.operator_group.is_empty() {
             return Err(bad(
                 "reset.operator_group",
-                "missing: the reset socket accepts only members of this group (name or gid)"
-                    .into(),
+                "missing: the reset socket accepts only members of this group (name or gid)".into(),
             ));
         }
         let gid = crate::reset_socket::resolve_group(&rs.operator_group)

@@ -371,8 +371,7 @@ pub fn run_on(
     let identity = platform_identity(&cfg.platform);
     let kin = StandardKinematics::new(&cfg.platform);
     let instance = random_instance();
-    let mut monitor =
-        Monitor::new(Limits::from_config(cfg), kin, identity).with_instance(instance);
+    let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity).with_instance(instance);
     let m = cfg.platform.cables();
     let winches = cfg.winches.clone();
     let cob = cfg.can.safety_cob_id;
@@ -555,9 +554,7 @@ pub fn run_on(
                 // source is a second publisher impersonating the monitor: stamped after this
                 // monitor started (also in its future; older ones are a previous instance's
                 // history), or carrying this instance's epoch whatever its stamp.
-                let this_instance = |e: u32| {
-                    crs_limits::reset_epoch::instance(e) == instance
-                };
+                let this_instance = |e: u32| crs_limits::reset_epoch::instance(e) == instance;
                 let claims_instance = (ev.kind == EventKind::Reset as u32
                     && this_instance(ev.detail))
                     || (ev.kind == EventKind::StateChanged as u32
@@ -597,8 +594,11 @@ pub fn run_on(
                          reset key or the reset socket (operator group) may reset"
                     );
                 }
-                let mut ans =
-                    StateEvent::new(ProcessId::SafetyMonitor, EventKind::StateChanged, ev.sequence);
+                let mut ans = StateEvent::new(
+                    ProcessId::SafetyMonitor,
+                    EventKind::StateChanged,
+                    ev.sequence,
+                );
                 ans.state = monitor.state().code();
                 ans.detail = RESET_DENIED;
                 let _ = publish_own(&event_pub, &mut own, &ans);
@@ -1089,7 +1089,10 @@ pub enum ResetReply {
 /// Operator side (`safety-monitor reset`): asks the monitor through its reset socket
 /// ([`crate::reset_socket`]); the kernel passes this process's credentials, which must show
 /// membership of the operator group.
-pub fn request_reset(socket: &std::path::Path, timeout: Duration) -> Result<ResetReply, DaemonError> {
+pub fn request_reset(
+    socket: &std::path::Path,
+    timeout: Duration,
+) -> Result<ResetReply, DaemonError> {
     let line = crate::reset_socket::request(socket, timeout).map_err(|e| {
         DaemonError::Other(format!(
             "reset socket {}: {e} (is the monitor running with this [reset] socket?)",

@@ -424,7 +424,8 @@ pub mod authority {
         if count == u16::MAX {
             return Err(Blocked::Exhausted);
         }
-        let next = crs_limits::reset_epoch::new(crs_limits::reset_epoch::instance(*epoch), count + 1);
+        let next =
+            crs_limits::reset_epoch::new(crs_limits::reset_epoch::instance(*epoch), count + 1);
         debug_assert!(epoch_newer(next, *epoch) && crs_limits::reset_epoch::releases(next, *epoch));
         *epoch = next;
         Ok(ResetToken { epoch: next })
@@ -1128,15 +1129,17 @@ impl Monitor {
     /// checked while drive-io reports Running, and also whenever the applied setpoint advanced
     /// (drive-io applies setpoints whatever state it claims).
     pub fn on_feedback(&mut self, fb: &DriveFeedback) {
-        let fresh = self.last_feedback.is_none_or(|(ts, cycle)| {
-            fb.timestamp_ns > ts && fb.cycle > cycle
-        }) && (self.clock_ns == 0
-            || fb.timestamp_ns <= self.clock_ns.saturating_add(FEEDBACK_FUTURE_TOLERANCE_NS));
+        let fresh = self
+            .last_feedback
+            .is_none_or(|(ts, cycle)| fb.timestamp_ns > ts && fb.cycle > cycle)
+            && (self.clock_ns == 0
+                || fb.timestamp_ns <= self.clock_ns.saturating_add(FEEDBACK_FUTURE_TOLERANCE_NS));
         let previous_applied = self.last_applied;
+        // Any sample arms the silence check (drive-io exists); only a fresh one feeds it.
+        self.seen_feedback = true;
         if fresh {
             self.last_feedback = Some((fb.timestamp_ns, fb.cycle));
             self.feedback_count += 1;
-            self.seen_feedback = true;
         } else {
             self.stats.feedback_stale += 1;
             return;
@@ -1153,8 +1156,8 @@ impl Monitor {
         if self.state.is_tripped() {
             self.reset_evidence_feedback(fb);
         }
-        let applying = state == Some(BusState::Running)
-            || fb.applied_setpoint_sequence > previous_applied;
+        let applying =
+            state == Some(BusState::Running) || fb.applied_setpoint_sequence > previous_applied;
         if !self.lim.check_following_error || !applying {
             return;
         }

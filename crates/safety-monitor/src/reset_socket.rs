@@ -26,8 +26,8 @@ pub fn resolve_group(group: &str) -> Result<u32, String> {
     if let Ok(gid) = group.trim().parse::<u32>() {
         return Ok(gid);
     }
-    let name = std::ffi::CString::new(group.trim())
-        .map_err(|_| format!("{group:?}: not a group name"))?;
+    let name =
+        std::ffi::CString::new(group.trim()).map_err(|_| format!("{group:?}: not a group name"))?;
     let mut grp: libc::group = unsafe { std::mem::zeroed() };
     let mut buf = vec![0 as libc::c_char; 16 * 1024];
     let mut out: *mut libc::group = std::ptr::null_mut();
@@ -367,7 +367,10 @@ mod tests {
                 }
             }
             let answer = client.join().unwrap();
-            assert_eq!(answer.trim(), if want_reset { "accepted" } else { "denied" });
+            assert_eq!(
+                answer.trim(),
+                if want_reset { "accepted" } else { "denied" }
+            );
         }
         // A regular file at the socket's path is not removed.
         std::fs::write(&path, b"x").unwrap();

@@ -105,7 +105,8 @@ impl Rig {
         cfg.can.reset_wait_ms = 200;
         // The operator's reset through the reset socket; this test process's own group is the
         // operator group (no safety I/O node on this bus, so no reset key).
-        let reset_socket = std::env::temp_dir().join(format!("{}reset.sock", prefix.replace('/', "-")));
+        let reset_socket =
+            std::env::temp_dir().join(format!("{}reset.sock", prefix.replace('/', "-")));
         // SAFETY: getgid has no preconditions.
         cfg.reset_socket = Some((reset_socket.clone(), unsafe { libc::getgid() }));
         cfg.reset.key = false;

@@ -390,7 +390,10 @@ fn following_error_and_feedback_silence_trip() {
     fb.bus_state = BusState::Ready as u32;
     m2.on_feedback(&fb);
     m2.on_setpoint(&sp(16, HOME, 0, 0.0));
-    let t = m2.end_cycle(0).new_trip.expect("applied while claiming Ready");
+    let t = m2
+        .end_cycle(0)
+        .new_trip
+        .expect("applied while claiming Ready");
     assert_eq!(t.fault.cause, Cause::FollowingError);
     // drive-io silent for silence_cycles (4) after its first feedback.
     let mut seq = 17;
@@ -440,17 +443,26 @@ fn reset_is_refused_while_the_cause_persists_and_accepted_after() {
         seq += 1;
         let r = m.end_cycle(0);
         assert!(r.new_trip.is_none(), "latched: no second trip");
-        assert_eq!(m.request_reset(key_reset()), ResetDecision::Refused(Cause::NonFinite));
+        assert_eq!(
+            m.request_reset(key_reset()),
+            ResetDecision::Refused(Cause::NonFinite)
+        );
     }
     // Good again, but fewer than reset_clear_cycles (3) clean cycles: still refused.
     for _ in 0..2 {
         seq = good_cycle(&mut m, seq, 0);
-        assert!(matches!(m.request_reset(key_reset()), ResetDecision::Refused(_)));
+        assert!(matches!(
+            m.request_reset(key_reset()),
+            ResetDecision::Refused(_)
+        ));
     }
     seq = good_cycle(&mut m, seq, 0);
     let e0 = m.reset_epoch();
     assert_eq!(m.heartbeat(1).epoch, e0);
-    assert_eq!(m.request_reset(key_reset()), ResetDecision::Accepted { epoch: e0 + 1 });
+    assert_eq!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { epoch: e0 + 1 }
+    );
     assert_eq!(m.reset_epoch(), e0 + 1);
     assert_eq!(m.heartbeat(2).epoch, e0 + 1);
     assert_eq!(m.state_code(), StateCode::Armed);
@@ -510,13 +522,19 @@ fn only_an_accepted_reset_advances_the_epoch() {
     seq += 1;
     m.end_cycle(0);
     for _ in 0..3 {
-        assert!(matches!(m.request_reset(key_reset()), ResetDecision::Refused(_)));
+        assert!(matches!(
+            m.request_reset(key_reset()),
+            ResetDecision::Refused(_)
+        ));
     }
     assert_eq!(m.reset_epoch(), 41);
     for _ in 0..3 {
         seq = good_cycle(&mut m, seq, 0);
     }
-    assert_eq!(m.request_reset(key_reset()), ResetDecision::Accepted { epoch: 42 });
+    assert_eq!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { epoch: 42 }
+    );
     assert_eq!(m.request_reset(key_reset()), ResetDecision::NotTripped);
     assert_eq!(m.reset_epoch(), 42);
     // Not ready: nothing either.
@@ -553,7 +571,10 @@ fn a_latched_cause_must_be_positively_shown_cleared() {
     // too after its count.)
     for _ in 0..10 {
         seq = good_cycle(&mut m, seq, 0);
-        assert!(matches!(m.request_reset(key_reset()), ResetDecision::Refused(_)));
+        assert!(matches!(
+            m.request_reset(key_reset()),
+            ResetDecision::Refused(_)
+        ));
     }
     assert!(m.latched().contains(Cause::FeedbackSilence));
     // Feedback back, but its lengths do not follow the held setpoint: still refused.
@@ -574,10 +595,16 @@ fn a_latched_cause_must_be_positively_shown_cleared() {
         m.on_feedback(&fb);
         seq = good_cycle(&mut m, seq, 0);
         if k < 2 {
-            assert!(matches!(m.request_reset(key_reset()), ResetDecision::Refused(_)));
+            assert!(matches!(
+                m.request_reset(key_reset()),
+                ResetDecision::Refused(_)
+            ));
         }
     }
-    assert!(matches!(m.request_reset(key_reset()), ResetDecision::Accepted { .. }));
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { .. }
+    ));
 
     // A force latch: drives that stopped reporting give no evidence.
     let mut m = monitor();
@@ -597,7 +624,10 @@ fn a_latched_cause_must_be_positively_shown_cleared() {
         }
         seq = good_cycle(&mut m, seq, t);
         t += 15 * MS;
-        assert!(matches!(m.request_reset(key_reset()), ResetDecision::Refused(_)));
+        assert!(matches!(
+            m.request_reset(key_reset()),
+            ResetDecision::Refused(_)
+        ));
     }
     assert!(m.latched().contains(Cause::ForceOverload));
     assert!(m.latched().contains(Cause::ForceSilence));
@@ -608,7 +638,10 @@ fn a_latched_cause_must_be_positively_shown_cleared() {
         seq = good_cycle(&mut m, seq, t);
         t += 15 * MS;
     }
-    assert!(matches!(m.request_reset(key_reset()), ResetDecision::Accepted { .. }));
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { .. }
+    ));
 }
 
 #[test]
@@ -858,7 +891,11 @@ fn a_fluttering_force_trips_k_minus_one_violations_do_not() {
                 m.on_drive_state(i, true);
             }
             if k % 5 == 0 {
-                let f = if (reading / 5) % 2 == 0 { 200.0 } else { 3000.0 };
+                let f = if (reading / 5) % 2 == 0 {
+                    200.0
+                } else {
+                    3000.0
+                };
                 reading += 1;
                 for i in 0..8 {
                     m.on_force(i, if i == 5 { f } else { 4000.0 }, t + k * MS);
@@ -873,7 +910,10 @@ fn a_fluttering_force_trips_k_minus_one_violations_do_not() {
         t += 15 * MS;
     }
     let (_, tr) = trip.expect("a force fluttering between slack and in range must trip");
-    assert_eq!((tr.fault.cause, tr.fault.cable), (Cause::ForceSlack, Some(5)));
+    assert_eq!(
+        (tr.fault.cause, tr.fault.cable),
+        (Cause::ForceSlack, Some(5))
+    );
     // k - 1 violations spread over the window, in-range readings between them: no trip.
     let mut m = monitor();
     let (seq, _) = force_cycle(&mut m, 1, 0, 0, 4000.0);
@@ -892,7 +932,10 @@ fn a_fluttering_force_trips_k_minus_one_violations_do_not() {
         m.on_force(i, if i == 3 { 200.0 } else { 4000.0 }, 31 * MS);
     }
     let tr = m.end_cycle(45 * MS).new_trip.expect("k-th violation");
-    assert_eq!((tr.fault.cause, tr.fault.cable), (Cause::ForceSlack, Some(3)));
+    assert_eq!(
+        (tr.fault.cause, tr.fault.cable),
+        (Cause::ForceSlack, Some(3))
+    );
 }
 
 #[test]
@@ -1065,7 +1108,10 @@ fn force_config_errors_name_the_key() {
     for (forces, key) in [
         ("[forces]\nhard_limit_n = 5000.0\n", "forces.hard_limit_n"),
         ("[forces]\nsilence_cycles = 0\n", "forces.silence_cycles"),
-        ("[forces]\nwindow_violations = 0\n", "forces.window_violations"),
+        (
+            "[forces]\nwindow_violations = 0\n",
+            "forces.window_violations",
+        ),
         (
             "[forces]\nwindow_readings = 8\nwindow_violations = 9\n",
             "forces.window_violations",
@@ -1436,11 +1482,17 @@ fn an_estop_event_of_another_process_latches_until_the_reset() {
     seq += 1;
     let t = m.end_cycle(0).new_trip.expect("e-stop event");
     assert_eq!(t.fault.cause, Cause::EStopEvent);
-    assert!(matches!(m.request_reset(key_reset()), ResetDecision::Refused(_)));
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Refused(_)
+    ));
     for _ in 0..3 {
         seq = good_cycle(&mut m, seq, 0);
     }
-    assert!(matches!(m.request_reset(key_reset()), ResetDecision::Accepted { .. }));
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { .. }
+    ));
 }
 
 proptest! {
@@ -1629,4 +1681,299 @@ fn state_codes_are_the_contract_constants() {
     }
     assert_eq!(StateCode::from_code(0), None);
     assert_eq!(StateCode::from_code(4), None);
+}
+
+// ---- issue: the holes a reviewer finds ------------------------------------------------------
+
+/// A hold is zero velocity: a stream that stands still, then jumps to a plausible speed (5 m/s
+/// of table 5.1, below its 6.25 m/s with the margin) in one period trips `motion_acceleration`
+/// at the step out of the hold — and so does the first moving step of a stream. Stopping into a
+/// hold from speed does not trip (the safe direction).
+#[test]
+fn a_jump_from_rest_to_a_plausible_speed_trips_motion_acceleration() {
+    let mc = Limits::from_config(cfg()).motion;
+    let v = 5.0;
+    assert!(v <= mc.linear_velocity && v / 1e-3 > mc.linear_acceleration);
+    for (hold_first, what) in [(60usize, "out of a hold"), (1, "the stream's first step")] {
+        let mut poses = vec![HOME; hold_first];
+        let mut p = HOME;
+        for _ in 0..20 {
+            p[0] += v * 1e-3;
+            poses.push(p);
+        }
+        let mut m = monitor();
+        let tr = run_poses(&mut m, &poses, 15).unwrap_or_else(|| panic!("{what}: no trip"));
+        assert_eq!(tr.fault.cause, Cause::MotionAcceleration, "{what}");
+        assert_eq!(tr.fault.sequence, hold_first as u64 + 1, "{what}");
+        assert!((tr.fault.value - v / 1e-3).abs() < 1.0, "{what}: {tr}");
+    }
+    // Decelerating into a hold at once is not checked.
+    let mut poses = ramp_path(1.0, 10.0, 150);
+    let last = *poses.last().unwrap();
+    poses.extend(std::iter::repeat_n(last, 30));
+    let mut m = monitor();
+    assert_eq!(run_poses(&mut m, &poses, 15), None);
+    // A sequence gap cannot restart the chain: rest, then two lost setpoints, then 5 m/s.
+    let mut poses = vec![HOME; 30];
+    let mut p = HOME;
+    p[0] += 3.0 * v * 1e-3;
+    let mut m = monitor();
+    let mut seq = 1;
+    for q in &poses {
+        m.on_setpoint(&sp(seq, *q, 0, 0.0));
+        seq += 1;
+    }
+    m.end_cycle(15 * MS);
+    poses.clear();
+    seq += 2;
+    m.on_setpoint(&sp(seq, p, 0, 0.0));
+    let tr = m.end_cycle(30 * MS).new_trip.expect("jump after a gap");
+    assert_eq!(tr.fault.cause, Cause::MotionAcceleration);
+}
+
+/// The reset epoch is the instance's: a monitor instance starts at count 0 and each accepted
+/// reset adds one to the count, never to the instance.
+#[test]
+fn the_epoch_carries_the_instance_and_counts_its_resets() {
+    use crs_limits::reset_epoch::{count, instance, releases};
+    let mut m = monitor().with_instance(0xBEEF);
+    let e0 = m.reset_epoch();
+    assert_eq!((instance(e0), count(e0)), (0xBEEF, 0));
+    let mut seq = good_cycle(&mut m, 1, 0);
+    m.on_estop_event(5);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    seq += 1;
+    m.end_cycle(0);
+    for _ in 0..3 {
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    let ResetDecision::Accepted { epoch } = m.request_reset(key_reset()) else {
+        panic!("reset refused");
+    };
+    assert_eq!((instance(epoch), count(epoch)), (0xBEEF, 1));
+    assert!(releases(epoch, e0));
+    // An instance whose count is exhausted refuses (a wrap would make an old reset new).
+    let mut m = monitor().with_reset_epoch(crs_limits::reset_epoch::new(7, u16::MAX));
+    let mut seq = good_cycle(&mut m, 1, 0);
+    m.on_estop_event(5);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    seq += 1;
+    m.end_cycle(0);
+    for _ in 0..3 {
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    assert_eq!(
+        m.request_reset(key_reset()),
+        ResetDecision::InstanceExhausted
+    );
+    assert!(m.state().is_tripped());
+}
+
+/// After a monitor restart the consumers stay stopped on the new instance's start epoch; while
+/// armed, the monitor accepts the operator's reset only when a consumer is seen waiting (the
+/// safety I/O node keeps the torque off although the monitor says RUN, or drive-io reports a
+/// latched stop) for CONSUMER_WAIT_CYCLES cycles; otherwise a reset while armed changes
+/// nothing.
+#[test]
+fn a_restarted_instance_resets_only_for_waiting_consumers() {
+    use safety_monitor::monitor::CONSUMER_WAIT_CYCLES;
+    let c = cfg();
+    let own = platform_identity(&c.platform);
+    for (waiting, sto_released, drive_io_latched) in [
+        ("the safety I/O node", false, false),
+        ("drive-io", true, true),
+        ("nobody", true, false),
+    ] {
+        let mut m = Monitor::new(
+            Limits::from_config(c),
+            StandardKinematics::new(&c.platform),
+            own,
+        )
+        .with_instance(0x1234);
+        let mut t = 0;
+        let mut cycles = 0;
+        let mut cycle = |m: &mut Monitor| {
+            for k in 0..15 {
+                for i in 0..8 {
+                    m.on_drive_state(i, true);
+                    m.on_force(i, 4000.0, t + k * MS);
+                }
+            }
+            m.on_safety_io(0x01, u8::from(sto_released), t);
+            let mut fb = feedback(0, &[0.0; 8]);
+            fb.bus_state = if drive_io_latched {
+                BusState::EStop as u32
+            } else {
+                BusState::Ready as u32
+            };
+            m.on_feedback(&fb);
+            t += 15 * MS;
+            cycles += 1;
+            m.end_cycle(t)
+        };
+        cycle(&mut m);
+        assert_eq!(m.state_code(), StateCode::Armed, "{waiting}");
+        for _ in 1..CONSUMER_WAIT_CYCLES {
+            cycle(&mut m);
+        }
+        // One cycle short of the wait: nothing.
+        assert_eq!(
+            m.request_reset(key_reset()),
+            ResetDecision::NotTripped,
+            "{waiting}"
+        );
+        cycle(&mut m);
+        let d = m.request_reset(key_reset());
+        if waiting == "nobody" {
+            assert_eq!(d, ResetDecision::NotTripped);
+            assert_eq!(m.reset_epoch(), crs_limits::reset_epoch::new(0x1234, 0));
+        } else {
+            assert_eq!(
+                d,
+                ResetDecision::Accepted {
+                    epoch: crs_limits::reset_epoch::new(0x1234, 1)
+                },
+                "{waiting}"
+            );
+            assert_eq!(m.state_code(), StateCode::Armed);
+            // The wait starts over: a second request right after changes nothing.
+            assert_eq!(m.request_reset(key_reset()), ResetDecision::NotTripped);
+        }
+    }
+}
+
+/// The monitor's own identifiers spoken by another node, an open e-stop circuit and a silent
+/// safety I/O node each trip; the node's causes need the node reporting with the circuit closed
+/// before a reset.
+#[test]
+fn impersonation_estop_circuit_and_a_silent_safety_io_node_trip() {
+    let mut m = monitor();
+    let seq = good_cycle(&mut m, 1, 0);
+    m.on_impersonation(0x101);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    let t = m.end_cycle(15 * MS).new_trip.expect("impersonation");
+    assert_eq!(
+        (t.fault.cause, t.fault.value),
+        (Cause::Impersonation, 257.0)
+    );
+
+    let mut m = monitor();
+    let mut seq = good_cycle(&mut m, 1, 0);
+    m.on_safety_io(0x01, 0x01, 0);
+    seq = good_cycle(&mut m, seq, 15 * MS);
+    m.on_safety_io(0x00, 0x00, 0);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    seq += 1;
+    let t = m.end_cycle(30 * MS).new_trip.expect("e-stop circuit open");
+    assert_eq!(t.fault.cause, Cause::EStopCircuit);
+    // Closed again but the node then silent: refused (no evidence), and the silence latches.
+    m.on_safety_io(0x01, 0x00, 0);
+    seq = good_cycle(&mut m, seq, 45 * MS);
+    for _ in 0..6 {
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    assert!(m.latched().contains(Cause::SafetyIoSilence));
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Refused(_)
+    ));
+    // Reporting with the circuit closed: accepted after the clean cycles.
+    for _ in 0..3 {
+        m.on_safety_io(0x01, 0x00, 0);
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { .. }
+    ));
+}
+
+/// A hung drive adapter whose publisher keeps republishing its last sample (or stamps it in
+/// the monitor's future) is as dead as a silent one: `feedback_silence`.
+#[test]
+fn stale_or_future_feedback_is_not_a_live_drive_adapter() {
+    let q = sp(1, HOME, 0, 0.0).cable_length_m[..8].to_vec();
+    for future in [false, true] {
+        let mut m = monitor();
+        let mut seq = 1;
+        let mut t = 0;
+        let mut fb = feedback(0, &q);
+        (fb.cycle, fb.timestamp_ns) = (1, 15 * MS);
+        let mut trip = None;
+        for k in 0..20u64 {
+            t += 15 * MS;
+            m.begin_cycle(t);
+            let mut f = fb;
+            if future {
+                f.cycle += k;
+                f.timestamp_ns = t + 10_000 * MS;
+            }
+            m.on_feedback(&f);
+            seq = good_cycle(&mut m, seq, t);
+            if let Some(tr) = m.trip() {
+                trip = Some((k, *tr));
+                break;
+            }
+        }
+        let (k, tr) =
+            trip.unwrap_or_else(|| panic!("future {future}: stale feedback never tripped"));
+        assert_eq!(tr.fault.cause, Cause::FeedbackSilence, "future {future}");
+        // The first sample counts when fresh, then silence_cycles without a fresh one; a
+        // future-stamped first sample arms the check without counting.
+        let n = u64::from(Limits::from_config(cfg()).feedback_silence_cycles);
+        assert_eq!(k, if future { n - 1 } else { n }, "future {future}");
+        assert!(m.stats().feedback_stale > 0);
+    }
+}
+
+/// A producer whose timestamps jump far into the future cannot blind the RPDO check: history
+/// entries are stamped within the interval the monitor's clock saw them published in, so an
+/// RPDO far from every setpoint still trips; RPDOs no setpoint can have preceded are counted
+/// and trip `rpdo_unchecked` after `unchecked_cycles` cycles instead of being skipped.
+#[test]
+fn a_timestamp_jump_does_not_blind_the_rpdo_check() {
+    let mut m = monitor();
+    let q = sp(1, HOME, 0, 0.0).cable_length_m;
+    let mut seq = 1;
+    let mut t = 0;
+    for _ in 0..30 {
+        t += 15 * MS;
+        m.begin_cycle(t);
+        for _ in 0..15 {
+            let mut s = sp(seq, HOME, 0, 0.0);
+            s.timestamp_ns = t + 10_000_000 * MS; // 10 000 s ahead
+            m.on_setpoint(&s);
+            seq += 1;
+        }
+        // drive-io forwards what it got: checked and fine.
+        m.on_rpdo(2, q[2], t + MS);
+        assert!(m.end_cycle(t + 2 * MS).faults.is_empty());
+    }
+    t += 15 * MS;
+    m.begin_cycle(t);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    m.on_rpdo(4, q[4] - 0.15, t + MS);
+    let tr = m
+        .end_cycle(t + 2 * MS)
+        .new_trip
+        .expect("forged RPDO after the jump");
+    assert_eq!(
+        (tr.fault.cause, tr.fault.cable),
+        (Cause::RpdoMismatch, Some(4))
+    );
+
+    // Enabling RPDOs before any setpoint: counted, and N such cycles trip.
+    let n = Limits::from_config(cfg()).unchecked_cycles;
+    let mut m = monitor();
+    let mut trip = None;
+    for k in 1..=n + 1 {
+        m.begin_cycle(u64::from(k) * 15 * MS);
+        m.on_rpdo(0, q[0], u64::from(k) * 15 * MS);
+        if let Some(tr) = m.end_cycle(u64::from(k) * 15 * MS + 1).new_trip {
+            trip = Some((k, tr));
+            break;
+        }
+    }
+    let (k, tr) = trip.expect("uncheckable RPDOs must trip");
+    assert_eq!((k, tr.fault.cause), (n, Cause::RpdoUnchecked));
 }
