@@ -689,20 +689,20 @@ pub fn execute_observed(
             &[],
         )?;
     }
+    // The heartbeat is mandatory for drive-io: only a run without the monitor (--no-monitor, a
+    // bench) with a drives config without it runs the test rigs' bench executable instead.
+    let drive_io_exe = if !with_monitor && drives_cfg.safety_heartbeat.is_none() {
+        exe(drive_io::config::BENCH_EXECUTABLE)
+    } else {
+        exe("drive-io")
+    };
     stack.spawn(
         "drive-io",
-        &exe("drive-io"),
+        &drive_io_exe,
         &[
             rt_args(rt),
             vec!["--config".into(), s(&a.drives)],
             buses.args("drive-io"),
-            // The heartbeat is mandatory for drive-io (issue 16): only a run without the monitor
-            // (--no-monitor, a bench) with a drives config without it takes the bench override.
-            if !with_monitor && drives_cfg.safety_heartbeat.is_none() {
-                vec![drive_io::config::BENCH_OVERRIDE_FLAG.into()]
-            } else {
-                Vec::new()
-            },
         ]
         .concat(),
         &[],
