@@ -634,5 +634,6 @@ fn monitor_layout() -> &'static safety_monitor::bus_layout::BusLayout {
                 }
             })
             .collect(),
+        safety_io: None,
     })
 }

@@ -229,7 +229,11 @@ fn read_control_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
             // Bit 0: e-stop circuit OPEN (pressed), bit 1: reset key turned.
             let inputs = u8::from(estop) | (u8::from(key) << 1);
             if c.io_inputs.swap(inputs, Ordering::AcqRel) != inputs {
-                tracing::info!(reset_key = key, estop_pressed = estop, "safety I/O node inputs");
+                tracing::info!(
+                    reset_key = key,
+                    estop_pressed = estop,
+                    "safety I/O node inputs"
+                );
             }
             last = text;
         }
