@@ -25,6 +25,11 @@ bash tools/canopen-interop.sh
 echo "== systemd units (systemd-analyze verify + the stack's unit policy)"
 bash tools/systemd-verify.sh
 
+echo "== safety monitor fault-injection matrix on the host at the spec's thresholds (wire model; timing asserted)"
+cargo build -q --workspace --bins
+"${CARGO_TARGET_DIR:-target}/debug/safety-hil" --bin-dir "${CARGO_TARGET_DIR:-target}/debug" \
+  --workdir "$(mktemp -d)" --assert-timing --attempts 2 --retry-budget 2
+
 if [ "${CRS_SKIP_HIL:-0}" != 1 ]; then
   # One static release build serves all three (the emulated guest is slow; debug is slower).
   export HIL_PROFILE=${HIL_PROFILE:-release}

@@ -93,7 +93,7 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
     for i in 0..8 {
         drives.push_str(&format!(
             "[[force_sensor]]\ninterface = \"{}\"\nnode_id = {}\ncable = {}\n\
-             n_per_unit = 0.1\nevery_n_syncs = 5\n",
+             n_per_unit = 0.1\nevery_n_syncs = {LOAD_CELL_EVERY_N_SYNCS}\n",
             drive_interface(i),
             33 + i,
             i + 1
@@ -178,6 +178,9 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
     }
     Ok(())
 }
+
+/// The load cells report every this many SYNCs (the shipped drives file's rate).
+pub const LOAD_CELL_EVERY_N_SYNCS: u32 = 5;
 
 /// The monitor executable of a scenario: the production `safety-monitor`, or for
 /// `stop_frame_lost` this crate's `safety-monitor-nmt-unsent` (the same daemon on a sending

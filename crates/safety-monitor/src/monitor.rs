@@ -586,6 +586,10 @@ pub struct Monitor {
     rpdo_checked: u32,
     rpdo_unchecked: u32,
     rpdo_unchecked_streak: u32,
+    /// Per cable, the first enabling RPDO target before any setpoint (NaN: none yet): drive-io
+    /// enables the drives holding where they stand before motion-core streams, and a target
+    /// that stays there is checked (no motion); one that moves is not checkable.
+    rpdo_hold_m: [f64; MAX_CABLES],
     /// The safety I/O node: TPDO1s this cycle, cycles without one after the first, whether it
     /// ever reported, its e-stop circuit and STO output as last reported.
     io_reports: u32,
@@ -685,6 +689,7 @@ impl Monitor {
             rpdo_checked: 0,
             rpdo_unchecked: 0,
             rpdo_unchecked_streak: 0,
+            rpdo_hold_m: [f64::NAN; MAX_CABLES],
             io_reports: 0,
             io_silent: 0,
             io_seen: false,
@@ -1263,15 +1268,26 @@ impl Monitor {
     /// `rx_ns`. Compared with φ*(x) of the recent setpoints computed before it (the drive
     /// adapter forwards one of them).
     ///
-    /// An RPDO that no recent setpoint can have preceded (none seen yet, or every one stamped
-    /// after it) cannot be checked: it is counted, and cycles with such RPDOs only trip
+    /// Before any setpoint, an RPDO that holds the cable's first enabling target is checked
+    /// (the drive holds where it was enabled: no motion). An RPDO that no recent setpoint can
+    /// have preceded (a moving target before any setpoint, or every setpoint stamped after
+    /// it) cannot be checked: it is counted, and cycles with such RPDOs only trip
     /// `rpdo_unchecked` after `unchecked_cycles` in a row (fail closed, not skipped).
     pub fn on_rpdo(&mut self, cable: usize, length_m: f64, rx_ns: u64) {
         if !self.lim.check_rpdo || cable >= self.m {
             return;
         }
         if self.hist_len == 0 {
-            self.rpdo_unchecked += 1;
+            let hold = &mut self.rpdo_hold_m[cable];
+            if hold.is_nan() && length_m.is_finite() {
+                *hold = length_m;
+            }
+            // The same encoder counts give the same metres: a hold compares exactly.
+            if *hold == length_m {
+                self.rpdo_checked += 1;
+            } else {
+                self.rpdo_unchecked += 1;
+            }
             return;
         }
         self.stats.rpdo_checked += 1;

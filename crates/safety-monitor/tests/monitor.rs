@@ -1962,18 +1962,27 @@ fn a_timestamp_jump_does_not_blind_the_rpdo_check() {
         (Cause::RpdoMismatch, Some(4))
     );
 
-    // Enabling RPDOs before any setpoint: counted, and N such cycles trip.
+    // Enabling RPDOs before any setpoint that hold where the drive was enabled: no motion,
+    // checked, never a trip.
     let n = Limits::from_config(cfg()).unchecked_cycles;
     let mut m = monitor();
-    let mut trip = None;
-    for k in 1..=n + 1 {
+    for k in 1..=3 * n {
         m.begin_cycle(u64::from(k) * 15 * MS);
         m.on_rpdo(0, q[0], u64::from(k) * 15 * MS);
+        assert!(m.end_cycle(u64::from(k) * 15 * MS + 1).faults.is_empty());
+    }
+    // Enabling RPDOs before any setpoint whose target moves: counted, and N such cycles trip
+    // (the first one is where the drive was enabled).
+    let mut m = monitor();
+    let mut trip = None;
+    for k in 1..=n + 2 {
+        m.begin_cycle(u64::from(k) * 15 * MS);
+        m.on_rpdo(0, q[0] + f64::from(k) * 1e-3, u64::from(k) * 15 * MS);
         if let Some(tr) = m.end_cycle(u64::from(k) * 15 * MS + 1).new_trip {
             trip = Some((k, tr));
             break;
         }
     }
     let (k, tr) = trip.expect("uncheckable RPDOs must trip");
-    assert_eq!((k, tr.fault.cause), (n, Cause::RpdoUnchecked));
+    assert_eq!((k, tr.fault.cause), (n + 1, Cause::RpdoUnchecked));
 }

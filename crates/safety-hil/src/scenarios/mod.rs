@@ -3,6 +3,7 @@
 
 pub mod bus;
 pub mod forces;
+pub mod holes;
 pub mod integrity;
 pub mod process_faults;
 pub mod reset_authority;

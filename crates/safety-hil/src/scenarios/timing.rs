@@ -11,7 +11,11 @@
 //! drives within the SCT at the latest) plus one cycle for the emulator's status file.
 
 use crate::Res;
+use crate::configs::LOAD_CELL_EVERY_N_SYNCS;
 use crate::scenarios::Outcome;
+
+/// The winch emulator re-reads its control file (injected forces) this often.
+pub const CONTROL_FILE_POLL_MS: f64 = 5.0;
 
 /// The monitor's cycle of the generated config (`[monitor] cycle_ms`).
 pub const MONITOR_CYCLE_MS: f64 = 15.0;
@@ -79,12 +83,22 @@ pub fn bound(name: &str, t: &TimingArgs) -> Option<Bound> {
         | "reset_while_armed_changes_nothing" => by_monitor(silence, t),
         // drive-io dies or its feedback is stale: feedback silence.
         "kill_drive_io" | "stale_published_feedback" => by_monitor(feedback, t),
-        // k of n force readings (8 of 16 at the SYNC period) out of band.
-        "overload_one_cable" | "slack_one_cable" | "force_hard_limit_negative" => {
-            by_monitor(2.0 + 16.0 * t.period_ms / MONITOR_CYCLE_MS, t)
+        // 8 of the last 16 load-cell readings out of band: the emulator's control file is
+        // read every 5 ms, then 8 readings, then the monitor's cycle.
+        "overload_one_cable" | "slack_one_cable" => {
+            let readings = 8.0 * f64::from(LOAD_CELL_EVERY_N_SYNCS) * t.period_ms;
+            by_monitor(
+                2.0 + (CONTROL_FILE_POLL_MS + readings) / MONITOR_CYCLE_MS,
+                t,
+            )
+        }
+        // One reading beyond the hard limit trips at once.
+        "force_hard_limit_negative" => {
+            let reading = f64::from(LOAD_CELL_EVERY_N_SYNCS) * t.period_ms;
+            by_monitor(2.0 + (CONTROL_FILE_POLL_MS + reading) / MONITOR_CYCLE_MS, t)
         }
         // Nothing on the monitor detects it: the drives' watch brakes after the SCT.
-        "kill_monitor" | "corrupted_safety_frame" | "heartbeat_config_crc_mismatch" => Bound {
+        "kill_monitor" | "corrupted_safety_frame" => Bound {
             detect_ms: None,
             stop_ms: t.validation_ms + 2.0 * MONITOR_CYCLE_MS,
         },
@@ -185,6 +199,13 @@ mod tests {
         // The drives' watch: no detection on the monitor, only the stop is bounded.
         assert!(check_timing("kill_monitor", &outcome(None, Some(79.0)), &HOST).is_ok());
         assert!(check_timing("kill_monitor", &outcome(None, Some(81.0)), &HOST).is_err());
+    }
+
+    #[test]
+    fn the_force_window_bound_counts_eight_load_cell_readings() {
+        // 5 ms control file + 8 readings every 5 SYNCs at 1 kHz + 2 cycles.
+        let b = bound("overload_one_cable", &HOST).expect("bounded");
+        assert!((b.detect_ms.expect("monitor") - (5.0 + 40.0 + 30.0)).abs() < 1e-9);
     }
 
     #[test]
