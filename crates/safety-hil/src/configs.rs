@@ -108,6 +108,7 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
          [feedback]\nfollowing_error_mm = 100.0\nwindow_setpoints = 200\nsilence_cycles = {}\n\
          [can]\ndrives = \"drives.toml\"\nsafety_cob_id = 0x101\n\
          check_rpdo = true\nreset_wait_ms = 2000\nreader_stall_cycles = {}\n\
+         safety_io_silence_cycles = {}\n\
          safety_validation_time_ms = {validation_ms}\nsafety_pair_window_ms = {}\n\
          [motion]\nsetpoint_period_ms = {}\n\
          [forces]\nsilence_cycles = {}\n\
@@ -115,6 +116,9 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
         args.silence_cycles,
         args.feedback_silence_cycles,
         // Stall-related like the feedback silence: the guest stalls processes for tens of ms.
+        args.feedback_silence_cycles.max(10),
+        // The safety I/O node (every 10 ms) is played by the emulator, which a loaded host or
+        // the guest stalls: like the reader stall (the spec has no figure for it).
         args.feedback_silence_cycles.max(10),
         (validation_ms / 2).max(1),
         f64::from(period_us) * 1e-3,
