@@ -69,7 +69,7 @@ pub struct Control {
 impl Control {
     /// The control file's text (`winch-emulator --control-file`): one line per injected
     /// value; an empty file is the emulator's own state.
-    pub fn to_text(&self) -> String {
+    pub fn to_text(self) -> String {
         let mut t = String::new();
         for (i, f) in self.forces.iter().enumerate() {
             if let Some(f) = f {

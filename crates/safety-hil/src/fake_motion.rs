@@ -32,6 +32,8 @@ pub struct FakeCtl {
     pub skip_every: AtomicU32,
     /// Announce a wrong platform identity while set.
     pub wrong_identity: AtomicBool,
+    /// When the first wrong identity was announced (CLOCK_MONOTONIC ns; 0 = not yet).
+    pub wrong_identity_sent_ns: AtomicU64,
     /// Publish the pose moved this far in x (µm) with CONSISTENT cable lengths, at once.
     pub pose_jump_um: AtomicI64,
     /// Move the pose in x by this much (µm) per setpoint from now on, with CONSISTENT cable
@@ -94,10 +96,15 @@ impl Fake {
                 }
                 if n.is_multiple_of(100) {
                     let mut h = *id.as_bytes();
-                    if c.wrong_identity.load(Ordering::Relaxed) {
+                    let wrong = c.wrong_identity.load(Ordering::Relaxed);
+                    if wrong {
                         h[31] ^= 0x5A;
                     }
                     let _ = id_pub.publish(&PlatformIdentity::new(crs_ipc::PlatformId::new(h), 8));
+                    if wrong && c.wrong_identity_sent_ns.load(Ordering::Relaxed) == 0 {
+                        c.wrong_identity_sent_ns
+                            .store(monotonic_ns(), Ordering::Relaxed);
+                    }
                 }
                 n += 1;
                 let target = c.offset_target_um.load(Ordering::Relaxed);

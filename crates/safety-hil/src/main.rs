@@ -112,7 +112,7 @@ pub fn bus_mode(args: &Args) -> Res<crs_stack::transport::BusMode> {
 
 type Scenario = (&'static str, fn(&mut Stack) -> Res<Outcome>);
 
-const SCENARIOS: [Scenario; 35] = [
+const SCENARIOS: [Scenario; 36] = [
     ("offset_101mm_trips", setpoint_stream::offset_101mm),
     ("offset_99mm_no_trip", setpoint_stream::offset_99mm),
     ("frozen_motion_core", process_faults::frozen_motion_core),
@@ -178,6 +178,10 @@ const SCENARIOS: [Scenario; 35] = [
     ("state_event_flood", holes::state_event_flood),
     ("timestamp_jump", holes::timestamp_jump),
     ("estop_circuit_pressed", holes::estop_circuit_pressed),
+    (
+        "reset_across_monitor_restart",
+        holes::reset_across_monitor_restart,
+    ),
 ];
 
 /// The configuration the timing bounds depend on.

@@ -196,31 +196,30 @@ impl ResetSocket {
     /// Accepts new connections and returns the first complete request (one per call; the
     /// caller answers it with [`ResetSocket::answer`] before the next poll).
     pub fn poll(&mut self, now_ns: u64) -> Option<Request> {
-        // New connections (never blocking); beyond MAX_PENDING they are closed unanswered.
-        loop {
-            match self.listener.accept() {
-                Ok((stream, _)) => {
-                    let _ = stream.set_nonblocking(true);
-                    let Ok(peer) = peer_of(&stream, self.gid) else {
-                        continue;
-                    };
-                    if let Some(slot) = self.pending.iter_mut().find(|p| p.is_none()) {
-                        *slot = Some(Pending {
-                            stream,
-                            peer,
-                            since_ns: now_ns,
-                            buf: [0; 32],
-                            len: 0,
-                        });
-                    } else {
-                        tracing::warn!(
-                            pid = peer.pid,
-                            uid = peer.uid,
-                            "reset socket: too many pending connections, closed"
-                        );
-                    }
-                }
-                Err(_) => break,
+        // New connections (never blocking), a bounded number per cycle (a local flood of
+        // connections cannot hold the cycle); beyond MAX_PENDING they are closed unanswered.
+        for _ in 0..2 * MAX_PENDING {
+            let Ok((stream, _)) = self.listener.accept() else {
+                break;
+            };
+            let _ = stream.set_nonblocking(true);
+            let Ok(peer) = peer_of(&stream, self.gid) else {
+                continue;
+            };
+            if let Some(slot) = self.pending.iter_mut().find(|p| p.is_none()) {
+                *slot = Some(Pending {
+                    stream,
+                    peer,
+                    since_ns: now_ns,
+                    buf: [0; 32],
+                    len: 0,
+                });
+            } else {
+                tracing::warn!(
+                    pid = peer.pid,
+                    uid = peer.uid,
+                    "reset socket: too many pending connections, closed"
+                );
             }
         }
         for slot in &mut self.pending {

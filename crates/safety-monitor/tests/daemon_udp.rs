@@ -31,7 +31,6 @@ struct Rig {
     kin: StandardKinematics,
     id: crs_ipc::PlatformId,
     seq: u64,
-    prefix: String,
     /// The monitor's reset socket (this test process is in the operator group: its own gid).
     reset_socket: PathBuf,
     /// (state, time) of the last valid safety pair; NMT commands seen (command, time).
@@ -148,7 +147,6 @@ impl Rig {
             kin,
             id,
             seq: 0,
-            prefix,
             reset_socket,
             last_pair: None,
             invalid_pairs: 0,

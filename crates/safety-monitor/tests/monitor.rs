@@ -891,7 +891,7 @@ fn a_fluttering_force_trips_k_minus_one_violations_do_not() {
                 m.on_drive_state(i, true);
             }
             if k % 5 == 0 {
-                let f = if (reading / 5) % 2 == 0 {
+                let f = if (reading / 5).is_multiple_of(2) {
                     200.0
                 } else {
                     3000.0

@@ -247,3 +247,82 @@ pub fn estop_circuit_pressed(st: &mut Stack) -> Res<Outcome> {
             .into(),
     })
 }
+
+/// The monitor dies while the drives follow and is started again: the new instance's start
+/// epoch (count 0) releases nothing that was stopped, and Reset events forged in the monitor's
+/// name with the new instance's epoch (and its next count), stamped before its start, release
+/// neither drive-io nor the drives. Only the operator's key, verified by the new instance,
+/// brings the stack back.
+pub fn reset_across_monitor_restart(st: &mut Stack) -> Res<Outcome> {
+    use crs_limits::reset_epoch;
+    let c = st.fake()?.clone();
+    st.wait_following(false)?;
+    let mut bus = open_bus(st, "safety")?;
+    let mut spy = BusSpy::default();
+    spy_pairs(st, bus.as_mut(), &mut spy, 3)?;
+    let old = spy.last_heartbeat().ok_or("no safety pair seen")?.epoch;
+    let t0 = st.inject();
+    st.signal("safety-monitor", libc::SIGKILL)?;
+    st.reap("safety-monitor");
+    let (_, stopped) = st.stopped_by_the_drives_watch()?;
+    st.spawn_monitor("safety-monitor")?;
+    // The new instance's pairs on the bus.
+    let new = loop {
+        spy_pairs(st, bus.as_mut(), &mut spy, 1)?;
+        let e = spy.last_heartbeat().ok_or("no safety pair seen")?.epoch;
+        if reset_epoch::instance(e) != reset_epoch::instance(old) {
+            break e;
+        }
+    };
+    if reset_epoch::count(new) != 0 {
+        return Err(format!(
+            "the new instance starts at count {}",
+            reset_epoch::count(new)
+        ));
+    }
+    spy_pairs(st, bus.as_mut(), &mut spy, 20)?;
+    require_still_latched(st, "restarted monitor (start epoch)")?;
+    // Forged resets in the monitor's name, stamped before its start (a replayed or pre-made
+    // event): the new epoch and its next count.
+    let node = IpcNode::with_prefix("shil-forger", &st.prefix).map_err(|e| e.to_string())?;
+    let publ = node.publisher::<StateEvent>().map_err(|e| e.to_string())?;
+    for (k, epoch) in [new, new.wrapping_add(1)].into_iter().enumerate() {
+        let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, 900 + k as u64);
+        ev.detail = epoch;
+        ev.timestamp_ns = t0;
+        publ.publish(&ev).map_err(|e| e.to_string())?;
+    }
+    require_still_latched(st, "reset forged for the restarted monitor")?;
+    // The operator's key: the new instance verifies and resets.
+    let (ok, text) = st.operator_reset()?;
+    if !ok {
+        return Err(format!(
+            "the operator's key after the restart was refused: {text:?}"
+        ));
+    }
+    st.wait("drive-io re-enabled and following", 30.0, |s| {
+        let e = s.emu()?;
+        Ok(matches!(s.bus_state(), Some(crs_ipc::BusState::Running))
+            && e.drives
+                .iter()
+                .all(|d| d.demand == crate::emulator::DEMAND_FOLLOW)
+            && !e.inhibit)
+    })?;
+    c.paused.store(true, Ordering::Relaxed);
+    st.wait("the trip at the end", 10.0, |s| {
+        Ok(!s.monitor_estops.is_empty())
+    })?;
+    st.require_braked()?;
+    Ok(Outcome {
+        cause: "drives: heartbeat timeout; restart released nothing; key accepted".into(),
+        detect_ms: None,
+        stop_ms: ms(t0, stopped),
+        note: format!(
+            "instance {:#06x} -> {:#06x}; forged resets with epochs {new:#x}, {:#x}: still \
+             latched; key: {text:?}",
+            reset_epoch::instance(old),
+            reset_epoch::instance(new),
+            new.wrapping_add(1)
+        ),
+    })
+}
