@@ -184,6 +184,17 @@ const SCENARIOS: [Scenario; 36] = [
     ),
 ];
 
+/// Whether a failed attempt runs again: only a stall BEFORE the scenario's fault was injected,
+/// and only while attempts are left. A failure after the injection is the verdict.
+fn retried(injected: bool, attempt: u32, attempts: u32) -> bool {
+    !injected && attempt < attempts
+}
+
+/// The run passes only if no more scenarios were retried than its budget allows.
+fn within_budget(retries: u32, budget: u32) -> bool {
+    retries <= budget
+}
+
 /// The configuration the timing bounds depend on.
 fn timing_args(args: &Args) -> scenarios::TimingArgs {
     scenarios::TimingArgs {
@@ -322,7 +333,7 @@ fn main() -> ExitCode {
                     break;
                 }
                 Err(e) => {
-                    let retry = !injected && attempt < args.attempts;
+                    let retry = retried(injected, attempt, args.attempts);
                     if retry {
                         retries += 1;
                         println!(
@@ -375,7 +386,7 @@ fn main() -> ExitCode {
             f(o.stop_ms)
         );
     }
-    if retries > args.retry_budget {
+    if !within_budget(retries, args.retry_budget) {
         all_ok = false;
         println!(
             "SAFETY-HIL FAIL retries: {retries} scenario(s) stalled before their fault, more than \
@@ -397,5 +408,29 @@ fn main() -> ExitCode {
         ExitCode::SUCCESS
     } else {
         ExitCode::FAILURE
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_a_stall_before_the_fault_is_retried() {
+        // After the injection: never, whatever the attempts left.
+        assert!(!retried(true, 1, 3));
+        // Before it: while attempts are left.
+        assert!(retried(false, 1, 2));
+        assert!(!retried(false, 2, 2));
+        // One attempt (the host default): never.
+        assert!(!retried(false, 1, 1));
+    }
+
+    #[test]
+    fn more_retries_than_the_budget_fail_the_run() {
+        assert!(within_budget(0, 0));
+        assert!(!within_budget(1, 0));
+        assert!(within_budget(3, 3));
+        assert!(!within_budget(4, 3));
     }
 }
