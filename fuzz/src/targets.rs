@@ -460,6 +460,13 @@ pub fn all() -> Vec<Target> {
             seeds: |_| vec![watch_seed()],
             run: run_watch,
         },
+        Target {
+            name: "monitor-latch",
+            what: "the safety monitor core (safety_monitor::Monitor) under arbitrary interleavings of setpoints, feedback, forces, RPDOs, drive reports, safety I/O inputs (the reset key), e-stops and cycles: no motion permitted after a trip without a reset it accepted",
+            locate: Locate::No,
+            seeds: |_| vec![monitor_seed()],
+            run: run_monitor,
+        },
     ]
 }
 
@@ -498,7 +505,10 @@ fn signature() -> safety_frame::ConfigSignature {
 
 /// Properties: no panic; never PERMIT when no frame at all arrived on the safety ids within the
 /// validation time; never PERMIT right after the monitor said STOP in a valid pair; never
-/// PERMIT without a signature frame (issue 16) within twice the validation time.
+/// PERMIT without a signature frame within twice the validation time; after a trip (PERMIT →
+/// INHIBIT) never PERMIT again on an epoch that is not a reset the watch has not acted on
+/// (`crs_limits::reset_epoch::releases` of the epoch it permitted on before the trip): no
+/// self-release, no release on a restarted monitor's start epoch or a replay.
 fn run_watch(b: &[u8], _: &Scratch) -> Verdict {
     let cfg = SafetyWatchConfig::default();
     let validation_ns = u64::from(cfg.validation_time_ms) * 1_000_000;
@@ -508,6 +518,12 @@ fn run_watch(b: &[u8], _: &Scratch) -> Verdict {
     let mut last_signature_frame: Option<u64> = None;
     let mut i = 0;
     let mut pending_normal: Option<CanFrame> = None;
+    // The epoch of the last valid RUN pair, the one the watch permitted on, and the one in
+    // force at its last trip.
+    let mut last_run_epoch: Option<u32> = None;
+    let mut permitted_on: Option<u32> = None;
+    let mut in_force: Option<u32> = None;
+    let mut was_permitting = false;
     while i + 4 <= b.len() {
         now += u64::from(b[i]) * 1_000_000;
         let fs = frames_from(&b[i + 1..]);
@@ -523,6 +539,7 @@ fn run_watch(b: &[u8], _: &Scratch) -> Verdict {
             last_signature_frame = Some(now);
         }
         let mut stop_said = false;
+        let mut n_pair = None;
         if id == cfg.cob_id {
             pending_normal = Some(f);
         } else if id == cfg.cob_id + 1
@@ -530,8 +547,29 @@ fn run_watch(b: &[u8], _: &Scratch) -> Verdict {
             && let Ok(hb) = safety_frame::decode_pair(&n, &f, cfg.cob_id)
         {
             stop_said = hb.state == SafetyState::Stop;
+            n_pair = Some(hb);
+        }
+        if let Some(hb) = n_pair
+            && hb.state == SafetyState::Run
+        {
+            last_run_epoch = Some(hb.epoch);
         }
         let permits = w.permits(now);
+        if was_permitting && !permits {
+            in_force = permitted_on;
+        }
+        if permits {
+            if let (Some(f), Some(e)) = (in_force, last_run_epoch)
+                && !crs_limits::reset_epoch::releases(e, f)
+            {
+                return Verdict::Violation(format!(
+                    "SafetyWatch permits at t = {now} ns on epoch {e:#x} after a trip under \
+                     epoch {f:#x} without a reset of the current monitor"
+                ));
+            }
+            permitted_on = last_run_epoch;
+        }
+        was_permitting = permits;
         let silent = last_safety_frame.is_none_or(|t| now.saturating_sub(t) > validation_ns);
         if permits && silent {
             return Verdict::Violation(format!(
@@ -551,6 +589,172 @@ fn run_watch(b: &[u8], _: &Scratch) -> Verdict {
         }
     }
     Verdict::Accepted
+}
+
+/// The monitor for [`run_monitor`]: the shipped configuration, started ready.
+fn fuzz_monitor() -> safety_monitor::Monitor {
+    use safety_monitor::config;
+    static C: std::sync::OnceLock<config::MonitorConfig> = std::sync::OnceLock::new();
+    let c = C.get_or_init(|| {
+        let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/safety-monitor.toml");
+        config::load(&p).expect("the shipped monitor config loads")
+    });
+    let lim = safety_monitor::monitor::Limits::from_config(c);
+    let id = safety_monitor::identity::platform_identity(&c.platform);
+    let mut m = safety_monitor::Monitor::new(
+        lim,
+        safety_monitor::kinematics::StandardKinematics::new(&c.platform),
+        id,
+    );
+    m.on_identity(&crs_ipc::PlatformIdentity::new(id, 8));
+    m
+}
+
+/// Operations for the monitor, 3 bytes each: opcode, two argument bytes. The seed: drives
+/// reporting with forces, holding setpoints and feedback, cycles; a NaN setpoint (a trip);
+/// the key turned and released; clean cycles.
+fn monitor_seed() -> Vec<u8> {
+    let mut v = Vec::new();
+    // One cycle: every drive reporting operational with an in-band force, a holding setpoint,
+    // feedback, the safety I/O node's inputs (bit 0 e-stop circuit closed, bit 1 the key).
+    let cycle = |v: &mut Vec<u8>, inputs: u8| {
+        for k in 0..8u8 {
+            v.extend([6, k, 1]);
+            v.extend([4, k, 40]);
+        }
+        v.extend([0, 0, 0, 3, 0, 0, 7, inputs, 0x01, 9, 0, 0]);
+    };
+    for _ in 0..30 {
+        cycle(&mut v, 0x01);
+    }
+    v.extend([2, 0, 0, 9, 0, 0]);
+    for _ in 0..30 {
+        cycle(&mut v, 0x01);
+    }
+    // The key turned for two cycles, then released.
+    cycle(&mut v, 0x03);
+    cycle(&mut v, 0x03);
+    for _ in 0..30 {
+        cycle(&mut v, 0x01);
+    }
+    v
+}
+
+/// Property: once tripped, the monitor leaves the latch only in a cycle in which it accepted
+/// an operator reset (from the key: the only channel that exists in the core), and its epoch
+/// changes only with an accepted reset. No panic on any input.
+fn run_monitor(b: &[u8], _: &Scratch) -> Verdict {
+    monitor_walk(b).0
+}
+
+/// What [`run_monitor`] saw: its verdict, the trips (Armed → Tripped at a cycle's end) and the
+/// accepted resets.
+fn monitor_walk(b: &[u8]) -> (Verdict, u32, u32) {
+    use safety_monitor::operator::{KeyEvent, KeyWatch};
+    use safety_monitor::{ResetDecision, StateCode};
+    static HOME_Q: std::sync::OnceLock<[f64; crs_ipc::MAX_CABLES]> = std::sync::OnceLock::new();
+    let mut m = fuzz_monitor();
+    let q = *HOME_Q.get_or_init(|| {
+        // The monitor's own φ*(home) is what a holding stream sends.
+        let mut q = [0.0; crs_ipc::MAX_CABLES];
+        let c = safety_monitor::config::load(
+            &PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/safety-monitor.toml"),
+        )
+        .expect("shipped config");
+        safety_monitor::kinematics::StandardKinematics::new(&c.platform)
+            .lengths(&[0.0, 0.0, 2.0, 0.0, 0.0, 0.0], &mut q);
+        q
+    });
+    let mut key = KeyWatch::new();
+    let mut now: u64 = 1_000_000_000;
+    let mut seq = 0u64;
+    let mut fb_cycle = 0u64;
+    let mut accepted_since_check = false;
+    let mut was_tripped = false;
+    let mut epoch = m.reset_epoch();
+    let (mut trips, mut accepted) = (0u32, 0u32);
+    m.begin_cycle(now);
+    for op in b.chunks_exact(3) {
+        let (a, x) = (op[1], op[2]);
+        let k = usize::from(a % 8);
+        match op[0] % 10 {
+            0..=2 => {
+                seq += 1;
+                let mut s = crs_ipc::JointSetpoint {
+                    cable_count: 8,
+                    sequence: seq,
+                    // Published within this cycle, on the monitor's clock.
+                    timestamp_ns: now + u64::from(x) * 10_000,
+                    pose: [0.0, 0.0, 2.0, 0.0, 0.0, 0.0],
+                    cable_length_m: q,
+                    ..crs_ipc::JointSetpoint::default()
+                };
+                if op[0] % 10 == 1 {
+                    s.cable_length_m[k] += f64::from(x) * 1e-3;
+                    s.pose[0] += f64::from(a) * 1e-4;
+                } else if op[0] % 10 == 2 {
+                    s.pose[3] = f64::NAN;
+                }
+                m.on_setpoint(&s);
+            }
+            3 => {
+                fb_cycle += 1;
+                let mut fb = crs_ipc::DriveFeedback {
+                    cycle: fb_cycle,
+                    timestamp_ns: now,
+                    applied_setpoint_sequence: seq,
+                    bus_state: crs_ipc::BusState::Running as u32,
+                    ..crs_ipc::DriveFeedback::default()
+                };
+                fb.cable_length_m = q;
+                fb.cable_count = 8;
+                m.on_feedback(&fb);
+            }
+            4 => m.on_force(k, f64::from(x) * 100.0, now),
+            5 => m.on_rpdo(k, q[k] + (f64::from(x) - 128.0) * 1e-3, now),
+            6 => m.on_drive_report(k, x & 1 == 1, now),
+            7 => {
+                m.on_safety_io(a, x, now);
+                if let KeyEvent::Reset(r) = key.on_inputs(a, now)
+                    && let ResetDecision::Accepted { epoch: e } = m.request_reset(r)
+                {
+                    accepted_since_check = true;
+                    accepted += 1;
+                    epoch = e;
+                }
+            }
+            8 => m.on_estop_event(u32::from(a)),
+            _ => {
+                now += 15_000_000;
+                let _ = m.end_cycle(now);
+                let tripped = m.state_code() == StateCode::Tripped;
+                if was_tripped && !tripped && !accepted_since_check {
+                    return (
+                        Verdict::Violation(
+                            "the monitor left its latch without an accepted operator reset".into(),
+                        ),
+                        trips,
+                        accepted,
+                    );
+                }
+                if m.reset_epoch() != epoch {
+                    return (
+                        Verdict::Violation(format!(
+                            "the reset epoch moved ({epoch:#x} -> {:#x}) without an accepted reset",
+                            m.reset_epoch()
+                        )),
+                        trips,
+                        accepted,
+                    );
+                }
+                trips += u32::from(tripped && !was_tripped);
+                was_tripped = tripped;
+                accepted_since_check = false;
+                m.begin_cycle(now);
+            }
+        }
+    }
+    (Verdict::Accepted, trips, accepted)
 }
 
 const SURROGATE_PLATFORM: &str = "fuzz-platform";
@@ -634,5 +838,34 @@ fn monitor_layout() -> &'static safety_monitor::bus_layout::BusLayout {
                 }
             })
             .collect(),
+        safety_io: None,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The monitor target's seed is not vacuous: it trips the monitor and the key resets it;
+    /// without the key the latch holds through the same clean cycles.
+    #[test]
+    fn the_monitor_seed_trips_and_only_the_key_resets() {
+        let seed = monitor_seed();
+        let (v, trips, accepted) = monitor_walk(&seed);
+        assert!(matches!(v, Verdict::Accepted), "{v:?}");
+        assert!(
+            trips >= 1 && accepted >= 1,
+            "trips {trips}, accepted {accepted}"
+        );
+        // The key's two operations (turned: inputs 0x03) replaced by clean inputs.
+        let mut no_key = seed.clone();
+        for op in no_key.chunks_exact_mut(3) {
+            if op[0] == 7 && op[1] == 0x03 {
+                op[1] = 0x01;
+            }
+        }
+        let (v, trips, accepted) = monitor_walk(&no_key);
+        assert!(matches!(v, Verdict::Accepted), "{v:?}");
+        assert_eq!((trips, accepted), (1, 0));
+    }
 }

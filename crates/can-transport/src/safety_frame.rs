@@ -17,7 +17,7 @@
 //! | 0    | protocol version (high nibble, [`PROTOCOL_VERSION`]) and state (low nibble: 0x1 = RUN, motion permitted; 0x2 = STOP, e-stop) |
 //! | 1    | cause code of the latched trip (0 = none)                                |
 //! | 2..4 | counter u16, +1 per pair sent, wrapping (stuck/repeated data is detected)|
-//! | 4..8 | reset epoch u32: +1 for every operator reset the monitor verified and accepted (ISO 13849-1 §5.2.2 manual reset); consumers leave an inhibit only on a newer epoch |
+//! | 4..8 | reset epoch u32: the monitor instance (a random nonce drawn at its start) in the high 16 bits, the number of operator resets that instance verified and accepted (ISO 13849-1 §5.2.2 manual reset) in the low 16 bits ([`reset_epoch`]); consumers leave an inhibit only on a reset they have not acted on |
 //!
 //! Version 1 (state in byte 0 as 0x01/0x02, u32 counter, cable, version in byte 7) is refused:
 //! its byte 0 has version nibble 0. The cable of a trip is no longer on the wire (the monitor's
@@ -63,6 +63,8 @@ pub struct SafetyHeartbeat {
 
 /// The reset-epoch order, shared with motion-core's IPC reset gate (one home: `crs-limits`).
 pub use crs_limits::epoch_newer;
+/// The epoch's structure (monitor instance | reset count) and which epoch releases what.
+pub use crs_limits::reset_epoch;
 
 impl SafetyHeartbeat {
     /// The 8 data bytes of the normal frame.

@@ -338,6 +338,42 @@ impl<T: Topic> TopicSubscriber<T> {
         }
     }
 
+    /// As [`TopicSubscriber::receive`], with the process id of the sample's publisher: the
+    /// sample header names its publisher port, the service's dynamic configuration the node
+    /// that created the port, whose unique id encodes the creating process's pid (None if the
+    /// port is gone or the id cannot be read). For logging who sent something — not an
+    /// authentication: iceoryx2 0.10 does not authenticate publishers (docs/safety-monitor.md,
+    /// threat model). A sample with a foreign contract version is an error (and consumed).
+    pub fn receive_with_sender(&self) -> Result<Option<(T, Option<i32>)>, IpcError> {
+        use iceoryx2::service::port_factory::PortFactory as _;
+        let Some(sample) = self
+            .port
+            .receive()
+            .map_err(|e| svc_err(&self.service, "receive", e))?
+        else {
+            return Ok(None);
+        };
+        let v = *sample.payload();
+        if v.version() != CONTRACT_VERSION {
+            return Err(IpcError::Version {
+                service: self.service.clone(),
+                found: v.version(),
+                expected: CONTRACT_VERSION,
+            });
+        }
+        let id = sample.header().publisher_id();
+        let mut pid = None;
+        self.factory.dynamic_config().list_publishers(|d| {
+            if d.publisher_id == id {
+                pid = d.node_id.pid::<ipc::Service>().ok().map(|p| p.value());
+                CallbackProgression::Stop
+            } else {
+                CallbackProgression::Continue
+            }
+        });
+        Ok(Some((v, pid)))
+    }
+
     /// The publishers currently connected to this service (iceoryx2's dynamic service
     /// configuration, shared memory: no syscall, no allocation): fills `out` with up to
     /// `out.len()` of them and returns how many there are in total.

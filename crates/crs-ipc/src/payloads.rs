@@ -193,6 +193,12 @@ pub mod monitor_state {
     pub const TRIPPED: u32 = 2;
     /// Start-up: not every drive verified yet, the safety heartbeat says STOP.
     pub const NOT_READY: u32 = 3;
+    /// `StateEvent::detail` of the monitor's epoch announcement (source SafetyMonitor, kind
+    /// StateChanged, `state` = the monitor's state code, `detail_node` = its current reset
+    /// epoch): published about once a second and right before each of its Reset events, so a
+    /// consumer without CAN access (motion-core) knows which epoch the CURRENT monitor
+    /// announces and accepts only a Reset of that epoch.
+    pub const EPOCH_ANNOUNCE: u32 = 0x5AFE_0010;
 }
 
 /// Who publishes a [`StateEvent`] / [`Heartbeat`].

@@ -525,6 +525,8 @@ pub fn execute_observed(
     };
     let home_q = configured.home_command().map_err(SimError::HomePose)?;
     std::fs::create_dir_all(&a.out).map_err(output(&a.out))?;
+    // A previous run's operator inputs (a pressed e-stop, a turned key) do not carry over.
+    let _ = std::fs::remove_file(a.out.join("safety-io.control"));
     let waypoint_file = a.waypoints.clone().or(daemon.trajectory.waypoints.clone());
     let waypoints_arg = match (a.dwell_s, &waypoint_file) {
         (Some(dwell), Some(file)) => {
@@ -673,11 +675,22 @@ pub fn execute_observed(
                     .map(|q| format!("{q:?}"))
                     .collect::<Vec<_>>()
                     .join(","),
+                // The operator's hand on the safety I/O node (its reset key and e-stop).
+                "--io-control".into(),
+                s(&a.out.join("safety-io.control")),
             ],
         ]
         .concat(),
         &[],
     )?;
+    if with_monitor && drives_cfg.safety_io.is_some() {
+        println!(
+            "  the safety I/O node's reset key: `echo reset_key on > {0}` then `: > {0}` (turned \
+             and released: the monitor's operator reset); `echo estop pressed > {0}`: its \
+             e-stop button",
+            a.out.join("safety-io.control").display()
+        );
+    }
     let mut first_truth = None;
     wait_for(
         "the plant's first state",
@@ -702,20 +715,20 @@ pub fn execute_observed(
             &[],
         )?;
     }
+    // The heartbeat is mandatory for drive-io: only a run without the monitor (--no-monitor, a
+    // bench) with a drives config without it runs the test rigs' bench executable instead.
+    let drive_io_exe = if !with_monitor && drives_cfg.safety_heartbeat.is_none() {
+        exe(drive_io::config::BENCH_EXECUTABLE)
+    } else {
+        exe("drive-io")
+    };
     stack.spawn(
         "drive-io",
-        &exe("drive-io"),
+        &drive_io_exe,
         &[
             rt_args(rt),
             vec!["--config".into(), s(&a.drives)],
             buses.args("drive-io"),
-            // The heartbeat is mandatory for drive-io (issue 16): only a run without the monitor
-            // (--no-monitor, a bench) with a drives config without it takes the bench override.
-            if !with_monitor && drives_cfg.safety_heartbeat.is_none() {
-                vec![drive_io::config::BENCH_OVERRIDE_FLAG.into()]
-            } else {
-                Vec::new()
-            },
         ]
         .concat(),
         &[],

@@ -96,6 +96,14 @@ pub struct BusConfig {
     /// Largest accepted cable speed implied by consecutive setpoints (m/s); faster = fault.
     #[serde(default = "d_vmax")]
     pub max_cable_speed_m_per_s: f64,
+    /// Largest accepted change of a cable's speed between consecutive setpoint steps (m/s²),
+    /// from rest too: a hold is zero speed, so a stream that jumps from rest to a plausible
+    /// speed faults (`SETPOINT_STEP`) instead of jerking the cabin at the drives' torque limit.
+    /// Braking (towards zero, without reversing) is never limited. Above the platform's cable
+    /// accelerations at the table 5.1 limits (|a| + |α| r + ω² r + v²/L: about 30 m/s² on the
+    /// CRS) with margin.
+    #[serde(default = "d_amax")]
+    pub max_cable_acceleration_m_per_s2: f64,
     /// Hard limit of a drive's measured cable force (TPDO2 pulley force), N: one reading above
     /// it (or below −limit, a broken sensor) quick-stops all drives — drive-io's own channel,
     /// independent of the safety monitor's force supervision (the winches' rating, 14 kN).
@@ -273,6 +281,16 @@ fn d_sdo() -> u32 {
 fn d_vmax() -> f64 {
     5.0
 }
+fn d_amax() -> f64 {
+    50.0
+}
+/// Upper bounds of the adapter's safety-relevant limits (a value beyond them switches its check
+/// off in practice): cable speed (the CRS winches: 5 m/s), cable acceleration, the force hard
+/// limit (the seed's winches are rated 14 kN), the stale-setpoint time.
+pub const MAX_CABLE_SPEED_BOUND_M_PER_S: f64 = 10.0;
+pub const MAX_CABLE_ACCELERATION_BOUND_M_PER_S2: f64 = 200.0;
+pub const FORCE_HARD_LIMIT_BOUND_N: f64 = 20_000.0;
+pub const STALE_SETPOINT_BOUND_MS: u64 = 500;
 fn d_force_limit() -> f64 {
     14_000.0
 }
@@ -723,8 +741,17 @@ impl DrivesConfig {
                 "must be > 0 and < bus.sync_period_us / 2",
             ));
         }
-        if b.stale_setpoint_cycles == 0 {
-            return Err(invalid("bus.stale_setpoint_cycles", "must be >= 1"));
+        if b.stale_setpoint_cycles == 0
+            || u64::from(b.stale_setpoint_cycles) * u64::from(b.sync_period_us)
+                > STALE_SETPOINT_BOUND_MS * 1000
+        {
+            return Err(invalid(
+                "bus.stale_setpoint_cycles",
+                format!(
+                    "must be >= 1 and at most {STALE_SETPOINT_BOUND_MS} ms of SYNC periods \
+                     (a longer stale time lets a dead motion loop's last setpoint stand)"
+                ),
+            ));
         }
         if b.heartbeat_producer_ms == 0 {
             return Err(invalid("bus.heartbeat_producer_ms", "must be >= 1"));
@@ -741,13 +768,26 @@ impl DrivesConfig {
                 "must be >= 1",
             ));
         }
-        if !(b.force_hard_limit_n.is_finite() && b.force_hard_limit_n > 0.0) {
-            return Err(invalid("bus.force_hard_limit_n", "must be finite and > 0"));
+        if !(b.force_hard_limit_n > 0.0 && b.force_hard_limit_n <= FORCE_HARD_LIMIT_BOUND_N) {
+            return Err(invalid(
+                "bus.force_hard_limit_n",
+                format!("must be in (0, {FORCE_HARD_LIMIT_BOUND_N}] N"),
+            ));
         }
-        if !(b.max_cable_speed_m_per_s.is_finite() && b.max_cable_speed_m_per_s > 0.0) {
+        if !(b.max_cable_speed_m_per_s > 0.0
+            && b.max_cable_speed_m_per_s <= MAX_CABLE_SPEED_BOUND_M_PER_S)
+        {
             return Err(invalid(
                 "bus.max_cable_speed_m_per_s",
-                "must be finite and > 0",
+                format!("must be in (0, {MAX_CABLE_SPEED_BOUND_M_PER_S}] m/s"),
+            ));
+        }
+        if !(b.max_cable_acceleration_m_per_s2 > 0.0
+            && b.max_cable_acceleration_m_per_s2 <= MAX_CABLE_ACCELERATION_BOUND_M_PER_S2)
+        {
+            return Err(invalid(
+                "bus.max_cable_acceleration_m_per_s2",
+                format!("must be in (0, {MAX_CABLE_ACCELERATION_BOUND_M_PER_S2}] m/s²"),
             ));
         }
         if !(1..=127).contains(&b.master_node_id)
@@ -761,16 +801,21 @@ impl DrivesConfig {
         if b.master_heartbeat_ms == 0 {
             return Err(invalid("bus.master_heartbeat_ms", "must be >= 1"));
         }
-        if b.drive_consumer_ms() != 0 && b.drive_consumer_ms() <= b.master_heartbeat_ms {
+        // The drives' watch of drive-io's heartbeat (0x1016) and their action on its loss or
+        // an NMT stop (0x6007) are safety functions: off (0 = no consumer, 0 = no action) is
+        // refused.
+        if b.drive_consumer_ms() <= b.master_heartbeat_ms {
             return Err(invalid(
                 "bus.drive_heartbeat_consumer_ms",
-                "must exceed bus.master_heartbeat_ms (or be 0 = off)",
+                "must exceed bus.master_heartbeat_ms (0 = off is refused: a drive must act \
+                 when drive-io's heartbeat stops)",
             ));
         }
-        if !(0..=3).contains(&b.abort_connection_option) {
+        if !(1..=3).contains(&b.abort_connection_option) {
             return Err(invalid(
                 "bus.abort_connection_option",
-                "must be 0 (no action), 1 (fault), 2 (disable voltage) or 3 (quick stop)",
+                "must be 1 (fault), 2 (disable voltage) or 3 (quick stop); 0 (no action) is \
+                 refused: the monitor's NMT stop and the loss of drive-io's heartbeat must act",
             ));
         }
         if !(b.following_error_window_m.is_finite() && b.following_error_window_m > 0.0) {
@@ -924,11 +969,10 @@ impl DrivesConfig {
         u64::from(self.bus.sync_period_us) * 1000
     }
 
-    /// Issue 16, item 3: the safety heartbeat is mandatory for the drive adapter. Without
-    /// `[safety_heartbeat]` drive-io refuses to start unless the bench-only override
-    /// ([`BENCH_OVERRIDE_FLAG`]) is given — never in config/ or systemd/ (a test checks the
-    /// shipped files). `Ok(true)`: running without the heartbeat on the override (the caller
-    /// logs that loudly).
+    /// The safety heartbeat is mandatory for the drive adapter. Without `[safety_heartbeat]`
+    /// drive-io refuses to start; only the bench executable ([`BENCH_EXECUTABLE`], never in
+    /// config/ or systemd/: a test checks the shipped files) passes `bench_override`.
+    /// `Ok(true)`: running without the heartbeat on the bench (the caller logs that loudly).
     pub fn require_safety_heartbeat(&self, bench_override: bool) -> Result<bool, ConfigError> {
         match (&self.safety_heartbeat, bench_override) {
             (Some(_), _) => Ok(false),
@@ -937,8 +981,8 @@ impl DrivesConfig {
                 "safety_heartbeat",
                 format!(
                     "missing: the safety monitor's fail-safe heartbeat is mandatory (nothing may \
-                     move without the monitor). For a bench without a monitor only, start \
-                     drive-io with {BENCH_OVERRIDE_FLAG}"
+                     move without the monitor). For a bench without a monitor only, run the \
+                     test rigs' {BENCH_EXECUTABLE} instead of drive-io"
                 ),
             )),
         }
@@ -983,6 +1027,7 @@ pub fn safety_io_tpdo_cob_id(node_id: u8) -> u16 {
     0x180 + u16::from(node_id)
 }
 
-/// drive-io's bench-only override: start without `[safety_heartbeat]` (no monitor on the bus).
+/// The bench-only executable that may start without `[safety_heartbeat]` (no monitor on the
+/// bus): crates/drive-rig's `drive-io-bench`. The production `drive-io` has no switch for it.
 /// Must never appear in config/ or systemd/.
-pub const BENCH_OVERRIDE_FLAG: &str = "--bench-without-safety-heartbeat";
+pub const BENCH_EXECUTABLE: &str = "drive-io-bench";

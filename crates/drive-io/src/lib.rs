@@ -12,6 +12,7 @@
 pub mod bank_set;
 pub mod budget;
 pub mod canopen;
+pub mod cli;
 pub mod commissioning;
 pub mod config;
 pub mod eds;

@@ -184,6 +184,12 @@ pub struct Master {
     boot_timeout_ns: u64,
     sdo_timeout_ns: u64,
     max_step_counts: [f64; MAX_CABLES],
+    /// Largest change of the step per period between consecutive steps (counts per period²).
+    max_accel_counts: [f64; MAX_CABLES],
+    /// The speed of the last applied step (counts per SYNC period of stream time: the step over
+    /// the sequence numbers it covered) and those periods; 0 after enabling, holding or a stop.
+    last_vel_counts: [f64; MAX_CABLES],
+    last_periods: f64,
     force_limit_n: f64,
     drives: [DriveView; MAX_NODES],
     phase: Phase,
@@ -225,6 +231,7 @@ impl Master {
         let winches = cfg.winches[..m].to_vec();
         let mut drives = [DriveView::new(0, 0); MAX_NODES];
         let mut max_step_counts = [0.0; MAX_CABLES];
+        let mut max_accel_counts = [0.0; MAX_CABLES];
         let period_s = f64::from(cfg.bus.sync_period_us) * 1e-6;
         for (k, (d, p)) in drives.iter_mut().zip(&plans).take(n).enumerate() {
             let iface = if k < m {
@@ -263,6 +270,11 @@ impl Master {
             // Largest step per SYNC period at max cable speed.
             max_step_counts[i] =
                 cfg.bus.max_cable_speed_m_per_s * period_s * winches[i].counts_per_m();
+            // Largest change of the step between consecutive periods at max acceleration.
+            max_accel_counts[i] = cfg.bus.max_cable_acceleration_m_per_s2
+                * period_s
+                * period_s
+                * winches[i].counts_per_m();
         }
         let feedback = DriveFeedback {
             cable_count: m as u32,
@@ -293,6 +305,9 @@ impl Master {
             boot_timeout_ns: u64::from(cfg.bus.boot_timeout_ms) * 1_000_000,
             sdo_timeout_ns: u64::from(cfg.bus.sdo_timeout_ms) * 1_000_000,
             max_step_counts,
+            max_accel_counts,
+            last_vel_counts: [0.0; MAX_CABLES],
+            last_periods: 1.0,
             force_limit_n: cfg.bus.force_hard_limit_n,
             drives,
             phase: Phase::Boot,
@@ -877,21 +892,23 @@ impl Master {
     }
 
     /// Leaves the latch with the safety monitor's reset ([`ResetGrant`], made only by
-    /// [`crate::reset::ResetGate`]): re-runs the enable sequence (holding the actual
-    /// positions) if every drive's heartbeat is fresh. False (nothing changed) when not latched
-    /// or a heartbeat is stale.
-    pub fn reset(&mut self, grant: ResetGrant, now_ns: u64) -> bool {
+    /// [`crate::reset::ResetGate`], consumed here): re-runs the enable sequence (holding the
+    /// actual positions) if every drive's heartbeat is fresh, and returns the grant's epoch.
+    /// Nothing changes when not latched or a heartbeat is stale: the grant comes back
+    /// (`Err`), to be retried or dropped.
+    pub fn reset(&mut self, grant: ResetGrant, now_ns: u64) -> Result<u32, ResetGrant> {
         if !self.is_latched() || !self.heartbeats_fresh(now_ns) {
-            return false;
+            return Err(grant);
         }
-        tracing::info!(epoch = grant.epoch(), "reset: re-enabling drives");
+        let epoch = grant.epoch();
+        tracing::info!(epoch, "reset: re-enabling drives");
         self.hb_inhibit = false;
         self.restart_nmt = std::mem::take(&mut self.nmt_stopped);
         self.fault_code = fault_code::NONE;
         self.fault_node = 0;
         self.set_phase(Phase::Enable);
         self.boot_start_ns = Some(now_ns);
-        true
+        Ok(epoch)
     }
 
     fn heartbeats_fresh(&self, now_ns: u64) -> bool {
@@ -1241,7 +1258,8 @@ impl Master {
         // setpoints may arrive within one SYNC) — and never more than the stale limit, beyond
         // which the drives are quick-stopped anyway. The first setpoint after enabling must
         // start at the held position (one period of motion).
-        let periods = if self.phase == Phase::Running {
+        let running = self.phase == Phase::Running;
+        let periods = if running {
             let own = now_ns.saturating_sub(self.last_apply_ns) as f64 / self.sync_period_ns as f64;
             let by_sequence = sp.sequence.saturating_sub(self.applied_seq) as f64;
             by_sequence
@@ -1250,6 +1268,15 @@ impl Master {
         } else {
             1.0
         };
+        // A hold is zero speed: out of Ready (enabled, holding) the previous step is rest, so the
+        // first moving step is acceleration-checked like every other one.
+        if !running {
+            self.last_vel_counts = [0.0; MAX_CABLES];
+            self.last_periods = 1.0;
+        }
+        // Between the midpoints of the previous step and this one.
+        let dt_mid = 0.5 * (periods + self.last_periods);
+        let mut vel = [0.0f64; MAX_CABLES];
         for (i, count) in counts.iter_mut().enumerate().take(self.m) {
             let node = self.drives[i].node;
             let Some(c) = self.winches[i].length_to_counts(sp.cable_length_m[i]) else {
@@ -1276,8 +1303,29 @@ impl Master {
                 self.stop(BusState::Fault, fault_code::SETPOINT_STEP, node);
                 return false;
             }
+            // Acceleration: the step's speed may change by at most max_accel × Δt from the
+            // previous step's (+2 counts of rounding); braking towards zero without reversing is
+            // never limited (the safe direction: a hold after an e-stop).
+            let v = (f64::from(c) - f64::from(self.target[i])) / periods;
+            let pv = self.last_vel_counts[i];
+            let braking = v * pv >= 0.0 && v.abs() <= pv.abs();
+            if !braking && (v - pv).abs() > self.max_accel_counts[i] * dt_mid + 2.0 {
+                tracing::error!(
+                    node,
+                    length = sp.cable_length_m[i],
+                    step_counts_per_period = v,
+                    previous_counts_per_period = pv,
+                    periods,
+                    "setpoint step accelerates the cable beyond max_cable_acceleration"
+                );
+                self.stop(BusState::Fault, fault_code::SETPOINT_STEP, node);
+                return false;
+            }
+            vel[i] = v;
             *count = c;
         }
+        self.last_vel_counts[..self.m].copy_from_slice(&vel[..self.m]);
+        self.last_periods = periods;
         self.target[..self.m].copy_from_slice(&counts[..self.m]);
         self.applied_seq = sp.sequence;
         self.last_apply_ns = now_ns;

@@ -304,6 +304,7 @@ pub fn run_with<B: CanBus>(
     let mut gate = ResetGate::new();
     let mut pending_reset: Option<(StateEvent, u64)> = None;
     let mut ignored_resets = 0u64;
+    let mut bad_events = 0u64;
     let mut buses = Buses::new(buses);
     let start_ns = monotonic_ns();
     let mut schedule = match cfg.bus.sync_source {
@@ -448,10 +449,30 @@ pub fn run_with<B: CanBus>(
             watch.as_ref().and_then(SafetyWatch::verified_epoch),
             master.is_latched(),
         );
-        while let Some(ev) = events.receive().unwrap_or_else(|e| {
-            tracing::warn!(error = %e, "bad state event ignored");
-            None
-        }) {
+        // Every event of this cycle is drained: a sample of a foreign contract version is
+        // skipped (and logged, rate-limited) without ending the drain, so a flood of bad events
+        // cannot hold an e-stop back by a cycle per bad sample. Bounded by the buffer's worth.
+        let mut drained = 0usize;
+        loop {
+            if drained >= 4 * <StateEvent as crs_ipc::Topic>::SUBSCRIBER_BUFFER {
+                break;
+            }
+            drained += 1;
+            let ev = match events.receive() {
+                Ok(Some(ev)) => ev,
+                Ok(None) => break,
+                Err(e @ crs_ipc::IpcError::Version { .. }) => {
+                    bad_events += 1;
+                    if bad_events.is_power_of_two() {
+                        tracing::warn!(error = %e, bad_events, "bad state event ignored");
+                    }
+                    continue;
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, "state event receive failed");
+                    break;
+                }
+            };
             if ev.source == ProcessId::DriveIo as u32 {
                 continue;
             }
@@ -466,24 +487,29 @@ pub fn run_with<B: CanBus>(
             master.on_event(&ev, cycle_now);
         }
         if let Some((ev, t0)) = pending_reset {
+            // Freshness is judged at the event's arrival (t0): the wait for the watch below
+            // must not make a fresh event stale.
             let verdict = match &watch {
-                Some(w) => gate.check(&ev, w.verified_epoch()),
-                None => gate.check_unauthenticated(&ev),
+                Some(w) => gate.check(&ev, w.verified_epoch(), t0),
+                None => gate.check_unauthenticated(&ev, t0),
             };
+            let in_window = cycle_now.saturating_sub(t0) < RESET_VERIFY_WINDOW_NS;
             match verdict {
-                Ok(grant) if master.reset(grant, cycle_now) => {
-                    gate.granted(grant);
-                    pending_reset = None;
-                }
-                Ok(_) if !master.is_latched() => pending_reset = None,
-                // Latched but a heartbeat is stale, or the watch has not verified the epoch
-                // yet: retry within the window.
-                Ok(_) | Err(Ignored::NotVerified { .. })
-                    if cycle_now.saturating_sub(t0) < RESET_VERIFY_WINDOW_NS => {}
-                Ok(_) => {
-                    tracing::warn!("reset not applied: a drive heartbeat is stale");
-                    pending_reset = None;
-                }
+                Ok(grant) => match master.reset(grant, cycle_now) {
+                    Ok(epoch) => {
+                        gate.granted(epoch);
+                        pending_reset = None;
+                    }
+                    Err(_) if !master.is_latched() => pending_reset = None,
+                    // Latched but a heartbeat is stale: retry within the window.
+                    Err(_) if in_window => {}
+                    Err(_) => {
+                        tracing::warn!("reset not applied: a drive heartbeat is stale");
+                        pending_reset = None;
+                    }
+                },
+                // The watch has not verified the epoch yet: retry within the window.
+                Err(Ignored::NotVerified { .. }) if in_window => {}
                 Err(why) => {
                     log_ignored(&mut ignored_resets, why, ev.source);
                     pending_reset = None;

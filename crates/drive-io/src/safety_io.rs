@@ -6,9 +6,12 @@
 //!   while the node is NMT operational, its safety watch ([`SafetyWatch`], the same validation
 //!   the drives and drive-io do: validation time, pair window, configuration signature,
 //!   counters) permits motion, and the e-stop circuit is closed. Anything else — a dead or
-//!   silent monitor, a STOP pair, an invalid pair, the monitor's NMT stop, a pressed e-stop
-//!   button — removes torque from every drive at once (stop category 0; the brakes close),
-//!   independently of what the drives' CANopen side believes.
+//!   silent monitor, a STOP pair, an invalid pair, an NMT stop, a pressed e-stop button —
+//!   removes torque from every drive at once (stop category 0; the brakes close), independently
+//!   of what the drives' CANopen side believes. An open e-stop circuit and an NMT stop also
+//!   inhibit the node's watch ([`SafetyWatch::inhibit_locally`]): releasing the button or an NMT
+//!   start gives the torque back only with the monitor's next reset (a newer epoch), never by
+//!   itself.
 //! * **Inputs**: bit 0 = e-stop circuit closed (button released; a normally-closed contact,
 //!   so a broken wire reads as pressed), bit 1 = the operator's reset key turned. Reported in
 //!   TPDO1 `[inputs, outputs]` on every change and at least every `inputs_period_ms`.
@@ -101,7 +104,10 @@ impl SafetyIoNode {
         if frame.id() == 0 && d.len() == 2 && (d[1] == 0 || d[1] == self.node) {
             match d[0] {
                 NMT_START => self.nmt = NmtState::Operational,
-                NMT_STOP => self.nmt = NmtState::Stopped,
+                NMT_STOP => {
+                    self.nmt = NmtState::Stopped;
+                    self.watch.inhibit_locally(now_ns);
+                }
                 NMT_ENTER_PREOP => self.nmt = NmtState::PreOperational,
                 NMT_RESET_NODE | NMT_RESET_COMM => {
                     self.sent = None;
@@ -117,6 +123,9 @@ impl SafetyIoNode {
     }
 
     fn update_outputs(&mut self, now_ns: u64) {
+        if self.inputs & INPUT_ESTOP_CLOSED == 0 {
+            self.watch.inhibit_locally(now_ns);
+        }
         let release = self.nmt == NmtState::Operational
             && self.inputs & INPUT_ESTOP_CLOSED != 0
             && self.watch.permits(now_ns);
@@ -194,12 +203,24 @@ mod tests {
         (SafetyIoNode::new(&io, w), w)
     }
 
-    /// The monitor's cycle: signature pair then heartbeat pair.
+    /// The monitor's cycle: signature pair then heartbeat pair (epoch 1).
     fn monitor_cycle(
         n: &mut SafetyIoNode,
         w: &SafetyWatchConfig,
         k: u16,
         state: SafetyState,
+        t: u64,
+        out: &mut FrameBuf,
+    ) {
+        monitor_cycle_e(n, w, k, state, 1, t, out)
+    }
+
+    fn monitor_cycle_e(
+        n: &mut SafetyIoNode,
+        w: &SafetyWatchConfig,
+        k: u16,
+        state: SafetyState,
+        epoch: u32,
         t: u64,
         out: &mut FrameBuf,
     ) {
@@ -215,7 +236,7 @@ mod tests {
             state,
             cause: 0,
             counter: k,
-            epoch: 1,
+            epoch,
         };
         for f in &safety_frame::encode(&hb, w.cob_id) {
             n.handle_frame(f, t, out);
@@ -262,10 +283,33 @@ mod tests {
         n.set_inputs(false, false);
         n.poll(t, &mut out);
         assert!(!n.sto_released(), "e-stop pressed");
+        // Released: the same epoch's RUN pairs do not give the torque back (no self-release);
+        // the monitor's next reset (a newer epoch) does.
         n.set_inputs(true, false);
-        monitor_cycle(&mut n, &w, 5, SafetyState::Run, t, &mut out);
-        assert!(n.sto_released(), "released again with the next valid pair");
-        monitor_cycle(&mut n, &w, 6, SafetyState::Stop, t + 15 * MS, &mut out);
+        for k in 5..10 {
+            monitor_cycle(
+                &mut n,
+                &w,
+                k,
+                SafetyState::Run,
+                t + u64::from(k) * MS,
+                &mut out,
+            );
+        }
+        assert!(!n.sto_released(), "released by the button");
+        for k in 10..13 {
+            monitor_cycle_e(
+                &mut n,
+                &w,
+                k,
+                SafetyState::Run,
+                2,
+                t + u64::from(k) * MS,
+                &mut out,
+            );
+        }
+        assert!(n.sto_released(), "released by the monitor's reset");
+        monitor_cycle_e(&mut n, &w, 13, SafetyState::Stop, 2, t + 15 * MS, &mut out);
         assert!(!n.sto_released(), "STOP pair");
         n.handle_frame(&crate::canopen::nmt(NMT_STOP, 0), t + 16 * MS, &mut out);
         assert_eq!(n.nmt_state(), NmtState::Stopped);

@@ -13,13 +13,15 @@
 //!
 //! It starts inhibited (nothing received yet) and the FIRST release (power-on) needs
 //! `release_pairs` consecutive valid RUN pairs of one reset epoch. After it has permitted once,
-//! an inhibit is never left by itself (issue 16, no self-release): only `release_pairs`
-//! consecutive valid RUN pairs carrying a reset epoch NEWER than the one in force when it
-//! inhibited release it. The monitor advances its epoch only when its verification accepts an
-//! operator reset (ISO 13849-1 §5.2.2: a manual reset, not the return of a signal, ends a
-//! stop), or when it is restarted (its epoch starts at its wall clock in seconds). A replay of
-//! recorded heartbeats after the monitor died, or a second producer repeating its frames,
-//! carries an old epoch and releases nothing. While permitted, a pair with another epoch (a
+//! an inhibit is never left by itself (no self-release): only `release_pairs` consecutive valid
+//! RUN pairs carrying an epoch that stands for an operator reset this watch has not acted on
+//! release it ([`reset_epoch::releases`]): a later reset count of the same monitor instance, or
+//! a reset (count >= 1) of another instance. The epoch is the monitor instance (a random nonce
+//! drawn at its start) and the count of operator resets that instance accepted (ISO 13849-1
+//! §5.2.2: a manual reset, not the return of a signal, ends a stop). A RESTARTED monitor is a
+//! new instance at count 0: its RUN pairs release nothing that stopped, until an operator
+//! resets the new instance. A replay of recorded heartbeats after the monitor died, or a second
+//! producer repeating its frames, carries an old epoch and releases nothing. While permitted, a pair with another epoch (a
 //! second producer) inhibits. Releasing never moves anything: a drive that was stopped stays in
 //! Quick Stop Active until the master re-enables it, and drive-io's master leaves its latch
 //! only with the monitor's reset of the epoch this watch verified ([`VerifiedEpoch`]; see
@@ -41,7 +43,7 @@
 use can_transport::CanFrame;
 use can_transport::safety_frame::{
     ConfigSignature, DEFAULT_COB_ID, PairError, PairReceiver, SafetyState, SrdoParams,
-    config_cob_id, epoch_newer,
+    config_cob_id, reset_epoch,
 };
 use serde::Deserialize;
 
@@ -169,6 +171,10 @@ pub enum InhibitReason {
     ConfigCrc { expected: u16, got: u16 },
     /// No valid configuration signature within the validation time.
     ConfigMissing,
+    /// The device's own safety input stopped it (the safety I/O node's e-stop circuit opened,
+    /// or it was NMT-stopped): like any inhibit, left only on a reset the watch has not acted
+    /// on, never by the input returning.
+    Local,
 }
 
 /// A reset epoch read from a valid, complete RUN pair on the monitor's own COB-IDs while the
@@ -424,9 +430,10 @@ impl SafetyWatch {
             self.consecutive = 0;
         }
         self.consecutive = self.consecutive.saturating_add(1);
-        // No self-release (issue 16): once permitted, only a newer epoch (an accepted operator
-        // reset, or a restarted monitor) may end an inhibit; the first release is the power-on.
-        let may_release = self.epoch.is_none_or(|e| epoch_newer(epoch, e));
+        // No self-release: once permitted, only an operator reset this watch has not acted on
+        // (a later count of the same instance, or a reset of a new instance — not a restarted
+        // monitor's start epoch) may end an inhibit; the first release is the power-on.
+        let may_release = self.epoch.is_none_or(|e| reset_epoch::releases(epoch, e));
         if may_release && self.consecutive >= self.cfg.release_pairs {
             self.state = WatchState::Permit;
             self.epoch = Some(epoch);
@@ -444,6 +451,14 @@ impl SafetyWatch {
         self.state == WatchState::Inhibit(InhibitReason::NotYetValid)
             && self.trips == 0
             && now_ns.saturating_sub(self.started_ns) <= self.validation_ns
+    }
+
+    /// Inhibits from the device's own side (see [`InhibitReason::Local`]): the release then needs
+    /// a reset of the monitor, as after any other inhibit.
+    pub fn inhibit_locally(&mut self, now_ns: u64) {
+        if self.state == WatchState::Permit {
+            self.inhibit(InhibitReason::Local, now_ns);
+        }
     }
 
     /// Applies the validation-time check at `now_ns`; true if motion is permitted.
@@ -633,6 +648,47 @@ mod tests {
                 in_force: 3,
                 got: 4
             })
+        );
+    }
+
+    /// A restarted monitor (a new instance at count 0) releases nothing that stopped under the
+    /// previous one; the new instance's first operator reset does.
+    #[test]
+    fn a_restarted_monitor_releases_only_with_a_reset_of_the_new_instance() {
+        use reset_epoch::new;
+        let mut w = SafetyWatch::new(SafetyWatchConfig::default());
+        for k in 0..3u16 {
+            feed_e(
+                &mut w,
+                k,
+                SafetyState::Run,
+                new(0xAAAA, 4),
+                u64::from(k) * 15 * MS,
+            );
+        }
+        assert!(w.permits(40 * MS));
+        // The monitor dies: timeout. A new instance starts (count 0) and sends RUN pairs.
+        assert!(!w.permits(200 * MS));
+        for k in 0..100u16 {
+            let t = 300 * MS + u64::from(k) * 15 * MS;
+            feed_e(&mut w, k, SafetyState::Run, new(0x5555, 0), t);
+            assert!(!w.permits(t + MS), "released on a start epoch");
+        }
+        // The operator resets the new instance: released on its count 1.
+        let t0 = 300 * MS + 100 * 15 * MS;
+        for k in 100..103u16 {
+            feed_e(
+                &mut w,
+                k,
+                SafetyState::Run,
+                new(0x5555, 1),
+                t0 + u64::from(k) * MS,
+            );
+        }
+        assert!(w.permits(t0 + 103 * MS));
+        assert_eq!(
+            w.verified_epoch().map(VerifiedEpoch::get),
+            Some(new(0x5555, 1))
         );
     }
 
@@ -920,7 +976,7 @@ mod tests {
                         prop_assert_eq!(Some(v.get()), w.epoch_in_force());
                         if before != WatchState::Permit && let Some(old) = epoch_before {
                             prop_assert!(
-                                epoch_newer(v.get(), old),
+                                reset_epoch::releases(v.get(), old),
                                 "released from {:?} on epoch {} (in force {})", before, v.get(), old
                             );
                         }

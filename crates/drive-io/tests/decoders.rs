@@ -114,6 +114,35 @@ fn errors_name_the_field() {
             GOOD.replace("[bus]", "[bus]\nsetpoint_wait_us = 500"),
             "bus.setpoint_wait_us",
         ),
+        // Safety-relevant values bounded both ways, refused by key.
+        (
+            GOOD.replace("[bus]", "[bus]\nstale_setpoint_cycles = 501"),
+            "bus.stale_setpoint_cycles",
+        ),
+        (
+            GOOD.replace("[bus]", "[bus]\nabort_connection_option = 0"),
+            "bus.abort_connection_option",
+        ),
+        (
+            GOOD.replace("[bus]", "[bus]\ndrive_heartbeat_consumer_ms = 0"),
+            "bus.drive_heartbeat_consumer_ms",
+        ),
+        (
+            GOOD.replace("[bus]", "[bus]\nmax_cable_speed_m_per_s = 11.0"),
+            "bus.max_cable_speed_m_per_s",
+        ),
+        (
+            GOOD.replace("[bus]", "[bus]\nmax_cable_acceleration_m_per_s2 = 0.0"),
+            "bus.max_cable_acceleration_m_per_s2",
+        ),
+        (
+            GOOD.replace("[bus]", "[bus]\nmax_cable_acceleration_m_per_s2 = 201.0"),
+            "bus.max_cable_acceleration_m_per_s2",
+        ),
+        (
+            GOOD.replace("[bus]", "[bus]\nforce_hard_limit_n = 20001.0"),
+            "bus.force_hard_limit_n",
+        ),
         (
             GOOD.replace("[bus]", "[bus]\nsync_source = \"tick\""),
             "sync_source",

@@ -144,6 +144,36 @@ impl Sim {
     }
 }
 
+/// 3 t² − 2 t³: a rest-to-rest profile (zero speed at both ends, bounded acceleration), as a
+/// planner's stream starts and ends.
+fn smoothstep(t: f64) -> f64 {
+    let t = t.clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// Accelerates every cable from rest (`l0`, holding as setpoint `seq`) at 40 m/s² (within the
+/// default 50 m/s² of `bus.max_cable_acceleration_m_per_s2`) up to `v` m/s; returns the last
+/// lengths and the next sequence number.
+fn ramp_up(s: &mut Sim, l0: &[f64], v: f64, mut seq: u64) -> (Vec<f64>, u64) {
+    let (mut l, mut vel) = (l0.to_vec(), 0.0);
+    while vel < v {
+        vel = (vel + 40.0 * 1e-3).min(v);
+        seq += 1;
+        for x in &mut l {
+            *x += vel * 1e-3;
+        }
+        let sp = s.setpoint(seq, &l);
+        s.step(Some(&sp));
+        assert_eq!(
+            s.master.state(),
+            BusState::Running,
+            "{:?}",
+            s.master.feedback().fault_code
+        );
+    }
+    (l, seq + 1)
+}
+
 #[test]
 fn boot_sequence_uses_nmt_sdo_and_ds402() {
     let mut s = Sim::new();
@@ -222,7 +252,10 @@ fn follows_setpoints_and_reports_feedback() {
     let mut seq = 0;
     for k in 1..=400 {
         seq += 1;
-        let l: Vec<f64> = l0.iter().map(|x| x + 0.1 * (k as f64 / 400.0)).collect();
+        let l: Vec<f64> = l0
+            .iter()
+            .map(|x| x + 0.1 * smoothstep(k as f64 / 400.0))
+            .collect();
         let sp = s.setpoint(seq, &l);
         s.step(Some(&sp));
         assert_eq!(s.master.state(), BusState::Running);
@@ -348,13 +381,15 @@ fn invalid_setpoints_fault_without_moving() {
     let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
     let sp = s.setpoint(1, &l0);
     s.step(Some(&sp));
-    // 4.5 mm in 1 ms (4.5 m/s) is accepted; 4.5 mm + 1 mm more is not.
-    let l: Vec<f64> = l0.iter().map(|x| x + 0.0045).collect();
-    let sp = s.setpoint(2, &l);
+    // At 4.5 m/s (reached at the allowed acceleration) 4.5 mm in 1 ms is accepted; a step of
+    // 5.5 mm (5.5 m/s, within the acceleration limit of one period? no matter) is not.
+    let (l1, seq) = ramp_up(&mut s, &l0, 4.5, 1);
+    let l: Vec<f64> = l1.iter().map(|x| x + 0.0045).collect();
+    let sp = s.setpoint(seq, &l);
     s.step(Some(&sp));
     assert_eq!(s.master.state(), BusState::Running);
-    let l: Vec<f64> = l0.iter().map(|x| x + 0.0045 + 0.0055).collect();
-    let sp = s.setpoint(3, &l); // stamped 1 ms after setpoint 2
+    let l: Vec<f64> = l.iter().map(|x| x + 0.0055).collect();
+    let sp = s.setpoint(seq + 1, &l); // stamped 1 ms after the previous one
     s.step(Some(&sp));
     assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
     // Wrong cable count.
@@ -463,8 +498,9 @@ fn the_step_limit_runs_on_drive_ios_own_clock_not_the_senders_timestamps() {
     // Two setpoints within one SYNC (phase slip): 2 periods of motion (9 mm at 4.5 m/s) pass.
     let mut s = Sim::new();
     let l0 = start(&mut s);
-    let l: Vec<f64> = l0.iter().map(|x| x + 0.009).collect();
-    let sp = s.setpoint(3, &l);
+    let (l1, seq) = ramp_up(&mut s, &l0, 4.5, 1);
+    let l: Vec<f64> = l1.iter().map(|x| x + 0.009).collect();
+    let sp = s.setpoint(seq + 1, &l);
     s.step(Some(&sp));
     assert_eq!(s.master.state(), BusState::Running);
     // After 10 SYNCs without a new setpoint the drives held; a setpoint 10 periods of motion
@@ -472,8 +508,8 @@ fn the_step_limit_runs_on_drive_ios_own_clock_not_the_senders_timestamps() {
     for _ in 0..9 {
         s.step(None);
     }
-    let l: Vec<f64> = l0.iter().map(|x| x + 0.009 + 0.045).collect();
-    let sp = s.setpoint(13, &l);
+    let l: Vec<f64> = l.iter().map(|x| x + 0.045).collect();
+    let sp = s.setpoint(seq + 11, &l);
     s.step(Some(&sp));
     assert_eq!(
         s.master.state(),
@@ -481,6 +517,60 @@ fn the_step_limit_runs_on_drive_ios_own_clock_not_the_senders_timestamps() {
         "{:?}",
         s.master.feedback().fault_code
     );
+}
+
+/// A hold is zero speed: the first step out of it may change the cable's speed by at most
+/// max_cable_acceleration × one period — a stream that jumps from rest to 4.5 m/s (within the
+/// speed limit, the "violent start from rest") faults SETPOINT_STEP without moving;
+/// the same speed reached at the allowed acceleration runs; braking to a hold at once is
+/// allowed.
+#[test]
+fn a_step_out_of_a_hold_is_acceleration_checked() {
+    // From Ready (enabled, holding): 4.5 mm in the first period.
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    let sp = s.setpoint(1, &l0);
+    s.step(Some(&sp));
+    let l: Vec<f64> = l0.iter().map(|x| x + 0.0045).collect();
+    let sp = s.setpoint(2, &l);
+    s.step(Some(&sp));
+    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    for _ in 0..20 {
+        s.step(None);
+    }
+    let moved: f64 = s
+        .axes
+        .iter()
+        .zip(&l0)
+        .map(|(a, l)| (a.length_m - l).abs())
+        .fold(0.0, f64::max);
+    assert!(moved < 1e-4, "the jump was applied: {moved} m");
+    // Out of a hold while running (the stream stood still for 30 periods, then jumps).
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    for k in 1..=30 {
+        let sp = s.setpoint(k, &l0);
+        s.step(Some(&sp));
+    }
+    assert_eq!(s.master.state(), BusState::Running);
+    let l: Vec<f64> = l0.iter().map(|x| x + 0.0045).collect();
+    let sp = s.setpoint(31, &l);
+    s.step(Some(&sp));
+    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    // The same speed reached at the allowed acceleration, then an abrupt hold: fine.
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    let sp = s.setpoint(1, &l0);
+    s.step(Some(&sp));
+    let (l1, seq) = ramp_up(&mut s, &l0, 4.5, 1);
+    for k in 0..10 {
+        let sp = s.setpoint(seq + k, &l1);
+        s.step(Some(&sp));
+        assert_eq!(s.master.state(), BusState::Running);
+    }
 }
 
 #[test]
@@ -564,7 +654,10 @@ fn drives_with_other_default_mappings_are_configured_from_the_eds_and_run() {
     }
     let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
     for k in 1..=200u64 {
-        let l: Vec<f64> = l0.iter().map(|x| x + 0.05 * (k as f64 / 200.0)).collect();
+        let l: Vec<f64> = l0
+            .iter()
+            .map(|x| x + 0.05 * smoothstep(k as f64 / 200.0))
+            .collect();
         let sp = s.setpoint(k, &l);
         s.step(Some(&sp));
         assert_eq!(s.master.state(), BusState::Running);
@@ -752,10 +845,11 @@ fn reset_after_an_escalation_restarts_the_drives_and_the_heartbeat() {
         2,
     );
     ev.detail = 1;
+    ev.timestamp_ns = s.now;
     let grant = drive_io::reset::ResetGate::new()
-        .check_unauthenticated(&ev)
+        .check_unauthenticated(&ev, s.now)
         .unwrap();
-    assert!(s.master.reset(grant, s.now));
+    assert_eq!(s.master.reset(grant, s.now).ok(), Some(1));
     for _ in 0..200 {
         s.step(None);
         if s.master.state() == BusState::Ready {

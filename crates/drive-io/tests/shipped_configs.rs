@@ -3,7 +3,7 @@
 //! start without it appears nowhere in config/ or systemd/.
 
 use drive_io::DrivesConfig;
-use drive_io::config::BENCH_OVERRIDE_FLAG;
+use drive_io::config::BENCH_EXECUTABLE;
 use std::path::{Path, PathBuf};
 
 fn repo() -> PathBuf {
@@ -58,11 +58,13 @@ fn the_bench_override_is_never_shipped() {
         let Ok(text) = std::fs::read_to_string(p) else {
             continue;
         };
-        assert!(
-            !text.contains(BENCH_OVERRIDE_FLAG),
-            "{}: contains the bench-only override {BENCH_OVERRIDE_FLAG}",
-            p.display()
-        );
+        for bench in [BENCH_EXECUTABLE, "--bench-without-safety-heartbeat"] {
+            assert!(
+                !text.contains(bench),
+                "{}: names the bench-only {bench}",
+                p.display()
+            );
+        }
     }
 }
 
@@ -73,14 +75,15 @@ fn without_the_heartbeat_drive_io_refuses_unless_overridden() {
     cfg.safety_heartbeat = None;
     let e = cfg.require_safety_heartbeat(false).unwrap_err().to_string();
     assert!(
-        e.contains("safety_heartbeat") && e.contains(BENCH_OVERRIDE_FLAG),
+        e.contains("safety_heartbeat") && e.contains(BENCH_EXECUTABLE),
         "{e}"
     );
     assert_eq!(cfg.require_safety_heartbeat(true).ok(), Some(true));
 }
 
 /// The daemon itself: a config without `[safety_heartbeat]` is refused at start, naming the
-/// table and the override.
+/// table and the bench executable; the production binary has no switch to allow it (the old
+/// `--bench-without-safety-heartbeat` is an unknown argument now).
 #[test]
 fn the_daemon_refuses_to_start_without_the_heartbeat() {
     let text = std::fs::read_to_string(repo().join("config/drives.toml")).unwrap();
@@ -99,7 +102,18 @@ fn the_daemon_refuses_to_start_without_the_heartbeat() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{err}");
     assert!(
-        err.contains("safety_heartbeat") && err.contains(BENCH_OVERRIDE_FLAG),
+        err.contains("safety_heartbeat") && err.contains(BENCH_EXECUTABLE),
+        "{err}"
+    );
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_drive-io"))
+        .arg("--config")
+        .arg(&path)
+        .arg("--bench-without-safety-heartbeat")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("unexpected argument"),
         "{err}"
     );
     let _ = std::fs::remove_dir_all(&dir);

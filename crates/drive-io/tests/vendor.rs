@@ -295,7 +295,12 @@ fn vendor_drives_with_load_cells_boot_follow_and_report_the_cells_forces() {
     let l0: Vec<f64> = r.master.feedback().cable_length_m[..2].to_vec();
     r.frames.clear();
     for k in 1..=200u64 {
-        let l: Vec<f64> = l0.iter().map(|x| x + 0.02 * (k as f64 / 200.0)).collect();
+        // Rest to rest (3t² − 2t³): a step out of a hold is acceleration-checked.
+        let t = k as f64 / 200.0;
+        let l: Vec<f64> = l0
+            .iter()
+            .map(|x| x + 0.02 * t * t * (3.0 - 2.0 * t))
+            .collect();
         let sp = r.setpoint(k, &l);
         r.step(Some(&sp));
     }

@@ -322,14 +322,12 @@ impl Rig {
             if now - start >= dur {
                 break;
             }
-            let t = (now - start) as f64 * 1e-9;
-            // A 1 kHz producer numbers one setpoint per millisecond: when this thread was not
-            // scheduled for k ms, the k - 1 samples in between are lost, not renumbered
-            // (drive-io judges the step by the sequence numbers that passed).
-            if let Some(prev) = sent.last() {
-                let lost = (now.saturating_sub(prev.timestamp_ns) / 1_000_000).saturating_sub(1);
-                self.seq += lost;
-            }
+            // The profile advances one millisecond per published setpoint, not with the wall
+            // clock: when this thread was not scheduled for k ms it continues where it was
+            // instead of jumping k ms of motion at once. Such a jump is a velocity spike that
+            // drive-io's acceleration limit rightly refuses; a real-time motion core never
+            // produces one.
+            let t = sent.len() as f64 * 1e-3;
             sent.push(self.publish_at(&profile(t), now)?);
             std::thread::sleep(Duration::from_micros(900));
         }
@@ -610,7 +608,9 @@ pub fn scenario_stale(buses: &RigBuses, prefix: &str) -> Res<String> {
     let mut rig = Rig::start(buses, prefix)?;
     rig.boot()?;
     let init = rig.initial;
-    rig.stream(Duration::from_millis(300), |t| init.map(|l| l + 0.2 * t))?;
+    rig.stream(Duration::from_millis(300), |t| {
+        init.map(|l| l + ramp_m(0.2, t))
+    })?;
     rig.wait_state(BusState::Running, Duration::from_secs(1), &[])?;
     // Stop publishing.
     let f = rig.wait_state(
@@ -639,15 +639,22 @@ pub fn scenario_heartbeat_loss(buses: &RigBuses, prefix: &str) -> Res<String> {
     let mut rig = Rig::start(buses, prefix)?;
     rig.boot()?;
     let init = rig.initial;
-    rig.stream(Duration::from_millis(200), |t| init.map(|l| l + 0.1 * t))?;
+    let sent = rig.stream(Duration::from_millis(200), |t| {
+        init.map(|l| l + ramp_m(0.1, t))
+    })?;
     rig.wait_state(BusState::Running, Duration::from_secs(1), &[])?;
+    // Hold where the stream ended (braking is free; a jump ahead would be a velocity step).
+    let hold: [f64; HIL_WINCHES] = match sent.last() {
+        Some(s) => std::array::from_fn(|i| s.cable_length_m[i]),
+        None => init,
+    };
     let victim = 2;
     rig.control.mute_heartbeat(victim);
     let t0 = Instant::now();
     // Keep streaming: the fault must come from the heartbeat consumer, not from stale setpoints.
     let mut f = None;
     while t0.elapsed() < Duration::from_secs(30) {
-        let l = init.map(|l| l + 0.02);
+        let l = hold;
         rig.publish(&l)?;
         let fb = rig.latest_feedback(Duration::from_secs(1))?;
         match BusState::from_u32(fb.bus_state) {
@@ -679,12 +686,29 @@ pub fn scenario_heartbeat_loss(buses: &RigBuses, prefix: &str) -> Res<String> {
     ))
 }
 
+/// The position (m) after `t` s of a move at `v_m_per_s` that starts from rest at
+/// [`RAMP_ACCEL_M_PER_S2`]: drive-io refuses a velocity step out of a hold (its
+/// `max_cable_acceleration_m_per_s2`), as a real motion core never commands one.
+pub fn ramp_m(v_m_per_s: f64, t: f64) -> f64 {
+    let t1 = v_m_per_s.abs() / RAMP_ACCEL_M_PER_S2;
+    if t < t1 {
+        0.5 * RAMP_ACCEL_M_PER_S2 * t * t * v_m_per_s.signum()
+    } else {
+        v_m_per_s * (t - 0.5 * t1)
+    }
+}
+
+/// The acceleration of [`ramp_m`]'s start (below drive-io's default limit of 50 m/s²).
+pub const RAMP_ACCEL_M_PER_S2: f64 = 10.0;
+
 /// An e-stop event on the process bus -> quick stop all, hold; Reset re-enables.
 pub fn scenario_estop(buses: &RigBuses, prefix: &str) -> Res<String> {
     let mut rig = Rig::start(buses, prefix)?;
     rig.boot()?;
     let init = rig.initial;
-    rig.stream(Duration::from_millis(200), |t| init.map(|l| l - 0.1 * t))?;
+    rig.stream(Duration::from_millis(200), |t| {
+        init.map(|l| l + ramp_m(-0.1, t))
+    })?;
     rig.wait_state(BusState::Running, Duration::from_secs(1), &[])?;
     let ev = StateEvent::new(ProcessId::Test, EventKind::EStop, 1);
     rig.events.publish(&ev).map_err(|e| e.to_string())?;

@@ -50,16 +50,42 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-/// A reset minted the one way there is: the gate, from the monitor's reset event.
-fn reset() -> ResetAuthority {
+const NOW: u64 = 100_000_000_000;
+
+/// The monitor's epoch announcement of `epoch`, stamped `t`.
+fn announcement(epoch: u32, t: u64) -> crs_ipc::StateEvent {
+    let mut ev = crs_ipc::StateEvent::new(
+        crs_ipc::ProcessId::SafetyMonitor,
+        crs_ipc::EventKind::StateChanged,
+        1,
+    );
+    ev.detail = crs_ipc::monitor_state::EPOCH_ANNOUNCE;
+    ev.detail_node = epoch;
+    ev.timestamp_ns = t;
+    ev
+}
+
+/// The monitor's Reset event of `epoch`, stamped `t`.
+fn reset_event(epoch: u32, t: u64) -> crs_ipc::StateEvent {
     let mut ev = crs_ipc::StateEvent::new(
         crs_ipc::ProcessId::SafetyMonitor,
         crs_ipc::EventKind::Reset,
-        1,
+        2,
     );
-    ev.detail = 1;
-    ResetGate::new()
-        .check(&ev)
+    ev.detail = epoch;
+    ev.timestamp_ns = t;
+    ev
+}
+
+/// A reset minted the one way there is: the gate, from the monitor's announcement and reset
+/// event.
+fn reset() -> ResetAuthority {
+    let mut gate = ResetGate::new();
+    assert_eq!(
+        gate.check(&announcement(1, NOW), NOW),
+        Err(ResetIgnored::NotAReset)
+    );
+    gate.check(&reset_event(1, NOW), NOW)
         .expect("the monitor's reset event carries a reset")
 }
 
@@ -607,7 +633,7 @@ fn only_a_reset_event_mints_a_reset_and_other_commands_do_not_clear_the_latch() 
     ] {
         let ev = crs_ipc::StateEvent::new(crs_ipc::ProcessId::SafetyMonitor, kind, 1);
         assert_eq!(
-            ResetGate::new().check(&ev),
+            ResetGate::new().check(&ev, NOW),
             Err(ResetIgnored::NotAReset),
             "{kind:?}"
         );
@@ -619,11 +645,12 @@ fn only_a_reset_event_mints_a_reset_and_other_commands_do_not_clear_the_latch() 
     );
     foreign.version = crs_ipc::CONTRACT_VERSION + 1;
     assert_eq!(
-        ResetGate::new().check(&foreign),
+        ResetGate::new().check(&foreign, NOW),
         Err(ResetIgnored::NotAReset),
         "other contract version"
     );
-    // Issue 16: only the safety monitor's reset, and only with a newer epoch.
+    // Only the safety monitor's reset, and only of an epoch it announced and this loop has
+    // not acted on.
     let mut gate = ResetGate::new();
     for src in [
         crs_ipc::ProcessId::Operator,
@@ -633,28 +660,62 @@ fn only_a_reset_event_mints_a_reset_and_other_commands_do_not_clear_the_latch() 
     ] {
         let mut ev = crs_ipc::StateEvent::new(src, crs_ipc::EventKind::Reset, 1);
         ev.detail = 5;
-        assert_eq!(gate.check(&ev), Err(ResetIgnored::Source(src as u32)));
+        ev.timestamp_ns = NOW;
+        assert_eq!(gate.check(&ev, NOW), Err(ResetIgnored::Source(src as u32)));
     }
-    let mut ev = crs_ipc::StateEvent::new(
-        crs_ipc::ProcessId::SafetyMonitor,
-        crs_ipc::EventKind::Reset,
-        1,
+    // Never "any epoch first": without the monitor's announcement nothing is accepted.
+    assert_eq!(
+        gate.check(&reset_event(5, NOW), NOW),
+        Err(ResetIgnored::NotAnnounced {
+            epoch: 5,
+            announced: None
+        })
     );
-    ev.detail = 5;
-    assert!(gate.check(&ev).is_ok());
+    let _ = gate.check(&announcement(5, NOW), NOW);
+    assert_eq!(gate.announced_epoch(), Some(5));
+    assert!(gate.check(&reset_event(5, NOW), NOW).is_ok());
     // The same event again (a replay), or an older epoch: ignored.
     assert_eq!(
-        gate.check(&ev),
+        gate.check(&reset_event(5, NOW), NOW),
         Err(ResetIgnored::NotNewer { epoch: 5, last: 5 })
     );
-    ev.detail = 4;
+    let _ = gate.check(&announcement(6, NOW + 1), NOW + 1);
+    // A reset of another epoch than the announced one, or stamped before the announcement.
+    assert!(matches!(
+        gate.check(&reset_event(7, NOW + 1), NOW + 1),
+        Err(ResetIgnored::NotAnnounced { .. })
+    ));
+    assert!(matches!(
+        gate.check(&reset_event(6, NOW), NOW + 1),
+        Err(ResetIgnored::NotAnnounced { .. })
+    ));
+    // Stale, or stamped in the loop's future.
     assert_eq!(
-        gate.check(&ev),
-        Err(ResetIgnored::NotNewer { epoch: 4, last: 5 })
+        gate.check(&reset_event(6, NOW + 1), NOW + 3_000_000_000),
+        Err(ResetIgnored::Stale)
     );
-    ev.detail = 6;
-    assert!(gate.check(&ev).is_ok());
+    assert_eq!(
+        gate.check(&reset_event(6, NOW + 1_000_000_000), NOW + 1),
+        Err(ResetIgnored::Stale)
+    );
+    assert!(gate.check(&reset_event(6, NOW + 2), NOW + 2).is_ok());
     assert_eq!(gate.last_epoch(), Some(6));
+    // A restarted monitor (a new instance): its start epoch is no reset even when announced;
+    // its first accepted reset is.
+    use crs_limits::reset_epoch::new;
+    let t = NOW + 10;
+    let _ = gate.check(&announcement(new(0x7777, 0), t), t);
+    assert_eq!(
+        gate.check(&reset_event(new(0x7777, 0), t), t),
+        Err(ResetIgnored::StartEpoch {
+            epoch: new(0x7777, 0)
+        })
+    );
+    let _ = gate.check(&announcement(new(0x7777, 1), t + 1), t + 1);
+    assert!(
+        gate.check(&reset_event(new(0x7777, 1), t + 1), t + 1)
+            .is_ok()
+    );
     let mut hl = setup(tour());
     let mut sink = Ring(vec![JointSetpoint::default(); 1], 0);
     let stats = LoopStats::default();

@@ -93,7 +93,7 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
     for i in 0..8 {
         drives.push_str(&format!(
             "[[force_sensor]]\ninterface = \"{}\"\nnode_id = {}\ncable = {}\n\
-             n_per_unit = 0.1\nevery_n_syncs = 5\n",
+             n_per_unit = 0.1\nevery_n_syncs = {LOAD_CELL_EVERY_N_SYNCS}\n",
             drive_interface(i),
             33 + i,
             i + 1
@@ -108,16 +108,25 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
          [feedback]\nfollowing_error_mm = 100.0\nwindow_setpoints = 200\nsilence_cycles = {}\n\
          [can]\ndrives = \"drives.toml\"\nsafety_cob_id = 0x101\n\
          check_rpdo = true\nreset_wait_ms = 2000\nreader_stall_cycles = {}\n\
+         safety_io_silence_cycles = {}\n\
          safety_validation_time_ms = {validation_ms}\nsafety_pair_window_ms = {}\n\
          [motion]\nsetpoint_period_ms = {}\n\
-         [forces]\nsilence_cycles = {}\n",
+         [forces]\nsilence_cycles = {}\n\
+         [reset]\nkey = true\nsocket = \"reset.sock\"\noperator_group = \"{}\"\n",
         args.silence_cycles,
         args.feedback_silence_cycles,
         // Stall-related like the feedback silence: the guest stalls processes for tens of ms.
         args.feedback_silence_cycles.max(10),
+        // The safety I/O node (every 10 ms) is played by the emulator, which a loaded host or
+        // the guest stalls: like the reader stall (the spec has no figure for it).
+        args.feedback_silence_cycles.max(10),
         (validation_ms / 2).max(1),
         f64::from(period_us) * 1e-3,
-        args.feedback_silence_cycles
+        args.feedback_silence_cycles,
+        // The operator group of the reset socket: this harness's own group (the operator's
+        // `safety-monitor reset` runs as this user; a foreign process runs as nobody).
+        // SAFETY: getgid has no preconditions.
+        unsafe { libc::getgid() }
     );
     // The harness accepts its own generated platform (the operator's `safety-monitor accept`).
     let monitor = monitor.replace(
@@ -174,11 +183,16 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
     Ok(())
 }
 
-/// Extra monitor arguments of a scenario (fault injection inside the monitor process).
-pub fn monitor_fault_injection(scenario: &str) -> &'static [&'static str] {
+/// The load cells report every this many SYNCs (the shipped drives file's rate).
+pub const LOAD_CELL_EVERY_N_SYNCS: u32 = 5;
+
+/// The monitor executable of a scenario: the production `safety-monitor`, or for
+/// `stop_frame_lost` this crate's `safety-monitor-nmt-unsent` (the same daemon on a sending
+/// socket that fails every NMT frame: the fault injection is not in the production binary).
+pub fn monitor_executable(scenario: &str) -> &'static str {
     match scenario {
-        "stop_frame_lost" => &["--inject-nmt-stop-unsent"],
-        _ => &[],
+        "stop_frame_lost" => "safety-monitor-nmt-unsent",
+        _ => "safety-monitor",
     }
 }
 

@@ -57,13 +57,79 @@ pub const DEMAND_HOLD: u8 = 0;
 pub const DEMAND_QUICK_STOP: u8 = 1;
 pub const DEMAND_FOLLOW: u8 = 2;
 
-/// The winch emulator reports `force_n` as cable `cable`'s (1-based) measured force from its
-/// next SYNC on (its `--control-file`; the emulator has no physics, its force is a constant
-/// pretension otherwise).
-pub fn inject_force(dir: &Path, cable: usize, force_n: f64) -> Res<()> {
+/// What this harness injects through the winch emulator's control file: measured forces per
+/// cable (None: the emulator's stand-in), the safety I/O node's reset key and e-stop button.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Control {
+    pub forces: [Option<f64>; 8],
+    pub reset_key: bool,
+    pub estop: bool,
+}
+
+impl Control {
+    /// The control file's text (`winch-emulator --control-file`): one line per injected
+    /// value; an empty file is the emulator's own state.
+    pub fn to_text(self) -> String {
+        let mut t = String::new();
+        for (i, f) in self.forces.iter().enumerate() {
+            if let Some(f) = f {
+                t.push_str(&format!("force {} {f}\n", i + 1));
+            }
+        }
+        if self.reset_key {
+            t.push_str("reset_key on\n");
+        }
+        if self.estop {
+            t.push_str("estop pressed\n");
+        }
+        t
+    }
+}
+
+/// Writes `c` as the emulator's control file in `dir` (atomically: rename; the emulator re-reads
+/// it every 5 ms).
+pub fn write_control(dir: &Path, c: &Control) -> Res<()> {
     let p = dir.join("emulator.control");
     let tmp = dir.join("emulator.control.tmp");
-    std::fs::write(&tmp, format!("force {cable} {force_n}\n"))
+    std::fs::write(&tmp, c.to_text())
         .and_then(|_| std::fs::rename(&tmp, &p))
         .map_err(|e| format!("{}: {e}", p.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn status_files_parse_and_partial_ones_do_not() {
+        let mut text = String::from("emulator 123 45 1 2 99\n");
+        for i in 0..8 {
+            text.push_str(&format!("drive {i} 6.5 0.0 5 4663 2 0\n"));
+        }
+        let s = parse_status(&text).expect("a complete status");
+        assert_eq!(
+            (s.time_ns, s.syncs, s.inhibit, s.safety_trips),
+            (123, 45, true, 2)
+        );
+        assert_eq!(s.drives.len(), 8);
+        assert_eq!(s.drives[3].demand, DEMAND_FOLLOW);
+        // A status written half (7 drives) or with a bad number is no status.
+        let cut: String = text.lines().take(8).map(|l| format!("{l}\n")).collect();
+        assert!(parse_status(&cut).is_none());
+        assert!(parse_status(&text.replace("6.5", "six")).is_none());
+        assert!(parse_status("").is_none());
+    }
+
+    #[test]
+    fn the_control_file_says_what_is_injected_and_nothing_else() {
+        let mut c = Control::default();
+        assert_eq!(c.to_text(), "");
+        c.forces[3] = Some(10_500.0);
+        c.reset_key = true;
+        assert_eq!(c.to_text(), "force 4 10500\nreset_key on\n");
+        c.forces[3] = None;
+        c.reset_key = false;
+        c.estop = true;
+        assert_eq!(c.to_text(), "estop pressed\n");
+    }
 }

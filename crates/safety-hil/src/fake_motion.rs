@@ -1,6 +1,6 @@
 //! The fake motion core: setpoints and the platform identity at the loop period, published by
 //! this process (iceoryx2 node `shil-fake-motion-core`), with faults switched on through
-//! [`FakeCtl`]: offsets (ramped at 0.1 m/s), NaN poses, sequence gaps, a wrong identity, a pose
+//! [`FakeCtl`]: offsets (ramped at 0.1 m/s, 10 m/s²), NaN poses, sequence gaps, a wrong identity, a pose
 //! jump with consistent lengths, a step with lying timestamps, a pause.
 
 use crate::Res;
@@ -12,6 +12,10 @@ use safety_monitor::platform::load_platform;
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU32, AtomicU64, Ordering};
+
+/// The offset ramp's speed and acceleration.
+const OFFSET_SPEED_M_PER_S: f64 = 0.1;
+const OFFSET_ACCEL_M_PER_S2: f64 = 10.0;
 
 // Setpoints at 1 kHz with injectable faults.
 #[derive(Default)]
@@ -28,8 +32,13 @@ pub struct FakeCtl {
     pub skip_every: AtomicU32,
     /// Announce a wrong platform identity while set.
     pub wrong_identity: AtomicBool,
+    /// When the first wrong identity was announced (CLOCK_MONOTONIC ns; 0 = not yet).
+    pub wrong_identity_sent_ns: AtomicU64,
     /// Publish the pose moved this far in x (µm) with CONSISTENT cable lengths, at once.
     pub pose_jump_um: AtomicI64,
+    /// Move the pose in x by this much (µm) per setpoint from now on, with CONSISTENT cable
+    /// lengths, from rest at once (no acceleration phase).
+    pub pose_speed_um: AtomicI64,
     /// Add this (µm) to cable `cable` at once (no ramp) ...
     pub step_um: AtomicI64,
     /// ... and claim this much more time (ns) per setpoint in the timestamps from then on.
@@ -67,30 +76,56 @@ impl Fake {
             let mut seq = 0u64;
             let mut lie_total = 0u64;
             let mut offset_um = 0i64;
+            let mut offset_vel = 0.0f64;
+            let mut moved_um = 0i64;
             let mut next = monotonic_ns();
             let mut n = 0u64;
             while !c.stop.load(Ordering::Relaxed) {
                 next += period_ns;
                 crs_rt::sleep_until(next);
                 let now = monotonic_ns();
-                if now > next + 50_000_000 {
-                    next = now; // the guest stalled: no burst
+                if now > next + period_ns / 2 {
+                    // This thread was stalled (a loaded host, the guest): skip the missed
+                    // ticks, never publish a burst. A burst is a real velocity demand (several
+                    // setpoints' motion within one SYNC), which drive-io's acceleration limit
+                    // rightly refuses; motion-core ticks on its own clock.
+                    next = now;
                 }
                 if c.paused.load(Ordering::Relaxed) {
                     continue;
                 }
                 if n.is_multiple_of(100) {
                     let mut h = *id.as_bytes();
-                    if c.wrong_identity.load(Ordering::Relaxed) {
+                    let wrong = c.wrong_identity.load(Ordering::Relaxed);
+                    if wrong {
                         h[31] ^= 0x5A;
                     }
                     let _ = id_pub.publish(&PlatformIdentity::new(crs_ipc::PlatformId::new(h), 8));
+                    if wrong && c.wrong_identity_sent_ns.load(Ordering::Relaxed) == 0 {
+                        c.wrong_identity_sent_ns
+                            .store(monotonic_ns(), Ordering::Relaxed);
+                    }
                 }
                 n += 1;
                 let target = c.offset_target_um.load(Ordering::Relaxed);
-                // 0.1 m/s: 100 µm per ms.
-                let step = (period_ns / 10_000) as i64;
-                offset_um += (target - offset_um).clamp(-step, step);
+                // 0.1 m/s reached and left at OFFSET_ACCEL_M_PER_S2 (below drive-io's step
+                // limit of 50 m/s²: a velocity step out of a hold is refused there), braking
+                // so as to stop at the target.
+                let dt = period_ns as f64 * 1e-9;
+                let d = (target - offset_um) as f64 * 1e-6;
+                let v_goal = d.signum()
+                    * (2.0 * OFFSET_ACCEL_M_PER_S2 * d.abs())
+                        .sqrt()
+                        .min(OFFSET_SPEED_M_PER_S);
+                let dv = OFFSET_ACCEL_M_PER_S2 * dt;
+                offset_vel = offset_vel + (v_goal - offset_vel).clamp(-dv, dv);
+                let step = (offset_vel * dt * 1e6).round() as i64;
+                offset_um += if (target - offset_um).abs() <= step.abs().max(1) {
+                    offset_vel = 0.0;
+                    target - offset_um
+                } else {
+                    step
+                };
                 seq += 1;
                 let skip = c.skip_every.load(Ordering::Relaxed);
                 if skip > 0 && seq.is_multiple_of(u64::from(skip)) {
@@ -105,7 +140,8 @@ impl Fake {
                     cable_length_m: q,
                     ..JointSetpoint::default()
                 };
-                let jump = c.pose_jump_um.load(Ordering::Relaxed);
+                moved_um += c.pose_speed_um.load(Ordering::Relaxed);
+                let jump = c.pose_jump_um.load(Ordering::Relaxed) + moved_um;
                 if jump != 0 {
                     s.pose[0] += jump as f64 * 1e-6;
                     kin.lengths(&s.pose, &mut s.cable_length_m);

@@ -8,13 +8,20 @@
 
 use crate::Res;
 use crate::configs::{
-    drives_never_ready, emulator_drives, home_length, monitor_config, monitor_fault_injection,
+    drives_never_ready, emulator_drives, home_length, monitor_config, monitor_executable,
 };
-use crate::emulator::{DEMAND_FOLLOW, DEMAND_HOLD, DEMAND_QUICK_STOP, EmuStatus, parse_status};
+use crate::emulator::{
+    Control, DEMAND_FOLLOW, DEMAND_HOLD, DEMAND_QUICK_STOP, EmuStatus, parse_status,
+};
 use crate::fake_motion::{Fake, FakeCtl};
-use crs_ipc::{BusState, DriveFeedback, EventKind, Heartbeat, IpcNode, ProcessId, StateEvent};
+use crs_ipc::{
+    BusState, DriveFeedback, EventKind, Heartbeat, IpcNode, ProcessId, StateEvent, monotonic_ns,
+};
 use crs_stack::supervisor::{Supervisor, Usage};
 use safety_monitor::Cause;
+use safety_monitor::daemon::{
+    RESET_ACCEPTED, RESET_DENIED, RESET_EXHAUSTED, RESET_NOT_READY, RESET_NOT_TRIPPED,
+};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
@@ -45,6 +52,16 @@ pub struct Stack {
     pub feedback_count: u64,
     /// motion-core's loop state (its heartbeat), if it runs.
     pub motion_state: Option<u32>,
+    /// The monitor's answers to reset requests (StateChanged with a RESET_* detail), in order.
+    pub reset_answers: Vec<StateEvent>,
+    /// The scenario's fault was injected (or its stack was up and following): a failure from
+    /// here on is the scenario's verdict, never retried; before it, a stall of the stack.
+    pub injected: bool,
+    /// The winch emulator's control file as this harness last wrote it (forces, the safety
+    /// I/O node's reset key and e-stop).
+    control: Control,
+    /// The monitor's command line (to start it again: `monitor_restart_reset`).
+    mon_args: Vec<String>,
     fake: Option<Fake>,
 }
 
@@ -157,6 +174,10 @@ impl Stack {
             monitor_heartbeats: 0,
             feedback_count: 0,
             motion_state: None,
+            reset_answers: Vec::new(),
+            injected: false,
+            control: Control::default(),
+            mon_args: Vec::new(),
             fake: None,
         };
         let cfg_dir = st.cfg.clone();
@@ -185,9 +206,9 @@ impl Stack {
         ]
         .into_iter()
         .chain(st.buses.args("safety-monitor"))
-        .chain(monitor_fault_injection(name).iter().map(|a| a.to_string()))
         .collect();
-        st.spawn("safety-monitor", &mon_args)?;
+        st.mon_args = mon_args.clone();
+        st.spawn_monitor(monitor_executable(name))?;
         // The monitor starts not ready (STOP) until every drive is operational and sends forces
         // (after drive-io's NMT start): the drives release only after its RUN pairs, then
         // drive-io can enable them.
@@ -213,6 +234,82 @@ impl Stack {
         Ok(st)
     }
 
+    /// Starts the monitor (again) from `exe` (the production `safety-monitor`, or the HIL
+    /// variant whose NMT frames fail to send) with this scenario's command line.
+    pub fn spawn_monitor(&mut self, exe: &'static str) -> Res<()> {
+        let path = self.exe(exe);
+        let args = self.mon_args.clone();
+        self.procs
+            .spawn("safety-monitor", &path, &args, &[("RUST_LOG", "info")])
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    }
+
+    /// The scenario injects its fault now: failures from here on are its verdict (never
+    /// retried). Returns the injection time (CLOCK_MONOTONIC ns).
+    pub fn inject(&mut self) -> u64 {
+        self.injected = true;
+        monotonic_ns()
+    }
+
+    /// Writes the emulator's control file from `self.control` (atomically; the emulator
+    /// re-reads it every 5 ms).
+    fn write_control(&self) -> Res<()> {
+        crate::emulator::write_control(&self.dir, &self.control)
+    }
+
+    /// Makes cable `cable` (1-based) report `force_n` as its measured force (None: the
+    /// emulator's stand-in again).
+    pub fn set_force(&mut self, cable: usize, force_n: Option<f64>) -> Res<()> {
+        let slot = self
+            .control
+            .forces
+            .get_mut(cable.wrapping_sub(1))
+            .ok_or_else(|| format!("cable {cable} out of range"))?;
+        *slot = force_n;
+        self.write_control()
+    }
+
+    /// The operator's e-stop button on the safety I/O node.
+    pub fn set_estop(&mut self, pressed: bool) -> Res<()> {
+        self.control.estop = pressed;
+        self.write_control()
+    }
+
+    /// The operator turns the safety I/O node's reset key and releases it: waits (on the
+    /// safety bus) until the node reported the key turned, then released, then for the
+    /// monitor's answer; returns it (its `detail`: RESET_ACCEPTED, ...).
+    pub fn turn_reset_key(&mut self) -> Res<StateEvent> {
+        let mut spy = open_bus(self, "safety")?;
+        let cob = 0x180 + u16::from(crate::configs::SAFETY_IO_NODE);
+        let answers0 = self.reset_answers.len();
+        for turned in [true, false] {
+            self.control.reset_key = turned;
+            self.write_control()?;
+            self.wait(
+                &format!(
+                    "the safety I/O node reporting its reset key {}",
+                    if turned { "turned" } else { "released" }
+                ),
+                10.0,
+                |_| {
+                    let mut seen = false;
+                    while let Some(f) = spy.try_recv().map_err(|e| e.to_string())? {
+                        let d = f.frame.data();
+                        if f.frame.id() as u16 == cob && !d.is_empty() {
+                            seen = (d[0] & 0x02 != 0) == turned;
+                        }
+                    }
+                    Ok(seen)
+                },
+            )?;
+        }
+        self.wait("the monitor's answer to the reset key", 10.0, |s| {
+            Ok(s.reset_answers.len() > answers0)
+        })?;
+        Ok(self.reset_answers[answers0])
+    }
+
     pub fn bus_state(&self) -> Option<BusState> {
         self.last_feedback
             .and_then(|f| BusState::from_u32(f.bus_state))
@@ -229,6 +326,10 @@ impl Stack {
                     self.monitor_estops.push(e);
                 } else if e.kind == EventKind::Reset as u32 {
                     self.monitor_resets += 1;
+                } else if e.kind == EventKind::StateChanged as u32
+                    && (RESET_ACCEPTED..=RESET_EXHAUSTED).contains(&e.detail)
+                {
+                    self.reset_answers.push(e);
                 }
             }
         }
@@ -322,6 +423,8 @@ impl Stack {
                 self.monitor_estops
             ));
         }
+        // The stack is up and following: what fails from here on is the scenario's verdict.
+        self.injected = true;
         Ok(())
     }
 
@@ -415,17 +518,26 @@ impl Stack {
         Ok(e)
     }
 
-    /// `safety-monitor reset` as the operator would run it; true if accepted.
+    /// The operator's reset: the safety I/O node's key turned and released. True if accepted
+    /// (or nothing to reset); the text names the answer (and a refusal's cause).
     pub fn operator_reset(&mut self) -> Res<(bool, String)> {
-        let out = Command::new(self.exe("safety-monitor"))
-            .args([
-                "reset",
-                "--ipc-prefix",
-                &self.prefix,
-                "--timeout-ms",
-                "5000",
-            ])
-            .env("RUST_LOG", "warn")
+        let a = self.turn_reset_key()?;
+        Ok(describe_answer(&a))
+    }
+
+    /// `safety-monitor reset --socket S` as a process of `uid`:`gid` (None: this harness's
+    /// own) would run it; true if accepted (or nothing to reset), with its output.
+    pub fn socket_reset(&mut self, as_user: Option<(u32, u32)>) -> Res<(bool, String)> {
+        use std::os::unix::process::CommandExt;
+        let mut cmd = Command::new(self.exe("safety-monitor"));
+        cmd.args(["reset", "--timeout-ms", "5000", "--socket"])
+            .arg(self.cfg.join("reset.sock"))
+            .env("RUST_LOG", "warn");
+        if let Some((uid, gid)) = as_user {
+            // std drops the supplementary groups (setgroups(0)) when root sets a uid.
+            cmd.uid(uid).gid(gid);
+        }
+        let out = cmd
             .output()
             .map_err(|e| format!("running safety-monitor reset: {e}"))?;
         let text = String::from_utf8_lossy(&out.stdout).trim().to_string();
@@ -463,6 +575,27 @@ impl Stack {
             }
         }
         out
+    }
+}
+
+/// (accepted or nothing to reset, the answer in words) of a monitor's reset answer event.
+pub fn describe_answer(a: &StateEvent) -> (bool, String) {
+    match a.detail {
+        RESET_ACCEPTED => (true, "reset accepted".into()),
+        RESET_NOT_TRIPPED => (
+            true,
+            "reset not needed: nothing was latched, nothing changed".into(),
+        ),
+        RESET_NOT_READY => (false, "reset REFUSED: the monitor is not ready".into()),
+        RESET_DENIED => (false, "reset DENIED: not an authorised channel".into()),
+        RESET_EXHAUSTED => (false, "reset REFUSED: instance exhausted".into()),
+        _ => (
+            false,
+            format!(
+                "reset REFUSED: the cause persists ({})",
+                Cause::from_code(a.detail_node).map_or("unknown".into(), |c| c.to_string())
+            ),
+        ),
     }
 }
 

@@ -53,6 +53,29 @@ pub enum Observed {
     Force { cable: usize, force_n: f64 },
     /// An error frame of the bus controller (the reader's socket subscribes to them).
     BusError(can_transport::BusCondition),
+    /// The safety I/O node's TPDO1: inputs (bit 0 e-stop circuit closed, bit 1 reset key) and
+    /// outputs (bit 0 STO released).
+    SafetyIo { inputs: u8, outputs: u8 },
+    /// A frame on one of the monitor's OWN identifiers (its heartbeat and configuration
+    /// signature pairs): the process compares it with what it sent.
+    OwnId { cob_id: u16, data: [u8; 8], len: u8 },
+}
+
+/// A frame on the monitor's own identifiers `cob_id .. cob_id + 3` (any interface), as
+/// [`Observed::OwnId`]; None for every other frame.
+pub fn own_id(cob_id: u16, f: &CanFrame) -> Option<Observed> {
+    let id = f.id() as u16;
+    if f.is_extended() || f.is_rtr() || !(cob_id..=cob_id.saturating_add(3)).contains(&id) {
+        return None;
+    }
+    let mut data = [0u8; 8];
+    let d = f.data();
+    data[..d.len()].copy_from_slice(d);
+    Some(Observed::OwnId {
+        cob_id: id,
+        data,
+        len: d.len() as u8,
+    })
 }
 
 /// Decodes a frame received on interface `iface` with the drives' layout: an RPDO, a force,
@@ -70,6 +93,16 @@ pub fn observe(layout: &BusLayout, iface: usize, f: &CanFrame) -> Option<Observe
     }
     if let Some((cable, force_n)) = layout.force_of(iface, f) {
         return Some(Observed::Force { cable, force_n });
+    }
+    if let Some((io_iface, cob)) = layout.safety_io
+        && io_iface == iface
+        && f.id() as u16 == cob
+    {
+        let d = f.data();
+        return (d.len() >= 2).then(|| Observed::SafetyIo {
+            inputs: d[0],
+            outputs: d[1],
+        });
     }
     let id = f.id() as u16;
     let node = (id & 0x7F) as u8;
@@ -100,6 +133,7 @@ mod tests {
                 n_per_unit: 0.001,
                 node: 6,
             }],
+            safety_io: Some((1, 0x1B0)),
         };
         assert_eq!(
             observe(&layout, 0, &rpdo1(5, CW_QUICK_STOP, -7)),
@@ -143,6 +177,32 @@ mod tests {
             observe(&layout, 0, &CanFrame::new(0x200, &[0; 6]).unwrap()),
             None
         );
+        // The safety I/O node's TPDO1 on its interface only; the monitor's own identifiers.
+        assert_eq!(
+            observe(&layout, 1, &CanFrame::new(0x1B0, &[0x03, 0x01]).unwrap()),
+            Some(Observed::SafetyIo {
+                inputs: 3,
+                outputs: 1
+            })
+        );
+        assert_eq!(
+            observe(&layout, 0, &CanFrame::new(0x1B0, &[0x03, 0x01]).unwrap()),
+            None
+        );
+        assert_eq!(
+            observe(&layout, 1, &CanFrame::new(0x1B0, &[0x03]).unwrap()),
+            None
+        );
+        assert!(matches!(
+            own_id(0x101, &CanFrame::new(0x104, &[1, 2]).unwrap()),
+            Some(Observed::OwnId {
+                cob_id: 0x104,
+                len: 2,
+                ..
+            })
+        ));
+        assert_eq!(own_id(0x101, &CanFrame::new(0x105, &[1]).unwrap()), None);
+        assert_eq!(own_id(0x101, &CanFrame::new(0x100, &[1]).unwrap()), None);
         // Empty frames of every kind (SYNC, NMT, a stray heartbeat id) are nothing.
         for id in [0x080, 0x000, 0x705, 0x205, 0x286] {
             assert_eq!(

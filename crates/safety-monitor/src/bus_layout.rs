@@ -107,11 +107,14 @@ impl ForceLayout {
     }
 }
 
-/// Every cable's RPDO and force frame (cable order).
+/// Every cable's RPDO and force frame (cable order), and the safety I/O node's TPDO1.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct BusLayout {
     pub rpdo: Vec<RpdoLayout>,
     pub force: Vec<ForceLayout>,
+    /// The safety I/O node's TPDO1 (interface index, COB-ID 0x180 + node id): [inputs,
+    /// outputs] (drives file `[safety_io]`).
+    pub safety_io: Option<(usize, u16)>,
 }
 
 impl BusLayout {
@@ -191,6 +194,7 @@ mod tests {
                 n_per_unit: 1.0,
                 node: 33,
             }],
+            safety_io: None,
         };
         // The same node id on another interface is another drive.
         assert_eq!(l.rpdo_of(1, &f), Some((1, 2, -7)));

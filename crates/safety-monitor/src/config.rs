@@ -149,6 +149,38 @@ pub struct CanSection {
     pub safety_validation_time_ms: u32,
     #[serde(default = "d_srvt")]
     pub safety_pair_window_ms: u32,
+    /// Monitor cycles the safety I/O node (`[safety_io]` of the drives file) may go without a
+    /// TPDO1 once it has reported, before the monitor trips (`safety_io_silence`): its e-stop
+    /// circuit and reset key could no longer be read.
+    #[serde(default = "d_io_silence")]
+    pub safety_io_silence_cycles: u32,
+}
+
+/// `[reset]`: the channels an operator's reset may come from (see
+/// [`crate::operator`]). Every other reset request — in particular one published on the process
+/// bus — is refused and logged with its sender.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ResetSection {
+    /// The reset key of the safety I/O node (turned and released), read from its TPDO1 on the
+    /// monitor's own socket. Needs `[safety_io]` in the drives file.
+    #[serde(default = "d_true")]
+    pub key: bool,
+    /// A unix socket for `safety-monitor reset`, relative to this file; empty = none. Its
+    /// peer's credentials (SO_PEERCRED) must show membership of `operator_group`.
+    #[serde(default)]
+    pub socket: String,
+    /// The operator group (name, or a numeric gid) whose members may reset through `socket`.
+    #[serde(default)]
+    pub operator_group: String,
+}
+
+fn d_reset() -> ResetSection {
+    ResetSection {
+        key: true,
+        socket: String::new(),
+        operator_group: String::new(),
+    }
 }
 
 /// `[forces]`: the drives' measured cable forces (TPDO2 pulley force, read from the bus on the
@@ -165,10 +197,14 @@ pub struct ForcesSection {
     /// Overload: f > f_max_n + overload_margin_n for longer than `filter_ms`.
     #[serde(default = "d_overload_margin")]
     pub overload_margin_n: f64,
-    /// How long a limit must be violated before it trips (sensor noise, short transients), ms.
-    #[serde(default = "d_force_filter")]
-    pub filter_ms: f64,
-    /// Any single reading above this trips at once: the winches' rating (seed: 14 kN).
+    /// Slack or overload trips when at least `window_violations` of a cable's last
+    /// `window_readings` force readings are beyond a limit (sensor noise and short transients
+    /// pass; a steady or a fluttering violation trips).
+    #[serde(default = "d_force_window")]
+    pub window_readings: u32,
+    #[serde(default = "d_force_violations")]
+    pub window_violations: u32,
+    /// Any single reading beyond ± this trips at once: the winches' rating (seed: 14 kN).
     #[serde(default = "d_hard_limit")]
     pub hard_limit_n: f64,
     /// An operational drive without a force reading for this many cycles => e-stop.
@@ -234,6 +270,8 @@ struct RawConfig {
     #[serde(default = "d_motion")]
     motion: MotionSection,
     can: CanSection,
+    #[serde(default = "d_reset")]
+    reset: ResetSection,
 }
 
 fn d_cycle() -> u32 {
@@ -321,9 +359,22 @@ fn d_slack_margin() -> f64 {
 fn d_overload_margin() -> f64 {
     1000.0
 }
-fn d_force_filter() -> f64 {
-    45.0
+fn d_force_window() -> u32 {
+    16
 }
+fn d_force_violations() -> u32 {
+    8
+}
+fn d_io_silence() -> u32 {
+    4
+}
+/// Upper bound of `forces.hard_limit_n`: the seed's winches are rated 14 kN (f_abs_max); a
+/// hard limit far beyond any winch's rating would never fire before the winch is overloaded.
+pub const MAX_HARD_LIMIT_N: f64 = 20_000.0;
+/// Upper bound of `motion.setpoint_period_ms`: a longer nominal period would loosen the
+/// per-step velocity and acceleration checks by the same factor (spec sec. 5.6: 1 ms; the
+/// emulated test guest runs 4 ms).
+pub const MAX_SETPOINT_PERIOD_MS: f64 = 10.0;
 fn d_hard_limit() -> f64 {
     14_000.0
 }
@@ -335,7 +386,8 @@ fn d_forces() -> ForcesSection {
         check: true,
         slack_margin_n: d_slack_margin(),
         overload_margin_n: d_overload_margin(),
-        filter_ms: d_force_filter(),
+        window_readings: d_force_window(),
+        window_violations: d_force_violations(),
         hard_limit_n: d_hard_limit(),
         silence_cycles: d_force_silence(),
     }
@@ -497,6 +549,9 @@ pub struct MonitorConfig {
     pub motion: MotionSection,
     pub can: CanSection,
     pub ipc: IpcSection,
+    pub reset: ResetSection,
+    /// The reset socket (absolute) and the operator group's gid, if the socket is configured.
+    pub reset_socket: Option<(PathBuf, u32)>,
     pub platform_file: PathBuf,
     pub platform: PlatformParams,
     pub drives_file: PathBuf,
@@ -637,7 +692,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
     // Upper bounds (issue 16): a setting beyond them would switch its check off in practice
     // (a silence of minutes, a margin of metres). Cycles are monitor cycles (15 ms: 67 ≈ 1 s).
     let fo = &raw.forces;
-    let counts: [(&str, u32, u32); 8] = [
+    let counts: [(&str, u32, u32); 10] = [
         ("monitor.silence_cycles", m.silence_cycles, 67),
         (
             "monitor.max_missing_setpoints",
@@ -658,13 +713,23 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         ),
         ("forces.silence_cycles", fo.silence_cycles, 67),
         ("can.reader_stall_cycles", raw.can.reader_stall_cycles, 67),
+        (
+            "can.safety_io_silence_cycles",
+            raw.can.safety_io_silence_cycles,
+            67,
+        ),
+        (
+            "forces.window_readings",
+            fo.window_readings,
+            crate::monitor::MAX_FORCE_WINDOW,
+        ),
     ];
     for (key, v, max) in counts {
         if v > max {
             return Err(bad(key, format!("{v} is above the bound {max}: refused")));
         }
     }
-    let reals: [(&str, f64, f64); 6] = [
+    let reals: [(&str, f64, f64); 7] = [
         ("monitor.workspace_margin_m", m.workspace_margin_m, 0.5),
         ("monitor.workspace_margin_deg", m.workspace_margin_deg, 5.0),
         (
@@ -673,7 +738,12 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             100.0,
         ),
         ("forces.overload_margin_n", fo.overload_margin_n, 5000.0),
-        ("forces.filter_ms", fo.filter_ms, 200.0),
+        ("forces.hard_limit_n", fo.hard_limit_n, MAX_HARD_LIMIT_N),
+        (
+            "motion.setpoint_period_ms",
+            raw.motion.setpoint_period_ms,
+            MAX_SETPOINT_PERIOD_MS,
+        ),
         ("motion.margin", raw.motion.margin, 1.0),
     ];
     for (key, v, max) in reals {
@@ -701,10 +771,24 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             format!("must be in 1..={}", crate::monitor::HISTORY),
         ));
     }
+    if fo.window_readings == 0 {
+        return Err(bad("forces.window_readings", "must be >= 1".into()));
+    }
+    if !(1..=fo.window_readings).contains(&fo.window_violations) {
+        return Err(bad(
+            "forces.window_violations",
+            format!(
+                "must be in 1..=forces.window_readings ({}), got {}",
+                fo.window_readings, fo.window_violations
+            ),
+        ));
+    }
+    if raw.can.safety_io_silence_cycles == 0 {
+        return Err(bad("can.safety_io_silence_cycles", "must be >= 1".into()));
+    }
     for (key, v) in [
         ("forces.slack_margin_n", fo.slack_margin_n),
         ("forces.overload_margin_n", fo.overload_margin_n),
-        ("forces.filter_ms", fo.filter_ms),
     ] {
         if !(v.is_finite() && v >= 0.0) {
             return Err(bad(key, format!("must be a number >= 0, got {v}")));
@@ -875,6 +959,45 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         }
         interfaces[0].transport = t.clone();
     }
+    // Reset channels (ISO 13849-1 §5.2.2: the operator's manual reset at the safety function).
+    let rs = &raw.reset;
+    if rs.key && safety_io.is_none() {
+        return Err(bad(
+            "reset.key",
+            format!(
+                "the reset key is read from the safety I/O node, but the drives file {} has no \
+                 [safety_io] (set reset.key = false and configure reset.socket)",
+                drives_file.display()
+            ),
+        ));
+    }
+    let reset_socket = if rs.socket.is_empty() {
+        if !rs.operator_group.is_empty() {
+            return Err(bad(
+                "reset.operator_group",
+                "given without reset.socket (the group is checked on the socket's peers)".into(),
+            ));
+        }
+        None
+    } else {
+        if rs.operator_group.is_empty() {
+            return Err(bad(
+                "reset.operator_group",
+                "missing: the reset socket accepts only members of this group (name or gid)".into(),
+            ));
+        }
+        let gid = crate::reset_socket::resolve_group(&rs.operator_group)
+            .map_err(|e| bad("reset.operator_group", e))?;
+        Some((relative_to(path, &rs.socket), gid))
+    };
+    if !rs.key && reset_socket.is_none() {
+        return Err(bad(
+            "reset",
+            "no reset channel: enable reset.key (the safety I/O node's key) or configure \
+             reset.socket; without one a trip can never be reset"
+                .into(),
+        ));
+    }
     if winches.len() != platform.cables() {
         return Err(ConfigError::Invalid {
             file: drives_file.display().to_string(),
@@ -926,6 +1049,8 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         motion: raw.motion,
         can: raw.can,
         ipc: raw.ipc,
+        reset: raw.reset,
+        reset_socket,
         platform_file,
         platform,
         drives_file,
@@ -1116,7 +1241,8 @@ pub fn load_drives(path: &Path) -> Result<Drives, ConfigError> {
         Some((iface, _)) => vec![iface],
         None => (0..interfaces.len()).collect(),
     };
-    let layout = bus_layout(&raw, &interfaces, &out, &invalid)?;
+    let mut layout = bus_layout(&raw, &interfaces, &out, &invalid)?;
+    layout.safety_io = safety_io.map(|(iface, node)| (iface, 0x180 + u16::from(node)));
     Ok(Drives {
         interfaces,
         safety_interfaces,

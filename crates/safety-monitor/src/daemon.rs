@@ -12,16 +12,21 @@
 //!   if anyone else publishes a Reset;
 //! * every cycle: the doubled safety heartbeat (RUN/STOP) and an iceoryx2 heartbeat.
 //!
-//! Reset protocol (operator CLI `safety-monitor reset`): a `StateEvent { source: Operator,
-//! kind: StateChanged, state: RESET_REQUEST }`; the monitor answers with `StateEvent { source:
-//! SafetyMonitor, kind: StateChanged, detail: RESET_ACCEPTED | RESET_REFUSED |
-//! RESET_NOT_TRIPPED, detail_node: persisting cause, sequence: the request's }`. When accepted
-//! (every latched cause shown cleared, issue 16) the reset epoch advances; the monitor sends NMT
-//! start to all drives, RUN heartbeats carrying the new epoch, and once every drive reports
-//! operational (and the drives' watches had [`RESET_MIN_RUN_CYCLES`] RUN pairs of the new epoch
-//! to release) publishes `StateEvent { kind: Reset, detail: epoch }`, which releases motion-core
-//! and drive-io (drive-io only if its watch verified that epoch on CAN). A request while armed
-//! changes nothing (no NMT start, no Reset event). A Reset event from any other process is
+//! Reset protocol: an operator's reset comes from the safety I/O node's reset key (turned and
+//! released, read from its TPDO1 on the monitor's own socket) or from the reset socket
+//! (`safety-monitor reset`, peer credentials of the operator group): [`crate::operator`]. A
+//! reset request published on the process bus (`StateEvent { source: Operator, state:
+//! RESET_REQUEST }`) is refused — answered with `detail: RESET_DENIED` — and logged with its
+//! publisher's pid. Every decision is published as `StateEvent { source: SafetyMonitor, kind:
+//! StateChanged, detail: RESET_ACCEPTED | RESET_REFUSED | RESET_NOT_TRIPPED | RESET_NOT_READY,
+//! detail_node: persisting cause }`. When accepted (every latched cause shown cleared) the reset
+//! epoch advances (the count of this monitor instance); the monitor sends NMT start to all
+//! drives, RUN heartbeats carrying the new epoch, and once every drive reports operational (and
+//! the consumers' watches had [`RESET_MIN_RUN_CYCLES`] RUN pairs of the new epoch to release)
+//! announces the epoch and publishes `StateEvent { kind: Reset, detail: epoch }`, which releases
+//! motion-core and drive-io (drive-io only if its watch verified that epoch on CAN). A request
+//! while armed changes nothing unless a consumer waits for a reset of this instance (after a
+//! monitor restart, see [`Monitor::request_reset`]). A Reset event from any other process is
 //! ignored and logged (rate-limited); while tripped the e-stop is re-asserted.
 
 use crate::bus_frames::{self, Observed};
@@ -51,6 +56,17 @@ pub const RESET_REFUSED: u32 = 0x5AFE_0003;
 pub const RESET_NOT_TRIPPED: u32 = 0x5AFE_0004;
 /// Refused because the monitor has not verified its start-up conditions yet.
 pub const RESET_NOT_READY: u32 = 0x5AFE_0005;
+/// Denied: the request did not come from an authorised channel (the reset key, the reset
+/// socket); a request on the process bus is never authorised.
+pub const RESET_DENIED: u32 = 0x5AFE_0006;
+/// Refused: this monitor instance cannot count further resets (restart it).
+pub const RESET_EXHAUSTED: u32 = 0x5AFE_0007;
+/// More state events than this in one monitor cycle is a flood: the subscriber's buffer (64)
+/// may have overwritten an e-stop unseen, so the process bus can no longer be trusted to
+/// deliver a stop (`ipc_error`, value = the count). The stack publishes a few events a second.
+pub const MAX_EVENTS_PER_CYCLE: u32 = 48;
+/// Monitor cycles between two epoch announcements (about one second).
+pub const EPOCH_ANNOUNCE_CYCLES: u64 = 67;
 /// `StateEvent::state` with which motion-core announces a graceful end of its setpoint stream
 /// (source MotionCore, kind StateChanged, published AFTER its last setpoint): the contract's
 /// `crs_ipc::motion_state::STOPPING`.
@@ -73,16 +89,56 @@ pub fn is_fresh(now_ns: u64, event_ns: u64) -> bool {
 /// RUN heartbeats sent after an accepted reset before the Reset event (the drives' and
 /// drive-io's watches need `release_pairs` (default 3) consecutive RUN pairs to release).
 pub const RESET_MIN_RUN_CYCLES: u32 = 4;
-/// The initial reset epoch of this monitor instance: CLOCK_REALTIME in seconds, so a restarted
-/// monitor's epoch is newer than its previous run's (watches that inhibited when the old one
-/// died may then release — a restart is an operator/systemd action; drive-io and motion-core
-/// still stay latched until an accepted reset). Failure modes (clock set back, more than one
-/// reset per second in the previous run) only keep the drives inhibited.
-pub fn initial_reset_epoch() -> u32 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs() as u32)
-        .unwrap_or(1)
+/// The instance nonce of this monitor process (the high half of its reset epoch,
+/// [`crs_limits::reset_epoch`]): drawn from the kernel's random source, so a restarted monitor
+/// is another instance whose start epoch (count 0) releases none of the consumers that stopped
+/// under the previous one; they wait for an operator reset of the new instance. If the draw
+/// fails, the monotonic clock's low bits stand in (still different from the previous run's
+/// draw with overwhelming probability; a collision only keeps the consumers stopped).
+pub fn random_instance() -> u16 {
+    let mut b = [0u8; 2];
+    // SAFETY: `b` is valid for 2 bytes; getrandom writes at most that many.
+    let n = unsafe { libc::getrandom(b.as_mut_ptr().cast(), b.len(), 0) };
+    if n == 2 {
+        u16::from_le_bytes(b)
+    } else {
+        (monotonic_ns() >> 10) as u16
+    }
+}
+
+/// The frames the monitor sent on its own identifiers recently (COB-ID, data, length): a frame
+/// on those identifiers that it receives and did not send is another node speaking for it
+/// ([`Monitor::on_impersonation`]). 4 frames per cycle; 16 cycles cover the bus reader's batch
+/// delay many times over.
+#[derive(Debug)]
+pub struct SentOwn {
+    ring: [(u16, [u8; 8], u8); 64],
+    len: usize,
+    next: usize,
+}
+
+impl Default for SentOwn {
+    fn default() -> Self {
+        Self {
+            ring: [(0, [0; 8], 0); 64],
+            len: 0,
+            next: 0,
+        }
+    }
+}
+
+impl SentOwn {
+    pub fn record(&mut self, f: &can_transport::CanFrame) {
+        let mut d = [0u8; 8];
+        d[..f.data().len()].copy_from_slice(f.data());
+        self.ring[self.next] = (f.id() as u16, d, f.data().len() as u8);
+        self.next = (self.next + 1) % self.ring.len();
+        self.len = (self.len + 1).min(self.ring.len());
+    }
+
+    pub fn contains(&self, cob_id: u16, data: &[u8; 8], len: u8) -> bool {
+        self.ring[..self.len].contains(&(cob_id, *data, len))
+    }
 }
 
 /// The monitor's own recently published state events (kind, sequence, detail): a received
@@ -171,6 +227,7 @@ const READER_BATCH: Duration = Duration::from_millis(3);
 fn bus_reader(
     mut buses: Vec<Box<dyn CanBus>>,
     layout: crate::bus_layout::BusLayout,
+    own_cob: u16,
     queue: Arc<ArrayQueue<Obs>>,
     stop: Arc<AtomicBool>,
     health: Arc<ReaderHealth>,
@@ -188,7 +245,9 @@ fn bus_reader(
             loop {
                 let (what, rx_ns) = match bus.try_recv_event() {
                     Ok(Some(RxEvent::Frame(rx))) => {
-                        match bus_frames::observe(&layout, iface, &rx.frame) {
+                        match bus_frames::own_id(own_cob, &rx.frame)
+                            .or_else(|| bus_frames::observe(&layout, iface, &rx.frame))
+                        {
                             Some(what) => (what, rx.rx_monotonic_ns),
                             None => continue,
                         }
@@ -311,11 +370,12 @@ pub fn run_on(
     let mut tx = crate::tx_buses::TxBuses::new(tx, &cfg.safety_interfaces);
     let identity = platform_identity(&cfg.platform);
     let kin = StandardKinematics::new(&cfg.platform);
-    let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity)
-        .with_reset_epoch(initial_reset_epoch());
+    let instance = random_instance();
+    let mut monitor = Monitor::new(Limits::from_config(cfg), kin, identity).with_instance(instance);
     let m = cfg.platform.cables();
     let winches = cfg.winches.clone();
     let cob = cfg.can.safety_cob_id;
+    let own_cob = cob;
     let period = cfg.cycle_ns();
     let trip_log = cfg.trip_log();
 
@@ -336,7 +396,7 @@ pub fn run_on(
         let layout = cfg.layout.clone();
         std::thread::Builder::new()
             .name("safety-bus-rx".into())
-            .spawn(move || bus_reader(rx, layout, q, s, d))
+            .spawn(move || bus_reader(rx, layout, own_cob, q, s, d))
             .map_err(|e| DaemonError::Other(format!("spawning the bus reader: {e}")))?
     };
 
@@ -389,6 +449,23 @@ pub fn run_on(
     ];
     let mut procs = crate::ownership::ProcFs;
 
+    // The operator's reset channels (crate::operator): the safety I/O node's key, the socket.
+    let mut key = crate::operator::KeyWatch::new();
+    let key_enabled = cfg.reset.key && cfg.layout.safety_io.is_some();
+    let mut reset_socket = match &cfg.reset_socket {
+        Some((path, gid)) => {
+            let s = crate::reset_socket::ResetSocket::bind(path, *gid)
+                .map_err(|e| DaemonError::Other(e.to_string()))?;
+            tracing::info!(socket = %path.display(), operator_gid = gid, "reset socket listening");
+            Some(s)
+        }
+        None => None,
+    };
+    let mut sent_own = SentOwn::default();
+    let mut impersonations: u64 = 0;
+    let mut denied: u64 = 0;
+    let mut last_announced: Option<u32> = None;
+
     let mut sum = Summary::default();
     let mut stops = StopPath::new();
     let mut last_stage: Option<StopStage> = None;
@@ -417,6 +494,7 @@ pub fn run_on(
         let now = monotonic_ns();
         let late = now.saturating_sub(deadline);
         sum.max_lateness_ns = sum.max_lateness_ns.max(late);
+        monitor.begin_cycle(now);
 
         while let Some(id) = identities.receive().unwrap_or_else(|e| {
             tracing::error!(error = %e, "platform identity receive failed");
@@ -436,19 +514,53 @@ pub fn run_on(
                 tracing::info!("platform identity verified");
             }
         }
-        let mut reset_request = None;
+        let mut reset_request: Option<(crate::operator::OperatorReset, ReplyTo)> = None;
         let mut foreign_reset = false;
-        while let Some(ev) = events.receive().unwrap_or_else(|e| {
-            tracing::warn!(error = %e, "state event ignored");
-            None
-        }) {
+        // Every event of this cycle is drained, whatever is wrong with some of them: a sample
+        // of a foreign contract version is a fault (ipc_error) and does not stop the draining,
+        // so a flood of bad events cannot hold an e-stop back; more events than the buffer can
+        // be trusted with in one cycle is a flood and trips (an e-stop may have been
+        // overwritten unseen). Bounded: a publisher faster than this loop cannot keep it here.
+        let mut events_this_cycle: u32 = 0;
+        let mut bad_versions: u32 = 0;
+        loop {
+            if events_this_cycle >= 4 * MAX_EVENTS_PER_CYCLE {
+                break;
+            }
+            let (ev, sender) = match events.receive_with_sender() {
+                Ok(Some(x)) => x,
+                Ok(None) => break,
+                Err(IpcError::Version { found, .. }) => {
+                    events_this_cycle += 1;
+                    bad_versions += 1;
+                    if bad_versions == 1 {
+                        tracing::error!(
+                            found,
+                            "a state event of a foreign contract version: the process bus                              cannot be trusted (ipc_error)"
+                        );
+                    }
+                    continue;
+                }
+                Err(e) => {
+                    tracing::error!(error = %e, "state event receive failed");
+                    monitor.on_ipc_error();
+                    break;
+                }
+            };
+            events_this_cycle += 1;
             let fresh = is_fresh(now, ev.timestamp_ns);
             if ev.source == ProcessId::SafetyMonitor as u32 {
                 // Our own events come back through our subscriber; anything else claiming our
-                // source (stamped after this monitor started, also in its future: older ones
-                // are a previous instance's history) is a second publisher impersonating the
-                // monitor.
-                if ev.timestamp_ns >= started_ns && !own.contains(&ev) {
+                // source is a second publisher impersonating the monitor: stamped after this
+                // monitor started (also in its future; older ones are a previous instance's
+                // history), or carrying this instance's epoch whatever its stamp.
+                let this_instance = |e: u32| crs_limits::reset_epoch::instance(e) == instance;
+                let claims_instance = (ev.kind == EventKind::Reset as u32
+                    && this_instance(ev.detail))
+                    || (ev.kind == EventKind::StateChanged as u32
+                        && ev.detail == crs_ipc::monitor_state::EPOCH_ANNOUNCE
+                        && this_instance(ev.detail_node));
+                if (ev.timestamp_ns >= started_ns || claims_instance) && !own.contains(&ev) {
                     forged += 1;
                     if forged.is_power_of_two() {
                         tracing::error!(
@@ -465,12 +577,31 @@ pub fn run_on(
                 }
                 continue;
             }
-            if ev.source == ProcessId::Operator as u32
-                && ev.kind == EventKind::StateChanged as u32
-                && ev.state == RESET_REQUEST
-                && fresh
-            {
-                reset_request = Some(ev.sequence);
+            if ev.kind == EventKind::StateChanged as u32 && ev.state == RESET_REQUEST {
+                // A reset request on the process bus: any process of the stack's user can
+                // publish it under any source. Refused, answered, logged with its sender.
+                denied += 1;
+                let exe = sender
+                    .and_then(|pid| std::fs::read_link(format!("/proc/{pid}/exe")).ok())
+                    .map_or_else(|| "?".to_string(), |p| p.display().to_string());
+                if denied.is_power_of_two() || denied < 8 {
+                    tracing::warn!(
+                        claimed_source = ev.source,
+                        sender_pid = ?sender,
+                        sender_executable = %exe,
+                        denied,
+                        "reset request on the process bus REFUSED: only the safety I/O node's \
+                         reset key or the reset socket (operator group) may reset"
+                    );
+                }
+                let mut ans = StateEvent::new(
+                    ProcessId::SafetyMonitor,
+                    EventKind::StateChanged,
+                    ev.sequence,
+                );
+                ans.state = monitor.state().code();
+                ans.detail = RESET_DENIED;
+                let _ = publish_own(&event_pub, &mut own, &ans);
             } else if ev.source == ProcessId::MotionCore as u32
                 && let Some(end) = ev.plan_end()
                 && fresh
@@ -513,6 +644,41 @@ pub fn run_on(
                 }
             }
         }
+        if bad_versions > 0 {
+            monitor.on_ipc_error();
+        }
+        if events_this_cycle > MAX_EVENTS_PER_CYCLE {
+            tracing::error!(
+                events = events_this_cycle,
+                limit = MAX_EVENTS_PER_CYCLE,
+                "state-event flood: an e-stop may have been lost in the subscriber's buffer \
+                 (ipc_error)"
+            );
+            monitor.on_ipc_error();
+        }
+        // The reset socket: at most one request per cycle.
+        if let Some(sock) = reset_socket.as_mut()
+            && reset_request.is_none()
+        {
+            match sock.poll(now) {
+                Some(crate::reset_socket::Request::Reset(r)) => {
+                    reset_request = Some((r, ReplyTo::Socket));
+                }
+                Some(crate::reset_socket::Request::Denied { peer, why }) => {
+                    denied += 1;
+                    tracing::warn!(
+                        pid = peer.pid,
+                        uid = peer.uid,
+                        gid = peer.gid,
+                        executable = %peer.executable(),
+                        why,
+                        "reset request on the reset socket DENIED"
+                    );
+                    sock.answer(&format!("denied {why}"));
+                }
+                None => {}
+            }
+        }
         if let Err(e) = setpoints.drain(|sp| monitor.on_setpoint(sp)) {
             tracing::error!(error = %e, "setpoint receive failed");
             monitor.on_ipc_error();
@@ -550,6 +716,40 @@ pub fn run_on(
                 Observed::Force { cable, force_n } => {
                     if cable < m {
                         monitor.on_force(cable, force_n, o.rx_ns);
+                    }
+                }
+                Observed::SafetyIo { inputs, outputs } => {
+                    monitor.on_safety_io(inputs, outputs, o.rx_ns);
+                    if key_enabled {
+                        use crate::operator::KeyEvent;
+                        match key.on_inputs(inputs, o.rx_ns) {
+                            KeyEvent::Reset(r) => {
+                                if reset_request.is_none() {
+                                    reset_request = Some((r, ReplyTo::Key));
+                                }
+                            }
+                            KeyEvent::Turned => tracing::info!("reset key turned"),
+                            KeyEvent::Stuck { held_ns } => tracing::warn!(
+                                held_ms = held_ns as f64 * 1e-6,
+                                "reset key held too long: ignored until released and turned again"
+                            ),
+                            KeyEvent::None => {}
+                        }
+                    }
+                }
+                Observed::OwnId { cob_id, data, len } => {
+                    if !sent_own.contains(cob_id, &data, len) {
+                        impersonations += 1;
+                        if impersonations.is_power_of_two() {
+                            tracing::error!(
+                                cob_id = format_args!("{cob_id:#05x}"),
+                                interface = o.iface,
+                                impersonations,
+                                "a frame on the monitor's own identifiers that it did not send: \
+                                 another node speaks for the monitor (impersonation)"
+                            );
+                        }
+                        monitor.on_impersonation(cob_id);
                     }
                 }
                 Observed::BusError(condition) => {
@@ -597,14 +797,16 @@ pub fn run_on(
             );
         }
         if let Some(rec) = report.new_trip {
-            // Stop path first: quick stop to every drive, then NMT stop all (retried and
+            // Stop path first: quick stop to EVERY drive (holding its last target seen on the
+            // bus; a drive whose RPDO was never seen gets target 0, which a CiA 402 drive in
+            // quick stop does not follow), then the NMT stop of every drive (retried and
             // escalated when unsent: stop_path).
             for (i, l) in cfg.layout.rpdo.iter().enumerate() {
-                if let (Some(t), Some(bus)) = (last_target[i], tx.on(l.interface)) {
-                    stops.quick_stop(bus, l, t);
+                if let Some(bus) = tx.on(l.interface) {
+                    stops.quick_stop(bus, l, last_target[i].unwrap_or(0));
                 }
             }
-            stops.nmt_stop(&mut tx);
+            stops.nmt_stop_drives(&mut tx, winches.iter().map(|w| (w.interface, w.node_id)));
             resetting = None;
             event_seq += 1;
             let ev = estop_event(&rec, event_seq);
@@ -618,7 +820,7 @@ pub fn run_on(
                 append_trip_log(p, &rec);
             }
         } else if report.state == StateCode::Tripped {
-            stops.nmt_stop(&mut tx);
+            stops.nmt_stop_drives(&mut tx, winches.iter().map(|w| (w.interface, w.node_id)));
             if foreign_reset && let Some(rec) = monitor.trip() {
                 event_seq += 1;
                 let ev = estop_event(rec, event_seq);
@@ -628,34 +830,53 @@ pub fn run_on(
             }
         }
 
-        if let Some(req) = reset_request {
-            let decision = monitor.request_reset();
+        if let Some((req, reply)) = reset_request {
+            let channel = req.channel();
+            let decision = monitor.request_reset(req);
             let (detail, cause) = match decision {
                 ResetDecision::Accepted { .. } => (RESET_ACCEPTED, 0),
                 ResetDecision::NotTripped => (RESET_NOT_TRIPPED, 0),
                 ResetDecision::Refused(c) => (RESET_REFUSED, u32::from(c.code())),
                 ResetDecision::NotReady => (RESET_NOT_READY, 0),
+                ResetDecision::InstanceExhausted => (RESET_EXHAUSTED, 0),
             };
-            let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::StateChanged, req);
+            event_seq += 1;
+            let mut ev =
+                StateEvent::new(ProcessId::SafetyMonitor, EventKind::StateChanged, event_seq);
             ev.state = monitor.state().code();
             ev.detail = detail;
             ev.detail_node = cause;
             let _ = publish_own(&event_pub, &mut own, &ev);
+            if let (ReplyTo::Socket, Some(sock)) = (reply, reset_socket.as_mut()) {
+                sock.answer(&match decision {
+                    ResetDecision::Accepted { epoch } => format!("accepted epoch {epoch:#010x}"),
+                    ResetDecision::NotTripped => "not-tripped".into(),
+                    ResetDecision::Refused(c) => format!("refused {c}"),
+                    ResetDecision::NotReady => "not-ready".into(),
+                    ResetDecision::InstanceExhausted => "exhausted".into(),
+                });
+            }
             match decision {
                 ResetDecision::Refused(c) => {
-                    tracing::warn!(cause = %c, "reset REFUSED: the cause persists or is not shown cleared")
+                    tracing::warn!(cause = %c, %channel, "reset REFUSED: the cause persists or is not shown cleared")
                 }
                 ResetDecision::NotReady => {
-                    tracing::warn!(?readiness, "reset REFUSED: not ready yet")
+                    tracing::warn!(?readiness, %channel, "reset REFUSED: not ready yet")
                 }
-                // Armed: nothing is latched here, so nothing changes anywhere (issue 16: no NMT
-                // start, no Reset event that would clear latches the monitor never evaluated).
+                ResetDecision::InstanceExhausted => tracing::error!(
+                    %channel,
+                    "reset REFUSED: this monitor instance has counted 65535 resets; restart it"
+                ),
+                // Armed and no consumer waits: nothing is latched here, so nothing changes
+                // anywhere (no NMT start, no Reset event that would clear latches the monitor
+                // never evaluated).
                 ResetDecision::NotTripped => {
-                    tracing::info!("reset request while armed: nothing to reset, nothing changed")
+                    tracing::info!(%channel, "reset request while armed: nothing to reset, nothing changed")
                 }
                 ResetDecision::Accepted { epoch } => {
                     tracing::info!(
-                        epoch,
+                        epoch = format_args!("{epoch:#010x}"),
+                        %channel,
                         "reset ACCEPTED: new reset epoch, NMT start, releasing the stack"
                     );
                     stops.other(&mut tx, &bus_frames::nmt(bus_frames::NMT_START, 0));
@@ -675,6 +896,12 @@ pub fn run_on(
                         "not every drive reported operational after the NMT start; releasing anyway"
                     );
                 }
+                // The epoch announcement first (motion-core accepts a Reset only of the epoch
+                // the current monitor announced), then the Reset itself.
+                event_seq += 1;
+                let ann = epoch_announcement(&monitor, event_seq);
+                let _ = publish_own(&event_pub, &mut own, &ann);
+                last_announced = Some(monitor.reset_epoch());
                 event_seq += 1;
                 let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, event_seq);
                 // The epoch this reset minted; drive-io acts on it only once its watch has
@@ -685,17 +912,32 @@ pub fn run_on(
             }
         }
 
+        // The epoch announcement about once a second (motion-core, which has no CAN, learns
+        // which epoch the current monitor stands for); not while a reset's Reset event is
+        // pending (that announces the new epoch itself, right before the event).
+        if resetting.is_none()
+            && (last_announced != Some(monitor.reset_epoch())
+                || monitor.stats().cycles.is_multiple_of(EPOCH_ANNOUNCE_CYCLES))
+        {
+            event_seq += 1;
+            let ann = epoch_announcement(&monitor, event_seq);
+            let _ = publish_own(&event_pub, &mut own, &ann);
+            last_announced = Some(monitor.reset_epoch());
+        }
         // The fail-safe heartbeat: every cycle, STOP while tripped, after the signature (a
-        // consumer counts a RUN pair only with a recent signature of its own CRC).
+        // consumer counts a RUN pair only with a recent signature of its own CRC). Every frame
+        // on the monitor's own identifiers is remembered: one it receives and did not send is
+        // an impersonation.
         for f in &signature {
+            sent_own.record(f);
             stops.other(&mut tx.safety(), f);
         }
         let tripped = monitor.state().is_tripped();
-        let stage = stops.heartbeat(
-            &mut tx.safety(),
-            &safety_frame::encode(&monitor.heartbeat(counter), cob),
-            tripped,
-        );
+        let pair = safety_frame::encode(&monitor.heartbeat(counter), cob);
+        for f in &pair {
+            sent_own.record(f);
+        }
+        let stage = stops.heartbeat(&mut tx.safety(), &pair, tripped);
         if let Some(st) = stage
             && last_stage != Some(st)
         {
@@ -803,6 +1045,22 @@ fn check_owners(
     }
 }
 
+/// Where the answer to an operator's reset goes besides the monitor's state event.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ReplyTo {
+    Key,
+    Socket,
+}
+
+/// The monitor's epoch announcement (see [`crs_ipc::monitor_state::EPOCH_ANNOUNCE`]).
+fn epoch_announcement(monitor: &Monitor, seq: u64) -> StateEvent {
+    let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::StateChanged, seq);
+    ev.state = monitor.state().code();
+    ev.detail = crs_ipc::monitor_state::EPOCH_ANNOUNCE;
+    ev.detail_node = monitor.reset_epoch();
+    ev
+}
+
 fn estop_event(rec: &TripRecord, seq: u64) -> StateEvent {
     let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::EStop, seq);
     // The time of the cycle that detected the fault (the stop frames went out right after).
@@ -814,46 +1072,48 @@ fn estop_event(rec: &TripRecord, seq: u64) -> StateEvent {
 }
 
 /// The monitor's answer to a reset request.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum ResetReply {
     Accepted,
     NotTripped,
     Refused(Option<Cause>),
     /// The monitor is still in its start-up state (not every drive verified yet).
     NotReady,
+    /// The request did not come from an authorised channel (the peer is not in the operator
+    /// group): the monitor's reason.
+    Denied(String),
+    /// This monitor instance cannot count more resets (restart it).
+    Exhausted,
 }
 
-/// Operator side: publishes a reset request and waits up to `timeout` for the monitor's answer.
-pub fn request_reset(ipc: &IpcNode, timeout: Duration) -> Result<ResetReply, DaemonError> {
-    let replies = ipc.subscriber::<StateEvent>()?;
-    let requests = ipc.publisher::<StateEvent>()?;
-    // Old events (history) are not answers to this request.
-    while let Ok(Some(_)) = replies.receive() {}
-    let id = monotonic_ns();
-    let mut ev = StateEvent::new(ProcessId::Operator, EventKind::StateChanged, id);
-    ev.state = RESET_REQUEST;
-    requests.publish(&ev)?;
-    let t0 = std::time::Instant::now();
-    while t0.elapsed() < timeout {
-        while let Some(r) = replies.receive()? {
-            if r.source == ProcessId::SafetyMonitor as u32
-                && r.kind == EventKind::StateChanged as u32
-                && r.sequence == id
-            {
-                return Ok(match r.detail {
-                    RESET_ACCEPTED => ResetReply::Accepted,
-                    RESET_NOT_TRIPPED => ResetReply::NotTripped,
-                    RESET_NOT_READY => ResetReply::NotReady,
-                    _ => ResetReply::Refused(Cause::from_code(r.detail_node)),
-                });
-            }
+/// Operator side (`safety-monitor reset`): asks the monitor through its reset socket
+/// ([`crate::reset_socket`]); the kernel passes this process's credentials, which must show
+/// membership of the operator group.
+pub fn request_reset(
+    socket: &std::path::Path,
+    timeout: Duration,
+) -> Result<ResetReply, DaemonError> {
+    let line = crate::reset_socket::request(socket, timeout).map_err(|e| {
+        DaemonError::Other(format!(
+            "reset socket {}: {e} (is the monitor running with this [reset] socket?)",
+            socket.display()
+        ))
+    })?;
+    let (word, rest) = line.split_once(' ').unwrap_or((line.as_str(), ""));
+    Ok(match word {
+        "accepted" => ResetReply::Accepted,
+        "not-tripped" => ResetReply::NotTripped,
+        "not-ready" => ResetReply::NotReady,
+        "refused" => ResetReply::Refused(Cause::ALL.into_iter().find(|c| c.name() == rest.trim())),
+        "denied" => ResetReply::Denied(rest.trim().to_string()),
+        "exhausted" => ResetReply::Exhausted,
+        _ => {
+            return Err(DaemonError::Other(format!(
+                "reset socket {}: unexpected answer {line:?}",
+                socket.display()
+            )));
         }
-        std::thread::sleep(Duration::from_millis(2));
-    }
-    Err(DaemonError::Other(format!(
-        "no answer from the safety monitor within {} ms (is it running with the same --ipc-prefix?)",
-        timeout.as_millis()
-    )))
+    })
 }
 
 #[cfg(test)]

@@ -14,6 +14,7 @@
 //! | trip causes and the trip log | [`trip`] |
 //! | the CANopen frames of the stop path | [`bus_frames`] |
 //! | health of the own bus reader thread (fail closed) | [`bus_watch`] |
+//! | who may reset: the safety I/O node's key, the reset socket (SO_PEERCRED) | [`operator`], [`reset_socket`] |
 //! | stop frames with retry and escalation (NMT stop → heartbeat inhibit) | [`stop_path`] |
 //! | the process: 15 ms cycle, iceoryx2, CAN stop, safety heartbeat, reset | [`daemon`] |
 //!
@@ -31,8 +32,10 @@ pub mod daemon;
 pub mod identity;
 pub mod kinematics;
 pub mod monitor;
+pub mod operator;
 pub mod ownership;
 pub mod platform;
+pub mod reset_socket;
 pub mod stop_path;
 pub mod trip;
 pub mod tx_buses;

@@ -74,6 +74,12 @@ pub struct Limits {
     pub require_ready: bool,
     pub forces: ForceLimits,
     pub motion: MotionCheck,
+    /// The safety I/O node is configured (drives file `[safety_io]`): its TPDO1 (e-stop circuit,
+    /// reset key, STO output) is supervised and part of the start-up conditions.
+    pub safety_io: bool,
+    /// Cycles the safety I/O node may go without a TPDO1 once it reported (it sends one at
+    /// least every `inputs_period_ms`).
+    pub safety_io_silence_cycles: u32,
 }
 
 /// Plausibility of consecutive setpoint poses (table 5.1 limits × (1 + margin)), SI.
@@ -94,8 +100,9 @@ struct PrevPose {
     sequence: u64,
     r: DVec3,
     rot: DMat3,
-    /// Linear and angular velocity of the step that led here (None: a hold, a gap or the first).
-    vel: Option<(DVec3, DVec3)>,
+    /// Linear and angular velocity of the step that led here: zero for a hold and for the first
+    /// setpoint of a stream (the platform starts at rest), the mean velocity over a gap.
+    vel: (DVec3, DVec3),
 }
 
 /// Thresholds of the measured-force supervision (seed §5.1, table 5.1), N.
@@ -106,9 +113,13 @@ pub struct ForceLimits {
     pub slack_below_n: f64,
     /// ... overload above this (f_max + margin) ...
     pub overload_above_n: f64,
-    /// ... for at least this long (by the readings' receive times).
-    pub filter_ns: u64,
-    /// A single reading above this trips at once (the winches' rating).
+    /// ... in at least `window_violations` of a cable's last `window_readings` readings (a
+    /// fluttering force trips as well as a steady one; one in-range reading does not restart
+    /// anything).
+    pub window_readings: u32,
+    pub window_violations: u32,
+    /// A single reading beyond ± this trips at once (the winches' rating; a reading below
+    /// −limit is a broken sensor or a cable pushed, and trips as well).
     pub hard_limit_n: f64,
     /// Cycles an operational drive may go without a force reading.
     pub silence_cycles: u32,
@@ -139,7 +150,8 @@ impl Limits {
                 check: c.forces.check,
                 slack_below_n: c.platform.f_min_n - c.forces.slack_margin_n,
                 overload_above_n: c.platform.f_max_n + c.forces.overload_margin_n,
-                filter_ns: (c.forces.filter_ms * 1e6) as u64,
+                window_readings: c.forces.window_readings.clamp(1, MAX_FORCE_WINDOW),
+                window_violations: c.forces.window_violations.max(1),
                 hard_limit_n: c.forces.hard_limit_n,
                 silence_cycles: c.forces.silence_cycles,
             },
@@ -155,22 +167,31 @@ impl Limits {
                     angular_acceleration: l.angular_acceleration_rad_per_s2 * k,
                 }
             },
+            safety_io: c.safety_io.is_some(),
+            safety_io_silence_cycles: c.can.safety_io_silence_cycles,
         }
     }
 }
+
+/// Largest force window (readings per cable).
+pub const MAX_FORCE_WINDOW: u32 = 64;
 
 /// Per-cable state of the force supervision.
 #[derive(Debug, Clone, Copy, Default)]
 struct ForceWatch {
     /// The drive reports NMT operational (it runs and sends PDOs).
     operational: bool,
+    /// Supervised whatever its NMT state from now on: the drive was operational while (or when)
+    /// the monitor left its start-up state.
+    supervised: bool,
     /// Readings this cycle.
     readings: u32,
-    /// Cycles in a row without a reading while operational.
+    /// Cycles in a row without a reading while supervised.
     silent: u32,
-    /// Receive time of the first reading of the current slack / overload episode.
-    slack_since_ns: Option<u64>,
-    over_since_ns: Option<u64>,
+    /// The verdicts of the last `window_readings` readings, newest in bit 0: below the slack
+    /// limit, above the overload limit.
+    slack_bits: u64,
+    over_bits: u64,
 }
 
 /// The monitor's state, with the data each state has: a trip cannot exist without its
@@ -308,13 +329,17 @@ pub struct Readiness {
     pub not_operational: u32,
     /// Drives that sent no force reading (TPDO2) in the last cycle.
     pub no_feedback: u32,
+    /// The safety I/O node (if configured) reported its inputs recently with the e-stop
+    /// circuit closed (its reset key and e-stop can be read).
+    pub safety_io_ok: bool,
 }
 
 impl Readiness {
-    /// Every drive operational with live feedback (the identity is reported, not required:
-    /// see [`MonitorState::NotReady`]).
+    /// Every drive operational with live feedback, the safety I/O node (if any) reporting with
+    /// its e-stop circuit closed (the identity is reported, not required: see
+    /// [`MonitorState::NotReady`]).
     pub fn ready(&self) -> bool {
-        self.not_operational == 0 && self.no_feedback == 0
+        self.not_operational == 0 && self.no_feedback == 0 && self.safety_io_ok
     }
 }
 
@@ -330,6 +355,10 @@ pub enum ResetDecision {
     Refused(Cause),
     /// Nothing to reset: the monitor has not verified its start-up conditions yet.
     NotReady,
+    /// This monitor instance has accepted 65 535 resets: its epoch cannot advance without
+    /// wrapping (which would make an old reset look new). Restart the monitor (a new instance,
+    /// which then needs an operator reset of its own).
+    InstanceExhausted,
 }
 
 /// The reset authority (issue 16, type-state): the latch of [`Monitor`] is left only with a
@@ -360,27 +389,44 @@ pub mod authority {
     /// cleared), indexed by cause code.
     pub type Streaks = [u16; 32];
 
+    /// Why [`verify`] did not mint a token.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum Blocked {
+        /// This cause was seen, or not shown cleared, within the last `need` cycles.
+        Cause(Cause),
+        /// The instance's reset count is at its maximum (see
+        /// [`super::ResetDecision::InstanceExhausted`]).
+        Exhausted,
+    }
+
     /// Accepts the reset if no fault was seen for `need` cycles (`clean`) and every latched
-    /// cause was shown cleared for `need` cycles; then advances `epoch` and mints the token.
-    /// Otherwise the cause that blocks it.
+    /// cause was shown cleared for `need` cycles; then advances `epoch` (the reset count of
+    /// this instance, [`crs_limits::reset_epoch`]) and mints the token. Otherwise what blocks
+    /// it. The operator's request itself ([`crate::operator::OperatorReset`]) is checked by the
+    /// caller.
     pub(super) fn verify(
         latched: CauseSet,
         streaks: &Streaks,
         clean: u32,
         need: u32,
         epoch: &mut u32,
-    ) -> Result<ResetToken, Cause> {
+    ) -> Result<ResetToken, Blocked> {
         if let Some(c) = latched
             .iter()
             .find(|c| u32::from(streaks[usize::from(c.code())]) < need)
         {
-            return Err(c);
+            return Err(Blocked::Cause(c));
         }
         if clean < need {
-            return Err(latched.first().unwrap_or(Cause::IpcError));
+            return Err(Blocked::Cause(latched.first().unwrap_or(Cause::IpcError)));
         }
-        let next = epoch.wrapping_add(1);
-        debug_assert!(epoch_newer(next, *epoch));
+        let count = crs_limits::reset_epoch::count(*epoch);
+        if count == u16::MAX {
+            return Err(Blocked::Exhausted);
+        }
+        let next =
+            crs_limits::reset_epoch::new(crs_limits::reset_epoch::instance(*epoch), count + 1);
+        debug_assert!(epoch_newer(next, *epoch) && crs_limits::reset_epoch::releases(next, *epoch));
         *epoch = next;
         Ok(ResetToken { epoch: next })
     }
@@ -400,6 +446,8 @@ pub mod authority {
 ///   readings of the operational ones are finite and within [f_min − margin, f_max + margin]
 ///   this cycle (drives NMT-stopped send no forces: their forces are checked again, within the
 ///   filter time, after the NMT start that follows an accepted reset);
+/// * the safety I/O node's causes (e-stop circuit, silence): the node reported this cycle with
+///   its e-stop circuit closed;
 /// * process-bus and bus-observation causes: this cycle's receives and the reader's batches
 ///   completed without error; an e-stop event of another process: it is a one-shot command,
 ///   acknowledged by the operator's reset itself (the stop it caused is verified through the
@@ -414,10 +462,12 @@ pub mod evidence {
             | CableCount | SequenceRegression | MotionVelocity | MotionAcceleration
             | UnplannedStreamEnd => Class::Stream,
             IdentityMismatch | IdentityMissing => Class::Identity,
-            FollowingError | FeedbackSilence | RpdoMismatch | FollowingUnchecked => Class::Feedback,
+            FollowingError | FeedbackSilence | RpdoMismatch | FollowingUnchecked
+            | RpdoUnchecked => Class::Feedback,
             ForceSlack | ForceOverload | ForceSilence => Class::Forces,
+            EStopCircuit | SafetyIoSilence => Class::SafetyIo,
             IpcError | BusObservation | EStopEvent | ForgedEvent | CanBusError
-            | ForeignPublisher => Class::Receive,
+            | ForeignPublisher | Impersonation => Class::Receive,
         }
     }
 
@@ -427,9 +477,21 @@ pub mod evidence {
         Identity,
         Feedback,
         Forces,
+        /// The safety I/O node reported this cycle, with its e-stop circuit closed.
+        SafetyIo,
         Receive,
     }
 }
+
+/// Armed cycles in a row a consumer must be seen waiting (see [`Monitor::request_reset`])
+/// before an operator reset while armed is taken as the reset of this instance: more than a
+/// validation time (50 ms) plus the release pairs (3 cycles), so a consumer that is merely
+/// releasing on the current epoch is not mistaken for one that waits.
+pub const CONSUMER_WAIT_CYCLES: u32 = 10;
+
+/// How far in the monitor's future a drive-io feedback timestamp may lie (same CLOCK_MONOTONIC
+/// host; drive-io may stamp a sample just after the monitor's cycle began).
+pub const FEEDBACK_FUTURE_TOLERANCE_NS: u64 = 50_000_000;
 
 /// A drive's heartbeat older than this is not evidence of a reporting drive (ns).
 const DRIVE_REPORT_MAX_AGE_NS: u64 = 1_000_000_000;
@@ -446,6 +508,8 @@ pub struct Stats {
     pub forces_checked: u64,
     /// Largest |Δq| seen on any cable (m).
     pub max_abs_dq_m: f64,
+    /// drive-io feedback samples that did not advance (republished) or lay in the future.
+    pub feedback_stale: u64,
 }
 
 /// The monitor core. Construct once (allocates the gap window), then per cycle: `on_*` for every
@@ -502,6 +566,41 @@ pub struct Monitor {
     fb_unchecked: u32,
     unchecked_streak: u32,
     prev_pose: Option<PrevPose>,
+    /// The monitor's clock at the start of this cycle and of the previous one
+    /// ([`Monitor::begin_cycle`]; 0 = not given): a setpoint drained in this cycle was
+    /// published between the two, whatever its own timestamp claims.
+    clock_ns: u64,
+    prev_clock_ns: u64,
+    /// The monitor has left its start-up state: a drive operational from now on (every drive,
+    /// at the transition) is force-supervised whatever its NMT state later says.
+    supervising: bool,
+    /// drive-io's last feedback sample (timestamp, cycle): a sample that does not advance both
+    /// is stale (republished), not evidence of a live adapter.
+    last_feedback: Option<(u64, u64)>,
+    /// The setpoint drive-io reported as applied in its last fresh sample.
+    last_applied: u64,
+    /// drive-io's feedback this cycle reported a latched stop (e-stop, stale stop, fault).
+    fb_latched: bool,
+    /// RPDOs that enable operation, checked / not checkable this cycle, and the streak of
+    /// cycles with only uncheckable ones.
+    rpdo_checked: u32,
+    rpdo_unchecked: u32,
+    rpdo_unchecked_streak: u32,
+    /// Per cable, the first enabling RPDO target before any setpoint (NaN: none yet): drive-io
+    /// enables the drives holding where they stand before motion-core streams, and a target
+    /// that stays there is checked (no motion); one that moves is not checkable.
+    rpdo_hold_m: [f64; MAX_CABLES],
+    /// The safety I/O node: TPDO1s this cycle, cycles without one after the first, whether it
+    /// ever reported, its e-stop circuit and STO output as last reported.
+    io_reports: u32,
+    io_silent: u32,
+    io_seen: bool,
+    io_estop_closed: bool,
+    io_sto_released: bool,
+    /// Armed cycles in a row in which a consumer waits for this instance's reset: the safety
+    /// I/O node keeps the STO on although the monitor says RUN (its watch stopped under another
+    /// monitor instance or epoch), or drive-io reports a latched stop.
+    waiting_streak: u32,
     /// The last setpoint's pose of this stream (start-up: motion needs a verified identity).
     last_pose: Option<[f64; 6]>,
     /// The monitor's clock at the end of the last cycle that brought setpoints, and the last
@@ -579,10 +678,74 @@ impl Monitor {
             fb_unchecked: 0,
             unchecked_streak: 0,
             prev_pose: None,
+            clock_ns: 0,
+            prev_clock_ns: 0,
+            // A monitor that starts armed (require_ready off, bench) has been ready from the
+            // start.
+            supervising: !lim.require_ready,
+            last_feedback: None,
+            last_applied: 0,
+            fb_latched: false,
+            rpdo_checked: 0,
+            rpdo_unchecked: 0,
+            rpdo_unchecked_streak: 0,
+            rpdo_hold_m: [f64::NAN; MAX_CABLES],
+            io_reports: 0,
+            io_silent: 0,
+            io_seen: false,
+            io_estop_closed: false,
+            io_sto_released: false,
+            waiting_streak: 0,
             last_pose: None,
             cycle_ref: None,
             plan: PlanWatch::default(),
         }
+    }
+
+    /// Opens a cycle at the monitor's clock `now_ns` (call before this cycle's inputs): the
+    /// setpoints drained now were published after the previous cycle began and before now, so
+    /// their history entries are stamped within that interval whatever their own timestamps
+    /// claim (a producer's clock that jumps forward or back cannot blind the RPDO check).
+    pub fn begin_cycle(&mut self, now_ns: u64) {
+        self.prev_clock_ns = if self.clock_ns == 0 {
+            now_ns
+        } else {
+            self.clock_ns
+        };
+        self.clock_ns = now_ns;
+    }
+
+    /// The safety I/O node's TPDO1 (inputs: bit 0 e-stop circuit closed, bit 1 reset key;
+    /// outputs: bit 0 STO released), received at `rx_ns`. An open e-stop circuit trips
+    /// (`estop_circuit`); the reset key is read by the process ([`crate::operator::KeyWatch`]).
+    pub fn on_safety_io(&mut self, inputs: u8, outputs: u8, _rx_ns: u64) {
+        self.io_reports += 1;
+        self.io_seen = true;
+        self.io_estop_closed = inputs & crate::operator::INPUT_ESTOP_CLOSED != 0;
+        self.io_sto_released = outputs & crate::operator::OUTPUT_STO_RELEASED != 0;
+        if !self.io_estop_closed {
+            self.fault(Fault {
+                value: f64::from(inputs),
+                ..Fault::new(Cause::EStopCircuit)
+            });
+        }
+    }
+
+    /// A frame on the monitor's own identifiers (`cob_id` = its COB-ID) that it did not send.
+    pub fn on_impersonation(&mut self, cob_id: u16) {
+        self.fault(Fault {
+            value: f64::from(cob_id),
+            ..Fault::new(Cause::Impersonation)
+        });
+    }
+
+    /// Sets the monitor instance (construction only): the reset epoch becomes the instance's
+    /// start epoch (count 0, [`crs_limits::reset_epoch`]). The daemon draws the instance at
+    /// random when it starts, so a restarted monitor is another instance whose start epoch
+    /// releases none of the consumers that stopped under the previous one.
+    pub fn with_instance(mut self, instance: u16) -> Self {
+        self.epoch = crs_limits::reset_epoch::new(instance, 0);
+        self
     }
 
     /// The producer announced its plan: `end` is the sequence number of its last planned
@@ -850,9 +1013,18 @@ impl Monitor {
                 ..at(Cause::DqLimit)
             });
         }
+        // When the setpoint existed, for the RPDO check ("computed before the RPDO"): its own
+        // timestamp, but never outside the interval in which it was published as the
+        // monitor's clock knows it (begin_cycle), so a producer clock that jumps cannot put
+        // every setpoint in the future (RPDO check blind) or far in the past.
+        let stamped = if self.clock_ns == 0 {
+            sp.timestamp_ns
+        } else {
+            sp.timestamp_ns.clamp(self.prev_clock_ns, self.clock_ns)
+        };
         let e = &mut self.hist[self.hist_next];
         e.sequence = sp.sequence;
-        e.timestamp_ns = sp.timestamp_ns;
+        e.timestamp_ns = stamped;
         e.q_cmd[..m].copy_from_slice(&sp.cable_length_m[..m]);
         e.q_star[..m].copy_from_slice(&self.q[..m]);
         self.hist_next = (self.hist_next + 1) % HISTORY;
@@ -860,15 +1032,20 @@ impl Monitor {
     }
 
     /// Velocity and acceleration implied by consecutive setpoints: one sequence number is one
-    /// stream period (the sender's timestamps are not used). A step to exactly the same pose
-    /// is a hold (motion-core holding after an e-stop or refusal; the drives decelerate on
-    /// their own), which ends the acceleration chain instead of counting as a deceleration.
+    /// stream period (the sender's timestamps are not used). A hold is zero velocity: the
+    /// first setpoint of a stream (the platform starts at rest) and a step to exactly the same
+    /// pose (motion-core holding after an e-stop or refusal) leave a velocity of zero, so the
+    /// step OUT of a hold is acceleration-checked like any other — a stream that jumps from
+    /// rest to a plausible speed trips here. The step INTO a hold is not checked (stopping the
+    /// setpoints is the safe direction; the drives decelerate on their own). Over a sequence gap
+    /// of n periods the mean velocity is compared with the previous step's over the time
+    /// between their midpoints, (n + 1)/2 periods.
     fn check_motion(&mut self, sp: &JointSetpoint) {
         let mc = self.lim.motion;
         let p = &sp.pose;
         let r = DVec3::new(p[0], p[1], p[2]);
         let rot = StandardKinematics::rotation(p[3], p[4], p[5]);
-        let mut vel = None;
+        let mut vel = (DVec3::ZERO, DVec3::ZERO);
         if let Some(prev) = self.prev_pose
             && sp.sequence > prev.sequence
         {
@@ -890,19 +1067,19 @@ impl Monitor {
                 self.fault(at(w.length(), mc.angular_velocity, Cause::MotionVelocity));
             }
             let hold = dr == DVec3::ZERO && angle == 0.0;
-            if !hold && n == 1 {
-                vel = Some((v, w));
-                if let Some((pv, pw)) = prev.vel {
-                    let (a, alpha) = ((v - pv).length() / dt, (w - pw).length() / dt);
-                    if !within(a, mc.linear_acceleration) {
-                        self.fault(at(a, mc.linear_acceleration, Cause::MotionAcceleration));
-                    } else if !within(alpha, mc.angular_acceleration) {
-                        self.fault(at(
-                            alpha,
-                            mc.angular_acceleration,
-                            Cause::MotionAcceleration,
-                        ));
-                    }
+            if !hold {
+                vel = (v, w);
+                let (pv, pw) = prev.vel;
+                let dt_mid = (n as f64 + 1.0) * 0.5 * mc.period_s;
+                let (a, alpha) = ((v - pv).length() / dt_mid, (w - pw).length() / dt_mid);
+                if !within(a, mc.linear_acceleration) {
+                    self.fault(at(a, mc.linear_acceleration, Cause::MotionAcceleration));
+                } else if !within(alpha, mc.angular_acceleration) {
+                    self.fault(at(
+                        alpha,
+                        mc.angular_acceleration,
+                        Cause::MotionAcceleration,
+                    ));
                 }
             }
         }
@@ -949,16 +1126,44 @@ impl Monitor {
     }
 
     /// drive-io's feedback (call for every sample received).
+    ///
+    /// Only a FRESH sample counts as a live drive adapter (`feedback_silence`): its timestamp
+    /// and SYNC cycle must both advance past the previous sample's, and the timestamp may not
+    /// lie in the monitor's future ([`Monitor::begin_cycle`]) — a hung adapter whose publisher
+    /// keeps republishing its last sample is as dead as a silent one. The following error is
+    /// checked while drive-io reports Running, and also whenever the applied setpoint advanced
+    /// (drive-io applies setpoints whatever state it claims).
     pub fn on_feedback(&mut self, fb: &DriveFeedback) {
-        self.feedback_count += 1;
+        let fresh = self
+            .last_feedback
+            .is_none_or(|(ts, cycle)| fb.timestamp_ns > ts && fb.cycle > cycle)
+            && (self.clock_ns == 0
+                || fb.timestamp_ns <= self.clock_ns.saturating_add(FEEDBACK_FUTURE_TOLERANCE_NS));
+        let previous_applied = self.last_applied;
+        // Any sample arms the silence check (drive-io exists); only a fresh one feeds it.
         self.seen_feedback = true;
+        if fresh {
+            self.last_feedback = Some((fb.timestamp_ns, fb.cycle));
+            self.feedback_count += 1;
+        } else {
+            self.stats.feedback_stale += 1;
+            return;
+        }
+        self.last_applied = fb.applied_setpoint_sequence;
         self.stats.feedback_checked += 1;
+        let state = BusState::from_u32(fb.bus_state);
+        if matches!(
+            state,
+            Some(BusState::EStop | BusState::Fault | BusState::StaleStop)
+        ) {
+            self.fb_latched = true;
+        }
         if self.state.is_tripped() {
             self.reset_evidence_feedback(fb);
         }
-        if !self.lim.check_following_error
-            || BusState::from_u32(fb.bus_state) != Some(BusState::Running)
-        {
+        let applying =
+            state == Some(BusState::Running) || fb.applied_setpoint_sequence > previous_applied;
+        if !self.lim.check_following_error || !applying {
             return;
         }
         let m = self.m;
@@ -1062,8 +1267,27 @@ impl Monitor {
     /// An RPDO1 target seen on the bus for cable `cable` (converted to metres), received at
     /// `rx_ns`. Compared with φ*(x) of the recent setpoints computed before it (the drive
     /// adapter forwards one of them).
+    ///
+    /// Before any setpoint, an RPDO that holds the cable's first enabling target is checked
+    /// (the drive holds where it was enabled: no motion). An RPDO that no recent setpoint can
+    /// have preceded (a moving target before any setpoint, or every setpoint stamped after
+    /// it) cannot be checked: it is counted, and cycles with such RPDOs only trip
+    /// `rpdo_unchecked` after `unchecked_cycles` in a row (fail closed, not skipped).
     pub fn on_rpdo(&mut self, cable: usize, length_m: f64, rx_ns: u64) {
-        if !self.lim.check_rpdo || cable >= self.m || self.hist_len == 0 {
+        if !self.lim.check_rpdo || cable >= self.m {
+            return;
+        }
+        if self.hist_len == 0 {
+            let hold = &mut self.rpdo_hold_m[cable];
+            if hold.is_nan() && length_m.is_finite() {
+                *hold = length_m;
+            }
+            // The same encoder counts give the same metres: a hold compares exactly.
+            if *hold == length_m {
+                self.rpdo_checked += 1;
+            } else {
+                self.rpdo_unchecked += 1;
+            }
             return;
         }
         self.stats.rpdo_checked += 1;
@@ -1079,11 +1303,16 @@ impl Monitor {
             if d < best {
                 best = d;
                 if best <= limit {
-                    return;
+                    break;
                 }
             }
         }
-        if any {
+        if any && best <= limit {
+            self.rpdo_checked += 1;
+        } else if !any {
+            self.rpdo_unchecked += 1;
+        } else {
+            self.rpdo_checked += 1;
             self.fault(Fault {
                 cable: Some(cable as u8),
                 value: if length_m.is_finite() { best } else { f64::NAN },
@@ -1093,8 +1322,9 @@ impl Monitor {
         }
     }
 
-    /// NMT state of the drive of `cable` (from its heartbeat): only operational drives send
-    /// PDOs, so only their forces are supervised and their silence counted.
+    /// NMT state of the drive of `cable` (from its heartbeat): a start-up condition (every
+    /// drive operational); the forces are supervised whatever it says once the monitor has been
+    /// ready.
     pub fn on_drive_state(&mut self, cable: usize, operational: bool) {
         self.on_drive_report(cable, operational, 0);
     }
@@ -1106,16 +1336,20 @@ impl Monitor {
             *t = rx_ns;
         }
         if let Some(w) = self.force.get_mut(cable) {
-            if !operational {
-                *w = ForceWatch::default();
-            }
+            // The force window is NOT restarted when a drive leaves operational: a drive that
+            // is stopped and started again (by anyone) keeps its history.
             w.operational = operational;
+            w.supervised |= operational && self.supervising;
         }
     }
 
-    /// A measured cable force (the drive's TPDO2 pulley force, N) received at `rx_ns`. Slack
-    /// and overload are timed by the monitor's receive clock, not by the sender.
-    pub fn on_force(&mut self, cable: usize, force_n: f64, rx_ns: u64) {
+    /// A measured cable force (the drive's TPDO2 pulley force or its load cell's, N). Once the
+    /// monitor has been ready, every reading is checked whatever the drive's NMT state: slack below f_min − margin or
+    /// overload above f_max + margin in `window_violations` of the cable's last
+    /// `window_readings` readings trips (a fluttering force as well as a steady one), one
+    /// reading beyond ± the hard limit trips at once, a reading that is not a number trips
+    /// `force_silence` (the check cannot be evaluated).
+    pub fn on_force(&mut self, cable: usize, force_n: f64, _rx_ns: u64) {
         let fl = self.lim.forces;
         if cable >= self.m {
             return;
@@ -1123,7 +1357,10 @@ impl Monitor {
         let w = &mut self.force[cable];
         // Counted also with the check off: a live reading is a start-up condition.
         w.readings += 1;
-        if !fl.check || !w.operational {
+        // Before its drive was operational with the monitor ready, only an operational
+        // drive's readings count (the cables may not be tensioned before the NMT start); after
+        // that, every reading, whatever the drive's NMT state.
+        if !fl.check || !(w.supervised || w.operational) {
             return;
         }
         self.stats.forces_checked += 1;
@@ -1138,28 +1375,31 @@ impl Monitor {
             self.fault(at(Cause::ForceSilence, f64::NAN));
             return;
         }
-        if force_n < fl.slack_below_n || force_n > fl.overload_above_n {
+        let slack = force_n < fl.slack_below_n;
+        let over = force_n > fl.overload_above_n;
+        if slack || over {
             self.force_out_of_range = true;
         }
+        let mask = if fl.window_readings >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << fl.window_readings) - 1
+        };
+        w.slack_bits = ((w.slack_bits << 1) | u64::from(slack)) & mask;
+        w.over_bits = ((w.over_bits << 1) | u64::from(over)) & mask;
+        let (n_slack, n_over) = (w.slack_bits.count_ones(), w.over_bits.count_ones());
         let mut fault = None;
-        if force_n < fl.slack_below_n {
-            let since = *w.slack_since_ns.get_or_insert(rx_ns);
-            if rx_ns.saturating_sub(since) >= fl.filter_ns {
-                fault = Some(at(Cause::ForceSlack, fl.slack_below_n));
-            }
-        } else {
-            w.slack_since_ns = None;
+        // k of n: a cable alternating between slack and overload counts both.
+        if n_slack + n_over >= fl.window_violations {
+            fault = Some(if n_over > n_slack || (n_over == n_slack && over) {
+                at(Cause::ForceOverload, fl.overload_above_n)
+            } else {
+                at(Cause::ForceSlack, fl.slack_below_n)
+            });
         }
-        if force_n > fl.overload_above_n {
-            let since = *w.over_since_ns.get_or_insert(rx_ns);
-            if rx_ns.saturating_sub(since) >= fl.filter_ns {
-                fault = Some(at(Cause::ForceOverload, fl.overload_above_n));
-            }
-        } else {
-            w.over_since_ns = None;
-        }
-        // The hard limit needs no filter: one reading above the winches' rating trips.
-        if !within(force_n, fl.hard_limit_n) {
+        // The hard limit needs no window: one reading beyond the winches' rating, of either
+        // sign, trips.
+        if !within(force_n.abs(), fl.hard_limit_n) {
             fault = Some(at(Cause::ForceOverload, fl.hard_limit_n));
         }
         if let Some(f) = fault {
@@ -1246,13 +1486,52 @@ impl Monitor {
         }
         self.fb_checked = 0;
         self.fb_unchecked = 0;
+        // RPDOs that enable operation but cannot be checked, cycle after cycle, fail closed.
+        if self.rpdo_unchecked > 0 && self.rpdo_checked == 0 {
+            self.rpdo_unchecked_streak = self.rpdo_unchecked_streak.saturating_add(1);
+        } else if self.rpdo_checked > 0 {
+            self.rpdo_unchecked_streak = 0;
+        }
+        if self.lim.check_rpdo
+            && self.lim.unchecked_cycles > 0
+            && self.rpdo_unchecked_streak >= self.lim.unchecked_cycles
+        {
+            self.fault(Fault {
+                value: f64::from(self.rpdo_unchecked_streak),
+                limit: f64::from(self.lim.unchecked_cycles),
+                ..Fault::new(Cause::RpdoUnchecked)
+            });
+        }
+        self.rpdo_checked = 0;
+        self.rpdo_unchecked = 0;
+        // The safety I/O node: once it reported, a silence trips (its e-stop circuit, reset key
+        // and STO output can no longer be read).
+        if self.lim.safety_io {
+            if self.io_reports > 0 {
+                self.io_silent = 0;
+            } else if self.io_seen {
+                self.io_silent = self.io_silent.saturating_add(1);
+            }
+            if self.io_silent >= self.lim.safety_io_silence_cycles.max(1) {
+                self.fault(Fault {
+                    value: f64::from(self.io_silent),
+                    limit: f64::from(self.lim.safety_io_silence_cycles),
+                    ..Fault::new(Cause::SafetyIoSilence)
+                });
+            }
+        }
         // Start-up conditions, from this cycle's drive states and readings.
         let readiness = self.readiness();
-        // Operational drives without force readings: the force check cannot be evaluated.
+        // Cables without force readings: the force check cannot be evaluated. Once the monitor
+        // has been ready every cable is supervised whatever its drive's NMT state (a drive that
+        // someone stopped keeps being supervised: its load cell still reports, or its silence
+        // trips), except while tripped (the monitor itself NMT-stops the drives then).
+        let tripped = self.state.is_tripped();
         if self.lim.forces.check {
             for i in 0..self.m {
                 let w = &mut self.force[i];
-                if !w.operational || w.readings > 0 {
+                let supervised = w.operational || (w.supervised && !tripped);
+                if !supervised || w.readings > 0 {
                     w.silent = 0;
                 } else {
                     w.silent = w.silent.saturating_add(1);
@@ -1270,6 +1549,15 @@ impl Monitor {
         }
         for w in &mut self.force[..self.m] {
             w.readings = 0;
+        }
+        // A consumer waits for a reset of this instance: the safety I/O node keeps the torque
+        // off although the monitor says RUN (its watch stopped under another monitor instance
+        // or epoch), or drive-io reports a latched stop.
+        let sto_off = self.lim.safety_io && self.io_reports > 0 && !self.io_sto_released;
+        if self.state == MonitorState::Armed && (sto_off || self.fb_latched) {
+            self.waiting_streak = self.waiting_streak.saturating_add(1);
+        } else {
+            self.waiting_streak = 0;
         }
         let mut new_trip = None;
         let mut became_ready = false;
@@ -1294,6 +1582,11 @@ impl Monitor {
             self.clear_streak = self.clear_streak.saturating_add(1);
             if self.state == MonitorState::NotReady && readiness.ready() {
                 self.state = MonitorState::Armed;
+                self.supervising = true;
+                // Every drive is operational now (readiness): all are supervised from here on.
+                for w in &mut self.force[..self.m] {
+                    w.supervised = true;
+                }
                 became_ready = true;
             }
         }
@@ -1326,7 +1619,9 @@ impl Monitor {
         self.feedback_count = 0;
         self.fb_following = false;
         self.fb_not_following = false;
+        self.fb_latched = false;
         self.force_out_of_range = false;
+        self.io_reports = 0;
         report
     }
 
@@ -1355,6 +1650,7 @@ impl Monitor {
                     Class::Identity => identity_ok,
                     Class::Feedback => feedback_ok,
                     Class::Forces => forces_ok,
+                    Class::SafetyIo => self.io_reports > 0 && self.io_estop_closed,
                     Class::Receive => true,
                 };
             let s = &mut self.evidence[usize::from(c.code())];
@@ -1379,19 +1675,50 @@ impl Monitor {
             identity_verified: self.identity_state == IdentityState::Verified,
             not_operational,
             no_feedback,
+            safety_io_ok: !self.lim.safety_io || (self.io_reports > 0 && self.io_estop_closed),
         }
     }
 
-    /// Operator reset (ISO 13849-1 §5.2.2 manual reset): accepted only if no fault was seen for
-    /// `reset_clear_cycles` cycles and every latched cause was positively shown cleared for as
-    /// many cycles ([`authority::verify`]). Accepting advances the reset epoch. While armed or
-    /// not ready nothing changes.
-    pub fn request_reset(&mut self) -> ResetDecision {
+    /// Operator reset (ISO 13849-1 §5.2.2 manual reset), from an authorised channel only (the
+    /// reset key, the reset socket: [`crate::operator::OperatorReset`]): accepted only if no
+    /// fault was seen for `reset_clear_cycles` cycles and every latched cause was positively
+    /// shown cleared for as many cycles ([`authority::verify`]). Accepting advances the reset
+    /// epoch (the count of this instance).
+    ///
+    /// While armed nothing changes — unless a consumer waits for a reset of THIS instance (the
+    /// safety I/O node keeps the torque off although the monitor says RUN, or drive-io reports
+    /// a latched stop, for [`CONSUMER_WAIT_CYCLES`] cycles): after a monitor restart the
+    /// drives, the node and drive-io stay stopped on the new instance's start epoch, and only
+    /// this reset (with the same clean-cycle condition) releases them. While not ready nothing
+    /// changes.
+    pub fn request_reset(&mut self, request: crate::operator::OperatorReset) -> ResetDecision {
+        let _consumed = request;
+        let need = self.lim.reset_clear_cycles;
         match self.state {
             MonitorState::NotReady => ResetDecision::NotReady,
-            MonitorState::Armed => ResetDecision::NotTripped,
+            MonitorState::Armed if self.waiting_streak < CONSUMER_WAIT_CYCLES => {
+                ResetDecision::NotTripped
+            }
+            MonitorState::Armed => {
+                match authority::verify(
+                    CauseSet::default(),
+                    &self.evidence,
+                    self.clear_streak,
+                    need,
+                    &mut self.epoch,
+                ) {
+                    Ok(token) => {
+                        let epoch = token.epoch();
+                        self.waiting_streak = 0;
+                        ResetDecision::Accepted { epoch }
+                    }
+                    Err(authority::Blocked::Exhausted) => ResetDecision::InstanceExhausted,
+                    Err(authority::Blocked::Cause(c)) => {
+                        ResetDecision::Refused(self.last_faults.first().unwrap_or(c))
+                    }
+                }
+            }
             MonitorState::Tripped(_) => {
-                let need = self.lim.reset_clear_cycles;
                 match authority::verify(
                     self.latched,
                     &self.evidence,
@@ -1404,17 +1731,28 @@ impl Monitor {
                         self.release(token);
                         ResetDecision::Accepted { epoch }
                     }
-                    Err(c) => ResetDecision::Refused(self.last_faults.first().unwrap_or(c)),
+                    Err(authority::Blocked::Exhausted) => ResetDecision::InstanceExhausted,
+                    Err(authority::Blocked::Cause(c)) => {
+                        ResetDecision::Refused(self.last_faults.first().unwrap_or(c))
+                    }
                 }
             }
         }
     }
 
     /// Leaves the latch: the only transition out of [`MonitorState::Tripped`] (which drops the trip
-    /// record with it), and it needs the token only [`authority::verify`] mints.
+    /// record with it), and it needs the token only [`authority::verify`] mints. The force
+    /// windows start afresh (the operator's reset follows positive evidence of in-range
+    /// forces), and the drives, which the monitor NMT-stopped, get their silence allowance
+    /// again while the NMT start takes effect.
     fn release(&mut self, _token: authority::ResetToken) {
         self.state = MonitorState::Armed;
         self.latched.clear();
         self.evidence = [0; 32];
+        for w in &mut self.force {
+            w.slack_bits = 0;
+            w.over_bits = 0;
+            w.silent = 0;
+        }
     }
 }

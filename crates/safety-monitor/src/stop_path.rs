@@ -147,6 +147,33 @@ impl StopPath {
         ok
     }
 
+    /// NMT stop addressed to each drive (`(interface, node id)`) on its own interface (on the
+    /// trip and every tripped cycle). Addressed, not broadcast: the safety I/O node (whose
+    /// TPDO1 carries the operator's reset key and e-stop circuit, sent only while it is
+    /// operational) and the load cells (whose readings are the evidence that the forces are
+    /// back in range) keep running; the drives' torque is removed by the STOP pairs through the
+    /// node's STO outputs and by their own NMT stop.
+    pub fn nmt_stop_drives(
+        &mut self,
+        tx: &mut crate::tx_buses::TxBuses,
+        drives: impl Iterator<Item = (usize, u8)>,
+    ) -> bool {
+        let mut ok = true;
+        for (iface, node) in drives {
+            let sent = match tx.on(iface) {
+                Some(bus) => self.send(bus, &bus_frames::nmt(bus_frames::NMT_STOP, node)),
+                None => false,
+            };
+            ok &= sent;
+        }
+        // Counted once per cycle (like the broadcast), whichever drives' frames stayed unsent.
+        if !ok {
+            self.counts.nmt_stop_unsent += 1;
+        }
+        self.cycle.nmt_stop = Some(ok);
+        ok
+    }
+
     /// NMT stop, all nodes (on the trip and every tripped cycle).
     pub fn nmt_stop(&mut self, bus: &mut dyn CanBus) -> bool {
         let ok = self.send(bus, &bus_frames::nmt(bus_frames::NMT_STOP, 0));

@@ -67,7 +67,21 @@ pub enum Cause {
     /// monitor's own socket; value = 1 bus-off, 2 error-passive): frames to and from the drives,
     /// the monitor's stop frames among them, may no longer get through (issue 15).
     CanBusError = 23,
-    // 24..=27 are left free (issue 16 numbered its causes from 28).
+    /// A frame on the monitor's own identifiers (the doubled heartbeat and configuration
+    /// signature, `safety_cob_id` .. + 3) that this monitor did not send: another node speaks
+    /// for the monitor on the bus (value = the COB-ID).
+    Impersonation = 24,
+    /// The safety I/O node reports its e-stop circuit open (the operator's e-stop button, a
+    /// broken wire): the node has removed the drives' torque; the monitor latches it so that
+    /// closing the circuit again releases nothing without the operator's reset.
+    EStopCircuit = 25,
+    /// The safety I/O node sent no TPDO1 for N cycles after it reported: its inputs (e-stop
+    /// circuit, reset key) and its STO output can no longer be read (fail closed).
+    SafetyIoSilence = 26,
+    /// RPDOs that enable operation arrived on the bus but none could be checked for N cycles in
+    /// a row (no setpoint the monitor saw could have preceded them): the RPDO check fails closed
+    /// (value = cycles).
+    RpdoUnchecked = 27,
     /// The setpoint producer announced the end of its stream (STOPPING) before the end of the
     /// plan it announced, while the stream was not holding, or without any plan announced: a
     /// forged or premature end that would disarm the silence and sequence checks (issue 16).
@@ -79,7 +93,7 @@ pub enum Cause {
 }
 
 impl Cause {
-    pub const ALL: [Cause; 25] = [
+    pub const ALL: [Cause; 29] = [
         Cause::DqLimit,
         Cause::NonFinite,
         Cause::OutsideWorkspace,
@@ -103,6 +117,10 @@ impl Cause {
         Cause::EStopEvent,
         Cause::ForgedEvent,
         Cause::CanBusError,
+        Cause::Impersonation,
+        Cause::EStopCircuit,
+        Cause::SafetyIoSilence,
+        Cause::RpdoUnchecked,
         Cause::UnplannedStreamEnd,
         Cause::ForeignPublisher,
     ];
@@ -143,6 +161,10 @@ impl Cause {
             Cause::EStopEvent => "estop_event",
             Cause::ForgedEvent => "forged_event",
             Cause::CanBusError => "can_bus_error",
+            Cause::Impersonation => "impersonation",
+            Cause::EStopCircuit => "estop_circuit",
+            Cause::SafetyIoSilence => "safety_io_silence",
+            Cause::RpdoUnchecked => "rpdo_unchecked",
             Cause::UnplannedStreamEnd => "unplanned_stream_end",
             Cause::ForeignPublisher => "foreign_publisher",
         }

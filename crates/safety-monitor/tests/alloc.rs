@@ -12,6 +12,17 @@ use std::path::PathBuf;
 #[global_allocator]
 static A: CountingAlloc = CountingAlloc;
 
+/// An operator's reset the way the safety I/O node's key gives one: turned, then released.
+fn key_reset() -> safety_monitor::operator::OperatorReset {
+    use safety_monitor::operator::{INPUT_ESTOP_CLOSED, INPUT_RESET_KEY, KeyEvent, KeyWatch};
+    let mut k = KeyWatch::new();
+    k.on_inputs(INPUT_ESTOP_CLOSED | INPUT_RESET_KEY, 0);
+    match k.on_inputs(INPUT_ESTOP_CLOSED, 100_000_000) {
+        KeyEvent::Reset(r) => r,
+        other => panic!("the key gave no reset: {other:?}"),
+    }
+}
+
 #[test]
 fn a_cycle_allocates_nothing() {
     let cfg = config::load(
@@ -31,6 +42,7 @@ fn a_cycle_allocates_nothing() {
     let mut seq = 0;
     let ((), n) = count_allocations(|| {
         for cycle in 0..1000u64 {
+            m.begin_cycle(cycle * 15_000_000 + 1);
             m.on_identity(&ident);
             for _ in 0..15 {
                 seq += 1;
@@ -44,6 +56,8 @@ fn a_cycle_allocates_nothing() {
                 let mut f = DriveFeedback {
                     cable_count: 8,
                     applied_setpoint_sequence: seq,
+                    cycle: seq,
+                    timestamp_ns: s.timestamp_ns,
                     bus_state: BusState::Running as u32,
                     ..DriveFeedback::default()
                 };
@@ -57,7 +71,7 @@ fn a_cycle_allocates_nothing() {
             }
             m.end_cycle(cycle * 15_000_000);
             if cycle > 510 && m.state().is_tripped() {
-                m.request_reset();
+                m.request_reset(key_reset());
             }
         }
     });

@@ -31,7 +31,8 @@ struct Rig {
     kin: StandardKinematics,
     id: crs_ipc::PlatformId,
     seq: u64,
-    prefix: String,
+    /// The monitor's reset socket (this test process is in the operator group: its own gid).
+    reset_socket: PathBuf,
     /// (state, time) of the last valid safety pair; NMT commands seen (command, time).
     last_pair: Option<(SafetyState, Instant)>,
     invalid_pairs: u32,
@@ -75,6 +76,7 @@ fn one_bus_with_drive_forces(cfg: &mut config::MonitorConfig, transport: &Transp
                 node: w.node_id,
             })
             .collect(),
+        safety_io: None,
     };
 }
 
@@ -100,6 +102,13 @@ impl Rig {
         cfg.ipc.setpoint_owners = vec![me.clone()];
         cfg.ipc.identity_owners = vec![me];
         cfg.can.reset_wait_ms = 200;
+        // The operator's reset through the reset socket; this test process's own group is the
+        // operator group (no safety I/O node on this bus, so no reset key).
+        let reset_socket =
+            std::env::temp_dir().join(format!("{}reset.sock", prefix.replace('/', "-")));
+        // SAFETY: getgid has no preconditions.
+        cfg.reset_socket = Some((reset_socket.clone(), unsafe { libc::getgid() }));
+        cfg.reset.key = false;
         let kin = StandardKinematics::new(&cfg.platform);
         let id = platform_identity(&cfg.platform);
         let node_ids: Vec<u8> = cfg.winches.iter().map(|w| w.node_id).collect();
@@ -138,7 +147,7 @@ impl Rig {
             kin,
             id,
             seq: 0,
-            prefix,
+            reset_socket,
             last_pair: None,
             invalid_pairs: 0,
             nmt: Vec::new(),
@@ -251,14 +260,11 @@ impl Rig {
     }
 }
 
-/// The reset CLI's request from another thread (its own iceoryx2 node), while this thread keeps
-/// publishing setpoints (`offset`, `nan_pose`) like a live motion core.
+/// The reset CLI's request from another thread (through the monitor's reset socket), while
+/// this thread keeps publishing setpoints (`offset`, `nan_pose`) like a live motion core.
 fn reset(rig: &mut Rig, offset: f64, nan_pose: bool) -> ResetReply {
-    let p = rig.prefix.clone();
-    let h = std::thread::spawn(move || {
-        let ipc = IpcNode::with_prefix("sm-test-reset", &p).unwrap();
-        daemon::request_reset(&ipc, Duration::from_secs(2)).unwrap()
-    });
+    let p = rig.reset_socket.clone();
+    let h = std::thread::spawn(move || daemon::request_reset(&p, Duration::from_secs(2)).unwrap());
     while !h.is_finished() {
         rig.run_for(Duration::from_millis(1), offset, nan_pose);
     }

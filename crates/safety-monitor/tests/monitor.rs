@@ -13,6 +13,17 @@ use safety_monitor::{Cause, Monitor, MonitorState, ResetDecision, StateCode};
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+/// An operator's reset the way the safety I/O node's key gives one: turned, then released.
+fn key_reset() -> safety_monitor::operator::OperatorReset {
+    use safety_monitor::operator::{INPUT_ESTOP_CLOSED, INPUT_RESET_KEY, KeyEvent, KeyWatch};
+    let mut k = KeyWatch::new();
+    k.on_inputs(INPUT_ESTOP_CLOSED | INPUT_RESET_KEY, 0);
+    match k.on_inputs(INPUT_ESTOP_CLOSED, 100_000_000) {
+        KeyEvent::Reset(r) => r,
+        other => panic!("the key gave no reset: {other:?}"),
+    }
+}
+
 fn cfg() -> &'static MonitorConfig {
     static C: OnceLock<MonitorConfig> = OnceLock::new();
     C.get_or_init(|| {
@@ -311,9 +322,10 @@ fn motion_needs_a_verified_identity_holding_does_not() {
     // Holding setpoints without an identity: within the grace, no trip.
     let seq = good_cycle(&mut m, 1, 15_000_000);
     assert_eq!(m.state_code(), StateCode::Armed);
-    // The first setpoint that moves (1 mm in x) trips in this very cycle, not after the grace.
+    // The first setpoint that moves (5 µm in x: 5 mm/s out of the hold, well within the
+    // acceleration limit) trips in this very cycle, not after the grace.
     let mut moved = HOME;
-    moved[0] += 0.001;
+    moved[0] += 5e-6;
     m.on_setpoint(&sp(seq, moved, 0, 0.0));
     let t = m.end_cycle(30_000_000).new_trip.expect("trip");
     assert_eq!(t.fault.cause, Cause::IdentityMissing);
@@ -327,9 +339,15 @@ fn motion_needs_a_verified_identity_holding_does_not() {
     assert!(m.end_cycle(30_000_000).new_trip.is_none());
 }
 
+/// A fresh drive-io sample (its SYNC cycle and timestamp advance with every call, as drive-io's
+/// do: a sample that does not advance is stale).
 fn feedback(applied: u64, lengths: &[f64]) -> DriveFeedback {
+    static CYCLE: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    let cycle = CYCLE.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let mut f = DriveFeedback {
         cable_count: 8,
+        cycle,
+        timestamp_ns: cycle * 1_000_000,
         applied_setpoint_sequence: applied,
         bus_state: BusState::Running as u32,
         ..DriveFeedback::default()
@@ -354,14 +372,29 @@ fn following_error_and_feedback_silence_trip() {
     let t = m.end_cycle(0).new_trip.expect("following error");
     assert_eq!(t.fault.cause, Cause::FollowingError);
     assert_eq!(t.fault.cable, Some(6));
-    // Not judged while drive-io is not Running (e.g. quick-stopping).
+    // Not judged while drive-io is not Running and applies nothing new (e.g. quick-stopping
+    // after applying setpoint 10)...
     let mut m = monitor();
     good_cycle(&mut m, 1, 0);
+    m.on_feedback(&feedback(10, &q[..8]));
     let mut fb = feedback(10, &meas);
     fb.bus_state = BusState::EStop as u32;
     m.on_feedback(&fb);
     m.on_setpoint(&sp(16, HOME, 0, 0.0));
     assert!(m.end_cycle(0).faults.is_empty());
+    // ... but judged whenever the applied setpoint advances, whatever state drive-io claims
+    // (a drive adapter that applies setpoints while reporting Ready is checked too).
+    let mut m2 = monitor();
+    good_cycle(&mut m2, 1, 0);
+    let mut fb = feedback(12, &meas);
+    fb.bus_state = BusState::Ready as u32;
+    m2.on_feedback(&fb);
+    m2.on_setpoint(&sp(16, HOME, 0, 0.0));
+    let t = m2
+        .end_cycle(0)
+        .new_trip
+        .expect("applied while claiming Ready");
+    assert_eq!(t.fault.cause, Cause::FollowingError);
     // drive-io silent for silence_cycles (4) after its first feedback.
     let mut seq = 17;
     for k in 0..4 {
@@ -395,7 +428,7 @@ fn rpdo_targets_far_from_the_kinematics_trip() {
 #[test]
 fn reset_is_refused_while_the_cause_persists_and_accepted_after() {
     let mut m = monitor();
-    assert_eq!(m.request_reset(), ResetDecision::NotTripped);
+    assert_eq!(m.request_reset(key_reset()), ResetDecision::NotTripped);
     let mut seq = good_cycle(&mut m, 1, 0);
     let mut s = sp(seq, HOME, 0, 0.0);
     s.pose[2] = f64::NAN;
@@ -410,17 +443,26 @@ fn reset_is_refused_while_the_cause_persists_and_accepted_after() {
         seq += 1;
         let r = m.end_cycle(0);
         assert!(r.new_trip.is_none(), "latched: no second trip");
-        assert_eq!(m.request_reset(), ResetDecision::Refused(Cause::NonFinite));
+        assert_eq!(
+            m.request_reset(key_reset()),
+            ResetDecision::Refused(Cause::NonFinite)
+        );
     }
     // Good again, but fewer than reset_clear_cycles (3) clean cycles: still refused.
     for _ in 0..2 {
         seq = good_cycle(&mut m, seq, 0);
-        assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+        assert!(matches!(
+            m.request_reset(key_reset()),
+            ResetDecision::Refused(_)
+        ));
     }
     seq = good_cycle(&mut m, seq, 0);
     let e0 = m.reset_epoch();
     assert_eq!(m.heartbeat(1).epoch, e0);
-    assert_eq!(m.request_reset(), ResetDecision::Accepted { epoch: e0 + 1 });
+    assert_eq!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { epoch: e0 + 1 }
+    );
     assert_eq!(m.reset_epoch(), e0 + 1);
     assert_eq!(m.heartbeat(2).epoch, e0 + 1);
     assert_eq!(m.state_code(), StateCode::Armed);
@@ -470,7 +512,7 @@ fn only_an_accepted_reset_advances_the_epoch() {
     let mut m = monitor().with_reset_epoch(41);
     let mut seq = good_cycle(&mut m, 1, 0);
     for _ in 0..5 {
-        assert_eq!(m.request_reset(), ResetDecision::NotTripped);
+        assert_eq!(m.request_reset(key_reset()), ResetDecision::NotTripped);
     }
     assert_eq!(m.reset_epoch(), 41);
     assert_eq!(m.heartbeat(0).epoch, 41);
@@ -480,14 +522,20 @@ fn only_an_accepted_reset_advances_the_epoch() {
     seq += 1;
     m.end_cycle(0);
     for _ in 0..3 {
-        assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+        assert!(matches!(
+            m.request_reset(key_reset()),
+            ResetDecision::Refused(_)
+        ));
     }
     assert_eq!(m.reset_epoch(), 41);
     for _ in 0..3 {
         seq = good_cycle(&mut m, seq, 0);
     }
-    assert_eq!(m.request_reset(), ResetDecision::Accepted { epoch: 42 });
-    assert_eq!(m.request_reset(), ResetDecision::NotTripped);
+    assert_eq!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { epoch: 42 }
+    );
+    assert_eq!(m.request_reset(key_reset()), ResetDecision::NotTripped);
     assert_eq!(m.reset_epoch(), 42);
     // Not ready: nothing either.
     let c = cfg();
@@ -497,7 +545,7 @@ fn only_an_accepted_reset_advances_the_epoch() {
         platform_identity(&c.platform),
     )
     .with_reset_epoch(7);
-    assert_eq!(n.request_reset(), ResetDecision::NotReady);
+    assert_eq!(n.request_reset(key_reset()), ResetDecision::NotReady);
     assert_eq!(n.reset_epoch(), 7);
 }
 
@@ -523,7 +571,10 @@ fn a_latched_cause_must_be_positively_shown_cleared() {
     // too after its count.)
     for _ in 0..10 {
         seq = good_cycle(&mut m, seq, 0);
-        assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+        assert!(matches!(
+            m.request_reset(key_reset()),
+            ResetDecision::Refused(_)
+        ));
     }
     assert!(m.latched().contains(Cause::FeedbackSilence));
     // Feedback back, but its lengths do not follow the held setpoint: still refused.
@@ -533,7 +584,7 @@ fn a_latched_cause_must_be_positively_shown_cleared() {
         m.on_feedback(&fb);
         seq = good_cycle(&mut m, seq, 0);
         assert_eq!(
-            m.request_reset(),
+            m.request_reset(key_reset()),
             ResetDecision::Refused(Cause::FollowingError)
         );
     }
@@ -544,10 +595,16 @@ fn a_latched_cause_must_be_positively_shown_cleared() {
         m.on_feedback(&fb);
         seq = good_cycle(&mut m, seq, 0);
         if k < 2 {
-            assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+            assert!(matches!(
+                m.request_reset(key_reset()),
+                ResetDecision::Refused(_)
+            ));
         }
     }
-    assert!(matches!(m.request_reset(), ResetDecision::Accepted { .. }));
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { .. }
+    ));
 
     // A force latch: drives that stopped reporting give no evidence.
     let mut m = monitor();
@@ -567,7 +624,10 @@ fn a_latched_cause_must_be_positively_shown_cleared() {
         }
         seq = good_cycle(&mut m, seq, t);
         t += 15 * MS;
-        assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+        assert!(matches!(
+            m.request_reset(key_reset()),
+            ResetDecision::Refused(_)
+        ));
     }
     assert!(m.latched().contains(Cause::ForceOverload));
     assert!(m.latched().contains(Cause::ForceSilence));
@@ -578,7 +638,10 @@ fn a_latched_cause_must_be_positively_shown_cleared() {
         seq = good_cycle(&mut m, seq, t);
         t += 15 * MS;
     }
-    assert!(matches!(m.request_reset(), ResetDecision::Accepted { .. }));
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { .. }
+    ));
 }
 
 #[test]
@@ -724,7 +787,7 @@ proptest! {
                     if let Some(t) = r.new_trip {
                         prop_assert!(r.faults.contains(t.fault.cause));
                     }
-                    let _ = m.request_reset();
+                    let _ = m.request_reset(key_reset());
                 }
             }
         }
@@ -761,7 +824,7 @@ fn force_cycle(
 }
 
 #[test]
-fn slack_and_overload_trip_after_the_filter_time_with_the_cable_and_force() {
+fn slack_and_overload_trip_after_k_of_n_readings_with_the_cable_and_force() {
     let c = cfg();
     let fl = Limits::from_config(c).forces;
     assert!(fl.check, "the shipped configuration supervises forces");
@@ -797,14 +860,82 @@ fn slack_and_overload_trip_after_the_filter_time_with_the_cable_and_force() {
             assert_eq!(tr.fault.cable, Some(cable as u8));
             assert_eq!(tr.fault.value, f_bad);
             assert_eq!(tr.fault.limit, limit);
-            // 45 ms filter at one reading per ms: the fourth cycle at the latest, not the first.
-            let filter_cycles = fl.filter_ns.div_ceil(15 * MS);
-            assert!(
-                cyc >= filter_cycles - 1 && cyc <= filter_cycles,
+            // k of n at one reading per ms (15 per cycle): the cycle of the k-th reading.
+            assert_eq!(
+                cyc,
+                u64::from(fl.window_violations - 1) / 15,
                 "tripped in cycle {cyc}"
             );
         }
     }
+}
+
+/// One in-range reading does not restart anything (issue: a cable alternating 200 N and
+/// 3 kN at 20 Hz was never caught by a filter that every in-range reading restarted): a
+/// fluttering force trips once k of the last n readings are out of range, k - 1 do not.
+#[test]
+fn a_fluttering_force_trips_k_minus_one_violations_do_not() {
+    let fl = Limits::from_config(cfg()).forces;
+    assert!(fl.window_violations * 2 <= fl.window_readings, "{fl:?}");
+    // 200 N <-> 3 kN at 20 Hz with one reading per 5 ms (the shipped load cells): 5 low, 5
+    // high, ...
+    let mut m = monitor();
+    let (mut seq, _) = force_cycle(&mut m, 1, 0, 0, 4000.0);
+    let mut t = 15 * MS;
+    let mut reading = 0u64;
+    let mut trip = None;
+    for cyc in 0..40u64 {
+        for k in 0..15 {
+            m.on_setpoint(&sp(seq + k, HOME, 0, 0.0));
+            for i in 0..8 {
+                m.on_drive_state(i, true);
+            }
+            if k % 5 == 0 {
+                let f = if (reading / 5).is_multiple_of(2) {
+                    200.0
+                } else {
+                    3000.0
+                };
+                reading += 1;
+                for i in 0..8 {
+                    m.on_force(i, if i == 5 { f } else { 4000.0 }, t + k * MS);
+                }
+            }
+        }
+        seq += 15;
+        if let Some(tr) = m.end_cycle(t + 15 * MS).new_trip {
+            trip = Some((cyc, tr));
+            break;
+        }
+        t += 15 * MS;
+    }
+    let (_, tr) = trip.expect("a force fluttering between slack and in range must trip");
+    assert_eq!(
+        (tr.fault.cause, tr.fault.cable),
+        (Cause::ForceSlack, Some(5))
+    );
+    // k - 1 violations spread over the window, in-range readings between them: no trip.
+    let mut m = monitor();
+    let (seq, _) = force_cycle(&mut m, 1, 0, 0, 4000.0);
+    for k in 0..fl.window_readings {
+        let bad = k % 2 == 1 && k >= fl.window_readings - 2 * (fl.window_violations - 1);
+        m.on_force(3, if bad { 200.0 } else { 4000.0 }, 15 * MS + u64::from(k));
+    }
+    for i in (0..8).filter(|&i| i != 3) {
+        m.on_force(i, 4000.0, 16 * MS);
+    }
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    assert!(m.end_cycle(30 * MS).new_trip.is_none());
+    // One more violation within the window: trips.
+    m.on_setpoint(&sp(seq + 1, HOME, 0, 0.0));
+    for i in 0..8 {
+        m.on_force(i, if i == 3 { 200.0 } else { 4000.0 }, 31 * MS);
+    }
+    let tr = m.end_cycle(45 * MS).new_trip.expect("k-th violation");
+    assert_eq!(
+        (tr.fault.cause, tr.fault.cable),
+        (Cause::ForceSlack, Some(3))
+    );
 }
 
 #[test]
@@ -813,8 +944,8 @@ fn forces_inside_the_limits_and_short_transients_do_not_trip() {
     let mut m = monitor();
     let (mut seq, mut t) = (1, 0);
     for cyc in 0..40u64 {
-        // Every 5th cycle a 10 ms excursion (shorter than the 45 ms filter) below the slack
-        // limit, and the limits themselves otherwise.
+        // Every 5th cycle an excursion below the slack limit of k - 1 readings (one fewer than
+        // the window trips on), and the limits themselves otherwise.
         let f = match cyc % 5 {
             0 => fl.slack_below_n,
             1 => fl.overload_above_n,
@@ -823,10 +954,14 @@ fn forces_inside_the_limits_and_short_transients_do_not_trip() {
         let r;
         (seq, r) = force_cycle(&mut m, seq, t, 3, f);
         assert!(r.faults.is_empty(), "cycle {cyc}: {:?}", r.faults);
-        for k in 0..10 {
-            m.on_force(2, fl.slack_below_n - 100.0, t + k * MS);
+        if cyc % 5 == 0 {
+            for k in 0..u64::from(fl.window_violations - 1) {
+                m.on_force(2, fl.slack_below_n - 100.0, t + k * MS);
+            }
         }
-        m.on_force(2, 4000.0, t + 11 * MS);
+        for k in 0..u64::from(fl.window_readings) {
+            m.on_force(2, 4000.0, t + 11 * MS + k);
+        }
         t += 15 * MS;
     }
     assert_eq!(m.state_code(), StateCode::Armed);
@@ -834,17 +969,20 @@ fn forces_inside_the_limits_and_short_transients_do_not_trip() {
 }
 
 #[test]
-fn one_reading_above_the_hard_limit_trips_at_once() {
+fn one_reading_beyond_the_hard_limit_of_either_sign_trips_at_once() {
     let fl = Limits::from_config(cfg()).forces;
-    let mut m = monitor();
-    let (seq, _) = force_cycle(&mut m, 1, 0, 2, 4000.0);
-    m.on_force(2, fl.hard_limit_n + 1.0, 15 * MS + 1);
-    let r = m.end_cycle(16 * MS);
-    let tr = r.new_trip.expect("hard limit");
-    assert_eq!(tr.fault.cause, Cause::ForceOverload);
-    assert_eq!(tr.fault.limit, fl.hard_limit_n);
-    assert_eq!(tr.fault.cable, Some(2));
-    let _ = seq;
+    for f in [fl.hard_limit_n + 1.0, -fl.hard_limit_n - 1.0] {
+        let mut m = monitor();
+        let (seq, _) = force_cycle(&mut m, 1, 0, 2, 4000.0);
+        m.on_force(2, f, 15 * MS + 1);
+        let r = m.end_cycle(16 * MS);
+        let tr = r.new_trip.expect("hard limit");
+        assert_eq!(tr.fault.cause, Cause::ForceOverload, "{f} N");
+        assert_eq!(tr.fault.limit, fl.hard_limit_n);
+        assert_eq!(tr.fault.value, f);
+        assert_eq!(tr.fault.cable, Some(2));
+        let _ = seq;
+    }
 }
 
 #[test]
@@ -885,8 +1023,9 @@ fn a_silent_or_non_numeric_force_sensor_trips_fail_closed() {
 }
 
 #[test]
-fn drives_that_are_not_operational_are_not_force_supervised() {
-    // Before NMT start (pre-operational: no PDOs, cables may still be slack) and after a stop.
+fn not_operational_drives_are_force_supervised_only_once_the_monitor_was_ready() {
+    // Before NMT start (pre-operational: no PDOs, cables may still be slack) the monitor is not
+    // ready yet and only operational drives count.
     let mut m = monitor();
     for cyc in 0..10u64 {
         for k in 0..15 {
@@ -911,6 +1050,41 @@ fn drives_that_are_not_operational_are_not_force_supervised() {
     }
     assert!(tripped);
     assert_eq!(m.trip().unwrap().fault.cause, Cause::ForceSlack);
+
+    // Once ready, a drive that leaves operational (stopped by anyone) keeps being supervised:
+    // its load cell's slack reading trips, and so does its silence.
+    for silent in [false, true] {
+        let mut m = monitor();
+        let (mut seq, _) = force_cycle(&mut m, 1, 0, 0, 4000.0);
+        let mut t = 0;
+        assert_eq!(m.state_code(), StateCode::Armed);
+        m.on_drive_state(6, false);
+        let mut trip = None;
+        for _ in 0..10 {
+            t += 15 * MS;
+            for k in 0..15 {
+                m.on_setpoint(&sp(seq + k, HOME, 0, 0.0));
+                for i in 0..8 {
+                    if i == 6 && silent {
+                        continue;
+                    }
+                    m.on_force(i, if i == 6 { 0.0 } else { 4000.0 }, t + k * MS);
+                }
+            }
+            seq += 15;
+            if let Some(tr) = m.end_cycle(t + 15 * MS).new_trip {
+                trip = Some(tr);
+                break;
+            }
+        }
+        let tr = trip.unwrap_or_else(|| panic!("not operational drive 7 (silent {silent})"));
+        let want = if silent {
+            Cause::ForceSilence
+        } else {
+            Cause::ForceSlack
+        };
+        assert_eq!((tr.fault.cause, tr.fault.cable), (want, Some(6)));
+    }
 }
 
 #[test]
@@ -934,7 +1108,16 @@ fn force_config_errors_name_the_key() {
     for (forces, key) in [
         ("[forces]\nhard_limit_n = 5000.0\n", "forces.hard_limit_n"),
         ("[forces]\nsilence_cycles = 0\n", "forces.silence_cycles"),
-        ("[forces]\nfilter_ms = -1.0\n", "forces.filter_ms"),
+        (
+            "[forces]\nwindow_violations = 0\n",
+            "forces.window_violations",
+        ),
+        (
+            "[forces]\nwindow_readings = 8\nwindow_violations = 9\n",
+            "forces.window_violations",
+        ),
+        ("[forces]\nwindow_readings = 65\n", "forces.window_readings"),
+        ("[forces]\nhard_limit_n = 25000.0\n", "forces.hard_limit_n"),
     ] {
         let p = dir.join("sm.toml");
         let text = if base.contains("[forces]") {
@@ -980,7 +1163,11 @@ fn run_poses(
 fn ramp_path(v: f64, a: f64, n: usize) -> Vec<[f64; 6]> {
     let dt = 1e-3;
     let (mut x, mut vel) = (0.0, 0.0);
-    let mut out = Vec::with_capacity(n);
+    let mut out = Vec::with_capacity(n + 1);
+    // At rest first: the step out of it is acceleration-checked like any other.
+    let mut rest = HOME;
+    rest[0] = -0.5;
+    out.push(rest);
     for _ in 0..n {
         vel = (vel + a * dt).min(v);
         x += vel * dt;
@@ -1018,7 +1205,7 @@ fn a_consistent_pose_jump_inside_the_box_trips_motion_velocity() {
     let mut m = monitor();
     let tr = run_poses(&mut m, &poses, 15).expect("a 200 m/s step must trip");
     assert_eq!(tr.fault.cause, Cause::MotionVelocity);
-    assert_eq!(tr.fault.sequence, 101);
+    assert_eq!(tr.fault.sequence, 102);
     assert!(tr.fault.value > 100.0 && tr.fault.limit < 10.0, "{tr}");
     // The same stream without the motion check passes the Δq check: this is what it adds.
     let mut m = monitor_with(|l| l.motion.check = false);
@@ -1146,7 +1333,7 @@ fn the_monitor_starts_not_ready_and_arms_only_when_every_drive_is_verified() {
     );
     assert_eq!(m.state_code(), StateCode::NotReady);
     assert_eq!(m.heartbeat(1).state, SafetyState::Stop);
-    assert_eq!(m.request_reset(), ResetDecision::NotReady);
+    assert_eq!(m.request_reset(key_reset()), ResetDecision::NotReady);
     let mut t = 0;
     let mut cycle = |m: &mut Monitor, drives: usize, operational: bool| {
         for k in 0..15 {
@@ -1168,7 +1355,13 @@ fn the_monitor_starts_not_ready_and_arms_only_when_every_drive_is_verified() {
     assert_eq!(cycle(&mut m, 8, false).state, StateCode::NotReady);
     // The identity is reported but not required (motion-core starts after the drives enable).
     assert!(!m.readiness().identity_verified);
+    // Every drive operational with forces, but the safety I/O node (its e-stop circuit and
+    // reset key) not heard: not ready; heard with the e-stop circuit open: not ready (and a
+    // fault); heard with it closed: ready.
+    assert!(lim.safety_io, "the shipped drives have a safety I/O node");
+    assert_eq!(cycle(&mut m, 8, true).state, StateCode::NotReady);
     // Everything verified: armed, RUN.
+    m.on_safety_io(0x01, 0x00, 0);
     let r = cycle(&mut m, 8, true);
     assert!(r.became_ready);
     assert_eq!(m.state_code(), StateCode::Armed);
@@ -1261,7 +1454,10 @@ fn settings_beyond_their_bounds_are_refused_by_name() {
         ("feedback", "following_error_mm", "100.0", "100.5"),
         ("forces", "silence_cycles", "67", "68"),
         ("forces", "overload_margin_n", "5000.0", "5001.0"),
-        ("forces", "filter_ms", "200.0", "201.0"),
+        ("forces", "window_readings", "64", "65"),
+        ("forces", "hard_limit_n", "20000.0", "20001.0"),
+        ("motion", "setpoint_period_ms", "10.0", "10.5"),
+        ("can", "safety_io_silence_cycles", "67", "68"),
         ("forces", "slack_margin_n", "1000.0", "1001.0"),
         ("motion", "margin", "1.0", "1.01"),
         ("can", "reader_stall_cycles", "67", "68"),
@@ -1286,11 +1482,17 @@ fn an_estop_event_of_another_process_latches_until_the_reset() {
     seq += 1;
     let t = m.end_cycle(0).new_trip.expect("e-stop event");
     assert_eq!(t.fault.cause, Cause::EStopEvent);
-    assert!(matches!(m.request_reset(), ResetDecision::Refused(_)));
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Refused(_)
+    ));
     for _ in 0..3 {
         seq = good_cycle(&mut m, seq, 0);
     }
-    assert!(matches!(m.request_reset(), ResetDecision::Accepted { .. }));
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { .. }
+    ));
 }
 
 proptest! {
@@ -1320,7 +1522,7 @@ proptest! {
                     clean_since_fault = 0;
                 }
                 _ => {
-                    let d = m.request_reset();
+                    let d = m.request_reset(key_reset());
                     match d {
                         ResetDecision::Accepted { epoch } => {
                             prop_assert_eq!(before.0, StateCode::Tripped);
@@ -1479,4 +1681,308 @@ fn state_codes_are_the_contract_constants() {
     }
     assert_eq!(StateCode::from_code(0), None);
     assert_eq!(StateCode::from_code(4), None);
+}
+
+// ---- issue: the holes a reviewer finds ------------------------------------------------------
+
+/// A hold is zero velocity: a stream that stands still, then jumps to a plausible speed (5 m/s
+/// of table 5.1, below its 6.25 m/s with the margin) in one period trips `motion_acceleration`
+/// at the step out of the hold — and so does the first moving step of a stream. Stopping into a
+/// hold from speed does not trip (the safe direction).
+#[test]
+fn a_jump_from_rest_to_a_plausible_speed_trips_motion_acceleration() {
+    let mc = Limits::from_config(cfg()).motion;
+    let v = 5.0;
+    assert!(v <= mc.linear_velocity && v / 1e-3 > mc.linear_acceleration);
+    for (hold_first, what) in [(60usize, "out of a hold"), (1, "the stream's first step")] {
+        let mut poses = vec![HOME; hold_first];
+        let mut p = HOME;
+        for _ in 0..20 {
+            p[0] += v * 1e-3;
+            poses.push(p);
+        }
+        let mut m = monitor();
+        let tr = run_poses(&mut m, &poses, 15).unwrap_or_else(|| panic!("{what}: no trip"));
+        assert_eq!(tr.fault.cause, Cause::MotionAcceleration, "{what}");
+        assert_eq!(tr.fault.sequence, hold_first as u64 + 1, "{what}");
+        assert!((tr.fault.value - v / 1e-3).abs() < 1.0, "{what}: {tr}");
+    }
+    // Decelerating into a hold at once is not checked.
+    let mut poses = ramp_path(1.0, 10.0, 150);
+    let last = *poses.last().unwrap();
+    poses.extend(std::iter::repeat_n(last, 30));
+    let mut m = monitor();
+    assert_eq!(run_poses(&mut m, &poses, 15), None);
+    // A sequence gap cannot restart the chain: rest, then two lost setpoints, then 5 m/s.
+    let mut poses = vec![HOME; 30];
+    let mut p = HOME;
+    p[0] += 3.0 * v * 1e-3;
+    let mut m = monitor();
+    let mut seq = 1;
+    for q in &poses {
+        m.on_setpoint(&sp(seq, *q, 0, 0.0));
+        seq += 1;
+    }
+    m.end_cycle(15 * MS);
+    poses.clear();
+    seq += 2;
+    m.on_setpoint(&sp(seq, p, 0, 0.0));
+    let tr = m.end_cycle(30 * MS).new_trip.expect("jump after a gap");
+    assert_eq!(tr.fault.cause, Cause::MotionAcceleration);
+}
+
+/// The reset epoch is the instance's: a monitor instance starts at count 0 and each accepted
+/// reset adds one to the count, never to the instance.
+#[test]
+fn the_epoch_carries_the_instance_and_counts_its_resets() {
+    use crs_limits::reset_epoch::{count, instance, releases};
+    let mut m = monitor().with_instance(0xBEEF);
+    let e0 = m.reset_epoch();
+    assert_eq!((instance(e0), count(e0)), (0xBEEF, 0));
+    let mut seq = good_cycle(&mut m, 1, 0);
+    m.on_estop_event(5);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    seq += 1;
+    m.end_cycle(0);
+    for _ in 0..3 {
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    let ResetDecision::Accepted { epoch } = m.request_reset(key_reset()) else {
+        panic!("reset refused");
+    };
+    assert_eq!((instance(epoch), count(epoch)), (0xBEEF, 1));
+    assert!(releases(epoch, e0));
+    // An instance whose count is exhausted refuses (a wrap would make an old reset new).
+    let mut m = monitor().with_reset_epoch(crs_limits::reset_epoch::new(7, u16::MAX));
+    let mut seq = good_cycle(&mut m, 1, 0);
+    m.on_estop_event(5);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    seq += 1;
+    m.end_cycle(0);
+    for _ in 0..3 {
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    assert_eq!(
+        m.request_reset(key_reset()),
+        ResetDecision::InstanceExhausted
+    );
+    assert!(m.state().is_tripped());
+}
+
+/// After a monitor restart the consumers stay stopped on the new instance's start epoch; while
+/// armed, the monitor accepts the operator's reset only when a consumer is seen waiting (the
+/// safety I/O node keeps the torque off although the monitor says RUN, or drive-io reports a
+/// latched stop) for CONSUMER_WAIT_CYCLES cycles; otherwise a reset while armed changes
+/// nothing.
+#[test]
+fn a_restarted_instance_resets_only_for_waiting_consumers() {
+    use safety_monitor::monitor::CONSUMER_WAIT_CYCLES;
+    let c = cfg();
+    let own = platform_identity(&c.platform);
+    for (waiting, sto_released, drive_io_latched) in [
+        ("the safety I/O node", false, false),
+        ("drive-io", true, true),
+        ("nobody", true, false),
+    ] {
+        let mut m = Monitor::new(
+            Limits::from_config(c),
+            StandardKinematics::new(&c.platform),
+            own,
+        )
+        .with_instance(0x1234);
+        let mut t = 0;
+        let mut cycles = 0;
+        let mut cycle = |m: &mut Monitor| {
+            for k in 0..15 {
+                for i in 0..8 {
+                    m.on_drive_state(i, true);
+                    m.on_force(i, 4000.0, t + k * MS);
+                }
+            }
+            m.on_safety_io(0x01, u8::from(sto_released), t);
+            let mut fb = feedback(0, &[0.0; 8]);
+            fb.bus_state = if drive_io_latched {
+                BusState::EStop as u32
+            } else {
+                BusState::Ready as u32
+            };
+            m.on_feedback(&fb);
+            t += 15 * MS;
+            cycles += 1;
+            m.end_cycle(t)
+        };
+        cycle(&mut m);
+        assert_eq!(m.state_code(), StateCode::Armed, "{waiting}");
+        for _ in 1..CONSUMER_WAIT_CYCLES {
+            cycle(&mut m);
+        }
+        // One cycle short of the wait: nothing.
+        assert_eq!(
+            m.request_reset(key_reset()),
+            ResetDecision::NotTripped,
+            "{waiting}"
+        );
+        cycle(&mut m);
+        let d = m.request_reset(key_reset());
+        if waiting == "nobody" {
+            assert_eq!(d, ResetDecision::NotTripped);
+            assert_eq!(m.reset_epoch(), crs_limits::reset_epoch::new(0x1234, 0));
+        } else {
+            assert_eq!(
+                d,
+                ResetDecision::Accepted {
+                    epoch: crs_limits::reset_epoch::new(0x1234, 1)
+                },
+                "{waiting}"
+            );
+            assert_eq!(m.state_code(), StateCode::Armed);
+            // The wait starts over: a second request right after changes nothing.
+            assert_eq!(m.request_reset(key_reset()), ResetDecision::NotTripped);
+        }
+    }
+}
+
+/// The monitor's own identifiers spoken by another node, an open e-stop circuit and a silent
+/// safety I/O node each trip; the node's causes need the node reporting with the circuit closed
+/// before a reset.
+#[test]
+fn impersonation_estop_circuit_and_a_silent_safety_io_node_trip() {
+    let mut m = monitor();
+    let seq = good_cycle(&mut m, 1, 0);
+    m.on_impersonation(0x101);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    let t = m.end_cycle(15 * MS).new_trip.expect("impersonation");
+    assert_eq!(
+        (t.fault.cause, t.fault.value),
+        (Cause::Impersonation, 257.0)
+    );
+
+    let mut m = monitor();
+    let mut seq = good_cycle(&mut m, 1, 0);
+    m.on_safety_io(0x01, 0x01, 0);
+    seq = good_cycle(&mut m, seq, 15 * MS);
+    m.on_safety_io(0x00, 0x00, 0);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    seq += 1;
+    let t = m.end_cycle(30 * MS).new_trip.expect("e-stop circuit open");
+    assert_eq!(t.fault.cause, Cause::EStopCircuit);
+    // Closed again but the node then silent: refused (no evidence), and the silence latches.
+    m.on_safety_io(0x01, 0x00, 0);
+    seq = good_cycle(&mut m, seq, 45 * MS);
+    for _ in 0..6 {
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    assert!(m.latched().contains(Cause::SafetyIoSilence));
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Refused(_)
+    ));
+    // Reporting with the circuit closed: accepted after the clean cycles.
+    for _ in 0..3 {
+        m.on_safety_io(0x01, 0x00, 0);
+        seq = good_cycle(&mut m, seq, 0);
+    }
+    assert!(matches!(
+        m.request_reset(key_reset()),
+        ResetDecision::Accepted { .. }
+    ));
+}
+
+/// A hung drive adapter whose publisher keeps republishing its last sample (or stamps it in
+/// the monitor's future) is as dead as a silent one: `feedback_silence`.
+#[test]
+fn stale_or_future_feedback_is_not_a_live_drive_adapter() {
+    let q = sp(1, HOME, 0, 0.0).cable_length_m[..8].to_vec();
+    for future in [false, true] {
+        let mut m = monitor();
+        let mut seq = 1;
+        let mut t = 0;
+        let mut fb = feedback(0, &q);
+        (fb.cycle, fb.timestamp_ns) = (1, 15 * MS);
+        let mut trip = None;
+        for k in 0..20u64 {
+            t += 15 * MS;
+            m.begin_cycle(t);
+            let mut f = fb;
+            if future {
+                f.cycle += k;
+                f.timestamp_ns = t + 10_000 * MS;
+            }
+            m.on_feedback(&f);
+            seq = good_cycle(&mut m, seq, t);
+            if let Some(tr) = m.trip() {
+                trip = Some((k, *tr));
+                break;
+            }
+        }
+        let (k, tr) =
+            trip.unwrap_or_else(|| panic!("future {future}: stale feedback never tripped"));
+        assert_eq!(tr.fault.cause, Cause::FeedbackSilence, "future {future}");
+        // The first sample counts when fresh, then silence_cycles without a fresh one; a
+        // future-stamped first sample arms the check without counting.
+        let n = u64::from(Limits::from_config(cfg()).feedback_silence_cycles);
+        assert_eq!(k, if future { n - 1 } else { n }, "future {future}");
+        assert!(m.stats().feedback_stale > 0);
+    }
+}
+
+/// A producer whose timestamps jump far into the future cannot blind the RPDO check: history
+/// entries are stamped within the interval the monitor's clock saw them published in, so an
+/// RPDO far from every setpoint still trips; RPDOs no setpoint can have preceded are counted
+/// and trip `rpdo_unchecked` after `unchecked_cycles` cycles instead of being skipped.
+#[test]
+fn a_timestamp_jump_does_not_blind_the_rpdo_check() {
+    let mut m = monitor();
+    let q = sp(1, HOME, 0, 0.0).cable_length_m;
+    let mut seq = 1;
+    let mut t = 0;
+    for _ in 0..30 {
+        t += 15 * MS;
+        m.begin_cycle(t);
+        for _ in 0..15 {
+            let mut s = sp(seq, HOME, 0, 0.0);
+            s.timestamp_ns = t + 10_000_000 * MS; // 10 000 s ahead
+            m.on_setpoint(&s);
+            seq += 1;
+        }
+        // drive-io forwards what it got: checked and fine.
+        m.on_rpdo(2, q[2], t + MS);
+        assert!(m.end_cycle(t + 2 * MS).faults.is_empty());
+    }
+    t += 15 * MS;
+    m.begin_cycle(t);
+    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    m.on_rpdo(4, q[4] - 0.15, t + MS);
+    let tr = m
+        .end_cycle(t + 2 * MS)
+        .new_trip
+        .expect("forged RPDO after the jump");
+    assert_eq!(
+        (tr.fault.cause, tr.fault.cable),
+        (Cause::RpdoMismatch, Some(4))
+    );
+
+    // Enabling RPDOs before any setpoint that hold where the drive was enabled: no motion,
+    // checked, never a trip.
+    let n = Limits::from_config(cfg()).unchecked_cycles;
+    let mut m = monitor();
+    for k in 1..=3 * n {
+        m.begin_cycle(u64::from(k) * 15 * MS);
+        m.on_rpdo(0, q[0], u64::from(k) * 15 * MS);
+        assert!(m.end_cycle(u64::from(k) * 15 * MS + 1).faults.is_empty());
+    }
+    // Enabling RPDOs before any setpoint whose target moves: counted, and N such cycles trip
+    // (the first one is where the drive was enabled).
+    let mut m = monitor();
+    let mut trip = None;
+    for k in 1..=n + 2 {
+        m.begin_cycle(u64::from(k) * 15 * MS);
+        m.on_rpdo(0, q[0] + f64::from(k) * 1e-3, u64::from(k) * 15 * MS);
+        if let Some(tr) = m.end_cycle(u64::from(k) * 15 * MS + 1).new_trip {
+            trip = Some((k, tr));
+            break;
+        }
+    }
+    let (k, tr) = trip.expect("uncheckable RPDOs must trip");
+    assert_eq!((k, tr.fault.cause), (n + 1, Cause::RpdoUnchecked));
 }

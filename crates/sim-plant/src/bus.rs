@@ -278,6 +278,9 @@ pub struct PlantBus {
     last_sync_ns: Vec<Option<u64>>,
     /// The safety I/O node (drives.toml `[safety_io]`): its interface, the node, its frames.
     safety_io: Option<(usize, SafetyIoNode, FrameBuf)>,
+    /// The operator's devices on the node, set from outside ([`PlantBus::io_inputs`]): bit 0
+    /// e-stop button pressed (circuit open), bit 1 reset key turned.
+    io_inputs: std::sync::Arc<std::sync::atomic::AtomicU8>,
     /// Winch axes in drive coordinates (what the encoders read, m).
     axes: Vec<CspWinch>,
     q_off: Vec<f64>,
@@ -470,6 +473,7 @@ impl PlantBus {
             bank,
             last_sync_ns: vec![None; interfaces],
             safety_io,
+            io_inputs: Default::default(),
             axes,
             q_off,
             home_drive,
@@ -748,9 +752,18 @@ impl PlantBus {
         self.bank.transmit_pdos_on(iface);
     }
 
-    /// Heartbeats when due; the safety I/O node's validation time and TPDO.
+    /// The safety I/O node's inputs as the operator sets them (bit 0 e-stop pressed, bit 1
+    /// reset key turned; 0 = at rest): another thread writes them (sim-plant's `--io-control`),
+    /// [`PlantBus::poll`] applies them.
+    pub fn io_inputs(&self) -> std::sync::Arc<std::sync::atomic::AtomicU8> {
+        self.io_inputs.clone()
+    }
+
+    /// Heartbeats when due; the safety I/O node's inputs, validation time and TPDO.
     pub fn poll(&mut self, now_ns: u64) {
         if let Some((_, node, out)) = self.safety_io.as_mut() {
+            let i = self.io_inputs.load(std::sync::atomic::Ordering::Acquire);
+            node.set_inputs(i & 1 == 0, i & 2 != 0);
             node.poll(now_ns, out);
         }
         self.apply_sto();

@@ -29,10 +29,11 @@ struct Args {
     /// multi-process tests: lengths, velocities, NMT/CiA 402 state, motion demand, safety watch.
     #[arg(long)]
     status_file: Option<PathBuf>,
-    /// FAULT INJECTION (the safety HIL matrix): re-read this file every 5 ms; lines
-    /// `force <cable 1-based> <newtons>|off` make that winch report the given measured force
-    /// (TPDO2) instead of the pretension stand-in. A bad line is logged (naming the line) and
-    /// ignored; a missing file means no override.
+    /// FAULT INJECTION and the operator's hand (the safety HIL matrix): re-read this file
+    /// every 5 ms; lines `force <cable 1-based> <newtons>|off` make that winch report the given
+    /// measured force (TPDO2) instead of the pretension stand-in; `reset_key on|off` and
+    /// `estop pressed|released` set the safety I/O node's inputs. A bad line is logged (naming
+    /// the line) and ignored; a missing file means no override, key at rest, e-stop released.
     #[arg(long)]
     control_file: Option<PathBuf>,
     /// Run the emulation loop SCHED_FIFO at this priority (1..=99) with mlockall. The drives it
@@ -152,8 +153,18 @@ fn write_status_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
     }
 }
 
-/// One line of the control file: `force <cable 1-based> <newtons>|off`.
-fn parse_control_line(line: &str, m: usize) -> Result<Option<(usize, Option<f64>)>, String> {
+/// One line of the control file.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Control {
+    /// `force <cable 1-based> <newtons>|off`: the measured force cable `i` reports.
+    Force(usize, Option<f64>),
+    /// `reset_key on|off`: the safety I/O node's reset key turned (the operator's hand).
+    ResetKey(bool),
+    /// `estop pressed|released`: the safety I/O node's e-stop button (circuit open).
+    EStop(bool),
+}
+
+fn parse_control_line(line: &str, m: usize) -> Result<Option<Control>, String> {
     let f: Vec<&str> = line.split_whitespace().collect();
     match f.as_slice() {
         [] => Ok(None),
@@ -173,21 +184,34 @@ fn parse_control_line(line: &str, m: usize) -> Result<Option<(usize, Option<f64>
                         .ok_or_else(|| format!("force {v:?} is not a finite number (N)"))?,
                 ),
             };
-            Ok(Some((i - 1, v)))
+            Ok(Some(Control::Force(i - 1, v)))
         }
-        _ => Err("expected `force <cable> <newtons>|off`".into()),
+        ["reset_key", "on"] => Ok(Some(Control::ResetKey(true))),
+        ["reset_key", "off"] => Ok(Some(Control::ResetKey(false))),
+        ["estop", "pressed"] => Ok(Some(Control::EStop(true))),
+        ["estop", "released"] => Ok(Some(Control::EStop(false))),
+        _ => Err(
+            "expected `force <cable> <newtons>|off`, `reset_key on|off` or \
+             `estop pressed|released`"
+                .into(),
+        ),
     }
 }
 
+/// Re-reads the control file every 5 ms; its whole text is the injected state (a line that is
+/// absent means: no force override, key at rest, e-stop released).
 fn read_control_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
     let mut last = String::new();
     while !c.stop.load(Ordering::Acquire) {
         let text = std::fs::read_to_string(path).unwrap_or_default();
         if text != last {
             let mut set = vec![None; m];
+            let (mut key, mut estop) = (false, false);
             for (n, line) in text.lines().enumerate() {
                 match parse_control_line(line, m) {
-                    Ok(Some((i, v))) => set[i] = v,
+                    Ok(Some(Control::Force(i, v))) => set[i] = v,
+                    Ok(Some(Control::ResetKey(on))) => key = on,
+                    Ok(Some(Control::EStop(pressed))) => estop = pressed,
                     Ok(None) => {}
                     Err(e) => tracing::error!("{}:{}: {e}", path.display(), n + 1),
                 }
@@ -202,6 +226,15 @@ fn read_control_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
                 }
                 c.set_force_override(i, v);
             }
+            // Bit 0: e-stop circuit OPEN (pressed), bit 1: reset key turned.
+            let inputs = u8::from(estop) | (u8::from(key) << 1);
+            if c.io_inputs.swap(inputs, Ordering::AcqRel) != inputs {
+                tracing::info!(
+                    reset_key = key,
+                    estop_pressed = estop,
+                    "safety I/O node inputs"
+                );
+            }
             last = text;
         }
         std::thread::sleep(Duration::from_millis(5));
@@ -210,16 +243,28 @@ fn read_control_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
 
 #[cfg(test)]
 mod tests {
-    use super::parse_control_line;
+    use super::{Control, parse_control_line};
 
     #[test]
     fn control_lines() {
         assert_eq!(
             parse_control_line("force 3 10500", 8),
-            Ok(Some((2, Some(10500.0))))
+            Ok(Some(Control::Force(2, Some(10500.0))))
         );
-        assert_eq!(parse_control_line("force 8 off", 8), Ok(Some((7, None))));
+        assert_eq!(
+            parse_control_line("force 8 off", 8),
+            Ok(Some(Control::Force(7, None)))
+        );
         assert_eq!(parse_control_line("  # x", 8), Ok(None));
+        assert_eq!(
+            parse_control_line("reset_key on", 8),
+            Ok(Some(Control::ResetKey(true)))
+        );
+        assert_eq!(
+            parse_control_line("estop pressed", 8),
+            Ok(Some(Control::EStop(true)))
+        );
+        assert!(parse_control_line("reset_key maybe", 8).is_err());
         assert!(
             parse_control_line("force 9 1", 8)
                 .unwrap_err()

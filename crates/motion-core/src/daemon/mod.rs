@@ -28,8 +28,9 @@ pub trait SetpointSink {
     fn publish(&mut self, sp: &JointSetpoint) -> bool;
 }
 
-/// Operator/safety events the loop polls once per cycle (non-blocking).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Operator/safety events the loop polls once per cycle (non-blocking). Not `Clone`: a reset
+/// is used once.
+#[derive(Debug, PartialEq, Eq)]
 pub enum Command {
     EStop,
     /// Leaves a latched state; only a [`ResetAuthority`] value can ask for it.
@@ -38,8 +39,8 @@ pub enum Command {
 
 /// The right to clear the loop's latch (e-stop or refused reference). It has no public
 /// constructor: [`ResetGate::check`] is the single place that decides which events may reset
-/// the loop (issue 16: only the safety monitor's reset, with a reset epoch newer than the last
-/// one this loop accepted).
+/// the loop (only the CURRENT safety monitor's fresh reset, of the epoch it announced, that this
+/// loop has not acted on). Not `Clone` or `Copy`: consumed by the loop.
 ///
 /// Forging one fails with E0603 (private constructor); `tools/test.sh` checks the code, so a
 /// renamed path (another error) fails the test instead of passing it.
@@ -47,7 +48,13 @@ pub enum Command {
 /// ```compile_fail,E0603
 /// let forged = motion_core::daemon::ResetAuthority(());
 /// ```
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+///
+/// ```compile_fail
+/// fn twice(a: motion_core::daemon::ResetAuthority) -> (motion_core::daemon::ResetAuthority, motion_core::daemon::ResetAuthority) {
+///     (a, a)
+/// }
+/// ```
+#[derive(Debug, PartialEq, Eq)]
 pub struct ResetAuthority(());
 
 /// Why a state event did not yield a [`ResetAuthority`].
@@ -57,24 +64,47 @@ pub enum ResetIgnored {
     NotAReset,
     /// A reset event from another process than the safety monitor (raw source code).
     Source(u32),
-    /// The monitor's reset epoch (`detail`) does not advance past the last one accepted: a
-    /// replay, or a copy of an old event.
+    /// The monitor's reset epoch (`detail`) is not a reset this loop has not acted on
+    /// ([`crs_limits::reset_epoch::releases`]): a replay, or a copy of an old event.
     NotNewer { epoch: u32, last: u32 },
+    /// The epoch is a monitor instance's start epoch (count 0): no operator reset.
+    StartEpoch { epoch: u32 },
+    /// Stamped outside [now − [`RESET_MAX_AGE_NS`], now + tolerance] of the loop's clock.
+    Stale,
+    /// Not the epoch the current monitor announced (announcement missing, older than the
+    /// event, stale, or of another epoch): never "any epoch first".
+    NotAnnounced { epoch: u32, announced: Option<u32> },
 }
+
+/// A reset event (and the announcement it needs) older than this is stale (ns).
+pub const RESET_MAX_AGE_NS: u64 = 2_000_000_000;
+/// An announcement counts this long (the monitor re-announces about once a second).
+pub const ANNOUNCEMENT_MAX_AGE_NS: u64 = 3_000_000_000;
+/// How far in the loop's future an event's stamp may lie (same CLOCK_MONOTONIC host).
+pub const EVENT_FUTURE_TOLERANCE_NS: u64 = 50_000_000;
 
 /// motion-core's reset gate (ISO 13849-1 §5.2.2: only the safety function's manual reset ends
 /// a stop). Accepts only `StateEvent { kind: Reset, source: SafetyMonitor, detail: epoch }`
-/// whose epoch is newer (serial-number order) than the last accepted one.
+/// that is
+/// * fresh: stamped within [`RESET_MAX_AGE_NS`] before the loop's clock, not in its future;
+/// * a reset: count >= 1 of its monitor instance ([`crs_limits::reset_epoch`]) — a restarted
+///   monitor's start epoch is none;
+/// * of the epoch the CURRENT monitor announced (`crs_ipc::monitor_state::EPOCH_ANNOUNCE`,
+///   fresh, stamped no later than the event): never "any epoch first";
+/// * one this loop has not acted on ([`crs_limits::reset_epoch::releases`] against the last
+///   accepted epoch).
 ///
 /// What this does NOT authenticate: iceoryx2 0.10 does not tell a subscriber which process
-/// published a sample, and `source` is self-declared, so a local process that forges the
-/// monitor's source with a newer epoch passes here (see docs/safety-monitor.md, threat model).
-/// The loop's release alone moves nothing: it holds its position, and the drives stay braked
-/// until drive-io leaves its latch, which needs the same epoch verified in the monitor's
-/// doubled heartbeat on CAN.
+/// published a sample, and `source` is self-declared, so a local process that reads the
+/// monitor's announcement and forges its source with that epoch passes here (see
+/// docs/safety-monitor.md, threat model). The loop's release alone moves nothing: it holds its
+/// position, and the drives stay braked until drive-io leaves its latch, which needs the same
+/// epoch verified in the monitor's doubled heartbeat on CAN.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ResetGate {
     last_epoch: Option<u32>,
+    /// The epoch the monitor announced last, and the announcement's stamp.
+    announced: Option<(u32, u64)>,
 }
 
 impl ResetGate {
@@ -87,10 +117,36 @@ impl ResetGate {
         self.last_epoch
     }
 
-    /// The reset a state event carries, if it is the monitor's and advances the epoch. Strict:
-    /// only a well-formed reset event of this contract version (an e-stop, by contrast, is
-    /// honoured on its kind code alone). Allocation-free (called in the 1 ms loop).
-    pub fn check(&mut self, ev: &crs_ipc::StateEvent) -> Result<ResetAuthority, ResetIgnored> {
+    /// The epoch the monitor announced last (None: none yet).
+    pub fn announced_epoch(&self) -> Option<u32> {
+        self.announced.map(|(e, _)| e)
+    }
+
+    /// The reset a state event carries (see the type's docs); the monitor's epoch
+    /// announcements are recorded here (and are `NotAReset`). Strict: only a well-formed reset
+    /// event of this contract version (an e-stop, by contrast, is honoured on its kind code
+    /// alone). `now_ns`: the loop's clock. Allocation-free (called in the 1 ms loop).
+    pub fn check(
+        &mut self,
+        ev: &crs_ipc::StateEvent,
+        now_ns: u64,
+    ) -> Result<ResetAuthority, ResetIgnored> {
+        let fresh = |stamp: u64, age: u64| {
+            stamp <= now_ns.saturating_add(EVENT_FUTURE_TOLERANCE_NS)
+                && now_ns.saturating_sub(stamp) <= age
+        };
+        if ev.version == crs_ipc::CONTRACT_VERSION
+            && ev.source == crs_ipc::ProcessId::SafetyMonitor as u32
+            && ev.kind == crs_ipc::EventKind::StateChanged as u32
+            && ev.detail == crs_ipc::monitor_state::EPOCH_ANNOUNCE
+        {
+            if fresh(ev.timestamp_ns, ANNOUNCEMENT_MAX_AGE_NS)
+                && self.announced.is_none_or(|(_, t)| ev.timestamp_ns >= t)
+            {
+                self.announced = Some((ev.detail_node, ev.timestamp_ns));
+            }
+            return Err(ResetIgnored::NotAReset);
+        }
         match ev.decode() {
             Ok(crs_ipc::Event::Reset {
                 source: crs_ipc::ProcessId::SafetyMonitor,
@@ -98,9 +154,25 @@ impl ResetGate {
             Ok(crs_ipc::Event::Reset { .. }) => return Err(ResetIgnored::Source(ev.source)),
             _ => return Err(ResetIgnored::NotAReset),
         }
+        if !fresh(ev.timestamp_ns, RESET_MAX_AGE_NS) {
+            return Err(ResetIgnored::Stale);
+        }
         let epoch = ev.detail;
+        if crs_limits::reset_epoch::count(epoch) == 0 {
+            return Err(ResetIgnored::StartEpoch { epoch });
+        }
+        match self.announced {
+            Some((a, t))
+                if a == epoch && t <= ev.timestamp_ns && fresh(t, ANNOUNCEMENT_MAX_AGE_NS) => {}
+            other => {
+                return Err(ResetIgnored::NotAnnounced {
+                    epoch,
+                    announced: other.map(|(a, _)| a),
+                });
+            }
+        }
         if let Some(last) = self.last_epoch
-            && !crs_limits::epoch_newer(epoch, last)
+            && !crs_limits::reset_epoch::releases(epoch, last)
         {
             return Err(ResetIgnored::NotNewer { epoch, last });
         }

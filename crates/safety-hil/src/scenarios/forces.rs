@@ -1,19 +1,18 @@
 //! Measured forces (issue 15): one cable's force leaves the band and stays out.
 
 use crate::Res;
-use crate::emulator::inject_force;
 use crate::scenarios::{Outcome, ms};
 use crate::stack::Stack;
-use crs_ipc::monotonic_ns;
 use safety_monitor::Cause;
 
 /// One cable's measured force leaves [f_min − 500 N, f_max + 1000 N] (test cabin: 1000 /
-/// 9000 N) and stays there: the monitor's filtered force check (45 ms) trips on that cable.
+/// 9000 N) and stays there: the monitor's force check (8 of the last 16 readings) trips on that
+/// cable.
 pub fn force_fault(st: &mut Stack, cable: usize, force_n: f64, cause: Cause) -> Res<Outcome> {
     let _ = st.fake()?.clone();
     st.wait_following(false)?;
-    let t0 = monotonic_ns();
-    inject_force(&st.dir, cable, force_n)?;
+    let t0 = st.inject();
+    st.set_force(cable, Some(force_n))?;
     let ev = st.monitor_trip(cause, 10.0)?;
     if ev.detail_node as usize != cable {
         return Err(format!(
@@ -27,7 +26,7 @@ pub fn force_fault(st: &mut Stack, cable: usize, force_n: f64, cause: Cause) -> 
         detect_ms: ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!(
-            "emulated drive reports {force_n} N (t0 = control file written; filter 45 ms)"
+            "emulated load cell reports {force_n} N (t0 = control file written; 8 of 16 readings)"
         ),
     })
 }

@@ -42,7 +42,7 @@ pub fn forged_stopping(st: &mut Stack) -> Res<Outcome> {
 /// (publisher's process executable, iceoryx2 service introspection) can tell. The monitor
 /// trips `foreign_publisher`, the drives brake.
 pub fn foreign_publisher(st: &mut Stack) -> Res<Outcome> {
-    let t0 = monotonic_ns();
+    let t0 = st.inject();
     let c = st.fake()?.clone();
     let trip = st.monitor_trip(Cause::ForeignPublisher, 10.0)?;
     let stopped = st.require_braked()?;

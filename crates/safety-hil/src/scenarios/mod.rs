@@ -3,6 +3,7 @@
 
 pub mod bus;
 pub mod forces;
+pub mod holes;
 pub mod integrity;
 pub mod process_faults;
 pub mod reset_authority;
@@ -21,3 +22,6 @@ pub struct Outcome {
 pub fn ms(from_ns: u64, to_ns: u64) -> Option<f64> {
     (from_ns > 0 && to_ns >= from_ns).then(|| (to_ns - from_ns) as f64 * 1e-6)
 }
+
+pub mod timing;
+pub use timing::{TimingArgs, check_timing};

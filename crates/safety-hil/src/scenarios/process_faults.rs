@@ -96,6 +96,9 @@ pub fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
     let c = st.fake()?.clone();
     st.wait_following(false)?;
     let fb0 = st.last_feedback.ok_or("no drive-io feedback")?;
+    // drive-io's death is preparation: the fault is the replacement's first sample. A host
+    // stall that makes the replacement slower than the feedback silence is no verdict.
+    st.injected = false;
     // Everything that takes time is prepared before drive-io dies: the node (its creation
     // sweeps dead nodes) and the SYNC thread that keeps the drives sending forces.
     let node =
@@ -138,6 +141,17 @@ pub fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
         }
     };
     let t_replaced = monotonic_ns();
+    st.poll()?;
+    if !st.monitor_estops.is_empty() {
+        sync_stop.store(true, Ordering::Relaxed);
+        return Err(format!(
+            "stalled: replacing drive-io's publisher took {:.0} ms, the monitor tripped first \
+             ({:?})",
+            (t_replaced - t0) as f64 * 1e-6,
+            Cause::from_code(st.monitor_estops[0].detail)
+        ));
+    }
+    st.injected = true;
     let mut next = t_replaced;
     let mut cycle = fb0.cycle;
     let r = loop {

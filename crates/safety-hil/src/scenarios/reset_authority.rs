@@ -72,6 +72,11 @@ pub struct BusSpy {
 }
 
 impl BusSpy {
+    /// The last heartbeat decoded from the monitor's pairs.
+    pub fn last_heartbeat(&self) -> Option<can_transport::safety_frame::SafetyHeartbeat> {
+        self.last
+    }
+
     fn drain(&mut self, bus: &mut dyn can_transport::CanBus) -> Res<()> {
         let rx = self.rx.get_or_insert_with(|| {
             can_transport::safety_frame::PairReceiver::new(0x101, 1_000_000_000)

@@ -115,13 +115,19 @@ pub fn nan_pose(st: &mut Stack) -> Res<Outcome> {
 }
 
 pub fn identity_mismatch(st: &mut Stack) -> Res<Outcome> {
-    publisher_fault(
-        st,
-        |c| c.wrong_identity.store(true, Ordering::Relaxed),
-        Cause::IdentityMismatch,
-        "identity_mismatch",
-        "re-announced identity with one byte changed",
-    )
+    let c = st.fake()?.clone();
+    st.wait_following(false)?;
+    c.wrong_identity.store(true, Ordering::Relaxed);
+    let ev = st.monitor_trip(Cause::IdentityMismatch, 10.0)?;
+    let stopped = st.require_braked()?;
+    // t0: the first wrong announcement (the producer re-announces every 100 setpoints).
+    let t0 = c.wrong_identity_sent_ns.load(Ordering::Relaxed);
+    Ok(Outcome {
+        cause: "identity_mismatch".into(),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: "re-announced identity with one byte changed (t0 = its announcement)".into(),
+    })
 }
 
 /// The pose jumps 200 mm inside the workspace box with cable lengths that agree with it: Δq

@@ -2,7 +2,9 @@
 //! docs/safety-monitor.md).
 //!
 //! * `safety-monitor [--config F] [--transport T] [--ipc-prefix P]`: run the monitor.
-//! * `safety-monitor reset [--ipc-prefix P]`: operator reset; exit 0 if accepted, 1 if refused.
+//! * `safety-monitor reset [--config F] [--socket S]`: operator reset through the monitor's
+//!   reset socket (this process's credentials must show the operator group); exit 0 if
+//!   accepted (or nothing to reset), 1 if refused or denied.
 //! * `safety-monitor identity [--config F]`: print the platform identity the monitor computes.
 //! * `safety-monitor accept NEW.toml [--config F] [--yes]`: show the parameter diff of a
 //!   (re)calibrated platform against the one the monitor runs; with `--yes` make it the
@@ -34,20 +36,19 @@ struct Args {
     /// iceoryx2 service-name prefix (default: $CRS_IPC_PREFIX or none).
     #[arg(long, global = true)]
     ipc_prefix: Option<String>,
-    /// FAULT INJECTION (the HIL matrix's `stop_frame_lost`): every send of the monitor's NMT
-    /// stop fails as on a full TX queue (ENOBUFS), so the stop must escalate to the safety
-    /// heartbeat's inhibit. Never in operation; logged as an error at start.
-    #[arg(long, hide = true)]
-    inject_nmt_stop_unsent: bool,
 }
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Ask the running monitor to release its latched e-stop (refused while the cause persists).
+    /// Ask the running monitor to release its latched e-stop (refused while the cause
+    /// persists), through its reset socket: only members of the operator group may.
     Reset {
         /// How long to wait for the monitor's answer (ms).
         #[arg(long, default_value_t = 2000)]
         timeout_ms: u64,
+        /// The reset socket (default: `[reset] socket` of --config).
+        #[arg(long)]
+        socket: Option<PathBuf>,
     },
     /// Print the platform identity (SHA-256) the monitor computes from the platform TOML.
     Identity,
@@ -89,9 +90,21 @@ fn main() -> ExitCode {
 
 fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
     match args.cmd {
-        Some(Cmd::Reset { timeout_ms }) => {
-            let ipc = node("safety-monitor-reset", &args.ipc_prefix)?;
-            match daemon::request_reset(&ipc, Duration::from_millis(timeout_ms))? {
+        Some(Cmd::Reset { timeout_ms, socket }) => {
+            let socket = match socket {
+                Some(s) => s,
+                None => {
+                    let cfg = safety_monitor::config::load(&args.config)?;
+                    cfg.reset_socket.map(|(p, _)| p).ok_or_else(|| {
+                        format!(
+                            "{}: no [reset] socket configured (the reset is the safety I/O \
+                             node's key)",
+                            args.config.display()
+                        )
+                    })?
+                }
+            };
+            match daemon::request_reset(&socket, Duration::from_millis(timeout_ms))? {
                 ResetReply::Accepted => {
                     println!("reset accepted: e-stop released, drives re-enabled by drive-io");
                     Ok(ExitCode::SUCCESS)
@@ -111,6 +124,17 @@ fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
                     println!(
                         "reset REFUSED: the cause persists ({})",
                         c.map_or("unknown".to_string(), |c| c.to_string())
+                    );
+                    Ok(ExitCode::FAILURE)
+                }
+                ResetReply::Denied(why) => {
+                    println!("reset DENIED: {why}");
+                    Ok(ExitCode::FAILURE)
+                }
+                ResetReply::Exhausted => {
+                    println!(
+                        "reset REFUSED: this monitor instance has counted all the resets it can; \
+                         restart it (then reset the new instance)"
                     );
                     Ok(ExitCode::FAILURE)
                 }
@@ -175,21 +199,6 @@ fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
             }
             let ipc = node("safety-monitor", &args.ipc_prefix)?;
             let (tx, rx) = daemon::open_buses(&cfg)?;
-            let tx: Vec<Box<dyn can_transport::CanBus>> = if args.inject_nmt_stop_unsent {
-                tracing::error!(
-                    "FAULT INJECTION: every NMT stop of this monitor fails to send (test only)"
-                );
-                tx.into_iter()
-                    .map(|b| {
-                        Box::new(safety_monitor::stop_path::FailingSends::new(
-                            b,
-                            u32::from(safety_monitor::bus_frames::COB_NMT),
-                        )) as Box<dyn can_transport::CanBus>
-                    })
-                    .collect()
-            } else {
-                tx
-            };
             let s = daemon::run_on(&cfg, tx, rx, &ipc, &STOP)?;
             tracing::info!(
                 ?s,

@@ -56,6 +56,12 @@ struct Args {
     /// as `crs sim` does, so the first setpoint equals the drives' positions.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     home_lengths_m: Option<Vec<f64>>,
+    /// The operator's hand on the safety I/O node (drives.toml `[safety_io]`): re-read this
+    /// file every 20 ms; a line `reset_key on` turns the reset key (the monitor resets when it
+    /// is released again: `off`, or the line removed), `estop pressed` opens the e-stop
+    /// circuit. A missing file: key at rest, e-stop released (`crs sim` prints the path).
+    #[arg(long)]
+    io_control: Option<std::path::PathBuf>,
     /// Run the plant loop as SCHED_FIFO with this priority (1..=99) and mlockall.
     #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
     rt_priority: Option<i32>,
@@ -78,6 +84,39 @@ fn main() -> ExitCode {
             eprintln!("sim-plant: error: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// `--io-control`: the safety I/O node's inputs from a file (see [`Args`]).
+fn io_control_loop(path: &std::path::Path, inputs: &std::sync::atomic::AtomicU8) {
+    let mut last = None;
+    while !STOP.load(Ordering::Relaxed) {
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        let mut v = 0u8;
+        for (n, line) in text.lines().enumerate() {
+            match line.split_whitespace().collect::<Vec<_>>().as_slice() {
+                [] => {}
+                [c, ..] if c.starts_with('#') => {}
+                ["reset_key", "on"] => v |= 2,
+                ["reset_key", "off"] | ["estop", "released"] => {}
+                ["estop", "pressed"] => v |= 1,
+                _ => tracing::error!(
+                    "{}:{}: expected `reset_key on|off` or `estop pressed|released`",
+                    path.display(),
+                    n + 1
+                ),
+            }
+        }
+        if last != Some(v) {
+            inputs.store(v, std::sync::atomic::Ordering::Release);
+            tracing::info!(
+                reset_key = v & 2 != 0,
+                estop_pressed = v & 1 != 0,
+                "safety I/O node inputs (--io-control)"
+            );
+            last = Some(v);
+        }
+        std::thread::sleep(Duration::from_millis(20));
     }
 }
 
@@ -166,6 +205,10 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         .iter()
         .map(|spec| can_transport::open(spec).map_err(|e| format!("transport {spec}: {e}")))
         .collect::<Result<Vec<_>, _>>()?;
+    if let Some(path) = args.io_control.clone() {
+        let inputs = plant.io_inputs();
+        std::thread::spawn(move || io_control_loop(&path, &inputs));
+    }
     if let Some(p) = args.rt_priority {
         crs_rt::make_realtime(p, args.cpu)?;
         tracing::info!(priority = p, cpu = ?args.cpu, "SCHED_FIFO + mlockall");

@@ -1,0 +1,328 @@
+//! The ways through the supervision a review found: motion from rest, a reset asked for by a
+//! foreign process, fluttering forces, the monitor's identifiers spoken by another node, a
+//! state-event flood, a producer's timestamp jump. Each injects the fault while the stack
+//! runs and requires the monitor's trip (or refusal) and braked drives.
+
+use crate::Res;
+use crate::configs::home_length;
+use crate::scenarios::reset_authority::{BusSpy, require_still_latched, spy_pairs};
+use crate::scenarios::{Outcome, ms};
+use crate::stack::{Stack, describe_answer, open_bus};
+use crs_ipc::{EventKind, IpcNode, ProcessId, StateEvent};
+use safety_monitor::Cause;
+use safety_monitor::daemon::{RESET_DENIED, RESET_REQUEST};
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+/// From rest (the stream holding the home pose) the pose moves at 4 m/s at once, with
+/// consistent cable lengths: Δq stays 0 and the velocity is below table 5.1's 5 m/s (+25 %),
+/// only the acceleration out of the hold (4000 m/s² ≫ 14 m/s²) shows it.
+pub fn jump_from_rest(st: &mut Stack) -> Res<Outcome> {
+    let c = st.fake()?.clone();
+    st.wait_following(false)?;
+    let t0 = st.inject();
+    c.pose_speed_um.store(4_000, Ordering::Relaxed);
+    let ev = st.monitor_trip(Cause::MotionAcceleration, 10.0)?;
+    let stopped = st.require_braked()?;
+    Ok(Outcome {
+        cause: "motion_acceleration".into(),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: "hold, then 4 mm per 1 ms setpoint (4 m/s) with consistent lengths".into(),
+    })
+}
+
+/// After a trip whose cause cleared, a process of the stack's user asks for the reset on the
+/// process bus (under the operator's source) and through the reset socket as another user
+/// (nobody, not in the operator group): both refused, the monitor stays tripped and the
+/// drives braked; the operator's key then resets.
+pub fn reset_from_foreign_process(st: &mut Stack) -> Res<Outcome> {
+    let c = st.fake()?.clone();
+    st.wait_following(false)?;
+    st.inject();
+    c.nan.store(true, Ordering::Relaxed);
+    st.monitor_trip(Cause::NonFinite, 10.0)?;
+    st.require_braked()?;
+    c.nan.store(false, Ordering::Relaxed);
+    // 1. On the process bus, claiming the operator's source.
+    let node = IpcNode::with_prefix("shil-foreign", &st.prefix).map_err(|e| e.to_string())?;
+    let publ = node.publisher::<StateEvent>().map_err(|e| e.to_string())?;
+    let answers0 = st.reset_answers.len();
+    let mut req = StateEvent::new(ProcessId::Operator, EventKind::StateChanged, 7);
+    req.state = RESET_REQUEST;
+    publ.publish(&req).map_err(|e| e.to_string())?;
+    st.wait(
+        "the monitor's answer to the process-bus request",
+        10.0,
+        |s| Ok(s.reset_answers.len() > answers0),
+    )?;
+    let a = st.reset_answers[answers0];
+    if a.detail != RESET_DENIED {
+        return Err(format!(
+            "a reset request on the process bus was not denied: {}",
+            describe_answer(&a).1
+        ));
+    }
+    require_still_latched(st, "process-bus reset request")?;
+    if st.monitor_resets > 0 {
+        return Err("the monitor reset on a process-bus request".into());
+    }
+    // 2. Through the reset socket as nobody.
+    let (ok, text) = st.socket_reset(Some((65_534, 65_534)))?;
+    if ok {
+        return Err(format!(
+            "the reset socket accepted a foreign user: {text:?}"
+        ));
+    }
+    require_still_latched(st, "reset socket as a foreign user")?;
+    let log = std::fs::read_to_string(st.dir.join("safety-monitor.log")).unwrap_or_default();
+    if !log.contains("REFUSED") {
+        return Err("the monitor did not log the refused request with its sender".into());
+    }
+    // 3. The operator's key: accepted.
+    let (ok, key) = st.operator_reset()?;
+    if !ok {
+        return Err(format!("the operator's key was refused: {key:?}"));
+    }
+    st.wait("the monitor's Reset event", 10.0, |s| {
+        Ok(s.monitor_resets > 0)
+    })?;
+    c.paused.store(true, Ordering::Relaxed);
+    st.wait("the trip at the end", 10.0, |s| {
+        Ok(s.monitor_estops.len() >= 2)
+    })?;
+    st.require_braked()?;
+    Ok(Outcome {
+        cause: "non_finite; foreign resets refused, key accepted".into(),
+        detect_ms: None,
+        stop_ms: None,
+        note: format!("process bus: denied; socket as nobody: {text:?}; key: {key:?}"),
+    })
+}
+
+/// One cable's load cell flutters between slack (200 N) and in band (3 kN) at 20 Hz: the
+/// window (8 of the last 16 readings) trips although no reading run is long.
+pub fn flutter_force(st: &mut Stack) -> Res<Outcome> {
+    let _ = st.fake()?.clone();
+    st.wait_following(false)?;
+    let t0 = st.inject();
+    let mut slack = true;
+    let mut n = 0;
+    loop {
+        st.set_force(2, Some(if slack { 200.0 } else { 3_000.0 }))?;
+        slack = !slack;
+        n += 1;
+        std::thread::sleep(Duration::from_millis(25));
+        st.poll()?;
+        if !st.monitor_estops.is_empty() || n > 200 {
+            break;
+        }
+    }
+    let ev = st.monitor_trip(Cause::ForceSlack, 1.0)?;
+    if ev.detail_node != 2 {
+        return Err(format!("tripped on cable {}, expected 2", ev.detail_node));
+    }
+    let stopped = st.require_braked()?;
+    Ok(Outcome {
+        cause: "force_slack cable 2 (flutter)".into(),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: format!("200 N / 3 kN alternating every 25 ms; {n} changes before the trip"),
+    })
+}
+
+/// Another node on the safety bus sends the monitor's own heartbeat COB-IDs (a RUN pair,
+/// valid CRCs, the monitor's epoch and the next counter): the monitor recognises frames it did
+/// not send and trips `impersonation`; the drives brake.
+pub fn impersonation_under_isolation(st: &mut Stack) -> Res<Outcome> {
+    let _ = st.fake()?.clone();
+    st.wait_following(false)?;
+    let mut bus = open_bus(st, "safety")?;
+    let mut spy = BusSpy::default();
+    spy_pairs(st, bus.as_mut(), &mut spy, 3)?;
+    let mut hb = spy.last_heartbeat().ok_or("no safety pair seen")?;
+    hb.counter = hb.counter.wrapping_add(1);
+    let t0 = st.inject();
+    for f in can_transport::safety_frame::encode(&hb, 0x101) {
+        bus.send(&f).map_err(|e| e.to_string())?;
+    }
+    let ev = st.monitor_trip(Cause::Impersonation, 10.0)?;
+    let stopped = st.require_braked()?;
+    Ok(Outcome {
+        cause: "impersonation".into(),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: format!(
+            "one RUN pair 0x101/0x102 of epoch {} from another node",
+            hb.epoch
+        ),
+    })
+}
+
+/// A process floods the state-event topic with events of a foreign contract version while
+/// the operator presses stop: the flood cannot hold the stop back (every event of a cycle is
+/// drained; the foreign versions themselves trip `ipc_error`).
+pub fn state_event_flood(st: &mut Stack) -> Res<Outcome> {
+    let _ = st.fake()?.clone();
+    st.wait_following(false)?;
+    let node = IpcNode::with_prefix("shil-flood", &st.prefix).map_err(|e| e.to_string())?;
+    let publ = node.publisher::<StateEvent>().map_err(|e| e.to_string())?;
+    let t0 = st.inject();
+    let mut bad = StateEvent::new(ProcessId::Test, EventKind::StateChanged, 1);
+    bad.version = 0xDEAD;
+    for k in 0..2_000u64 {
+        bad.sequence = k;
+        publ.publish(&bad).map_err(|e| e.to_string())?;
+        if k == 1_000 {
+            publ.publish(&StateEvent::new(ProcessId::Operator, EventKind::EStop, 1))
+                .map_err(|e| e.to_string())?;
+        }
+    }
+    let ev = st.monitor_trip_any(&[Cause::IpcError, Cause::EStopEvent], 10.0)?;
+    let stopped = st.require_braked()?;
+    Ok(Outcome {
+        cause: Cause::from_code(ev.detail).map_or("?".into(), |c| c.to_string()),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: "2000 events of version 0xDEAD, the operator's e-stop among them".into(),
+    })
+}
+
+/// The producer's timestamps jump 10 000 s into the future, then a faulty adapter sends an
+/// RPDO 300 mm off: the monitor stamps setpoints within its own clock, so the RPDO is still
+/// compared and trips `rpdo_mismatch` (not skipped as "no setpoint before it").
+pub fn timestamp_jump(st: &mut Stack) -> Res<Outcome> {
+    let c = st.fake()?.clone();
+    st.wait_following(false)?;
+    // One jump, then the normal period on top of it (the lie accumulates per setpoint).
+    c.timestamp_lie_ns
+        .store(10_000_000_000_000, Ordering::Relaxed);
+    std::thread::sleep(Duration::from_millis(2));
+    c.timestamp_lie_ns.store(0, Ordering::Relaxed);
+    // 100 ms of jumped setpoints.
+    let p0 = c.published.load(Ordering::Relaxed);
+    st.wait("100 jumped setpoints", 10.0, |_| {
+        Ok(c.published.load(Ordering::Relaxed) >= p0 + 100)
+    })?;
+    st.poll()?;
+    if !st.monitor_estops.is_empty() {
+        return Err(format!(
+            "tripped before the forged RPDO: {:?}",
+            st.monitor_estops[0]
+        ));
+    }
+    let mut bus = open_bus(st, crate::configs::drive_interface(3))?;
+    let counts_per_m = 10.0 * 1_048_576.0 / (std::f64::consts::PI * 0.305);
+    let target = 200_000_000.0 - (home_length() + 0.3) * counts_per_m;
+    let f = safety_monitor::bus_frames::rpdo1(4, 0x000F, target.round() as i32);
+    let t0 = st.inject();
+    bus.send(&f).map_err(|e| e.to_string())?;
+    let ev = st.monitor_trip(Cause::RpdoMismatch, 10.0)?;
+    let stopped = st.require_braked()?;
+    Ok(Outcome {
+        cause: "rpdo_mismatch after a timestamp jump".into(),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: "timestamps +10 000 s, then a forged RPDO1 300 mm off".into(),
+    })
+}
+
+/// The operator presses the e-stop button of the safety I/O node's circuit: the monitor
+/// reads it from the node's TPDO1 and trips `estop_circuit`; the node itself takes STO off.
+pub fn estop_circuit_pressed(st: &mut Stack) -> Res<Outcome> {
+    let _ = st.fake()?.clone();
+    st.wait_following(false)?;
+    let t0 = st.inject();
+    st.set_estop(true)?;
+    let ev = st.monitor_trip(Cause::EStopCircuit, 10.0)?;
+    let stopped = st.require_braked()?;
+    // Released again, the latch stays until the operator's reset.
+    st.set_estop(false)?;
+    require_still_latched(st, "e-stop button released")?;
+    Ok(Outcome {
+        cause: "estop_circuit".into(),
+        detect_ms: ms(t0, ev.timestamp_ns),
+        stop_ms: ms(t0, stopped),
+        note: "safety I/O node input bit 0 opened (control file), then closed: still latched"
+            .into(),
+    })
+}
+
+/// The monitor dies while the drives follow and is started again: the new instance's start
+/// epoch (count 0) releases nothing that was stopped, and Reset events forged in the monitor's
+/// name with the new instance's epoch (and its next count), stamped before its start, release
+/// neither drive-io nor the drives. Only the operator's key, verified by the new instance,
+/// brings the stack back.
+pub fn reset_across_monitor_restart(st: &mut Stack) -> Res<Outcome> {
+    use crs_limits::reset_epoch;
+    let c = st.fake()?.clone();
+    st.wait_following(false)?;
+    let mut bus = open_bus(st, "safety")?;
+    let mut spy = BusSpy::default();
+    spy_pairs(st, bus.as_mut(), &mut spy, 3)?;
+    let old = spy.last_heartbeat().ok_or("no safety pair seen")?.epoch;
+    let t0 = st.inject();
+    st.signal("safety-monitor", libc::SIGKILL)?;
+    st.reap("safety-monitor");
+    let (_, stopped) = st.stopped_by_the_drives_watch()?;
+    st.spawn_monitor("safety-monitor")?;
+    // The new instance's pairs on the bus.
+    let new = loop {
+        spy_pairs(st, bus.as_mut(), &mut spy, 1)?;
+        let e = spy.last_heartbeat().ok_or("no safety pair seen")?.epoch;
+        if reset_epoch::instance(e) != reset_epoch::instance(old) {
+            break e;
+        }
+    };
+    if reset_epoch::count(new) != 0 {
+        return Err(format!(
+            "the new instance starts at count {}",
+            reset_epoch::count(new)
+        ));
+    }
+    spy_pairs(st, bus.as_mut(), &mut spy, 20)?;
+    require_still_latched(st, "restarted monitor (start epoch)")?;
+    // Forged resets in the monitor's name, stamped before its start (a replayed or pre-made
+    // event): the new epoch and its next count.
+    let node = IpcNode::with_prefix("shil-forger", &st.prefix).map_err(|e| e.to_string())?;
+    let publ = node.publisher::<StateEvent>().map_err(|e| e.to_string())?;
+    for (k, epoch) in [new, new.wrapping_add(1)].into_iter().enumerate() {
+        let mut ev = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, 900 + k as u64);
+        ev.detail = epoch;
+        ev.timestamp_ns = t0;
+        publ.publish(&ev).map_err(|e| e.to_string())?;
+    }
+    require_still_latched(st, "reset forged for the restarted monitor")?;
+    // The operator's key: the new instance verifies and resets.
+    let (ok, text) = st.operator_reset()?;
+    if !ok {
+        return Err(format!(
+            "the operator's key after the restart was refused: {text:?}"
+        ));
+    }
+    st.wait("drive-io re-enabled and following", 30.0, |s| {
+        let e = s.emu()?;
+        Ok(matches!(s.bus_state(), Some(crs_ipc::BusState::Running))
+            && e.drives
+                .iter()
+                .all(|d| d.demand == crate::emulator::DEMAND_FOLLOW)
+            && !e.inhibit)
+    })?;
+    c.paused.store(true, Ordering::Relaxed);
+    st.wait("the trip at the end", 10.0, |s| {
+        Ok(!s.monitor_estops.is_empty())
+    })?;
+    st.require_braked()?;
+    Ok(Outcome {
+        cause: "drives: heartbeat timeout; restart released nothing; key accepted".into(),
+        detect_ms: None,
+        stop_ms: ms(t0, stopped),
+        note: format!(
+            "instance {:#06x} -> {:#06x}; forged resets with epochs {new:#x}, {:#x}: still \
+             latched; key: {text:?}",
+            reset_epoch::instance(old),
+            reset_epoch::instance(new),
+            new.wrapping_add(1)
+        ),
+    })
+}
