@@ -341,6 +341,9 @@ pub enum SimError {
     /// The waypoint file (`--dwell-s`).
     #[error(transparent)]
     Waypoints(#[from] trajectory::WaypointError),
+    /// The ride (the waypoint file motion-core would run) refused before anything started.
+    #[error("ride refused, nothing started: {0}")]
+    RideRefused(#[from] lifecycle::RideRefused),
     /// Timing or writing the waypoints (`--dwell-s`).
     #[error(transparent)]
     Campaign(#[from] crate::campaign::CampaignError),
@@ -511,8 +514,17 @@ pub fn execute_observed(
         None => None,
     };
     let home_q = configured.home_command().map_err(SimError::HomePose)?;
-    std::fs::create_dir_all(&a.out).map_err(output(&a.out))?;
     let waypoint_file = a.waypoints.clone().or(daemon.trajectory.waypoints.clone());
+    // The ride motion-core will run, checked with the loop's own checks before any process
+    // starts: a refusal names the file, the line and (outside the region) the axis and bound.
+    if ride.is_none()
+        && cueing.is_none()
+        && let Some(file) = &waypoint_file
+    {
+        let ride_file = trajectory::read_ride(file).map_err(lifecycle::RideRefused::from)?;
+        configured.verify_ride(&ride_file)?;
+    }
+    std::fs::create_dir_all(&a.out).map_err(output(&a.out))?;
     let waypoints_arg = match (a.dwell_s, &waypoint_file) {
         (Some(dwell), Some(file)) => {
             let wps = trajectory::read_waypoints(file)?;
