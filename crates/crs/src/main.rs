@@ -9,6 +9,7 @@ mod load_cmd;
 mod model_cmd;
 mod plant_cmd;
 mod ride_cmd;
+mod ride_ctl_cmd;
 mod sim_cmd;
 mod surrogate_cmd;
 
@@ -31,6 +32,10 @@ enum Command {
     /// Run the whole simulated stack (sim-plant, safety-monitor, drive-io, motion-core) on the
     /// default platform and report tracking, forces, loop statistics and the monitor state.
     Sim(sim_cmd::SimArgs),
+    /// Rides on the running stack: start a ride file (verified before anything moves), abort
+    /// it, return home, status. Talks to motion-core's control socket.
+    #[command(subcommand)]
+    Ride(ride_ctl_cmd::RideCommand),
     /// Model computations on a platform TOML: ik, fk, forces, stiffness, workspace.
     #[command(subcommand)]
     Model(model_cmd::ModelCommand),
@@ -66,6 +71,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Sim(a) => sim_cmd::run(a),
+        Command::Ride(cmd) => ride_ctl_cmd::run(cmd).map_err(Into::into),
         Command::Model(cmd) => model_cmd::run(cmd),
         Command::Plant(cmd) => plant_cmd::run(cmd),
         Command::Surrogate(cmd) => surrogate_cmd::run(cmd),

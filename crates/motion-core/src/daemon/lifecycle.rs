@@ -441,23 +441,17 @@ impl Configured {
         let period_s = self.period_s();
         let mut sp = JointSetpoint::default();
         let mut n = 0usize;
-        trajectory::plan_samples(
-            start,
-            waypoints,
-            self.limits,
-            period_s,
-            |segment, r| {
-                n += 1;
-                check
-                    .compute(&r, &mut sp)
-                    .map_err(|rejection| PlanRefused::Rejected {
-                        segment,
-                        t_s: n as f64 * period_s,
-                        position: [r.pose.r.x, r.pose.r.y, r.pose.r.z],
-                        rejection,
-                    })
-            },
-        )?;
+        trajectory::plan_samples(start, waypoints, self.limits, period_s, |segment, r| {
+            n += 1;
+            check
+                .compute(&r, &mut sp)
+                .map_err(|rejection| PlanRefused::Rejected {
+                    segment,
+                    t_s: n as f64 * period_s,
+                    position: [r.pose.r.x, r.pose.r.y, r.pose.r.z],
+                    rejection,
+                })
+        })?;
         Ok(VerifiedPlan {
             samples: n,
             duration_s: n as f64 * period_s,

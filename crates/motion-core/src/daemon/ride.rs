@@ -159,9 +159,7 @@ pub enum RideCommandError {
         .0.r.x, .0.r.y, .0.r.z
     )]
     NotAtHome(Pose),
-    #[error(
-        "the loop is latched (e-stop or refused reference): reset at the safety monitor first"
-    )]
+    #[error("the loop is latched (e-stop or refused reference): reset at the safety monitor first")]
     Latched,
     #[error("no ride to abort ({})", .0.name())]
     NothingToAbort(RidePhase),
@@ -270,10 +268,12 @@ impl RideControl {
     ) -> Result<VerifiedPlan, RideCommandError> {
         let sampler =
             trajectory::spawn_planner(from, waypoints, self.limits, self.period_s, on_error);
-        slot.pending.push((sampler, plan.samples as u64)).map_err(|(s, _)| {
-            s.cancel();
-            RideCommandError::Busy
-        })?;
+        slot.pending
+            .push((sampler, plan.samples as u64))
+            .map_err(|(s, _)| {
+                s.cancel();
+                RideCommandError::Busy
+            })?;
         Ok(plan)
     }
 }

@@ -80,9 +80,8 @@ pub fn answer(
     let planned = |what: &str, p: VerifiedPlan| format!("{what}: plan {:.1} s", p.duration_s);
     match req {
         Request::Start { name, text } => {
-            let ride = trajectory::parse_ride(&text, &name).map_err(|e| {
-                RideCommandError::Refused(super::lifecycle::RideRefused::File(e))
-            })?;
+            let ride = trajectory::parse_ride(&text, &name)
+                .map_err(|e| RideCommandError::Refused(super::lifecycle::RideRefused::File(e)))?;
             let n = ride.waypoints.len();
             control
                 .start(slot, &ride, on_error)
@@ -95,16 +94,18 @@ pub fn answer(
             .abort(slot)
             .map(|()| "aborting: braking the ride to a stop".into()),
         Request::Status => {
+            // Rounded to the printed digits first, so that a rounding error prints as 0.000.
+            let tidy = |v: f64, scale: f64| (v * scale).round() / scale + 0.0;
             let p = slot.pose();
             Ok(format!(
                 "{}; pose [{:.3}, {:.3}, {:.3}] m [{:.2}, {:.2}, {:.2}]°; rides started: {}",
                 slot.phase().name(),
-                p.r.x,
-                p.r.y,
-                p.r.z,
-                p.phi.x.to_degrees(),
-                p.phi.y.to_degrees(),
-                p.phi.z.to_degrees(),
+                tidy(p.r.x, 1e3),
+                tidy(p.r.y, 1e3),
+                tidy(p.r.z, 1e3),
+                tidy(p.phi.x.to_degrees(), 1e2),
+                tidy(p.phi.y.to_degrees(), 1e2),
+                tidy(p.phi.z.to_degrees(), 1e2),
                 slot.rides_started()
             ))
         }
