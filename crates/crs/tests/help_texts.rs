@@ -79,6 +79,9 @@ fn surrogate_help_names_no_subcommand_that_does_not_exist() {
         .collect();
     let listed = about.rsplit(':').next().unwrap();
     for word in listed.trim().trim_end_matches('.').split(", ") {
-        assert!(subs.iter().any(|s| s == word), "`{word}` is no subcommand: {about}");
+        assert!(
+            subs.iter().any(|s| s == word),
+            "`{word}` is no subcommand: {about}"
+        );
     }
 }

@@ -214,11 +214,8 @@ fn an_operator_stop_is_summarised_as_stopped_in_words_and_exits_non_zero() {
     let node = crs_ipc::IpcNode::with_prefix("test-operator", &prefix).unwrap();
     let events = node.publisher::<crs_ipc::StateEvent>().unwrap();
     for k in 1..=3 {
-        let ev = crs_ipc::StateEvent::new(
-            crs_ipc::ProcessId::Operator,
-            crs_ipc::EventKind::EStop,
-            k,
-        );
+        let ev =
+            crs_ipc::StateEvent::new(crs_ipc::ProcessId::Operator, crs_ipc::EventKind::EStop, k);
         events.publish(&ev).unwrap();
         std::thread::sleep(Duration::from_millis(100));
     }
@@ -235,10 +232,9 @@ fn an_operator_stop_is_summarised_as_stopped_in_words_and_exits_non_zero() {
         "{text}"
     );
     assert!(!text.contains("at rest after the trajectory"), "{text}");
-    let summary: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(sim.out.join("run/summary.json")).unwrap(),
-    )
-    .unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(sim.out.join("run/summary.json")).unwrap())
+            .unwrap();
     assert_eq!(summary["completed"], serde_json::Value::Bool(false));
     assert_eq!(
         summary["stopped_by"],

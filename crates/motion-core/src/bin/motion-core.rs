@@ -30,8 +30,9 @@ use std::time::Duration;
     about = "CRS 1 ms motion loop: IK + surrogate offset → joint setpoints (iceoryx2)"
 )]
 struct Args {
-    /// Daemon TOML.
-    #[arg(long, default_value = "config/motion-core.toml")]
+    /// Daemon TOML (`config/…` is looked up by the stack's rule: $CRS_CONFIG_DIR, ./config,
+    /// else /etc/crs/config).
+    #[arg(long, default_value = "config/motion-core.toml", value_parser = crs_paths::parse_config)]
     config: PathBuf,
     /// Waypoint CSV to run (overrides [trajectory].waypoints).
     #[arg(long)]
