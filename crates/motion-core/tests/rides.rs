@@ -276,16 +276,16 @@ fn braking_reduces_each_axis_speed_at_the_planner_limit_and_stops() {
         let before = r.velocity;
         let rest = motion_core::daemon::ride::brake_step(&mut r, &limits, dt);
         n += 1;
-        for k in 0..6 {
+        for (k, (v, v0)) in r.velocity.iter().zip(before).enumerate() {
             let a = if k < 3 {
                 limits.linear_acceleration
             } else {
                 limits.angular_acceleration
             } / s3;
-            let dv = (r.velocity[k] - before[k]).abs();
+            let dv = (v - v0).abs();
             assert!(dv <= a * dt * (1.0 + 1e-12), "axis {k}: {dv}");
-            assert!(r.velocity[k].abs() <= before[k].abs(), "axis {k} sped up");
-            assert!(r.velocity[k] * before[k] >= 0.0, "axis {k} reversed");
+            assert!(v.abs() <= v0.abs(), "axis {k} sped up");
+            assert!(v * v0 >= 0.0, "axis {k} reversed");
         }
         if rest {
             break;
