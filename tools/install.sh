@@ -49,4 +49,4 @@ if [ -z "$DESTDIR" ] && [ "$(id -u)" = 0 ]; then
   id crs >/dev/null 2>&1 || useradd --system --no-create-home --shell /usr/sbin/nologin crs
   command -v systemctl >/dev/null && systemctl daemon-reload 2>/dev/null || true
 fi
-echo "installed into ${DESTDIR:-/} (prefix $PREFIX); start with: systemctl start crs-stack.target"
+echo "installed into ${DESTDIR:-/} (prefix $PREFIX); start with: systemctl start crs-stack.target (comes up idle); a ride: crs ride start FILE"

@@ -213,6 +213,15 @@ pub fn cia402_state(sw: u16) -> &'static str {
     }
 }
 
+/// Who stopped a run and why, in words (`"console: stop requested by an operator"`), for an
+/// e-stop event; None for other events.
+pub fn estop_in_words(e: &StateEvent) -> Option<String> {
+    if e.kind != EventKind::EStop as u32 {
+        return None;
+    }
+    describe_event(e).map(|(_, cause)| format!("{}: {cause}", process_name(e.source)))
+}
+
 /// The trip-log text of a state event, or None for routine state changes.
 fn describe_event(e: &StateEvent) -> Option<(String, String)> {
     let cause_name = |c: u32| Cause::from_code(c).map_or(format!("cause {c}"), |c| c.to_string());

@@ -51,9 +51,10 @@ pub const KNOWN: [KnownPlatform; 2] = [
     },
 ];
 
-/// The configuration directory `crs sim` reads by default (relative to the working directory,
-/// as its other default paths).
-pub const CONFIG_DIR: &str = "config";
+/// The configuration directory's name in the repository; `crs sim` reads the directory the
+/// stack's lookup rule gives ([`crs_paths::config_dir`]: $CRS_CONFIG_DIR, ./config, else
+/// /etc/crs/config).
+pub const CONFIG_DIR: &str = crs_paths::CONFIG_PREFIX;
 
 /// A resolved platform: the files of one run of the stack.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -287,7 +288,11 @@ pub fn run_files(
     timing: &str,
     out: &Path,
 ) -> Result<RunFiles, SelectError> {
-    let set = select(platform, overrides.daemon.as_deref(), Path::new(CONFIG_DIR))?;
+    let set = select(
+        platform,
+        overrides.daemon.as_deref(),
+        &crs_paths::config_dir(),
+    )?;
     let pick =
         |flag: &Option<PathBuf>, default: &PathBuf| flag.clone().unwrap_or_else(|| default.clone());
     let profile: crate::timing::TimingProfile = timing.parse()?;

@@ -110,6 +110,11 @@ pub const DEFAULT_MAX_STATIC_ERROR_MM: f64 = 10.0;
 pub struct Summary {
     /// The platform the daemon ran (its TOML `[platform] name`).
     pub platform: String,
+    /// The run ended as planned: motion-core finished its trajectory and held, with no e-stop,
+    /// no refused reference and no bus stop while it streamed.
+    pub completed: bool,
+    /// Who stopped the run and why, in words (the first e-stop's source and cause).
+    pub stopped_by: Option<String>,
     pub transport: String,
     pub monitor: bool,
     pub plant_samples: u64,
@@ -354,6 +359,9 @@ pub enum SimError {
     /// The waypoint file (`--dwell-s`).
     #[error(transparent)]
     Waypoints(#[from] trajectory::WaypointError),
+    /// The ride (the waypoint file motion-core would run) refused before anything started.
+    #[error("ride refused, nothing started: {0}")]
+    RideRefused(#[from] lifecycle::RideRefused),
     /// Timing or writing the waypoints (`--dwell-s`).
     #[error(transparent)]
     Campaign(#[from] crate::campaign::CampaignError),
@@ -524,10 +532,17 @@ pub fn execute_observed(
         None => None,
     };
     let home_q = configured.home_command().map_err(SimError::HomePose)?;
-    std::fs::create_dir_all(&a.out).map_err(output(&a.out))?;
-    // A previous run's operator inputs (a pressed e-stop, a turned key) do not carry over.
-    let _ = std::fs::remove_file(a.out.join("safety-io.control"));
     let waypoint_file = a.waypoints.clone().or(daemon.trajectory.waypoints.clone());
+    // The ride motion-core will run, checked with the loop's own checks before any process
+    // starts: a refusal names the file, the line and (outside the region) the axis and bound.
+    if ride.is_none()
+        && cueing.is_none()
+        && let Some(file) = &waypoint_file
+    {
+        let ride_file = trajectory::read_ride(file).map_err(lifecycle::RideRefused::from)?;
+        configured.verify_ride(&ride_file)?;
+    }
+    std::fs::create_dir_all(&a.out).map_err(output(&a.out))?;
     let waypoints_arg = match (a.dwell_s, &waypoint_file) {
         (Some(dwell), Some(file)) => {
             let wps = trajectory::read_waypoints(file)?;
@@ -848,9 +863,10 @@ pub fn execute_observed(
         }
         while let Ok(Some(e)) = events.receive() {
             observer.event(&e);
-            if let Ok(crs_ipc::Event::EStop { .. }) = e.decode() {
+            if let Some(words) = crs_console::status::estop_in_words(&e) {
                 sum.estops += 1;
-                println!("  E-STOP from process {} (detail {})", e.source, e.detail);
+                println!("  E-STOP by {words}");
+                sum.stopped_by.get_or_insert(words);
             }
         }
         while let Ok(Some(h)) = heartbeats.receive() {
@@ -939,9 +955,10 @@ pub fn execute_observed(
         sum.tracking_position_mean_mm = sum_p / n_track as f64 * 1e3;
         sum.tracking_rotation_mean_deg = (sum_r / n_track as f64).to_degrees();
     }
+    sum.completed = result.is_ok() && sum.estops == 0 && sum.loop_rejected == 0;
     // The static error is only that after a completed run (motion-core ended its plan and
-    // held); an aborted run leaves it NaN ("not reached").
-    if let (Some(t), Some(r), Ok(())) = (last_truth, last_ref, &result) {
+    // held); a stopped run leaves it NaN ("not reached").
+    if let (Some(t), Some(r), true) = (last_truth, last_ref, sum.completed) {
         let (dp, dr) = Pose::from_array(t.pose).error_to(&Pose::from_array(r));
         sum.static_position_mm = dp * 1e3;
         sum.static_rotation_deg = dr.to_degrees();
@@ -967,6 +984,19 @@ pub fn execute_observed(
     if sum.estops > 0 && with_monitor {
         sum.monitor_trips =
             supervisor::log_lines(&a.out.join("safety-monitor.log"), "SAFETY TRIP", 4);
+    }
+    if let Some(b) = &sum.bus_stopped_during_run {
+        sum.completed = false;
+        sum.stopped_by
+            .get_or_insert_with(|| format!("drive-io: the bus stopped during the run ({b})"));
+    }
+    if sum.loop_rejected > 0 {
+        sum.stopped_by.get_or_insert_with(|| {
+            format!(
+                "motion-core: refused {} reference(s) and held",
+                sum.loop_rejected
+            )
+        });
     }
     if sum.bus_stopped_during_run.is_some() {
         sum.bus_stop_reasons = supervisor::log_lines(&a.out.join("drive-io.log"), " ERROR ", 2);
@@ -1042,8 +1072,13 @@ fn print_summary(s: &Summary) {
         s.tracking_rotation_mean_deg,
         s.tracking_rotation_max_deg
     );
-    if s.static_position_mm.is_nan() {
-        println!("  at rest after the trajectory: not reached (the run did not complete)");
+    if !s.completed {
+        println!(
+            "  STOPPED: the trajectory did not complete ({})",
+            s.stopped_by.as_deref().unwrap_or("the run ended early")
+        );
+    } else if s.static_position_mm.is_nan() {
+        println!("  at rest after the trajectory: not measured (no plant state or setpoint)");
     } else {
         println!(
             "  at rest after the trajectory: position {:.2} mm, rotation {:.3}°",

@@ -10,6 +10,7 @@ mod load_cmd;
 mod model_cmd;
 mod plant_cmd;
 mod ride_cmd;
+mod ride_ctl_cmd;
 mod sim_cmd;
 mod surrogate_cmd;
 
@@ -32,19 +33,26 @@ enum Command {
     /// Run the whole simulated stack (sim-plant, safety-monitor, drive-io, motion-core) on the
     /// default platform and report tracking, forces, loop statistics and the monitor state.
     Sim(sim_cmd::SimArgs),
-    /// Model computations on a platform TOML: ik, fk, forces, stiffness, workspace.
+    /// Rides on the running stack: start (a ride file, verified before anything moves), abort,
+    /// home, status. Talks to motion-core's control socket.
+    #[command(subcommand)]
+    Ride(ride_ctl_cmd::RideCommand),
+    /// Model computations on a platform TOML: ik, fk, forces, stiffness, planar, truss,
+    /// sensitivity, workspace.
     #[command(subcommand)]
     Model(model_cmd::ModelCommand),
-    /// The simulated plant: measurement campaigns and data sets.
+    /// The simulated plant: check, record (measurement campaigns as data sets), evaluate.
     #[command(subcommand)]
     Plant(plant_cmd::PlantCommand),
-    /// The polynomial surrogate of the elastostatic force control: fit, check, inspect.
+    /// The polynomial surrogate of the elastostatic force control: fit, check, evaluate.
     #[command(subcommand)]
     Surrogate(surrogate_cmd::SurrogateCommand),
-    /// Calibration from measured data: identification, residual diagnosis, model extension.
+    /// Calibration from measured data (identification, residual diagnosis, model extension): run,
+    /// demo, loop, campaign, bench-diagnosis, generate.
     #[command(subcommand)]
     Calibrate(calibrate_cmd::CalibrateCommand),
-    /// Load tracking from the cable forces (eq. 5.9–5.10): the walking-subject experiment.
+    /// Load tracking from the cable forces (eq. 5.9–5.10): track (the walking-subject
+    /// experiment).
     #[command(subcommand)]
     Load(load_cmd::LoadCommand),
     /// Commissioning and pre-ride check on the running stack: set-up wrench, payload mass and
@@ -70,6 +78,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Sim(a) => sim_cmd::run(a),
+        Command::Ride(cmd) => ride_ctl_cmd::run(cmd).map_err(Into::into),
         Command::Model(cmd) => model_cmd::run(cmd),
         Command::Plant(cmd) => plant_cmd::run(cmd),
         Command::Surrogate(cmd) => surrogate_cmd::run(cmd),

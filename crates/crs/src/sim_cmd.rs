@@ -12,9 +12,9 @@ use std::path::PathBuf;
 #[derive(clap::Args, Debug)]
 pub struct SimArgs {
     /// The cabin: `icosahedron` or `helicopter`, or the path of one of their platform TOML
-    /// files. Picks that platform's daemon, plant, safety-monitor and drives configs (config/;
-    /// crs_stack::platforms); --config, --plant, --monitor-config and --drives replace single
-    /// files of the set. Default: the platform of --config if it is one of these, else the
+    /// files. Picks that platform's daemon, plant, safety-monitor and drives configs
+    /// (config/); --config, --plant, --monitor-config and --drives replace single files of the
+    /// set. Default: the platform of --config if it is one of these, else the
     /// icosahedron.
     #[arg(long)]
     pub(crate) platform: Option<String>,
@@ -88,7 +88,7 @@ pub struct SimArgs {
     /// Timing profile: `spec` (the configs as shipped), `relaxed` (debug builds on a loaded
     /// host: 4 ms loop and SYNC, longer watchdogs) or `emulated` (the QEMU guest: relaxed, no
     /// SCHED_FIFO, 0.1 of the demo speed). Non-spec profiles run relaxed copies of the daemon,
-    /// drives and monitor configs written to <out>/timing-<profile>/ (crs_stack::timing).
+    /// drives and monitor configs written to <out>/timing-<profile>/.
     #[arg(long, default_value = "spec", value_parser = TimingProfile::NAMES)]
     pub(crate) timing: String,
     #[command(flatten)]
@@ -160,6 +160,14 @@ pub fn run(a: SimArgs) -> Result<(), Box<dyn std::error::Error>> {
     }
     let sum = execute_observed(&options, &mut observer)?;
     observer.stop_console();
+    // A stopped run is never a success, with or without --check.
+    if !sum.completed {
+        let who = sum.stopped_by.as_deref().unwrap_or("the run ended early");
+        if a.check {
+            println!("SIM-CHECK: FAIL (stopped: {who})");
+        }
+        return Err(format!("the run was stopped: {who}; the trajectory did not complete").into());
+    }
     if a.check {
         let fails = sum.check_failures(a.max_static_error_mm);
         if !fails.is_empty() {

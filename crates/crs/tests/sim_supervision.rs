@@ -201,3 +201,46 @@ fn a_monitor_timed_for_another_loop_period_is_refused_before_anything_starts() {
     assert!(!so.contains("started"), "nothing may start: {so}");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn an_operator_stop_is_summarised_as_stopped_in_words_and_exits_non_zero() {
+    let mut sim = Sim::start("stop");
+    let line = sim.wait_line("iceoryx2 prefix", 60);
+    let prefix = line
+        .split("iceoryx2 prefix ")
+        .nth(1)
+        .and_then(|r| r.split(',').next())
+        .unwrap_or_else(|| panic!("no prefix in `{line}`"))
+        .to_string();
+    sim.children();
+    // The console's STOP: an e-stop event from the operator on the run's process bus.
+    let node = crs_ipc::IpcNode::with_prefix("test-operator", &prefix).unwrap();
+    let events = node.publisher::<crs_ipc::StateEvent>().unwrap();
+    for k in 1..=3 {
+        let ev =
+            crs_ipc::StateEvent::new(crs_ipc::ProcessId::Operator, crs_ipc::EventKind::EStop, k);
+        events.publish(&ev).unwrap();
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let (status, text) = sim.finish(120);
+    assert!(!status.success(), "a stopped run exited 0:\n{text}");
+    assert!(
+        text.contains("E-STOP by operator: stop requested by an operator"),
+        "{text}"
+    );
+    assert!(
+        text.contains(
+            "STOPPED: the trajectory did not complete (operator: stop requested by an operator)"
+        ),
+        "{text}"
+    );
+    assert!(!text.contains("at rest after the trajectory"), "{text}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(sim.out.join("run/summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["completed"], serde_json::Value::Bool(false));
+    assert_eq!(
+        summary["stopped_by"],
+        "operator: stop requested by an operator"
+    );
+}

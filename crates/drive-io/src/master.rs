@@ -198,6 +198,10 @@ pub struct Master {
     toggle: bool,
     target: [i32; MAX_CABLES],
     last_seq: u64,
+    /// motion-core announced the planned end of its setpoint stream (`motion_state::STOPPING`).
+    stream_end: bool,
+    /// The last applied setpoint commanded rest (every cable speed zero).
+    last_at_rest: bool,
     /// drive-io's own clock (the cycle's now) when the last setpoint was applied.
     last_apply_ns: u64,
     setpoint_age: u32,
@@ -316,6 +320,8 @@ impl Master {
             toggle: false,
             target: [0; MAX_CABLES],
             last_seq: 0,
+            stream_end: false,
+            last_at_rest: false,
             last_apply_ns: 0,
             setpoint_age: 0,
             applied_seq: 0,
@@ -880,9 +886,17 @@ impl Master {
 
     /// Handles an e-stop event from the process bus (anyone may stop). A Reset event does
     /// nothing here: leaving the latch needs a [`ResetGrant`] ([`Master::reset`], issue 16).
+    /// motion-core's announced end of its stream (`motion_state::STOPPING`, published after
+    /// its last setpoint) makes the silence that follows a planned end, not a stale stream —
+    /// provided that last setpoint commanded rest (see the Running phase).
     pub fn on_event(&mut self, ev: &StateEvent, _now_ns: u64) {
         if ev.kind == EventKind::EStop as u32 {
             self.stop(BusState::EStop, fault_code::NONE, 0);
+        } else if ev.kind == EventKind::StateChanged as u32
+            && ev.source == crs_ipc::ProcessId::MotionCore as u32
+            && ev.state == crs_ipc::motion_state::STOPPING
+        {
+            self.stream_end = true;
         }
     }
 
@@ -1072,12 +1086,33 @@ impl Master {
                 if let Some(sp) = setpoint.filter(|sp| sp.sequence > self.last_seq) {
                     self.last_seq = sp.sequence;
                     if self.apply_setpoint(sp, now_ns) {
+                        if self.phase == Phase::Ready {
+                            // A new stream: an old end announcement does not cover it.
+                            self.stream_end = false;
+                        }
+                        self.last_at_rest = sp.cable_velocity_m_per_s[..self.m]
+                            .iter()
+                            .all(|v| *v == 0.0);
                         self.setpoint_age = 0;
                         self.set_phase(Phase::Running);
                     }
                 } else if self.phase == Phase::Running {
                     self.setpoint_age = self.setpoint_age.saturating_add(1);
-                    if self.setpoint_age > self.stale_cycles {
+                    if self.setpoint_age > self.stale_cycles && self.stream_end && self.last_at_rest
+                    {
+                        // The planned end of the stream, at rest: a normal state. The drives
+                        // stay enabled holding the last target; a new stream (sequence numbers
+                        // from 1 again) is followed from here.
+                        tracing::info!(
+                            sequence = self.last_seq,
+                            "motion-core ended its stream at rest: drives holding position"
+                        );
+                        self.stream_end = false;
+                        self.last_seq = 0;
+                        self.applied_seq = 0;
+                        self.setpoint_age = 0;
+                        self.set_phase(Phase::Ready);
+                    } else if self.setpoint_age > self.stale_cycles {
                         tracing::warn!(cycles = self.setpoint_age, "setpoints stale");
                         self.stop(BusState::StaleStop, fault_code::NONE, 0);
                     }

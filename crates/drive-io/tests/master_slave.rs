@@ -898,3 +898,73 @@ fn rig_config() -> DrivesConfig {
     }
     DrivesConfig::parse(&text).unwrap()
 }
+
+/// motion-core's end-of-stream announcement from `source`.
+fn stream_end(source: crs_ipc::ProcessId) -> crs_ipc::StateEvent {
+    let mut ev = crs_ipc::StateEvent::new(source, crs_ipc::EventKind::StateChanged, 9);
+    ev.state = crs_ipc::motion_state::STOPPING;
+    ev
+}
+
+#[test]
+fn a_planned_end_at_rest_holds_the_drives_enabled_without_a_quick_stop() {
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    for seq in 1..=10 {
+        let sp = s.setpoint(seq, &l0);
+        s.step(Some(&sp));
+    }
+    assert_eq!(s.master.state(), BusState::Running);
+    let now = s.now;
+    s.master
+        .on_event(&stream_end(crs_ipc::ProcessId::MotionCore), now);
+    for _ in 0..(s.cfg.bus.stale_setpoint_cycles + 20) {
+        s.step(None);
+    }
+    assert_eq!(s.master.state(), BusState::Ready);
+    assert!(
+        s.slaves
+            .iter()
+            .all(|sl| sl.ds402_state() == Ds402State::OperationEnabled),
+        "a planned end quick-stopped the drives"
+    );
+    // A new stream (sequence numbers from 1 again) is followed.
+    let sp = s.setpoint(1, &l0);
+    s.step(Some(&sp));
+    assert_eq!(s.master.state(), BusState::Running);
+    // ... and its silence without a new announcement is stale again.
+    for _ in 0..(s.cfg.bus.stale_setpoint_cycles + 2) {
+        s.step(None);
+    }
+    assert_eq!(s.master.state(), BusState::StaleStop);
+}
+
+#[test]
+fn an_announced_end_in_motion_or_from_another_process_is_still_a_stale_stop() {
+    for (moving, source) in [
+        (true, crs_ipc::ProcessId::MotionCore),
+        (false, crs_ipc::ProcessId::Operator),
+    ] {
+        let mut s = Sim::new();
+        s.boot();
+        let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+        for seq in 1..=10 {
+            let mut sp = s.setpoint(seq, &l0);
+            if moving {
+                sp.cable_velocity_m_per_s[0] = 0.01;
+            }
+            s.step(Some(&sp));
+        }
+        let now = s.now;
+        s.master.on_event(&stream_end(source), now);
+        for _ in 0..(s.cfg.bus.stale_setpoint_cycles + 2) {
+            s.step(None);
+        }
+        assert_eq!(
+            s.master.state(),
+            BusState::StaleStop,
+            "moving {moving}, source {source:?}"
+        );
+    }
+}

@@ -795,10 +795,14 @@ fn configure_refuses_plans_that_leave_the_workspace_or_the_feasible_set() {
         pose: Pose::new(Vector3::new(0.0, 0.0, 50.0), Vector3::zeros()),
         not_before_s: 0.0,
     };
-    assert_eq!(
-        c.verify_plan(&tour().into_iter().chain([outside]).collect::<Vec<_>>()),
-        Err(lifecycle::PlanRefused::WaypointOutside { index: 4 })
-    );
+    match c.verify_plan(&tour().into_iter().chain([outside]).collect::<Vec<_>>()) {
+        Err(lifecycle::PlanRefused::WaypointOutside { index: 4, outside }) => {
+            assert_eq!(outside.axis, "z_m");
+            assert_eq!(outside.value, 50.0);
+            assert_eq!(outside.max, pf.region.position.max.z);
+        }
+        other => panic!("{other:?}"),
+    }
 }
 
 #[test]

@@ -9,6 +9,8 @@ use crs_ipc::{
 };
 use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
 use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
+use motion_core::daemon::ride::{RideControl, RideSlot};
+use motion_core::daemon::ride_socket;
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::timeline::Timeline;
 use motion_core::daemon::trajectory::{self, Waypoint};
@@ -28,8 +30,9 @@ use std::time::Duration;
     about = "CRS 1 ms motion loop: IK + surrogate offset → joint setpoints (iceoryx2)"
 )]
 struct Args {
-    /// Daemon TOML.
-    #[arg(long, default_value = "config/motion-core.toml")]
+    /// Daemon TOML (`config/…` is looked up by the stack's rule: $CRS_CONFIG_DIR, ./config,
+    /// else /etc/crs/config).
+    #[arg(long, default_value = "config/motion-core.toml", value_parser = crs_paths::parse_config)]
     config: PathBuf,
     /// Waypoint CSV to run (overrides [trajectory].waypoints).
     #[arg(long)]
@@ -42,6 +45,12 @@ struct Args {
     /// `crs/v1/cueing_pose` stream through the velocity/acceleration-limited tracker).
     #[arg(long, default_value = "waypoints", value_parser = ["waypoints", "cueing"])]
     input: String,
+    /// Take rides from an operator on this Unix socket (`crs ride start FILE | abort | home |
+    /// status`): the loop comes up idle, holding the home pose, and ignores the daemon TOML's
+    /// [trajectory].waypoints; only an explicit --waypoints runs at start. The installed unit
+    /// uses /run/crs/motion-core/control.sock.
+    #[arg(long, value_name = "PATH")]
+    control: Option<PathBuf>,
 }
 
 /// The newest motion-cueing target since the last cycle (drains the subscriber; no allocation).
@@ -81,6 +90,8 @@ struct IoxPorts {
     /// Sequence number of the plan's last setpoint (`motion_state::PLAN`, issue 16): the
     /// safety monitor accepts the end-of-stream announcement only after it.
     plan_end: u64,
+    /// With `--control`: the current ride's end, which replaces `plan_end`.
+    rides: Option<Arc<RideSlot>>,
     hb_seq: u64,
     _node: IpcNode,
 }
@@ -88,9 +99,8 @@ struct IoxPorts {
 impl IoxPorts {
     fn announce_plan(&mut self) {
         self.hb_seq += 1;
-        let _ = self
-            .events
-            .publish(&StateEvent::plan(self.plan_end, self.hb_seq));
+        let end = self.rides.as_ref().map_or(self.plan_end, |r| r.plan_end());
+        let _ = self.events.publish(&StateEvent::plan(end, self.hb_seq));
     }
 }
 impl StagePorts for IoxPorts {
@@ -272,8 +282,14 @@ fn run(args: Args) -> Result<(), String> {
     }
 
     let cueing = args.input == "cueing";
+    if cueing && args.control.is_some() {
+        return Err("--control takes waypoint rides: not with --input cueing".into());
+    }
     let waypoint_file = if cueing {
         None
+    } else if args.control.is_some() {
+        // Rides are started on purpose: the configured demo never runs on its own.
+        args.waypoints.clone()
     } else {
         args.waypoints.clone().or(cfg.trajectory.waypoints.clone())
     };
@@ -300,9 +316,15 @@ fn run(args: Args) -> Result<(), String> {
     }
     // Verify the whole plan with the loop's own checks before anything moves: a plan that
     // would leave the workspace or the wrench-feasible set is refused, naming where.
-    let plan = configured
-        .verify_plan(&waypoints)
-        .map_err(|e| e.to_string())?;
+    let plan = match &waypoint_file {
+        Some(p) => {
+            let ride = trajectory::read_ride(p).map_err(|e| e.to_string())?;
+            configured.verify_ride(&ride).map_err(|e| e.to_string())?
+        }
+        None => configured
+            .verify_plan(&waypoints)
+            .map_err(|e| e.to_string())?,
+    };
     tracing::info!(
         samples = plan.samples,
         duration_s = plan.duration_s,
@@ -329,6 +351,10 @@ fn run(args: Args) -> Result<(), String> {
     } else {
         plan.samples as u64
     };
+    let rides = args
+        .control
+        .as_ref()
+        .map(|_| Arc::new(RideSlot::new(platform.home, plan_end)));
     let start_ns = realtime::now_ns() + 50_000_000;
     let timeline = Arc::new(Timeline::new(period_ns));
     let sync_lead_ns = cfg.sync_lead_ns;
@@ -339,6 +365,7 @@ fn run(args: Args) -> Result<(), String> {
         let outbox = outbox.clone();
         let stats = stats.clone();
         let timeline = timeline.clone();
+        let rides = rides.clone();
         let identity =
             PlatformIdentity::new(PlatformId::new(platform.identity()), model.m() as u32);
         let mut rt = cfg.realtime;
@@ -372,6 +399,7 @@ fn run(args: Args) -> Result<(), String> {
                         notify_failures: 0,
                         platform_identity: identity,
                         plan_end,
+                        rides,
                         hb_seq: 0,
                         _node: node,
                     };
@@ -461,6 +489,34 @@ fn run(args: Args) -> Result<(), String> {
         let sub = node.subscriber::<CueingPose>().map_err(|e| e.to_string())?;
         hard_loop = hard_loop.with_cueing(filter, Box::new(IoxCueing(sub)));
         tracing::info!("reference input: motion-cueing stream (crs/v1/cueing_pose)");
+    }
+    if let (Some(path), Some(slot)) = (&args.control, &rides) {
+        hard_loop = hard_loop.with_rides(slot.clone(), lim, period_s, platform.home);
+        let control = RideControl::new(
+            lifecycle::configure_checks(&cfg, &platform).map_err(|e| e.to_string())?,
+        );
+        let listener = ride_socket::bind(path)
+            .map_err(|e| format!("{}: cannot bind the control socket: {e}", path.display()))?;
+        let slot = slot.clone();
+        std::thread::Builder::new()
+            .name("crs-ride-control".into())
+            .spawn(move || {
+                for conn in listener.incoming() {
+                    let Ok(conn) = conn else { continue };
+                    let on_error = |e: trajectory::PlanningFailed| {
+                        tracing::error!("ride planner: {e}; the loop holds where the plan ended")
+                    };
+                    match ride_socket::serve_one(conn, &control, &slot, on_error) {
+                        Ok(reply) => tracing::info!("operator: {reply}"),
+                        Err(e) => tracing::warn!("control socket: {e}"),
+                    }
+                }
+            })
+            .map_err(|e| e.to_string())?;
+        tracing::info!(
+            socket = %path.display(),
+            "idle, holding the home pose: rides start with `crs ride start FILE`"
+        );
     }
     let mut sink = OutboxSink(&outbox);
     let mut cmds = IoxCommands(commands, ResetGate::new());

@@ -99,8 +99,11 @@ pub const DYNAMIC_SCALE_MARGIN: f64 = 0.8;
 /// Why [`Configured::verify_plan`] refused a plan.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum PlanRefused {
-    #[error("waypoint {} lies outside the platform's workspace region", index + 1)]
-    WaypointOutside { index: usize },
+    #[error("waypoint {}: {outside}", index + 1)]
+    WaypointOutside {
+        index: usize,
+        outside: OutsideRegion,
+    },
     #[error(
         "plan refused: segment to waypoint {} at t = {t_s:.3} s, pose [{:.3}, {:.3}, {:.3}] m: {rejection}",
         segment + 1,
@@ -117,6 +120,67 @@ pub enum PlanRefused {
     },
     #[error(transparent)]
     Planning(#[from] PlanningFailed),
+}
+
+/// Where a pose leaves the platform's operating region: the first axis out of its bounds, in
+/// the units of the waypoint file (m, degrees).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error("{axis} = {value:.3} {unit} lies outside the region's [{min:.3}, {max:.3}] {unit}")]
+pub struct OutsideRegion {
+    /// The waypoint file's column (`x_m` … `phi_z_deg`).
+    pub axis: &'static str,
+    pub value: f64,
+    pub min: f64,
+    pub max: f64,
+    pub unit: &'static str,
+}
+
+/// The first axis of `pose` outside `region`, `None` when the region contains the pose.
+pub fn outside_region(region: &Region, pose: &Pose) -> Option<OutsideRegion> {
+    const POS: [&str; 3] = ["x_m", "y_m", "z_m"];
+    const ROT: [&str; 3] = ["phi_x_deg", "phi_y_deg", "phi_z_deg"];
+    let out = |v: f64, lo: f64, hi: f64| !(lo..=hi).contains(&v);
+    for k in 0..3 {
+        let (v, lo, hi) = (pose.r[k], region.position.min[k], region.position.max[k]);
+        if out(v, lo, hi) {
+            return Some(OutsideRegion {
+                axis: POS[k],
+                value: v,
+                min: lo,
+                max: hi,
+                unit: "m",
+            });
+        }
+    }
+    for k in 0..3 {
+        let (v, lo, hi) = (pose.phi[k], region.rotation_min[k], region.rotation_max[k]);
+        if out(v, lo, hi) {
+            return Some(OutsideRegion {
+                axis: ROT[k],
+                value: v.to_degrees(),
+                min: lo.to_degrees(),
+                max: hi.to_degrees(),
+                unit: "°",
+            });
+        }
+    }
+    None
+}
+
+/// Why a ride (a waypoint file) was refused before anything moved: the file and the line of
+/// the waypoint concerned, and what is wrong there.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum RideRefused {
+    #[error(transparent)]
+    File(#[from] trajectory::WaypointError),
+    #[error("{file}: no waypoint rows: a ride needs at least one")]
+    NoWaypoints { file: String },
+    #[error("{file}:{line}: {refused}")]
+    Plan {
+        file: String,
+        line: usize,
+        refused: PlanRefused,
+    },
 }
 
 /// A plan that passed the loop's own checks.
@@ -331,9 +395,42 @@ impl Configured {
     /// anything moves; the error names the waypoint, time and pose. The surrogate offset is not
     /// part of the check (a fresh cycle without it, as the daemon has always verified).
     pub fn verify_plan(&self, waypoints: &[Waypoint]) -> Result<VerifiedPlan, PlanRefused> {
+        self.verify_plan_from(self.platform.home, waypoints)
+    }
+
+    /// [`Self::verify_plan`] of a ride file: the refusal names the file and the line of the
+    /// waypoint concerned (the waypoint outside the region, or the one the refused segment
+    /// leads to). A file without waypoints is refused too.
+    pub fn verify_ride(&self, ride: &trajectory::RideFile) -> Result<VerifiedPlan, RideRefused> {
+        if ride.waypoints.is_empty() {
+            return Err(RideRefused::NoWaypoints {
+                file: ride.file.clone(),
+            });
+        }
+        self.verify_plan(&ride.waypoints).map_err(|refused| {
+            let index = match &refused {
+                PlanRefused::WaypointOutside { index, .. } => *index,
+                PlanRefused::Rejected { segment, .. } => *segment,
+                PlanRefused::Planning(p) => p.waypoint,
+            };
+            RideRefused::Plan {
+                file: ride.file.clone(),
+                line: ride.line(index),
+                refused,
+            }
+        })
+    }
+
+    /// [`Self::verify_plan`] from another start pose than home (the return home from where
+    /// the platform holds).
+    pub fn verify_plan_from(
+        &self,
+        start: Pose,
+        waypoints: &[Waypoint],
+    ) -> Result<VerifiedPlan, PlanRefused> {
         for (index, w) in waypoints.iter().enumerate() {
-            if !self.platform.region.contains(&w.pose) {
-                return Err(PlanRefused::WaypointOutside { index });
+            if let Some(outside) = outside_region(&self.platform.region, &w.pose) {
+                return Err(PlanRefused::WaypointOutside { index, outside });
             }
         }
         let mut check = new_cycle(
@@ -344,23 +441,17 @@ impl Configured {
         let period_s = self.period_s();
         let mut sp = JointSetpoint::default();
         let mut n = 0usize;
-        trajectory::plan_samples(
-            self.platform.home,
-            waypoints,
-            self.limits,
-            period_s,
-            |segment, r| {
-                n += 1;
-                check
-                    .compute(&r, &mut sp)
-                    .map_err(|rejection| PlanRefused::Rejected {
-                        segment,
-                        t_s: n as f64 * period_s,
-                        position: [r.pose.r.x, r.pose.r.y, r.pose.r.z],
-                        rejection,
-                    })
-            },
-        )?;
+        trajectory::plan_samples(start, waypoints, self.limits, period_s, |segment, r| {
+            n += 1;
+            check
+                .compute(&r, &mut sp)
+                .map_err(|rejection| PlanRefused::Rejected {
+                    segment,
+                    t_s: n as f64 * period_s,
+                    position: [r.pose.r.x, r.pose.r.y, r.pose.r.z],
+                    rejection,
+                })
+        })?;
         Ok(VerifiedPlan {
             samples: n,
             duration_s: n as f64 * period_s,

@@ -13,15 +13,19 @@ pub mod cycle;
 pub mod lifecycle;
 pub mod outbox;
 pub mod realtime;
+pub mod ride;
+pub mod ride_socket;
 pub mod stats;
 pub mod timeline;
 pub mod trajectory;
 
 use crs_ipc::JointSetpoint;
 use cycle::{Cycle, Reference, Rejection};
+use ride::{RidePhase, RideSlot};
 use stats::LoopStats;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use trajectory::Sampler;
+use trajectory::{PlannerLimits, Sampler};
 
 /// Where the loop sends setpoints (iceoryx2 in the daemon, a buffer in tests).
 pub trait SetpointSink {
@@ -233,6 +237,19 @@ pub struct HardLoop {
     setpoint: JointSetpoint,
     last_safe: Option<JointSetpoint>,
     sequence: u64,
+    /// Rides handed in by an operator ([`ride`]); `None`: the plan given at activation only.
+    rides: Option<RideRides>,
+}
+
+/// The loop's side of rides started on purpose.
+struct RideRides {
+    slot: Arc<RideSlot>,
+    limits: PlannerLimits,
+    period_s: f64,
+    /// The last reference the checks accepted (where an abort brakes from).
+    last_reference: Reference,
+    /// Braking an aborted ride: the reference, and whether it has come to rest.
+    braking: Option<(Reference, bool)>,
 }
 
 impl HardLoop {
@@ -246,7 +263,30 @@ impl HardLoop {
             setpoint: JointSetpoint::default(),
             last_safe: None,
             sequence: 0,
+            rides: None,
         }
+    }
+
+    /// Takes rides from an operator through `slot` ([`ride`]): a new plan only while idle, an
+    /// abort brakes at the planner's acceleration `limits`.
+    pub fn with_rides(
+        mut self,
+        slot: Arc<RideSlot>,
+        limits: PlannerLimits,
+        period_s: f64,
+        home: cdpr_model::Pose,
+    ) -> Self {
+        self.rides = Some(RideRides {
+            slot,
+            limits,
+            period_s,
+            last_reference: Reference {
+                pose: home,
+                ..Reference::default()
+            },
+            braking: None,
+        });
+        self
     }
 
     /// Follow a motion-cueing stream instead of the planned trajectory (see [`cueing`]).
@@ -313,19 +353,55 @@ impl HardLoop {
                 (Command::Reset(_), _) => {}
             }
         }
+        if let Some(r) = &mut self.rides {
+            let abort = r.slot.abort_requested();
+            let idle = match self.state {
+                LoopState::Holding => true,
+                LoopState::Running => {
+                    matches!(r.braking, Some((_, true)))
+                        || (r.braking.is_none() && self.sampler.finished())
+                }
+                _ => false,
+            };
+            if idle && let Some((sampler, samples)) = r.slot.take() {
+                let old = std::mem::replace(&mut self.sampler, sampler);
+                r.slot.retire(old);
+                r.braking = None;
+                self.state = LoopState::Running;
+                r.slot.set_plan_end(self.sequence + samples);
+            } else if abort && self.state == LoopState::Running && r.braking.is_none() && !idle {
+                self.sampler.cancel();
+                r.braking = Some((r.last_reference, false));
+            }
+        }
         if self.state == LoopState::Running {
-            let reference: Reference = match &mut self.cueing {
-                Some((filter, source)) => {
+            let braking = self.rides.as_mut().and_then(|r| {
+                let (b, rest) = r.braking.as_mut()?;
+                if !*rest && ride::brake_step(b, &r.limits, r.period_s) {
+                    *rest = true;
+                    // The stream's planned end is now: the loop holds from the next setpoint.
+                    r.slot.stopped_at(self.sequence + 1);
+                }
+                Some(*b)
+            });
+            let reference: Reference = match (&mut self.cueing, braking) {
+                (_, Some(b)) => b,
+                (Some((filter, source)), None) => {
                     if let Some(t) = source.latest() {
                         filter.set_target(&t);
                         self.cueing_last_ns = Some(now_ns);
                     }
                     filter.step()
                 }
-                None => self.sampler.next_reference().0,
+                (None, None) => self.sampler.next_reference().0,
             };
             match self.cycle.compute(&reference, &mut self.setpoint) {
-                Ok(()) => self.last_safe = Some(self.setpoint),
+                Ok(()) => {
+                    self.last_safe = Some(self.setpoint);
+                    if let Some(r) = &mut self.rides {
+                        r.last_reference = reference;
+                    }
+                }
                 Err(r) => {
                     stats.rejected.fetch_add(1, Ordering::Relaxed);
                     self.state = LoopState::Refused(r);
@@ -350,6 +426,16 @@ impl HardLoop {
             if sink.publish(&sp) {
                 stats.published.fetch_add(1, Ordering::Relaxed);
             }
+        }
+        if let Some(r) = &self.rides {
+            let phase = match (self.state, r.braking) {
+                (s, _) if s.is_latched() => RidePhase::Latched,
+                (_, Some((_, false))) => RidePhase::Braking,
+                (LoopState::Holding, _) | (_, Some((_, true))) => RidePhase::Idle,
+                _ if self.sampler.finished() => RidePhase::Idle,
+                _ => RidePhase::Riding,
+            };
+            r.slot.publish(phase, &r.last_reference.pose);
         }
         stats.cycles.fetch_add(1, Ordering::Relaxed);
         self.state

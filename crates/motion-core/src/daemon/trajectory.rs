@@ -92,9 +92,45 @@ pub fn read_waypoints(path: &Path) -> Result<Vec<Waypoint>, WaypointError> {
 }
 
 pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, WaypointError> {
+    parse_ride(text, file).map(|r| r.waypoints)
+}
+
+/// A ride: the waypoints of a waypoint CSV with the file name and each waypoint's line, so
+/// that a refusal of the ride can name where in the file the operator has to look.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RideFile {
+    pub file: String,
+    pub waypoints: Vec<Waypoint>,
+    /// 1-based line of each waypoint (same length as `waypoints`).
+    pub lines: Vec<usize>,
+}
+
+impl RideFile {
+    /// The line of waypoint `index` (0-based); the last line for an index past the end.
+    pub fn line(&self, index: usize) -> usize {
+        self.lines
+            .get(index)
+            .or(self.lines.last())
+            .copied()
+            .unwrap_or(1)
+    }
+}
+
+/// Reads a waypoint CSV as a [`RideFile`] (errors as [`read_waypoints`]).
+pub fn read_ride(path: &Path) -> Result<RideFile, WaypointError> {
+    let text = std::fs::read_to_string(path).map_err(|e| WaypointError::Read {
+        file: path.display().to_string(),
+        reason: e.to_string(),
+    })?;
+    parse_ride(&text, &path.display().to_string())
+}
+
+/// Parses a waypoint CSV's text as a [`RideFile`] named `file`.
+pub fn parse_ride(text: &str, file_name: &str) -> Result<RideFile, WaypointError> {
     let mut out = Vec::new();
+    let mut lines = Vec::new();
+    let file = || file_name.to_string();
     let mut header_seen = false;
-    let file = || file.to_string();
     for (n, line) in text.lines().enumerate() {
         let ln = n + 1;
         let line = line.trim();
@@ -140,6 +176,7 @@ pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, Waypoint
                 line: ln,
             });
         }
+        lines.push(ln);
         out.push(Waypoint {
             not_before_s: v[0],
             pose: Pose::from_array([
@@ -158,7 +195,11 @@ pub fn parse_waypoints(text: &str, file: &str) -> Result<Vec<Waypoint>, Waypoint
             line: text.lines().count().max(1),
         });
     }
-    Ok(out)
+    Ok(RideFile {
+        file: file(),
+        waypoints: out,
+        lines,
+    })
 }
 
 /// Loop side: pops chunks and yields one reference per cycle.
@@ -169,6 +210,8 @@ pub struct Sampler {
     index: usize,
     last: Reference,
     done: Arc<AtomicBool>,
+    /// Tells the planner thread to stop (an aborted or replaced plan).
+    cancel: Arc<AtomicBool>,
 }
 
 impl Sampler {
@@ -211,6 +254,12 @@ impl Sampler {
         self.done.load(Ordering::Acquire) || self.full.is_full()
     }
 
+    /// Stops the planner thread of this plan (it ends at its next sample); the loop's hand-back
+    /// of a plan it no longer follows. Lock-free.
+    pub fn cancel(&self) {
+        self.cancel.store(true, Ordering::Release);
+    }
+
     /// True when the planner has delivered everything and the queue is drained.
     pub fn finished(&self) -> bool {
         self.done.load(Ordering::Acquire)
@@ -237,11 +286,14 @@ pub fn spawn_planner(
         }));
     }
     let done = Arc::new(AtomicBool::new(false));
-    let (f2, e2, d2) = (full.clone(), empty.clone(), done.clone());
+    let cancel = Arc::new(AtomicBool::new(false));
+    let (f2, e2, d2, c2) = (full.clone(), empty.clone(), done.clone(), cancel.clone());
     std::thread::Builder::new()
         .name("crs-planner".into())
         .spawn(move || {
-            if let Err(e) = plan(start, &waypoints, limits, period_s, &f2, &e2) {
+            if let Err(PlanStop::Failed(e)) =
+                plan(start, &waypoints, limits, period_s, &f2, &e2, &c2)
+            {
                 on_error(e);
             }
             d2.store(true, Ordering::Release);
@@ -257,6 +309,20 @@ pub fn spawn_planner(
             ..Reference::default()
         },
         done,
+        cancel,
+    }
+}
+
+/// Why the planner thread ended early.
+enum PlanStop {
+    Failed(PlanningFailed),
+    /// The loop no longer follows this plan.
+    Cancelled,
+}
+
+impl From<PlanningFailed> for PlanStop {
+    fn from(e: PlanningFailed) -> Self {
+        Self::Failed(e)
     }
 }
 
@@ -344,10 +410,21 @@ fn plan(
     period_s: f64,
     full: &ArrayQueue<Box<Chunk>>,
     empty: &ArrayQueue<Box<Chunk>>,
-) -> Result<(), PlanningFailed> {
+    cancel: &AtomicBool,
+) -> Result<(), PlanStop> {
     let mut chunk: Option<Box<Chunk>> = None;
-    let wait = || std::thread::sleep(std::time::Duration::from_micros(500));
-    plan_samples::<PlanningFailed>(start, waypoints, lim, period_s, |_, r| {
+    let wait = || {
+        std::thread::sleep(std::time::Duration::from_micros(500));
+        if cancel.load(Ordering::Acquire) {
+            Err(PlanStop::Cancelled)
+        } else {
+            Ok(())
+        }
+    };
+    plan_samples::<PlanStop>(start, waypoints, lim, period_s, |_, r| {
+        if cancel.load(Ordering::Acquire) {
+            return Err(PlanStop::Cancelled);
+        }
         let c = loop {
             if let Some(c) = chunk.as_mut() {
                 break c;
@@ -357,7 +434,7 @@ fn plan(
                     c.len = 0;
                     chunk = Some(c);
                 }
-                None => wait(),
+                None => wait()?,
             }
         };
         c.samples[c.len] = r;
@@ -366,7 +443,7 @@ fn plan(
             let mut full_chunk = chunk.take().expect("set above");
             while let Err(back) = full.push(full_chunk) {
                 full_chunk = back;
-                wait();
+                wait()?;
             }
         }
         Ok(())
@@ -374,7 +451,7 @@ fn plan(
     if let Some(mut c) = chunk.take().filter(|c| c.len > 0) {
         while let Err(back) = full.push(c) {
             c = back;
-            wait();
+            wait()?;
         }
     }
     Ok(())
