@@ -92,6 +92,8 @@ fn oracle_campaign(robot: &plant_oracle::Robot, n: usize) -> Vec<Observation> {
             forces: Some(eq.forces.clone()),
             pose_ref: Some(x),
             direction: vec![0.0; model.m()],
+            direction_beyond_noise: vec![0.0; model.m()],
+            command_direction: vec![0.0; model.m()],
         });
     }
     obs

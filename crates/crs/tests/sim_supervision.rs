@@ -16,8 +16,6 @@ struct Sim {
     lines: mpsc::Receiver<String>,
     log: Vec<String>,
     out: PathBuf,
-    /// The bus's port, reserved while the stack runs.
-    _port: crs_test_support::ports::UdpPort,
 }
 
 impl Sim {
@@ -49,7 +47,6 @@ impl Sim {
             lines,
             log: Vec::new(),
             out,
-            _port: port,
         }
     }
 

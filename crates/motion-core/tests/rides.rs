@@ -241,13 +241,27 @@ fn the_loop_comes_up_idle_holding_home_and_moves_only_for_a_verified_ride() {
         r.control.home(&r.slot, no_error),
         Err(RideCommandError::Latched)
     ));
+    // The monitor's reset as the gate accepts it: its epoch announced, then the Reset event of
+    // that epoch, both fresh on the loop's clock.
+    let now = crs_ipc::monotonic_ns();
+    let mut gate = ResetGate::new();
+    let mut announce = crs_ipc::StateEvent::new(
+        crs_ipc::ProcessId::SafetyMonitor,
+        crs_ipc::EventKind::StateChanged,
+        1,
+    );
+    announce.detail = crs_ipc::monitor_state::EPOCH_ANNOUNCE;
+    announce.detail_node = 1;
+    announce.timestamp_ns = now;
+    assert!(gate.check(&announce, now).is_err(), "an announcement is not a reset");
     let mut ev = crs_ipc::StateEvent::new(
         crs_ipc::ProcessId::SafetyMonitor,
         crs_ipc::EventKind::Reset,
-        1,
+        2,
     );
     ev.detail = 1;
-    r.cmds.0 = Some(Command::Reset(ResetGate::new().check(&ev).unwrap()));
+    ev.timestamp_ns = now;
+    r.cmds.0 = Some(Command::Reset(gate.check(&ev, now).unwrap()));
     assert_eq!(r.step(), LoopState::Holding);
     assert_eq!(r.slot.phase(), RidePhase::Idle);
     r.control.home(&r.slot, no_error).unwrap();
