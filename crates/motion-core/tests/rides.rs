@@ -253,7 +253,10 @@ fn the_loop_comes_up_idle_holding_home_and_moves_only_for_a_verified_ride() {
     announce.detail = crs_ipc::monitor_state::EPOCH_ANNOUNCE;
     announce.detail_node = 1;
     announce.timestamp_ns = now;
-    assert!(gate.check(&announce, now).is_err(), "an announcement is not a reset");
+    assert!(
+        gate.check(&announce, now).is_err(),
+        "an announcement is not a reset"
+    );
     let mut ev = crs_ipc::StateEvent::new(
         crs_ipc::ProcessId::SafetyMonitor,
         crs_ipc::EventKind::Reset,
