@@ -57,8 +57,8 @@ pub struct SimArgs {
     #[arg(long)]
     pub(crate) check: bool,
     /// Static (at rest) position error bound for --check, mm. The default is twice the largest
-    /// at-rest error seen on the shipped plants (crs_stack::sim_run::DEFAULT_MAX_STATIC_ERROR_MM:
-    /// 4.9 mm at the end of the demo hover flight, 0.15–0.44 mm after the tours).
+    /// at-rest error seen on the shipped plants (4.9 mm at the end of the demo hover flight,
+    /// 0.15–0.44 mm after the tours).
     #[arg(long, default_value_t = crs_stack::sim_run::DEFAULT_MAX_STATIC_ERROR_MM)]
     pub(crate) max_static_error_mm: f64,
     /// Safety-monitor TOML (its [monitor] platform must be the daemon's platform) [default:

@@ -419,13 +419,13 @@ const CLAIMS: &[(&str, &str, &str, &str)] = &[
         "calibration-demo",
         "step5.pos_mean_mm",
         "README.md",
-        "| 5 | + found effects (drum, pulleys) | {} / {_} |",
+        "| 5 | + found effects (force sensors, powertrain, load/COG, sag) | {} / {_} |",
     ),
     (
         "calibration-demo",
         "step5.force_mean_n",
         "README.md",
-        "| 5 | + found effects (drum, pulleys) | {_} / {_} | {_} | {} / {_} |",
+        "| 5 | + found effects (force sensors, powertrain, load/COG, sag) | {_} / {_} | {_} | {} / {_} |",
     ),
     // The closed calibration loop on the running stack, README.
     (
