@@ -164,7 +164,17 @@ pub fn run(a: SimArgs) -> Result<(), Box<dyn std::error::Error>> {
     if !sum.completed {
         let who = sum.stopped_by.as_deref().unwrap_or("the run ended early");
         if a.check {
-            println!("SIM-CHECK: FAIL (stopped: {who})");
+            // The stop first, then whatever else the check finds (a run stopped early has no
+            // at-rest error to judge).
+            let mut fails = vec![format!("stopped: {who}")];
+            fails.extend(
+                sum.check_failures(a.max_static_error_mm)
+                    .into_iter()
+                    .filter(|f| {
+                        !(sum.static_position_mm.is_nan() && f.starts_with("static position error"))
+                    }),
+            );
+            println!("SIM-CHECK: FAIL ({})", fails.join("; "));
         }
         return Err(format!("the run was stopped: {who}; the trajectory did not complete").into());
     }

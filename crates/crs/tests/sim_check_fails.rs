@@ -222,10 +222,16 @@ fn a_drive_fault_fails() {
     // drive-io's hard force limit at 6500 N (14 kN shipped): the tour out takes a cable above
     // it, drive-io stops the drives with FORCE_LIMIT and reports the fault.
     let drives = std::fs::read_to_string(root().join("config/drives.toml")).unwrap();
-    let limited = drives.replace(
-        "\nmaster_heartbeat_ms = 10",
-        "\nmaster_heartbeat_ms = 10\nforce_hard_limit_n = 6500.0",
-    );
+    let limited = drives
+        .replace(
+            "\nmaster_heartbeat_ms = 10",
+            "\nmaster_heartbeat_ms = 10\nforce_hard_limit_n = 6500.0",
+        )
+        // The copy lives elsewhere: its EDS paths (relative to the file) made absolute.
+        .replace(
+            "eds = \"eds/",
+            &format!("eds = \"{}/", root().join("config/eds").display()),
+        );
     assert_ne!(limited, drives);
     let drives_path = dir.join("drives.toml");
     std::fs::write(&drives_path, limited).unwrap();
@@ -255,15 +261,17 @@ fn a_run_that_does_not_complete_fails() {
     stack_bin_dir(&crs());
     let dir = scratch("timeout");
     // The demo tour takes ~9 s; the run is given 3 s: it is stopped, never judged a pass, and
-    // its at-rest error is "not reached".
+    // it reports no at-rest error.
     let (ok, text) = run_to_end(sim(&dir, &["--timeout-s", "3"]));
     assert!(!ok, "{text}");
     assert!(!text.contains("SIM-CHECK: PASS"), "{text}");
     assert!(text.contains("timed out after 3 s"), "{text}");
+    // Never an at-rest figure for a run that did not complete.
     assert!(
-        text.contains("at rest after the trajectory: not reached"),
+        text.contains("STOPPED: the trajectory did not complete"),
         "{text}"
     );
+    assert!(!text.contains("at rest after the trajectory:"), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
