@@ -522,9 +522,13 @@ fn estop_quick_stop_decelerates_then_brakes_hold() {
     rig.boot();
     // Move and stop in the middle of the motion (cables at speed).
     let x0 = rig.plant.home().to_array();
+    let mut dx = 0.0;
     for k in 1..=300 {
         let mut x = x0;
-        x[0] += 0.3 * (k as f64 / 1000.0); // 0.3 m/s along x
+        // Up to 0.3 m/s along x over 100 ms (3 m/s²: drive-io refuses a setpoint that
+        // accelerates a cable beyond bus.max_cable_acceleration_m_per_s2).
+        dx += 0.3 * (k as f64 / 100.0).min(1.0) / 1000.0;
+        x[0] += dx;
         let sp = rig.setpoint(&Pose::from_array(x));
         rig.step(Some(&sp));
     }
@@ -1015,12 +1019,12 @@ fn run_loop_with_drive_io_over_udp_follows_setpoints() {
         }
         // Stream setpoints: 50 mm up in z over 0.5 s (raised cosine), stamped as published.
         let x0 = control.home.to_array();
+        // The trajectory by setpoint (1 ms each, as motion-core's loop computes it), not by
+        // the host's clock: a host stall must not turn into a step in the stream.
         let mut seq = 0;
-        let t1 = Instant::now();
-        let total = Duration::from_millis(900);
         let mut x_end = control.home;
-        while t1.elapsed() < total {
-            let s = (t1.elapsed().as_secs_f64() / 0.5).min(1.0);
+        while seq < 900 {
+            let s = ((seq + 1) as f64 * 1e-3 / 0.5).min(1.0);
             let mut x = x0;
             x[2] += 0.05 * (0.5 - 0.5 * (std::f64::consts::PI * s).cos());
             x_end = Pose::from_array(x);
@@ -1263,8 +1267,15 @@ fn ramp_offset(rig: &mut Rig, cable: usize, target_m: f64) -> (Option<f64>, f64,
     let home = rig.control.home;
     let (mut fmax, mut fmin) = (f64::NEG_INFINITY, f64::INFINITY);
     let n = (target_m.abs() / 1e-4).round() as usize;
-    for k in 1..=n + 200 {
-        let off = target_m * (k.min(n) as f64 / n as f64);
+    // 0.1 mm per setpoint (0.1 m/s), reached over 20 setpoints (5 m/s²: drive-io refuses a
+    // setpoint that accelerates a cable beyond bus.max_cable_acceleration_m_per_s2).
+    let step = 1e-4f64.copysign(target_m);
+    let mut off = 0.0f64;
+    for k in 1..=n + 210 {
+        off += step * (k as f64 / 20.0).min(1.0);
+        if off.abs() > target_m.abs() {
+            off = target_m;
+        }
         let mut sp = rig.setpoint(&home);
         sp.cable_length_m[cable] += off;
         rig.step(Some(&sp));
