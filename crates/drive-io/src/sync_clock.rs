@@ -232,9 +232,11 @@ impl IsoClock {
     /// What is due at `now_ns`. The cycle comes first: a SYNC is never sent before its
     /// period's cycle ran (even when drive-io was preempted past both).
     pub fn due(&self, now_ns: u64) -> IsoDue {
-        if !self.cycle_done && (self.pending || now_ns >= self.next_sync_ns - self.guard_ns) {
-            IsoDue::Cycle
-        } else if self.pending && self.second_cycle_allowed(now_ns) {
+        let first =
+            !self.cycle_done && (self.pending || now_ns >= self.next_sync_ns - self.guard_ns);
+        // Or a newer setpoint after a late one's cycle: it still makes this period's SYNC.
+        let second = self.pending && self.second_cycle_allowed(now_ns);
+        if first || second {
             IsoDue::Cycle
         } else if now_ns >= self.next_sync_ns - self.spin_ns {
             IsoDue::Sync
