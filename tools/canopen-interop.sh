@@ -19,7 +19,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 python3 -c "import canopen, can, msgpack" 2>/dev/null || pip install -q canopen python-can msgpack >/dev/null
 command -v dcfchk >/dev/null || pip install -q dcf-tools >/dev/null
-cargo build -q -p drive-io --bin drive-io-interop --bin winch-emulator
+cargo build -q -p drive-rig --bin drive-io-interop --bin winch-emulator
 BIN=${CARGO_TARGET_DIR:-target}/debug
 OUT=out/canopen-interop
 rm -rf "$OUT"; mkdir -p "$OUT"

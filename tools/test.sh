@@ -77,8 +77,12 @@ suite "systemd units (systemd-analyze verify + the stack's unit policy)" bash to
 
 host_safety_matrix() {
   cargo build -q --workspace --bins
+  # World-readable (mktemp -d is 0700): reset_from_foreign_process connects to the monitor's
+  # reset socket as user nobody, whom the monitor itself must refuse (SO_PEERCRED), not the
+  # directory's permissions.
+  local w; w=$(mktemp -d); chmod 755 "$w"
   "${CARGO_TARGET_DIR:-target}/debug/safety-hil" --bin-dir "${CARGO_TARGET_DIR:-target}/debug" \
-    --workdir "$(mktemp -d)" --assert-timing --attempts 2 --retry-budget 2
+    --workdir "$w" --assert-timing --attempts 2 --retry-budget 2
 }
 suite "safety monitor fault-injection matrix on the host at the spec's thresholds (wire model; timing asserted)" \
   host_safety_matrix

@@ -152,7 +152,16 @@ impl External {
             // One sequence number per SYNC period of profile time, as motion-core numbers its
             // setpoints: a publisher stalled for two periods moves two periods' worth, and
             // drive-io's step check allows exactly that.
-            self.publish(&profile(t), base + 1 + (t / period_s) as u64)?;
+            // Once per period (the publisher wakes more often than a SYNC period longer than
+            // 1 ms): a second setpoint in the same period would carry the next sequence number
+            // with half a period's motion, a false acceleration in drive-io's step check.
+            // The profile at the period's instant, not at the wake-up: wake-up jitter would
+            // otherwise be a velocity ripple of ± v per period.
+            let k = (t / period_s) as u64;
+            let seq = base + 1 + k;
+            if seq > self.seq {
+                self.publish(&profile(k as f64 * period_s), seq)?;
+            }
             let f = self.latest(Duration::from_secs(1))?;
             let s = BusState::from_u32(f.bus_state);
             if t0.elapsed() >= d || !matches!(s, Some(BusState::Ready | BusState::Running)) {
@@ -203,8 +212,10 @@ pub fn scenario_run(cfg: DrivesConfig, prefix: &str) -> Res<String> {
     let mut x = External::start(cfg, prefix)?;
     let l0 = boot(&mut x)?;
     let goal: Vec<f64> = l0.iter().map(|l| l + 0.05).collect();
+    // A raised cosine (at most 1 m/s²): drive-io refuses a step that accelerates a cable
+    // beyond bus.max_cable_acceleration_m_per_s2, as it would a jump out of a hold.
     x.stream(Duration::from_millis(500), |t| {
-        let s = (t / 0.5).min(1.0);
+        let s = 0.5 - 0.5 * (std::f64::consts::PI * (t / 0.5).min(1.0)).cos();
         l0.iter().map(|l| l + 0.05 * s).collect()
     })?;
     let f = x.stream(Duration::from_millis(100), |_| goal.clone())?;
