@@ -103,10 +103,10 @@ enum Schedule {
 }
 
 impl Schedule {
-    fn wake_at_ns(&self, now_ns: u64) -> u64 {
+    fn wake_at_ns(&self) -> u64 {
         match self {
             Schedule::Free(c) => c.wake_at_ns(),
-            Schedule::Iso(c) => c.wake_at_ns(now_ns),
+            Schedule::Iso(c) => c.wake_at_ns(),
         }
     }
     fn notified(&mut self) {
@@ -343,7 +343,7 @@ pub fn run_with<B: CanBus>(
         // Wait for what is due next, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
         let mut now = monotonic_ns();
         loop {
-            let wake = schedule.wake_at_ns(now);
+            let wake = schedule.wake_at_ns();
             if now >= wake {
                 break;
             }

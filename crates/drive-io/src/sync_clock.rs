@@ -150,16 +150,13 @@ pub enum IsoDue {
 /// cycle (the RPDOs for the next SYNC), started by motion-core's "setpoint published"
 /// notification, or `guard` before the SYNC without one (holding the last target, like EtherCAT
 /// distributed clocks or Lely's SYNC producer, which never wait for the application). A
-/// setpoint that missed its SYNC starts its cycle right after that SYNC; a newer setpoint in
-/// the same period still gets a cycle of its own before the guard time (at most
-/// [`MAX_CYCLES_PER_PERIOD`]), so one late setpoint cannot lock the stream a period behind its
-/// SYNCs (each notification finding its period's cycle already spent on the previous one). After a
+/// notification still pending when the SYNC goes out (its setpoint missed that SYNC) does not
+/// start a cycle right after it: that cycle would spend the next period's one cycle on the late
+/// setpoint, the next on-time notification would find it spent and wait for the SYNC after,
+/// and so on — one late setpoint would lock the stream a period behind its SYNCs. The late
+/// setpoint is still the newest one at the guard time if no newer one comes. After a
 /// stall no SYNC is sent closer than 0.9 periods to the previous one: grid instants are skipped
 /// (counted), never compressed. Pure logic; the runner does the waiting.
-/// Cycles of one isochronous period at most: a late setpoint's (right after the SYNC it missed)
-/// and the on-time one's. Bounds the RPDO frames a flood of notifications can put on the bus.
-pub const MAX_CYCLES_PER_PERIOD: u8 = 2;
-
 #[derive(Clone, Debug)]
 pub struct IsoClock {
     period_ns: u64,
@@ -169,8 +166,6 @@ pub struct IsoClock {
     next_sync_ns: u64,
     /// The cycle for `next_sync_ns` ran.
     cycle_done: bool,
-    /// Cycles run for `next_sync_ns` (a late setpoint's and the on-time one's).
-    cycles: u8,
     pending: bool,
     last_sync_ns: Option<u64>,
     locked: u64,
@@ -187,7 +182,6 @@ impl IsoClock {
             spin_ns: spin_ns.min(period_ns / 4),
             next_sync_ns: now_ns + period_ns,
             cycle_done: false,
-            cycles: 0,
             pending: false,
             last_sync_ns: None,
             locked: 0,
@@ -210,33 +204,22 @@ impl IsoClock {
         self.pending = true;
     }
 
-    /// Until when to wait for frames and notifications (at `now_ns`).
-    pub fn wake_at_ns(&self, now_ns: u64) -> u64 {
+    /// Until when to wait for frames and notifications.
+    pub fn wake_at_ns(&self) -> u64 {
         let spin_from = self.next_sync_ns - self.spin_ns;
-        if self.pending && (!self.cycle_done || self.second_cycle_allowed(now_ns)) {
-            0
-        } else if self.cycle_done {
+        if self.cycle_done {
             spin_from
+        } else if self.pending {
+            0
         } else {
             spin_from.min(self.next_sync_ns - self.guard_ns)
         }
     }
 
-    /// A newer setpoint after this period's cycle (a late setpoint's, run right after the
-    /// SYNC it missed) still gets a cycle of its own, before the guard time: RPDOs sent later
-    /// could straddle the SYNC (one drive latching the new target, another the old).
-    fn second_cycle_allowed(&self, now_ns: u64) -> bool {
-        self.cycles < MAX_CYCLES_PER_PERIOD && now_ns < self.next_sync_ns - self.guard_ns
-    }
-
     /// What is due at `now_ns`. The cycle comes first: a SYNC is never sent before its
     /// period's cycle ran (even when drive-io was preempted past both).
     pub fn due(&self, now_ns: u64) -> IsoDue {
-        let first =
-            !self.cycle_done && (self.pending || now_ns >= self.next_sync_ns - self.guard_ns);
-        // Or a newer setpoint after a late one's cycle: it still makes this period's SYNC.
-        let second = self.pending && self.second_cycle_allowed(now_ns);
-        if first || second {
+        if !self.cycle_done && (self.pending || now_ns >= self.next_sync_ns - self.guard_ns) {
             IsoDue::Cycle
         } else if now_ns >= self.next_sync_ns - self.spin_ns {
             IsoDue::Sync
@@ -248,7 +231,6 @@ impl IsoClock {
     /// The period's cycle starts: what triggered it.
     pub fn cycle_started(&mut self) -> Trigger {
         self.cycle_done = true;
-        self.cycles = self.cycles.saturating_add(1);
         if std::mem::take(&mut self.pending) {
             self.locked += 1;
             Trigger::Setpoint
@@ -273,7 +255,9 @@ impl IsoClock {
         self.next_sync_ns = next;
         self.last_sync_ns = Some(at_ns);
         self.cycle_done = false;
-        self.cycles = 0;
+        // A notification from before this SYNC: its setpoint goes with the next notification's
+        // cycle (superseded) or the guard's (read as the newest), not right now (see the type).
+        self.pending = false;
         skipped
     }
 
@@ -440,7 +424,7 @@ mod tests {
         let mut i = 0;
         let mut now = 0;
         loop {
-            let wake = c.wake_at_ns(now).max(now);
+            let wake = c.wake_at_ns().max(now);
             if i < notes.len() && notes[i] <= wake {
                 now = now.max(notes[i]);
                 c.notified();
@@ -469,42 +453,6 @@ mod tests {
     }
 
     #[test]
-    fn one_late_setpoint_does_not_lock_the_stream_a_period_behind() {
-        let mut c = IsoClock::new(MS, 400 * US, 100 * US, 0);
-        // The first setpoint comes 300 µs before SYNC 2 (past the guard), every later one on
-        // time, 500 µs before its SYNC: the late one's cycle runs right after SYNC 2, and the
-        // next setpoint (2.5 ms) still gets a cycle of its own before SYNC 3, and so on.
-        let mut notes = vec![MS + 700 * US];
-        notes.extend((2..10).map(|k| k * MS + 500 * US));
-        let (syncs, trig, at) = simulate_iso_timed(&mut c, &notes, 10 * MS, |_| 0);
-        assert!(
-            syncs
-                .iter()
-                .enumerate()
-                .all(|(k, t)| *t == (k as u64 + 1) * MS)
-        );
-        for &n in &notes[1..] {
-            assert!(
-                at.contains(&n),
-                "the setpoint of {} µs waited: cycles at {at:?} ({trig:?})",
-                n / US
-            );
-        }
-        // The late one right after the SYNC it missed.
-        assert!(at.contains(&(2 * MS)), "{at:?}");
-        // A flood of notifications runs at most two cycles per period.
-        let mut c = IsoClock::new(MS, 400 * US, 100 * US, 0);
-        let flood: Vec<u64> = (0..400).map(|k| 10 * US * k).collect();
-        let (syncs, trig) = simulate_iso(&mut c, &flood, 4 * MS, |_| 0);
-        assert!(
-            trig.len() <= 2 * (syncs.len() + 1),
-            "{} cycles for {} SYNCs",
-            trig.len(),
-            syncs.len()
-        );
-    }
-
-    #[test]
     fn isochronous_sync_is_periodic_whatever_the_setpoints_do() {
         let mut c = IsoClock::new(MS, 400 * US, 100 * US, 0);
         // Setpoints 500 µs before each SYNC, but jittering ±200 µs and with a 5 ms stall.
@@ -521,10 +469,9 @@ mod tests {
                 "SYNC {k} off its instant: {syncs:?}"
             );
         }
-        // At least one cycle per SYNC, at most two (a late setpoint's right after the SYNC it
-        // missed, then the on-time one's); the stall's periods ran on the guard.
+        // One cycle per SYNC; the stall's periods ran on the guard.
         assert!(
-            (syncs.len()..=2 * syncs.len() + 2).contains(&trig.len()),
+            (syncs.len()..=syncs.len() + 1).contains(&trig.len()),
             "{trig:?}"
         );
         assert!(c.guard_cycles() >= 5, "{trig:?}");
@@ -535,17 +482,43 @@ mod tests {
     fn a_setpoint_too_late_for_its_sync_goes_to_the_next_one() {
         let mut c = IsoClock::new(MS, 400 * US, 100 * US, 0);
         // 300 µs before SYNC 2 (at 2 ms): past the 400 µs guard, so SYNC 2's cycle already ran
-        // on the guard and this setpoint starts SYNC 3's cycle.
+        // on the guard; this setpoint is read by SYNC 3's cycle at its guard (2.6 ms), not by a
+        // cycle right after SYNC 2.
         let notes = [MS + 700 * US];
-        let (_, trig) = simulate_iso(&mut c, &notes, 3 * MS + 700 * US, |_| 0);
-        assert_eq!(
-            trig,
-            vec![
-                Trigger::Clock,
-                Trigger::Clock,
-                Trigger::Setpoint,
-                Trigger::Clock
-            ]
+        let (_, trig, at) = simulate_iso_timed(&mut c, &notes, 3 * MS + 700 * US, |_| 0);
+        assert_eq!(trig, vec![Trigger::Clock; 4]);
+        assert_eq!(at, vec![600 * US, 1600 * US, 2600 * US, 3600 * US]);
+    }
+
+    #[test]
+    fn one_late_setpoint_does_not_lock_the_stream_a_period_behind() {
+        let mut c = IsoClock::new(MS, 400 * US, 100 * US, 0);
+        // The first setpoint comes 300 µs before SYNC 2 (past the guard), every later one on
+        // time, 500 µs before its SYNC: each on-time one starts its period's cycle when it
+        // arrives (before its SYNC), none waits for the SYNC after; one cycle per SYNC.
+        let mut notes = vec![MS + 700 * US];
+        notes.extend((2..10).map(|k| k * MS + 500 * US));
+        let (syncs, trig, at) = simulate_iso_timed(&mut c, &notes, 10 * MS, |_| 0);
+        assert!(
+            syncs
+                .iter()
+                .enumerate()
+                .all(|(k, t)| *t == (k as u64 + 1) * MS)
+        );
+        for &n in &notes[1..] {
+            assert!(
+                at.contains(&n),
+                "the setpoint of {} µs waited: cycles at {at:?} ({trig:?})",
+                n / US
+            );
+        }
+        assert!(
+            !at.contains(&(2 * MS)),
+            "a cycle right after SYNC 2: {at:?}"
+        );
+        assert!(
+            (syncs.len()..=syncs.len() + 1).contains(&trig.len()),
+            "{trig:?}"
         );
     }
 
