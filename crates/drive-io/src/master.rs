@@ -1294,14 +1294,23 @@ impl Master {
         // which the drives are quick-stopped anyway. The first setpoint after enabling must
         // start at the held position (one period of motion).
         let running = self.phase == Phase::Running;
-        let periods = if running {
+        // `periods` bounds the step (speed); `v_periods` is the time base of the step's speed for
+        // the acceleration check: the sequence numbers, bounded by drive-io's own time plus two
+        // periods — one more than the speed bound, because a setpoint superseded before
+        // drive-io read it leaves a gap of two sequence numbers that may arrive a fraction of a
+        // period after the previous one (a stalled, then catching-up producer); judged over
+        // own + 1 such a step would look like a speed jump it is not. A producer claiming many
+        // skipped periods still gets at most own + 2 (and its step at most the speed bound).
+        let (periods, v_periods) = if running {
             let own = now_ns.saturating_sub(self.last_apply_ns) as f64 / self.sync_period_ns as f64;
             let by_sequence = sp.sequence.saturating_sub(self.applied_seq) as f64;
-            by_sequence
-                .min(own + 1.0)
-                .clamp(1.0, f64::from(self.stale_cycles) + 2.0)
+            let max = f64::from(self.stale_cycles) + 2.0;
+            (
+                by_sequence.min(own + 1.0).clamp(1.0, max),
+                by_sequence.min(own + 2.0).clamp(1.0, max),
+            )
         } else {
-            1.0
+            (1.0, 1.0)
         };
         // A hold is zero speed: out of Ready (enabled, holding) the previous step is rest, so the
         // first moving step is acceleration-checked like every other one.
@@ -1310,7 +1319,7 @@ impl Master {
             self.last_periods = 1.0;
         }
         // Between the midpoints of the previous step and this one.
-        let dt_mid = 0.5 * (periods + self.last_periods);
+        let dt_mid = 0.5 * (v_periods + self.last_periods);
         let mut vel = [0.0f64; MAX_CABLES];
         for (i, count) in counts.iter_mut().enumerate().take(self.m) {
             let node = self.drives[i].node;
@@ -1341,7 +1350,7 @@ impl Master {
             // Acceleration: the step's speed may change by at most max_accel × Δt from the
             // previous step's (+2 counts of rounding); braking towards zero without reversing is
             // never limited (the safe direction: a hold after an e-stop).
-            let v = (f64::from(c) - f64::from(self.target[i])) / periods;
+            let v = (f64::from(c) - f64::from(self.target[i])) / v_periods;
             let pv = self.last_vel_counts[i];
             let braking = v * pv >= 0.0 && v.abs() <= pv.abs();
             if !braking && (v - pv).abs() > self.max_accel_counts[i] * dt_mid + 2.0 {
@@ -1360,7 +1369,7 @@ impl Master {
             *count = c;
         }
         self.last_vel_counts[..self.m].copy_from_slice(&vel[..self.m]);
-        self.last_periods = periods;
+        self.last_periods = v_periods;
         self.target[..self.m].copy_from_slice(&counts[..self.m]);
         self.applied_seq = sp.sequence;
         self.last_apply_ns = now_ns;
