@@ -23,7 +23,9 @@ rm -rf "$OUT"; mkdir -p "$OUT"
 
 echo "-- crs sim with a candump log"
 LOG=$(pwd)/$OUT/bus.candump
-sed "s#^\# candump_log = .*#candump_log = \"$LOG\"#" config/drives.toml > "$OUT/drives.toml"
+# (the copy lives elsewhere: its EDS paths, relative to the file, made absolute)
+sed -e "s#^\# candump_log = .*#candump_log = \"$LOG\"#" -e "s#^eds = \"eds/#eds = \"$PWD/config/eds/#" \
+  config/drives.toml > "$OUT/drives.toml"
 grep -q "^candump_log" "$OUT/drives.toml" || { echo "could not enable candump_log in the drives copy"; exit 1; }
 # --timing relaxed (4 ms loop and SYNC, watchdogs to match): this checks what the tools read in
 # a run's files, not the host's timing; at the spec's 1 ms / 10 ms a stall of this shared host

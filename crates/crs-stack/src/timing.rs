@@ -95,10 +95,15 @@ impl TimingProfile {
                 drives.extend([
                     R::one("bus", "boot_timeout_ms", "20000"),
                     R::one("bus", "sdo_timeout_ms", "500"),
+                    // The emulator's stalls bunch motion-core's setpoints: their steps judged
+                    // at the bound, not the shipped 50 m/s² (the speed check stays).
+                    R::one("bus", "max_cable_acceleration_m_per_s2", "200.0"),
                 ]);
                 monitor.extend([
                     R::one("feedback", "silence_cycles", "20"),
                     R::one("forces", "silence_cycles", "20"),
+                    // The safety I/O node's 10 ms inputs through an emulated guest's stalls.
+                    R::one("can", "safety_io_silence_cycles", "10"),
                 ]);
             }
         }

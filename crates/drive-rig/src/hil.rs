@@ -78,14 +78,16 @@ impl RigBuses {
 
 /// The HIL drives configuration on `transports` (one per interface): two drives per
 /// interface, velocity and force (the simulated winch's 0x2110) every 5th SYNC, so each bus
-/// stays within its budget. Timeouts are lenient because the VM is not real time.
+/// stays within its budget. Timeouts are lenient because the VM is not real time, and so is the
+/// acceleration check (the bound, 200 m/s²): the VM's stalls bunch the rig's setpoints.
 pub fn hil_config(transports: &[String]) -> DrivesConfig {
     let mut text = String::from(
         "[bus]\nsync_period_us = 1000\nstale_setpoint_cycles = 50\n\
          heartbeat_producer_ms = 20\nheartbeat_timeout_ms = 300\nboot_timeout_ms = 20000\n\
          sdo_timeout_ms = 500\nmax_cable_speed_m_per_s = 5.0\n\
          drive_heartbeat_consumer_ms = 600\n\
-         following_error_window_m = 0.5\n",
+         following_error_window_m = 0.5\n\
+         max_cable_acceleration_m_per_s2 = 200.0\n",
     );
     for (k, t) in transports.iter().enumerate() {
         text.push_str(&format!(
