@@ -160,8 +160,15 @@ impl<B: CanBus> LoggingBus<B> {
     }
 
     fn log(&mut self, frame: &CanFrame) {
+        // The line is formatted on the stack and handed to the buffer in one piece, so the
+        // buffer is only ever flushed between whole lines: several interfaces (one LoggingBus
+        // each) append to the same file with O_APPEND and their lines must not interleave.
+        let mut line = [0u8; 160];
+        let mut cur = std::io::Cursor::new(&mut line[..]);
+        let formatted = write_line(&mut cur, SystemTime::now(), self.inner.interface(), frame);
+        let n = cur.position() as usize;
         if let Some(w) = self.out.as_mut()
-            && let Err(e) = write_line(w, SystemTime::now(), self.inner.interface(), frame)
+            && let Err(e) = formatted.and_then(|()| w.write_all(&line[..n]))
         {
             tracing::error!(error = %e, "candump log write failed; logging disabled");
             self.out = None;
