@@ -6,6 +6,7 @@
 use crate::robot::{PlantError, Robot};
 use glam::{DQuat, DVec3};
 use plant_oracle::PoseQ;
+use plant_oracle::cholesky_solve;
 
 /// Central-difference step of the gradient (m, rad): truncation ∝ h² against round-off
 /// ∝ ε U/h at potentials of ~10² J.
@@ -149,43 +150,4 @@ fn hessian(
         }
     }
     Ok(hm)
-}
-
-/// Solves H s = b for a symmetric positive definite 6 × 6 H; `None` when it is not.
-#[allow(clippy::needless_range_loop)]
-fn cholesky_solve(h: &[[f64; 6]; 6], b: &[f64; 6]) -> Option<[f64; 6]> {
-    let mut l = [[0.0; 6]; 6];
-    for i in 0..6 {
-        for j in 0..=i {
-            let mut s = h[i][j];
-            for k in 0..j {
-                s -= l[i][k] * l[j][k];
-            }
-            if i == j {
-                if !(s > 0.0 && s.is_finite()) {
-                    return None;
-                }
-                l[i][i] = s.sqrt();
-            } else {
-                l[i][j] = s / l[j][j];
-            }
-        }
-    }
-    let mut y = [0.0; 6];
-    for i in 0..6 {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= l[i][k] * y[k];
-        }
-        y[i] = s / l[i][i];
-    }
-    let mut x = [0.0; 6];
-    for i in (0..6).rev() {
-        let mut s = y[i];
-        for k in i + 1..6 {
-            s -= l[k][i] * x[k];
-        }
-        x[i] = s / l[i][i];
-    }
-    Some(x)
 }

@@ -34,6 +34,8 @@
 mod energy;
 mod geometry;
 mod linalg;
+/// The 6 × 6 Cholesky solve of the Newton step (bench-plant's minimiser uses it too).
+pub use linalg::cholesky_solve;
 mod minimize;
 mod robot;
 

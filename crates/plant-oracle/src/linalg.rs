@@ -4,7 +4,7 @@
 #![allow(clippy::needless_range_loop)]
 
 /// Solves H s = b for symmetric positive definite `h`; None when H is not positive definite.
-pub(crate) fn cholesky_solve(h: &[[f64; 6]; 6], b: &[f64; 6]) -> Option<[f64; 6]> {
+pub fn cholesky_solve(h: &[[f64; 6]; 6], b: &[f64; 6]) -> Option<[f64; 6]> {
     let mut l = [[0.0; 6]; 6];
     for i in 0..6 {
         for j in 0..=i {
