@@ -40,11 +40,11 @@ pub const RESET_EVENT_FUTURE_TOLERANCE_NS: u64 = 50_000_000;
 /// this module it cannot be constructed; not `Clone` or `Copy`: consumed by
 /// [`crate::master::Master::reset`], which hands it back when it cannot apply it yet.
 ///
-/// ```compile_fail
+/// ```compile_fail,E0451
 /// let forged = drive_io::reset::ResetGrant { epoch: 1 };
 /// ```
 ///
-/// ```compile_fail
+/// ```compile_fail,E0382
 /// fn twice(g: drive_io::reset::ResetGrant) -> (drive_io::reset::ResetGrant, drive_io::reset::ResetGrant) {
 ///     (g, g)
 /// }

@@ -182,7 +182,7 @@ pub enum InhibitReason {
 /// on this side of the bus. It has no public constructor; only [`SafetyWatch::verified_epoch`]
 /// makes one (type-state for drive-io's reset authority, issue 16).
 ///
-/// ```compile_fail
+/// ```compile_fail,E0603
 /// let forged = drive_io::safety_watch::VerifiedEpoch(7);
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

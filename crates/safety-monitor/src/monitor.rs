@@ -371,7 +371,7 @@ pub mod authority {
     /// Proof that the monitor's verification accepted an operator reset; carries the new
     /// epoch. No public constructor (private field), not `Clone`: used once.
     ///
-    /// ```compile_fail
+    /// ```compile_fail,E0451
     /// let forged = safety_monitor::monitor::authority::ResetToken { epoch: 1 };
     /// ```
     #[derive(Debug, PartialEq, Eq)]

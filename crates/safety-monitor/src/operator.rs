@@ -54,7 +54,7 @@ impl fmt::Display for ResetChannel {
 /// or `Copy`: made only by [`KeyWatch`] (the key turned and released) and by the reset socket's
 /// credential check, and consumed by [`crate::Monitor::request_reset`].
 ///
-/// ```compile_fail
+/// ```compile_fail,E0451
 /// let forged = safety_monitor::operator::OperatorReset {
 ///     channel: safety_monitor::operator::ResetChannel::Key,
 /// };

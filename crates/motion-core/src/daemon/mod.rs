@@ -53,7 +53,7 @@ pub enum Command {
 /// let forged = motion_core::daemon::ResetAuthority(());
 /// ```
 ///
-/// ```compile_fail
+/// ```compile_fail,E0382
 /// fn twice(a: motion_core::daemon::ResetAuthority) -> (motion_core::daemon::ResetAuthority, motion_core::daemon::ResetAuthority) {
 ///     (a, a)
 /// }
