@@ -19,7 +19,7 @@
 //! - [`commission`]: commissioning and the pre-ride check (`crs commission`, eq. 6.21–6.24, 3.42).
 //! - [`commission_report`]: what `crs commission` prints of a commissioning.
 //! - [`diagnosis_bench`]: the residual diagnosis benchmark (`crs calibrate bench-diagnosis`).
-//! - [`figures`]: the README's headline figures regenerated into one JSON file (`crs figures`).
+//! - [`figures`]: the docs' headline figures regenerated into one JSON file (`crs figures`).
 //! - [`load_experiment`]: the seed's walking-subject load tracking (sec. 5.3) on the plant.
 //! - [`plant_check`]: a plant TOML checked and settled at home (`crs plant check`).
 //! - [`plant_record`]: a measurement campaign on the plant written as a data set.

@@ -1,4 +1,4 @@
-//! `crs figures`: regenerate the README's headline figures into one JSON file
+//! `crs figures`: regenerate the docs' headline figures into one JSON file
 //! ([`crs_stack::figures`]; the repository keeps the last run in benches/figures.json).
 
 use crs_stack::figures::{Context, GROUPS, regenerate};

@@ -62,8 +62,8 @@ enum Command {
     /// The operator console: a web page with the running stack's live state and a stop button
     /// (no reset), JSON at /api/status and /api/trips. Binds 127.0.0.1 unless given a token.
     Console(console_cmd::ConsoleArgs),
-    /// Regenerate the README's headline figures (not timings) into one JSON file:
-    /// benches/figures.json is its last run, checked against the README by the tests.
+    /// Regenerate the docs' headline figures (not timings) into one JSON file:
+    /// benches/figures.json is its last run, checked against the docs by the tests.
     Figures(figures_cmd::FiguresArgs),
     /// Write man pages (crs.1, crs-sim.1, ...) into DIR.
     GenMan {
