@@ -198,6 +198,9 @@ pub struct Master {
     toggle: bool,
     target: [i32; MAX_CABLES],
     last_seq: u64,
+    /// Setpoints of the stream never read by a cycle: a newer one was published before the
+    /// cycle read the subscriber (sequence numbers skipped between two cycles' reads).
+    superseded: u64,
     /// motion-core announced the planned end of its setpoint stream (`motion_state::STOPPING`).
     stream_end: bool,
     /// The last applied setpoint commanded rest (every cable speed zero).
@@ -320,6 +323,7 @@ impl Master {
             toggle: false,
             target: [0; MAX_CABLES],
             last_seq: 0,
+            superseded: 0,
             stream_end: false,
             last_at_rest: false,
             last_apply_ns: 0,
@@ -900,6 +904,11 @@ impl Master {
         }
     }
 
+    /// Setpoints superseded before a cycle read them (skipped sequence numbers of the stream).
+    pub fn superseded_setpoints(&self) -> u64 {
+        self.superseded
+    }
+
     /// True while a stop is latched (e-stop, stale stop, fault).
     pub fn is_latched(&self) -> bool {
         matches!(self.phase, Phase::Stopped(_))
@@ -1084,6 +1093,9 @@ impl Master {
             Phase::Ready | Phase::Running => {
                 self.check_drives(now_ns);
                 if let Some(sp) = setpoint.filter(|sp| sp.sequence > self.last_seq) {
+                    if self.last_seq > 0 {
+                        self.superseded += sp.sequence - self.last_seq - 1;
+                    }
                     self.last_seq = sp.sequence;
                     if self.apply_setpoint(sp, now_ns) {
                         if self.phase == Phase::Ready {

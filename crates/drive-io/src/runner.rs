@@ -92,6 +92,8 @@ pub struct RunSummary {
     pub syncs: u64,
     /// Isochronous mode: how late the SYNC left drive-io after its instant, worst case, ns.
     pub sync_late_max_ns: u64,
+    /// Setpoints superseded before a cycle read them (a newer one was published first).
+    pub superseded_setpoints: u64,
 }
 
 /// Which scheduler times the cycles ([`crate::sync_clock`]).
@@ -581,6 +583,7 @@ pub fn run_with<B: CanBus>(
         clock_cycles,
         syncs,
         sync_late_max_ns,
+        superseded_setpoints: master.superseded_setpoints(),
     })
 }
 

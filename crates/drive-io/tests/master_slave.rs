@@ -77,7 +77,13 @@ impl Sim {
 
     /// One 1 ms cycle: master -> slaves -> physics -> slaves -> master.
     fn step(&mut self, sp: Option<&JointSetpoint>) {
-        self.now += 1_000_000;
+        self.step_after(sp, 1_000_000);
+    }
+
+    /// One cycle `dt_ns` after the previous one (a cycle started early or late; the drives'
+    /// physics still advance one period).
+    fn step_after(&mut self, sp: Option<&JointSetpoint>, dt_ns: u64) {
+        self.now += dt_ns;
         let mut out = BusFrames::new(1);
         self.master.cycle(self.now, sp, &mut out);
         self.master.mark_written(self.now);
@@ -570,6 +576,66 @@ fn a_step_out_of_a_hold_is_acceleration_checked() {
         let sp = s.setpoint(seq + k, &l1);
         s.step(Some(&sp));
         assert_eq!(s.master.state(), BusState::Running);
+    }
+}
+
+/// The acceleration check takes the step's speed over its sequence numbers (bounded by
+/// drive-io's own time + 2 periods): at constant speed, a setpoint superseded before drive-io
+/// read it leaves a step of two sequence numbers, and its successor may be read a fraction of
+/// a period after the previous one. That is no speed jump and must run on; the same step with
+/// one sequence number (twice the speed at once) faults SETPOINT_STEP.
+#[test]
+fn a_superseded_setpoints_successor_read_early_is_no_speed_jump() {
+    for (gap, faults) in [(2u64, false), (1, true)] {
+        let mut s = Sim::new();
+        s.boot();
+        let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+        let sp = s.setpoint(1, &l0);
+        s.step(Some(&sp));
+        let v = 2.0;
+        let (mut l, mut seq) = ramp_up(&mut s, &l0, v, 1);
+        for _ in 0..10 {
+            for x in &mut l {
+                *x += v * 1e-3;
+            }
+            let sp = s.setpoint(seq, &l);
+            s.step(Some(&sp));
+            seq += 1;
+        }
+        assert_eq!(s.master.state(), BusState::Running);
+        let superseded = s.master.superseded_setpoints();
+        // Two periods of motion at v, read 0.2 periods after the previous setpoint.
+        for x in &mut l {
+            *x += 2.0 * v * 1e-3;
+        }
+        seq += gap - 1;
+        let sp = s.setpoint(seq, &l);
+        s.step_after(Some(&sp), 200_000);
+        if faults {
+            assert_eq!(
+                s.master.feedback().fault_code,
+                fault_code::SETPOINT_STEP,
+                "a doubled speed within one sequence number must fault"
+            );
+            continue;
+        }
+        assert_eq!(
+            s.master.state(),
+            BusState::Running,
+            "fault {:#x}",
+            s.master.feedback().fault_code
+        );
+        assert_eq!(s.master.superseded_setpoints(), superseded + 1);
+        // The stream goes on at v, one setpoint per period.
+        for _ in 0..10 {
+            seq += 1;
+            for x in &mut l {
+                *x += v * 1e-3;
+            }
+            let sp = s.setpoint(seq, &l);
+            s.step(Some(&sp));
+            assert_eq!(s.master.state(), BusState::Running);
+        }
     }
 }
 

@@ -1,31 +1,47 @@
 //! Bench: drive-io's three cycle designs side by side in one run, on the wire model with the
 //! shipped CRS layout (config/drives.toml: 8 drives and their load cells on four 1 Mbit/s
-//! interfaces; the safety interface is left out: no monitor runs here).
+//! interfaces; the safety interface is left out: no monitor runs here), and a bare 1 ms timer
+//! loop in the same conditions (this VM's floor).
 //!
 //! drive-io (the real runner) and the winch emulator (playing the drives and load cells) run as
 //! threads; an in-process `can-wire` hub carries the four buses with their bit time,
 //! arbitration and transmit queues; a listener node on every bus sees each frame at its end of
-//! frame (the model's stamp). A publisher thread plays motion-core at 1 kHz: with
-//! `sync_source = "isochronous"` it ticks `--lead-us` before each SYNC of the schedule drive-io
-//! announces (as motion-core does) and publishes `--publish-phase-us` later (motion-core's
-//! publish stage); with `"setpoint"` / `"clock"` it runs on its own 1 ms grid. Every setpoint
-//! commands distinct targets, so each RPDO on the wire names the setpoint it carries.
+//! frame (the model's stamp). drive-io's bus handles record every frame it hands to the wire
+//! (send stamp, its transmit queue depth then). A publisher thread plays motion-core at 1 kHz:
+//! with `sync_source = "isochronous"` it ticks `--lead-us` before each SYNC of the schedule
+//! drive-io announces (as motion-core does) and publishes `--publish-phase-us` later
+//! (motion-core's publish stage); with `"setpoint"` / `"clock"` it runs on its own 1 ms grid.
+//! The motion is a slow ramp (1 mm/s on every cable): every setpoint's target counts are new
+//! on every drive (checked), so each RPDO on the wire names exactly one setpoint.
 //!
 //! Figures per mode (all from the wire model's stamps, CLOCK_MONOTONIC):
-//! * SYNC interval on bus can0: sd / min / max, intervals below 0.9 periods;
+//! * SYNC interval on bus can0: sd / min / max, intervals below 0.9 periods, and why each short
+//!   one is short (drive-io sent the two SYNCs closer, or the wire delayed the first: queued
+//!   behind drive-io's own frames, or behind a model violation of the hub);
 //! * setpoint published → the last RPDO carrying it off the wire (max over the 8 drives):
 //!   p50 / p99 / p99.9 / max;
 //! * missed cycles: setpoints whose RPDOs were not all off the wire before the first SYNC after
-//!   their publication (on their bus), and setpoints never seen on the wire.
+//!   their publication (on their bus); setpoints not on the wire, split into never written by
+//!   drive-io (superseded: a newer one was read first — drive-io's own count beside it — or
+//!   published after a stop) and lost (written, not all seen by the listener);
+//! * the VM's steal time over the mode (/proc/stat).
+//!
+//! The bare timer rows: an absolute-deadline 1 ms loop on the same cpu at drive-io's priority,
+//! once sleeping to the deadline, once sleeping to the deadline − `sync_spin_us` and spinning
+//! (as drive-io's isochronous SYNC does); grid instants less than 0.9 periods after the last
+//! wake-up are skipped (drive-io's rule). Their "interval" is between wake-ups.
 //!
 //! usage: bus-latency-bench [--seconds 60] [--modes isochronous,setpoint,clock]
-//!        [--rt-priority 80] [--load-cpu 0 | --no-load] [--stack-cpu 1]
+//!        [--rt-priority 80] [--load-cpu 0] [--stack-cpu 1] [--no-baseline]
 
+use can_transport::wire::WireBus;
+use can_transport::{BusErrorFrame, CanBus, CanError, CanFrame, RxEvent, RxFrame};
 use clap::Parser;
 use crs_ipc::{IpcNode, JointSetpoint, MAX_CABLES, SyncSchedule, monotonic_ns};
 use drive_io::config::{DrivesConfig, SyncSource};
 use drive_io::runner;
 use drive_rig::emulator::{self, EmulatorConfig, EmulatorControl};
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -33,7 +49,7 @@ use std::time::{Duration, Instant};
 
 #[derive(Parser)]
 struct Args {
-    /// Seconds per mode.
+    /// Seconds per mode (and per bare-timer row).
     #[arg(long, default_value_t = 60)]
     seconds: u64,
     /// The cycle designs to compare, one after the other in this run.
@@ -61,9 +77,26 @@ struct Args {
     /// ... and publishes this long after its tick (motion-core's publish stage), µs.
     #[arg(long, default_value_t = 200)]
     publish_phase_us: u64,
+    /// Leave out the bare timer rows.
+    #[arg(long)]
+    no_baseline: bool,
+    /// Short SYNC intervals whose neighbourhood is printed per mode.
+    #[arg(long, default_value_t = 3)]
+    show_short: usize,
+    /// SCHED_FIFO priority of the winch emulator (the drives and load cells; default: none,
+    /// it competes with everything else on the stack's cpu).
+    #[arg(long)]
+    emulator_priority: Option<i32>,
+    /// Pin the winch emulator to this cpu instead of the stack's (the drives are other
+    /// hardware).
+    #[arg(long)]
+    emulator_cpu: Option<usize>,
 }
 
 const P_NS: u64 = 1_000_000;
+/// The ramp every cable follows, m/s: ≥ 10 counts per period with the shipped winches, so
+/// every setpoint's targets are new.
+const RAMP_M_PER_S: f64 = 1e-3;
 
 /// One quantile definition for this bench: the nearest rank, (n − 1)·q rounded.
 fn quantile(sorted: &[u64], q: f64) -> u64 {
@@ -89,6 +122,140 @@ fn place(cpu: Option<usize>, rt: Option<i32>) {
     }
 }
 
+/// Steal time so far, in clock ticks: (all cpus, the given cpu) from /proc/stat.
+fn steal_ticks(cpu: Option<usize>) -> Option<(u64, u64)> {
+    let text = std::fs::read_to_string("/proc/stat").ok()?;
+    let field = |name: &str| -> Option<u64> {
+        let line = text
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some(name))?;
+        // user nice system idle iowait irq softirq steal
+        line.split_whitespace().nth(8)?.parse().ok()
+    };
+    let all = field("cpu")?;
+    let one = match cpu {
+        Some(c) => field(&format!("cpu{c}"))?,
+        None => all,
+    };
+    Some((all, one))
+}
+
+/// Steal over an interval as a share of it: (all cpus, the stack's cpu), percent.
+struct Steal {
+    start: Option<(u64, u64)>,
+    t0: Instant,
+    cpu: Option<usize>,
+}
+
+impl Steal {
+    fn start(cpu: Option<usize>) -> Self {
+        Self {
+            start: steal_ticks(cpu),
+            t0: Instant::now(),
+            cpu,
+        }
+    }
+    fn percent(&self) -> Option<(f64, f64)> {
+        let (a0, c0) = self.start?;
+        let (a1, c1) = steal_ticks(self.cpu)?;
+        // SAFETY: sysconf has no preconditions.
+        let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+        // SAFETY: as above.
+        let ncpu = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) }.max(1) as f64;
+        let ticks = self.t0.elapsed().as_secs_f64() * hz;
+        Some((
+            100.0 * (a1 - a0) as f64 / (ticks * ncpu),
+            100.0 * (c1 - c0) as f64 / ticks,
+        ))
+    }
+}
+
+fn steal_text(s: Option<(f64, f64)>) -> String {
+    match s {
+        Some((all, cpu)) => format!("{cpu:.1} % ({all:.1} % all cpus)"),
+        None => "/proc/stat unreadable".into(),
+    }
+}
+
+/// One frame drive-io handed to the wire client.
+#[derive(Clone, Copy)]
+struct Sent {
+    at_ns: u64,
+    /// drive-io's frames on this bus not yet off the wire when it sent this one.
+    depth: u64,
+    id: u16,
+    /// An RPDO's target counts (6-byte frames).
+    value: Option<i32>,
+}
+
+/// drive-io's end of one bus: the wire client, recording every frame sent (preallocated; the
+/// log is handed to the bench when drive-io drops its buses).
+struct Recorded {
+    inner: WireBus,
+    log: Vec<Sent>,
+    index: usize,
+    out: Arc<Mutex<Vec<Vec<Sent>>>>,
+}
+
+impl Drop for Recorded {
+    fn drop(&mut self) {
+        let mut out = self.out.lock().unwrap_or_else(|p| p.into_inner());
+        out[self.index] = std::mem::take(&mut self.log);
+    }
+}
+
+impl CanBus for Recorded {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
+        let depth = self.inner.in_flight();
+        let at_ns = monotonic_ns();
+        let d = frame.data();
+        let value = (d.len() == 6).then(|| i32::from_le_bytes([d[2], d[3], d[4], d[5]]));
+        let r = self.inner.send(frame);
+        if r.is_ok() {
+            self.log.push(Sent {
+                at_ns,
+                depth,
+                id: frame.id() as u16,
+                value,
+            });
+        }
+        r
+    }
+    fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<RxFrame>, CanError> {
+        self.inner.recv_timeout(timeout)
+    }
+    fn try_recv(&mut self) -> Result<Option<RxFrame>, CanError> {
+        self.inner.try_recv()
+    }
+    fn interface(&self) -> &str {
+        self.inner.interface()
+    }
+    fn rx_errors(&self) -> u64 {
+        self.inner.rx_errors()
+    }
+    fn subscribe_bus_errors(&mut self) -> Result<(), CanError> {
+        self.inner.subscribe_bus_errors()
+    }
+    fn recv_event_timeout(&mut self, timeout: Duration) -> Result<Option<RxEvent>, CanError> {
+        self.inner.recv_event_timeout(timeout)
+    }
+    fn try_recv_event(&mut self) -> Result<Option<RxEvent>, CanError> {
+        self.inner.try_recv_event()
+    }
+    fn send_bus_error(&mut self, error: &BusErrorFrame) -> Result<(), CanError> {
+        self.inner.send_bus_error(error)
+    }
+    fn bus_errors(&self) -> u64 {
+        self.inner.bus_errors()
+    }
+    fn enable_tx_echo(&mut self) -> Result<(), CanError> {
+        self.inner.enable_tx_echo()
+    }
+    fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
+        self.inner.readiness_fd()
+    }
+}
+
 /// What the listeners saw on one bus.
 #[derive(Default)]
 struct Seen {
@@ -96,6 +263,23 @@ struct Seen {
     syncs: Vec<u64>,
     /// (drive index, target counts, end of frame) of every RPDO.
     rpdos: Vec<(usize, i32, u64)>,
+    /// (identifier, end of frame) of every frame (bus can0 only).
+    all: Vec<(u16, u64)>,
+}
+
+/// Why a SYNC interval on the wire was below 0.9 periods.
+#[derive(Default, Clone, Copy)]
+struct ShortCauses {
+    /// drive-io handed the two SYNCs to the wire less than 0.9 P apart.
+    sent_closer: usize,
+    /// Sent ≥ 0.9 P apart; the first waited on the wire behind drive-io's own frames queued
+    /// before it.
+    queued_behind_own: usize,
+    /// Sent ≥ 0.9 P apart, nothing of drive-io's queued before the first: delayed by the wire
+    /// model otherwise (a frame on the wire, or a submission the hub learned too late).
+    other: usize,
+    /// SYNC sends and SYNCs on the wire could not be paired (the listener lost some).
+    unpaired: bool,
 }
 
 struct ModeResult {
@@ -104,13 +288,76 @@ struct ModeResult {
     sync_max_us: f64,
     short_intervals: usize,
     intervals: usize,
+    causes: ShortCauses,
+    neighbourhoods: Vec<String>,
     lat: Option<[f64; 4]>,
+    written: Option<[f64; 2]>,
     measured: usize,
     missed: usize,
-    never: usize,
+    superseded: usize,
+    lost: usize,
     published: usize,
     rpdo_wire_us: f64,
+    violations: u64,
+    violation_max_ns: u64,
+    rx_dropped: u64,
+    hub_cpu_s: f64,
+    steal: Option<(f64, f64)>,
     summary: runner::RunSummary,
+}
+
+struct BaseResult {
+    spin_us: u64,
+    sd_us: f64,
+    min_us: f64,
+    max_us: f64,
+    short: usize,
+    intervals: usize,
+    late_p50_us: f64,
+    late_p99_us: f64,
+    late_max_us: f64,
+    skipped: u64,
+    steal: Option<(f64, f64)>,
+}
+
+/// sd / min / max of the intervals (µs) and how many are below 0.9 P.
+fn interval_figures(stamps: &[u64]) -> (f64, f64, f64, usize, usize) {
+    let iv: Vec<f64> = stamps
+        .windows(2)
+        .map(|w| (w[1] - w[0]) as f64 / 1000.0)
+        .collect();
+    let n = iv.len().max(1) as f64;
+    let mean = iv.iter().sum::<f64>() / n;
+    let sd = (iv.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n).sqrt();
+    let (mn, mx) = iv
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(*x), b.max(*x)));
+    let short = iv.iter().filter(|x| **x < 900.0).count();
+    (sd, mn, mx, short, iv.len())
+}
+
+/// The date and time now, UTC, `YYYY-MM-DD HH:MM`.
+fn utc_now() -> String {
+    // SAFETY: time(NULL) and gmtime_r into a tm we own.
+    unsafe {
+        let t = libc::time(std::ptr::null_mut());
+        let mut tm: libc::tm = std::mem::zeroed();
+        libc::gmtime_r(&t, &mut tm);
+        format!(
+            "{:04}-{:02}-{:02} {:02}:{:02} UTC",
+            tm.tm_year + 1900,
+            tm.tm_mon + 1,
+            tm.tm_mday,
+            tm.tm_hour,
+            tm.tm_min
+        )
+    }
+}
+
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "unreadable".into())
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -118,6 +365,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if args.load_cpu.is_some() && args.load_cpu == args.stack_cpu {
         return Err("--load-cpu and --stack-cpu must differ".into());
     }
+    let (started, load_start) = (utc_now(), loadavg());
     let load_stop = Arc::new(AtomicBool::new(false));
     let load = args.load_cpu.map(|cpu| {
         let stop = load_stop.clone();
@@ -129,17 +377,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         })
     });
+    let spin_us = u64::from(DrivesConfig::load(&args.drives)?.bus.sync_spin_us);
     let mut results = Vec::new();
     for mode in &args.modes {
         results.push((*mode, run_mode(&args, *mode)?));
+    }
+    let mut base = Vec::new();
+    if !args.no_baseline {
+        for spin in [0, spin_us] {
+            base.push(bare_timer(&args, spin));
+        }
     }
     load_stop.store(true, Ordering::Relaxed);
     if let Some(l) = load {
         let _ = l.join();
     }
+    for (mode, r) in &results {
+        println!("\n{}: the shortest SYNC intervals on can0:", mode.name());
+        for n in &r.neighbourhoods {
+            println!("{n}");
+        }
+    }
     println!(
-        "\n{} s per mode at 1 kHz on the wire model ({}, 4 x 1 Mbit/s, 2 drives + 2 load cells \
-         per bus), stack threads on cpu {:?}, {}, {}",
+        "\n{started} (load average at start {load_start}, at end {}): {} s per row at 1 kHz on \
+         the wire model ({}, 4 x 1 Mbit/s, 2 drives + 2 load cells per bus), stack threads on \
+         cpu {:?}, {}, {}",
+        loadavg(),
         args.seconds,
         args.drives.display(),
         args.stack_cpu,
@@ -148,21 +411,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             None => "no load thread".into(),
         },
         match args.rt_priority {
-            Some(p) => format!("SCHED_FIFO {p} (drive-io) / {} (publisher, hub)", p - 1),
+            Some(p) => format!(
+                "SCHED_FIFO {p} (drive-io, bare timer) / {} (publisher, hub)",
+                p - 1
+            ),
             None => "SCHED_OTHER".into(),
         }
     );
     println!(
-        "| sync_source | SYNC interval sd / min / max (µs) | intervals < 0.9 P | published → last RPDO off the wire p50 / p99 / p99.9 / max (µs) | cycle's RPDO wire time (µs) | missed cycles | never on the wire |"
+        "| design | SYNC interval sd / min / max (µs) | intervals < 0.9 P (drive-io sent closer / queued behind own frames / other) | published → last RPDO off the wire p50 / p99 / p99.9 / max (µs) | cycle's RPDO wire time (µs) | missed cycles | not on the wire: never written by drive-io / partly (queue full at send, or not seen) | steal, stack cpu (all cpus) |"
     );
-    println!("|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|");
     for (mode, r) in &results {
         let lat = match r.lat {
             Some([a, b, c, d]) => format!("{a:.1} / {b:.1} / {c:.1} / {d:.1}"),
             None => "no setpoint measured".into(),
         };
+        let c = r.causes;
+        let causes = if c.unpaired {
+            "not paired".into()
+        } else {
+            format!("{} / {} / {}", c.sent_closer, c.queued_behind_own, c.other)
+        };
         println!(
-            "| {} | {:.1} / {:.1} / {:.1} | {} of {} | {lat} | {:.0} | {} of {} | {} |",
+            "| {} | {:.1} / {:.1} / {:.1} | {} of {} ({causes}) | {lat} | {:.0} | {} of {} | {} (drive-io: {} superseded) / {} | {} |",
             mode.name(),
             r.sync_sd_us,
             r.sync_min_us,
@@ -172,14 +444,43 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.rpdo_wire_us,
             r.missed,
             r.measured,
-            r.never
+            r.superseded,
+            r.summary.superseded_setpoints,
+            r.lost,
+            steal_text(r.steal)
+        );
+    }
+    for b in &base {
+        println!(
+            "| bare 1 ms timer, {} | {:.1} / {:.1} / {:.1} | {} of {} | lateness p50 / p99 / max {:.1} / {:.1} / {:.1} | — | {} grid instants skipped | — | {} |",
+            if b.spin_us == 0 {
+                "sleep to the deadline".to_string()
+            } else {
+                format!("sleep to deadline − {} µs, spin", b.spin_us)
+            },
+            b.sd_us,
+            b.min_us,
+            b.max_us,
+            b.short,
+            b.intervals,
+            b.late_p50_us,
+            b.late_p99_us,
+            b.late_max_us,
+            b.skipped,
+            steal_text(b.steal)
         );
     }
     for (mode, r) in &results {
+        let w = match r.written {
+            Some([a, b]) => format!("{a:.1} / {b:.1} µs"),
+            None => "-".into(),
+        };
         println!(
-            "{}: {} setpoints published, {} measured; drive-io: {} cycles ({} by setpoint / {} \
-             own clock or guard), {} overruns, {} SYNCs, SYNC left drive-io at most {:.1} µs \
-             late, tx_full {}, final state {:?}",
+            "{}: {} setpoints published, {} measured, published → drive-io's last RPDO send \
+             p50 / p99 {w}; drive-io: {} cycles ({} by setpoint / {} own clock or guard), {} \
+             overruns, {} superseded setpoints, {} SYNCs, SYNC left drive-io at most {:.1} µs \
+             late, tx_full {}, final state {:?}; hub: {} model violations (worst {:.1} µs), {} \
+             frames dropped at receiving nodes, hub thread cpu {:.1} s",
             mode.name(),
             r.published,
             r.measured,
@@ -187,13 +488,68 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.summary.setpoint_cycles,
             r.summary.clock_cycles,
             r.summary.overruns,
+            r.summary.superseded_setpoints,
             r.summary.syncs,
             r.summary.sync_late_max_ns as f64 / 1000.0,
             r.summary.tx_full_drops,
-            r.summary.final_state
+            r.summary.final_state,
+            r.violations,
+            r.violation_max_ns as f64 / 1000.0,
+            r.rx_dropped,
+            r.hub_cpu_s
         );
     }
     Ok(())
+}
+
+/// A bare absolute-deadline 1 ms loop where drive-io runs: sleep to the deadline (`spin_us`
+/// 0) or to the deadline − `spin_us` and spin. A deadline less than 0.9 P after the last
+/// wake-up is skipped (drive-io's catch-up rule).
+fn bare_timer(args: &Args, spin_us: u64) -> BaseResult {
+    let (secs, cpu, rt) = (args.seconds, args.stack_cpu, args.rt_priority);
+    let spin = spin_us * 1000;
+    let h = std::thread::spawn(move || {
+        place(cpu, rt);
+        let _ = crs_rt::set_timer_slack(1);
+        let steal = Steal::start(cpu);
+        let n = (secs * 1000) as usize;
+        let (mut wakes, mut late) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        let mut t = monotonic_ns() + 2 * P_NS;
+        let mut skipped = 0u64;
+        for _ in 0..n {
+            crs_rt::sleep_until(t - spin);
+            let mut w = monotonic_ns();
+            while w < t {
+                std::hint::spin_loop();
+                w = monotonic_ns();
+            }
+            wakes.push(w);
+            late.push(w - t);
+            t += P_NS;
+            while t < w + P_NS - P_NS / 10 {
+                t += P_NS;
+                skipped += 1;
+            }
+        }
+        (wakes, late, skipped, steal.percent())
+    });
+    let (wakes, mut late, skipped, steal) = h.join().expect("bare timer thread");
+    late.sort_unstable();
+    let (sd_us, min_us, max_us, short, intervals) = interval_figures(&wakes);
+    let us = |v: u64| v as f64 / 1000.0;
+    BaseResult {
+        spin_us,
+        sd_us,
+        min_us,
+        max_us,
+        short,
+        intervals,
+        late_p50_us: us(quantile(&late, 0.5)),
+        late_p99_us: us(quantile(&late, 0.99)),
+        late_max_us: us(*late.last().unwrap_or(&0)),
+        skipped,
+        steal,
+    }
 }
 
 fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::error::Error>> {
@@ -221,8 +577,22 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     let open = || -> Result<Vec<Box<dyn can_transport::CanBus>>, can_transport::CanError> {
         specs.iter().map(can_transport::open).collect()
     };
-    let (emu_buses, dio_buses, mut listeners) = (open()?, open()?, open()?);
-    // The cycle's RPDOs on one bus, exact bits (what the wire takes without a blocking frame).
+    let (emu_buses, mut listeners) = (open()?, open()?);
+    // drive-io's buses record what it sends (about 4 frames per bus and period).
+    let n_bus = transports.len();
+    let sent_logs: Arc<Mutex<Vec<Vec<Sent>>>> = Arc::new(Mutex::new(vec![Vec::new(); n_bus]));
+    let mut dio_buses = Vec::with_capacity(n_bus);
+    for (index, t) in transports.iter().enumerate() {
+        let path = t
+            .strip_prefix("wire:")
+            .ok_or("hub transport is not wire:")?;
+        dio_buses.push(Recorded {
+            inner: WireBus::connect(std::path::Path::new(path))?,
+            log: Vec::with_capacity(5000 * args.seconds as usize + 20_000),
+            index,
+            out: sent_logs.clone(),
+        });
+    }
     let m = cfg.winches.len();
     let prefix = format!("bench/{}/{}/", std::process::id(), mode.name());
     let control = EmulatorControl::new();
@@ -231,8 +601,9 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     let cpu = args.stack_cpu;
     let rt = args.rt_priority;
     let c2 = control.clone();
+    let (emu_rt, emu_cpu) = (args.emulator_priority, args.emulator_cpu.or(cpu));
     let emu = std::thread::spawn(move || {
-        place(cpu, None);
+        place(emu_cpu, emu_rt);
         emulator::run(emu_buses, &ecfg, &c2)
     });
     let stop = Arc::new(AtomicBool::new(false));
@@ -266,6 +637,9 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
             match can_transport::recv_any(&mut listeners, Duration::from_millis(5), &mut cursor) {
                 Ok(Some((b, can_transport::RxEvent::Frame(rx)))) => {
                     let id = rx.frame.id() as u16;
+                    if b == 0 {
+                        local[b].all.push((id, rx.rx_monotonic_ns));
+                    }
                     if id == 0x080 {
                         local[b].syncs.push(rx.rx_monotonic_ns);
                     } else if let Some(i) = drive_of.iter().position(|d| *d == (b, id))
@@ -306,6 +680,7 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     let secs = args.seconds;
     let (lead, phase) = (args.lead_us * 1000, args.publish_phase_us * 1000);
     let p3 = prefix.clone();
+    let steal = Steal::start(cpu);
     let publisher = std::thread::spawn(move || -> Result<Vec<(u64, [i32; MAX_CABLES])>, String> {
         place(cpu, rt.map(|p| p - 1));
         let _ = crs_rt::set_timer_slack(1);
@@ -346,8 +721,8 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
             };
             let mut counts = [0i32; MAX_CABLES];
             for (i, w) in winches.iter().enumerate() {
-                // A smooth motion whose every setpoint differs (1 µm per ms at least).
-                let l = init[i] + 0.05 * (1.0 - (t * 0.5).cos()) + 1e-6 * t;
+                // A slow ramp: new target counts on every drive in every setpoint.
+                let l = init[i] + RAMP_M_PER_S * t;
                 sp.cable_length_m[i] = l;
                 counts[i] = w.length_to_counts(l).unwrap_or(0);
             }
@@ -360,68 +735,197 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
         Ok(out)
     });
     let published = publisher.join().map_err(|_| "publisher panicked")??;
+    let steal = steal.percent();
     std::thread::sleep(Duration::from_millis(20));
+    let listen_stop_ns = monotonic_ns();
     listen_stop.store(true, Ordering::Release);
     listener.join().map_err(|_| "listener panicked")?;
     stop.store(true, Ordering::Release);
     let summary = dio.join().map_err(|_| "drive-io panicked")??;
     control.stop.store(true, Ordering::Release);
     emu.join().map_err(|_| "emulator panicked")??;
-    let _stats = hub.stop()?;
+    let stats = hub.stop()?;
     let _ = std::fs::remove_dir_all(&dir);
     let seen = std::mem::take(&mut *seen.lock().unwrap_or_else(|p| p.into_inner()));
+    let sent = std::mem::take(&mut *sent_logs.lock().unwrap_or_else(|p| p.into_inner()));
+    // The hub's figures: model violations, frames a receiving node's socket refused.
+    let stats: serde_json::Value = serde_json::from_str(&stats)?;
+    let (mut violations, mut violation_max_ns, mut rx_dropped) = (0u64, 0u64, 0u64);
+    for b in stats["buses"].as_array().into_iter().flatten() {
+        violations += b["violations"].as_u64().unwrap_or(0);
+        violation_max_ns = violation_max_ns.max(b["violation_max_ns"].as_u64().unwrap_or(0));
+        for n in b["nodes"].as_array().into_iter().flatten() {
+            rx_dropped += n["rx_dropped"].as_u64().unwrap_or(0);
+        }
+    }
 
-    // SYNC intervals on can0.
+    // Every setpoint's targets must be new on every drive, or the matching is ambiguous.
+    for i in 0..m {
+        let mut values: Vec<i32> = published.iter().map(|(_, c)| c[i]).collect();
+        values.sort_unstable();
+        if values.windows(2).any(|w| w[0] == w[1]) {
+            return Err(format!("drive {i}: two setpoints with the same target counts").into());
+        }
+    }
+
+    // SYNC intervals on can0, and why the short ones are short.
     let s0 = &seen[0].syncs;
-    let iv: Vec<f64> = s0
-        .windows(2)
-        .map(|w| (w[1] - w[0]) as f64 / 1000.0)
-        .collect();
-    let n = iv.len().max(1) as f64;
-    let mean = iv.iter().sum::<f64>() / n;
-    let sd = (iv.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n).sqrt();
-    let (mn, mx) = iv
+    let (sync_sd_us, sync_min_us, sync_max_us, short_intervals, intervals) = interval_figures(s0);
+    // drive-io's n-th SYNC on can0 is the n-th on the wire (one FIFO queue, one SYNC per
+    // instant) if the listener lost none; drive-io sends a few more after the listener stopped
+    // (every SYNC sent 10 ms before that must have been seen).
+    let mut sync_sends: Vec<&Sent> = sent[0].iter().filter(|f| f.id == 0x080).collect();
+    let surely_seen = sync_sends
         .iter()
-        .fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(*x), b.max(*x)));
-    let short = iv.iter().filter(|x| **x < 900.0).count();
-    // Per setpoint: when was each drive's RPDO carrying it off the wire, and the first SYNC
-    // after its publication on that drive's bus.
-    // The first time each (drive, target) was on the wire: every setpoint's targets are new.
-    let first: Vec<std::collections::HashMap<(usize, i32), u64>> = seen
+        .filter(|f| f.at_ns + 10 * P_NS < listen_stop_ns)
+        .count();
+    let paired = surely_seen <= s0.len()
+        && sync_sends.len() >= s0.len()
+        && sync_sends.iter().zip(s0).all(|(a, eof)| *eof > a.at_ns);
+    sync_sends.truncate(s0.len());
+    let mut causes = ShortCauses::default();
+    let mut neighbourhoods = Vec::new();
+    if paired {
+        let mut short: Vec<(u64, usize)> = s0
+            .windows(2)
+            .enumerate()
+            .filter(|(_, w)| w[1] - w[0] < P_NS - P_NS / 10)
+            .map(|(k, w)| (w[1] - w[0], k + 1))
+            .collect();
+        for &(_, k) in &short {
+            let (a, b) = (sync_sends[k - 1], sync_sends[k]);
+            if b.at_ns - a.at_ns < P_NS - P_NS / 10 {
+                causes.sent_closer += 1;
+            } else if a.depth > 0 {
+                causes.queued_behind_own += 1;
+            } else {
+                causes.other += 1;
+            }
+        }
+        short.sort_unstable();
+        let us = |v: i64| v as f64 / 1000.0;
+        for &(iv, k) in short.iter().take(args.show_short) {
+            let base = sync_sends[k.saturating_sub(2)].at_ns;
+            let mut text = format!(
+                "  interval {:.1} µs on the wire ({:.1} µs between drive-io's sends); times from \
+                 the send of SYNC n−2, µs:",
+                iv as f64 / 1000.0,
+                us((sync_sends[k].at_ns - sync_sends[k - 1].at_ns) as i64)
+            );
+            // drive-io's frames on can0 from SYNC n−2 to SYNC n, SYNCs with their end of frame.
+            for f in sent[0]
+                .iter()
+                .filter(|f| f.at_ns >= base && f.at_ns <= sync_sends[k].at_ns)
+            {
+                let eof = if f.id == 0x080 {
+                    let j = sync_sends.partition_point(|s| s.at_ns < f.at_ns);
+                    format!(
+                        ", off the wire {:.1} (queue + wire {:.1})",
+                        us((s0[j] - base) as i64),
+                        us((s0[j] - f.at_ns) as i64)
+                    )
+                } else {
+                    String::new()
+                };
+                text.push_str(&format!(
+                    "\n    sent {:8.1}  id {:#05x}  drive-io's frames not yet off the wire {}{eof}",
+                    us((f.at_ns - base) as i64),
+                    f.id,
+                    f.depth
+                ));
+            }
+            // What else was on the wire while SYNC n−1 waited.
+            let (from, to) = (sync_sends[k - 1].at_ns, s0[k - 1]);
+            let mut by_kind = [0usize; 5];
+            for (id, _) in seen[0].all.iter().filter(|(_, e)| *e > from && *e <= to) {
+                by_kind[match id {
+                    0x080 => 0,
+                    0x181..=0x1FF => 1,
+                    0x201..=0x27F => 2,
+                    0x281..=0x2FF | 0x381..=0x3FF | 0x481..=0x4FF => 3,
+                    _ => 4,
+                }] += 1;
+            }
+            text.push_str(&format!(
+                "\n    off the wire while SYNC n−1 waited ({:.1} µs): {} SYNC, {} TPDO1, {} RPDO, \
+                 {} TPDO2-4, {} other (heartbeats, EMCY, SDO)",
+                us((to - from) as i64),
+                by_kind[0],
+                by_kind[1],
+                by_kind[2],
+                by_kind[3],
+                by_kind[4]
+            ));
+            neighbourhoods.push(text);
+        }
+    } else {
+        causes.unpaired = true;
+        neighbourhoods.push(format!(
+            "  SYNCs on can0: {} sent by drive-io, {} seen by the listener: not paired",
+            sync_sends.len(),
+            s0.len()
+        ));
+    }
+
+    // Per setpoint: when drive-io wrote each drive's RPDO carrying it, when that RPDO was off
+    // the wire, and the first SYNC after its publication on that drive's bus. Targets are
+    // unique per drive (checked above), so the first occurrence is the setpoint's.
+    let first_seen: Vec<HashMap<(usize, i32), u64>> = seen
         .iter()
         .map(|s| {
-            let mut h = std::collections::HashMap::with_capacity(s.rpdos.len());
+            let mut h = HashMap::with_capacity(s.rpdos.len());
             for (d, t, at) in &s.rpdos {
                 h.entry((*d, *t)).or_insert(*at);
             }
             h
         })
         .collect();
+    let first_sent: Vec<HashMap<(u16, i32), u64>> = sent
+        .iter()
+        .map(|log| {
+            let mut h = HashMap::with_capacity(log.len());
+            for f in log {
+                if let Some(v) = f.value {
+                    h.entry((f.id, v)).or_insert(f.at_ns);
+                }
+            }
+            h
+        })
+        .collect();
     let mut lat = Vec::new();
-    let (mut missed, mut never) = (0, 0);
+    let mut written = Vec::new();
+    let (mut missed, mut superseded, mut lost) = (0, 0, 0);
     for (t_pub, counts) in &published {
         let mut last: Option<u64> = None;
+        let mut last_sent: Option<u64> = None;
         let mut late = false;
-        let mut complete = true;
+        let (mut on_wire, mut was_sent) = (0, 0);
         for (i, c) in counts.iter().enumerate().take(m) {
-            let b = drive_of[i].0;
-            let Some(&off) = first[b].get(&(i, *c)).filter(|at| **at >= *t_pub) else {
-                complete = false;
+            let (b, id) = drive_of[i];
+            if let Some(&w) = first_sent[b].get(&(id, *c)) {
+                was_sent += 1;
+                last_sent = Some(last_sent.map_or(w, |l: u64| l.max(w)));
+            }
+            let Some(&off) = first_seen[b].get(&(i, *c)) else {
                 continue;
             };
+            on_wire += 1;
             let k = seen[b].syncs.partition_point(|s| *s <= *t_pub);
             late |= seen[b].syncs.get(k).is_none_or(|s| off > *s);
             last = Some(last.map_or(off, |l: u64| l.max(off)));
         }
-        match (complete, last) {
-            (true, Some(l)) => {
-                lat.push(l - t_pub);
-                missed += usize::from(late);
-            }
-            _ => never += 1,
+        if was_sent == 0 {
+            superseded += 1;
+        } else if on_wire < m || was_sent < m {
+            lost += 1;
+        } else if let (Some(l), Some(w)) = (last, last_sent) {
+            lat.push(l.saturating_sub(*t_pub));
+            written.push(w.saturating_sub(*t_pub));
+            missed += usize::from(late);
         }
     }
     lat.sort_unstable();
+    written.sort_unstable();
     let us = |v: u64| v as f64 / 1000.0;
     // RPDO wire time of one bus's cycle: its two RPDOs' exact lengths.
     let rpdo_wire_us = 2.0
@@ -431,11 +935,13 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
         )?)
         .total() as f64;
     Ok(ModeResult {
-        sync_sd_us: sd,
-        sync_min_us: mn,
-        sync_max_us: mx,
-        short_intervals: short,
-        intervals: iv.len(),
+        sync_sd_us,
+        sync_min_us,
+        sync_max_us,
+        short_intervals,
+        intervals,
+        causes,
+        neighbourhoods,
         lat: (!lat.is_empty()).then(|| {
             [
                 us(quantile(&lat, 0.5)),
@@ -444,11 +950,19 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
                 us(*lat.last().unwrap_or(&0)),
             ]
         }),
+        written: (!written.is_empty())
+            .then(|| [us(quantile(&written, 0.5)), us(quantile(&written, 0.99))]),
         measured: lat.len(),
         missed,
-        never,
+        superseded,
+        lost,
         published: published.len(),
         rpdo_wire_us,
+        violations,
+        violation_max_ns,
+        rx_dropped,
+        hub_cpu_s: stats["hub"]["cpu_s"].as_f64().unwrap_or(f64::NAN),
+        steal,
         summary,
     })
 }
