@@ -141,7 +141,8 @@ pub struct Status {
     pub stop_requests: u64,
 }
 
-fn process_name(code: u32) -> &'static str {
+/// A process id's name.
+pub fn process_name(code: u32) -> &'static str {
     match code {
         x if x == ProcessId::MotionCore as u32 => "motion-core",
         x if x == ProcessId::DriveIo as u32 => "drive-io",
@@ -166,7 +167,8 @@ pub fn motion_state_name(code: u32) -> String {
     }
 }
 
-fn monitor_state_name(code: u32) -> String {
+/// The safety monitor's state code in words.
+pub fn monitor_state_name(code: u32) -> String {
     use crs_ipc::monitor_state::*;
     match code {
         ARMED => "armed".into(),
@@ -176,7 +178,8 @@ fn monitor_state_name(code: u32) -> String {
     }
 }
 
-fn bus_state_name(code: u32) -> String {
+/// drive-io's bus state code in words.
+pub fn bus_state_name(code: u32) -> String {
     BusState::from_u32(code).map_or(format!("state {code}"), |b| format!("{b:?}"))
 }
 
@@ -222,8 +225,9 @@ pub fn estop_in_words(e: &StateEvent) -> Option<String> {
     describe_event(e).map(|(_, cause)| format!("{}: {cause}", process_name(e.source)))
 }
 
-/// The trip-log text of a state event, or None for routine state changes.
-fn describe_event(e: &StateEvent) -> Option<(String, String)> {
+/// The trip-log text of a state event (what happened, its cause in words), or None for
+/// routine state changes.
+pub fn describe_event(e: &StateEvent) -> Option<(String, String)> {
     let cause_name = |c: u32| Cause::from_code(c).map_or(format!("cause {c}"), |c| c.to_string());
     if e.kind == EventKind::EStop as u32 {
         let cause = if e.source == ProcessId::SafetyMonitor as u32 {

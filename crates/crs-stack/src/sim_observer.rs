@@ -1,5 +1,5 @@
 //! What `crs sim` runs next to the stack ([`RunObserver`]): the operator console while the run
-//! lasts (`--console ADDR`) and the run's plots (`<out>/*.svg` + index.html, [`run_plots`]).
+//! lasts (`--console ADDR`) and the run's report (`<out>/index.html` + its plots, [`run_plots`]).
 
 use crate::console_setup::console_config;
 use crate::run_plots::{self, RunRecord};
@@ -80,10 +80,7 @@ impl RunObserver for SimObserver {
         let Some(plots) = self.plots.as_ref() else {
             return;
         };
-        let written = serde_json::to_value(summary)
-            .map_err(|e| e.to_string())
-            .and_then(|v| run_plots::write(out, plots, &v).map_err(|e| e.to_string()));
-        match written {
+        match run_plots::write(out, plots, summary) {
             Ok(index) => println!("plots written to {}", index.display()),
             Err(e) => println!("plots NOT written: {e}"),
         }
