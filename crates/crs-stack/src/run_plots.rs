@@ -884,7 +884,7 @@ fn summary_table(s: &Summary) -> String {
     );
     t.row(
         "f_min_n",
-        "limits f_min … f_max",
+        "force limits, lowest … highest allowed",
         format!("{} … {}", num(s.f_min_n, 0, "–"), num(s.f_max_n, 0, "–")),
         "N",
     );

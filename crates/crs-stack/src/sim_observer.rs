@@ -40,7 +40,7 @@ impl SimObserver {
 impl RunObserver for SimObserver {
     fn started(&mut self, run: &RunStart<'_>) -> Result<(), crate::sim_run::ObserverError> {
         if let Some(req) = &self.console_request {
-            let cfg = console_config(
+            let mut cfg = console_config(
                 req.addr,
                 req.token.clone(),
                 run.prefix,
@@ -48,6 +48,15 @@ impl RunObserver for SimObserver {
                 run.platform,
                 run.waypoints,
             );
+            // The START RIDE button when the ride waits for an operator.
+            if let Some(sock) = run.control {
+                cfg.rides = crate::console_setup::ride_setup(
+                    run.daemon,
+                    run.platform,
+                    Some(sock.to_path_buf()),
+                    run.waypoints,
+                )?;
+            }
             let h = crs_console::spawn(cfg)?;
             println!("  operator console: http://{}/", h.addr);
             self.console = Some(h);

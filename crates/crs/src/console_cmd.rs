@@ -44,6 +44,11 @@ pub struct SimConsoleArgs {
     /// Token for a console on a non-loopback address (also CRS_CONSOLE_TOKEN).
     #[arg(long, env = "CRS_CONSOLE_TOKEN", hide_env_values = true)]
     pub console_token: Option<String>,
+    /// The ride waits for an operator: motion-core comes up idle and holding with its control
+    /// socket (<out>/control.sock) and the ride starts from the console's START RIDE button
+    /// once the pre-ride checks pass (or `crs ride start FILE --socket <out>/control.sock`).
+    #[arg(long, requires = "console")]
+    pub start_from_console: bool,
 }
 
 impl SimConsoleArgs {
