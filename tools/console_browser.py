@@ -271,8 +271,15 @@ def start_ride(url, outdir):
         b.wait("the stack running", lambda: b.text("stack-state") == "stack running", 90)
         # Every pre-ride check passes once the drives are up, the monitor is armed and
         # motion-core idles at home: only then is the button enabled.
-        b.wait("every pre-ride check to pass",
-               lambda: len(checks(b)) == 5 and all(c[1] for c in checks(b)), 120)
+        seen = {}
+        def all_pass():
+            seen["c"] = checks(b)
+            return len(seen["c"]) == 5 and all(c[1] for c in seen["c"])
+        t0 = time.time()
+        while not all_pass():
+            if time.time() - t0 > 120:
+                fail(f"the pre-ride checks never all passed in 120 s: {seen['c']}")
+            time.sleep(0.2)
         b.wait("START RIDE enabled", lambda: not b.js("document.getElementById('start-btn').disabled"), 10)
         print("  pre-ride checks: " + "; ".join(f"{n}: {seen}" for n, _, seen in checks(b)), flush=True)
         print(f"  START RIDE enabled ({b.text('ride-loaded')})", flush=True)
