@@ -2,9 +2,16 @@
 # The operator console in a real browser (headless Chromium over the DevTools protocol):
 #  1. `crs console` with no stack on its prefix: the page says the stack is not running;
 #  2. `crs sim --console`: the page keeps receiving updates (50 in order) with live values, a screenshot is kept
-#     (out/console/screenshot.png), the STOP button e-stops the running stack (motion-core
-#     latches, the drives quick-stop, the trip log names the operator), then `crs sim` is
-#     interrupted and its summary must count the e-stop.
+#     (out/console/screenshot.png), START RIDE is disabled (the ride started at launch), the STOP
+#     button e-stops the running stack (motion-core latches, the drives quick-stop, the trip log
+#     names the operator, newest first; /api/trips oldest first), STOP stays enabled; then the
+#     browser check interrupts `crs sim` and the page must say DISCONNECTED with every badge grey
+#     ("unknown"); the summary must count the e-stop and say the run did not complete;
+#  3. the run report of 2 (out/console/sim/index.html) in the browser: named fields with units,
+#     the verdict in words, events in words, the tracking-error plot in mm, the ride path linked,
+#     no plot text on its data lines, every link and image resolves;
+#  4. `crs sim --console --start-from-console`: START RIDE is enabled only once every pre-ride
+#     check passes, a real click starts the ride, START is disabled while riding, STOP stops it.
 # Uses the static release binaries the HIL scripts build (same command: no rebuild after them).
 # Env: CONSOLE_BIN_DIR to use other binaries.
 set -euo pipefail
@@ -17,7 +24,8 @@ python3 -c "import websocket" 2>/dev/null || pip install -q websocket-client >/d
 if [ -z "${CONSOLE_BIN_DIR:-}" ]; then
   TRIPLE=x86_64-unknown-linux-gnu
   RUSTFLAGS="-C target-feature=+crt-static" cargo build --profile release --target "$TRIPLE" \
-    --workspace --bin crs --bin motion-core --bin drive-io --bin sim-plant --bin safety-monitor
+    --workspace --bin crs --bin motion-core --bin drive-io --bin sim-plant --bin safety-monitor \
+    --bin can-wire
   CONSOLE_BIN_DIR=${CARGO_TARGET_DIR:-target}/$TRIPLE/release
 fi
 BIN=$CONSOLE_BIN_DIR
@@ -48,20 +56,33 @@ P2=$(port)
 SIM=$!
 PIDS+=($SIM)
 for _ in $(seq 300); do curl -sf "http://127.0.0.1:$P2/api/status" >/dev/null && break; sleep 0.1; done
-python3 tools/console_browser.py live-stop "http://127.0.0.1:$P2/" "$OUT"
-curl -sf "http://127.0.0.1:$P2/api/trips" > "$OUT/trips.json"
-python3 - "$OUT/trips.json" <<'PY'
-import json, sys
-t = json.load(open(sys.argv[1]))
-assert any(e["source"] == "operator" and e["kind"] == "E-STOP" for e in t), t
-print(f"  /api/trips: {len(t)} entries, the operator's e-stop among them")
-PY
-kill -INT "$SIM"
+python3 tools/console_browser.py live-stop "http://127.0.0.1:$P2/" "$OUT" "$SIM"
 wait "$SIM" && { echo "crs sim should report the interruption"; exit 1; } || true
 python3 - "$OUT/sim/summary.json" <<'PY'
 import json, sys
 s = json.load(open(sys.argv[1]))
 assert s["estops"] >= 1, s
-print(f"  crs sim summary: {s['estops']} e-stop(s), {s['setpoints']} setpoints")
+assert s["completed"] is False, s
+print(f"  crs sim summary: {s['estops']} e-stop(s), completed false ({s['stopped_by']}), {s['setpoints']} setpoints")
+PY
+
+echo "-- the run report of that run"
+python3 tools/console_browser.py report "$OUT/sim"
+
+echo "-- a ride started from the console (crs sim --start-from-console)"
+P3=$(port)
+"$BIN/crs" sim --bin-dir "$BIN" --console "127.0.0.1:$P3" --start-from-console --dwell-s 2 --hold-s 60 \
+  --timeout-s 240 --timing relaxed --out "$OUT/sim-start" >"$OUT/crs-sim-start.log" 2>&1 &
+SIM2=$!
+PIDS+=($SIM2)
+for _ in $(seq 300); do curl -sf "http://127.0.0.1:$P3/api/status" >/dev/null && break; sleep 0.1; done
+python3 tools/console_browser.py start-ride "http://127.0.0.1:$P3/" "$OUT"
+kill -INT "$SIM2"
+wait "$SIM2" && { echo "crs sim should report the stop"; exit 1; } || true
+python3 - "$OUT/sim-start/summary.json" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+assert s["estops"] >= 1 and s["completed"] is False, s
+print(f"  crs sim summary: started from the console, stopped by {s['stopped_by']}")
 PY
 echo "CONSOLE-TEST: PASS"

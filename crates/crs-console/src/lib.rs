@@ -7,18 +7,26 @@
 //!   the other way through a channel to the same thread, which owns the only publisher.
 //! * The web side ([`server`]) is axum on tokio: one embedded page (HTML + JS, no build step),
 //!   live updates as server-sent events at the poller's 25 Hz, `GET /api/status`,
-//!   `GET /api/trips`, `POST /api/stop`.
+//!   `GET /api/trips` (the trip log in time order, oldest first), `POST /api/stop`,
+//!   `POST /api/ride/start`.
 //! * Stop publishes an e-stop `StateEvent` (source Operator) and the wake-up: motion-core
 //!   latches E-STOPPED and holds, drive-io quick-stops the drives. There is no reset here:
-//!   reset stays an operator action at the monitor (`safety-monitor reset`).
+//!   reset stays an operator action at the monitor (`safety-monitor reset`). STOP is always
+//!   enabled.
+//! * Start ([`ride`]): with motion-core's control socket and a verified ride, the start button
+//!   sends the ride as `crs ride start` does — only while the pre-ride checks pass (stack
+//!   running, motion-core idle and holding, the monitor armed, no latched trip, a ride
+//!   loaded), checked again by the server when the request arrives.
 //! * Binds 127.0.0.1 by default; any other address needs a token, checked on every request.
 
 pub mod poller;
+pub mod ride;
 pub mod server;
 pub mod status;
 
 use std::net::SocketAddr;
 
+pub use ride::{LoadedRide, RideSetup};
 pub use status::{PlanView, PlatformView, Status, TripEntry};
 
 /// Errors of the console.
@@ -56,6 +64,8 @@ pub struct ConsoleConfig {
     /// The hard loop's CPU (motion-core's `[realtime] cpu`): every console thread keeps off it
     /// and runs at nice 10, so web clients compete with nothing on the motion CPU.
     pub avoid_cpu: Option<usize>,
+    /// The start button's control socket and ride (None: rides start from `crs ride` only).
+    pub rides: Option<RideSetup>,
 }
 
 /// Makes the calling thread a background thread: nice 10 and, when given and other CPUs exist,

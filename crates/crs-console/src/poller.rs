@@ -2,6 +2,7 @@
 //! [`POLL_HZ`], publishes a [`Status`] into a `watch` channel and sends the stop requests.
 
 use crate::ConsoleError;
+use crate::ride::{self, ControlSeen, LoadedRide, RideSetup};
 use crate::status::{Collector, PlanView, PlatformView, Status, TripEntry};
 use crs_ipc::{
     DriveFeedback, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlantTruth,
@@ -30,6 +31,9 @@ pub enum Request {
     Stop(oneshot::Sender<Result<u64, crs_ipc::IpcError>>),
     /// The trip log.
     Trips(oneshot::Sender<Vec<TripEntry>>),
+    /// The start button: where to send which ride if every pre-ride check passes now, else the
+    /// checks that fail.
+    StartRide(oneshot::Sender<Result<(std::path::PathBuf, LoadedRide), Vec<String>>>),
 }
 
 /// The running poller.
@@ -40,6 +44,7 @@ pub struct Poller {
     pub requests: mpsc::Sender<Request>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
+    control_watch: Option<std::thread::JoinHandle<()>>,
 }
 
 impl Poller {
@@ -55,21 +60,36 @@ impl Drop for Poller {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
+        if let Some(t) = self.control_watch.take() {
+            let _ = t.join();
+        }
     }
 }
 
-/// Opens the subscribers (and the stop publisher) on `prefix` and starts the thread.
+/// Opens the subscribers (and the stop publisher) on `prefix` and starts the thread; with
+/// `rides`, a second thread asks motion-core's control socket what the loop does.
 pub fn start(
     prefix: &str,
     platform: Option<PlatformView>,
     plan: Option<PlanView>,
     avoid_cpu: Option<usize>,
+    rides: Option<RideSetup>,
 ) -> Result<Poller, ConsoleError> {
     let (ready_tx, ready_rx) = mpsc::channel::<Result<(), ConsoleError>>();
-    let mut collector = Collector::new(prefix, platform, plan);
+    let stop = Arc::new(AtomicBool::new(false));
+    let control_seen = Arc::new(std::sync::Mutex::new(ControlSeen::default()));
+    let control_watch = match &rides {
+        Some(r) => Some(ride::spawn_control_watch(
+            r.socket.clone(),
+            stop.clone(),
+            control_seen.clone(),
+            avoid_cpu,
+        )?),
+        None => None,
+    };
+    let mut collector = Collector::new(prefix, platform, plan).with_rides(rides);
     let (status_tx, status_rx) = watch::channel(to_json(&collector.status()));
     let (req_tx, req_rx) = mpsc::channel::<Request>();
-    let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
     let prefix = prefix.to_string();
     let thread = std::thread::Builder::new()
@@ -126,6 +146,13 @@ pub fn start(
                         let _ = answer.send(collector.trips());
                         continue;
                     }
+                    Ok(Request::StartRide(answer)) => {
+                        if let Ok(seen) = control_seen.lock() {
+                            collector.control(&seen);
+                        }
+                        let _ = answer.send(collector.start_check());
+                        continue;
+                    }
                     Err(mpsc::RecvTimeoutError::Timeout) => {}
                     Err(mpsc::RecvTimeoutError::Disconnected) => break,
                 }
@@ -142,6 +169,9 @@ pub fn start(
                 let _ = stats.drain(|s| collector.loop_stats(s));
                 let _ = hb.drain(|h| collector.heartbeat(h));
                 let _ = ev.drain(|e| collector.event(e));
+                if let Ok(seen) = control_seen.lock() {
+                    collector.control(&seen);
+                }
                 if status_tx.send(to_json(&collector.status())).is_err() {
                     break;
                 }
@@ -153,6 +183,7 @@ pub fn start(
             requests: req_tx,
             stop,
             thread: Some(thread),
+            control_watch,
         }),
         Ok(Err(e)) => Err(e),
         Err(_) => Err(ConsoleError::PollerGone),

@@ -95,6 +95,62 @@ async fn api_stop(State(st): State<Arc<AppState>>) -> Response {
     }
 }
 
+/// The start button: the ride goes to motion-core's control socket (as `crs ride start`)
+/// only if every pre-ride check passes at the moment the request arrives.
+async fn api_ride_start(State(st): State<Arc<AppState>>) -> Response {
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    let sent = st
+        .poller
+        .lock()
+        .map(|p| p.send(Request::StartRide(tx)).is_ok())
+        .unwrap_or(false);
+    let (socket, ride) = match (sent, rx.await) {
+        (true, Ok(Ok(go))) => go,
+        (true, Ok(Err(failed))) => {
+            return (
+                StatusCode::CONFLICT,
+                format!(
+                    "ride NOT started: pre-ride checks fail: {}\n",
+                    failed.join("; ")
+                ),
+            )
+                .into_response();
+        }
+        _ => return (StatusCode::SERVICE_UNAVAILABLE, "iceoryx2 poller stopped\n").into_response(),
+    };
+    let name = ride.name().to_string();
+    let req = ride.start_request();
+    let sent = tokio::task::spawn_blocking(move || {
+        motion_core::daemon::ride_socket::request(&socket, &req)
+    })
+    .await;
+    use motion_core::daemon::ride_socket::ClientError;
+    match sent {
+        Ok(Ok(msg)) => {
+            tracing::warn!(ride = %name, "ride started from the operator console: {msg}");
+            axum::Json(serde_json::json!({ "ride": "started", "message": msg })).into_response()
+        }
+        Ok(Err(ClientError::Refused(why))) => {
+            tracing::warn!(ride = %name, "ride from the operator console refused: {why}");
+            (
+                StatusCode::CONFLICT,
+                format!("ride refused by motion-core: {why}\n"),
+            )
+                .into_response()
+        }
+        Ok(Err(e)) => (
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!("ride NOT started: {e}\n"),
+        )
+            .into_response(),
+        Err(_) => (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "ride NOT started: the request's task failed\n",
+        )
+            .into_response(),
+    }
+}
+
 async fn api_events(
     State(st): State<Arc<AppState>>,
 ) -> Sse<impl tokio_stream::Stream<Item = Result<Event, Infallible>>> {
@@ -118,6 +174,7 @@ pub fn router(p: &Poller, token: Option<String>) -> Router {
         .route("/api/trips", get(api_trips))
         .route("/api/events", get(api_events))
         .route("/api/stop", post(api_stop))
+        .route("/api/ride/start", post(api_ride_start))
         .layer(middleware::from_fn_with_state(st.clone(), check_token))
         .with_state(st)
 }
@@ -134,6 +191,7 @@ pub async fn serve(
         cfg.platform.clone(),
         cfg.plan.clone(),
         cfg.avoid_cpu,
+        cfg.rides.clone(),
     )?;
     let app = router(&poller, cfg.token.clone());
     let listener = tokio::net::TcpListener::bind(cfg.addr)

@@ -1,6 +1,7 @@
 //! What the console shows: the JSON status the page and `GET /api/status` receive, and the trip
 //! log of `GET /api/trips`, assembled from the iceoryx2 samples by [`Collector`].
 
+use crate::ride::{ControlSeen, LoadedRide, RideSetup};
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, Heartbeat, JointSetpoint, LoopStatsSample, MAX_CABLES,
     PlantTruth, ProcessId, StateEvent, motion_state,
@@ -9,12 +10,17 @@ use safety_monitor::Cause;
 use safety_monitor::daemon::{RESET_ACCEPTED, RESET_NOT_READY, RESET_NOT_TRIPPED, RESET_REFUSED};
 use serde::Serialize;
 use std::collections::VecDeque;
+use std::path::PathBuf;
 
 /// A process counts as alive while its last heartbeat is younger than this (s). The slowest
 /// heartbeat of the stack is the monitor's 15 ms cycle; 1 s leaves room for a stalled host.
 pub const ALIVE_S: f64 = 1.0;
 /// Entries kept in the trip log.
 pub const TRIP_LOG_LEN: usize = 200;
+/// An answer of motion-core's control socket older than this (s) says nothing about the loop.
+pub const CONTROL_FRESH_S: f64 = 2.0;
+/// motion-core's control-socket phase in which a ride may start.
+pub const IDLE_PHASE: &str = "idle, holding";
 
 /// Static facts about the platform the page draws (from the operator TOML).
 #[derive(Debug, Clone, Serialize, Default)]
@@ -135,13 +141,39 @@ pub struct Status {
     pub processes: Vec<ProcessView>,
     pub progress: Option<ProgressView>,
     pub trips: usize,
-    /// The last entries of the trip log (newest last).
+    /// The last entries of the trip log, in time order (oldest first, newest last; the page
+    /// lists them newest first).
     pub recent_trips: Vec<TripEntry>,
     /// Stop requests sent from a console.
     pub stop_requests: u64,
+    /// The start button: the ride loaded and the pre-ride checks.
+    pub ride: RideView,
 }
 
-fn process_name(code: u32) -> &'static str {
+/// One pre-ride check.
+#[derive(Debug, Clone, Serialize, Default, PartialEq)]
+pub struct CheckView {
+    pub name: String,
+    pub ok: bool,
+    /// What was seen, in words.
+    pub detail: String,
+}
+
+/// The start button's state: enabled only when every check passes.
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct RideView {
+    /// motion-core's control socket (None: the console cannot start rides).
+    pub control_socket: Option<PathBuf>,
+    /// The control socket's last answer, or why there is none.
+    pub control: String,
+    /// The ride the button starts (`NAME (N waypoints, plan T s)`).
+    pub loaded: Option<String>,
+    pub checks: Vec<CheckView>,
+    pub start_allowed: bool,
+}
+
+/// A process id's name.
+pub fn process_name(code: u32) -> &'static str {
     match code {
         x if x == ProcessId::MotionCore as u32 => "motion-core",
         x if x == ProcessId::DriveIo as u32 => "drive-io",
@@ -166,7 +198,8 @@ pub fn motion_state_name(code: u32) -> String {
     }
 }
 
-fn monitor_state_name(code: u32) -> String {
+/// The safety monitor's state code in words.
+pub fn monitor_state_name(code: u32) -> String {
     use crs_ipc::monitor_state::*;
     match code {
         ARMED => "armed".into(),
@@ -176,7 +209,8 @@ fn monitor_state_name(code: u32) -> String {
     }
 }
 
-fn bus_state_name(code: u32) -> String {
+/// drive-io's bus state code in words.
+pub fn bus_state_name(code: u32) -> String {
     BusState::from_u32(code).map_or(format!("state {code}"), |b| format!("{b:?}"))
 }
 
@@ -222,8 +256,9 @@ pub fn estop_in_words(e: &StateEvent) -> Option<String> {
     describe_event(e).map(|(_, cause)| format!("{}: {cause}", process_name(e.source)))
 }
 
-/// The trip-log text of a state event, or None for routine state changes.
-fn describe_event(e: &StateEvent) -> Option<(String, String)> {
+/// The trip-log text of a state event (what happened, its cause in words), or None for
+/// routine state changes.
+pub fn describe_event(e: &StateEvent) -> Option<(String, String)> {
     let cause_name = |c: u32| Cause::from_code(c).map_or(format!("cause {c}"), |c| c.to_string());
     if e.kind == EventKind::EStop as u32 {
         let cause = if e.source == ProcessId::SafetyMonitor as u32 {
@@ -299,6 +334,8 @@ pub struct Collector {
     trips: VecDeque<TripEntry>,
     trip_count: usize,
     stop_requests: u64,
+    rides: Option<RideSetup>,
+    control: ControlSeen,
 }
 
 fn to_deg(r: [f64; 3]) -> [f64; 3] {
@@ -344,6 +381,154 @@ impl Collector {
             trips: VecDeque::new(),
             trip_count: 0,
             stop_requests: 0,
+            rides: None,
+            control: ControlSeen::default(),
+        }
+    }
+
+    /// Rides from the start button (motion-core's control socket, the ride loaded).
+    pub fn with_rides(mut self, rides: Option<RideSetup>) -> Self {
+        self.rides = rides;
+        self
+    }
+
+    /// motion-core's newest answer on its control socket.
+    pub fn control(&mut self, seen: &ControlSeen) {
+        if &self.control != seen {
+            self.control = seen.clone();
+        }
+    }
+
+    /// The pre-ride checks as of now.
+    pub fn pre_ride_checks(&self) -> Vec<CheckView> {
+        let now = crs_ipc::monotonic_ns();
+        let alive = |p: &ProcessSeen| {
+            p.heartbeats > 0 && (now.saturating_sub(p.last_ns) as f64 * 1e-9) < ALIVE_S
+        };
+        let stack_running = self.processes.iter().any(alive);
+        let check = |name: &str, ok: bool, detail: String| CheckView {
+            name: name.into(),
+            ok,
+            detail,
+        };
+        let fresh = self
+            .control
+            .at
+            .is_some_and(|t| t.elapsed().as_secs_f64() < CONTROL_FRESH_S);
+        let phase = if fresh {
+            self.control.phase.as_deref()
+        } else {
+            None
+        };
+        let idle = match (&self.rides, phase) {
+            (None, _) => check(
+                "motion-core idle and holding",
+                false,
+                "no control socket given to the console: rides start from `crs ride`".into(),
+            ),
+            (Some(_), Some(p)) => check("motion-core idle and holding", p == IDLE_PHASE, p.into()),
+            (Some(_), None) if self.control.at.is_none() => check(
+                "motion-core idle and holding",
+                false,
+                "not asked yet".into(),
+            ),
+            (Some(_), None) => check(
+                "motion-core idle and holding",
+                false,
+                if fresh {
+                    self.control.reply.clone()
+                } else {
+                    format!("no answer on the control socket for {CONTROL_FRESH_S} s")
+                },
+            ),
+        };
+        let monitor = &self.processes[ProcessId::SafetyMonitor as usize];
+        let armed = self.monitor_state == Some(crs_ipc::monitor_state::ARMED) && alive(monitor);
+        let monitor_words = match (self.monitor_state, alive(monitor)) {
+            (None, _) => "no data from the safety monitor".to_string(),
+            (Some(s), true) => monitor_state_name(s),
+            (Some(s), false) => format!("no heartbeat (last state: {})", monitor_state_name(s)),
+        };
+        let mut latched = Vec::new();
+        if self.monitor_state == Some(crs_ipc::monitor_state::TRIPPED) {
+            latched.push("the safety monitor is TRIPPED (reset at the monitor)".to_string());
+        }
+        if let Some(m) = self
+            .motion_state
+            .filter(|m| *m == motion_state::ESTOPPED || *m == motion_state::REFUSED)
+        {
+            latched.push(format!("motion-core: {}", motion_state_name(m)));
+        }
+        if let Some(p) = phase.filter(|p| p.starts_with("latched")) {
+            latched.push(format!("motion-core: {p}"));
+        }
+        let loaded = self.rides.as_ref().and_then(|r| r.ride.as_ref());
+        vec![
+            check(
+                "stack running",
+                stack_running,
+                if stack_running {
+                    "heartbeats within the last second".into()
+                } else {
+                    "no heartbeat from any process".into()
+                },
+            ),
+            idle,
+            check("safety monitor armed", armed, monitor_words),
+            check(
+                "no latched trip",
+                latched.is_empty(),
+                if latched.is_empty() {
+                    "none".into()
+                } else {
+                    latched.join("; ")
+                },
+            ),
+            check(
+                "a validated ride loaded",
+                loaded.is_some(),
+                loaded.map_or(
+                    "none (`crs console --ride FILE`, verified when the console starts)".into(),
+                    LoadedRide::describe,
+                ),
+            ),
+        ]
+    }
+
+    /// What the start button sends where, when every pre-ride check passes; otherwise the
+    /// checks that fail, in words.
+    pub fn start_check(&self) -> Result<(PathBuf, LoadedRide), Vec<String>> {
+        let failed: Vec<String> = self
+            .pre_ride_checks()
+            .into_iter()
+            .filter(|c| !c.ok)
+            .map(|c| format!("{}: {}", c.name, c.detail))
+            .collect();
+        match &self.rides {
+            Some(RideSetup {
+                socket,
+                ride: Some(ride),
+            }) if failed.is_empty() => Ok((socket.clone(), ride.clone())),
+            _ => Err(failed),
+        }
+    }
+
+    fn ride_view(&self) -> RideView {
+        let checks = self.pre_ride_checks();
+        RideView {
+            control_socket: self.rides.as_ref().map(|r| r.socket.clone()),
+            control: match &self.rides {
+                None => "no control socket".into(),
+                Some(_) if self.control.at.is_none() => "not asked yet".into(),
+                Some(_) => self.control.reply.clone(),
+            },
+            loaded: self
+                .rides
+                .as_ref()
+                .and_then(|r| r.ride.as_ref())
+                .map(LoadedRide::describe),
+            start_allowed: checks.iter().all(|c| c.ok),
+            checks,
         }
     }
 
@@ -392,10 +577,17 @@ impl Collector {
                 cause,
             };
             tracing::info!(source = %entry.source, kind = %entry.kind, cause = %entry.cause, "console: event");
-            if self.trips.len() == TRIP_LOG_LEN {
+            // In time order: the events of several processes arrive interleaved (one queue
+            // per publisher), so a later-drained event can be the older one.
+            let at = self
+                .trips
+                .iter()
+                .rposition(|t| t.t_s <= entry.t_s)
+                .map_or(0, |k| k + 1);
+            self.trips.insert(at, entry);
+            if self.trips.len() > TRIP_LOG_LEN {
                 self.trips.pop_front();
             }
-            self.trips.push_back(entry);
             self.trip_count += 1;
         }
     }
@@ -403,6 +595,7 @@ impl Collector {
         self.stop_requests += 1;
     }
 
+    /// The trip log in time order (oldest first).
     pub fn trips(&self) -> Vec<TripEntry> {
         self.trips.iter().cloned().collect()
     }
@@ -521,6 +714,7 @@ impl Collector {
             trips: self.trip_count,
             recent_trips: self.trips.iter().rev().take(20).rev().cloned().collect(),
             stop_requests: self.stop_requests,
+            ride: self.ride_view(),
         }
     }
 }
@@ -547,6 +741,30 @@ mod tests {
         assert_eq!(kind, "E-STOP");
         assert!(cause.contains("cable 3"), "{cause}");
         assert!(cause.contains(&Cause::DqLimit.to_string()), "{cause}");
+    }
+
+    #[test]
+    fn the_trip_log_is_in_time_order_whatever_order_the_events_arrive_in() {
+        let mut c = Collector::new("x/", None, None);
+        let t0 = c.t0_ns;
+        // Drained per publisher: the monitor's older trip after drive-io's newer fault.
+        for (src, kind, dt_ms) in [
+            (ProcessId::DriveIo, EventKind::Fault, 30u64),
+            (ProcessId::Operator, EventKind::EStop, 40),
+            (ProcessId::SafetyMonitor, EventKind::EStop, 10),
+            (ProcessId::MotionCore, EventKind::Fault, 20),
+        ] {
+            let mut e = StateEvent::new(src, kind, 1);
+            e.timestamp_ns = t0 + dt_ms * 1_000_000;
+            c.event(&e);
+        }
+        let order: Vec<String> = c.trips().into_iter().map(|t| t.source).collect();
+        assert_eq!(
+            order,
+            ["safety-monitor", "motion-core", "drive-io", "operator"]
+        );
+        let recent: Vec<f64> = c.status().recent_trips.iter().map(|t| t.t_s).collect();
+        assert!(recent.windows(2).all(|w| w[0] <= w[1]), "{recent:?}");
     }
 
     #[test]

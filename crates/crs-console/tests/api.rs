@@ -1,5 +1,6 @@
 //! The console's HTTP API against a fake stack on a private iceoryx2 prefix: status, the stop
-//! request on the bus, the token check, the live stream.
+//! request on the bus, the start-ride request behind the pre-ride checks (a fake control
+//! socket), the token check, the live stream.
 
 use crs_console::{ConsoleConfig, PlatformView};
 use crs_ipc::{EventKind, Heartbeat, IpcNode, JointSetpoint, ProcessId, StateEvent};
@@ -25,6 +26,7 @@ fn config(prefix: &str, token: Option<&str>) -> ConsoleConfig {
         }),
         plan: None,
         avoid_cpu: Some(1),
+        rides: None,
     }
 }
 
@@ -175,6 +177,7 @@ fn token_is_checked_on_every_request() {
         );
     }
     assert_eq!(http(addr, "POST", "/api/stop", &[]).0, 401);
+    assert_eq!(http(addr, "POST", "/api/ride/start", &[]).0, 401);
     assert_eq!(
         http(
             addr,
@@ -242,4 +245,193 @@ fn live_stream_sends_status_events_and_ends_on_shutdown() {
             Err(e) => panic!("the stream did not end with the console: {e}"),
         }
     }
+}
+
+/// A fake motion-core control socket: answers `status` with the phase it is given and `start`
+/// with a started ride; keeps every request.
+struct FakeControl {
+    path: std::path::PathBuf,
+    phase: std::sync::Arc<std::sync::Mutex<String>>,
+    requests: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
+}
+
+impl FakeControl {
+    fn start(tag: &str) -> Self {
+        use std::os::unix::net::UnixListener;
+        let path = std::env::temp_dir().join(format!(
+            "crs-console-test-{}-{tag}.sock",
+            std::process::id()
+        ));
+        let _ = std::fs::remove_file(&path);
+        let l = UnixListener::bind(&path).unwrap();
+        let phase = std::sync::Arc::new(std::sync::Mutex::new("riding".to_string()));
+        let requests = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let (ph, rq) = (phase.clone(), requests.clone());
+        std::thread::spawn(move || {
+            for conn in l.incoming() {
+                let Ok(mut c) = conn else { break };
+                let mut req = String::new();
+                if c.read_to_string(&mut req).is_err() {
+                    continue;
+                }
+                let reply = if req.starts_with("status") {
+                    format!(
+                        "ok {}; pose [0.000, 0.000, 2.000] m [0.00, 0.00, 0.00]°; rides started: 0",
+                        ph.lock().unwrap()
+                    )
+                } else {
+                    rq.lock().unwrap().push(req.clone());
+                    "ok ride rides/tour.csv started (2 waypoints): plan 3.0 s".to_string()
+                };
+                let _ = c.write_all(format!("{reply}\n").as_bytes());
+            }
+        });
+        Self {
+            path,
+            phase,
+            requests,
+        }
+    }
+}
+
+/// Waits until the console's status satisfies `want` (the poller and the control watch run
+/// on their own clocks: this waits on the answer, not on a time).
+fn wait_status(addr: SocketAddr, what: &str, want: impl Fn(&serde_json::Value) -> bool) {
+    let t0 = Instant::now();
+    loop {
+        let s = status(addr);
+        if want(&s) {
+            return;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "never {what}: {}",
+            s["ride"]
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn check_ok(s: &serde_json::Value, name: &str) -> bool {
+    s["ride"]["checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|c| c["name"] == name && c["ok"] == true)
+}
+
+#[test]
+fn start_ride_goes_to_the_control_socket_only_while_the_pre_ride_checks_pass() {
+    use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+    let p = prefix("ride");
+    let fake = FakeControl::start("ride");
+    let ride_text =
+        "t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n2,0.1,0,2,0,0,0\n4,0,0,2,0,0,0\n";
+    let mut cfg = config(&p, None);
+    cfg.rides = Some(crs_console::RideSetup {
+        socket: fake.path.clone(),
+        ride: Some(crs_console::LoadedRide::verified(
+            "rides/tour.csv".into(),
+            ride_text.into(),
+            2,
+            3.0,
+        )),
+    });
+    let console = crs_console::spawn(cfg).unwrap();
+    let addr = console.addr;
+    // No stack: refused, naming the checks that fail.
+    let s = status(addr);
+    assert_eq!(s["ride"]["start_allowed"], false, "{}", s["ride"]);
+    assert_eq!(
+        s["ride"]["loaded"],
+        "rides/tour.csv (2 waypoints, plan 3.0 s)"
+    );
+    let (code, body) = http(addr, "POST", "/api/ride/start", &[]);
+    assert_eq!(code, 409, "{body}");
+    assert!(
+        body.contains("stack running") && body.contains("safety monitor armed"),
+        "{body}"
+    );
+
+    // A fake stack: motion-core and an armed monitor beating.
+    let monitor = std::sync::Arc::new(AtomicU32::new(crs_ipc::monitor_state::ARMED));
+    let done = std::sync::Arc::new(AtomicBool::new(false));
+    let (m2, d2, p2) = (monitor.clone(), done.clone(), p.clone());
+    let beats = std::thread::spawn(move || {
+        let node = IpcNode::with_prefix("fake-stack-ride", &p2).unwrap();
+        let hb = node.publisher::<Heartbeat>().unwrap();
+        for seq in 1.. {
+            if d2.load(Ordering::Relaxed) {
+                break;
+            }
+            hb.publish(&Heartbeat::new(ProcessId::MotionCore, 1, seq))
+                .unwrap();
+            hb.publish(&Heartbeat::new(
+                ProcessId::SafetyMonitor,
+                m2.load(Ordering::Relaxed),
+                seq,
+            ))
+            .unwrap();
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    });
+    wait_status(addr, "the monitor armed and motion-core riding", |s| {
+        check_ok(s, "safety monitor armed")
+            && s["ride"]["control"]
+                .as_str()
+                .is_some_and(|c| c.starts_with("riding"))
+    });
+    // Riding: not idle, refused.
+    let (code, body) = http(addr, "POST", "/api/ride/start", &[]);
+    assert_eq!(code, 409, "{body}");
+    assert!(
+        body.contains("motion-core idle and holding: riding"),
+        "{body}"
+    );
+    assert!(fake.requests.lock().unwrap().is_empty());
+
+    // Idle and holding: every check passes, the ride goes to the socket as `crs ride start`.
+    *fake.phase.lock().unwrap() = "idle, holding".into();
+    wait_status(addr, "the start allowed", |s| {
+        s["ride"]["start_allowed"] == true
+    });
+    let (code, body) = http(addr, "POST", "/api/ride/start", &[]);
+    assert_eq!(code, 200, "{body}");
+    assert!(body.contains("\"ride\":\"started\""), "{body}");
+    assert_eq!(
+        *fake.requests.lock().unwrap(),
+        vec![format!("start rides/tour.csv\n{ride_text}")]
+    );
+
+    // A tripped monitor: the start is refused again and nothing reaches the socket.
+    monitor.store(crs_ipc::monitor_state::TRIPPED, Ordering::Relaxed);
+    wait_status(addr, "the trip latched", |s| {
+        s["ride"]["start_allowed"] == false && !check_ok(s, "no latched trip")
+    });
+    let (code, body) = http(addr, "POST", "/api/ride/start", &[]);
+    assert_eq!(code, 409, "{body}");
+    assert!(
+        body.contains("no latched trip: the safety monitor is TRIPPED"),
+        "{body}"
+    );
+    assert_eq!(fake.requests.lock().unwrap().len(), 1);
+    done.store(true, Ordering::Relaxed);
+    beats.join().unwrap();
+    let _ = std::fs::remove_file(&fake.path);
+}
+
+#[test]
+fn without_a_control_socket_the_start_is_refused_and_says_why() {
+    let p = prefix("noride");
+    let console = crs_console::spawn(config(&p, None)).unwrap();
+    let s = status(console.addr);
+    assert_eq!(s["ride"]["start_allowed"], false);
+    assert_eq!(s["ride"]["control"], "no control socket");
+    let (code, body) = http(console.addr, "POST", "/api/ride/start", &[]);
+    assert_eq!(code, 409, "{body}");
+    assert!(
+        body.contains("no control socket given to the console"),
+        "{body}"
+    );
+    assert!(body.contains("a validated ride loaded: none"), "{body}");
 }

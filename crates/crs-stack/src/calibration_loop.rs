@@ -553,6 +553,7 @@ fn stack_run(
     name: &str,
 ) -> Result<(Summary, usize), LoopError> {
     let args = SimOptions {
+        operator_start: false,
         config: daemon_toml.to_path_buf(),
         drives: a.drives.clone(),
         plant: a.plant.clone(),

@@ -3,11 +3,11 @@
 //! `crs sim --console`.
 
 use cdpr_model::config::{ConfigError, Platform};
-use crs_console::{ConsoleConfig, PlanView, PlatformView};
+use crs_console::{ConsoleConfig, LoadedRide, PlanView, PlatformView, RideSetup};
 use motion_core::daemon::config::DaemonConfig;
 use motion_core::daemon::trajectory::{self, PlanningFailed, WaypointError};
 use std::net::SocketAddr;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Why the plan of a waypoint file could not be shown.
 #[derive(Debug, thiserror::Error)]
@@ -26,6 +26,57 @@ pub enum ConsoleSetupError {
     Config(#[from] ConfigError),
     #[error(transparent)]
     Console(#[from] crs_console::ConsoleError),
+    /// The controller cannot be configured for the daemon's platform (verifying a ride).
+    #[error(transparent)]
+    Configure(#[from] motion_core::daemon::lifecycle::ConfigureError),
+    /// The ride for the start button, refused by the loop's own checks (file, line, axis, bound).
+    #[error("--ride refused: {0}")]
+    Ride(#[from] motion_core::daemon::lifecycle::RideRefused),
+    #[error("--ride needs --control (motion-core's control socket)")]
+    RideWithoutControl,
+}
+
+/// The start button's ride: `file` read and verified with motion-core's own ride checks
+/// (region, limits, wrench feasibility along the planned path) for `daemon` on `platform`.
+pub fn load_ride(
+    daemon: &DaemonConfig,
+    platform: &Platform,
+    file: &Path,
+) -> Result<LoadedRide, ConsoleSetupError> {
+    use motion_core::daemon::lifecycle::{self, RideRefused};
+    let name = file.display().to_string();
+    let text = std::fs::read_to_string(file).map_err(|e| {
+        RideRefused::File(WaypointError::Read {
+            file: name.clone(),
+            reason: e.to_string(),
+        })
+    })?;
+    let ride = trajectory::parse_ride(&text, &name).map_err(RideRefused::File)?;
+    let plan = lifecycle::configure(daemon, platform)?.verify_ride(&ride)?;
+    Ok(LoadedRide::verified(
+        name,
+        text,
+        ride.waypoints.len(),
+        plan.duration_s,
+    ))
+}
+
+/// The start button of a console: motion-core's control socket and, when given, the ride
+/// (verified now: a refused ride ends the console's set-up with the refusal).
+pub fn ride_setup(
+    daemon: &DaemonConfig,
+    platform: &Platform,
+    control: Option<PathBuf>,
+    ride: Option<&Path>,
+) -> Result<Option<RideSetup>, ConsoleSetupError> {
+    match (control, ride) {
+        (None, None) => Ok(None),
+        (None, Some(_)) => Err(ConsoleSetupError::RideWithoutControl),
+        (Some(socket), ride) => Ok(Some(RideSetup {
+            socket,
+            ride: ride.map(|f| load_ride(daemon, platform, f)).transpose()?,
+        })),
+    }
 }
 
 /// What the page draws: frame anchors a_i, platform anchors b_i and the force limits.
@@ -95,26 +146,46 @@ pub fn console_config(
         platform: Some(platform_view(platform)),
         plan,
         avoid_cpu: daemon.realtime.cpu,
+        rides: None,
     }
 }
 
+/// `crs console`'s options.
+pub struct ServeOptions<'a> {
+    pub addr: SocketAddr,
+    pub token: Option<String>,
+    /// iceoryx2 prefix (default: `CRS_IPC_PREFIX`, empty for the systemd stack).
+    pub prefix: Option<String>,
+    /// The daemon TOML.
+    pub config: &'a Path,
+    /// The plan shown as progress (default: the daemon TOML's).
+    pub waypoints: Option<&'a Path>,
+    /// motion-core's control socket for the start button.
+    pub control: Option<PathBuf>,
+    /// The ride the start button starts.
+    pub ride: Option<&'a Path>,
+}
+
 /// `crs console`: the console of the stack of the daemon TOML `config` (its platform, and the
-/// plan of `waypoints` or the daemon's own), on `prefix` (default: `CRS_IPC_PREFIX`, empty for
-/// the systemd stack), served until Ctrl-C.
-pub fn serve(
-    addr: SocketAddr,
-    token: Option<String>,
-    prefix: Option<String>,
-    config: &Path,
-    waypoints: Option<&Path>,
-) -> Result<(), ConsoleSetupError> {
-    let daemon = motion_core::daemon::config::load(config)?;
+/// plan of `waypoints`, of the ride, or the daemon's own), on `prefix`, with the start button
+/// when a control socket is given, served until Ctrl-C.
+pub fn serve(o: ServeOptions<'_>) -> Result<(), ConsoleSetupError> {
+    let daemon = motion_core::daemon::config::load(o.config)?;
     let platform = cdpr_model::config::load_platform(&daemon.platform)?;
-    let prefix = prefix.unwrap_or_else(|| std::env::var(crs_ipc::PREFIX_ENV).unwrap_or_default());
-    let wps = waypoints
+    let rides = ride_setup(&daemon, &platform, o.control, o.ride)?;
+    let prefix = o
+        .prefix
+        .unwrap_or_else(|| std::env::var(crs_ipc::PREFIX_ENV).unwrap_or_default());
+    let wps = o
+        .waypoints
+        .or(o.ride)
         .map(Path::to_path_buf)
         .or(daemon.trajectory.waypoints.clone());
-    let cfg = console_config(addr, token, &prefix, &daemon, &platform, wps.as_deref());
+    let mut cfg = console_config(o.addr, o.token, &prefix, &daemon, &platform, wps.as_deref());
+    cfg.rides = rides;
+    if let Some(r) = cfg.rides.as_ref().and_then(|r| r.ride.as_ref()) {
+        println!("  start button: ride {}", r.describe());
+    }
     crs_console::run_blocking(cfg)?;
     Ok(())
 }
@@ -138,5 +209,37 @@ mod tests {
         ));
         let view = platform_view(&pf);
         assert_eq!(view.frame_anchors_m.len(), pf.model.m());
+    }
+
+    #[test]
+    fn the_start_buttons_ride_is_verified_with_the_loops_checks() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config");
+        let daemon = motion_core::daemon::config::load(&dir.join("motion-core.toml")).unwrap();
+        let pf = cdpr_model::config::load_platform(&daemon.platform).unwrap();
+        let demo = dir.join("demo-waypoints.csv");
+        let ride = load_ride(&daemon, &pf, &demo).unwrap();
+        assert!(
+            ride.describe().contains("waypoints, plan"),
+            "{}",
+            ride.describe()
+        );
+        // A waypoint outside the region: refused naming the file, the line and the bound.
+        let bad = std::env::temp_dir().join(format!("crs-console-ride-{}.csv", std::process::id()));
+        std::fs::write(
+            &bad,
+            "t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n2,0,0,2,0,0,0\n4,0,4.0,2,0,0,0\n",
+        )
+        .unwrap();
+        let e = load_ride(&daemon, &pf, &bad).unwrap_err().to_string();
+        std::fs::remove_file(&bad).unwrap();
+        assert!(e.contains(":3:") && e.contains("y_m"), "{e}");
+        assert!(matches!(
+            ride_setup(&daemon, &pf, None, Some(&demo)),
+            Err(ConsoleSetupError::RideWithoutControl)
+        ));
+        let setup = ride_setup(&daemon, &pf, Some("/tmp/x.sock".into()), None)
+            .unwrap()
+            .unwrap();
+        assert!(setup.ride.is_none());
     }
 }

@@ -1,14 +1,26 @@
-//! Plots of every `crs sim` run: `<out>/pose.svg` (tracked vs reference pose over time),
-//! `<out>/forces.svg` (cable forces with f_min / f_max), `<out>/loop.svg` (histogram of the
-//! loop's setpoint period and motion-core's lateness quantiles), `<out>/events.svg` (monitor and
-//! process events on the time axis) and `<out>/index.html` showing them with the summary.
+//! The report of every `crs sim` run: `<out>/index.html` — the summary as named fields with
+//! units, the events in words — and its plots: `<out>/pose.svg` (tracked vs reference pose over
+//! time), `<out>/tracking.svg` (the tracking error in mm and °, and the winches' lengths against
+//! the commanded ones), `<out>/path.svg` (the ride's path, top and side view), `<out>/forces.svg`
+//! (cable forces with f_min / f_max), `<out>/loop.svg` (histogram of the loop's setpoint period
+//! and motion-core's lateness quantiles), `<out>/events.svg` (the events on the time axis).
+//! Every plot's legend sits in a strip above its plot areas, never on the data.
 //!
 //! [`RunRecord`] is fed from the launcher's follow loop (a few lines in the `crs` binary's `sim_cmd.rs`); it keeps
 //! the streams decimated to [`KEEP_EVERY`] (100 Hz of a 1 kHz stream) so a long run stays small.
+//! Routine events (motion-core's plan announcement and the monitor's epoch announcement, each
+//! about once a second) are kept only when they change something.
 
+use crate::sim_run::Summary;
+use cdpr_model::Pose;
+use crs_console::status::{
+    bus_state_name, describe_event, monitor_state_name, motion_state_name, process_name,
+};
 use crs_ipc::{
     EventKind, JointSetpoint, LoopStatsSample, MAX_CABLES, PlantTruth, ProcessId, StateEvent,
+    motion_state,
 };
+use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 
 /// Keep every n-th sample of the 1 kHz streams.
@@ -16,6 +28,35 @@ pub const KEEP_EVERY: u64 = 10;
 /// Setpoint-period histogram: bin width and range (µs).
 const BIN_US: f64 = 20.0;
 const HIST_MAX_US: f64 = 3000.0;
+/// Setpoints kept to pair each plant state with the newest reference published before it.
+const RECENT_SETPOINTS: usize = 256;
+/// Height of the legend strip above a figure's plot areas (px).
+const LEGEND_STRIP_PX: u32 = 30;
+
+/// One event of the run, in words.
+#[derive(Clone, Debug)]
+pub struct RunEvent {
+    /// Seconds on the report's time axis.
+    pub t_s: f64,
+    pub source: String,
+    pub what: String,
+    /// An e-stop or a fault (drawn red).
+    pub alarm: bool,
+}
+
+/// The tracking error at one kept plant state, against the newest setpoint before it.
+#[derive(Clone, Debug)]
+struct TrackingSample {
+    t_s: f64,
+    /// Plant minus reference, x, y, z (mm).
+    position_mm: [f64; 3],
+    /// |plant − reference| (mm).
+    position_norm_mm: f64,
+    /// Rotation error angle (°, eq. 3.3's ε_φ).
+    rotation_deg: f64,
+    /// Winch length minus commanded length per cable (mm).
+    length_mm: Vec<f64>,
+}
 
 /// What a run's plots are made of.
 #[derive(Default)]
@@ -29,14 +70,20 @@ pub struct RunRecord {
     reference: Vec<(f64, [f64; 6])>,
     /// (t s, pose, forces) of the plant.
     actual: Vec<(f64, [f64; 6], Vec<f64>)>,
+    /// (timestamp ns, pose, commanded lengths) of the newest setpoints.
+    recent_sp: VecDeque<(u64, [f64; 6], [f64; MAX_CABLES], usize)>,
+    tracking: Vec<TrackingSample>,
     last_sp_ns: Option<u64>,
     /// Setpoint periods in bins of BIN_US; the last bin holds everything above HIST_MAX_US.
     period_hist: Vec<u64>,
     period_max_us: f64,
     /// (t s, lateness p50, p99, max µs) from motion-core's loop statistics.
     lateness: Vec<(f64, f64, f64, f64)>,
-    /// (t s, source, what).
-    events: Vec<(f64, String, String)>,
+    events: Vec<RunEvent>,
+    /// The last state each process announced (index: its process id): repeats are not events.
+    last_state: [Option<u32>; 8],
+    /// The last plan end motion-core announced.
+    plan_end: Option<u64>,
 }
 
 impl RunRecord {
@@ -67,6 +114,12 @@ impl RunRecord {
             self.reference.push((t, sp.pose));
         }
         self.n_sp += 1;
+        if self.recent_sp.len() == RECENT_SETPOINTS {
+            self.recent_sp.pop_front();
+        }
+        let m = (sp.cable_count as usize).min(MAX_CABLES);
+        self.recent_sp
+            .push_back((sp.timestamp_ns, sp.pose, sp.cable_length_m, m));
     }
 
     pub fn truth(&mut self, p: &PlantTruth) {
@@ -74,6 +127,24 @@ impl RunRecord {
             let t = self.t(p.timestamp_ns);
             let m = (p.cable_count as usize).min(MAX_CABLES);
             self.actual.push((t, p.pose, p.force_n[..m].to_vec()));
+            // The tracking error against the newest reference published before this state
+            // (the summary's tracking figures pair them the same way).
+            if let Some((_, r, q, n)) = self
+                .recent_sp
+                .iter()
+                .rev()
+                .find(|(ts, ..)| *ts <= p.timestamp_ns)
+            {
+                let (dp, dr) = Pose::from_array(p.pose).error_to(&Pose::from_array(*r));
+                let n = (*n).min(m);
+                self.tracking.push(TrackingSample {
+                    t_s: t,
+                    position_mm: [0, 1, 2].map(|k| (p.pose[k] - r[k]) * 1e3),
+                    position_norm_mm: dp * 1e3,
+                    rotation_deg: dr.to_degrees(),
+                    length_mm: (0..n).map(|i| (p.cable_length_m[i] - q[i]) * 1e3).collect(),
+                });
+            }
         }
         self.n_truth += 1;
     }
@@ -88,37 +159,62 @@ impl RunRecord {
         ));
     }
 
+    /// Keeps the event in words; routine re-announcements that change nothing are dropped.
     pub fn event(&mut self, e: &StateEvent) {
-        let source = match e.source {
-            x if x == ProcessId::MotionCore as u32 => "motion-core",
-            x if x == ProcessId::DriveIo as u32 => "drive-io",
-            x if x == ProcessId::SafetyMonitor as u32 => "safety-monitor",
-            x if x == ProcessId::Operator as u32 => "operator",
-            _ => "other",
-        };
-        let what = match e.kind {
-            x if x == EventKind::EStop as u32 => {
-                if e.source == ProcessId::SafetyMonitor as u32 {
-                    let cause = safety_monitor::Cause::from_code(e.detail)
-                        .map_or(format!("cause {}", e.detail), |c| c.to_string());
-                    format!("E-STOP: {cause}")
-                } else {
-                    "E-STOP".to_string()
-                }
-            }
-            x if x == EventKind::Fault as u32 => {
-                format!("fault (state {}, detail {})", e.state, e.detail)
-            }
-            x if x == EventKind::Reset as u32 => "reset".to_string(),
-            _ if e.source == ProcessId::MotionCore as u32
-                && e.state == crs_ipc::motion_state::STOPPING =>
-            {
-                "end of setpoint stream".to_string()
-            }
-            _ => format!("state {}", e.state),
+        let Some((what, alarm)) = self.event_words(e) else {
+            return;
         };
         let t = self.t(e.timestamp_ns);
-        self.events.push((t, source.to_string(), what));
+        self.events.push(RunEvent {
+            t_s: t,
+            source: process_name(e.source).to_string(),
+            what,
+            alarm,
+        });
+    }
+
+    fn event_words(&mut self, e: &StateEvent) -> Option<(String, bool)> {
+        if let Some((kind, cause)) = describe_event(e) {
+            let alarm = kind == "E-STOP" || kind == "fault";
+            return Some((format!("{kind}: {cause}"), alarm));
+        }
+        if e.kind != EventKind::StateChanged as u32 {
+            return Some((format!("event kind {}, state {}", e.kind, e.state), false));
+        }
+        if let Some(end) = e.plan_end() {
+            if self.plan_end == Some(end) {
+                return None;
+            }
+            self.plan_end = Some(end);
+            return Some((
+                if end == motion_state::PLAN_OPEN_END {
+                    "plan announced: open end (cueing input)".to_string()
+                } else {
+                    format!("plan announced: ends with setpoint #{end}")
+                },
+                false,
+            ));
+        }
+        let slot = self.last_state.get_mut(e.source as usize)?;
+        if *slot == Some(e.state) {
+            return None;
+        }
+        *slot = Some(e.state);
+        let words = match e.source {
+            x if x == ProcessId::MotionCore as u32 && e.state == motion_state::STOPPING => {
+                "end of the setpoint stream (planned)".to_string()
+            }
+            x if x == ProcessId::MotionCore as u32 => motion_state_name(e.state),
+            x if x == ProcessId::SafetyMonitor as u32 => monitor_state_name(e.state),
+            x if x == ProcessId::DriveIo as u32 => format!("bus {}", bus_state_name(e.state)),
+            _ => format!("state {}", e.state),
+        };
+        Some((words, false))
+    }
+
+    /// The run's events in words, in the order received.
+    pub fn events(&self) -> &[RunEvent] {
+        &self.events
     }
 
     fn t_end(&self) -> f64 {
@@ -130,6 +226,8 @@ impl RunRecord {
 
 /// What one plot's drawing returns: plotters' error of the SVG backend (file I/O).
 type Plot = Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>>;
+type Area<'a> =
+    plotters::drawing::DrawingArea<plotters::prelude::SVGBackend<'a>, plotters::coord::Shift>;
 
 /// Why the run's plots could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -150,6 +248,37 @@ pub enum RunPlotError {
     },
 }
 
+const REFERENCE: plotters::style::RGBColor = plotters::style::RGBColor(239, 143, 0);
+const PLANT: plotters::style::RGBColor = plotters::style::RGBColor(25, 90, 210);
+const EVENT_GREY: plotters::style::RGBColor = plotters::style::RGBColor(150, 150, 150);
+const ALARM: plotters::style::RGBColor = plotters::style::RGBColor(200, 30, 30);
+
+/// Splits off the legend strip at the top of `root` and draws the legend in it, one entry
+/// after the other (a line sample and its label): outside every plot area by construction.
+fn legend_strip<'a>(
+    root: &Area<'a>,
+    items: &[(String, plotters::style::RGBColor)],
+) -> Result<Area<'a>, plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
+    use plotters::prelude::*;
+    let (strip, body) = root.split_vertically(LEGEND_STRIP_PX);
+    let y = (LEGEND_STRIP_PX / 2) as i32;
+    let mut x = 70i32;
+    for (label, colour) in items {
+        strip.draw(&PathElement::new(
+            vec![(x, y), (x + 22, y)],
+            colour.stroke_width(3),
+        ))?;
+        strip.draw(&Text::new(
+            label.clone(),
+            (x + 28, y - 7),
+            ("sans-serif", 17).into_font(),
+        ))?;
+        // Room for the label at ~8 px per character of a 14 px sans-serif font.
+        x += 28 + 8 * label.chars().count() as i32 + 24;
+    }
+    Ok(body)
+}
+
 fn draw_events<DB: plotters::prelude::DrawingBackend>(
     chart: &mut plotters::prelude::ChartContext<
         '_,
@@ -159,32 +288,48 @@ fn draw_events<DB: plotters::prelude::DrawingBackend>(
             plotters::coord::types::RangedCoordf64,
         >,
     >,
-    events: &[(f64, String, String)],
+    events: &[RunEvent],
     y: (f64, f64),
 ) -> Result<(), plotters::drawing::DrawingAreaErrorKind<DB::ErrorType>>
 where
     DB::ErrorType: 'static,
 {
     use plotters::prelude::*;
-    for (t, _, what) in events {
-        let colour = if what.starts_with("E-STOP") || what.starts_with("fault") {
-            RED
-        } else {
-            RGBColor(120, 120, 120)
-        };
+    for e in events {
+        let colour = if e.alarm { ALARM } else { EVENT_GREY };
         chart.draw_series(std::iter::once(PathElement::new(
-            vec![(*t, y.0), (*t, y.1)],
+            vec![(e.t_s, y.0), (e.t_s, y.1)],
             colour.stroke_width(1),
         )))?;
     }
     Ok(())
 }
 
+/// (lo, hi) of `vals` padded by 8 % and at least `min_pad`; (0, 1) without values.
+fn range(vals: impl Iterator<Item = f64>, min_pad: f64) -> (f64, f64) {
+    let (lo, hi) = vals
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+    let pad = ((hi - lo) * 0.08).max(min_pad);
+    (lo - pad, hi + pad)
+}
+
 fn pose_plot(r: &RunRecord, path: &Path) -> Plot {
     use plotters::prelude::*;
-    let root = SVGBackend::new(path, (1100, 640)).into_drawing_area();
+    let root = SVGBackend::new(path, (1100, 670)).into_drawing_area();
     root.fill(&WHITE)?;
-    let panels = root.split_evenly((2, 3));
+    let body = legend_strip(
+        &root,
+        &[
+            ("reference (setpoints)".into(), REFERENCE),
+            ("plant (true pose)".into(), PLANT),
+            ("event (grey) / e-stop, fault (red)".into(), EVENT_GREY),
+        ],
+    )?;
+    let panels = body.split_evenly((2, 3));
     let names = ["x (m)", "y (m)", "z (m)", "φx (°)", "φy (°)", "φz (°)"];
     let t_end = r.t_end();
     for (k, area) in panels.iter().enumerate() {
@@ -193,46 +338,187 @@ fn pose_plot(r: &RunRecord, path: &Path) -> Plot {
         } else {
             180.0 / std::f64::consts::PI
         };
-        let vals = r
-            .reference
-            .iter()
-            .map(|(_, p)| p[k] * scale)
-            .chain(r.actual.iter().map(|(_, p, _)| p[k] * scale));
-        let (lo, hi) = vals.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-            (a.min(v), b.max(v))
-        });
-        let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
-        let pad = ((hi - lo) * 0.08).max(if k < 3 { 0.01 } else { 0.1 });
+        let (lo, hi) = range(
+            r.reference
+                .iter()
+                .map(|(_, p)| p[k] * scale)
+                .chain(r.actual.iter().map(|(_, p, _)| p[k] * scale)),
+            if k < 3 { 0.01 } else { 0.1 },
+        );
         let mut chart = ChartBuilder::on(area)
             .caption(names[k], ("sans-serif", 16))
             .margin(8)
             .x_label_area_size(30)
             .y_label_area_size(55)
-            .build_cartesian_2d(0f64..t_end, (lo - pad)..(hi + pad))?;
+            .build_cartesian_2d(0f64..t_end, lo..hi)?;
         chart.configure_mesh().x_desc("t (s)").draw()?;
-        draw_events(&mut chart, &r.events, (lo - pad, hi + pad))?;
-        chart
-            .draw_series(LineSeries::new(
-                r.reference.iter().map(|(t, p)| (*t, p[k] * scale)),
-                RGBColor(239, 143, 0).stroke_width(2),
-            ))?
-            .label("reference")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], RGBColor(239, 143, 0)));
-        chart
-            .draw_series(LineSeries::new(
-                r.actual.iter().map(|(t, p, _)| (*t, p[k] * scale)),
-                BLUE.stroke_width(1),
-            ))?
-            .label("plant (true)")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLUE));
-        if k == 0 {
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperLeft)
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()?;
-        }
+        draw_events(&mut chart, &r.events, (lo, hi))?;
+        chart.draw_series(LineSeries::new(
+            r.reference.iter().map(|(t, p)| (*t, p[k] * scale)),
+            REFERENCE.stroke_width(2),
+        ))?;
+        chart.draw_series(LineSeries::new(
+            r.actual.iter().map(|(t, p, _)| (*t, p[k] * scale)),
+            PLANT.stroke_width(1),
+        ))?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// The tracking error where it is visible: mm and degrees, not the metre axes of the pose plot.
+fn tracking_plot(r: &RunRecord, path: &Path) -> Plot {
+    use plotters::prelude::*;
+    let root = SVGBackend::new(path, (1100, 720)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let axes = [
+        ("x", RGBColor(200, 30, 30)),
+        ("y", RGBColor(30, 150, 30)),
+        ("z", RGBColor(25, 90, 210)),
+    ];
+    let mut legend: Vec<(String, RGBColor)> = axes
+        .iter()
+        .map(|(a, c)| (format!("{a}: plant − reference"), *c))
+        .collect();
+    legend.push(("|plant − reference|".into(), BLACK));
+    let body = legend_strip(&root, &legend)?;
+    let rows = body.split_evenly((3, 1));
+    let t_end = r.t_end();
+    // Position error: components and norm (mm).
+    let (lo, hi) = range(
+        r.tracking.iter().flat_map(|s| {
+            s.position_mm
+                .into_iter()
+                .chain(std::iter::once(s.position_norm_mm))
+        }),
+        0.05,
+    );
+    let mut chart = ChartBuilder::on(&rows[0])
+        .caption(
+            "position tracking error (plant vs the newest setpoint before it)",
+            ("sans-serif", 15),
+        )
+        .margin(8)
+        .x_label_area_size(28)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0f64..t_end, lo..hi)?;
+    chart.configure_mesh().x_desc("t (s)").y_desc("mm").draw()?;
+    draw_events(&mut chart, &r.events, (lo, hi))?;
+    for (k, (_, c)) in axes.iter().enumerate() {
+        chart.draw_series(LineSeries::new(
+            r.tracking.iter().map(|s| (s.t_s, s.position_mm[k])),
+            c.stroke_width(1),
+        ))?;
+    }
+    chart.draw_series(LineSeries::new(
+        r.tracking.iter().map(|s| (s.t_s, s.position_norm_mm)),
+        BLACK.stroke_width(2),
+    ))?;
+    // Rotation error (°).
+    let (lo, hi) = range(r.tracking.iter().map(|s| s.rotation_deg), 0.005);
+    let lo = lo.min(0.0);
+    let mut chart = ChartBuilder::on(&rows[1])
+        .caption(
+            "rotation tracking error (angle, eq. 3.3)",
+            ("sans-serif", 15),
+        )
+        .margin(8)
+        .x_label_area_size(28)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0f64..t_end, lo..hi)?;
+    chart.configure_mesh().x_desc("t (s)").y_desc("°").draw()?;
+    draw_events(&mut chart, &r.events, (lo, hi))?;
+    chart.draw_series(LineSeries::new(
+        r.tracking.iter().map(|s| (s.t_s, s.rotation_deg)),
+        BLACK.stroke_width(2),
+    ))?;
+    // Winch length against the commanded cable length, per cable (mm).
+    let (lo, hi) = range(
+        r.tracking.iter().flat_map(|s| s.length_mm.iter().copied()),
+        0.05,
+    );
+    let mut chart = ChartBuilder::on(&rows[2])
+        .caption(
+            "cable length: winch − commanded, per cable (colours: cable 1 … m, as in forces.svg)",
+            ("sans-serif", 15),
+        )
+        .margin(8)
+        .x_label_area_size(28)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0f64..t_end, lo..hi)?;
+    chart.configure_mesh().x_desc("t (s)").y_desc("mm").draw()?;
+    draw_events(&mut chart, &r.events, (lo, hi))?;
+    let m = r
+        .tracking
+        .iter()
+        .map(|s| s.length_mm.len())
+        .max()
+        .unwrap_or(0);
+    for i in 0..m {
+        chart.draw_series(LineSeries::new(
+            r.tracking
+                .iter()
+                .filter_map(|s| s.length_mm.get(i).map(|v| (s.t_s, *v))),
+            Palette99::pick(i).stroke_width(1),
+        ))?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// The ride's path: top view (x–y) and side view (x–z), reference and plant.
+fn path_plot(r: &RunRecord, path: &Path) -> Plot {
+    use plotters::prelude::*;
+    let root = SVGBackend::new(path, (1100, 520)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let body = legend_strip(
+        &root,
+        &[
+            ("reference (setpoints)".into(), REFERENCE),
+            ("plant (true pose)".into(), PLANT),
+        ],
+    )?;
+    let (left, right) = body.split_horizontally(550);
+    for (area, (j, name)) in [
+        (&left, (1usize, "top view: y (m)")),
+        (&right, (2, "side view: z (m)")),
+    ] {
+        let (x0, x1) = range(
+            r.reference
+                .iter()
+                .map(|(_, p)| p[0])
+                .chain(r.actual.iter().map(|(_, p, _)| p[0])),
+            0.05,
+        );
+        let (y0, y1) = range(
+            r.reference
+                .iter()
+                .map(|(_, p)| p[j])
+                .chain(r.actual.iter().map(|(_, p, _)| p[j])),
+            0.05,
+        );
+        let mut chart = ChartBuilder::on(area)
+            .caption(
+                if j == 1 {
+                    "top view (x–y)"
+                } else {
+                    "side view (x–z)"
+                },
+                ("sans-serif", 15),
+            )
+            .margin(10)
+            .x_label_area_size(32)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0..x1, y0..y1)?;
+        chart.configure_mesh().x_desc("x (m)").y_desc(name).draw()?;
+        chart.draw_series(LineSeries::new(
+            r.reference.iter().map(|(_, p)| (p[0], p[j])),
+            REFERENCE.stroke_width(2),
+        ))?;
+        chart.draw_series(LineSeries::new(
+            r.actual.iter().map(|(_, p, _)| (p[0], p[j])),
+            PLANT.stroke_width(1),
+        ))?;
     }
     root.present()?;
     Ok(())
@@ -240,8 +526,17 @@ fn pose_plot(r: &RunRecord, path: &Path) -> Plot {
 
 fn force_plot(r: &RunRecord, path: &Path) -> Plot {
     use plotters::prelude::*;
-    let root = SVGBackend::new(path, (1100, 460)).into_drawing_area();
+    let root = SVGBackend::new(path, (1100, 500)).into_drawing_area();
     root.fill(&WHITE)?;
+    let m = r.actual.first().map_or(0, |a| a.2.len());
+    let mut legend: Vec<(String, RGBColor)> = (0..m)
+        .map(|i| {
+            let c = Palette99::pick(i).to_rgba();
+            (format!("cable {}", i + 1), RGBColor(c.0, c.1, c.2))
+        })
+        .collect();
+    legend.push(("f_min, f_max".into(), ALARM));
+    let body = legend_strip(&root, &legend)?;
     let t_end = r.t_end();
     let f_top = r
         .actual
@@ -249,7 +544,7 @@ fn force_plot(r: &RunRecord, path: &Path) -> Plot {
         .flat_map(|(_, _, f)| f.iter().copied())
         .fold(r.f_max, f64::max)
         * 1.05;
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(&body)
         .caption(
             "cable forces (plant truth) and the limits f_min, f_max",
             ("sans-serif", 18),
@@ -265,35 +560,34 @@ fn force_plot(r: &RunRecord, path: &Path) -> Plot {
             vec![(0.0, lim), (t_end, lim)],
             8,
             5,
-            RED.stroke_width(2),
+            ALARM.stroke_width(2),
         ))?;
     }
-    let m = r.actual.first().map_or(0, |a| a.2.len());
     for i in 0..m {
-        let c = Palette99::pick(i).to_rgba();
-        chart
-            .draw_series(LineSeries::new(
-                r.actual.iter().map(|(t, _, f)| (*t, f[i])),
-                c.stroke_width(1),
-            ))?
-            .label(format!("cable {}", i + 1))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
+        chart.draw_series(LineSeries::new(
+            r.actual.iter().map(|(t, _, f)| (*t, f[i])),
+            Palette99::pick(i).stroke_width(1),
+        ))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
     root.present()?;
     Ok(())
 }
 
 fn loop_plot(r: &RunRecord, path: &Path) -> Plot {
     use plotters::prelude::*;
-    let root = SVGBackend::new(path, (1100, 420)).into_drawing_area();
+    let root = SVGBackend::new(path, (1100, 450)).into_drawing_area();
     root.fill(&WHITE)?;
-    let (left, right) = root.split_horizontally(600);
+    let body = legend_strip(
+        &root,
+        &[
+            ("periods (count)".into(), BLUE),
+            ("periods ≥ 3 ms".into(), RED),
+            ("lateness p50".into(), GREEN),
+            ("p99".into(), BLUE),
+            ("max".into(), RED),
+        ],
+    )?;
+    let (left, right) = body.split_horizontally(600);
     let total: u64 = r.period_hist.iter().sum::<u64>().max(1);
     // Log-scaled counts: the tail bins (a few stalls) must stay visible next to the 1 ms peak.
     let y_top = (r.period_hist.iter().copied().max().unwrap_or(1).max(1) as f64 * 2.0).log10();
@@ -343,27 +637,15 @@ fn loop_plot(r: &RunRecord, path: &Path) -> Plot {
         .y_label_area_size(60)
         .build_cartesian_2d(0f64..t_end, (1f64..y_max * 2.0).log_scale())?;
     chart.configure_mesh().x_desc("t (s)").y_desc("µs").draw()?;
-    for (k, (name, colour)) in [("p50", GREEN), ("p99", BLUE), ("max", RED)]
-        .into_iter()
-        .enumerate()
-    {
-        chart
-            .draw_series(LineSeries::new(
-                r.lateness.iter().map(move |l| {
-                    let v = [l.1, l.2, l.3][k];
-                    (l.0, v.max(1.0))
-                }),
-                colour.stroke_width(2),
-            ))?
-            .label(name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour));
+    for (k, colour) in [GREEN, BLUE, RED].into_iter().enumerate() {
+        chart.draw_series(LineSeries::new(
+            r.lateness.iter().map(move |l| {
+                let v = [l.1, l.2, l.3][k];
+                (l.0, v.max(1.0))
+            }),
+            colour.stroke_width(2),
+        ))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
     root.present()?;
     Ok(())
 }
@@ -377,12 +659,15 @@ fn events_plot(r: &RunRecord, path: &Path) -> Plot {
         "operator",
         "other",
     ];
-    let root = SVGBackend::new(path, (1100, 260)).into_drawing_area();
+    let root = SVGBackend::new(path, (1100, 300)).into_drawing_area();
     root.fill(&WHITE)?;
     let t_end = r.t_end();
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            format!("events on the process bus ({})", r.events.len()),
+            format!(
+                "events on the process bus ({}; state changes only)",
+                r.events.len()
+            ),
             ("sans-serif", 16),
         )
         .margin(10)
@@ -402,14 +687,23 @@ fn events_plot(r: &RunRecord, path: &Path) -> Plot {
             }
         })
         .draw()?;
-    for (t, src, what) in &r.events {
-        let row = sources.iter().position(|s| s == src).unwrap_or(4) as f64;
-        let bad = what.starts_with("E-STOP") || what.starts_with("fault");
-        let colour = if bad { RED } else { BLUE };
-        chart.draw_series(std::iter::once(Circle::new((*t, row), 5, colour.filled())))?;
+    // Labels of events close in time on one row alternate above and below the marker.
+    let mut last: [(f64, usize); 5] = [(f64::NEG_INFINITY, 0); 5];
+    for e in &r.events {
+        let k = sources.iter().position(|s| *s == e.source).unwrap_or(4);
+        let row = k as f64;
+        let colour = if e.alarm { ALARM } else { PLANT };
+        let near = e.t_s - last[k].0 < 0.12 * t_end;
+        let level = if near { (last[k].1 + 1) % 2 } else { 0 };
+        last[k] = (e.t_s, level);
+        chart.draw_series(std::iter::once(Circle::new(
+            (e.t_s, row),
+            5,
+            colour.filled(),
+        )))?;
         chart.draw_series(std::iter::once(Text::new(
-            what.clone(),
-            (*t, row + 0.25),
+            e.what.clone(),
+            (e.t_s, row + if level == 0 { 0.3 } else { -0.12 }),
             ("sans-serif", 12),
         )))?;
     }
@@ -421,17 +715,365 @@ fn html_escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }
 
-/// Writes the four SVGs and index.html into `out`; returns the index path.
-pub fn write(
-    out: &Path,
-    r: &RunRecord,
-    summary: &serde_json::Value,
-) -> Result<PathBuf, RunPlotError> {
+/// A number with `digits` decimals; NaN / ±∞ as `none` (what a figure not measured means).
+fn num(x: f64, digits: usize, none: &str) -> String {
+    if x.is_finite() {
+        format!("{x:.digits$}")
+    } else {
+        none.to_string()
+    }
+}
+
+/// The summary table: sections of named fields, each with its value and unit; `data-field`
+/// names the summary.json key.
+struct Table(String);
+
+impl Table {
+    fn section(&mut self, title: &str) {
+        self.0.push_str(&format!(
+            "<tr class=\"section\"><th colspan=\"3\">{}</th></tr>\n",
+            html_escape(title)
+        ));
+    }
+    fn row(&mut self, field: &str, name: &str, value: String, unit: &str) {
+        self.0.push_str(&format!(
+            "<tr data-field=\"{}\"><th>{}</th><td class=\"value\">{}</td><td class=\"unit\">{}</td></tr>\n",
+            html_escape(field),
+            html_escape(name),
+            html_escape(&value),
+            html_escape(unit)
+        ));
+    }
+}
+
+/// The file name of `p` when it lies in `out` (a link relative to index.html), else its path.
+fn link_target(out: &Path, p: &Path) -> String {
+    match p.strip_prefix(out) {
+        Ok(rel) => rel.display().to_string(),
+        Err(_) => p.display().to_string(),
+    }
+}
+
+fn summary_table(s: &Summary) -> String {
+    let mut t = Table(String::new());
+    t.section("Outcome");
+    t.row(
+        "completed",
+        "completed",
+        if s.completed {
+            "yes: the ride ran to its end and the platform held".into()
+        } else {
+            "NO: the run was stopped before the ride ended".into()
+        },
+        "",
+    );
+    t.row(
+        "stopped_by",
+        "stopped by",
+        s.stopped_by.clone().unwrap_or_else(|| {
+            if s.completed {
+                "nobody (planned end)".into()
+            } else {
+                "the run ended early (see the events)".into()
+            }
+        }),
+        "",
+    );
+    t.row("duration_s", "run duration", num(s.duration_s, 1, "–"), "s");
+    t.row("platform", "platform", s.platform.clone(), "");
+    t.row("transport", "buses", s.transport.clone(), "");
+    t.row(
+        "monitor",
+        "safety monitor",
+        if s.monitor { "on" } else { "off" }.into(),
+        "",
+    );
+    t.section("Tracking (plant pose vs the setpoints)");
+    t.row(
+        "tracking_position_mean_mm",
+        "position error, mean",
+        num(s.tracking_position_mean_mm, 2, "–"),
+        "mm",
+    );
+    t.row(
+        "tracking_position_max_mm",
+        "position error, max",
+        num(s.tracking_position_max_mm, 2, "–"),
+        "mm",
+    );
+    t.row(
+        "tracking_rotation_mean_deg",
+        "rotation error, mean",
+        num(s.tracking_rotation_mean_deg, 3, "–"),
+        "°",
+    );
+    t.row(
+        "tracking_rotation_max_deg",
+        "rotation error, max",
+        num(s.tracking_rotation_max_deg, 3, "–"),
+        "°",
+    );
+    let not_reached = if s.completed {
+        "not measured"
+    } else {
+        "not reached (the run was stopped)"
+    };
+    t.row(
+        "static_position_mm",
+        "at rest after the ride: position error",
+        num(s.static_position_mm, 2, not_reached),
+        "mm",
+    );
+    t.row(
+        "static_rotation_deg",
+        "at rest after the ride: rotation error",
+        num(s.static_rotation_deg, 3, not_reached),
+        "°",
+    );
+    if s.rest.rest_points > 0 || s.rest_points_skipped > 0 {
+        let r = &s.rest;
+        t.row(
+            "rest.rest_points",
+            "rest points recorded",
+            r.rest_points.to_string(),
+            "",
+        );
+        t.row(
+            "rest_points_skipped",
+            "rest points skipped (no readings)",
+            s.rest_points_skipped.to_string(),
+            "",
+        );
+        t.row(
+            "rest.position_mean_mm",
+            "rest points, measured position error mean / max",
+            format!(
+                "{} / {}",
+                num(r.position_mean_mm, 2, "–"),
+                num(r.position_max_mm, 2, "–")
+            ),
+            "mm",
+        );
+        t.row(
+            "rest.true_position_mean_mm",
+            "rest points, true position error mean / max",
+            format!(
+                "{} / {}",
+                num(r.true_position_mean_mm, 2, "–"),
+                num(r.true_position_max_mm, 2, "–")
+            ),
+            "mm",
+        );
+    }
+    t.section("Cable forces");
+    let seen = s.force_min_n <= s.force_max_n;
+    t.row(
+        "force_min_n",
+        "force, lowest seen",
+        num(s.force_min_n, 0, "none seen"),
+        "N",
+    );
+    t.row(
+        "force_max_n",
+        "force, highest seen",
+        num(s.force_max_n, 0, "none seen"),
+        "N",
+    );
+    t.row(
+        "f_min_n",
+        "force limits, lowest … highest allowed",
+        format!("{} … {}", num(s.f_min_n, 0, "–"), num(s.f_max_n, 0, "–")),
+        "N",
+    );
+    t.row(
+        "forces_within",
+        "forces within the limits",
+        if !seen {
+            "no force seen".into()
+        } else if s.force_min_n >= s.f_min_n && s.force_max_n <= s.f_max_n {
+            "yes".into()
+        } else {
+            "NO: outside the limits".into()
+        },
+        "",
+    );
+    t.section("Loop (motion-core)");
+    t.row("loop_cycles", "cycles", s.loop_cycles.to_string(), "");
+    t.row("loop_overruns", "overruns", s.loop_overruns.to_string(), "");
+    t.row(
+        "loop_rejected",
+        "references rejected",
+        s.loop_rejected.to_string(),
+        "",
+    );
+    t.row(
+        "loop_dropped",
+        "setpoints not handed to the publish stage",
+        s.loop_dropped.to_string(),
+        "",
+    );
+    t.row(
+        "loop_lateness_p99_us",
+        "lateness p99 / max",
+        format!(
+            "{} / {}",
+            num(s.loop_lateness_p99_us, 1, "–"),
+            num(s.loop_lateness_max_us, 1, "–")
+        ),
+        "µs",
+    );
+    t.row(
+        "loop_compute_p99_us",
+        "compute p99",
+        num(s.loop_compute_p99_us, 1, "–"),
+        "µs",
+    );
+    t.row(
+        "setpoints",
+        "setpoints received",
+        s.setpoints.to_string(),
+        "",
+    );
+    t.row(
+        "plant_samples",
+        "plant states received",
+        s.plant_samples.to_string(),
+        "",
+    );
+    t.row(
+        "non_converged_plant_steps",
+        "plant steps without equilibrium",
+        s.non_converged_plant_steps.to_string(),
+        "",
+    );
+    t.section("Safety");
+    t.row("estops", "e-stops", s.estops.to_string(), "");
+    for (k, trip) in s.monitor_trips.iter().enumerate() {
+        t.row(
+            "monitor_trips",
+            &format!("monitor trip {}", k + 1),
+            trip.clone(),
+            "",
+        );
+    }
+    t.row(
+        "monitor_heartbeats",
+        "monitor heartbeats",
+        if s.monitor {
+            s.monitor_heartbeats.to_string()
+        } else {
+            "monitor not running".into()
+        },
+        "",
+    );
+    t.row(
+        "drive_faults",
+        "drive fault reports",
+        s.drive_faults.to_string(),
+        "",
+    );
+    t.row(
+        "bus_stopped_during_run",
+        "drive bus stopped during the ride",
+        s.bus_stopped_during_run
+            .clone()
+            .unwrap_or_else(|| "no".into()),
+        "",
+    );
+    for reason in &s.bus_stop_reasons {
+        t.row("bus_stop_reasons", "drive-io said", reason.clone(), "");
+    }
+    if !s.wire.is_empty() {
+        t.section("Buses (wire model)");
+        for w in &s.wire {
+            t.row(
+                "wire",
+                &format!("bus {}: frames / dropped at a full queue", w.bus),
+                format!("{} / {}", w.frames, w.dropped),
+                "",
+            );
+            t.row(
+                "wire",
+                &format!("bus {}: load mean / busiest second", w.bus),
+                format!(
+                    "{} / {}",
+                    num(w.load_mean_percent, 1, "–"),
+                    w.load_max_percent
+                        .map_or("not measured".into(), |x| num(x, 1, "–"))
+                ),
+                "%",
+            );
+            t.row(
+                "wire",
+                &format!("bus {}: worst frame latency", w.bus),
+                num(w.latency_max_us, 0, "–"),
+                "µs",
+            );
+        }
+    }
+    if let Some(r) = &s.ride {
+        t.section("Hover flight");
+        t.row("ride.pilot", "pilot", r.pilot.clone(), "");
+        t.row("ride.flown_s", "flown", num(r.flown_s, 1, "–"), "s");
+        t.row(
+            "ride.wall_contact_s",
+            "walls pushed",
+            num(r.wall_contact_s, 1, "–"),
+            "s",
+        );
+        t.row(
+            "ride.max_wall_penetration_mm",
+            "max beyond the walls x / y / z",
+            r.max_wall_penetration_mm
+                .map(|v| num(v, 1, "–"))
+                .join(" / "),
+            "mm",
+        );
+        t.row(
+            "ride.late_steps",
+            "late model steps",
+            r.late_steps.to_string(),
+            "",
+        );
+    }
+    if let Some(c) = &s.cueing {
+        t.section("Motion cueing");
+        t.row("cueing.source", "vehicle", c.source.clone(), "");
+        t.row("cueing.drive_s", "drive", num(c.drive_s, 1, "–"), "s");
+        t.row(
+            "cueing.max_tilt_rate_deg_per_s",
+            "max tilt rate (threshold)",
+            format!(
+                "{} ({})",
+                num(c.max_tilt_rate_deg_per_s, 2, "–"),
+                num(c.tilt_rate_threshold_deg_per_s, 2, "–")
+            ),
+            "°/s",
+        );
+        t.row(
+            "cueing.limited_steps",
+            "limited steps",
+            c.limited_steps.to_string(),
+            "",
+        );
+    }
+    if let Some(p) = &s.record {
+        t.section("Recording");
+        t.row("record", "data set", p.display().to_string(), "");
+    }
+    t.0
+}
+
+/// Writes the plots and index.html into `out`; returns the index path.
+pub fn write(out: &Path, r: &RunRecord, summary: &Summary) -> Result<PathBuf, RunPlotError> {
     type Draw = fn(&RunRecord, &Path) -> Plot;
-    let plots: [(&str, Draw); 4] = [
+    let plots: [(&str, Draw); 6] = [
         ("pose.svg", pose_plot),
+        ("tracking.svg", tracking_plot),
+        ("path.svg", path_plot),
         ("forces.svg", force_plot),
         ("loop.svg", loop_plot),
         ("events.svg", events_plot),
@@ -442,54 +1084,108 @@ pub fn write(
             return Err(RunPlotError::Draw { file, source });
         }
     }
-    let mut rows = String::new();
-    if let Some(obj) = summary.as_object() {
-        for (k, v) in obj {
-            let v = match v {
-                serde_json::Value::Number(n) => n.as_f64().map_or(n.to_string(), |x| {
-                    if x.fract() == 0.0 {
-                        format!("{x}")
-                    } else {
-                        format!("{x:.3}")
-                    }
-                }),
-                serde_json::Value::Null => "–".into(),
-                other => other.to_string(),
-            };
-            rows.push_str(&format!(
-                "<tr><th>{}</th><td>{}</td></tr>\n",
-                html_escape(k),
-                html_escape(&v)
-            ));
-        }
-    }
+    let rows = summary_table(summary);
+    // In time order (the topics of several processes arrive interleaved).
+    let mut events = r.events.clone();
+    events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     let mut ev = String::new();
-    for (t, src, what) in &r.events {
+    for e in &events {
         ev.push_str(&format!(
-            "<tr><td>{t:.3}</td><td>{}</td><td>{}</td></tr>\n",
-            html_escape(src),
-            html_escape(what)
+            "<tr{}><td>{:.3}</td><td>{}</td><td>{}</td></tr>\n",
+            if e.alarm { " class=\"alarm\"" } else { "" },
+            e.t_s,
+            html_escape(&e.source),
+            html_escape(&e.what)
         ));
     }
+    if events.is_empty() {
+        ev.push_str("<tr><td colspan=\"3\">no events</td></tr>\n");
+    }
+    // The ride's own figures, where the run's source made them.
+    let mut extra = String::new();
+    let mut figure = |title: &str, p: &Path, alt: &str| {
+        let href = html_escape(&link_target(out, p));
+        extra.push_str(&format!(
+            "<h2>{title}</h2><p><a href=\"{href}\">{href}</a></p><img src=\"{href}\" alt=\"{alt}\">\n"
+        ));
+    };
+    if let Some(p) = summary.ride.as_ref().and_then(|r| r.path_svg.as_ref()) {
+        figure("Hover flight: the ride's path", p, "hover flight path");
+    }
+    if let Some(c) = &summary.cueing {
+        if let Some(p) = &c.perception_svg {
+            figure("Motion cueing: perception", p, "cueing perception");
+        }
+        if let Some(p) = &c.motion_svg {
+            figure("Motion cueing: motion", p, "cueing motion");
+        }
+    }
+    let ride_path = match summary.ride.as_ref().and_then(|r| r.path_svg.as_ref()) {
+        Some(p) => {
+            let href = html_escape(&link_target(out, p));
+            format!(
+                "<a href=\"path.svg\">path.svg</a> (reference and plant) and the hover flight's <a href=\"{href}\">{href}</a>"
+            )
+        }
+        None => "<a href=\"path.svg\">path.svg</a>".into(),
+    };
+    // Links only to the files this run wrote.
+    let mut files: Vec<String> = [
+        "sim-plant.log",
+        "safety-monitor.log",
+        "drive-io.log",
+        "motion-core.log",
+        "can-wire.log",
+        "summary.json",
+        "waypoints-timed.csv",
+    ]
+    .iter()
+    .filter(|f| out.join(f).is_file())
+    .map(|f| format!("<a href=\"{f}\">{f}</a>"))
+    .collect();
+    if files.is_empty() {
+        files.push("none written".into());
+    }
+    let files = files.join(", ");
+    let verdict = if summary.completed {
+        "<p class=\"verdict ok\">Completed: the ride ran to its end and the platform held.</p>"
+            .to_string()
+    } else {
+        format!(
+            "<p class=\"verdict stopped\">STOPPED before the ride ended: {}</p>",
+            html_escape(
+                summary
+                    .stopped_by
+                    .as_deref()
+                    .unwrap_or("the run ended early (see the events)")
+            )
+        )
+    };
     let html = format!(
         r#"<!doctype html>
-<html lang="en"><head><meta charset="utf-8"><title>crs sim run</title>
-<style>body{{font-family:sans-serif;margin:16px;color:#1d232b}} table{{border-collapse:collapse}} th,td{{padding:2px 8px;border-bottom:1px solid #ddd;text-align:left}} img{{max-width:100%;border:1px solid #ddd;margin:6px 0}}</style>
+<html lang="en"><head><meta charset="utf-8"><title>crs sim run: {platform}</title>
+<style>body{{font-family:sans-serif;margin:16px;color:#1d232b;max-width:1150px}} table{{border-collapse:collapse}} th,td{{padding:2px 8px;border-bottom:1px solid #ddd;text-align:left;vertical-align:top}} td.value{{font-variant-numeric:tabular-nums}} tr.section th{{background:#eef1f4;padding-top:8px}} tr.alarm td{{color:#c62828;font-weight:600}} img{{max-width:100%;border:1px solid #ddd;margin:6px 0;display:block}} .verdict{{font-size:18px;font-weight:700;padding:6px 10px;border-radius:4px}} .ok{{background:#e3f2e5;color:#1b5e20}} .stopped{{background:#fde7e7;color:#b71c1c}}</style>
 </head><body>
-<h1>crs sim run</h1>
-<p>Time axis: seconds from the first setpoint or plant state the launcher received. Vertical lines in the plots mark events (red: e-stop / fault).</p>
-<h2>Summary</h2>
-<table>
+<h1>crs sim run: {platform}</h1>
+{verdict}
+<p>Time axis of every plot: seconds from the first setpoint or plant state the launcher received. Grey vertical lines mark events, red ones e-stops and faults; each plot's legend is in the strip above it.</p>
+<h2 id="summary">Summary</h2>
+<table id="summary-table">
+<tr><th>quantity</th><th>value</th><th>unit</th></tr>
 {rows}</table>
-<h2>Tracked vs reference pose</h2><img src="pose.svg" alt="pose">
-<h2>Cable forces</h2><img src="forces.svg" alt="forces">
-<h2>Loop timing</h2><img src="loop.svg" alt="loop">
-<h2>Events</h2><img src="events.svg" alt="events">
-<table><tr><th>t (s)</th><th>source</th><th>event</th></tr>
+<h2 id="events">Events (state changes, in time order)</h2>
+<table id="events-table"><tr><th>t (s)</th><th>source</th><th>event</th></tr>
 {ev}</table>
-<p>Logs: <a href="sim-plant.log">sim-plant</a>, <a href="safety-monitor.log">safety-monitor</a>, <a href="drive-io.log">drive-io</a>, <a href="motion-core.log">motion-core</a>; <a href="summary.json">summary.json</a>.</p>
+<img src="events.svg" alt="events">
+<h2 id="tracking">Tracking error (mm, °)</h2><img src="tracking.svg" alt="tracking error">
+<h2 id="pose">Tracked vs reference pose</h2><img src="pose.svg" alt="pose">
+<h2 id="path">The ride's path</h2><p>{ride_path}</p><img src="path.svg" alt="ride path">
+<h2 id="forces">Cable forces</h2><img src="forces.svg" alt="forces">
+<h2 id="loop">Loop timing</h2><img src="loop.svg" alt="loop">
+{extra}<p>Files of this run: {files}.</p>
 </body></html>
-"#
+"#,
+        platform = html_escape(&summary.platform),
     );
     let index = out.join("index.html");
     if let Err(source) = std::fs::write(&index, html) {
@@ -505,48 +1201,155 @@ pub fn write(
 mod tests {
     use super::*;
 
-    #[test]
-    fn writes_four_plots_and_an_index_with_the_summary() {
-        let dir = std::env::temp_dir().join(format!("crs-sim-plots-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+    fn record() -> RunRecord {
         let mut r = RunRecord::new(1000.0, 9000.0);
         for k in 0..2000u64 {
             let mut sp = JointSetpoint {
                 sequence: k + 1,
+                cable_count: 8,
                 timestamp_ns: 1_000_000_000 + k * 1_000_000 + if k >= 1500 { 4_000_000 } else { 0 },
                 ..Default::default()
             };
             sp.pose[0] = k as f64 * 1e-4;
+            sp.cable_length_m[..8].fill(5.0);
             r.setpoint(&sp);
             let mut t = PlantTruth {
                 cable_count: 8,
                 timestamp_ns: sp.timestamp_ns + 500_000,
                 ..Default::default()
             };
+            // 2 mm behind in x; the winches 0.5 mm longer than commanded.
             t.pose = sp.pose;
+            t.pose[0] -= 2e-3;
+            t.cable_length_m[..8].fill(5.0005);
             t.force_n[..8].fill(3000.0 + k as f64);
             r.truth(&t);
         }
-        let mut e = StateEvent::new(ProcessId::SafetyMonitor, EventKind::EStop, 1);
+        r
+    }
+
+    #[test]
+    fn routine_announcements_are_events_only_when_they_change_something() {
+        let mut r = record();
+        // motion-core re-announces its plan about once a second, the monitor its epoch.
+        for s in 0..5 {
+            let mut e = StateEvent::plan(9000, s);
+            e.timestamp_ns = 1_100_000_000 + s * 100_000_000;
+            r.event(&e);
+            let mut m = StateEvent::new(ProcessId::SafetyMonitor, EventKind::StateChanged, s);
+            m.state = crs_ipc::monitor_state::ARMED;
+            m.detail = crs_ipc::monitor_state::EPOCH_ANNOUNCE;
+            m.timestamp_ns = e.timestamp_ns;
+            r.event(&m);
+        }
+        let mut e = StateEvent::plan(9500, 9);
+        e.timestamp_ns = 2_000_000_000;
+        r.event(&e);
+        let mut e = StateEvent::new(ProcessId::MotionCore, EventKind::StateChanged, 10);
+        e.state = motion_state::STOPPING;
+        e.timestamp_ns = 2_900_000_000;
+        r.event(&e);
+        let words: Vec<String> = r
+            .events()
+            .iter()
+            .map(|e| format!("{}: {}", e.source, e.what))
+            .collect();
+        assert_eq!(
+            words,
+            [
+                "motion-core: plan announced: ends with setpoint #9000",
+                "safety-monitor: armed",
+                "motion-core: plan announced: ends with setpoint #9500",
+                "motion-core: end of the setpoint stream (planned)",
+            ]
+        );
+        assert!(r.events().iter().all(|e| !e.alarm));
+    }
+
+    #[test]
+    fn the_tracking_error_is_in_mm_against_the_newest_setpoint_before_each_state() {
+        let r = record();
+        assert_eq!(r.tracking.len(), 200);
+        for s in &r.tracking {
+            assert!((s.position_mm[0] + 2.0).abs() < 1e-6, "{:?}", s.position_mm);
+            assert!((s.position_norm_mm - 2.0).abs() < 1e-6);
+            assert!(s.rotation_deg.abs() < 1e-9);
+            assert_eq!(s.length_mm.len(), 8);
+            assert!(s.length_mm.iter().all(|l| (l - 0.5).abs() < 1e-6));
+        }
+    }
+
+    #[test]
+    fn writes_the_plots_and_an_index_with_named_fields_units_and_events_in_words() {
+        let dir = std::env::temp_dir().join(format!("crs-sim-plots-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut r = record();
+        let mut e = StateEvent::new(ProcessId::Operator, EventKind::EStop, 1);
         e.timestamp_ns = 2_500_000_000;
-        e.detail = 1;
         r.event(&e);
         // 1999 periods: 1998 of 1 ms, one of 5 ms (the stall) in the overflow bin.
         assert_eq!(r.period_hist.iter().sum::<u64>(), 1999);
         assert_eq!(*r.period_hist.last().unwrap(), 1);
         assert_eq!(r.period_hist[(1000.0 / BIN_US) as usize], 1998);
-        let summary = serde_json::json!({"setpoints": 2000, "tracking_position_mean_mm": 1.25});
+        let summary = Summary {
+            platform: "icosahedron".into(),
+            completed: false,
+            stopped_by: Some("operator: stop requested by an operator".into()),
+            setpoints: 2000,
+            tracking_position_mean_mm: 1.25,
+            static_position_mm: f64::NAN,
+            force_min_n: 3000.0,
+            force_max_n: 4999.0,
+            f_min_n: 1000.0,
+            f_max_n: 9000.0,
+            estops: 1,
+            ..Summary::default()
+        };
+        std::fs::write(dir.join("summary.json"), "{}").unwrap();
         let index = write(&dir, &r, &summary).unwrap();
         let html = std::fs::read_to_string(index).unwrap();
-        assert!(html.contains("tracking_position_mean_mm") && html.contains("1.250"));
-        assert!(html.contains("E-STOP"));
-        for f in ["pose.svg", "forces.svg", "loop.svg", "events.svg"] {
+        assert!(html.contains(
+            "<tr data-field=\"tracking_position_mean_mm\"><th>position error, mean</th><td class=\"value\">1.25</td><td class=\"unit\">mm</td></tr>"
+        ), "{html}");
+        assert!(
+            html.contains("STOPPED before the ride ended: operator: stop requested by an operator")
+        );
+        assert!(html.contains("not reached (the run was stopped)"));
+        assert!(html.contains("<td>operator</td><td>E-STOP: stop requested by an operator</td>"));
+        let coded = html
+            .match_indices("state ")
+            .any(|(i, _)| html[i + 6..].starts_with(|c: char| c.is_ascii_digit()));
+        assert!(!coded, "a state code in the report");
+        // Only the files that exist are linked.
+        assert!(html.contains("<a href=\"summary.json\">") && !html.contains("drive-io.log"));
+        for f in [
+            "pose.svg",
+            "tracking.svg",
+            "path.svg",
+            "forces.svg",
+            "loop.svg",
+            "events.svg",
+        ] {
             let svg = std::fs::read_to_string(dir.join(f)).unwrap();
             assert!(svg.starts_with("<svg") && svg.len() > 2000, "{f}");
+            assert!(html.contains(&format!("src=\"{f}\"")), "{f} not shown");
         }
-        // The force plot draws the limits and 8 cables.
+        // The force plot's legend names 8 cables and the limits, in the strip above the plot.
         let svg = std::fs::read_to_string(dir.join("forces.svg")).unwrap();
-        assert!(svg.contains("cable 8") && svg.contains("f_min"));
+        for label in ["cable 1", "cable 8", "f_min, f_max"] {
+            let at = svg.find(&format!(">\n{label}\n</text>")).expect(label);
+            let tag = &svg[svg[..at].rfind("<text").unwrap()..at];
+            let y: f64 = tag
+                .split("y=\"")
+                .nth(1)
+                .unwrap()
+                .split('"')
+                .next()
+                .unwrap()
+                .parse()
+                .unwrap();
+            assert!(y < f64::from(LEGEND_STRIP_PX), "{label} at y = {y}: {tag}");
+        }
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

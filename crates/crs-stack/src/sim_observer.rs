@@ -1,5 +1,5 @@
 //! What `crs sim` runs next to the stack ([`RunObserver`]): the operator console while the run
-//! lasts (`--console ADDR`) and the run's plots (`<out>/*.svg` + index.html, [`run_plots`]).
+//! lasts (`--console ADDR`) and the run's report (`<out>/index.html` + its plots, [`run_plots`]).
 
 use crate::console_setup::console_config;
 use crate::run_plots::{self, RunRecord};
@@ -40,7 +40,7 @@ impl SimObserver {
 impl RunObserver for SimObserver {
     fn started(&mut self, run: &RunStart<'_>) -> Result<(), crate::sim_run::ObserverError> {
         if let Some(req) = &self.console_request {
-            let cfg = console_config(
+            let mut cfg = console_config(
                 req.addr,
                 req.token.clone(),
                 run.prefix,
@@ -48,6 +48,15 @@ impl RunObserver for SimObserver {
                 run.platform,
                 run.waypoints,
             );
+            // The START RIDE button when the ride waits for an operator.
+            if let Some(sock) = run.control {
+                cfg.rides = crate::console_setup::ride_setup(
+                    run.daemon,
+                    run.platform,
+                    Some(sock.to_path_buf()),
+                    run.waypoints,
+                )?;
+            }
             let h = crs_console::spawn(cfg)?;
             println!("  operator console: http://{}/", h.addr);
             self.console = Some(h);
@@ -80,10 +89,7 @@ impl RunObserver for SimObserver {
         let Some(plots) = self.plots.as_ref() else {
             return;
         };
-        let written = serde_json::to_value(summary)
-            .map_err(|e| e.to_string())
-            .and_then(|v| run_plots::write(out, plots, &v).map_err(|e| e.to_string()));
-        match written {
+        match run_plots::write(out, plots, summary) {
             Ok(index) => println!("plots written to {}", index.display()),
             Err(e) => println!("plots NOT written: {e}"),
         }

@@ -95,6 +95,10 @@ pub struct SimOptions {
     /// Drive a vehicle's motion through the motion cueing instead of the waypoint plan
     /// ([`crate::cueing_run`]; motion-core follows it on its cueing input).
     pub cueing: Option<crate::cueing_run::CueingSpec>,
+    /// motion-core comes up idle and holding with its control socket (`<out>/control.sock`)
+    /// and runs the ride only when an operator starts it (the console's START RIDE button, or
+    /// `crs ride start` on that socket), instead of at launch.
+    pub operator_start: bool,
 }
 
 /// Default at-rest position error bound of `crs sim --check`, mm: twice the largest seen on the
@@ -232,6 +236,8 @@ pub struct RunStart<'a> {
     pub platform: &'a cdpr_model::config::Platform,
     /// The waypoint file motion-core runs (None: the daemon TOML's own).
     pub waypoints: Option<&'a Path>,
+    /// motion-core's control socket when an operator starts the ride ([`SimOptions::operator_start`]).
+    pub control: Option<&'a Path>,
 }
 
 /// Something that follows a run next to the summary (the operator console, the run's plots):
@@ -259,6 +265,9 @@ pub enum ObserverError {
     /// The operator console did not start (address in use, ...).
     #[error(transparent)]
     Console(#[from] crs_console::ConsoleError),
+    /// The console's start button (its ride refused, ...).
+    #[error(transparent)]
+    ConsoleSetup(#[from] crate::console_setup::ConsoleSetupError),
 }
 
 /// Why a run of the stack failed: refused before anything started (bad inputs, a missing
@@ -367,6 +376,10 @@ pub enum SimError {
     Campaign(#[from] crate::campaign::CampaignError),
     #[error("--dwell-s needs waypoints (--waypoints or [trajectory].waypoints)")]
     DwellWithoutWaypoints,
+    #[error(
+        "--start-from-console starts a waypoint ride: it needs waypoints (--waypoints or [trajectory].waypoints) and no --source helicopter / cueing"
+    )]
+    OperatorStartWithoutRide,
     #[error(transparent)]
     Transport(#[from] crate::transport::BadTransport),
     #[error("{}: {source}", drives.display())]
@@ -533,6 +546,10 @@ pub fn execute_observed(
     };
     let home_q = configured.home_command().map_err(SimError::HomePose)?;
     let waypoint_file = a.waypoints.clone().or(daemon.trajectory.waypoints.clone());
+    if a.operator_start && (ride.is_some() || cueing.is_some() || waypoint_file.is_none()) {
+        return Err(SimError::OperatorStartWithoutRide);
+    }
+    let control_socket = a.operator_start.then(|| a.out.join("control.sock"));
     // The ride motion-core will run, checked with the loop's own checks before any process
     // starts: a refusal names the file, the line and (outside the region) the axis and bound.
     if ride.is_none()
@@ -611,6 +628,7 @@ pub fn execute_observed(
         daemon: &daemon,
         platform: &platform,
         waypoints: waypoints_arg.as_deref().or(waypoint_file.as_deref()),
+        control: control_socket.as_deref(),
     })?;
 
     let mut stack = Supervisor::new(&prefix, &a.out);
@@ -769,6 +787,14 @@ pub fn execute_observed(
     ];
     if ride.is_some() || cueing.is_some() {
         mc_args.extend(["--input".into(), "cueing".into()]);
+    } else if let Some(sock) = &control_socket {
+        // Idle and holding until an operator starts the ride on the control socket.
+        mc_args.extend(["--control".into(), s(sock)]);
+        println!(
+            "  motion-core idles at home, holding: the ride starts when an operator starts it \
+             (the console's START RIDE, or `crs ride start FILE --socket {}`)",
+            sock.display()
+        );
     } else if let Some(w) = &waypoints_arg {
         mc_args.push("--waypoints".into());
         mc_args.push(s(w));

@@ -31,6 +31,7 @@ fn scratch(name: &str) -> PathBuf {
 fn options(dir: &Path, waypoints: PathBuf) -> SimOptions {
     let c = repo().join("config");
     SimOptions {
+        operator_start: false,
         config: c.join("motion-core.toml"),
         drives: c.join("drives.toml"),
         plant: c.join("plant/icosahedron.toml"),

@@ -20,9 +20,19 @@ pub struct ConsoleArgs {
     /// motion-core daemon TOML: the platform drawn and the plan shown as progress.
     #[arg(long, default_value = "config/motion-core.toml")]
     pub config: PathBuf,
-    /// Waypoint CSV the stack runs (default: the daemon TOML's).
+    /// Waypoint CSV the stack runs, shown as progress (default: the --ride file, else the
+    /// daemon TOML's).
     #[arg(long)]
     pub waypoints: Option<PathBuf>,
+    /// motion-core's control socket (`motion-core --control PATH`, as `crs ride` uses): enables
+    /// the START RIDE button, which starts --ride only while the pre-ride checks pass (stack
+    /// running, motion-core idle and holding, monitor armed, no latched trip).
+    #[arg(long, value_name = "PATH", env = "CRS_CONTROL_SOCKET")]
+    pub control: Option<PathBuf>,
+    /// The ride of the START RIDE button (waypoint CSV), verified with motion-core's own checks
+    /// when the console starts (a refused ride names file, line, axis and bound, exit 1).
+    #[arg(long, value_name = "FILE")]
+    pub ride: Option<PathBuf>,
 }
 
 /// `crs sim`'s console options (flattened into `SimArgs`).
@@ -34,6 +44,11 @@ pub struct SimConsoleArgs {
     /// Token for a console on a non-loopback address (also CRS_CONSOLE_TOKEN).
     #[arg(long, env = "CRS_CONSOLE_TOKEN", hide_env_values = true)]
     pub console_token: Option<String>,
+    /// The ride waits for an operator: motion-core comes up idle and holding with its control
+    /// socket (<out>/control.sock) and the ride starts from the console's START RIDE button
+    /// once the pre-ride checks pass (or `crs ride start FILE --socket <out>/control.sock`).
+    #[arg(long, requires = "console")]
+    pub start_from_console: bool,
 }
 
 impl SimConsoleArgs {
@@ -50,6 +65,14 @@ impl SimConsoleArgs {
 pub fn run(a: ConsoleArgs) -> Result<(), Box<dyn std::error::Error>> {
     // The console's own log (stop requests, events): journal under systemd, else stdout.
     crs_log::init("crs-console");
-    crs_stack::console_setup::serve(a.addr, a.token, a.prefix, &a.config, a.waypoints.as_deref())?;
+    crs_stack::console_setup::serve(crs_stack::console_setup::ServeOptions {
+        addr: a.addr,
+        token: a.token,
+        prefix: a.prefix,
+        config: &a.config,
+        waypoints: a.waypoints.as_deref(),
+        control: a.control,
+        ride: a.ride.as_deref(),
+    })?;
     Ok(())
 }

@@ -145,6 +145,7 @@ impl SimArgs {
             rt_priority: self.rt_priority,
             ride: self.ride.spec()?,
             cueing: self.cueing.spec(&self.ride.source)?,
+            operator_start: self.console.start_from_console,
         })
     }
 }

@@ -9,7 +9,7 @@ use crs_ipc::{
 };
 use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
 use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
-use motion_core::daemon::ride::{RideControl, RideSlot};
+use motion_core::daemon::ride::{RideControl, RidePhase, RideSlot};
 use motion_core::daemon::ride_socket;
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::timeline::Timeline;
@@ -38,7 +38,8 @@ struct Args {
     #[arg(long)]
     waypoints: Option<PathBuf>,
     /// Exit once the plan has been run and this many seconds of hold have passed (with
-    /// `--input cueing`: this many seconds after the last cueing target, once one arrived).
+    /// `--input cueing`: this many seconds after the last cueing target, once one arrived;
+    /// with `--control`: after the first ride an operator started has ended).
     #[arg(long)]
     exit_after_plan_s: Option<f64>,
     /// Reference input: `waypoints` (ruckig plan of the waypoint CSV) or `cueing` (follow the
@@ -536,7 +537,14 @@ fn run(args: Args) -> Result<(), String> {
             outbox.state.store(code, Ordering::Relaxed);
             if let Some(after) = exit_after {
                 let latched = hl.state().is_latched();
-                if plan_done_at.is_none() && (latched || (!hl.is_cueing() && hl.plan_finished())) {
+                // With --control the loop idles until an operator starts a ride: its plan is
+                // done once a ride was started (by the loop, this very thread) and ended.
+                let ride_done = rides
+                    .as_ref()
+                    .is_none_or(|r| r.rides_started() > 0 && r.phase() == RidePhase::Idle);
+                if plan_done_at.is_none()
+                    && (latched || (!hl.is_cueing() && hl.plan_finished() && ride_done))
+                {
                     plan_done_at = Some(now);
                 }
                 // A finite cueing stream is done when its source falls silent: the hold
