@@ -394,9 +394,27 @@ pub fn run_on(
     let reader = {
         let (q, s, d) = (queue.clone(), reader_stop.clone(), health.clone());
         let layout = cfg.layout.clone();
+        // The reader is the monitor's eyes on the bus: at SCHED_OTHER a loaded host starved it
+        // for tens of ms, and the cycle thread then saw the safety I/O node (and the drives)
+        // silent and tripped although their frames were on the bus. It runs one priority below
+        // the cycle thread, on the same CPU, when the monitor runs real-time at all.
+        let rt = (cfg.monitor.rt_priority > 1).then(|| {
+            (
+                cfg.monitor.rt_priority - 1,
+                usize::try_from(cfg.monitor.cpu).ok(),
+            )
+        });
         std::thread::Builder::new()
             .name("safety-bus-rx".into())
-            .spawn(move || bus_reader(rx, layout, own_cob, q, s, d))
+            .spawn(move || {
+                if let Some((priority, cpu)) = rt {
+                    match crs_rt::make_realtime(priority, cpu) {
+                        Ok(_) => tracing::info!(priority, ?cpu, "bus reader: SCHED_FIFO"),
+                        Err(e) => tracing::warn!("bus reader: {e}; it runs without it"),
+                    }
+                }
+                bus_reader(rx, layout, own_cob, q, s, d)
+            })
             .map_err(|e| DaemonError::Other(format!("spawning the bus reader: {e}")))?
     };
 
