@@ -11,7 +11,7 @@ use crs_ipc::{
     BusState, DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, ProcessId,
     SetpointReadyListener, StateEvent, SyncSchedule, monotonic_ns,
 };
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 #[derive(Debug, thiserror::Error)]
@@ -207,6 +207,10 @@ impl<B: CanBus> Buses<B> {
     }
 }
 
+/// Cycles run by this process so far, for the systemd watchdog thread (`crs-service`): it
+/// pings only while this advances. A Relaxed store per cycle, nothing else in the loop.
+pub static CYCLES_RUN: AtomicU64 = AtomicU64::new(0);
+
 /// Runs drive-io until `stop` is set: one cycle per SYNC period over every CAN interface of
 /// `buses` (one per `cfg.interfaces()` entry, in that order), handling received frames while it
 /// waits; each cycle reads the newest setpoint and e-stop events, writes RPDOs, publishes
@@ -339,6 +343,8 @@ pub fn run_with<B: CanBus>(
         multiplexed = buses.fds.is_some(),
         "cycle timing"
     );
+    // systemd (Type=notify): ready once the CAN sockets and every iceoryx2 port are open.
+    crs_service::notify_ready("CAN interfaces and iceoryx2 ports open, SYNC loop running");
     while !stop.load(Ordering::Relaxed) {
         // Wait for what is due next, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
         let mut now = monotonic_ns();
@@ -433,6 +439,7 @@ pub fn run_with<B: CanBus>(
             }
         }
         cycles += 1;
+        CYCLES_RUN.store(cycles, Ordering::Relaxed);
 
         let permit = watch.as_mut().is_none_or(|w| w.permits(cycle_now));
         let grace = watch
