@@ -94,6 +94,7 @@ HIL_SUITES=(
   "HIL: drive adapter on vcan (QEMU guest)|tools/hil-run.sh"
   "HIL: the full simulated stack on vcan (QEMU guest)|tools/stack-hil.sh"
   "HIL: the wire model's vcan forwarding (QEMU guest)|tools/wire-hil.sh"
+  "HIL: the .deb under a real systemd (Debian guest: install, upgrade, ride, monitor killed, isolation)|tools/systemd-boot-test.sh"
 )
 # The guest matrix (behaviour only; the host suite above asserts timing): under TCG a scenario
 # fails now and then after its fault was injected (2026-11-26: 2 of 5 guest runs, a different
