@@ -109,7 +109,7 @@ pub fn run(args: Args, bench: Bench) -> Result<(), Box<dyn std::error::Error>> {
         tracing::info!(interface = %itf.name, transport = %spec, "CAN interface");
     }
     tracing::info!(drives = cfg.winches.len(), "drive-io starting");
-    // systemd: READY=1 comes from the runner once its ports are open; the watchdog pings only
+    // systemd: READY=1 comes from the runner once the drives are operational; the watchdog pings only
     // while the SYNC loop's cycle count advances.
     let watchdog = crs_service::Watchdog::spawn(|| {
         runner::CYCLES_RUN.load(std::sync::atomic::Ordering::Relaxed)

@@ -343,8 +343,10 @@ pub fn run_with<B: CanBus>(
         multiplexed = buses.fds.is_some(),
         "cycle timing"
     );
-    // systemd (Type=notify): ready once the CAN sockets and every iceoryx2 port are open.
-    crs_service::notify_ready("CAN interfaces and iceoryx2 ports open, SYNC loop running");
+    // systemd (Type=notify): ready once the drives are operational (NMT boot, SDO, CiA 402
+    // enabled), so motion-core (After= drive-io) starts on drives that follow its setpoints, as
+    // `crs sim` starts it.
+    let mut notified_ready = false;
     while !stop.load(Ordering::Relaxed) {
         // Wait for what is due next, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
         let mut now = monotonic_ns();
@@ -551,6 +553,10 @@ pub fn run_with<B: CanBus>(
             }
         }
         feedback.publish(master.feedback())?;
+        if !notified_ready && matches!(master.state(), BusState::Ready | BusState::Running) {
+            crs_service::notify_ready("drives operational, SYNC loop running");
+            notified_ready = true;
+        }
         if let Some(ev) = master.take_state_event(event_seq + 1) {
             event_seq += 1;
             tracing::info!(state = ?BusState::from_u32(ev.state), detail = ev.detail, node = ev.detail_node, "bus state");
