@@ -86,6 +86,12 @@ t0=$(cut -d' ' -f1 /proc/uptime)
 check "systemctl start crs-stack.target" timeout 600 systemctl start crs-stack.target
 echo "BOOT: stack started in $(awk -v a="$t0" '{printf "%.0f", $1 - a}' /proc/uptime) s (emulated)"
 for u in $UNITS; do check "$u active" test "$(systemctl is-active $u.service)" = active; done
+if [ "$(systemctl is-active crs-motion-core.service)" != active ]; then
+  for u in $DAEMONS; do
+    journalctl -b --no-pager -q -o short-monotonic -u $u.service | grep -v 'heartbeat lost\|overran' | head -n 25 | sed "s/^/BOOT:   $u: /"
+  done
+  finish
+fi
 for u in $DAEMONS; do
   check "$u Type=notify (ready by sd_notify)" test "$(prop $u Type)" = notify
   w=$(prop $u WatchdogUSec)
