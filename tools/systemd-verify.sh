@@ -148,12 +148,8 @@ for dep in crs-safety-monitor.service crs-drive-io.service; do
   grep -Eq "^BindsTo=.*\b$dep\b" "$mc" || policy "$mc: BindsTo=$dep missing"
   grep -Eq "^After=.*\b$dep\b" "$mc" || policy "$mc: After=$dep missing"
 done
-grep -Eq '^Wants=.*crs-motion-core.service' systemd/crs-stack.target ||
-  policy "crs-stack.target must want crs-motion-core.service"
-# Requires= would stop the whole stack (PartOf=) when one unit dies: drive-io must stay up to
-# hold the drives stopped when the monitor dies.
-grep -q '^Requires=' systemd/crs-stack.target &&
-  policy "crs-stack.target: Requires= propagates one unit's death to every unit (use Wants=)"
+grep -Eq '^Requires=.*crs-motion-core.service' systemd/crs-stack.target ||
+  policy "crs-stack.target must require crs-motion-core.service"
 
 if [ $fail -ne 0 ]; then
   echo "systemd-verify: FAILED" >&2
