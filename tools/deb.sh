@@ -5,35 +5,42 @@
 #   /usr/lib/systemd/system  the units (ExecStart=/usr/bin/...), crs-stack.target without [Install]
 #   /etc/crs/config          the configs: every file under /etc is a conffile, so an edited config
 #                            survives an upgrade (dpkg keeps it, or asks)
-#   /usr/share/man/man1, completions (bash, zsh, fish); /usr/lib/tmpfiles.d/crs.conf (/run/crs)
+#   /usr/lib/crs/crs-isolation  the stack's namespaces (crs-isolation.service)
+#   /usr/share/man/man1      every binary's man pages, completions (bash, zsh, fish);
+#                            /usr/lib/tmpfiles.d/crs.conf (/run/crs)
 #   postinst                 the system user and group `crs`, systemd daemon-reload, tmpfiles;
 #                            it never enables, starts or restarts a unit (an upgrade leaves a
 #                            running stack running: the replaced binaries take effect at the
 #                            operator's next start)
-# Usage: tools/deb.sh [--bin-dir target/release] [--out target/deb] [--fast]
+# Usage: tools/deb.sh [--bin-dir target/release] [--out target/deb] [--fast] [--version V]
 #   --fast: no compression (tests of the package's layout with debug binaries)
-# Prints the path of the .deb. Needs dpkg-deb. Not yet covered: the man pages of the daemons
-# (only crs has them), the install/upgrade test with dpkg in the guest.
+#   --version V: the package's version instead of Cargo.toml's (e.g. an upgrade in a test)
+# The binaries are stripped of debug info (as Debian packages are). Prints the path of the .deb.
+# Needs dpkg-deb and objcopy. The install/upgrade test with dpkg under systemd:
+# tools/systemd-boot-test.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN_DIR=target/release
 OUT=target/deb
 COMPRESS=(-Zxz)
+VERSION=
 while [ $# -gt 0 ]; do
   case "$1" in
     --bin-dir) BIN_DIR=$2; shift 2 ;;
     --out) OUT=$2; shift 2 ;;
     --fast) COMPRESS=(-Znone); shift ;;
-    -h|--help) sed -n 2,17p "$0"; exit 0 ;;
+    --version) VERSION=$2; shift 2 ;;
+    -h|--help) sed -n 2,20p "$0"; exit 0 ;;
     *) echo "deb.sh: unknown argument $1 (see --help)" >&2; exit 2 ;;
   esac
 done
-VERSION=$(sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)
+VERSION=${VERSION:-$(sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -1)}
 ARCH=$(dpkg --print-architecture)
 ROOT="$OUT/crs-motion_${VERSION}_${ARCH}"
 rm -rf "$ROOT"
 mkdir -p "$ROOT"
 DESTDIR="$ROOT" tools/install.sh --prefix /usr --bin-dir "$BIN_DIR" >/dev/null
+for b in "$ROOT"/usr/bin/*; do objcopy --strip-debug "$b"; done
 # Units belong to the distribution's directory; /etc/systemd/system stays the administrator's.
 install -d "$ROOT/usr/lib/systemd/system" "$ROOT/usr/lib/tmpfiles.d" "$ROOT/DEBIAN"
 mv "$ROOT"/etc/systemd/system/* "$ROOT/usr/lib/systemd/system/"

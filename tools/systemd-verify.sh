@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Checks the systemd units in systemd/ (issue #5): `systemd-analyze verify` on every unit, plus
-# the stack's own policy (Type=notify only where the binary sends sd_notify, motion-core never
-# restarted, real-time limits set). Exits non-zero on ANY warning or error: systemd-analyze
+# the stack's own policy (Type=notify only where the binary sends sd_notify, every daemon
+# Type=notify with a watchdog, never restarted, real-time limits set, the isolation keys). Exits non-zero on ANY warning or error: systemd-analyze
 # itself exits 0 on e.g. unknown keys or unparsable values ("ignoring"), so its output must be
 # empty to pass.
 #
@@ -94,11 +94,22 @@ crate_of() { # unit file -> crate directory of its binary
 }
 for u in systemd/*.service; do
   n=$(basename "$u")
+  if [ "$n" = crs-isolation.service ]; then
+    # Root's oneshot set-up of the namespaces: no daemon, no real time.
+    grep -q '^Type=oneshot$' "$u" || policy "$n: must be Type=oneshot"
+    grep -q '^RemainAfterExit=yes$' "$u" || policy "$n: RemainAfterExit=yes missing"
+    grep -q '^ExecStop=' "$u" || policy "$n: ExecStop= missing (the namespace must go on stop)"
+    grep -q '^PartOf=crs-stack.target$' "$u" || policy "$n: PartOf=crs-stack.target missing"
+    grep -q '^NS=crs$' systemd/crs-isolation && grep -q 'ip netns add' systemd/crs-isolation ||
+      policy "crs-isolation: does not create the network namespace crs"
+    continue
+  fi
   crate=$(crate_of "$u")
   sends_ready=no; sends_watchdog=no
   if [ -d "$crate/src" ]; then
-    grep -rq 'READY=1' "$crate/src" && sends_ready=yes
-    grep -rq 'WATCHDOG=1' "$crate/src" && sends_watchdog=yes
+    # Directly, or through crs-service (notify_ready / Watchdog::spawn).
+    grep -rqE 'READY=1|crs_service::notify_ready' "$crate/src" && sends_ready=yes
+    grep -rqE 'WATCHDOG=1|crs_service::Watchdog::spawn' "$crate/src" && sends_watchdog=yes
   fi
   type=$(sed -n 's/^Type=//p' "$u" | tail -1)
   if [ "$type" = notify ] && [ $sends_ready = no ]; then
@@ -115,6 +126,19 @@ for u in systemd/*.service; do
   grep -q '^CPUSchedulingPriority=' "$u" || policy "$n: CPUSchedulingPriority missing"
   grep -q '^CPUAffinity=' "$u" || policy "$n: CPUAffinity missing"
   grep -q '^PartOf=crs-stack.target$' "$u" || policy "$n: PartOf=crs-stack.target missing"
+  # Every daemon tells systemd when it is ready and is watched (sd_notify via crs-service).
+  [ "$type" = notify ] || policy "$n: must be Type=notify (every daemon sends READY=1)"
+  grep -q '^WatchdogSec=' "$u" || policy "$n: WatchdogSec= missing"
+  grep -q '^Restart=no$' "$u" || policy "$n: must never restart (Restart=no)"
+  # Isolation: the CAN interfaces in the stack's network namespace, iceoryx2's /tmp and
+  # /dev/shm the stack's own, the namespaces set up first.
+  grep -q '^NetworkNamespacePath=/run/netns/crs$' "$u" || policy "$n: NetworkNamespacePath=/run/netns/crs missing"
+  grep -Eq '^BindPaths=.*:/tmp( |$)' "$u" || policy "$n: BindPaths= of the stack's /tmp missing"
+  grep -Eq '^BindPaths=.*:/dev/shm( |$)' "$u" || policy "$n: BindPaths= of the stack's /dev/shm missing"
+  grep -q '^PrivateTmp=yes' "$u" && policy "$n: PrivateTmp=yes would split the stack's /tmp per unit"
+  grep -Eq '^Requires=.*\bcrs-isolation.service\b' "$u" || policy "$n: Requires=crs-isolation.service missing"
+  grep -Eq '^After=.*\bcrs-isolation.service\b' "$u" || policy "$n: After=crs-isolation.service missing"
+  grep -q '^User=crs$' "$u" || policy "$n: must run as user crs (iceoryx2 connects one user's processes)"
 done
 mc=systemd/crs-motion-core.service
 grep -q '^Type=notify$' "$mc" || policy "$mc: must be Type=notify"

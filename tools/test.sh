@@ -118,6 +118,14 @@ for s in "${HIL_SUITES[@]}"; do
   fi
 done
 
+# The .deb under a real systemd in a Debian guest (tools/systemd-boot-test.sh: install,
+# upgrade of the running stack, isolation, readiness, a ride, the monitor killed, a clean stop).
+# It does not pass end to end yet: under TCG the emulator stalls trip the stack before the ride
+# (docs/install.md, "The systemd boot test"), and it takes ~7 min. Listed, not run, until it does.
+skip "HIL: the .deb under a real systemd (Debian guest)" \
+  "does not pass end to end yet under TCG (emulator stalls trip the stack before the ride; docs/install.md); run by hand: bash tools/systemd-boot-test.sh"
+suite "Debian package: layout, conffiles, man pages of every binary (tools/deb-test.sh)" bash tools/deb-test.sh
+
 # The operator console in headless Chromium against a running `crs sim`, and the ecosystem's
 # tools (can-utils, python-can, man, completions, install.sh) on what the stack writes. Both use
 # the static release binaries the HIL scripts built (or build them the same way).

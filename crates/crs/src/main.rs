@@ -13,6 +13,7 @@ mod ride_cmd;
 mod ride_ctl_cmd;
 mod sim_cmd;
 mod surrogate_cmd;
+mod timing_cmd;
 
 use clap::{CommandFactory, Parser, Subcommand};
 use std::process::ExitCode;
@@ -65,6 +66,9 @@ enum Command {
     /// Regenerate the docs' headline figures (not timings) into one JSON file:
     /// benches/figures.json is its last run, checked against the docs by the tests.
     Figures(figures_cmd::FiguresArgs),
+    /// Write the daemon, drives and monitor configs of a timing profile (spec, relaxed,
+    /// emulated) into DIR/timing-PROFILE/: the installed stack on a slow or emulated machine.
+    Timing(timing_cmd::TimingArgs),
     /// Write man pages (crs.1, crs-sim.1, ...) into DIR.
     GenMan {
         /// Output directory.
@@ -87,6 +91,7 @@ fn main() -> ExitCode {
         Command::Commission(a) => load_cmd::commission(a),
         Command::Console(a) => console_cmd::run(a),
         Command::Figures(a) => figures_cmd::run(a),
+        Command::Timing(a) => timing_cmd::run(a),
         Command::GenMan { dir } => gen_cmd::gen_man(Cli::command(), &dir)
             .map(|files| println!("wrote {} man pages to {}", files.len(), dir.display()))
             .map_err(Into::into),

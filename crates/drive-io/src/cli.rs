@@ -109,7 +109,17 @@ pub fn run(args: Args, bench: Bench) -> Result<(), Box<dyn std::error::Error>> {
         tracing::info!(interface = %itf.name, transport = %spec, "CAN interface");
     }
     tracing::info!(drives = cfg.winches.len(), "drive-io starting");
-    let summary = runner::run(&cfg, buses, &ipc, &STOP)?;
+    // systemd: READY=1 comes from the runner once the drives are operational; the watchdog pings only
+    // while the SYNC loop's cycle count advances.
+    let watchdog = crs_service::Watchdog::spawn(|| {
+        runner::CYCLES_RUN.load(std::sync::atomic::Ordering::Relaxed)
+    })?;
+    let summary = runner::run(&cfg, buses, &ipc, &STOP);
+    crs_service::notify_stopping();
+    if let Some(w) = watchdog {
+        w.stop();
+    }
+    let summary = summary?;
     tracing::info!(?summary, "drive-io stopped");
     Ok(())
 }

@@ -11,7 +11,7 @@ use crs_ipc::{
     BusState, DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, ProcessId,
     SetpointReadyListener, StateEvent, SyncSchedule, monotonic_ns,
 };
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 #[derive(Debug, thiserror::Error)]
@@ -209,6 +209,10 @@ impl<B: CanBus> Buses<B> {
     }
 }
 
+/// Cycles run by this process so far, for the systemd watchdog thread (`crs-service`): it
+/// pings only while this advances. A Relaxed store per cycle, nothing else in the loop.
+pub static CYCLES_RUN: AtomicU64 = AtomicU64::new(0);
+
 /// Runs drive-io until `stop` is set: one cycle per SYNC period over every CAN interface of
 /// `buses` (one per `cfg.interfaces()` entry, in that order), handling received frames while it
 /// waits; each cycle reads the newest setpoint and e-stop events, writes RPDOs, publishes
@@ -341,6 +345,10 @@ pub fn run_with<B: CanBus>(
         multiplexed = buses.fds.is_some(),
         "cycle timing"
     );
+    // systemd (Type=notify): ready once the drives are operational (NMT boot, SDO, CiA 402
+    // enabled), so motion-core (After= drive-io) starts on drives that follow its setpoints, as
+    // `crs sim` starts it.
+    let mut notified_ready = false;
     while !stop.load(Ordering::Relaxed) {
         // Wait for what is due next, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
         let mut now = monotonic_ns();
@@ -435,6 +443,7 @@ pub fn run_with<B: CanBus>(
             }
         }
         cycles += 1;
+        CYCLES_RUN.store(cycles, Ordering::Relaxed);
 
         let permit = watch.as_mut().is_none_or(|w| w.permits(cycle_now));
         let grace = watch
@@ -546,6 +555,10 @@ pub fn run_with<B: CanBus>(
             }
         }
         feedback.publish(master.feedback())?;
+        if !notified_ready && matches!(master.state(), BusState::Ready | BusState::Running) {
+            crs_service::notify_ready("drives operational, SYNC loop running");
+            notified_ready = true;
+        }
         if let Some(ev) = master.take_state_event(event_seq + 1) {
             event_seq += 1;
             tracing::info!(state = ?BusState::from_u32(ev.state), detail = ev.detail, node = ev.detail_node, "bus state");

@@ -2,11 +2,14 @@
 //! command line and the process live in [`drive_io::cli`]; this binary refuses a drives config
 //! without the safety monitor's heartbeat (`[safety_heartbeat]`), with no switch to allow it.
 
-use clap::Parser;
+use clap::{CommandFactory, Parser};
 use drive_io::cli::{Args, Bench, run};
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    if let Some(code) = crs_service::gen_man_if_asked("drive-io", Args::command) {
+        return code;
+    }
     crs_log::init("drive-io");
     match run(Args::parse(), Bench::Refused) {
         Ok(()) => ExitCode::SUCCESS,

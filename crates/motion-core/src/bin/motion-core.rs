@@ -1,7 +1,7 @@
 //! `motion-core`: the 1 ms hard-loop daemon (spec sec. 5.6). See `motion_core::daemon`.
 
 use cdpr_model::config::load_platform;
-use clap::Parser;
+use clap::{CommandFactory, Parser};
 use crs_ipc::{
     CueingPose, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlatformId,
     PlatformIdentity, ProcessId, StateEvent, SyncSchedule, TopicPublisher, TopicSubscriber,
@@ -251,6 +251,9 @@ fn sd_notify(msg: &str) {
 }
 
 fn main() -> ExitCode {
+    if let Some(code) = crs_service::gen_man_if_asked("motion-core", Args::command) {
+        return code;
+    }
     crs_log::init("motion-core");
     match run(Args::parse()) {
         Ok(()) => ExitCode::SUCCESS,

@@ -10,7 +10,7 @@
 //!   (re)calibrated platform against the one the monitor runs; with `--yes` make it the
 //!   monitor's accepted platform (issue 16).
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 use safety_monitor::daemon::{self, ResetReply};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -78,6 +78,9 @@ fn node(name: &str, prefix: &Option<String>) -> Result<crs_ipc::IpcNode, crs_ipc
 }
 
 fn main() -> ExitCode {
+    if let Some(code) = crs_service::gen_man_if_asked("safety-monitor", Args::command) {
+        return code;
+    }
     crs_log::init("safety-monitor");
     let args = Args::parse();
     match run(args) {
@@ -200,7 +203,16 @@ fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
             }
             let ipc = node("safety-monitor", &args.ipc_prefix)?;
             let (tx, rx) = daemon::open_buses(&cfg)?;
-            let s = daemon::run_on(&cfg, tx, rx, &ipc, &STOP)?;
+            // WATCHDOG=1 only while the 15 ms cycle advances (READY=1 comes from run_on).
+            let watchdog = crs_service::Watchdog::spawn(|| {
+                daemon::CYCLES_RUN.load(std::sync::atomic::Ordering::Relaxed)
+            })?;
+            let s = daemon::run_on(&cfg, tx, rx, &ipc, &STOP);
+            crs_service::notify_stopping();
+            if let Some(w) = watchdog {
+                w.stop();
+            }
+            let s = s?;
             tracing::info!(
                 ?s,
                 "safety monitor stopped (the drives brake without its heartbeat)"

@@ -6,7 +6,7 @@
 //! and offset convention (eq. 3.14 / 6.24) and docs/plant-figures.md.
 
 use cdpr_model::config::load_platform;
-use clap::Parser;
+use clap::{CommandFactory, Parser};
 use crs_ipc::{Heartbeat, IpcNode, PlantTruth, ProcessId, TrackerPose};
 use drive_io::DrivesConfig;
 use sim_plant::bus::{self, BusOptions, ConfigFiles, PlantBus};
@@ -77,6 +77,9 @@ extern "C" fn on_signal(_: libc::c_int) {
 }
 
 fn main() -> ExitCode {
+    if let Some(code) = crs_service::gen_man_if_asked("sim-plant", Args::command) {
+        return code;
+    }
     crs_log::init("sim-plant");
     match run(Args::parse()) {
         Ok(()) => ExitCode::SUCCESS,
@@ -220,6 +223,14 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         tracker = tracker_pub.service_name(),
         "sim-plant running"
     );
+    // systemd (Type=notify): ready once its CAN sockets and iceoryx2 ports are open; the
+    // watchdog pings only while the plant steps.
+    let steps = crs_service::CycleCounter::new();
+    let watchdog = crs_service::Watchdog::spawn({
+        let steps = steps.clone();
+        move || steps.get()
+    })?;
+    crs_service::notify_ready("CAN interfaces and iceoryx2 ports open, plant stepping");
     let mut publish_errors = 0u64;
     let mut was_braked = None;
     let mut was_converged = true;
@@ -229,6 +240,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         Duration::from_micros(u64::from(args.period_us)),
         &STOP,
         |truth, tracker| {
+            steps.tick();
             let r = truth_pub
                 .publish(truth)
                 .and_then(|()| tracker_pub.publish(tracker));
@@ -257,7 +269,12 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
                 let _ = heartbeat_pub.publish(&hb);
             }
         },
-    )?;
+    );
+    crs_service::notify_stopping();
+    if let Some(w) = watchdog {
+        w.stop();
+    }
+    let summary = summary?;
     tracing::info!(?summary, "sim-plant stopped");
     Ok(())
 }

@@ -1,0 +1,226 @@
+#!/bin/bash
+# The systemd boot test's guest side (tools/systemd-boot-test.sh boots it; runs as root from
+# crs-boot-test.service after multi-user.target). One "BOOT-CHECK: ok|FAIL <what>" line per
+# check, then "BOOT-TEST: PASS|FAIL". Behaviour only: the guest is emulated (TCG), nothing here
+# asserts timing; every wait is on a condition, bounded so a hang fails instead of blocking.
+set -u
+T=/crs-test
+FAILS=0
+ok() { echo "BOOT-CHECK: ok $*"; }
+bad() { echo "BOOT-CHECK: FAIL $*"; FAILS=$((FAILS + 1)); }
+check() { local what=$1; shift; if "$@"; then ok "$what"; else bad "$what"; fi; }
+# wait_for SECONDS CMD...: polls CMD until it succeeds; false once SECONDS have passed.
+wait_for() {
+  local end=$(($(cut -d. -f1 /proc/uptime) + $1)); shift
+  while ! "$@"; do [ "$(cut -d. -f1 /proc/uptime)" -lt $end ] || return 1; sleep 0.5; done
+}
+finish() {
+  if [ $FAILS -eq 0 ]; then echo "BOOT-TEST: PASS"; else
+    echo "== journal of the stack (failure context)"
+    journalctl -b --no-pager -o short-monotonic -u 'crs-*' | tail -n 150
+    echo "BOOT-TEST: FAIL ($FAILS checks failed)"
+  fi
+  sync
+  systemctl --force --force poweroff
+  exit 0
+}
+ride() { timeout 30 crs ride "$@"; }
+UNITS="crs-isolation crs-sim-plant crs-safety-monitor crs-drive-io crs-motion-core"
+DAEMONS="crs-sim-plant crs-safety-monitor crs-drive-io crs-motion-core"
+prop() { systemctl show -p "$2" --value "$1.service"; }
+echo "BOOT: guest up at $(cut -d' ' -f1 /proc/uptime) s, $(systemctl --version | head -1)"
+
+# --- 1. the package -------------------------------------------------------------------------
+V1=$(dpkg-deb -f $T/crs-motion-1.deb Version); V2=$(dpkg-deb -f $T/crs-motion-2.deb Version)
+check "dpkg -i crs-motion $V1" dpkg -i $T/crs-motion-1.deb
+check "system user crs created by postinst" id crs
+check "units installed (systemctl cat crs-stack.target)" systemctl cat crs-stack.target >/dev/null
+check "nothing started by the install" test "$(systemctl is-active crs-motion-core.service)" != active
+command -v man >/dev/null || echo "BOOT: (no man-db in the guest: pages are checked by tools/deb-test.sh)"
+for b in motion-core drive-io safety-monitor sim-plant crs; do
+  [ -x /usr/bin/$b ] || bad "/usr/bin/$b installed"
+done
+[ $FAILS -eq 0 ] || finish
+
+# --- 2. the rig: socketcan per bus in the stack's namespace, simulated drives ---------------
+# The real control PC's layout: every bus a SocketCAN interface (here vcan, created inside the
+# namespace by crs-isolation.service), the simulated drives (crs-sim-plant.service) as the rig.
+# Both are edits of conffiles, which the upgrade below must keep.
+sed -i 's#"wire:/run/crs/wire/\([a-z0-9]*\)\.sock"#"socketcan:\1"#' /etc/crs/config/drives.toml
+sed -i 's#^CRS_VCAN_CREATE=.*#CRS_VCAN_CREATE="can0 can1 can2 can3 safety"#' /etc/crs/config/can-netns.conf
+IFACES=$(sed -n 's/^transport = "socketcan:\(.*\)"/\1/p' /etc/crs/config/drives.toml | tr '\n' ' ')
+check "drives.toml edited to socketcan per bus ($IFACES)" test "$(wc -w <<<"$IFACES")" = 5
+check "no wire: transport left in drives.toml" bash -c '! grep -q "^transport = \"wire:" /etc/crs/config/drives.toml'
+check "systemctl enable crs-sim-plant.service (the rig)" systemctl enable crs-sim-plant.service
+# The emulated machine's settings (TCG cannot run 1 ms loops): the `emulated` timing copies of
+# the configs (crs timing), no SCHED_FIFO/pinning, longer start and watchdog times. The units'
+# other keys (Type=notify, Restart=no, isolation) stay as shipped.
+(cd /etc/crs && crs timing emulated --out /etc/crs/emulated) || bad "crs timing emulated"
+E=/etc/crs/emulated/timing-emulated
+IO=/run/crs-test-io
+: > $IO; chmod 0644 $IO
+ln -sfn /etc/crs/config/plant $E/plant
+for u in $DAEMONS; do
+  mkdir -p /etc/systemd/system/$u.service.d
+  {
+    echo "[Service]"
+    echo "Environment=CRS_CONFIG_DIR=$E"
+    echo "CPUSchedulingPolicy=other"
+    echo "CPUSchedulingPriority=0"
+    echo "CPUAffinity="
+    echo "TimeoutStartSec=300s"
+    echo "WatchdogSec=30s"
+    case $u in
+      crs-drive-io) echo "ExecStart="; echo "ExecStart=/usr/bin/drive-io --config config/drives.toml" ;;
+      crs-sim-plant) echo "ExecStart="
+        # --io-control: the simulated safety I/O node's reset key, turned by this test.
+        echo "ExecStart=/usr/bin/sim-plant --plant config/plant/icosahedron.toml --drives config/drives.toml --io-control $IO" ;;
+    esac
+  } > /etc/systemd/system/$u.service.d/emulated.conf
+done
+systemctl daemon-reload
+
+# --- 3. the stack under systemd ---------------------------------------------------------------
+ERR0=$(journalctl -b -p err --no-pager -q -o cat | wc -l)
+t0=$(cut -d' ' -f1 /proc/uptime)
+check "systemctl start crs-stack.target" timeout 600 systemctl start crs-stack.target
+echo "BOOT: stack started in $(awk -v a="$t0" '{printf "%.0f", $1 - a}' /proc/uptime) s (emulated)"
+for u in $UNITS; do check "$u active" test "$(systemctl is-active $u.service)" = active; done
+if [ "$(systemctl is-active crs-motion-core.service)" != active ]; then
+  for u in $DAEMONS; do
+    journalctl -b --no-pager -q -o short-monotonic -u $u.service | grep -v 'heartbeat lost\|overran' | head -n 25 | sed "s/^/BOOT:   $u: /"
+  done
+  finish
+fi
+for u in $DAEMONS; do
+  check "$u Type=notify (ready by sd_notify)" test "$(prop $u Type)" = notify
+  w=$(prop $u WatchdogUSec)
+  check "$u watchdog set (WatchdogUSec=$w)" test -n "$w" -a "$w" != 0 -a "$w" != infinity
+  check "$u shipped with WatchdogSec= (unit file)" grep -q '^WatchdogSec=' /usr/lib/systemd/system/$u.service
+done
+MC=$(prop crs-motion-core MainPID)
+
+# --- 4. isolation: impersonation from outside the stack's namespaces is refused --------------
+check "can0 exists inside the stack's namespace" ip -n crs link show can0
+check "can0 invisible outside it (host namespace)" bash -c '! ip link show can0 2>/dev/null'
+as_crs() { setpriv --reuid=crs --regid=crs --clear-groups -- "$@"; }
+refused() { ! "$@" >/dev/null 2>&1; }
+check "user crs cannot enter the stack's network namespace" refused as_crs nsenter --net=/run/netns/crs true
+check "user crs cannot reach the stack's /tmp and /dev/shm" refused as_crs ls /run/crs/private/shm
+# iceoryx2 0.10: bookkeeping under /tmp/iceoryx2/, segments in /dev/shm (iox2_*).
+iox() { echo "$(find /tmp/iceoryx2 -type f 2>/dev/null | wc -l) $(ls /dev/shm 2>/dev/null | grep -c '^iox2')"; }
+read -r f_in s_in < <(nsenter -t "$MC" -m bash -c "$(declare -f iox); iox")
+read -r f_out s_out < <(iox)
+check "the stack's iceoryx2 files: $f_in + $s_in segments inside its units, $f_out + $s_out outside" \
+  test "$f_in" -gt 0 -a "$s_in" -gt 0 -a "$f_out" = 0 -a "$s_out" = 0
+# An impostor safety monitor as user crs outside the namespace: it cannot open the buses.
+imp=$(cd /etc/crs && CRS_CONFIG_DIR=$E timeout 120 setpriv --reuid=crs --regid=crs --clear-groups -- \
+  safety-monitor --config config/safety-monitor.toml 2>&1); rc=$?
+echo "$imp" | tail -2 | sed 's/^/BOOT:   impostor: /'
+check "an impostor safety-monitor (user crs, outside) cannot open the CAN interfaces (rc=$rc)" \
+  bash -c "[ $rc -ne 0 ] && [ $rc -ne 124 ] && grep -qi 'no such device\|can0' <<<\"\$1\"" _ "$imp"
+
+# --- 5. nothing moves until a ride is started ---------------------------------------------------
+# The operator console (crs console) inside the stack's namespaces, as a transient unit like
+# the stack's: its /api/status has the drives' cable lengths.
+# (A unit file, not systemd-run: the guest has no D-Bus.)
+cat > /run/systemd/system/crs-test-console.service <<UNIT
+[Service]
+User=crs
+NetworkNamespacePath=/run/netns/crs
+BindPaths=/run/crs/private/tmp:/tmp /run/crs/private/shm:/dev/shm
+WorkingDirectory=/etc/crs
+Environment=CRS_CONFIG_DIR=$E
+ExecStart=/usr/bin/crs console --addr 127.0.0.1:8080
+UNIT
+systemctl daemon-reload
+check "the console started in the stack's namespaces" systemctl start crs-test-console.service
+status() { timeout 20 ip netns exec crs bash -c 'exec 3<>/dev/tcp/127.0.0.1/8080 || exit 1
+  printf "GET /api/status HTTP/1.0\r\nHost: x\r\n\r\n" >&3; cat <&3' 2>/dev/null | tr -d '\r' | sed '1,/^$/d'; }
+lengths() { status | grep -o '"cable_length_m":\[[^]]*\]' | sed 's/.*\[//; s/\]//'; }
+have_lengths() { [ "$(lengths | tr ',' '\n' | grep -c .)" -ge 8 ]; }
+check "drive feedback with 8 cable lengths (console /api/status)" wait_for 240 have_lengths
+ride_idle() { ride status 2>/dev/null | grep -q 'idle'; }
+ride_settled() { ride status 2>/dev/null | grep -qE 'idle|latched'; }
+wait_for 120 ride_settled
+ride status | sed 's/^/BOOT:   ride status: /'
+if ride status 2>/dev/null | grep -q latched; then
+  # Under TCG on a loaded host the emulator stalls the daemons for hundreds of ms and the
+  # monitor or drive-io may trip during start-up: say so with the cause, and reset it as the
+  # operator does (the safety I/O node's key, turned and released). Counted, never hidden.
+  echo "BOOT: latched after start (emulation stalls); the error lines:"
+  journalctl -b -p err --no-pager -q -o short-monotonic -u 'crs-*' | head -n 10 | sed 's/^/BOOT:   err: /'
+  journalctl -b -p warning --no-pager -q -o short-monotonic -u 'crs-*' | grep -v 'heartbeat lost\|overran' | head -n 20 | sed 's/^/BOOT:   warn: /'
+  for k in 1 2 3; do
+    echo "reset_key on" > $IO; sleep 2; : > $IO
+    wait_for 30 ride_idle && { echo "BOOT: start-up trip reset by the key (attempt $k)"; break; }
+  done
+fi
+check "motion-core idle and holding (crs ride status)" wait_for 60 ride_idle
+ride status | sed 's/^/BOOT:   ride status: /'
+ERR0=$(journalctl -b -p err --no-pager -q -o cat | wc -l)
+# max |a_i - b_i| over the cables, m
+maxdiff() { awk -v a="$1" -v b="$2" 'BEGIN{n=split(a,x,",");split(b,y,",");m=0;for(i=1;i<=n;i++){d=x[i]-y[i];if(d<0)d=-d;if(d>m)m=d};printf "%.6f",m}'; }
+L1=$(lengths); sleep 5; L2=$(lengths)
+d=$(maxdiff "$L1" "$L2")
+check "nothing moves before a ride: cable lengths over 5 s differ by at most $d m (<= 0.0005)" \
+  awk -v d="$d" 'BEGIN{exit !(d <= 0.0005)}'
+
+# --- 6. upgrade while the stack runs: edits kept, nothing restarted ---------------------------
+declare -A PID
+for u in $DAEMONS; do PID[$u]=$(prop $u MainPID); done
+check "dpkg -i crs-motion $V2 (upgrade, stack running)" bash -c "dpkg -i $T/crs-motion-2.deb </dev/null"
+check "installed version is $V2" test "$(dpkg-query -W -f '${Version}' crs-motion)" = "$V2"
+check "the drives.toml edit survived the upgrade" grep -q '^transport = "socketcan:can0"' /etc/crs/config/drives.toml
+check "the can-netns.conf edit survived the upgrade" grep -q '^CRS_VCAN_CREATE="can0' /etc/crs/config/can-netns.conf
+for u in $DAEMONS; do
+  check "$u not restarted by the upgrade (MainPID ${PID[$u]})" test "$(prop $u MainPID)" = "${PID[$u]}"
+done
+
+# --- 7. a ride --------------------------------------------------------------------------------
+L0=$(lengths)
+out=$(ride start $T/ride.csv 2>&1); rc=$?
+echo "$out" | sed 's/^/BOOT:   ride start: /'
+check "crs ride start accepted" test $rc = 0
+riding() { ride status 2>/dev/null | grep -q riding; }
+moved() { awk -v d="$(maxdiff "$L0" "$(lengths)")" 'BEGIN{exit !(d > 0.005)}'; }
+if [ $rc = 0 ]; then
+  check "the ride moves the cables (> 5 mm)" wait_for 120 moved
+  check "the ride ends, motion-core idle again" wait_for 600 ride_idle
+else
+  bad "the ride moves the cables (not started)"
+fi
+ride status | sed 's/^/BOOT:   ride status: /'
+ERR1=$(journalctl -b -p err --no-pager -q -o cat | wc -l)
+check "no error line from idle to the end of the ride ($((ERR1 - ERR0)))" test "$ERR1" = "$ERR0"
+
+# --- 8. the monitor killed: the drives stop, one trip line, nothing restarts ------------------
+since=$(date '+%Y-%m-%d %H:%M:%S')
+ride start $T/ride.csv >/dev/null 2>&1 && wait_for 60 riding
+check "systemctl kill -s KILL crs-safety-monitor" systemctl kill -s KILL crs-safety-monitor.service
+gone() { [ "$(systemctl is-active crs-safety-monitor.service)" != active ]; }
+check "the monitor stays dead" wait_for 60 gone
+mc_stopped() { [ "$(systemctl is-active crs-motion-core.service)" != active ]; }
+check "motion-core stopped with it (BindsTo=)" wait_for 60 mc_stopped
+dio_stop() { journalctl -u crs-drive-io.service --since "$since" --no-pager -q -o cat | grep -qiE 'safety heartbeat invalid or missing: e-stop|quick stop'; }
+check "drive-io reports the stop" wait_for 60 dio_stop
+journalctl -u crs-drive-io.service --since "$since" --no-pager -q -o cat | head -5 | sed 's/^/BOOT:   drive-io: /'
+sleep 2; S1=$(lengths); sleep 3; S2=$(lengths)
+d=$(maxdiff "$S1" "$S2")
+check "the drives stopped: cable lengths over 3 s differ by at most $d m (<= 0.0005)" \
+  awk -v d="$d" 'BEGIN{exit !(d <= 0.0005)}'
+ERRS=$(journalctl -b -p err --since "$since" --no-pager -q -o 'short-monotonic')
+echo "$ERRS" | sed 's/^/BOOT:   err: /'
+check "exactly one error line after the kill (the trip)" test "$(grep -c . <<<"$ERRS")" = 1
+for u in $DAEMONS; do check "$u NRestarts=0" test "$(prop $u NRestarts)" = 0; done
+check "the monitor not restarted (Restart=no)" test "$(systemctl is-active crs-safety-monitor.service)" != active
+
+# --- 9. a clean stop ------------------------------------------------------------------------
+systemctl stop crs-test-console.service
+since=$(date '+%Y-%m-%d %H:%M:%S')
+check "systemctl stop crs-stack.target" timeout 120 systemctl stop crs-stack.target
+for u in $UNITS; do check "$u not active after the stop" test "$(systemctl is-active $u.service)" != active; done
+check "the stack's network namespace removed" test ! -e /run/netns/crs
+ERRS=$(journalctl -b -p err --since "$since" --no-pager -q -o cat)
+check "no error line from the stop ($(grep -c . <<<"$ERRS"))" test -z "$ERRS"
+finish
