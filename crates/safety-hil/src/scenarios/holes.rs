@@ -334,7 +334,8 @@ pub fn reset_across_monitor_restart(st: &mut Stack) -> Res<Outcome> {
 /// and the RPDO check finds nothing wrong — while its feedback publisher republishes
 /// drive-io's last sample unchanged (timestamp and SYNC cycle frozen). Cable 1's setpoint
 /// ramps 50 mm out at 0.1 m/s meanwhile: the plant moves and no fresh measurement shows it.
-/// The monitor must trip `feedback_stale`.
+/// The monitor must trip `feedback_stale` (at this scenario's feedback silence,
+/// `configs::stale_feedback_silence_cycles`: the replacement must fit into it).
 pub fn stale_published_feedback(st: &mut Stack) -> Res<Outcome> {
     use crate::configs::{INTERFACES, drive_interface};
     use crs_ipc::{DriveFeedback, JointSetpoint, monotonic_ns};
