@@ -101,6 +101,12 @@ pub struct EmulatorControl {
     pub io_inputs: AtomicU8,
     /// Safety I/O node: STO released (torque permitted) now.
     pub sto_released: AtomicBool,
+    /// Sequence lock over the per-winch state (length, velocity, statusword, NMT, demand,
+    /// left-follow time): odd while the loop publishes a pass, so a reader on another thread
+    /// ([`EmulatorControl::read_consistent`]) never pairs one pass's demand with another
+    /// pass's length (a torn read once showed a drive braked at the length before its last
+    /// step, so the step looked like motion after the stop).
+    publish_seq: AtomicU64,
 }
 
 /// Motion demand codes in [`EmulatorControl::demand_code`].
@@ -111,6 +117,23 @@ pub const DEMAND_FOLLOW: u8 = 2;
 impl EmulatorControl {
     pub fn new() -> Arc<Self> {
         Arc::new(Self::default())
+    }
+    /// Runs `read` over a state the loop published as a whole (one pass): retried while the
+    /// loop is publishing or published meanwhile. The loop never waits for a reader.
+    pub fn read_consistent<R>(&self, mut read: impl FnMut(&Self) -> R) -> R {
+        loop {
+            let before = self.publish_seq.load(Ordering::Acquire);
+            if before % 2 == 1 {
+                std::hint::spin_loop();
+                continue;
+            }
+            let r = read(self);
+            // Orders the reads above before the check below (seqlock reader).
+            std::sync::atomic::fence(Ordering::Acquire);
+            if self.publish_seq.load(Ordering::Relaxed) == before {
+                return r;
+            }
+        }
     }
     /// True cable length of winch `i` (m).
     pub fn length_m(&self, i: usize) -> f64 {
@@ -219,6 +242,10 @@ pub fn run<B: CanBus>(
         node.start(crs_ipc::monotonic_ns(), out);
     }
     let publish = |bank: &DriveBanks, axes: &[WinchAxis], now: u64| {
+        // Seqlock writer: odd while publishing; the fence orders the odd count before the
+        // stores below, the Release of the even count the stores before it.
+        control.publish_seq.fetch_add(1, Ordering::Relaxed);
+        std::sync::atomic::fence(Ordering::Release);
         for (i, ax) in axes.iter().enumerate() {
             let d = match bank.demand(i) {
                 MotionDemand::Follow { .. } => DEMAND_FOLLOW,
@@ -235,6 +262,7 @@ pub fn run<B: CanBus>(
                 control.nmt[i].store(u16::from(s.nmt_state().code()), Ordering::Release);
             }
         }
+        control.publish_seq.fetch_add(1, Ordering::Release);
     };
     publish(&bank, &axes, crs_ipc::monotonic_ns());
     let mut last_pass_ns = crs_ipc::monotonic_ns();

@@ -159,6 +159,24 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
          feedback_owners = [\"drive-io\", \"safety-hil\"]\n\
          identity_owners = [\"motion-core\", \"safety-hil\"]\n"
     );
+    // `stale_published_feedback`: the feedback silence long enough for the replacement adapter
+    // to take drive-io's publisher (a loaded host took up to 220 ms after the kill, longer
+    // than the spec's 4 cycles): the scenario is about stale samples never counting as life and
+    // the trip naming them, the spec's silence is timed by `kill_drive_io`.
+    let stale_silence = format!(
+        "window_setpoints = 200\nsilence_cycles = {}\n",
+        args.feedback_silence_cycles
+    );
+    let monitor_stale = monitor.replace(
+        &stale_silence,
+        &format!(
+            "window_setpoints = 200\nsilence_cycles = {}\n",
+            stale_feedback_silence_cycles(args.feedback_silence_cycles)
+        ),
+    );
+    if monitor_stale == monitor {
+        return Err("safety-monitor-stale.toml: could not set the feedback silence".into());
+    }
     // The drives (winch emulator) of `heartbeat_config_crc_mismatch`: one SRDO parameter (their
     // validation time) differs from what the monitor announces.
     let drives_mismatch = drives.replace(
@@ -174,6 +192,7 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
         ("drives-crc-mismatch.toml", drives_mismatch.as_str()),
         ("safety-monitor.toml", monitor.as_str()),
         ("safety-monitor-strict.toml", strict.as_str()),
+        ("safety-monitor-stale.toml", monitor_stale.as_str()),
         ("motion-core.toml", motion.as_str()),
         ("waypoints.csv", waypoints),
     ] {
@@ -181,6 +200,12 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
         std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))?;
     }
     Ok(())
+}
+
+/// The monitor's feedback silence (cycles) in `stale_published_feedback`: 40 (600 ms), or the
+/// run's own if longer.
+pub fn stale_feedback_silence_cycles(run: u32) -> u32 {
+    run.max(40)
 }
 
 /// The load cells report every this many SYNCs (the shipped drives file's rate).
@@ -200,6 +225,7 @@ pub fn monitor_executable(scenario: &str) -> &'static str {
 pub fn monitor_config(scenario: &str) -> &'static str {
     match scenario {
         "foreign_publisher" => "safety-monitor-strict.toml",
+        "stale_published_feedback" => "safety-monitor-stale.toml",
         _ => "safety-monitor.toml",
     }
 }

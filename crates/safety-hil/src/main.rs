@@ -112,7 +112,7 @@ pub fn bus_mode(args: &Args) -> Res<crs_stack::transport::BusMode> {
 
 type Scenario = (&'static str, fn(&mut Stack) -> Res<Outcome>);
 
-const SCENARIOS: [Scenario; 36] = [
+const SCENARIOS: [Scenario; 37] = [
     ("offset_101mm_trips", setpoint_stream::offset_101mm),
     ("offset_99mm_no_trip", setpoint_stream::offset_99mm),
     ("frozen_motion_core", process_faults::frozen_motion_core),
@@ -182,6 +182,7 @@ const SCENARIOS: [Scenario; 36] = [
         "reset_across_monitor_restart",
         holes::reset_across_monitor_restart,
     ),
+    ("stale_published_feedback", holes::stale_published_feedback),
 ];
 
 /// Whether a failed attempt runs again: only a stall BEFORE the scenario's fault was injected,

@@ -429,17 +429,32 @@ impl Stack {
     }
 
     /// The stop the drives' own safety watch makes (no monitor, or an invalid pair): their
-    /// watch trips, they brake, and drive-io e-stops on its own watch. Returns the emulator's
-    /// status after the stop (its `safety_tripped_ns`) and the time the drives stopped.
+    /// watch trips, they brake, and drive-io's own watch trips too (its log says so) with
+    /// drive-io latched. Returns the emulator's status after the stop (its
+    /// `safety_tripped_ns`) and the time the drives stopped.
+    ///
+    /// drive-io's bus state is EStop (its watch first) or Fault (the drives' STO first: the
+    /// safety I/O node judges the same validation time at each frame's arrival, drive-io at
+    /// its cycle, so either may see the silence first; in the guest a stalled drive-io read
+    /// the drives' "switch on disabled" statuswords before its own watch expired, and faulted
+    /// with "drive ignores the target position"). Both are the latched stop a reset leaves.
     pub fn stopped_by_the_drives_watch(&mut self) -> Res<(EmuStatus, u64)> {
         self.wait("the drives' safety watch to trip", 10.0, |s| {
             Ok(s.emu()?.safety_trips > 0)
         })?;
         let stopped = self.require_braked()?;
         let e = self.emu()?;
-        self.wait("drive-io e-stopped by its own watch", 10.0, |s| {
-            Ok(s.bus_state() == Some(BusState::EStop))
-        })?;
+        let log = self.dir.join("drive-io.log");
+        self.wait(
+            "drive-io latched (EStop or Fault) and its own watch tripped",
+            10.0,
+            |s| {
+                let latched = matches!(s.bus_state(), Some(BusState::EStop | BusState::Fault));
+                Ok(latched
+                    && std::fs::read_to_string(&log)
+                        .is_ok_and(|t| t.contains("safety heartbeat invalid or missing: e-stop")))
+            },
+        )?;
         Ok((e, stopped))
     }
 

@@ -462,8 +462,8 @@ pub mod evidence {
             | CableCount | SequenceRegression | MotionVelocity | MotionAcceleration
             | UnplannedStreamEnd => Class::Stream,
             IdentityMismatch | IdentityMissing => Class::Identity,
-            FollowingError | FeedbackSilence | RpdoMismatch | FollowingUnchecked
-            | RpdoUnchecked => Class::Feedback,
+            FollowingError | FeedbackSilence | FeedbackStale | RpdoMismatch
+            | FollowingUnchecked | RpdoUnchecked => Class::Feedback,
             ForceSlack | ForceOverload | ForceSilence => Class::Forces,
             EStopCircuit | SafetyIoSilence => Class::SafetyIo,
             IpcError | BusObservation | EStopEvent | ForgedEvent | CanBusError
@@ -554,6 +554,10 @@ pub struct Monitor {
     unverified_cycles: u32,
     seen_feedback: bool,
     feedback_silent: u32,
+    /// Stale samples (not advancing, or stamped in the future) arrived since the last fresh
+    /// one: a feedback silence during which drive-io's topic still carried samples is
+    /// `feedback_stale`, not `feedback_silence`.
+    stale_since_fresh: bool,
     stream_end: bool,
     hist: Box<[Entry; HISTORY]>,
     hist_len: usize,
@@ -668,6 +672,7 @@ impl Monitor {
             unverified_cycles: 0,
             seen_feedback: false,
             feedback_silent: 0,
+            stale_since_fresh: false,
             stream_end: false,
             hist: Box::new([EMPTY; HISTORY]),
             hist_len: 0,
@@ -1145,8 +1150,10 @@ impl Monitor {
         if fresh {
             self.last_feedback = Some((fb.timestamp_ns, fb.cycle));
             self.feedback_count += 1;
+            self.stale_since_fresh = false;
         } else {
             self.stats.feedback_stale += 1;
+            self.stale_since_fresh = true;
             return;
         }
         self.last_applied = fb.applied_setpoint_sequence;
@@ -1463,10 +1470,17 @@ impl Monitor {
                 self.feedback_silent = 0;
             }
             if self.feedback_silent >= self.lim.feedback_silence_cycles {
+                // Samples that arrived but did not advance: the adapter's publisher lives,
+                // its loop does not (the operator must know which one to look at).
+                let cause = if self.stale_since_fresh {
+                    Cause::FeedbackStale
+                } else {
+                    Cause::FeedbackSilence
+                };
                 self.fault(Fault {
                     value: f64::from(self.feedback_silent),
                     limit: f64::from(self.lim.feedback_silence_cycles),
-                    ..Fault::new(Cause::FeedbackSilence)
+                    ..Fault::new(cause)
                 });
             }
         }

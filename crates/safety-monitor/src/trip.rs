@@ -90,10 +90,14 @@ pub enum Cause {
     /// publisher, or its publisher is not the process the stack expects (iceoryx2's service
     /// introspection: publisher count, owning node's process id and executable; issue 16).
     ForeignPublisher = 29,
+    /// drive-io's feedback keeps arriving but no sample advances its timestamp and SYNC cycle
+    /// (or each lies in the monitor's future) for N cycles: a hung adapter whose publisher
+    /// republishes its last sample while the plant may move (value = cycles).
+    FeedbackStale = 30,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 29] = [
+    pub const ALL: [Cause; 30] = [
         Cause::DqLimit,
         Cause::NonFinite,
         Cause::OutsideWorkspace,
@@ -123,6 +127,7 @@ impl Cause {
         Cause::RpdoUnchecked,
         Cause::UnplannedStreamEnd,
         Cause::ForeignPublisher,
+        Cause::FeedbackStale,
     ];
 
     pub fn code(self) -> u8 {
@@ -167,6 +172,7 @@ impl Cause {
             Cause::RpdoUnchecked => "rpdo_unchecked",
             Cause::UnplannedStreamEnd => "unplanned_stream_end",
             Cause::ForeignPublisher => "foreign_publisher",
+            Cause::FeedbackStale => "feedback_stale",
         }
     }
 

@@ -1889,7 +1889,7 @@ fn impersonation_estop_circuit_and_a_silent_safety_io_node_trip() {
 }
 
 /// A hung drive adapter whose publisher keeps republishing its last sample (or stamps it in
-/// the monitor's future) is as dead as a silent one: `feedback_silence`.
+/// the monitor's future) is as dead as a silent one, and the trip says which: `feedback_stale`.
 #[test]
 fn stale_or_future_feedback_is_not_a_live_drive_adapter() {
     let q = sp(1, HOME, 0, 0.0).cable_length_m[..8].to_vec();
@@ -1917,13 +1917,42 @@ fn stale_or_future_feedback_is_not_a_live_drive_adapter() {
         }
         let (k, tr) =
             trip.unwrap_or_else(|| panic!("future {future}: stale feedback never tripped"));
-        assert_eq!(tr.fault.cause, Cause::FeedbackSilence, "future {future}");
+        assert_eq!(tr.fault.cause, Cause::FeedbackStale, "future {future}");
         // The first sample counts when fresh, then silence_cycles without a fresh one; a
         // future-stamped first sample arms the check without counting.
         let n = u64::from(Limits::from_config(cfg()).feedback_silence_cycles);
         assert_eq!(k, if future { n - 1 } else { n }, "future {future}");
         assert!(m.stats().feedback_stale > 0);
     }
+}
+
+/// Stale samples followed by a fresh one, then nothing: the silence after the fresh sample is
+/// `feedback_silence` (the stale ones before it are not held against it).
+#[test]
+fn silence_after_a_fresh_sample_is_feedback_silence_not_stale() {
+    let q = sp(1, HOME, 0, 0.0).cable_length_m[..8].to_vec();
+    let mut m = monitor();
+    let mut seq = 1;
+    let mut t = 15 * MS;
+    let mut fb = feedback(0, &q);
+    (fb.cycle, fb.timestamp_ns) = (1, t);
+    m.begin_cycle(t);
+    m.on_feedback(&fb);
+    m.on_feedback(&fb); // stale: republished
+    seq = good_cycle(&mut m, seq, t);
+    t += 15 * MS;
+    m.begin_cycle(t);
+    (fb.cycle, fb.timestamp_ns) = (2, t);
+    m.on_feedback(&fb); // fresh again
+    seq = good_cycle(&mut m, seq, t);
+    let n = Limits::from_config(cfg()).feedback_silence_cycles;
+    for _ in 0..n {
+        t += 15 * MS;
+        m.begin_cycle(t);
+        seq = good_cycle(&mut m, seq, t);
+    }
+    let tr = m.trip().expect("silent drive-io tripped");
+    assert_eq!(tr.fault.cause, Cause::FeedbackSilence);
 }
 
 /// A producer whose timestamps jump far into the future cannot blind the RPDO check: history

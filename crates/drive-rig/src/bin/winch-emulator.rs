@@ -134,18 +134,24 @@ fn write_status_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
             c.safety_trips.load(Ordering::Acquire),
             c.safety_tripped_ns.load(Ordering::Acquire)
         );
-        for i in 0..m {
-            let _ = writeln!(
-                text,
-                "drive {i} {:.9} {:.9} {} {} {} {}",
-                c.length_m(i),
-                c.velocity_m_per_s(i),
-                c.nmt_state(i).map_or(255, |s| s.code()),
-                c.ds402_state(i).statusword(),
-                c.demand_code(i),
-                c.left_follow_ns(i)
-            );
-        }
+        // Every drive's line from one pass of the emulation loop: a demand with the length
+        // of the same pass (a braked drive never shows the length before its last step).
+        let header = text.len();
+        c.read_consistent(|c| {
+            text.truncate(header);
+            for i in 0..m {
+                let _ = writeln!(
+                    text,
+                    "drive {i} {:.9} {:.9} {} {} {} {}",
+                    c.length_m(i),
+                    c.velocity_m_per_s(i),
+                    c.nmt_state(i).map_or(255, |s| s.code()),
+                    c.ds402_state(i).statusword(),
+                    c.demand_code(i),
+                    c.left_follow_ns(i)
+                );
+            }
+        });
         if std::fs::write(&tmp, &text).is_ok() {
             let _ = std::fs::rename(&tmp, path);
         }

@@ -1,7 +1,8 @@
 //! The ways through the supervision a review found: motion from rest, a reset asked for by a
 //! foreign process, fluttering forces, the monitor's identifiers spoken by another node, a
-//! state-event flood, a producer's timestamp jump. Each injects the fault while the stack
-//! runs and requires the monitor's trip (or refusal) and braked drives.
+//! state-event flood, a producer's timestamp jump, drive feedback republished stale. Each
+//! injects the fault while the stack runs and requires the monitor's trip (or refusal) and
+//! braked drives.
 
 use crate::Res;
 use crate::configs::home_length;
@@ -323,6 +324,180 @@ pub fn reset_across_monitor_restart(st: &mut Stack) -> Res<Outcome> {
             reset_epoch::instance(old),
             reset_epoch::instance(new),
             new.wrapping_add(1)
+        ),
+    })
+}
+
+/// drive-io's loop hangs while its feedback publisher lives on: the scenario kills drive-io
+/// and takes its place at once with an adapter whose bus side still works — SYNC on every
+/// drive bus and RPDO1 targets that follow the setpoints' cable lengths, so the drives move
+/// and the RPDO check finds nothing wrong — while its feedback publisher republishes
+/// drive-io's last sample unchanged (timestamp and SYNC cycle frozen). Cable 1's setpoint
+/// ramps 50 mm out at 0.1 m/s meanwhile: the plant moves and no fresh measurement shows it.
+/// The monitor must trip `feedback_stale` (at this scenario's feedback silence,
+/// `configs::stale_feedback_silence_cycles`: the replacement must fit into it).
+pub fn stale_published_feedback(st: &mut Stack) -> Res<Outcome> {
+    use crate::configs::{INTERFACES, drive_interface};
+    use crs_ipc::{DriveFeedback, JointSetpoint, monotonic_ns};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, AtomicU64};
+    let c = st.fake()?.clone();
+    st.wait_following(false)?;
+    let fb0 = st.last_feedback.ok_or("no drive-io feedback")?;
+    let e0 = st.emu()?;
+    // drive-io's death is preparation: the fault is the replacement's first stale sample. A
+    // stall that makes the replacement slower than the feedback silence is no verdict.
+    st.injected = false;
+    // Everything that takes time is prepared before drive-io dies: the node, the setpoint
+    // subscriber and the bus thread (waiting on `go`).
+    let node =
+        IpcNode::with_prefix("shil-stale-drive-io", &st.prefix).map_err(|e| e.to_string())?;
+    let setpoints = node
+        .subscriber::<JointSetpoint>()
+        .map_err(|e| e.to_string())?;
+    let mut buses = INTERFACES[..4]
+        .iter()
+        .map(|i| open_bus(st, i))
+        .collect::<Res<Vec<_>>>()?;
+    // The newest setpoint's cable lengths (f64 bits), handed to the bus thread.
+    let lengths: Arc<[AtomicU64; 8]> = Arc::new(std::array::from_fn(|_| AtomicU64::new(0)));
+    let go = Arc::new(AtomicBool::new(false));
+    let stop = Arc::new(AtomicBool::new(false));
+    let period = u64::from(st.period_us) * 1000;
+    let bus_thread = {
+        let (lengths, go, stop) = (lengths.clone(), go.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let counts_per_m = 10.0 * 1_048_576.0 / (std::f64::consts::PI * 0.305);
+            let sync = can_transport::CanFrame::new_std_lossy(0x080, &[]);
+            while !go.load(Ordering::Relaxed) && !stop.load(Ordering::Relaxed) {
+                std::thread::sleep(Duration::from_micros(200));
+            }
+            let mut next = monotonic_ns();
+            while !stop.load(Ordering::Relaxed) {
+                next += period;
+                crs_rt::sleep_until(next);
+                for (i, l) in lengths.iter().enumerate() {
+                    let l = f64::from_bits(l.load(Ordering::Relaxed));
+                    if l <= 0.0 {
+                        continue;
+                    }
+                    // The generated drives: even cables sign +1 offset 0, odd ones sign −1
+                    // offset 200 000 000 counts (configs::write_configs).
+                    let counts = if i % 2 == 0 {
+                        l * counts_per_m
+                    } else {
+                        200_000_000.0 - l * counts_per_m
+                    };
+                    let f = safety_monitor::bus_frames::rpdo1(
+                        (i + 1) as u8,
+                        0x000F,
+                        counts.round() as i32,
+                    );
+                    let b = INTERFACES[..4]
+                        .iter()
+                        .position(|x| *x == drive_interface(i))
+                        .unwrap_or(0);
+                    let _ = buses[b].send(&f);
+                }
+                for bus in &mut buses {
+                    let _ = bus.send(&sync);
+                }
+            }
+        })
+    };
+    let finish = |r: Res<Outcome>| {
+        stop.store(true, Ordering::Relaxed);
+        r
+    };
+    let newest = |lengths: &[AtomicU64; 8]| -> Res<()> {
+        let mut last = None;
+        while let Some(s) = setpoints.receive().map_err(|e| e.to_string())? {
+            last = Some(s);
+        }
+        if let Some(s) = last {
+            for (a, l) in lengths.iter().zip(&s.cable_length_m) {
+                a.store(l.to_bits(), Ordering::Relaxed);
+            }
+        }
+        Ok(())
+    };
+    if let Err(e) = newest(&lengths) {
+        return finish(Err(e));
+    }
+    // The feedback topic has one publisher: the replacement takes it once drive-io's is gone.
+    st.signal("drive-io", libc::SIGKILL)?;
+    st.reap("drive-io");
+    let t0 = monotonic_ns();
+    go.store(true, Ordering::Relaxed);
+    let fb_pub = loop {
+        match node.publisher::<DriveFeedback>() {
+            Ok(p) => break p,
+            Err(e) if monotonic_ns() - t0 > 5_000_000_000 => {
+                return finish(Err(format!("replacing drive-io's feedback publisher: {e}")));
+            }
+            Err(_) => {
+                crs_ipc::cleanup_dead_nodes(&crs_ipc::iceoryx_config());
+            }
+        }
+    };
+    let t_replaced = monotonic_ns();
+    if let Err(e) = fb_pub.publish(&fb0).map_err(|e| e.to_string()) {
+        return finish(Err(e));
+    }
+    st.poll()?;
+    if !st.monitor_estops.is_empty() {
+        return finish(Err(format!(
+            "stalled: replacing drive-io's publisher took {:.0} ms, the monitor tripped first \
+             ({:?})",
+            (t_replaced - t0) as f64 * 1e-6,
+            Cause::from_code(st.monitor_estops[0].detail)
+        )));
+    }
+    st.injected = true;
+    // The plant moves: cable 1's setpoint ramps out (the adapter's RPDOs follow it).
+    c.cable.store(0, Ordering::Relaxed);
+    c.offset_target_um.store(50_000, Ordering::Relaxed);
+    let mut next = t_replaced;
+    let mut published = 1u64;
+    let r = loop {
+        next += period;
+        crs_rt::sleep_until(next);
+        if let Err(e) = newest(&lengths) {
+            break Err(e);
+        }
+        // drive-io's last sample, again: timestamp and cycle frozen.
+        let _ = fb_pub.publish(&fb0);
+        published += 1;
+        st.poll()?;
+        if !st.monitor_estops.is_empty() {
+            break st.monitor_trip(Cause::FeedbackStale, 1.0);
+        }
+        if monotonic_ns() - t0 > 10_000_000_000 {
+            break Err("no trip within 10 s of stale feedback".into());
+        }
+    };
+    let e1 = st.emu();
+    let ev = finish(r.map(|ev| Outcome {
+        detect_ms: ms(t0, ev.timestamp_ns),
+        ..Outcome::default()
+    }))?;
+    let _ = bus_thread.join();
+    let moved_mm = (e1?.drives[0].length_m - e0.drives[0].length_m).abs() * 1e3;
+    if moved_mm < 1.0 {
+        return Err(format!(
+            "the plant did not move under the stale feedback (cable 1: {moved_mm:.2} mm): the \
+             scenario's premise failed"
+        ));
+    }
+    let stopped = st.require_braked()?;
+    Ok(Outcome {
+        cause: "feedback_stale".into(),
+        detect_ms: ev.detect_ms,
+        stop_ms: ms(t0, stopped),
+        note: format!(
+            "drive-io replaced ({:.0} ms gap) by an adapter moving the drives and republishing \
+             its last sample {published} times; cable 1 moved {moved_mm:.1} mm unseen",
+            (t_replaced - t0) as f64 * 1e-6
         ),
     })
 }

@@ -153,7 +153,10 @@ pub fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
     }
     st.injected = true;
     let mut next = t_replaced;
-    let mut cycle = fb0.cycle;
+    // Past every cycle drive-io may have published after the harness's last sample: the
+    // replacement's samples are fresh from the first (a sample whose cycle does not advance is
+    // stale, and the monitor's `feedback_stale` would end the scenario before its fault).
+    let mut cycle = fb0.cycle + 1_000;
     let r = loop {
         next += period;
         crs_rt::sleep_until(next);

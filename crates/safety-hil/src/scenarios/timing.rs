@@ -80,7 +80,14 @@ pub fn bound(name: &str, t: &TimingArgs) -> Option<Bound> {
         | "kill_motion_core"
         | "reset_while_armed_changes_nothing" => by_monitor(silence, t),
         // drive-io dies or its feedback is stale: feedback silence.
-        "kill_drive_io" | "stale_published_feedback" => by_monitor(feedback, t),
+        "kill_drive_io" => by_monitor(feedback, t),
+        // The same at the scenario's longer silence (configs::stale_feedback_silence_cycles).
+        "stale_published_feedback" => by_monitor(
+            f64::from(crate::configs::stale_feedback_silence_cycles(
+                t.feedback_silence_cycles,
+            )) + 2.0,
+            t,
+        ),
         // 8 of the last 16 load-cell readings out of band: the emulator's control file is
         // read every 5 ms, then 8 readings, then the monitor's cycle.
         "overload_one_cable" | "slack_one_cable" => {
