@@ -66,6 +66,12 @@ workspace_tests() {
 suite "cargo fmt --check" cargo fmt --all -- --check
 suite "cargo clippy (all targets, -D warnings)" cargo clippy --workspace --all-targets -- -D warnings
 suite "cargo test (host; compile_fail doc tests with their error codes)" workspace_tests
+# Unused dependencies: cargo-machete (a dependency no source file names fails the suite).
+unused_dependencies() {
+  command -v cargo-machete >/dev/null || cargo install -q cargo-machete --locked
+  cargo machete
+}
+suite "no unused dependencies (cargo-machete)" unused_dependencies
 suite "model analysis tools against scipy (HiGHS LP: exact wrench feasibility, eq. 3.29)" scipy_feasibility
 suite "calibration against scipy least_squares on a data set of the independent benchmark plant" \
   scipy_calibration
