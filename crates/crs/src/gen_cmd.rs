@@ -3,31 +3,10 @@
 
 use std::path::Path;
 
-/// Writes `crs.1` and one `crs-<sub>.1` per subcommand (recursively) into `dir`; returns the files.
+/// Writes `crs.1` and one `crs-<sub>.1` per subcommand (recursively) into `dir`; returns the
+/// files. The same page writer as every daemon's `--gen-man` (crs-service).
 pub fn gen_man(cmd: clap::Command, dir: &Path) -> Result<Vec<std::path::PathBuf>, std::io::Error> {
-    std::fs::create_dir_all(dir)?;
-    let mut written = Vec::new();
-    fn walk(
-        cmd: &clap::Command,
-        name: &str,
-        dir: &Path,
-        written: &mut Vec<std::path::PathBuf>,
-    ) -> Result<(), std::io::Error> {
-        let cmd = cmd.clone().name(name.to_string());
-        let path = dir.join(format!("{name}.1"));
-        let mut buf = Vec::new();
-        clap_mangen::Man::new(cmd.clone()).render(&mut buf)?;
-        std::fs::write(&path, buf)?;
-        written.push(path);
-        for sub in cmd.get_subcommands().filter(|s| s.get_name() != "help") {
-            walk(sub, &format!("{name}-{}", sub.get_name()), dir, written)?;
-        }
-        Ok(())
-    }
-    let mut cmd = cmd;
-    cmd.build();
-    walk(&cmd, "crs", dir, &mut written)?;
-    Ok(written)
+    crs_service::write_man("crs", cmd, dir)
 }
 
 /// Prints the completion script for `shell` to stdout. A reader that closes the pipe early

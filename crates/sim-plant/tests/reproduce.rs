@@ -12,6 +12,17 @@ use common::*;
 use sim_plant::campaign::pose_errors;
 use sim_plant::{CampaignConfig, Plant, SkipReason, oracle_check, run_campaign};
 
+/// The commanded poses of the two ideal-plant tests: home height and three poses around it
+/// with a few degrees of rotation.
+fn commanded_poses() -> [cdpr_model::Pose; 4] {
+    [
+        pose(0.0, 0.0, 1.5, 0.0, 0.0, 0.0),
+        pose(1.2, -0.8, 1.4, 3.0, -2.0, 4.0),
+        pose(-1.0, 1.3, 1.9, -5.0, 5.0, -3.0),
+        pose(0.5, 0.5, 1.3, 0.0, 4.0, 0.0),
+    ]
+}
+
 #[test]
 fn ideal_plant_settles_at_the_elastostatic_command_to_round_off() {
     let cfg = ideal();
@@ -22,12 +33,7 @@ fn ideal_plant_settles_at_the_elastostatic_command_to_round_off() {
     let mut plant = Plant::new(cfg).unwrap();
     let mut f_ref = vec![0.0; 8];
     let mut q = vec![0.0; 8];
-    let poses = [
-        pose(0.0, 0.0, 1.5, 0.0, 0.0, 0.0),
-        pose(1.2, -0.8, 1.4, 3.0, -2.0, 4.0),
-        pose(-1.0, 1.3, 1.9, -5.0, 5.0, -3.0),
-        pose(0.5, 0.5, 1.3, 0.0, 4.0, 0.0),
-    ];
+    let poses = commanded_poses();
     let mut n = 0;
     for x in &poses {
         kinematics::inverse(model, &mut data, x).unwrap();
@@ -78,12 +84,7 @@ fn ideal_plant_chain_agrees_with_the_independent_oracle() {
     let robot = oracle_check::oracle_robot(&plant).unwrap();
     let mut f_ref = vec![0.0; 8];
     let mut q = vec![0.0; 8];
-    let poses = [
-        pose(0.0, 0.0, 1.5, 0.0, 0.0, 0.0),
-        pose(1.2, -0.8, 1.4, 3.0, -2.0, 4.0),
-        pose(-1.0, 1.3, 1.9, -5.0, 5.0, -3.0),
-        pose(0.5, 0.5, 1.3, 0.0, 4.0, 0.0),
-    ];
+    let poses = commanded_poses();
     for x in &poses {
         kinematics::inverse(&model, &mut data, x).unwrap();
         // The twin's wrench at this pose: its weight acts at the rotated centre of gravity.
