@@ -825,6 +825,7 @@ pub fn execute_observed(
     let mut last_sp_ns = 0u64;
     let mut was_running = false;
     let mut bus_stop: Option<(u64, u32)> = None;
+    let mut echoed_stop: Option<String> = None;
     let t0 = Instant::now();
     let result: Result<(), SimError> = loop {
         std::thread::sleep(Duration::from_millis(5));
@@ -892,7 +893,16 @@ pub fn execute_observed(
             if let Some(words) = crs_console::status::estop_in_words(&e) {
                 sum.estops += 1;
                 println!("  E-STOP by {words}");
-                sum.stopped_by.get_or_insert(words);
+                // The monitor's trip on somebody's e-stop event echoes that event: the stop
+                // belongs to its sender. The two arrive from different publishers in no fixed
+                // order, so the echo only names the stop if no sender's event is seen.
+                let echo = e.source == ProcessId::SafetyMonitor as u32
+                    && e.detail == safety_monitor::Cause::EStopEvent as u32;
+                if echo {
+                    echoed_stop.get_or_insert(words);
+                } else {
+                    sum.stopped_by.get_or_insert(words);
+                }
             }
         }
         while let Ok(Some(h)) = heartbeats.receive() {
@@ -1006,6 +1016,9 @@ pub fn execute_observed(
         r.finish();
         sum.rest = rest_errors(&r.samples);
         sum.rest_points_skipped = r.skipped.len();
+    }
+    if let Some(words) = echoed_stop {
+        sum.stopped_by.get_or_insert(words);
     }
     if sum.estops > 0 && with_monitor {
         sum.monitor_trips =
