@@ -27,6 +27,10 @@ use std::process::Command;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// Finite setpoints the producer publishes after a non-finite fault before an operator turns
+/// the key: ten times the shipped `reset_clear_cycles` (3).
+pub const CLEAN_SETPOINTS_BEFORE_KEY: u64 = 30;
+
 pub struct Stack {
     pub name: &'static str,
     pub dir: PathBuf,
@@ -399,6 +403,21 @@ impl Stack {
     pub fn start_motion_core(&mut self) -> Res<()> {
         let c = self.cfg.join("motion-core.toml").display().to_string();
         self.spawn("motion-core", &["--config".into(), c])
+    }
+
+    /// The fake producer's non-finite poses end, and this waits until it has published
+    /// `CLEAN_SETPOINTS_BEFORE_KEY` finite setpoints since: the monitor's reset needs its clear
+    /// streak (`reset_clear_cycles`) of fault-free cycles, which an emulated guest's stalled
+    /// producer may not have given it yet when the harness is fast (a key turned then is
+    /// rightly refused with "the cause persists"). A condition, not a sleep.
+    pub fn clear_non_finite(&mut self, c: &FakeCtl) -> Res<()> {
+        c.nan.store(false, std::sync::atomic::Ordering::Relaxed);
+        let p0 = c.published.load(std::sync::atomic::Ordering::Relaxed);
+        self.wait("finite setpoints after the non-finite ones", 20.0, |_| {
+            Ok(c.published.load(std::sync::atomic::Ordering::Relaxed)
+                >= p0 + CLEAN_SETPOINTS_BEFORE_KEY)
+        })?;
+        Ok(())
     }
 
     /// drive-io Running and the drives following (some cable moved by > 1 mm).

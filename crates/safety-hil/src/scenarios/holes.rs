@@ -44,7 +44,7 @@ pub fn reset_from_foreign_process(st: &mut Stack) -> Res<Outcome> {
     c.nan.store(true, Ordering::Relaxed);
     st.monitor_trip(Cause::NonFinite, 10.0)?;
     st.require_braked()?;
-    c.nan.store(false, Ordering::Relaxed);
+    st.clear_non_finite(&c)?;
     // 1. On the process bus, claiming the operator's source.
     let node = IpcNode::with_prefix("shil-foreign", &st.prefix).map_err(|e| e.to_string())?;
     let publ = node.publisher::<StateEvent>().map_err(|e| e.to_string())?;

@@ -24,8 +24,7 @@ pub fn reset_refused_then_accepted(st: &mut Stack) -> Res<Outcome> {
     }
     st.poll()?;
     st.require_braked()?;
-    c.nan.store(false, Ordering::Relaxed);
-    std::thread::sleep(Duration::from_millis(200));
+    st.clear_non_finite(&c)?;
     let t_reset = monotonic_ns();
     let (ok, text2) = st.operator_reset()?;
     if !ok {
