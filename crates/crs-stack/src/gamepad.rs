@@ -9,7 +9,7 @@
 //! cyclic roll (stick right flies towards +y), 4 right stick y → cyclic pitch (stick forward
 //! flies towards +x). A controller that disconnects centres every input (hover, hands off).
 
-use crate::ride_run::LivePilot;
+use crate::pilot::LivePilot;
 use ride_physics::PilotInput;
 use std::io::Read;
 use std::path::{Path, PathBuf};

@@ -54,6 +54,7 @@ pub mod diagnosis_bench;
 pub mod figures;
 pub mod gamepad;
 pub mod load_experiment;
+pub mod pilot;
 pub mod plant_check;
 pub mod plant_record;
 pub mod platforms;

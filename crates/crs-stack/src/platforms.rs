@@ -462,4 +462,87 @@ mod tests {
             Err(SelectError::Platform(_))
         ));
     }
+
+    // The shipped platforms' configs under the timing profiles (crate::timing).
+    fn shipped(k: &KnownPlatform) -> crate::timing::TimedConfigs {
+        let s = k.configs(&config_dir());
+        crate::timing::TimedConfigs {
+            daemon: s.daemon,
+            drives: s.drives,
+            monitor: s.monitor,
+        }
+    }
+
+    /// Both platforms' shipped configs relax under both profiles, and the copies load with the
+    /// daemons' own loaders with the relaxed values (a rule that silently matched nothing, or a
+    /// broken path, would show here).
+    #[test]
+    fn every_platform_relaxes_and_the_copies_load() {
+        for k in KNOWN {
+            for profile in [
+                crate::timing::TimingProfile::Relaxed,
+                crate::timing::TimingProfile::Emulated,
+            ] {
+                let dir = std::env::temp_dir().join(format!(
+                    "crs-timing-{}-{}-{}",
+                    k.name,
+                    profile.name(),
+                    std::process::id()
+                ));
+                let out = crate::timing::write_profile(profile, &shipped(&k), &dir)
+                    .expect("relaxed copies");
+                let d = motion_core::daemon::config::load(&out.daemon).expect("daemon loads");
+                assert_eq!(d.realtime.period_ns, 4_000_000, "{}", k.name);
+                let drives =
+                    drive_io::config::DrivesConfig::load(&out.drives).expect("drives load");
+                assert_eq!(drives.bus.sync_period_us, 4000);
+                assert_eq!(drives.bus.stale_setpoint_cycles, 100);
+                let mon = safety_monitor::config::load(&out.monitor).expect("monitor loads");
+                assert_eq!(mon.monitor.silence_cycles, 10);
+                assert_eq!(mon.monitor.identity_grace_cycles, 40);
+                assert_eq!(mon.can.reader_stall_cycles, 40);
+                if profile == crate::timing::TimingProfile::Emulated {
+                    assert_eq!(d.realtime.priority, 0);
+                    assert_eq!(drives.bus.boot_timeout_ms, 20000);
+                }
+                setpoint_buffer_outlasts_the_heartbeat_watch(&d, &drives, k.name);
+                // The monitor reads the relaxed drives copy beside it.
+                let text = std::fs::read_to_string(&out.monitor).unwrap();
+                assert!(text.contains("drives = \"drives.toml\""), "{text}");
+                let _ = std::fs::remove_dir_all(&dir);
+            }
+        }
+    }
+
+    /// The monitor's setpoint buffer (crs-ipc) spans more of the stream than the drives'
+    /// safety-heartbeat watch tolerates of a silent monitor: a monitor its host stalls is
+    /// stopped by that watch or catches up without a lost setpoint, never misreported as a
+    /// lossy stream (`sequence_gaps`; the CI failure of the 32-sample buffer at the 4 ms loop).
+    fn setpoint_buffer_outlasts_the_heartbeat_watch(
+        d: &motion_core::daemon::config::DaemonConfig,
+        drives: &drive_io::config::DrivesConfig,
+        name: &str,
+    ) {
+        let watch = drives
+            .safety_heartbeat
+            .as_ref()
+            .expect("the drives watch the monitor's heartbeat");
+        let span_ns = <crs_ipc::JointSetpoint as crs_ipc::Topic>::SUBSCRIBER_BUFFER as u64
+            * d.realtime.period_ns;
+        assert!(
+            span_ns > u64::from(watch.validation_time_ms) * 1_000_000,
+            "{name}: setpoint buffer {span_ns} ns <= validation time {} ms",
+            watch.validation_time_ms
+        );
+    }
+
+    #[test]
+    fn the_spec_setpoint_buffer_outlasts_the_heartbeat_watch() {
+        for k in KNOWN {
+            let s = shipped(&k);
+            let d = motion_core::daemon::config::load(&s.daemon).expect("daemon loads");
+            let drives = drive_io::config::DrivesConfig::load(&s.drives).expect("drives load");
+            setpoint_buffer_outlasts_the_heartbeat_watch(&d, &drives, k.name);
+        }
+    }
 }

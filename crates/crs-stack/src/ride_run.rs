@@ -8,11 +8,12 @@
 //! When the pilot's input ends the source falls silent; motion-core holds and exits after
 //! `--hold-s`. The flown path is plotted against the walls (SVG next to the summary).
 
+pub use crate::pilot::{LivePilot, Pilot};
 use cdpr_model::config::Platform;
 use crs_ipc::{CueingPose, IpcNode};
 use ride_physics::plot::{PathPoint, path_svg};
 use ride_physics::settings::HoverSettings;
-use ride_physics::{HoverModel, HoverState, PilotInput, PilotTrack};
+use ride_physics::{HoverModel, HoverState, PilotTrack};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -66,17 +67,6 @@ pub struct RideSpec {
     /// The ride TOML (damping, controls, walls).
     pub settings: PathBuf,
     pub pilot: PilotSpec,
-}
-
-/// Where the pilot's inputs come from at run time.
-pub enum Pilot {
-    Track(PilotTrack),
-    Live(Box<dyn LivePilot>),
-}
-
-/// A pilot read live (a game controller): polled once per model step, must not block.
-pub trait LivePilot: Send {
-    fn poll(&mut self) -> PilotInput;
 }
 
 /// The validated ride: model and pilot, checked before anything starts.

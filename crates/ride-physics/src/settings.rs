@@ -244,16 +244,16 @@ impl HoverSettings {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
 
-    pub fn config(name: &str) -> std::path::PathBuf {
+    fn config(name: &str) -> std::path::PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../config")
             .join(name)
     }
 
-    pub fn helicopter_model() -> HoverModel {
+    fn helicopter_model() -> HoverModel {
         let pf = cdpr_model::config::load_platform(config("helicopter.toml")).unwrap();
         HoverSettings::load(&config("ride-helicopter.toml"))
             .unwrap()

@@ -721,7 +721,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         (
             "forces.window_readings",
             fo.window_readings,
-            crate::monitor::MAX_FORCE_WINDOW,
+            crate::capacity::MAX_FORCE_WINDOW,
         ),
     ];
     for (key, v, max) in counts {
@@ -765,10 +765,10 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
                 .into(),
         ));
     }
-    if !(1..=crate::monitor::HISTORY as u32).contains(&f.window_setpoints) {
+    if !(1..=crate::capacity::HISTORY as u32).contains(&f.window_setpoints) {
         return Err(bad(
             "feedback.window_setpoints",
-            format!("must be in 1..={}", crate::monitor::HISTORY),
+            format!("must be in 1..={}", crate::capacity::HISTORY),
         ));
     }
     if fo.window_readings == 0 {

@@ -27,6 +27,7 @@ pub mod accept;
 pub mod bus_frames;
 pub mod bus_layout;
 pub mod bus_watch;
+pub mod capacity;
 pub mod config;
 pub mod daemon;
 pub mod identity;

@@ -47,10 +47,7 @@ fn within(value: f64, limit: f64) -> bool {
     value <= limit
 }
 
-/// Setpoints remembered for matching drive feedback and RPDO targets (256 ms at 1 kHz).
-pub const HISTORY: usize = 256;
-/// Largest gap window (cycles).
-pub const MAX_GAP_WINDOW: usize = 10_000;
+pub use crate::capacity::{HISTORY, MAX_FORCE_WINDOW, MAX_GAP_WINDOW};
 
 /// The thresholds of every check (SI).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -172,9 +169,6 @@ impl Limits {
         }
     }
 }
-
-/// Largest force window (readings per cable).
-pub const MAX_FORCE_WINDOW: u32 = 64;
 
 /// Per-cable state of the force supervision.
 #[derive(Debug, Clone, Copy, Default)]

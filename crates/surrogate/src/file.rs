@@ -21,8 +21,8 @@
 //! mismatched; loading never panics on file content.
 
 use crate::basis::{Basis, MAX_DEGREE, exponents, n_basis};
+use crate::certificate::{FitOptions, FitReport};
 use crate::design::{DEFAULT_OVERSAMPLING, MAX_SAMPLES, N_GRID, validation_poses};
-use crate::fit::{FitOptions, FitReport};
 use crate::model::{MAX_CABLES, Surrogate};
 use crate::region::{COORD_NAMES, N_COORDS, Normalisation, Region, pose_string};
 use serde::{Deserialize, Serialize};

@@ -67,6 +67,7 @@
 #![warn(missing_docs)]
 
 mod basis;
+mod certificate;
 mod design;
 mod file;
 mod fit;
@@ -74,7 +75,8 @@ mod model;
 mod region;
 
 pub use basis::{Basis, MAX_DEGREE, n_basis};
+pub use certificate::{DELTA_Q_LIMIT_M, FitOptions, FitReport, Location};
 pub use file::{FORMAT_NAME, FORMAT_VERSION, FileError};
-pub use fit::{DELTA_Q_LIMIT_M, FitError, FitOptions, FitReport, Location, fit};
+pub use fit::{FitError, fit};
 pub use model::{EvalError, MAX_CABLES, Surrogate};
 pub use region::{COORD_NAMES, N_COORDS, Region, RegionError};

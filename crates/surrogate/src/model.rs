@@ -2,7 +2,7 @@
 //! `q_off = phi_sg(x)`, added by the 1 ms loop to the standard kinematics `phi(x)`.
 
 use crate::basis::{Basis, MAX_DEGREE, Tables, fill_tables, for_each_basis, n_basis};
-use crate::fit::{FitOptions, FitReport};
+use crate::certificate::{FitOptions, FitReport};
 use crate::region::{N_COORDS, Normalisation, Region};
 
 /// Maximum number of cables a surrogate can serve.
@@ -27,7 +27,7 @@ pub enum EvalError {
 
 /// Polynomial surrogate `phi_sg(x)`: per-cable joint-space offset in m over a pose region.
 ///
-/// Immutable after construction (by [`crate::fit`] or [`Surrogate::load`]); evaluation needs no
+/// Immutable after construction (by [`crate::fit()`] or [`Surrogate::load`]); evaluation needs no
 /// separate scratch object (Model/Data split) because its small working set (normalised pose,
 /// 6 x (d+1) 1-D polynomial values, the `C(6+d, d)` basis values, <= 2 x 16 accumulators) lives
 /// on the stack with sizes fixed at compile time per degree: 1 KiB at degree 3, 7.6 KiB at the
@@ -237,7 +237,7 @@ impl Surrogate {
 mod tests {
     use super::*;
     use crate::basis::basis_row;
-    use crate::fit::Location;
+    use crate::certificate::Location;
 
     fn dummy_report(degree: usize, basis: Basis, n_cables: usize) -> FitReport {
         let at = Location {
