@@ -7,7 +7,7 @@
 //! loaded); motion-core verifies the ride once more before anything moves, as for `crs ride
 //! start`.
 
-use motion_core::daemon::ride_socket::{self, Request};
+use crs_ipc::ride_control::{self as ride_socket, Request};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};

@@ -120,11 +120,9 @@ async fn api_ride_start(State(st): State<Arc<AppState>>) -> Response {
     };
     let name = ride.name().to_string();
     let req = ride.start_request();
-    let sent = tokio::task::spawn_blocking(move || {
-        motion_core::daemon::ride_socket::request(&socket, &req)
-    })
-    .await;
-    use motion_core::daemon::ride_socket::ClientError;
+    let sent =
+        tokio::task::spawn_blocking(move || crs_ipc::ride_control::request(&socket, &req)).await;
+    use crs_ipc::ride_control::ClientError;
     match sent {
         Ok(Ok(msg)) => {
             tracing::warn!(ride = %name, "ride started from the operator console: {msg}");

@@ -22,6 +22,7 @@
 
 pub mod identity_golden;
 mod payloads;
+pub mod ride_control;
 pub mod topics;
 
 pub use payloads::*;

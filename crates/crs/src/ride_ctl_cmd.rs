@@ -1,9 +1,9 @@
 //! `crs ride`: an operator's rides on the running stack — start a ride file, abort it, return
 //! home, ask what the loop is doing — through motion-core's control socket
-//! (`motion_core::daemon::ride_socket`). motion-core verifies every ride with the loop's own
+//! (`crs_ipc::ride_control`). motion-core verifies every ride with the loop's own
 //! checks before anything moves and answers with the plan's duration or the refusal.
 
-use motion_core::daemon::ride_socket::{self, DEFAULT_SOCKET, Request};
+use crs_ipc::ride_control::{self as ride_socket, DEFAULT_SOCKET, Request};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug, Clone)]

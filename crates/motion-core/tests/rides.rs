@@ -6,8 +6,9 @@
 mod common;
 
 use crs_ipc::JointSetpoint;
+use crs_ipc::ride_control::{self as ride_control, Request};
 use motion_core::daemon::ride::{RideCommandError, RideControl, RidePhase, RideSlot};
-use motion_core::daemon::ride_socket::{self, Request};
+use motion_core::daemon::ride_socket;
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::trajectory::{self, PlanningFailed};
 use motion_core::daemon::{
@@ -328,9 +329,9 @@ fn the_control_socket_answers_ok_and_refused_lines() {
             ride_socket::serve_one(conn.unwrap(), &control, &slot, |_| {}).unwrap();
         }
     });
-    let status = ride_socket::request(&path, &Request::Status).unwrap();
+    let status = ride_control::request(&path, &Request::Status).unwrap();
     assert!(status.starts_with("idle, holding"), "{status}");
-    let refused = ride_socket::request(
+    let refused = ride_control::request(
         &path,
         &Request::Start {
             name: "/home/op/rides/wild.csv".into(),
@@ -341,7 +342,7 @@ fn the_control_socket_answers_ok_and_refused_lines() {
     .to_string();
     assert!(refused.contains("/home/op/rides/wild.csv:3:"), "{refused}");
     assert!(refused.contains("phi_y_deg = 9.000 °"), "{refused}");
-    let abort = ride_socket::request(&path, &Request::Abort)
+    let abort = ride_control::request(&path, &Request::Abort)
         .unwrap_err()
         .to_string();
     assert!(abort.contains("no ride to abort"), "{abort}");
