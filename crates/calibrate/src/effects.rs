@@ -375,6 +375,9 @@ pub struct EffectSize {
     /// A force-band hysteresis ±H as the length offset it makes at the training samples' mean
     /// compliance, H · mean((q + l)/k_F + c_s) (m, 1σ): comparable with a length hysteresis.
     pub length_equivalent: Option<(f64, f64)>,
+    /// A per-cable effect's size as one number (the drum: RMS of its scales over the cables,
+    /// noise-bias corrected, ±1σ through the full covariance; [`crate::magnitude`]).
+    pub rms: Option<crate::magnitude::RmsSize>,
 }
 
 /// Mean compliance (q_i + l_i)/k_F,i + c_s over the cables and samples, m/N.
@@ -942,11 +945,20 @@ pub fn effect_sizes(
             .then(|| mean_compliance(&fit.model, train))
             .flatten()
             .map(|c| (params[0].1 * c, params[0].2 * c));
+            let rms = (*e == Effect::Drum)
+                .then(|| {
+                    let ps = e.params_of(*form, m);
+                    let values: Vec<f64> = ps.iter().map(|p| fit.model.get(*p)).collect();
+                    fit.covariance_of(&ps)
+                        .and_then(|c| crate::magnitude::rms_size(&values, &c))
+                })
+                .flatten();
             EffectSize {
                 effect: *e,
                 form: *form,
                 params,
                 length_equivalent,
+                rms,
             }
         })
         .collect()

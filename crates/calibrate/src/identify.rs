@@ -77,6 +77,11 @@ pub struct Fit {
     /// 1σ uncertainty per free parameter (SI), from σ² (J^T J)^{-1}; NaN where the normal
     /// matrix gives none (listed in `unidentifiable`).
     pub std: Vec<f64>,
+    /// Covariance of the free parameters (SI, row-major `free.len()`²), σ² (J^T J)^{-1}: the
+    /// 1σ of a size made of several parameters (e.g. the drum's RMS over the cables) needs the
+    /// correlations. Empty when the normal matrix is singular.
+    #[serde(skip)]
+    pub cov: Vec<f64>,
     /// Free parameters the data do not determine: no finite, positive 1σ (singular normal
     /// matrix or a zero column). The report names them instead of printing a number.
     pub unidentifiable: Vec<ParamId>,
@@ -86,6 +91,31 @@ pub struct Fit {
     /// RMS of the wrench rows (N, N·m) and length rows (m) without weights.
     pub rms_wrench: f64,
     pub rms_length: f64,
+}
+
+impl Fit {
+    /// Covariance (SI, row-major) of the parameters `ps`, each free in this fit; `None` when one
+    /// is not free, rests on its bound (no 1σ) or the normal matrix was singular.
+    pub fn covariance_of(&self, ps: &[ParamId]) -> Option<Vec<f64>> {
+        let n = self.free.len();
+        if self.cov.len() != n * n {
+            return None;
+        }
+        let idx: Vec<usize> = ps
+            .iter()
+            .map(|p| {
+                self.free
+                    .iter()
+                    .position(|q| q == p)
+                    .filter(|_| !self.at_bound.contains(p))
+            })
+            .collect::<Option<_>>()?;
+        Some(
+            idx.iter()
+                .flat_map(|&a| idx.iter().map(move |&b| self.cov[a * n + b]))
+                .collect(),
+        )
+    }
 }
 
 /// Why an identification failed.
@@ -480,11 +510,17 @@ pub fn fit(
     // Covariance from the full (regularised) normal matrix.
     let dof = (nd as f64 - free.len() as f64).max(1.0);
     let sigma2 = 2.0 * cost / dof;
-    let std = match (j.transpose() * &j).try_inverse() {
-        Some(inv) => (0..free.len())
-            .map(|k| (sigma2 * inv[(k, k)]).max(0.0).sqrt() * prob.scale[k])
-            .collect(),
-        None => vec![f64::NAN; free.len()],
+    let n = free.len();
+    let (std, cov): (Vec<f64>, Vec<f64>) = match (j.transpose() * &j).try_inverse() {
+        Some(inv) => (
+            (0..n)
+                .map(|k| (sigma2 * inv[(k, k)]).max(0.0).sqrt() * prob.scale[k])
+                .collect(),
+            (0..n * n)
+                .map(|x| sigma2 * inv[(x / n, x % n)] * prob.scale[x / n] * prob.scale[x % n])
+                .collect(),
+        ),
+        None => (vec![f64::NAN; n], Vec::new()),
     };
     let std: Vec<f64> = std
         .into_iter()
@@ -535,6 +571,7 @@ pub fn fit(
         cond_end_scaled: cond_end,
         singular_values: sv,
         std,
+        cov,
         rms_wrench,
         rms_length,
     })

@@ -13,6 +13,7 @@
 //! | validation through the forward kinematics | [`validate`] | 3.3–3.8, 2.42 |
 //! | candidate effects, signature tests, selection | [`effects`] | 2.1, Fig. 1.4 |
 //! | the spec's steps end to end | [`pipeline`] | ch. 6.2–6.5 |
+//! | a per-cable effect's size (RMS ±1σ) against a truth | [`magnitude`] | |
 //! | multi-start, second run, bootstrap of the chosen effects | [`repeatability`] | 6.8, 6.10 |
 //! | structure the final model leaves in the held-out residuals | [`structure`] | |
 //! | Markdown / JSON / SVG report, platform TOML | [`report`] | |
@@ -22,6 +23,7 @@
 pub mod effects;
 pub mod identify;
 pub mod lm;
+pub mod magnitude;
 pub mod observation;
 pub mod params;
 pub mod pipeline;

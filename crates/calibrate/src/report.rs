@@ -219,6 +219,16 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
                         }
                     );
                 }
+                if let Some(r) = size.rms {
+                    let _ = writeln!(
+                        s,
+                        "| {} | size: RMS over the cables (noise bias taken off; plain RMS {:.3} ‰) | {:.3} ‰ | {:.3} ‰ |",
+                        effect_label(size.effect, size.form),
+                        r.raw * 1e3,
+                        r.value * 1e3,
+                        r.sigma * 1e3
+                    );
+                }
                 if let Some((h, sd)) = size.length_equivalent {
                     let _ = writeln!(
                         s,

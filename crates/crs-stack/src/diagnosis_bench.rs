@@ -301,7 +301,30 @@ pub struct MagnitudeCheck {
     pub within_two_sigma: bool,
     /// The drawn magnitude of the effect (in its kind's unit, [`Kind::range`]).
     pub magnitude: f64,
+    /// For a size made of one number (the drum's RMS over the cables): fitted ±1σ and truth.
+    pub size: Option<calibrate::magnitude::SizeCheck>,
 }
+
+/// What the drum's acceptance compares: the effect's size, the RMS of the scales over the
+/// cables (noise bias taken off, ±1σ through the fit's covariance) against the RMS of the true
+/// scales ([`calibrate::magnitude`]).
+pub const DRUM_SIZE: &str = "drum size (RMS of s_i over the cables)";
+/// The per-cable comparison, ‖ε − s‖/‖s‖ (reported next to the size, no tolerance of its own).
+pub const DRUM_PER_CABLE: &str = "drum scale s_i per cable";
+
+/// One acceptance item: what was measured against its target.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Acceptance {
+    pub item: String,
+    pub value: String,
+    pub target: String,
+    /// `None`: no run measured it (e.g. a benchmark of a few kinds has no pairs).
+    pub met: Option<bool>,
+}
+
+/// The share of the runs naming an effect that must size it within its tolerance. The issue
+/// gives the tolerances (drum 20 %, hysteresis 30 %) but no rate; this is its naming rate.
+pub const MAGNITUDE_RATE: f64 = 0.9;
 
 /// Largest drum scale from which 120 rows resolve the per-cable scales to ~20 % (their 1σ is
 /// 0.3–0.9e-3 with 2 mm tracker noise): the benchmark reports the tolerance above it apart.
@@ -438,6 +461,91 @@ impl Summary {
                 .count(),
             c.len(),
         )
+    }
+    /// (within 20 %, within ±2σ every cable, checked) of the drum's per-cable comparisons.
+    pub fn drum_per_cable(&self, generator: &str) -> (usize, usize, usize) {
+        let c: Vec<&MagnitudeCheck> = self
+            .of(generator)
+            .flat_map(|r| r.magnitudes.iter())
+            .filter(|m| m.what == DRUM_PER_CABLE)
+            .collect();
+        (
+            c.iter().filter(|m| m.relative_error <= 0.2).count(),
+            c.iter().filter(|m| m.within_two_sigma).count(),
+            c.len(),
+        )
+    }
+    /// The issue's acceptance items, measured on `generator`'s runs.
+    pub fn acceptance(&self, generator: &str) -> Vec<Acceptance> {
+        let rate = |(n, d): (usize, usize), min: f64, target: &str, item: &str| Acceptance {
+            item: item.into(),
+            value: ratio(n, d),
+            target: target.into(),
+            met: (d > 0).then_some(n as f64 >= min * d as f64),
+        };
+        let none = |(n, d): (usize, usize), item: &str| Acceptance {
+            item: item.into(),
+            value: format!("{n}/{d}"),
+            target: "0".into(),
+            met: (d > 0).then_some(n == 0),
+        };
+        let (w, wd, worst) = self.within_true_model(generator);
+        let (_, cpu_max) = self.seconds(generator, true);
+        let n = self.of(generator).count();
+        vec![
+            rate(
+                self.single_named(generator),
+                0.9,
+                "≥ 90 %",
+                "single-effect runs where the effect matters: effect named",
+            ),
+            rate(
+                self.pair_named(generator),
+                0.8,
+                "≥ 80 %",
+                "two-effect runs where both matter: both named",
+            ),
+            rate(
+                self.baselines_clean(generator),
+                0.95,
+                "≥ 95 %",
+                "baselines with nothing added",
+            ),
+            none(
+                self.fk_failures(generator),
+                "runs with an FK failure in any step",
+            ),
+            none(
+                self.non_physical(generator),
+                "runs with a non-physical final parameter",
+            ),
+            Acceptance {
+                item: "held-out position error within 10 % of the true-effect model".into(),
+                value: format!("{} (worst ratio {worst:.2})", ratio(w, wd)),
+                target: "all".into(),
+                met: (wd > 0).then_some(w == wd),
+            },
+            rate(
+                self.magnitudes_within(generator, Effect::Drum),
+                MAGNITUDE_RATE,
+                "within 20 % in ≥ 90 %",
+                &format!(
+                    "{DRUM_SIZE}: within 20 % of the truth's (runs naming the drum of a drum-scale scenario)"
+                ),
+            ),
+            rate(
+                self.magnitudes_within(generator, Effect::Hysteresis),
+                MAGNITUDE_RATE,
+                "within 30 % in ≥ 90 %",
+                "hysteresis h within 30 % of the truth (runs naming hysteresis)",
+            ),
+            Acceptance {
+                item: "pipeline CPU time per set, max".into(),
+                value: format!("{cpu_max:.2} s"),
+                target: "≤ 1 s".into(),
+                met: (n > 0).then_some(cpu_max <= 1.0),
+            },
+        ]
     }
     /// Pipeline time per set (mean, max): wall clock, or the thread's CPU time.
     pub fn seconds(&self, generator: &str, cpu: bool) -> (f64, f64) {
@@ -657,9 +765,15 @@ fn evaluate(
             r.magnitudes
                 .iter()
                 .map(|m| format!(
-                    " {}: {:.0} % off{}",
+                    " {}: {:.0} % off{}{}",
                     m.what,
                     100.0 * m.relative_error,
+                    m.size.map_or(String::new(), |c| format!(
+                        " ({:.3} ± {:.3} ‰ vs {:.3} ‰)",
+                        1e3 * c.fitted,
+                        1e3 * c.sigma,
+                        1e3 * c.truth
+                    )),
                     if m.within_two_sigma {
                         " (within 2σ)"
                     } else {
@@ -823,14 +937,30 @@ fn independent_magnitudes(truth: &bench_plant::Truth, rep: &PipelineReport) -> V
         };
         match (v.kind, size.effect, size.form) {
             (Kind::DrumFromSetUp | Kind::DrumFromZero, Effect::Drum, _) => {
+                // Both kinds are ε_i = s_i in the candidate's q_θ = (1 + ε_i) q_cmd + δ_i (from
+                // the set-up: δ_i takes −s_i q₀,i). The layer step has no scale to compare.
                 let f: Vec<f64> = fitted.iter().map(|x| x.0).collect();
                 out.push(MagnitudeCheck {
                     effect: Effect::Drum,
-                    what: "drum scale s_i".into(),
+                    what: DRUM_PER_CABLE.into(),
                     relative_error: rel(&f, &v.values),
-                    tolerance: Some(0.2),
+                    tolerance: None,
                     within_two_sigma: two_sigma(&v.values),
                     magnitude,
+                    size: None,
+                });
+                // No covariance, no size: counted as a miss (NaN is within no tolerance).
+                let c = size
+                    .rms
+                    .map(|r| calibrate::magnitude::check_rms(&r, &v.values));
+                out.push(MagnitudeCheck {
+                    effect: Effect::Drum,
+                    what: DRUM_SIZE.into(),
+                    relative_error: c.map_or(f64::NAN, |c| c.relative_error),
+                    tolerance: Some(0.2),
+                    within_two_sigma: c.is_some_and(|c| c.within_two_sigma),
+                    magnitude,
+                    size: c,
                 });
             }
             (
@@ -861,6 +991,7 @@ fn independent_magnitudes(truth: &bench_plant::Truth, rep: &PipelineReport) -> V
                     tolerance: Some(0.3),
                     within_two_sigma: sd.is_finite() && (h.abs() - h_true).abs() <= 2.0 * sd,
                     magnitude,
+                    size: None,
                 });
             }
             (Kind::PowertrainRope | Kind::PowertrainCompliance, Effect::Powertrain, form) => {
@@ -886,6 +1017,7 @@ fn independent_magnitudes(truth: &bench_plant::Truth, rep: &PipelineReport) -> V
                         .zip(&v.values)
                         .all(|((x, sd), b)| sd.is_finite() && (x - b).abs() <= 2.0 * sd),
                     magnitude,
+                    size: None,
                 });
             }
             _ => {}
@@ -1108,16 +1240,40 @@ fn print_summary(s: &Summary, generator: &str, a: &BenchConfig) {
     );
     if dd > 0 || hd > 0 {
         println!(
-            "| drum scale within 20 % of the truth (runs naming the drum of a drum-scale scenario) | {} |",
+            "| {DRUM_SIZE} within 20 % of the truth's (runs naming the drum of a drum-scale scenario) | {} |",
             ratio(dn, dd)
+        );
+        let sized: Vec<calibrate::magnitude::SizeCheck> = runs
+            .iter()
+            .flat_map(|r| r.magnitudes.iter())
+            .filter_map(|m| m.size)
+            .collect();
+        if !sized.is_empty() {
+            println!(
+                "| … the truth within ±2σ of the fitted size / relative error median, max / 1σ relative to the true size median, max | {} / {:.0} %, {:.0} % / {:.0} %, {:.0} % |",
+                ratio(
+                    sized.iter().filter(|c| c.within_two_sigma).count(),
+                    sized.len()
+                ),
+                100.0 * median(&sized.iter().map(|c| c.relative_error).collect::<Vec<_>>()),
+                100.0 * sized.iter().map(|c| c.relative_error).fold(0.0, f64::max),
+                100.0 * median(&sized.iter().map(|c| c.sigma / c.truth).collect::<Vec<_>>()),
+                100.0 * sized.iter().map(|c| c.sigma / c.truth).fold(0.0, f64::max),
+            );
+        }
+        let (pc, p2, pn) = s.drum_per_cable(generator);
+        println!(
+            "| {DRUM_PER_CABLE} within 20 % (‖ε − s‖/‖s‖) / the truth within ±2σ on every cable (no tolerance of their own) | {} / {} |",
+            ratio(pc, pn),
+            ratio(p2, pn)
         );
         let big: Vec<&MagnitudeCheck> = runs
             .iter()
             .flat_map(|r| r.magnitudes.iter())
-            .filter(|m| m.effect == Effect::Drum && m.magnitude >= DRUM_RESOLVED)
+            .filter(|m| m.what == DRUM_PER_CABLE && m.magnitude >= DRUM_RESOLVED)
             .collect();
         println!(
-            "| … of those with the largest \\|s_i\\| ≥ {:.2} % | {} |",
+            "| … per cable within 20 %, runs with the largest \\|s_i\\| ≥ {:.2} % | {} |",
             DRUM_RESOLVED * 100.0,
             ratio(
                 big.iter().filter(|m| m.relative_error <= 0.2).count(),
@@ -1129,7 +1285,7 @@ fn print_summary(s: &Summary, generator: &str, a: &BenchConfig) {
             ratio(hn, hd)
         );
         let all: Vec<&MagnitudeCheck> = runs.iter().flat_map(|r| r.magnitudes.iter()).collect();
-        for e in [Effect::Drum, Effect::Hysteresis, Effect::Powertrain] {
+        for e in [Effect::Hysteresis, Effect::Powertrain] {
             let c: Vec<&&MagnitudeCheck> = all.iter().filter(|m| m.effect == e).collect();
             if !c.is_empty() {
                 println!(
@@ -1156,6 +1312,20 @@ fn print_summary(s: &Summary, generator: &str, a: &BenchConfig) {
     println!(
         "| pipeline time per set, CPU time of its thread (mean / max) | {mean_c:.2} / {max_c:.2} s |"
     );
+    println!("\n| acceptance | measured | target | met |\n|---|---|---|---|");
+    for c in s.acceptance(generator) {
+        println!(
+            "| {} | {} | {} | {} |",
+            c.item,
+            c.value,
+            c.target,
+            match c.met {
+                Some(true) => "met",
+                Some(false) => "**not met**",
+                None => "not measured",
+            }
+        );
+    }
     for r in runs.iter().filter(|r| !r.non_physical.is_empty()) {
         println!(
             "non-physical in {} seed {}: {}",
@@ -1190,5 +1360,72 @@ fn median(v: &[f64]) -> f64 {
         f64::NAN
     } else {
         v[v.len() / 2]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn drum_run(per_cable: f64, size: f64) -> RunResult {
+        let check = |what: &str, rel: f64, tolerance| MagnitudeCheck {
+            effect: Effect::Drum,
+            what: what.into(),
+            relative_error: rel,
+            tolerance,
+            within_two_sigma: true,
+            magnitude: 2e-3,
+            size: None,
+        };
+        RunResult {
+            generator: "independent",
+            scenario: "drum-setup".into(),
+            seed: 0,
+            truth: vec![Effect::Drum],
+            out_of_catalogue: false,
+            u: vec![0.5],
+            chosen: vec![Effect::Drum],
+            forms: vec![Form::Standard],
+            fk_failed: false,
+            non_physical: vec![],
+            base_pos: 4.0,
+            final_pos: 3.0,
+            true_pos: Some(3.0),
+            matters: vec![true],
+            seconds: 0.5,
+            cpu_seconds: 0.5,
+            structure: false,
+            magnitudes: vec![
+                check(DRUM_PER_CABLE, per_cable, None),
+                check(DRUM_SIZE, size, Some(0.2)),
+            ],
+            rows: (120, 90),
+            candidate_lines: vec![],
+        }
+    }
+
+    #[test]
+    fn the_drum_item_of_the_acceptance_judges_the_size_and_counts_the_per_cable_apart() {
+        // Ten runs: the size within 20 % in nine (the per-cable comparison in none), then one
+        // more size outside: 9/10 is met, 9/11 is not.
+        let mut s = Summary {
+            runs: (0..10)
+                .map(|k| drum_run(0.5, if k == 0 { 0.3 } else { 0.1 }))
+                .collect(),
+        };
+        let item = |s: &Summary| {
+            s.acceptance("independent")
+                .into_iter()
+                .find(|a| a.item.starts_with(DRUM_SIZE))
+                .unwrap()
+        };
+        assert_eq!(s.magnitudes_within("independent", Effect::Drum), (9, 10));
+        assert_eq!(s.drum_per_cable("independent"), (0, 10, 10));
+        assert_eq!(item(&s).met, Some(true), "{:?}", item(&s));
+        s.runs.push(drum_run(0.1, 0.25));
+        assert_eq!(item(&s).met, Some(false), "{:?}", item(&s));
+        // A size that could not be computed (NaN) is a miss, not a pass.
+        s.runs.push(drum_run(0.1, f64::NAN));
+        assert_eq!(s.magnitudes_within("independent", Effect::Drum), (9, 12));
     }
 }
