@@ -35,8 +35,9 @@
 //! own parameters, and when they still do not move the report says so instead of a gain.
 
 use crate::identify::{self, Fit, FitError, FitSpec};
+use crate::observation::DirectionSource;
 use crate::observation::Observation;
-use crate::params::{CalModel, DirectionSource, ParamId};
+use crate::params::{CalModel, ParamId};
 use crate::residual::Kind;
 use crate::validate::{self, ErrorChannel};
 use nalgebra::{DMatrix, DVector};

@@ -28,6 +28,7 @@ pub mod observation;
 pub mod params;
 pub mod pipeline;
 pub mod repeatability;
+pub mod repeatability_figures;
 pub mod report;
 pub mod residual;
 pub mod structure;

@@ -4,6 +4,7 @@
 
 use cdpr_model::Pose;
 use crs_dataset::{Dataset, Phase};
+use serde::Serialize;
 
 /// One measured sample.
 #[derive(Clone, Debug, PartialEq)]
@@ -37,15 +38,27 @@ pub struct Observation {
     pub command_direction: Vec<f64>,
 }
 
+/// Where the hysteresis candidate takes a cable's direction of motion from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+pub enum DirectionSource {
+    /// The change of its measured force since the previous row (loading / unloading).
+    Force,
+    /// The same, a reversal counting once the force moved back beyond the measurement noise
+    /// ([`FORCE_DIRECTION_BAND_N`]).
+    ForceBeyondNoise,
+    /// Its command sequence, held while the command does not change (the winch's direction).
+    Command,
+}
+
 impl Observation {
     /// Direction of loading per cable (+1 loading, −1 unloading) from `source`: the force
     /// change, or the command sequence (a shortening winch loads its cable).
     #[inline]
-    pub fn loading(&self, source: crate::params::DirectionSource, i: usize) -> f64 {
+    pub fn loading(&self, source: DirectionSource, i: usize) -> f64 {
         match source {
-            crate::params::DirectionSource::Force => self.direction[i],
-            crate::params::DirectionSource::ForceBeyondNoise => self.direction_beyond_noise[i],
-            crate::params::DirectionSource::Command => -self.command_direction[i],
+            DirectionSource::Force => self.direction[i],
+            DirectionSource::ForceBeyondNoise => self.direction_beyond_noise[i],
+            DirectionSource::Command => -self.command_direction[i],
         }
     }
 }

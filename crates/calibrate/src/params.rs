@@ -3,6 +3,7 @@
 //! model extensions of [`crate::effects`]. Every extension reduces exactly to the base model
 //! when its parameters are zero (eq. 2.1).
 
+use crate::observation::DirectionSource;
 use cdpr_model::{Model, ModelError, ModelParams, Pulleys};
 use nalgebra::{Vector3, Vector6};
 use serde::Serialize;
@@ -59,18 +60,6 @@ pub const PULLEY_RADIUS_MAX_M: f64 = 0.5;
 pub const HYSTERESIS_LENGTH_MAX_M: f64 = 0.02;
 /// Largest drive-train series compliance (m/N): 100 m of stored rope at the nominal k_F.
 pub const SERIES_COMPLIANCE_MAX_M_PER_N: f64 = 5e-5;
-
-/// Where the hysteresis candidate takes a cable's direction of motion from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
-pub enum DirectionSource {
-    /// The change of its measured force since the previous row (loading / unloading).
-    Force,
-    /// The same, a reversal counting once the force moved back beyond the measurement noise
-    /// ([`crate::observation::FORCE_DIRECTION_BAND_N`]).
-    ForceBeyondNoise,
-    /// Its command sequence, held while the command does not change (the winch's direction).
-    Command,
-}
 
 /// One scalar parameter of [`CalModel`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]

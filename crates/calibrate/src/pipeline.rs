@@ -83,7 +83,7 @@ pub struct PipelineReport {
     pub stages: Vec<Stage>,
     pub selection: Option<Selection>,
     /// Multi-start, second run and bootstrap ([`crate::repeatability`]), when asked for.
-    pub repeatability: Option<crate::repeatability::Repeatability>,
+    pub repeatability: Option<crate::repeatability_figures::Repeatability>,
     /// The k_F ridge the elastostatic steps used, and the sweep that chose it (empty when it
     /// was configured).
     pub ridge_kf: f64,

@@ -468,9 +468,10 @@ pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
         s,
         "hysteresis_direction = {:?}",
         match cal.hysteresis_source {
-            crate::params::DirectionSource::Force => "force change",
-            crate::params::DirectionSource::ForceBeyondNoise => "force change beyond the noise",
-            crate::params::DirectionSource::Command => "command sequence (held)",
+            crate::observation::DirectionSource::Force => "force change",
+            crate::observation::DirectionSource::ForceBeyondNoise =>
+                "force change beyond the noise",
+            crate::observation::DirectionSource::Command => "command sequence (held)",
         }
     );
     let _ = writeln!(
@@ -856,7 +857,7 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
 
 /// "Repeatability" (issue 13, item 5): multi-start, second run, bootstrap. A test that failed
 /// says so and how often; it never prints a number for it.
-fn repeatability_section(s: &mut String, r: &crate::repeatability::Repeatability) {
+fn repeatability_section(s: &mut String, r: &crate::repeatability_figures::Repeatability) {
     s.push_str("\n## Repeatability\n\n");
     if let Some(ms) = &r.multi_start {
         let _ = writeln!(
