@@ -603,8 +603,9 @@ impl FrameBuf {
             self.dropped += 1;
         }
     }
-    /// Queues a cycle's RPDO: process data the next cycle's RPDO replaces (the runner may
-    /// withhold it, [`FrameBuf::is_rpdo`]; never an NMT, SDO or heartbeat frame).
+    /// Queues a cycle's RPDO: process data the next cycle's RPDO replaces (the runner counts
+    /// the cycles whose RPDOs queue behind earlier frames, [`FrameBuf::is_rpdo`]; never an
+    /// NMT, SDO or heartbeat frame).
     pub fn push_rpdo(&mut self, f: CanFrame) {
         if self.len < Self::CAPACITY {
             self.rpdos |= 1 << self.len;

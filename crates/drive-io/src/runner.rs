@@ -103,10 +103,11 @@ pub struct RunSummary {
     /// the late RPDOs at the next SYNC (RPDO transmission type 1 latches the last one received
     /// before a SYNC), one period late.
     pub rpdos_late_at_sync: u64,
-    /// Isochronous: cycles whose RPDOs were withheld on some interface because drive-io's
-    /// earlier frames there were still not off the wire (queueing more would only make the
-    /// next SYNC's RPDOs late too; those drives hold their last target for the period).
-    pub rpdo_batches_withheld: u64,
+    /// Isochronous: cycles whose RPDOs were queued on some interface behind drive-io's earlier
+    /// frames still not off the wire there. They are queued anyway: the queue keeps their
+    /// order, so a drive always latches the newest target that arrived before its SYNC;
+    /// withholding them could only leave it an older one.
+    pub rpdos_queued_behind: u64,
 }
 
 /// Which scheduler times the cycles ([`crate::sync_clock`]).
@@ -215,22 +216,19 @@ impl<B: CanBus> Buses<B> {
     }
 
     /// Sends the cycle's frames, interface by interface (each interface's queue is its own
-    /// FIFO, so the RPDOs go before a SYNC queued after them). With `withhold_stale`, an
-    /// interface whose earlier frames are still not off the wire gets none of this cycle's
-    /// RPDOs (its other frames go); returns whether any interface's were withheld.
-    fn send_frames(&mut self, out: &BusFrames, withhold_stale: bool) -> Result<bool, CanError> {
-        let mut withheld = false;
+    /// FIFO, so the RPDOs go before a SYNC queued after them). Returns whether this cycle's
+    /// RPDOs were queued behind earlier frames of drive-io still not off the wire on some
+    /// interface (checked only with `check_backlog`).
+    fn send_frames(&mut self, out: &BusFrames, check_backlog: bool) -> Result<bool, CanError> {
+        let mut behind = false;
         for i in 0..self.buses.len() {
-            let hold = withhold_stale && self.backlog(i);
+            let busy = check_backlog && self.backlog(i);
             for (f, is_rpdo) in out.on_tagged(i) {
-                if hold && is_rpdo {
-                    withheld = true;
-                    continue;
-                }
+                behind |= busy && is_rpdo;
                 self.send(i, f)?;
             }
         }
-        Ok(withheld)
+        Ok(behind)
     }
 
     /// The SYNC on every interface, through its own transmit path where there is one.
@@ -398,7 +396,7 @@ pub fn run_with<B: CanBus>(
         Schedule::Iso(_) => buses.open_sync_paths()?,
         Schedule::Free(_) => 0,
     };
-    let (mut rpdos_late_at_sync, mut rpdo_batches_withheld) = (0u64, 0u64);
+    let (mut rpdos_late_at_sync, mut rpdos_queued_behind) = (0u64, 0u64);
     let schedule_pub = match &schedule {
         Schedule::Iso(_) => Some(ipc.publisher::<SyncSchedule>()?),
         Schedule::Free(_) => None,
@@ -617,7 +615,7 @@ pub fn run_with<B: CanBus>(
         master.cycle(cycle_now, sp.as_ref(), &mut out);
         let iso = matches!(schedule, Schedule::Iso(_));
         if buses.send_frames(&out, iso)? {
-            rpdo_batches_withheld += 1;
+            rpdos_queued_behind += 1;
         }
         if !iso && out.sync_requested() {
             buses.send_sync()?;
@@ -667,7 +665,7 @@ pub fn run_with<B: CanBus>(
         sync_late_max_us = sync_late_max_ns as f64 / 1000.0,
         sync_priority_paths,
         rpdos_late_at_sync,
-        rpdo_batches_withheld,
+        rpdos_queued_behind,
         "cycles started by a setpoint / by drive-io's own clock"
     );
     Ok(RunSummary {
@@ -682,7 +680,7 @@ pub fn run_with<B: CanBus>(
         superseded_setpoints: master.superseded_setpoints(),
         sync_priority_paths,
         rpdos_late_at_sync,
-        rpdo_batches_withheld,
+        rpdos_queued_behind,
     })
 }
 
@@ -799,7 +797,7 @@ mod tests {
     }
 
     #[test]
-    fn rpdos_are_withheld_while_the_interfaces_earlier_frames_are_not_off_the_wire() {
+    fn rpdos_queued_behind_earlier_frames_are_sent_and_counted() {
         let (a, log_a, backlog_a) = fake(true);
         let (b, log_b, _) = fake(true);
         let mut buses = Buses::new(vec![a, b]);
@@ -811,23 +809,28 @@ mod tests {
         out.push_rpdo(1, rpdo(2));
         *backlog_a.lock().unwrap() = 2;
         assert!(buses.any_backlog());
-        // Interface a: its RPDO withheld, its heartbeat and NMT sent; b unaffected.
+        // Interface a: queued behind its earlier frames (counted), all of it still sent in
+        // order, through its own socket; b unaffected.
         assert!(buses.send_frames(&out, true).unwrap());
-        let sent_a: Vec<CanFrame> = log_a.lock().unwrap().iter().map(|e| e.1).collect();
+        let sent_a: Vec<(u8, CanFrame)> = log_a.lock().unwrap().clone();
         assert_eq!(
             sent_a,
-            vec![heartbeat(0x7F, NmtState::Operational), nmt(0x01, 1)]
+            vec![
+                (0, rpdo(1)),
+                (0, heartbeat(0x7F, NmtState::Operational)),
+                (0, nmt(0x01, 1))
+            ]
         );
         assert_eq!(*log_b.lock().unwrap(), vec![(0, rpdo(2))]);
-        // Without withholding (clock / setpoint mode) everything goes.
-        log_a.lock().unwrap().clear();
+        // Not checked (clock / setpoint mode): not counted.
         assert!(!buses.send_frames(&out, false).unwrap());
-        assert_eq!(log_a.lock().unwrap().len(), 3);
-        // The queue drained: the next cycle's RPDOs go again.
+        // A backlog without RPDOs in the cycle is not a cycle's RPDOs queued behind.
+        let mut hb_only = BusFrames::new(2);
+        hb_only.push(0, heartbeat(0x7F, NmtState::Operational));
+        assert!(!buses.send_frames(&hb_only, true).unwrap());
+        // The queue drained: not counted.
         *backlog_a.lock().unwrap() = 0;
         assert!(!buses.any_backlog());
-        log_a.lock().unwrap().clear();
         assert!(!buses.send_frames(&out, true).unwrap());
-        assert_eq!(log_a.lock().unwrap()[0], (0, rpdo(1)));
     }
 }

@@ -283,6 +283,10 @@ struct Seen {
     all: Vec<(u16, u64)>,
 }
 
+/// What the publisher did: (publish time, target counts) per setpoint, when it meant to
+/// publish each, and how often the announced schedule's phase changed.
+type PublisherLog = (Vec<(u64, [i32; MAX_CABLES])>, Vec<Planned>, u64);
+
 /// When the publisher meant to publish a setpoint, and (isochronous) the SYNC it was for.
 struct Planned {
     publish_at_ns: u64,
@@ -309,6 +313,9 @@ struct ModeResult {
     supersede_text: Option<String>,
     /// SYNCs drive-io handed to a priority path.
     prio_syncs: usize,
+    /// The hub's delivery lateness, worst bus: p99 and max, ns.
+    hub_late_p99_ns: u64,
+    hub_late_max_ns: u64,
     sync_sd_us: f64,
     sync_min_us: f64,
     sync_max_us: f64,
@@ -445,7 +452,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     );
     println!(
-        "| design | SYNC path | SYNC interval sd / min / max (µs) | intervals < 0.9 P (drive-io sent closer / queued behind own frames on its path / other) | published → last RPDO off the wire p50 / p99 / p99.9 / max (µs) | cycle's RPDO wire time (µs) | missed cycles | drive-io: SYNCs with its RPDOs still queued / RPDO batches withheld | not on the wire: never written by drive-io / partly (queue full at send, or not seen) | steal, stack cpu (all cpus) |"
+        "| design | SYNC path | SYNC interval sd / min / max (µs) | intervals < 0.9 P (drive-io sent closer / queued behind own frames on its path / other) | published → last RPDO off the wire p50 / p99 / p99.9 / max (µs) | cycle's RPDO wire time (µs) | missed cycles | drive-io: SYNCs with its frames still queued / cycles whose RPDOs queued behind its earlier frames | not on the wire: never written by drive-io / partly (queue full at send, or not seen) | steal, stack cpu (all cpus) |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for (mode, r) in &results {
@@ -479,7 +486,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.missed,
             r.measured,
             r.summary.rpdos_late_at_sync,
-            r.summary.rpdo_batches_withheld,
+            r.summary.rpdos_queued_behind,
             r.superseded,
             r.summary.superseded_setpoints,
             r.lost,
@@ -516,8 +523,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
              p50 / p99 {w}; drive-io: {} cycles ({} by setpoint / {} own clock or guard), {} \
              overruns, {} superseded setpoints, {} SYNCs, SYNC left drive-io at most {:.1} µs \
              late, tx_full {}, final state {:?}; hub: {} model violations (worst {:.1} µs), {} \
-             frames dropped at receiving nodes, hub thread cpu {:.1} s; {} SYNCs through a \
-             priority path",
+             frames dropped at receiving nodes, hub thread cpu {:.1} s, delivery lateness p99 / max \
+             {:.1} / {:.1} µs (drive-io sees its frames leave the wire that much later); {} \
+             SYNCs through a priority path",
             mode.name(),
             r.published,
             r.measured,
@@ -534,6 +542,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.violation_max_ns as f64 / 1000.0,
             r.rx_dropped,
             r.hub_cpu_s,
+            r.hub_late_p99_ns as f64 / 1000.0,
+            r.hub_late_max_ns as f64 / 1000.0,
             r.prio_syncs
         );
         if let Some(t) = &r.supersede_text {
@@ -725,72 +735,70 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     let (lead, phase) = (args.lead_us * 1000, args.publish_phase_us * 1000);
     let p3 = prefix.clone();
     let steal = Steal::start(cpu);
-    let publisher = std::thread::spawn(
-        move || -> Result<(Vec<(u64, [i32; MAX_CABLES])>, Vec<Planned>, u64), String> {
-            place(cpu, rt.map(|p| p - 1));
-            let _ = crs_rt::set_timer_slack(1);
-            let node = IpcNode::with_prefix("bench-pub", &p3).map_err(|e| e.to_string())?;
-            let p = node
-                .publisher::<JointSetpoint>()
-                .map_err(|e| e.to_string())?;
-            let ready = node.setpoint_ready_notifier().map_err(|e| e.to_string())?;
-            let schedule = node
-                .subscriber::<SyncSchedule>()
-                .map_err(|e| e.to_string())?;
-            let mut phase_of_grid: Option<u64> = None;
-            let mut phase_changes = 0u64;
-            let n = secs * 1000;
-            let mut out = Vec::with_capacity(n as usize);
-            let mut planned = Vec::with_capacity(n as usize);
-            let mut tick = monotonic_ns() + 2 * P_NS;
-            for seq in 1..=n {
-                if let Ok(Some(s)) = schedule.latest() {
-                    let ph = s.phase_ns(-(lead as i64));
-                    if phase_of_grid.is_some() && ph != phase_of_grid {
-                        phase_changes += 1;
-                    }
-                    phase_of_grid = ph;
+    let publisher = std::thread::spawn(move || -> Result<PublisherLog, String> {
+        place(cpu, rt.map(|p| p - 1));
+        let _ = crs_rt::set_timer_slack(1);
+        let node = IpcNode::with_prefix("bench-pub", &p3).map_err(|e| e.to_string())?;
+        let p = node
+            .publisher::<JointSetpoint>()
+            .map_err(|e| e.to_string())?;
+        let ready = node.setpoint_ready_notifier().map_err(|e| e.to_string())?;
+        let schedule = node
+            .subscriber::<SyncSchedule>()
+            .map_err(|e| e.to_string())?;
+        let mut phase_of_grid: Option<u64> = None;
+        let mut phase_changes = 0u64;
+        let n = secs * 1000;
+        let mut out = Vec::with_capacity(n as usize);
+        let mut planned = Vec::with_capacity(n as usize);
+        let mut tick = monotonic_ns() + 2 * P_NS;
+        for seq in 1..=n {
+            if let Ok(Some(s)) = schedule.latest() {
+                let ph = s.phase_ns(-(lead as i64));
+                if phase_of_grid.is_some() && ph != phase_of_grid {
+                    phase_changes += 1;
                 }
-                if mode == SyncSource::Isochronous
-                    && let Some(ph) = phase_of_grid
-                {
-                    // The next tick at the schedule's phase (lead before a SYNC), never sooner
-                    // than half a period after the last.
-                    let base = tick - tick % P_NS + ph;
-                    tick = if base + P_NS / 2 < tick {
-                        base + P_NS
-                    } else {
-                        base
-                    };
-                }
-                crs_rt::sleep_until(tick + phase);
-                let t = seq as f64 * 1e-3;
-                let mut sp = JointSetpoint {
-                    cable_count: winches.len() as u32,
-                    sequence: seq,
-                    ..Default::default()
-                };
-                let mut counts = [0i32; MAX_CABLES];
-                for (i, w) in winches.iter().enumerate() {
-                    // A slow ramp: new target counts on every drive in every setpoint.
-                    let l = init[i] + RAMP_M_PER_S * t;
-                    sp.cable_length_m[i] = l;
-                    counts[i] = w.length_to_counts(l).unwrap_or(0);
-                }
-                sp.timestamp_ns = monotonic_ns();
-                p.publish(&sp).map_err(|e| e.to_string())?;
-                ready.notify().map_err(|e| e.to_string())?;
-                out.push((sp.timestamp_ns, counts));
-                planned.push(Planned {
-                    publish_at_ns: tick + phase,
-                    sync_at_ns: (mode == SyncSource::Isochronous && phase_of_grid.is_some())
-                        .then_some(tick + lead),
-                });
-                tick += P_NS;
+                phase_of_grid = ph;
             }
-            Ok((out, planned, phase_changes))
-        },
-    );
+            if mode == SyncSource::Isochronous
+                && let Some(ph) = phase_of_grid
+            {
+                // The next tick at the schedule's phase (lead before a SYNC), never sooner
+                // than half a period after the last.
+                let base = tick - tick % P_NS + ph;
+                tick = if base + P_NS / 2 < tick {
+                    base + P_NS
+                } else {
+                    base
+                };
+            }
+            crs_rt::sleep_until(tick + phase);
+            let t = seq as f64 * 1e-3;
+            let mut sp = JointSetpoint {
+                cable_count: winches.len() as u32,
+                sequence: seq,
+                ..Default::default()
+            };
+            let mut counts = [0i32; MAX_CABLES];
+            for (i, w) in winches.iter().enumerate() {
+                // A slow ramp: new target counts on every drive in every setpoint.
+                let l = init[i] + RAMP_M_PER_S * t;
+                sp.cable_length_m[i] = l;
+                counts[i] = w.length_to_counts(l).unwrap_or(0);
+            }
+            sp.timestamp_ns = monotonic_ns();
+            p.publish(&sp).map_err(|e| e.to_string())?;
+            ready.notify().map_err(|e| e.to_string())?;
+            out.push((sp.timestamp_ns, counts));
+            planned.push(Planned {
+                publish_at_ns: tick + phase,
+                sync_at_ns: (mode == SyncSource::Isochronous && phase_of_grid.is_some())
+                    .then_some(tick + lead),
+            });
+            tick += P_NS;
+        }
+        Ok((out, planned, phase_changes))
+    });
     let (published, planned, phase_changes) =
         publisher.join().map_err(|_| "publisher panicked")??;
     let steal = steal.percent();
@@ -817,7 +825,14 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     // The hub's figures: model violations, frames a receiving node's socket refused.
     let stats: serde_json::Value = serde_json::from_str(&stats)?;
     let (mut violations, mut violation_max_ns, mut rx_dropped) = (0u64, 0u64, 0u64);
+    // How late the hub handed frames out (real time − end of frame): drive-io learns that its
+    // frames left the wire that much later, so its backlog counts include that lag.
+    let (mut hub_late_p99_ns, mut hub_late_max_ns) = (0u64, 0u64);
     for b in stats["buses"].as_array().into_iter().flatten() {
+        hub_late_p99_ns =
+            hub_late_p99_ns.max(b["delivery_lateness_ns"]["p99"].as_u64().unwrap_or(0));
+        hub_late_max_ns =
+            hub_late_max_ns.max(b["delivery_lateness_ns"]["max"].as_u64().unwrap_or(0));
         violations += b["violations"].as_u64().unwrap_or(0);
         violation_max_ns = violation_max_ns.max(b["violation_max_ns"].as_u64().unwrap_or(0));
         for n in b["nodes"].as_array().into_iter().flatten() {
@@ -1047,6 +1062,8 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     Ok(ModeResult {
         supersede_text,
         prio_syncs,
+        hub_late_p99_ns,
+        hub_late_max_ns,
         sync_sd_us,
         sync_min_us,
         sync_max_us,
