@@ -24,6 +24,12 @@
 //!   their publication (on their bus); setpoints not on the wire, split into never written by
 //!   drive-io (superseded: a newer one was read first — drive-io's own count beside it — or
 //!   published after a stop) and lost (written, not all seen by the listener);
+//! * the SYNC's transmit path (isochronous: each interface's priority path, see
+//!   `CanBus::open_priority_path`; the others: behind the cycle's RPDOs), and drive-io's own
+//!   counts of SYNCs with its frames still queued and of cycles whose RPDOs queued behind its
+//!   earlier frames, beside the hub's delivery lateness (drive-io sees frames leave that late);
+//! * isochronous: when the superseded setpoints were published (the publisher's lateness, and
+//!   whether after the guard of the SYNC they were planned for), and schedule phase changes;
 //! * the VM's steal time over the mode (/proc/stat).
 //!
 //! The bare timer rows: an absolute-deadline 1 ms loop on the same cpu at drive-io's priority,
