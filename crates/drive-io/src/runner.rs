@@ -249,8 +249,15 @@ impl<B: CanBus> Buses<B> {
     }
 
     /// Whether some interface still holds drive-io's earlier frames not off the wire.
+    #[cfg(test)]
     fn any_backlog(&self) -> bool {
         (0..self.buses.len()).any(|i| self.backlog(i))
+    }
+
+    /// Whether an interface whose SYNC has its own path still holds drive-io's frames not off
+    /// the wire in its own queue.
+    fn backlog_behind_sync(&self) -> bool {
+        (0..self.buses.len()).any(|i| self.sync_paths[i].is_some() && self.backlog(i))
     }
 
     /// Handles what is queued on every bus, at most [`MAX_DRAIN_PER_CYCLE`] events each.
@@ -482,13 +489,15 @@ pub fn run_with<B: CanBus>(
                 t = monotonic_ns();
             }
             if out.sync_requested() {
-                // CiA 402 CSP with RPDO transmission type 1: a drive applies the last RPDO
-                // received before the SYNC; one still queued now is applied a period late.
-                if buses.any_backlog() {
-                    rpdos_late_at_sync += 1;
-                }
                 buses.send_sync()?;
                 syncs += 1;
+                // CiA 402 CSP with RPDO transmission type 1: a drive applies the last RPDO
+                // received before the SYNC; one still queued now is applied a period late.
+                // Checked after the SYNC is out (no system call before it), on the interfaces
+                // whose SYNC went through its own path (the others' backlog holds the SYNC).
+                if buses.backlog_behind_sync() {
+                    rpdos_late_at_sync += 1;
+                }
             }
             let sent = monotonic_ns();
             sync_late_max_ns = sync_late_max_ns.max(sent.saturating_sub(at));
@@ -779,7 +788,7 @@ mod tests {
     #[test]
     fn the_sync_goes_through_the_priority_path_where_the_transport_has_one() {
         let (a, log_a, _) = fake(true);
-        let (b, log_b, _) = fake(false);
+        let (b, log_b, backlog_b) = fake(false);
         let mut buses = Buses::new(vec![a, b]);
         // Before the paths are opened (clock / setpoint mode): behind the RPDOs, same socket.
         buses.send_sync().unwrap();
@@ -787,8 +796,11 @@ mod tests {
         assert_eq!(buses.open_sync_paths().unwrap(), 1);
         buses.send_sync().unwrap();
         assert_eq!(*log_a.lock().unwrap().last().unwrap(), (1, sync()));
-        // Interface b's transport has no priority path: its SYNC stays on its socket.
+        // Interface b's transport has no priority path: its SYNC stays on its socket, and its
+        // backlog (which holds that SYNC) is not counted as RPDOs late at the SYNC.
         assert_eq!(*log_b.lock().unwrap().last().unwrap(), (0, sync()));
+        *backlog_b.lock().unwrap() = 1;
+        assert!(!buses.backlog_behind_sync());
         // The cycle's RPDOs still go through the interface's own socket.
         let mut out = BusFrames::new(2);
         out.push_rpdo(0, rpdo(1));
@@ -809,6 +821,7 @@ mod tests {
         out.push_rpdo(1, rpdo(2));
         *backlog_a.lock().unwrap() = 2;
         assert!(buses.any_backlog());
+        assert!(buses.backlog_behind_sync());
         // Interface a: queued behind its earlier frames (counted), all of it still sent in
         // order, through its own socket; b unaffected.
         assert!(buses.send_frames(&out, true).unwrap());
@@ -831,6 +844,7 @@ mod tests {
         // The queue drained: not counted.
         *backlog_a.lock().unwrap() = 0;
         assert!(!buses.any_backlog());
+        assert!(!buses.backlog_behind_sync());
         assert!(!buses.send_frames(&out, true).unwrap());
     }
 }
