@@ -317,6 +317,8 @@ struct ShortCauses {
 struct ModeResult {
     /// Isochronous: when the superseded setpoints were published (item: why superseded).
     supersede_text: Option<String>,
+    /// drive-io's first fault (code, node, last EMCY code), if it reported one.
+    fault: Option<(u32, u32, u32)>,
     /// SYNCs drive-io handed to a priority path.
     prio_syncs: usize,
     /// The hub's delivery lateness, worst bus: p99 and max, ns.
@@ -552,6 +554,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.hub_late_max_ns as f64 / 1000.0,
             r.prio_syncs
         );
+        if let Some((code, node, emcy)) = r.fault {
+            println!(
+                "{}: drive-io's fault: crs_ipc::fault_code {code}, node {node}, last EMCY {emcy:#06x}",
+                mode.name()
+            );
+        }
         if let Some(t) = &r.supersede_text {
             println!("{}: {t}", mode.name());
         }
@@ -807,6 +815,11 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     });
     let (published, planned, phase_changes) =
         publisher.join().map_err(|_| "publisher panicked")??;
+    // drive-io's last feedback: the first fault's cause if it stopped (crs_ipc::fault_code).
+    let last_fb = fb.latest()?;
+    let fault = last_fb
+        .filter(|f| f.fault_code != 0)
+        .map(|f| (f.fault_code, f.fault_node, f.last_emcy_code));
     let steal = steal.percent();
     std::thread::sleep(Duration::from_millis(20));
     let listen_stop_ns = monotonic_ns();
@@ -1067,6 +1080,7 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
         .total() as f64;
     Ok(ModeResult {
         supersede_text,
+        fault,
         prio_syncs,
         hub_late_p99_ns,
         hub_late_max_ns,
