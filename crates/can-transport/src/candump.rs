@@ -245,4 +245,23 @@ impl<B: CanBus> CanBus for LoggingBus<B> {
     fn enable_tx_echo(&mut self) -> Result<(), CanError> {
         self.inner.enable_tx_echo()
     }
+    /// The inner transport's priority path, logging to the same file (its lines appended
+    /// whole, as every interface's are).
+    fn open_priority_path(&self) -> Result<Option<Box<dyn CanBus>>, CanError> {
+        let Some(path) = self.inner.open_priority_path()? else {
+            return Ok(None);
+        };
+        let out = match self.out.as_ref().map(|w| w.get_ref().try_clone()) {
+            Some(Ok(f)) => Some(std::io::BufWriter::with_capacity(16 * 1024, f)),
+            Some(Err(e)) => {
+                tracing::error!(error = %e, "candump log not duplicated: the priority path's frames are not logged");
+                None
+            }
+            None => None,
+        };
+        Ok(Some(Box::new(LoggingBus { inner: path, out })))
+    }
+    fn tx_backlog(&self) -> Option<u64> {
+        self.inner.tx_backlog()
+    }
 }

@@ -132,7 +132,30 @@ pub trait CanBus: Send {
     fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
         None
     }
+    /// Opens a second, send-only transmit path on the same interface for frames that must not
+    /// wait behind this endpoint's own queued frames (drive-io's SYNC): SocketCAN: a second raw
+    /// socket with `SO_PRIORITY` [`PRIORITY_PATH_SO_PRIORITY`] (pfifo_fast's band 0, dequeued
+    /// before band 1 where the default priority 0 goes) and an empty receive filter; `wire:`: a
+    /// second node of the hub's bus that receives nothing (a controller's high-priority
+    /// mailbox: it competes by identifier, never behind this node's queue). Its frames still
+    /// wait for a frame already on the wire and lose arbitration to lower identifiers.
+    /// `Ok(None)`: the transport has no transmit queue to overtake (the UDP transports put
+    /// every frame on the network at `send`); send through this endpoint.
+    fn open_priority_path(&self) -> Result<Option<Box<dyn CanBus>>, CanError> {
+        Ok(None)
+    }
+    /// Frames this endpoint sent that have not left the wire yet, where the transport knows:
+    /// `wire:` exactly (sent minus resolved by the hub); SocketCAN 1 or 0 (whether the socket
+    /// still holds send-buffer memory, `SIOCOUTQ`: a frame is charged to its socket until the
+    /// driver confirms its transmission); `None` for the UDP transports (no transmit queue).
+    fn tx_backlog(&self) -> Option<u64> {
+        None
+    }
 }
+
+/// `SO_PRIORITY` of a [`CanBus::open_priority_path`] socket: `TC_PRIO_INTERACTIVE` (6), the
+/// highest a process may set without `CAP_NET_ADMIN`; pfifo_fast maps it to band 0.
+pub const PRIORITY_PATH_SO_PRIORITY: i32 = 6;
 
 impl<B: CanBus + ?Sized> CanBus for Box<B> {
     fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
@@ -167,6 +190,12 @@ impl<B: CanBus + ?Sized> CanBus for Box<B> {
     }
     fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
         (**self).readiness_fd()
+    }
+    fn open_priority_path(&self) -> Result<Option<Box<dyn CanBus>>, CanError> {
+        (**self).open_priority_path()
+    }
+    fn tx_backlog(&self) -> Option<u64> {
+        (**self).tx_backlog()
     }
 }
 

@@ -243,6 +243,46 @@ impl CanBus for SocketCanBus {
         &self.iface
     }
 
+    /// A second raw socket on the interface: `SO_PRIORITY` 6 puts its frames in pfifo_fast's
+    /// band 0, which the qdisc dequeues before band 1 (priority 0, this socket's frames), and
+    /// an empty filter receives nothing. Only a priority-aware qdisc (pfifo_fast, prio) honours
+    /// it; a frame the driver already took into the controller still goes first.
+    fn open_priority_path(&self) -> Result<Option<Box<dyn CanBus>>, CanError> {
+        let p = Self::open(&self.iface)?;
+        let io = |op| {
+            let iface = self.iface.clone();
+            move |source| CanError::Io { iface, op, source }
+        };
+        p.sock.set_filter_drop_all().map_err(io("CAN_RAW_FILTER"))?;
+        p.sock
+            .set_socket_option_int(
+                libc::SOL_SOCKET,
+                libc::SO_PRIORITY,
+                crate::PRIORITY_PATH_SO_PRIORITY,
+            )
+            .map_err(io("SO_PRIORITY"))?;
+        Ok(Some(Box::new(p)))
+    }
+
+    /// `SO_MEMINFO`'s `SK_MEMINFO_WMEM_ALLOC`: send-buffer memory still charged to the socket
+    /// (a frame's until the driver has confirmed its transmission and freed it): 1 if any, 0
+    /// if none; `None` if the kernel does not answer (before Linux 4.12).
+    fn tx_backlog(&self) -> Option<u64> {
+        let mut info = [0u32; 9]; // SK_MEMINFO_VARS
+        let mut len = std::mem::size_of_val(&info) as libc::socklen_t;
+        // SAFETY: getsockopt writes at most `len` bytes into `info`, which is that long.
+        let r = unsafe {
+            libc::getsockopt(
+                self.sock.as_raw_fd(),
+                libc::SOL_SOCKET,
+                libc::SO_MEMINFO,
+                info.as_mut_ptr().cast(),
+                &mut len,
+            )
+        };
+        (r == 0).then(|| u64::from(info[libc::SK_MEMINFO_WMEM_ALLOC as usize] > 0))
+    }
+
     fn rx_errors(&self) -> u64 {
         self.rx_errors
     }

@@ -65,6 +65,8 @@ struct OutBuf {
 struct NodeRt {
     conn: Option<OwnedFd>,
     echo: bool,
+    /// A send-only node (a transmit path that receives nothing, [`Kind::RxOff`]).
+    rx_off: bool,
     out: OutBuf,
     /// The node's count of frames it refused itself, as last reported.
     refused_seen: u32,
@@ -340,6 +342,7 @@ impl BusRt {
             .map(|_| NodeRt {
                 conn: None,
                 echo: false,
+                rx_off: false,
                 refused_seen: 0,
                 out: OutBuf {
                     buf: Box::new([0; MAX_MESSAGE]),
@@ -557,6 +560,7 @@ impl BusRt {
     fn leave(&mut self, node: usize, writer: &SyncSender<ToWriter>) {
         self.nodes[node].conn = None; // closing removes it from both epoll sets
         self.nodes[node].echo = false;
+        self.nodes[node].rx_off = false;
         self.nodes[node].out.len = 0;
         self.model.remove_node(node);
         let _ = writer.send(ToWriter::Node(NodeEvent {
@@ -676,6 +680,7 @@ impl BusRt {
                 ..
             } => self.model.record_refused(node, &frame),
             Record::EchoOn => self.nodes[node].echo = true,
+            Record::RxOff => self.nodes[node].rx_off = true,
             Record::Report => {}
             Record::Error { error, stamp_ns } => {
                 self.hub.error_frames += 1;
@@ -684,7 +689,7 @@ impl BusRt {
                         let mut r = [0u8; RECORD_LEN];
                         proto::encode_error(&error, stamp_ns.min(crs_rt::now_ns()), &mut r);
                         for (n, nd) in self.nodes.iter_mut().enumerate() {
-                            if n != node && nd.conn.is_some() {
+                            if n != node && nd.conn.is_some() && !nd.rx_off {
                                 push(nd, &r, &mut self.hub.rx_dropped[n]);
                             }
                         }
@@ -720,7 +725,7 @@ impl BusRt {
                     let mut r = [0u8; RECORD_LEN];
                     proto::encode_frame(Kind::Rx, &d.frame, d.eof_ns, d.node as u32, &mut r);
                     for (n, nd) in nodes.iter_mut().enumerate() {
-                        if n != d.node && nd.conn.is_some() {
+                        if n != d.node && nd.conn.is_some() && !nd.rx_off {
                             push(nd, &r, &mut hub.rx_dropped[n]);
                         }
                     }

@@ -578,6 +578,8 @@ pub struct FrameBuf {
     frames: [CanFrame; Self::CAPACITY],
     len: usize,
     dropped: u32,
+    /// Bit k: frame k is a cycle's RPDO ([`FrameBuf::push_rpdo`]; CAPACITY is 64).
+    rpdos: u64,
 }
 
 impl Default for FrameBuf {
@@ -586,6 +588,7 @@ impl Default for FrameBuf {
             frames: [CanFrame::default(); Self::CAPACITY],
             len: 0,
             dropped: 0,
+            rpdos: 0,
         }
     }
 }
@@ -600,11 +603,25 @@ impl FrameBuf {
             self.dropped += 1;
         }
     }
+    /// Queues a cycle's RPDO: process data the next cycle's RPDO replaces (the runner counts
+    /// the cycles whose RPDOs queue behind earlier frames, [`FrameBuf::is_rpdo`]; never an
+    /// NMT, SDO or heartbeat frame).
+    pub fn push_rpdo(&mut self, f: CanFrame) {
+        if self.len < Self::CAPACITY {
+            self.rpdos |= 1 << self.len;
+        }
+        self.push(f);
+    }
+    /// Whether frame `k` of [`FrameBuf::as_slice`] is a cycle's RPDO.
+    pub fn is_rpdo(&self, k: usize) -> bool {
+        k < Self::CAPACITY && self.rpdos & (1 << k) != 0
+    }
     pub fn as_slice(&self) -> &[CanFrame] {
         &self.frames[..self.len]
     }
     pub fn clear(&mut self) {
         self.len = 0;
+        self.rpdos = 0;
     }
     pub fn len(&self) -> usize {
         self.len
@@ -646,6 +663,20 @@ impl BusFrames {
     pub fn push(&mut self, iface: usize, f: CanFrame) {
         let i = iface.min(self.interfaces - 1);
         self.bufs[i].push(f);
+    }
+    /// Queues a cycle's RPDO on interface `iface` ([`FrameBuf::push_rpdo`]).
+    pub fn push_rpdo(&mut self, iface: usize, f: CanFrame) {
+        let i = iface.min(self.interfaces - 1);
+        self.bufs[i].push_rpdo(f);
+    }
+    /// The frames of interface `iface` with whether each is a cycle's RPDO.
+    pub fn on_tagged(&self, iface: usize) -> impl Iterator<Item = (&CanFrame, bool)> + '_ {
+        let b = self.bufs.get(iface);
+        b.map(FrameBuf::as_slice)
+            .unwrap_or(&[])
+            .iter()
+            .enumerate()
+            .map(move |(k, f)| (f, b.is_some_and(|b| b.is_rpdo(k))))
     }
     /// Queues `f` on every interface.
     pub fn push_all(&mut self, f: CanFrame) {

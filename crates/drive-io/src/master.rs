@@ -1223,7 +1223,7 @@ impl Master {
     fn push_rpdos(&self, i: usize, controlword: u16, target_counts: i32, out: &mut BusFrames) {
         let iface = usize::from(self.drives[i].iface);
         for p in self.plans[i].mapping.rpdos() {
-            out.push(iface, p.encode(controlword, target_counts));
+            out.push_rpdo(iface, p.encode(controlword, target_counts));
         }
     }
 

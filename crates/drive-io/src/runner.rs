@@ -94,6 +94,20 @@ pub struct RunSummary {
     pub sync_late_max_ns: u64,
     /// Setpoints superseded before a cycle read them (a newer one was published first).
     pub superseded_setpoints: u64,
+    /// Interfaces whose SYNC went through its own transmit path
+    /// ([`CanBus::open_priority_path`]; isochronous mode on `wire:` and SocketCAN), not
+    /// behind drive-io's queued frames.
+    pub sync_priority_paths: u32,
+    /// Isochronous: SYNC instants at which drive-io's frames of the cycle (its RPDOs, its
+    /// heartbeat when due) were still not off the wire on some interface: those drives apply
+    /// the late RPDOs at the next SYNC (RPDO transmission type 1 latches the last one received
+    /// before a SYNC), one period late.
+    pub rpdos_late_at_sync: u64,
+    /// Isochronous: cycles whose RPDOs were queued on some interface behind drive-io's earlier
+    /// frames still not off the wire there. They are queued anyway: the queue keeps their
+    /// order, so a drive always latches the newest target that arrived before its SYNC;
+    /// withholding them could only leave it an older one.
+    pub rpdos_queued_behind: u64,
 }
 
 /// Which scheduler times the cycles ([`crate::sync_clock`]).
@@ -135,6 +149,10 @@ impl Schedule {
 /// The CAN side of the runner: one bus per interface, in `DrivesConfig::interfaces()` order.
 struct Buses<B: CanBus> {
     buses: Vec<B>,
+    /// Each interface's SYNC transmit path (isochronous mode, where the transport has one:
+    /// a second socket in pfifo_fast's first band, a controller's priority mailbox on the wire
+    /// model); `None`: the SYNC goes through `buses[i]`, behind what is queued there.
+    sync_paths: Vec<Option<Box<dyn CanBus>>>,
     /// Readiness descriptors (-1 for unused slots); `None` if a transport has none.
     fds: Option<[std::os::fd::RawFd; MAX_INTERFACES]>,
     tx_full: u64,
@@ -154,11 +172,36 @@ impl<B: CanBus> Buses<B> {
                 None => all = false,
             }
         }
+        let sync_paths = buses.iter().map(|_| None).collect();
         Self {
             buses,
+            sync_paths,
             fds: all.then_some(fds),
             tx_full: 0,
         }
+    }
+
+    /// Opens every interface's SYNC transmit path where the transport has one; returns how
+    /// many did.
+    fn open_sync_paths(&mut self) -> Result<u32, CanError> {
+        let mut n = 0;
+        for (b, p) in self.buses.iter().zip(self.sync_paths.iter_mut()) {
+            *p = b.open_priority_path()?;
+            match p {
+                Some(_) => n += 1,
+                None => tracing::info!(
+                    interface = b.interface(),
+                    "no separate SYNC transmit path on this transport (no transmit queue to overtake): the SYNC goes through the interface's own socket"
+                ),
+            }
+        }
+        Ok(n)
+    }
+
+    /// Whether drive-io's frames sent earlier on interface `i` are still not off the wire
+    /// (where the transport knows; otherwise taken as no).
+    fn backlog(&self, i: usize) -> bool {
+        self.buses[i].tx_backlog().is_some_and(|n| n > 0)
     }
 
     fn send(&mut self, iface: usize, f: &CanFrame) -> Result<(), CanError> {
@@ -173,22 +216,48 @@ impl<B: CanBus> Buses<B> {
     }
 
     /// Sends the cycle's frames, interface by interface (each interface's queue is its own
-    /// FIFO, so the RPDOs go before a SYNC queued after them).
-    fn send_frames(&mut self, out: &BusFrames) -> Result<(), CanError> {
+    /// FIFO, so the RPDOs go before a SYNC queued after them). Returns whether this cycle's
+    /// RPDOs were queued behind earlier frames of drive-io still not off the wire on some
+    /// interface (checked only with `check_backlog`).
+    fn send_frames(&mut self, out: &BusFrames, check_backlog: bool) -> Result<bool, CanError> {
+        let mut behind = false;
         for i in 0..self.buses.len() {
-            for f in out.on(i) {
+            let busy = check_backlog && self.backlog(i);
+            for (f, is_rpdo) in out.on_tagged(i) {
+                behind |= busy && is_rpdo;
                 self.send(i, f)?;
+            }
+        }
+        Ok(behind)
+    }
+
+    /// The SYNC on every interface, through its own transmit path where there is one.
+    fn send_sync(&mut self) -> Result<(), CanError> {
+        let s = sync();
+        for i in 0..self.buses.len() {
+            let r = match self.sync_paths[i].as_mut() {
+                Some(p) => p.send(&s),
+                None => self.buses[i].send(&s),
+            };
+            match r {
+                Ok(()) => {}
+                Err(CanError::TxFull { .. }) => self.tx_full += 1,
+                Err(e) => return Err(e),
             }
         }
         Ok(())
     }
 
-    fn send_sync(&mut self) -> Result<(), CanError> {
-        let s = sync();
-        for i in 0..self.buses.len() {
-            self.send(i, &s)?;
-        }
-        Ok(())
+    /// Whether some interface still holds drive-io's earlier frames not off the wire.
+    #[cfg(test)]
+    fn any_backlog(&self) -> bool {
+        (0..self.buses.len()).any(|i| self.backlog(i))
+    }
+
+    /// Whether an interface whose SYNC has its own path still holds drive-io's frames not off
+    /// the wire in its own queue.
+    fn backlog_behind_sync(&self) -> bool {
+        (0..self.buses.len()).any(|i| self.sync_paths[i].is_some() && self.backlog(i))
     }
 
     /// Handles what is queued on every bus, at most [`MAX_DRAIN_PER_CYCLE`] events each.
@@ -327,6 +396,14 @@ pub fn run_with<B: CanBus>(
             start_ns,
         )),
     };
+    // Isochronous: the SYNC is the bus clock and must not wait behind drive-io's own queued
+    // frames; in the other two modes it follows the cycle's RPDOs in the same FIFO (a SYNC
+    // overtaking them would make the drives latch the previous targets).
+    let sync_priority_paths = match &schedule {
+        Schedule::Iso(_) => buses.open_sync_paths()?,
+        Schedule::Free(_) => 0,
+    };
+    let (mut rpdos_late_at_sync, mut rpdos_queued_behind) = (0u64, 0u64);
     let schedule_pub = match &schedule {
         Schedule::Iso(_) => Some(ipc.publisher::<SyncSchedule>()?),
         Schedule::Free(_) => None,
@@ -414,6 +491,13 @@ pub fn run_with<B: CanBus>(
             if out.sync_requested() {
                 buses.send_sync()?;
                 syncs += 1;
+                // CiA 402 CSP with RPDO transmission type 1: a drive applies the last RPDO
+                // received before the SYNC; one still queued now is applied a period late.
+                // Checked after the SYNC is out (no system call before it), on the interfaces
+                // whose SYNC went through its own path (the others' backlog holds the SYNC).
+                if buses.backlog_behind_sync() {
+                    rpdos_late_at_sync += 1;
+                }
             }
             let sent = monotonic_ns();
             sync_late_max_ns = sync_late_max_ns.max(sent.saturating_sub(at));
@@ -538,8 +622,11 @@ pub fn run_with<B: CanBus>(
         });
         out.clear();
         master.cycle(cycle_now, sp.as_ref(), &mut out);
-        buses.send_frames(&out)?;
-        if matches!(schedule, Schedule::Free(_)) && out.sync_requested() {
+        let iso = matches!(schedule, Schedule::Iso(_));
+        if buses.send_frames(&out, iso)? {
+            rpdos_queued_behind += 1;
+        }
+        if !iso && out.sync_requested() {
             buses.send_sync()?;
             syncs += 1;
         }
@@ -585,6 +672,9 @@ pub fn run_with<B: CanBus>(
         clock_cycles,
         syncs,
         sync_late_max_us = sync_late_max_ns as f64 / 1000.0,
+        sync_priority_paths,
+        rpdos_late_at_sync,
+        rpdos_queued_behind,
         "cycles started by a setpoint / by drive-io's own clock"
     );
     Ok(RunSummary {
@@ -597,6 +687,9 @@ pub fn run_with<B: CanBus>(
         syncs,
         sync_late_max_ns,
         superseded_setpoints: master.superseded_setpoints(),
+        sync_priority_paths,
+        rpdos_late_at_sync,
+        rpdos_queued_behind,
     })
 }
 
@@ -627,5 +720,131 @@ fn drain_ready(listener: &SetpointReadyListener, schedule: &mut Schedule) -> boo
             schedule.degrade();
             true
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::canopen::{NmtState, heartbeat, nmt};
+    use can_transport::RxFrame;
+    use std::sync::{Arc, Mutex};
+
+    /// What a fake interface was handed: (path, frame); path 0 = the interface's own socket,
+    /// 1 = its priority path.
+    type Log = Arc<Mutex<Vec<(u8, CanFrame)>>>;
+
+    /// A transport with a transmit queue the test sets ([`CanBus::tx_backlog`]) and, if
+    /// `priority`, a priority path; every send is logged.
+    struct FakeBus {
+        log: Log,
+        path: u8,
+        priority: bool,
+        backlog: Arc<Mutex<u64>>,
+    }
+
+    impl CanBus for FakeBus {
+        fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
+            self.log.lock().unwrap().push((self.path, *frame));
+            Ok(())
+        }
+        fn recv_timeout(&mut self, _: Duration) -> Result<Option<RxFrame>, CanError> {
+            Ok(None)
+        }
+        fn interface(&self) -> &str {
+            "fake"
+        }
+        fn open_priority_path(&self) -> Result<Option<Box<dyn CanBus>>, CanError> {
+            Ok(self.priority.then(|| {
+                Box::new(FakeBus {
+                    log: self.log.clone(),
+                    path: 1,
+                    priority: false,
+                    backlog: Arc::new(Mutex::new(0)),
+                }) as Box<dyn CanBus>
+            }))
+        }
+        fn tx_backlog(&self) -> Option<u64> {
+            Some(*self.backlog.lock().unwrap())
+        }
+    }
+
+    fn fake(priority: bool) -> (FakeBus, Log, Arc<Mutex<u64>>) {
+        let log = Log::default();
+        let backlog = Arc::new(Mutex::new(0));
+        let b = FakeBus {
+            log: log.clone(),
+            path: 0,
+            priority,
+            backlog: backlog.clone(),
+        };
+        (b, log, backlog)
+    }
+
+    fn rpdo(node: u16) -> CanFrame {
+        CanFrame::new(0x200 + node, &[0x0F, 0, 1, 2, 3, 4]).unwrap()
+    }
+
+    #[test]
+    fn the_sync_goes_through_the_priority_path_where_the_transport_has_one() {
+        let (a, log_a, _) = fake(true);
+        let (b, log_b, backlog_b) = fake(false);
+        let mut buses = Buses::new(vec![a, b]);
+        // Before the paths are opened (clock / setpoint mode): behind the RPDOs, same socket.
+        buses.send_sync().unwrap();
+        assert_eq!(log_a.lock().unwrap().last().unwrap().0, 0);
+        assert_eq!(buses.open_sync_paths().unwrap(), 1);
+        buses.send_sync().unwrap();
+        assert_eq!(*log_a.lock().unwrap().last().unwrap(), (1, sync()));
+        // Interface b's transport has no priority path: its SYNC stays on its socket, and its
+        // backlog (which holds that SYNC) is not counted as RPDOs late at the SYNC.
+        assert_eq!(*log_b.lock().unwrap().last().unwrap(), (0, sync()));
+        *backlog_b.lock().unwrap() = 1;
+        assert!(!buses.backlog_behind_sync());
+        // The cycle's RPDOs still go through the interface's own socket.
+        let mut out = BusFrames::new(2);
+        out.push_rpdo(0, rpdo(1));
+        assert!(!buses.send_frames(&out, true).unwrap());
+        assert_eq!(*log_a.lock().unwrap().last().unwrap(), (0, rpdo(1)));
+    }
+
+    #[test]
+    fn rpdos_queued_behind_earlier_frames_are_sent_and_counted() {
+        let (a, log_a, backlog_a) = fake(true);
+        let (b, log_b, _) = fake(true);
+        let mut buses = Buses::new(vec![a, b]);
+        buses.open_sync_paths().unwrap();
+        let mut out = BusFrames::new(2);
+        out.push_rpdo(0, rpdo(1));
+        out.push(0, heartbeat(0x7F, NmtState::Operational));
+        out.push(0, nmt(0x01, 1));
+        out.push_rpdo(1, rpdo(2));
+        *backlog_a.lock().unwrap() = 2;
+        assert!(buses.any_backlog());
+        assert!(buses.backlog_behind_sync());
+        // Interface a: queued behind its earlier frames (counted), all of it still sent in
+        // order, through its own socket; b unaffected.
+        assert!(buses.send_frames(&out, true).unwrap());
+        let sent_a: Vec<(u8, CanFrame)> = log_a.lock().unwrap().clone();
+        assert_eq!(
+            sent_a,
+            vec![
+                (0, rpdo(1)),
+                (0, heartbeat(0x7F, NmtState::Operational)),
+                (0, nmt(0x01, 1))
+            ]
+        );
+        assert_eq!(*log_b.lock().unwrap(), vec![(0, rpdo(2))]);
+        // Not checked (clock / setpoint mode): not counted.
+        assert!(!buses.send_frames(&out, false).unwrap());
+        // A backlog without RPDOs in the cycle is not a cycle's RPDOs queued behind.
+        let mut hb_only = BusFrames::new(2);
+        hb_only.push(0, heartbeat(0x7F, NmtState::Operational));
+        assert!(!buses.send_frames(&hb_only, true).unwrap());
+        // The queue drained: not counted.
+        *backlog_a.lock().unwrap() = 0;
+        assert!(!buses.any_backlog());
+        assert!(!buses.backlog_behind_sync());
+        assert!(!buses.send_frames(&out, true).unwrap());
     }
 }

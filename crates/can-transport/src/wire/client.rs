@@ -87,6 +87,8 @@ impl Drop for Counters {
 /// One node of a `can-wire` bus.
 pub struct WireBus {
     sock: OwnedFd,
+    /// The hub's socket (for a second connection: [`CanBus::open_priority_path`]).
+    path: std::path::PathBuf,
     /// The hub's bus name (e.g. `can0`): the interface name of candump logs.
     name: String,
     node: u32,
@@ -119,6 +121,11 @@ fn own_name() -> String {
 impl WireBus {
     /// Connects to the hub's socket at `path` and registers as a new node.
     pub fn connect(path: &Path) -> Result<Self, CanError> {
+        Self::connect_as(path, own_name())
+    }
+
+    /// [`WireBus::connect`] with the name the hub's statistics give the node.
+    fn connect_as(path: &Path, name: String) -> Result<Self, CanError> {
         let iface = format!("wire:{}", path.display());
         let sock = Socket::new(Domain::UNIX, Type::SEQPACKET.cloexec(), None)
             .map_err(io_err(&iface, "socket"))?;
@@ -130,7 +137,7 @@ impl WireBus {
         sock.set_read_timeout(Some(HANDSHAKE_TIMEOUT))
             .map_err(io_err(&iface, "SO_RCVTIMEO"))?;
         let sock: OwnedFd = sock.into();
-        let hello = proto::Hello { name: own_name() }.encode();
+        let hello = proto::Hello { name }.encode();
         // SAFETY: sending a buffer we own on a descriptor we own.
         let n = unsafe {
             libc::send(
@@ -173,6 +180,7 @@ impl WireBus {
         let sent = counters.resolved(); // 0 for a fresh node (slots are never reused)
         Ok(Self {
             sock,
+            path: path.to_path_buf(),
             name: w.bus,
             node: w.node,
             queue_len: u64::from(w.queue_len),
@@ -450,5 +458,22 @@ impl CanBus for WireBus {
 
     fn readiness_fd(&self) -> Option<RawFd> {
         Some(self.sock.as_raw_fd())
+    }
+
+    /// A second node of the same bus that receives nothing: its frames compete by identifier
+    /// with every other node's queue heads, this node's included, so they never wait behind
+    /// this node's queued frames (a controller's high-priority mailbox, or pfifo_fast's band 0
+    /// in front of a controller that sends its lowest identifier first).
+    fn open_priority_path(&self) -> Result<Option<Box<dyn CanBus>>, CanError> {
+        let p = Self::connect_as(&self.path, format!("prio {}", own_name()))?;
+        let mut rec = [0u8; RECORD_LEN];
+        proto::encode_rx_off(&mut rec);
+        p.send_record(&mut rec)
+            .map_err(|e| p.map_send_err(e, "send receive-off request"))?;
+        Ok(Some(Box::new(p)))
+    }
+
+    fn tx_backlog(&self) -> Option<u64> {
+        Some(self.in_flight())
     }
 }

@@ -58,6 +58,9 @@ pub enum Kind {
     Own = 6,
     /// Node → hub: only the count of refused frames (sent when the node closes).
     Report = 7,
+    /// Node → hub: deliver no other node's frames or error frames to me from now on (a
+    /// send-only transmit path, SocketCAN's empty receive filter).
+    RxOff = 8,
 }
 
 impl Kind {
@@ -70,6 +73,7 @@ impl Kind {
             5 => Kind::Rx,
             6 => Kind::Own,
             7 => Kind::Report,
+            8 => Kind::RxOff,
             _ => return None,
         })
     }
@@ -89,6 +93,8 @@ pub enum Record {
         stamp_ns: u64,
     },
     EchoOn,
+    /// Deliver nothing to this node ([`Kind::RxOff`]).
+    RxOff,
     /// The node's count of frames it refused itself ([`Kind::Report`]).
     Report,
 }
@@ -139,6 +145,12 @@ pub fn encode_echo_on(out: &mut [u8; RECORD_LEN]) {
     out[0] = Kind::EchoOn as u8;
 }
 
+/// Encodes the request to receive nothing.
+pub fn encode_rx_off(out: &mut [u8; RECORD_LEN]) {
+    *out = [0; RECORD_LEN];
+    out[0] = Kind::RxOff as u8;
+}
+
 /// Encodes a report (only the refused count, see [`set_refused_total`]).
 pub fn encode_report(out: &mut [u8; RECORD_LEN]) {
     *out = [0; RECORD_LEN];
@@ -166,6 +178,7 @@ pub fn decode(rec: &[u8; RECORD_LEN]) -> Result<Record, ProtoError> {
     let data: &[u8; 8] = rec[24..32].try_into().expect("8 bytes");
     match kind {
         Kind::EchoOn => Ok(Record::EchoOn),
+        Kind::RxOff => Ok(Record::RxOff),
         Kind::Report => Ok(Record::Report),
         Kind::Error => Ok(Record::Error {
             error: BusErrorFrame::new(id, data),

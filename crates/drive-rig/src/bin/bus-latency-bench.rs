@@ -24,6 +24,12 @@
 //!   their publication (on their bus); setpoints not on the wire, split into never written by
 //!   drive-io (superseded: a newer one was read first — drive-io's own count beside it — or
 //!   published after a stop) and lost (written, not all seen by the listener);
+//! * the SYNC's transmit path (isochronous: each interface's priority path, see
+//!   `CanBus::open_priority_path`; the others: behind the cycle's RPDOs), and drive-io's own
+//!   counts of SYNCs with its frames still queued and of cycles whose RPDOs queued behind its
+//!   earlier frames, beside the hub's delivery lateness (drive-io sees frames leave that late);
+//! * isochronous: when the superseded setpoints were published (the publisher's lateness, and
+//!   whether after the guard of the SYNC they were planned for), and schedule phase changes;
 //! * the VM's steal time over the mode (/proc/stat).
 //!
 //! The bare timer rows: an absolute-deadline 1 ms loop on the same cpu at drive-io's priority,
@@ -34,7 +40,6 @@
 //! usage: bus-latency-bench [--seconds 60] [--modes isochronous,setpoint,clock]
 //!        [--rt-priority 80] [--load-cpu 0] [--stack-cpu 1] [--no-baseline]
 
-use can_transport::wire::WireBus;
 use can_transport::{BusErrorFrame, CanBus, CanError, CanFrame, RxEvent, RxFrame};
 use clap::Parser;
 use crs_ipc::{IpcNode, JointSetpoint, MAX_CABLES, SyncSchedule, monotonic_ns};
@@ -181,7 +186,8 @@ fn steal_text(s: Option<(f64, f64)>) -> String {
 #[derive(Clone, Copy)]
 struct Sent {
     at_ns: u64,
-    /// drive-io's frames on this bus not yet off the wire when it sent this one.
+    /// drive-io's frames not yet off the wire on the path this one went through (the
+    /// interface's queue, or the SYNC's priority path) when it sent this one.
     depth: u64,
     id: u16,
     /// An RPDO's target counts (6-byte frames).
@@ -189,11 +195,13 @@ struct Sent {
 }
 
 /// drive-io's end of one bus: the wire client, recording every frame sent (preallocated; the
-/// log is handed to the bench when drive-io drops its buses).
+/// log is handed to the bench when drive-io drops its buses). Its priority path (drive-io's
+/// SYNC in isochronous mode) records into slot `index + buses`.
 struct Recorded {
-    inner: WireBus,
+    inner: Box<dyn CanBus>,
     log: Vec<Sent>,
     index: usize,
+    buses: usize,
     out: Arc<Mutex<Vec<Vec<Sent>>>>,
 }
 
@@ -206,7 +214,7 @@ impl Drop for Recorded {
 
 impl CanBus for Recorded {
     fn send(&mut self, frame: &CanFrame) -> Result<(), CanError> {
-        let depth = self.inner.in_flight();
+        let depth = self.inner.tx_backlog().unwrap_or(0);
         let at_ns = monotonic_ns();
         let d = frame.data();
         let value = (d.len() == 6).then(|| i32::from_le_bytes([d[2], d[3], d[4], d[5]]));
@@ -254,6 +262,20 @@ impl CanBus for Recorded {
     fn readiness_fd(&self) -> Option<std::os::fd::RawFd> {
         self.inner.readiness_fd()
     }
+    fn open_priority_path(&self) -> Result<Option<Box<dyn CanBus>>, CanError> {
+        Ok(self.inner.open_priority_path()?.map(|p| {
+            Box::new(Recorded {
+                inner: p,
+                log: Vec::with_capacity(self.log.capacity()),
+                index: self.index + self.buses,
+                buses: self.buses,
+                out: self.out.clone(),
+            }) as Box<dyn CanBus>
+        }))
+    }
+    fn tx_backlog(&self) -> Option<u64> {
+        self.inner.tx_backlog()
+    }
 }
 
 /// What the listeners saw on one bus.
@@ -265,6 +287,16 @@ struct Seen {
     rpdos: Vec<(usize, i32, u64)>,
     /// (identifier, end of frame) of every frame (bus can0 only).
     all: Vec<(u16, u64)>,
+}
+
+/// What the publisher did: (publish time, target counts) per setpoint, when it meant to
+/// publish each, and how often the announced schedule's phase changed.
+type PublisherLog = (Vec<(u64, [i32; MAX_CABLES])>, Vec<Planned>, u64);
+
+/// When the publisher meant to publish a setpoint, and (isochronous) the SYNC it was for.
+struct Planned {
+    publish_at_ns: u64,
+    sync_at_ns: Option<u64>,
 }
 
 /// Why a SYNC interval on the wire was below 0.9 periods.
@@ -283,6 +315,15 @@ struct ShortCauses {
 }
 
 struct ModeResult {
+    /// Isochronous: when the superseded setpoints were published (item: why superseded).
+    supersede_text: Option<String>,
+    /// drive-io's first fault (code, node, last EMCY code), if it reported one.
+    fault: Option<(u32, u32, u32)>,
+    /// SYNCs drive-io handed to a priority path.
+    prio_syncs: usize,
+    /// The hub's delivery lateness, worst bus: p99 and max, ns.
+    hub_late_p99_ns: u64,
+    hub_late_max_ns: u64,
     sync_sd_us: f64,
     sync_min_us: f64,
     sync_max_us: f64,
@@ -419,9 +460,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     );
     println!(
-        "| design | SYNC interval sd / min / max (µs) | intervals < 0.9 P (drive-io sent closer / queued behind own frames / other) | published → last RPDO off the wire p50 / p99 / p99.9 / max (µs) | cycle's RPDO wire time (µs) | missed cycles | not on the wire: never written by drive-io / partly (queue full at send, or not seen) | steal, stack cpu (all cpus) |"
+        "| design | SYNC path | SYNC interval sd / min / max (µs) | intervals < 0.9 P (drive-io sent closer / queued behind own frames on its path / other) | published → last RPDO off the wire p50 / p99 / p99.9 / max (µs) | cycle's RPDO wire time (µs) | missed cycles | drive-io: SYNCs with its frames still queued / cycles whose RPDOs queued behind its earlier frames | not on the wire: never written by drive-io / partly (queue full at send, or not seen) | steal, stack cpu (all cpus) |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for (mode, r) in &results {
         let lat = match r.lat {
             Some([a, b, c, d]) => format!("{a:.1} / {b:.1} / {c:.1} / {d:.1}"),
@@ -433,8 +474,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         } else {
             format!("{} / {} / {}", c.sent_closer, c.queued_behind_own, c.other)
         };
+        let path = if r.summary.sync_priority_paths > 0 {
+            format!(
+                "own (priority) path on {} of 4 buses",
+                r.summary.sync_priority_paths
+            )
+        } else {
+            "behind the cycle's RPDOs (one FIFO)".to_string()
+        };
         println!(
-            "| {} | {:.1} / {:.1} / {:.1} | {} of {} ({causes}) | {lat} | {:.0} | {} of {} | {} (drive-io: {} superseded) / {} | {} |",
+            "| {} | {path} | {:.1} / {:.1} / {:.1} | {} of {} ({causes}) | {lat} | {:.0} | {} of {} | {} / {} | {} (drive-io: {} superseded) / {} | {} |",
             mode.name(),
             r.sync_sd_us,
             r.sync_min_us,
@@ -444,6 +493,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.rpdo_wire_us,
             r.missed,
             r.measured,
+            r.summary.rpdos_late_at_sync,
+            r.summary.rpdos_queued_behind,
             r.superseded,
             r.summary.superseded_setpoints,
             r.lost,
@@ -452,7 +503,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     for b in &base {
         println!(
-            "| bare 1 ms timer, {} | {:.1} / {:.1} / {:.1} | {} of {} | lateness p50 / p99 / max {:.1} / {:.1} / {:.1} | — | {} grid instants skipped | — | {} |",
+            "| bare 1 ms timer, {} | — | {:.1} / {:.1} / {:.1} | {} of {} | lateness p50 / p99 / max {:.1} / {:.1} / {:.1} | — | {} grid instants skipped | — | — | {} |",
             if b.spin_us == 0 {
                 "sleep to the deadline".to_string()
             } else {
@@ -480,7 +531,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
              p50 / p99 {w}; drive-io: {} cycles ({} by setpoint / {} own clock or guard), {} \
              overruns, {} superseded setpoints, {} SYNCs, SYNC left drive-io at most {:.1} µs \
              late, tx_full {}, final state {:?}; hub: {} model violations (worst {:.1} µs), {} \
-             frames dropped at receiving nodes, hub thread cpu {:.1} s",
+             frames dropped at receiving nodes, hub thread cpu {:.1} s, delivery lateness p99 / max \
+             {:.1} / {:.1} µs (drive-io sees its frames leave the wire that much later); {} \
+             SYNCs through a priority path",
             mode.name(),
             r.published,
             r.measured,
@@ -496,8 +549,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.violations,
             r.violation_max_ns as f64 / 1000.0,
             r.rx_dropped,
-            r.hub_cpu_s
+            r.hub_cpu_s,
+            r.hub_late_p99_ns as f64 / 1000.0,
+            r.hub_late_max_ns as f64 / 1000.0,
+            r.prio_syncs
         );
+        if let Some((code, node, emcy)) = r.fault {
+            println!(
+                "{}: drive-io's fault: crs_ipc::fault_code {code}, node {node}, last EMCY {emcy:#06x}",
+                mode.name()
+            );
+        }
+        if let Some(t) = &r.supersede_text {
+            println!("{}: {t}", mode.name());
+        }
     }
     Ok(())
 }
@@ -580,16 +645,19 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     let (emu_buses, mut listeners) = (open()?, open()?);
     // drive-io's buses record what it sends (about 4 frames per bus and period).
     let n_bus = transports.len();
-    let sent_logs: Arc<Mutex<Vec<Vec<Sent>>>> = Arc::new(Mutex::new(vec![Vec::new(); n_bus]));
+    let sent_logs: Arc<Mutex<Vec<Vec<Sent>>>> = Arc::new(Mutex::new(vec![Vec::new(); 2 * n_bus]));
     let mut dio_buses = Vec::with_capacity(n_bus);
     for (index, t) in transports.iter().enumerate() {
         let path = t
             .strip_prefix("wire:")
             .ok_or("hub transport is not wire:")?;
         dio_buses.push(Recorded {
-            inner: WireBus::connect(std::path::Path::new(path))?,
+            inner: Box::new(can_transport::wire::WireBus::connect(
+                std::path::Path::new(path),
+            )?),
             log: Vec::with_capacity(5000 * args.seconds as usize + 20_000),
             index,
+            buses: n_bus,
             out: sent_logs.clone(),
         });
     }
@@ -681,7 +749,7 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     let (lead, phase) = (args.lead_us * 1000, args.publish_phase_us * 1000);
     let p3 = prefix.clone();
     let steal = Steal::start(cpu);
-    let publisher = std::thread::spawn(move || -> Result<Vec<(u64, [i32; MAX_CABLES])>, String> {
+    let publisher = std::thread::spawn(move || -> Result<PublisherLog, String> {
         place(cpu, rt.map(|p| p - 1));
         let _ = crs_rt::set_timer_slack(1);
         let node = IpcNode::with_prefix("bench-pub", &p3).map_err(|e| e.to_string())?;
@@ -693,12 +761,18 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
             .subscriber::<SyncSchedule>()
             .map_err(|e| e.to_string())?;
         let mut phase_of_grid: Option<u64> = None;
+        let mut phase_changes = 0u64;
         let n = secs * 1000;
         let mut out = Vec::with_capacity(n as usize);
+        let mut planned = Vec::with_capacity(n as usize);
         let mut tick = monotonic_ns() + 2 * P_NS;
         for seq in 1..=n {
             if let Ok(Some(s)) = schedule.latest() {
-                phase_of_grid = s.phase_ns(-(lead as i64));
+                let ph = s.phase_ns(-(lead as i64));
+                if phase_of_grid.is_some() && ph != phase_of_grid {
+                    phase_changes += 1;
+                }
+                phase_of_grid = ph;
             }
             if mode == SyncSource::Isochronous
                 && let Some(ph) = phase_of_grid
@@ -730,11 +804,22 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
             p.publish(&sp).map_err(|e| e.to_string())?;
             ready.notify().map_err(|e| e.to_string())?;
             out.push((sp.timestamp_ns, counts));
+            planned.push(Planned {
+                publish_at_ns: tick + phase,
+                sync_at_ns: (mode == SyncSource::Isochronous && phase_of_grid.is_some())
+                    .then_some(tick + lead),
+            });
             tick += P_NS;
         }
-        Ok(out)
+        Ok((out, planned, phase_changes))
     });
-    let published = publisher.join().map_err(|_| "publisher panicked")??;
+    let (published, planned, phase_changes) =
+        publisher.join().map_err(|_| "publisher panicked")??;
+    // drive-io's last feedback: the first fault's cause if it stopped (crs_ipc::fault_code).
+    let last_fb = fb.latest()?;
+    let fault = last_fb
+        .filter(|f| f.fault_code != 0)
+        .map(|f| (f.fault_code, f.fault_node, f.last_emcy_code));
     let steal = steal.percent();
     std::thread::sleep(Duration::from_millis(20));
     let listen_stop_ns = monotonic_ns();
@@ -747,11 +832,26 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     let stats = hub.stop()?;
     let _ = std::fs::remove_dir_all(&dir);
     let seen = std::mem::take(&mut *seen.lock().unwrap_or_else(|p| p.into_inner()));
-    let sent = std::mem::take(&mut *sent_logs.lock().unwrap_or_else(|p| p.into_inner()));
+    let mut sent = std::mem::take(&mut *sent_logs.lock().unwrap_or_else(|p| p.into_inner()));
+    // Each interface's log with its priority path's (the SYNCs in isochronous mode), in send
+    // order.
+    let prio_logs = sent.split_off(n_bus);
+    let prio_syncs: usize = prio_logs.iter().map(Vec::len).sum();
+    for (log, p) in sent.iter_mut().zip(prio_logs) {
+        log.extend(p);
+        log.sort_by_key(|f| f.at_ns);
+    }
     // The hub's figures: model violations, frames a receiving node's socket refused.
     let stats: serde_json::Value = serde_json::from_str(&stats)?;
     let (mut violations, mut violation_max_ns, mut rx_dropped) = (0u64, 0u64, 0u64);
+    // How late the hub handed frames out (real time − end of frame): drive-io learns that its
+    // frames left the wire that much later, so its backlog counts include that lag.
+    let (mut hub_late_p99_ns, mut hub_late_max_ns) = (0u64, 0u64);
     for b in stats["buses"].as_array().into_iter().flatten() {
+        hub_late_p99_ns =
+            hub_late_p99_ns.max(b["delivery_lateness_ns"]["p99"].as_u64().unwrap_or(0));
+        hub_late_max_ns =
+            hub_late_max_ns.max(b["delivery_lateness_ns"]["max"].as_u64().unwrap_or(0));
         violations += b["violations"].as_u64().unwrap_or(0);
         violation_max_ns = violation_max_ns.max(b["violation_max_ns"].as_u64().unwrap_or(0));
         for n in b["nodes"].as_array().into_iter().flatten() {
@@ -895,7 +995,12 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     let mut lat = Vec::new();
     let mut written = Vec::new();
     let (mut missed, mut superseded, mut lost) = (0, 0, 0);
-    for (t_pub, counts) in &published {
+    let guard_ns = u64::from(cfg.bus.rpdo_guard_us) * 1000;
+    // Isochronous: each setpoint's publisher lateness (published − planned) and whether it
+    // came after the guard time of the SYNC it was planned for; (lateness, after guard,
+    // superseded).
+    let mut timing: Vec<(u64, bool, bool)> = Vec::new();
+    for (j, (t_pub, counts)) in published.iter().enumerate() {
         let mut last: Option<u64> = None;
         let mut last_sent: Option<u64> = None;
         let mut late = false;
@@ -914,6 +1019,13 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
             late |= seen[b].syncs.get(k).is_none_or(|s| off > *s);
             last = Some(last.map_or(off, |l: u64| l.max(off)));
         }
+        if let Some(sync_at) = planned.get(j).and_then(|p| p.sync_at_ns) {
+            timing.push((
+                t_pub.saturating_sub(planned[j].publish_at_ns),
+                *t_pub > sync_at - guard_ns,
+                was_sent == 0,
+            ));
+        }
         if was_sent == 0 {
             superseded += 1;
         } else if on_wire < m || was_sent < m {
@@ -926,6 +1038,38 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
     }
     lat.sort_unstable();
     written.sort_unstable();
+    let supersede_text = (!timing.is_empty()).then(|| {
+        let lateness = |sel: &dyn Fn(&(u64, bool, bool)) -> bool| {
+            let mut v: Vec<u64> = timing.iter().filter(|t| sel(t)).map(|t| t.0).collect();
+            v.sort_unstable();
+            if v.is_empty() {
+                "-".to_string()
+            } else {
+                format!(
+                    "{:.1} / {:.1} / {:.1} / {:.1}",
+                    quantile(&v, 0.5) as f64 / 1000.0,
+                    quantile(&v, 0.99) as f64 / 1000.0,
+                    quantile(&v, 0.999) as f64 / 1000.0,
+                    *v.last().unwrap_or(&0) as f64 / 1000.0
+                )
+            }
+        };
+        let n_sup = timing.iter().filter(|t| t.2).count();
+        let sup_after = timing.iter().filter(|t| t.2 && t.1).count();
+        let after = timing.iter().filter(|t| t.1).count();
+        let margin_us = (args.lead_us - args.publish_phase_us) as f64 - guard_ns as f64 / 1000.0;
+        format!(
+            "superseded setpoints (never written): {n_sup}; published after the guard ({} µs \
+             before the SYNC they were planned for, i.e. more than {margin_us:.0} µs late): \
+             {sup_after} of {n_sup}; all setpoints published after their guard: {after} of {}; \
+             publisher lateness (published − planned) p50 / p99 / p99.9 / max, all: {} µs, \
+             superseded: {} µs; schedule phase changes seen by the publisher: {phase_changes}",
+            guard_ns / 1000,
+            timing.len(),
+            lateness(&|_| true),
+            lateness(&|t| t.2),
+        )
+    });
     let us = |v: u64| v as f64 / 1000.0;
     // RPDO wire time of one bus's cycle: its two RPDOs' exact lengths.
     let rpdo_wire_us = 2.0
@@ -935,6 +1079,11 @@ fn run_mode(args: &Args, mode: SyncSource) -> Result<ModeResult, Box<dyn std::er
         )?)
         .total() as f64;
     Ok(ModeResult {
+        supersede_text,
+        fault,
+        prio_syncs,
+        hub_late_p99_ns,
+        hub_late_max_ns,
         sync_sd_us,
         sync_min_us,
         sync_max_us,
