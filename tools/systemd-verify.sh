@@ -148,8 +148,16 @@ for dep in crs-safety-monitor.service crs-drive-io.service; do
   grep -Eq "^BindsTo=.*\b$dep\b" "$mc" || policy "$mc: BindsTo=$dep missing"
   grep -Eq "^After=.*\b$dep\b" "$mc" || policy "$mc: After=$dep missing"
 done
-grep -Eq '^Requires=.*crs-motion-core.service' systemd/crs-stack.target ||
-  policy "crs-stack.target must require crs-motion-core.service"
+# The target: Requires= the monitor and drive-io, Wants= motion-core, never Requires= it (a
+# stop job of motion-core, e.g. its BindsTo= after the monitor died, would stop the target and
+# through PartOf= drive-io, which must stay up holding the drives stopped: systemd/README.md).
+t=systemd/crs-stack.target
+for dep in crs-safety-monitor.service crs-drive-io.service; do
+  grep -Eq "^Requires=.*\b$dep\b" "$t" || policy "$t: Requires=$dep missing"
+done
+grep -Eq '^Wants=.*\bcrs-motion-core.service\b' "$t" || policy "$t: Wants=crs-motion-core.service missing"
+grep -Eq '^(Requires|BindsTo|Requisite)=.*\bcrs-motion-core.service\b' "$t" &&
+  policy "$t: must not Require= crs-motion-core.service (its stop would stop drive-io through the target)"
 
 if [ $fail -ne 0 ]; then
   echo "systemd-verify: FAILED" >&2

@@ -125,11 +125,14 @@ for s in "${HIL_SUITES[@]}"; do
 done
 
 # The .deb under a real systemd in a Debian guest (tools/systemd-boot-test.sh: install,
-# upgrade of the running stack, isolation, readiness, a ride, the monitor killed, a clean stop).
-# It does not pass end to end yet: under TCG the emulator stalls trip the stack before the ride
-# (docs/install.md, "The systemd boot test"), and it takes ~7 min. Listed, not run, until it does.
+# upgrade of the running stack, isolation, readiness, a ride, the monitor killed, a clean stop;
+# docs/install.md, "The systemd boot test"). Root file system and kernel cached in $CRS_VCAN_CACHE.
+# Not run yet: it does not pass reliably (2026-11-27: 7 runs, 0 passed; two of them 69 and 71
+# of 72 checks ok): killing the monitor gives drive-io's one trip line only when its own watch beats
+# the safety I/O node's STO (a 200 ms race; otherwise drive-io logs 11 error lines), and the
+# stack may trip while it starts under a loaded host's emulation stalls (docs/install.md).
 skip "HIL: the .deb under a real systemd (Debian guest)" \
-  "does not pass end to end yet under TCG (emulator stalls trip the stack before the ride; docs/install.md); run by hand: bash tools/systemd-boot-test.sh"
+  "not reliable yet: after the monitor kill drive-io logs 11 error lines instead of one when the I/O node's STO beats its watch (a drive-io change), start-up trips under TCG load; docs/install.md; run by hand: bash tools/systemd-boot-test.sh"
 suite "Debian package: layout, conffiles, man pages of every binary (tools/deb-test.sh)" bash tools/deb-test.sh
 
 # The operator console in headless Chromium against a running `crs sim`, and the ecosystem's

@@ -6,18 +6,37 @@
 set -u
 T=/crs-test
 FAILS=0
-ok() { echo "BOOT-CHECK: ok $*"; }
-bad() { echo "BOOT-CHECK: FAIL $*"; FAILS=$((FAILS + 1)); }
+up() { cut -d' ' -f1 /proc/uptime; }
+ok() { echo "BOOT-CHECK: ok $* [$(up) s]"; }
+bad() { echo "BOOT-CHECK: FAIL $* [$(up) s]"; FAILS=$((FAILS + 1)); }
 check() { local what=$1; shift; if "$@"; then ok "$what"; else bad "$what"; fi; }
 # wait_for SECONDS CMD...: polls CMD until it succeeds; false once SECONDS have passed.
 wait_for() {
   local end=$(($(cut -d. -f1 /proc/uptime) + $1)); shift
   while ! "$@"; do [ "$(cut -d. -f1 /proc/uptime)" -lt $end ] || return 1; sleep 0.5; done
 }
+# The journal's error and warning lines of the stack's units (a CI log shows why a check failed).
+journal_why() {
+  echo "== journalctl -p warning of the stack's units (failure context)"
+  journalctl -b -p warning --no-pager -q -o short-monotonic -u 'crs-*' |
+    grep -v 'heartbeat lost\|overran' | tail -n 60 | sed 's/^/BOOT:   journal: /'
+  local first
+  first=$(journalctl -b -p err --no-pager -q -o short-monotonic -u 'crs-*' | head -n 1)
+  [ -n "$first" ] || return 0
+  # The cause often sits in the lines before the first error (info/notice) and in the error
+  # entries' structured fields (drive-io's state, code, node), which -o short does not show.
+  echo "== the stack's journal up to its first error line (every priority)"
+  journalctl -b --no-pager -q -o short-monotonic -u 'crs-*' | grep -F -B 30 -m 1 -- "$first" |
+    sed 's/^/BOOT:   before: /'
+  echo "== the first error entries with their fields"
+  journalctl -b -p err --no-pager -q -o verbose -u 'crs-*' | grep -vE '^ +_|^ +(SYSLOG_|CODE_|INVOCATION_ID|TARGET|SPAN)' |
+    head -n 40 | sed 's/^/BOOT:   fields: /'
+}
 finish() {
   if [ $FAILS -eq 0 ]; then echo "BOOT-TEST: PASS"; else
-    echo "== journal of the stack (failure context)"
-    journalctl -b --no-pager -o short-monotonic -u 'crs-*' | tail -n 150
+    journal_why
+    echo "== journal of the stack, last 80 lines"
+    journalctl -b --no-pager -o short-monotonic -u 'crs-*' | tail -n 80 | sed 's/^/BOOT:   log: /'
     echo "BOOT-TEST: FAIL ($FAILS checks failed)"
   fi
   sync
@@ -57,6 +76,32 @@ check "systemctl enable crs-sim-plant.service (the rig)" systemctl enable crs-si
 # other keys (Type=notify, Restart=no, isolation) stay as shipped.
 (cd /etc/crs && crs timing emulated --out /etc/crs/emulated) || bad "crs timing emulated"
 E=/etc/crs/emulated/timing-emulated
+# This guest is slower than the `emulated` profile's guests (tools/stack-hil.sh: one `crs sim`,
+# no systemd, journald, dpkg or console beside it): stalls of 300-500 ms were seen here while
+# the stack started (all 8 drives' TPDO timeout at once, i.e. drive-io or the simulated drives
+# descheduled, then the monitor's trip). So the administrator of this machine widens the
+# watchdogs further, in the copies, each within the bound its daemon enforces: drive-io's
+# node/TPDO timeout 2 s (the drives' consumer of drive-io's heartbeat follows at 2x), its
+# stale-setpoint stop at its 500 ms bound, the safety heartbeat's validation time at its 200 ms
+# bound (in both configs: the drives compare the monitor's configuration CRC), the monitor's
+# silences at their ~1 s bound (67 cycles). Checks and limits stay as shipped.
+# setkey FILE SECTION KEY VALUE: the key must exist in that section (a renamed key fails).
+setkey() {
+  awk -v s="$2" -v k="$3" -v v="$4" '
+    /^[ \t]*\[/ { cur = $0; gsub(/^[ \t]*\[|\].*$/, "", cur) }
+    cur == s && $0 ~ ("^" k "[ \t]*=") { $0 = k " = " v; n++ }
+    { print } END { exit n == 0 }' "$1" > "$1.new" && mv "$1.new" "$1" ||
+    { rm -f "$1.new"; bad "$1: [$2] $3 not found"; }
+}
+for kv in "bus heartbeat_timeout_ms 2000" "bus stale_setpoint_cycles 125" \
+  "safety_heartbeat validation_time_ms 200"; do
+  setkey $E/drives.toml $kv
+done
+for kv in "monitor silence_cycles 67" "feedback silence_cycles 67" "forces silence_cycles 67" \
+  "can reader_stall_cycles 67" "can safety_io_silence_cycles 67" "can safety_validation_time_ms 200"; do
+  setkey $E/safety-monitor.toml $kv
+done
+grep -n '^heartbeat_timeout_ms\|^stale_setpoint_cycles\|^validation_time_ms' $E/drives.toml | sed 's/^/BOOT:   drives.toml: /'
 IO=/run/crs-test-io
 : > $IO; chmod 0644 $IO
 ln -sfn /etc/crs/config/plant $E/plant
@@ -65,9 +110,17 @@ for u in $DAEMONS; do
   {
     echo "[Service]"
     echo "Environment=CRS_CONFIG_DIR=$E"
-    echo "CPUSchedulingPolicy=other"
-    echo "CPUSchedulingPriority=0"
     echo "CPUAffinity="
+    # The guest's CPUs are saturated once motion-core's loop runs (run 3: the monitor's cycle
+    # overran, the simulated safety I/O node missed its heartbeat within 200 ms and removed
+    # the drives' torque as motion-core started). The monitor keeps its shipped SCHED_FIFO 70
+    # (a 15 ms cycle of little work: it cannot hog a CPU); the other loops run SCHED_OTHER,
+    # the simulated drives and I/O node first, all ahead of this test's own processes (nice 10).
+    case $u in
+      crs-safety-monitor) echo "Nice=-10" ;;
+      crs-sim-plant) echo "CPUSchedulingPolicy=other"; echo "CPUSchedulingPriority=0"; echo "Nice=-10" ;;
+      *) echo "CPUSchedulingPolicy=other"; echo "CPUSchedulingPriority=0"; echo "Nice=-5" ;;
+    esac
     echo "TimeoutStartSec=300s"
     echo "WatchdogSec=30s"
     case $u in
@@ -132,6 +185,7 @@ BindPaths=/run/crs/private/tmp:/tmp /run/crs/private/shm:/dev/shm
 WorkingDirectory=/etc/crs
 Environment=CRS_CONFIG_DIR=$E
 ExecStart=/usr/bin/crs console --addr 127.0.0.1:8080
+Nice=10
 UNIT
 systemctl daemon-reload
 check "the console started in the stack's namespaces" systemctl start crs-test-console.service
@@ -144,13 +198,15 @@ ride_idle() { ride status 2>/dev/null | grep -q 'idle'; }
 ride_settled() { ride status 2>/dev/null | grep -qE 'idle|latched'; }
 wait_for 120 ride_settled
 ride status | sed 's/^/BOOT:   ride status: /'
-if ride status 2>/dev/null | grep -q latched; then
-  # Under TCG on a loaded host the emulator stalls the daemons for hundreds of ms and the
-  # monitor or drive-io may trip during start-up: say so with the cause, and reset it as the
-  # operator does (the safety I/O node's key, turned and released). Counted, never hidden.
-  echo "BOOT: latched after start (emulation stalls); the error lines:"
-  journalctl -b -p err --no-pager -q -o short-monotonic -u 'crs-*' | head -n 10 | sed 's/^/BOOT:   err: /'
-  journalctl -b -p warning --no-pager -q -o short-monotonic -u 'crs-*' | grep -v 'heartbeat lost\|overran' | head -n 20 | sed 's/^/BOOT:   warn: /'
+START_ERRS=$(journalctl -b -p err --no-pager -q -o short-monotonic -u 'crs-*')
+check "no error line while the stack started ($(grep -c . <<<"$START_ERRS"))" test -z "$START_ERRS"
+if ride status 2>/dev/null | grep -q latched || [ -n "$START_ERRS" ]; then
+  # A trip while the stack starts fails the test (above), with its cause; the rest of the
+  # checks still run after the operator's reset (the safety I/O node's key, turned and
+  # released), so one run shows every failure.
+  echo "BOOT: tripped while starting; the error lines:"
+  sed 's/^/BOOT:   err: /' <<<"$START_ERRS" | head -n 20
+  journal_why
   for k in 1 2 3; do
     echo "reset_key on" > $IO; sleep 2; : > $IO
     wait_for 30 ride_idle && { echo "BOOT: start-up trip reset by the key (attempt $k)"; break; }
@@ -194,24 +250,40 @@ ride status | sed 's/^/BOOT:   ride status: /'
 ERR1=$(journalctl -b -p err --no-pager -q -o cat | wc -l)
 check "no error line from idle to the end of the ride ($((ERR1 - ERR0)))" test "$ERR1" = "$ERR0"
 
-# --- 8. the monitor killed: the drives stop, one trip line, nothing restarts ------------------
+# --- 8. the monitor killed: the drives stop, one trip, nothing restarts ----------------------
+# What the units promise (systemd/README.md, "A unit dies"): motion-core goes with the monitor
+# (BindsTo=); drive-io, the simulated drives and the namespace stay up, drive-io trips on the
+# missing safety heartbeat, holds the drives in their quick stop and says so; the safety I/O
+# node removes their torque (STO); nothing restarts (Restart=no).
+ERRK=$(journalctl -b -p err --no-pager -q -o cat | wc -l)
 since=$(date '+%Y-%m-%d %H:%M:%S')
-ride start $T/ride.csv >/dev/null 2>&1 && wait_for 60 riding
+check "a second ride started" ride start $T/ride.csv
+check "the second ride under way when the monitor is killed" wait_for 60 riding
 check "systemctl kill -s KILL crs-safety-monitor" systemctl kill -s KILL crs-safety-monitor.service
 gone() { [ "$(systemctl is-active crs-safety-monitor.service)" != active ]; }
 check "the monitor stays dead" wait_for 60 gone
 mc_stopped() { [ "$(systemctl is-active crs-motion-core.service)" != active ]; }
 check "motion-core stopped with it (BindsTo=)" wait_for 60 mc_stopped
-dio_stop() { journalctl -u crs-drive-io.service --since "$since" --no-pager -q -o cat | grep -qiE 'safety heartbeat invalid or missing: e-stop|quick stop'; }
-check "drive-io reports the stop" wait_for 60 dio_stop
-journalctl -u crs-drive-io.service --since "$since" --no-pager -q -o cat | head -5 | sed 's/^/BOOT:   drive-io: /'
+trip_line='safety heartbeat invalid or missing: e-stop'
+dio_stop() { journalctl -u crs-drive-io.service --since "$since" --no-pager -q -o cat | grep -q "$trip_line"; }
+check "drive-io reports the trip (\"$trip_line\")" wait_for 60 dio_stop
+for u in crs-drive-io crs-sim-plant crs-isolation; do
+  check "$u still active (holding the drives stopped, reporting)" test "$(systemctl is-active $u.service)" = active
+done
+check "crs-stack.target still active (nothing stopped through it)" test "$(systemctl is-active crs-stack.target)" = active
 sleep 2; S1=$(lengths); sleep 3; S2=$(lengths)
 d=$(maxdiff "$S1" "$S2")
 check "the drives stopped: cable lengths over 3 s differ by at most $d m (<= 0.0005)" \
   awk -v d="$d" 'BEGIN{exit !(d <= 0.0005)}'
-ERRS=$(journalctl -b -p err --since "$since" --no-pager -q -o 'short-monotonic')
+ERRS=$(journalctl -b -p err --no-pager -q -o short-monotonic | tail -n +$((ERRK + 1)))
 echo "$ERRS" | sed 's/^/BOOT:   err: /'
-check "exactly one error line after the kill (the trip)" test "$(grep -c . <<<"$ERRS")" = 1
+n_trip=$(grep -c "$trip_line" <<<"$ERRS")
+# drive-io logs the trip and then, as its consequence, "drive bus stopping: quick stop all
+# drives" with state=EStop (both at err, from one event): that second line is the trip's, no
+# other error may appear.
+n_other=$(grep -v "$trip_line" <<<"$ERRS" | grep -vc 'drive-io\[[0-9]*\]: drive bus stopping: quick stop all drives$')
+check "exactly one trip error line after the kill ($n_trip) and no error besides its quick stop ($n_other)" \
+  test "$n_trip" = 1 -a "$n_other" = 0
 for u in $DAEMONS; do check "$u NRestarts=0" test "$(prop $u NRestarts)" = 0; done
 check "the monitor not restarted (Restart=no)" test "$(systemctl is-active crs-safety-monitor.service)" != active
 
@@ -219,8 +291,13 @@ check "the monitor not restarted (Restart=no)" test "$(systemctl is-active crs-s
 systemctl stop crs-test-console.service
 since=$(date '+%Y-%m-%d %H:%M:%S')
 check "systemctl stop crs-stack.target" timeout 120 systemctl stop crs-stack.target
-for u in $UNITS; do check "$u not active after the stop" test "$(systemctl is-active $u.service)" != active; done
-check "the stack's network namespace removed" test ! -e /run/netns/crs
+# `systemctl stop` waits for the target's own stop job only, and the target (After= its units)
+# stops first: the units' stop jobs (PartOf=) run on after it returns, the simulated drives
+# after drive-io and the monitor, the namespace last. Wait for them, bounded.
+inactive() { [ "$(systemctl is-active "$1.service")" != active ] && [ "$(systemctl is-active "$1.service")" != deactivating ]; }
+for u in $UNITS; do check "$u not active after the stop" wait_for 60 inactive $u; done
+no_netns() { [ ! -e /run/netns/crs ]; }
+check "the stack's network namespace removed" wait_for 60 no_netns
 ERRS=$(journalctl -b -p err --since "$since" --no-pager -q -o cat)
 check "no error line from the stop ($(grep -c . <<<"$ERRS"))" test -z "$ERRS"
 finish

@@ -191,7 +191,7 @@ pub fn motion_state_name(code: u32) -> String {
         motion_state::RUNNING => "running".into(),
         motion_state::ESTOPPED => "E-STOPPED (latched)".into(),
         motion_state::REFUSED => "REFUSED a reference (latched)".into(),
-        motion_state::HOLDING => "holding".into(),
+        motion_state::HOLDING => "idle, holding".into(),
         motion_state::STOPPING => "stream ended".into(),
         motion_state::PLAN => "plan announced".into(),
         c => format!("state {c}"),

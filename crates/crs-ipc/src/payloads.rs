@@ -165,11 +165,14 @@ impl Default for DriveFeedback {
 
 /// `StateEvent::state` / `Heartbeat::state` codes of motion-core (source MotionCore).
 pub mod motion_state {
+    /// Following a plan, a ride or a cueing stream (the setpoints move).
     pub const RUNNING: u32 = 1;
     /// Latched e-stop (kind Fault).
     pub const ESTOPPED: u32 = 2;
     /// Refused a reference (latched, kind Fault).
     pub const REFUSED: u32 = 3;
+    /// Idle and holding: nothing to follow (before the first ride, after a plan or ride
+    /// ended or an abort braked to rest, after a reset of a latch); the setpoints stand still.
     pub const HOLDING: u32 = 4;
     /// Graceful end of the setpoint stream: published (kind StateChanged) AFTER the last
     /// setpoint, so the safety monitor disarms its silence watch instead of tripping.

@@ -280,6 +280,62 @@ fn the_loop_comes_up_idle_holding_home_and_moves_only_for_a_verified_ride() {
     );
 }
 
+/// The state code heartbeats and state events carry (`HardLoop::state_code`), in words: an
+/// idle loop must say HOLDING, never RUNNING (the console, the run report and safety-hil read
+/// it as "what motion-core does").
+#[test]
+fn heartbeats_say_holding_while_idle_and_running_only_while_a_ride_moves() {
+    use crs_ipc::motion_state::{ESTOPPED, HOLDING, RUNNING};
+    let mut r = rig();
+    // From the very first cycle (no waypoints: nothing to wait for), for as long as it idles.
+    for n in 0..300 {
+        r.step();
+        assert_eq!(
+            r.hl.state_code(),
+            HOLDING,
+            "idle cycle {n} reports {}",
+            r.hl.state_code()
+        );
+        assert!(r.hl.is_idle());
+    }
+    let good = ride("good.csv", "0,0.5,0.0,2.0,0,0,0\n");
+    r.control.start(&r.slot, &good, no_error).unwrap();
+    r.until("the ride under way", 10_000, |r| {
+        r.slot.phase() == RidePhase::Riding
+    });
+    assert_eq!(r.hl.state_code(), RUNNING, "a ride under way");
+    // Every cycle until the ride's end says RUNNING; from then on HOLDING again.
+    let mut riding = 0usize;
+    while r.slot.phase() == RidePhase::Riding {
+        assert_eq!(r.hl.state_code(), RUNNING);
+        r.step();
+        riding += 1;
+        assert!(riding < 200_000, "the ride never ended");
+    }
+    assert!(riding > 100, "{riding} cycles");
+    assert_eq!(r.slot.phase(), RidePhase::Idle);
+    for _ in 0..100 {
+        r.step();
+        assert_eq!(r.hl.state_code(), HOLDING, "idle after the ride");
+    }
+    // An abort braked to rest is idle too.
+    r.control.home(&r.slot, no_error).unwrap();
+    r.until("homing under way", 10_000, |r| {
+        r.slot.phase() == RidePhase::Riding
+    });
+    r.control.abort(&r.slot).unwrap();
+    r.until("braked to rest", 100_000, |r| {
+        r.slot.phase() == RidePhase::Idle
+    });
+    r.step();
+    assert_eq!(r.hl.state_code(), HOLDING, "braked to rest");
+    // A latch says what it is, not HOLDING.
+    r.cmds.0 = Some(Command::EStop);
+    r.step();
+    assert_eq!(r.hl.state_code(), ESTOPPED);
+    assert!(!r.hl.is_idle());
+}
+
 #[test]
 fn braking_reduces_each_axis_speed_at_the_planner_limit_and_stops() {
     let limits = rig().limits;

@@ -363,6 +363,13 @@ fn run(args: Args) -> Result<(), String> {
     let timeline = Arc::new(Timeline::new(period_ns));
     let sync_lead_ns = cfg.sync_lead_ns;
     let outbox = Arc::new(Outbox::new(64));
+    if rides.is_some() && waypoint_file.is_none() {
+        // Comes up idle: the first heartbeat says so, and no RUNNING -> HOLDING change is
+        // announced for a loop that never ran.
+        outbox
+            .state
+            .store(crs_ipc::motion_state::HOLDING, Ordering::Relaxed);
+    }
     let stats = Arc::new(LoopStats::default());
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
     let stage = {
@@ -535,7 +542,7 @@ fn run(args: Args) -> Result<(), String> {
         &stats,
         &STOP,
         |hl, now| {
-            let code = hl.state().code();
+            let code = hl.state_code();
             state_code.store(code, Ordering::Relaxed);
             outbox.state.store(code, Ordering::Relaxed);
             if let Some(after) = exit_after {

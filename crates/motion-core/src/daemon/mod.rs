@@ -304,6 +304,32 @@ impl HardLoop {
         self.state
     }
 
+    /// True while the loop follows nothing: no plan, ride or cueing stream under way (the
+    /// plan delivered, or an aborted ride braked to rest), so it holds where that ended.
+    pub fn is_idle(&self) -> bool {
+        match self.state {
+            LoopState::Holding => true,
+            LoopState::Running if self.cueing.is_none() => match self.rides.as_ref() {
+                Some(RideRides {
+                    braking: Some((_, at_rest)),
+                    ..
+                }) => *at_rest,
+                _ => self.sampler.finished(),
+            },
+            _ => false,
+        }
+    }
+
+    /// The state code heartbeats and state events carry (`crs_ipc::motion_state`): what the
+    /// loop does, so an idle loop says HOLDING, never RUNNING. [`Self::state`] stays
+    /// `Running` while idle: the loop still computes and checks the held reference each cycle.
+    pub fn state_code(&self) -> u32 {
+        match self.state {
+            LoopState::Running if self.is_idle() => crs_ipc::motion_state::HOLDING,
+            s => s.code(),
+        }
+    }
+
     /// True once the planner has delivered the whole plan and the loop has read it.
     pub fn plan_finished(&self) -> bool {
         self.sampler.finished()

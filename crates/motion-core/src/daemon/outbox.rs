@@ -145,7 +145,9 @@ pub fn run_publish_stage(
 ) {
     let period_ns = timeline.period_ns();
     let mut last_cycles = 0;
-    let mut last_state = LoopState::Running.code();
+    // The state the loop starts in (set before the stage starts): a change is announced
+    // only when the loop leaves it.
+    let mut last_state = outbox.state.load(Ordering::Relaxed);
     let mut deadline = start_ns + phase_ns;
     let stats_every = (1_000_000_000 / period_ns.max(1)).max(1);
     let mut passes = 0u64;

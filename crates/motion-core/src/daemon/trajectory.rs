@@ -285,7 +285,9 @@ pub fn spawn_planner(
             len: 0,
         }));
     }
-    let done = Arc::new(AtomicBool::new(false));
+    // No waypoints, no samples: the plan is delivered from the first cycle on (an idle loop
+    // is idle from its first heartbeat, not once the planner thread got scheduled).
+    let done = Arc::new(AtomicBool::new(waypoints.is_empty()));
     let cancel = Arc::new(AtomicBool::new(false));
     let (f2, e2, d2, c2) = (full.clone(), empty.clone(), done.clone(), cancel.clone());
     std::thread::Builder::new()
