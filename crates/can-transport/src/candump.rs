@@ -142,10 +142,17 @@ pub fn parse_line(line: &str) -> Result<LogLine, ParseError> {
 
 /// Wraps a bus and appends every sent and received frame to a candump log.
 /// Logging is buffered; an I/O error disables the log (reported once) instead of failing the bus.
+///
+/// The buffer is shared with the interface's priority path ([`CanBus::open_priority_path`]):
+/// one buffer per interface keeps that interface's lines in time order (two buffers would
+/// flush the SYNCs apart from the frames around them). Both handles are used by drive-io's one
+/// cycle thread, so the lock is never contended; it exists because a `CanBus` is `Send`.
 pub struct LoggingBus<B: CanBus> {
     inner: B,
-    out: Option<std::io::BufWriter<std::fs::File>>,
+    out: Shared,
 }
+
+type Shared = std::sync::Arc<std::sync::Mutex<Option<std::io::BufWriter<std::fs::File>>>>;
 
 impl<B: CanBus> LoggingBus<B> {
     pub fn create(inner: B, path: &std::path::Path) -> std::io::Result<Self> {
@@ -155,7 +162,9 @@ impl<B: CanBus> LoggingBus<B> {
             .open(path)?;
         Ok(Self {
             inner,
-            out: Some(std::io::BufWriter::with_capacity(64 * 1024, f)),
+            out: std::sync::Arc::new(std::sync::Mutex::new(Some(
+                std::io::BufWriter::with_capacity(64 * 1024, f),
+            ))),
         })
     }
 
@@ -167,16 +176,25 @@ impl<B: CanBus> LoggingBus<B> {
         let mut cur = std::io::Cursor::new(&mut line[..]);
         let formatted = write_line(&mut cur, SystemTime::now(), self.inner.interface(), frame);
         let n = cur.position() as usize;
-        if let Some(w) = self.out.as_mut()
+        let mut out = self
+            .out
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(w) = out.as_mut()
             && let Err(e) = formatted.and_then(|()| w.write_all(&line[..n]))
         {
             tracing::error!(error = %e, "candump log write failed; logging disabled");
-            self.out = None;
+            *out = None;
         }
     }
 
     pub fn flush(&mut self) -> std::io::Result<()> {
-        match self.out.as_mut() {
+        match self
+            .out
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .as_mut()
+        {
             Some(w) => w.flush(),
             None => Ok(()),
         }
@@ -224,12 +242,16 @@ impl<B: CanBus> CanBus for LoggingBus<B> {
             Some(crate::RxEvent::Frame(rx)) if !rx.own => self.log(&rx.frame),
             Some(crate::RxEvent::Frame(_)) => {}
             Some(crate::RxEvent::BusError(e)) => {
-                if let Some(w) = self.out.as_mut()
+                let mut out = self
+                    .out
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                if let Some(w) = out.as_mut()
                     && let Err(err) =
                         write_error_line(w, SystemTime::now(), self.inner.interface(), &e.error)
                 {
                     tracing::error!(error = %err, "candump log write failed; logging disabled");
-                    self.out = None;
+                    *out = None;
                 }
             }
             None => {}
@@ -245,21 +267,15 @@ impl<B: CanBus> CanBus for LoggingBus<B> {
     fn enable_tx_echo(&mut self) -> Result<(), CanError> {
         self.inner.enable_tx_echo()
     }
-    /// The inner transport's priority path, logging to the same file (its lines appended
-    /// whole, as every interface's are).
+    /// The inner transport's priority path, logging into this interface's own buffer.
     fn open_priority_path(&self) -> Result<Option<Box<dyn CanBus>>, CanError> {
         let Some(path) = self.inner.open_priority_path()? else {
             return Ok(None);
         };
-        let out = match self.out.as_ref().map(|w| w.get_ref().try_clone()) {
-            Some(Ok(f)) => Some(std::io::BufWriter::with_capacity(16 * 1024, f)),
-            Some(Err(e)) => {
-                tracing::error!(error = %e, "candump log not duplicated: the priority path's frames are not logged");
-                None
-            }
-            None => None,
-        };
-        Ok(Some(Box::new(LoggingBus { inner: path, out })))
+        Ok(Some(Box::new(LoggingBus {
+            inner: path,
+            out: self.out.clone(),
+        })))
     }
     fn tx_backlog(&self) -> Option<u64> {
         self.inner.tx_backlog()
