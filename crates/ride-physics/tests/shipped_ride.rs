@@ -1,5 +1,6 @@
-//! The hover dynamics (ride_physics::hover) on the shipped helicopter ride: hover holds, full
-//! collective climbs at its authority, pitch and roll fly the commanded way.
+//! The shipped helicopter ride (config/ride-helicopter.toml on config/helicopter.toml): its
+//! settings and their refusals, and the hover dynamics on it (hover holds, full collective
+//! climbs at its authority, pitch and roll fly the commanded way).
 
 use cdpr_model::Pose;
 use nalgebra::Vector3;
@@ -101,4 +102,46 @@ fn pitch_flies_towards_plus_x_roll_towards_minus_y_with_the_commanded_attitude()
         "{} vs {v_term}",
         s.v.y
     );
+}
+
+#[test]
+fn the_shipped_ride_config_makes_walls_inside_the_region() {
+    let m = helicopter_model();
+    assert!((m.mass_kg - 764.5).abs() < 1e-9);
+    assert_eq!(m.walls.min, Vector3::new(-1.3, -1.3, 1.35));
+}
+
+#[test]
+fn bad_settings_name_the_key() {
+    let text = std::fs::read_to_string(config("ride-helicopter.toml")).unwrap();
+    let bad = text.replace("collective_authority = 0.1", "collective_authority = 1.5");
+    let e = HoverSettings::parse(&bad, "r.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("r.toml: `controls.collective_authority`: must lie in (0, 1)"),
+        "{e}"
+    );
+    let bad = text.replace("[damping]", "[damping]\nfoo = 1");
+    let e = HoverSettings::parse(&bad, "r.toml").unwrap_err();
+    assert!(e.line.is_some() && e.message.contains("foo"), "{e}");
+    let pf = cdpr_model::config::load_platform(config("helicopter.toml")).unwrap();
+    let s = HoverSettings::parse(
+        &text.replace("margin_m = [0.2, 0.2, 0.1]", "margin_m = [0.2, 0.2, 0.3]"),
+        "r.toml",
+    )
+    .unwrap();
+    let e = s.model(&pf, "r.toml").unwrap_err().to_string();
+    assert!(
+        e.contains("walls.margin_m[2]") && e.contains("no room"),
+        "{e}"
+    );
+    let mut bare = pf.clone();
+    bare.dynamics = None;
+    let e = HoverSettings::parse(&text, "r.toml")
+        .unwrap()
+        .model(&bare, "r.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no [dynamics]"), "{e}");
 }
