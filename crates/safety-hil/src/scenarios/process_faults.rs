@@ -157,6 +157,7 @@ pub fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
     // replacement's samples are fresh from the first (a sample whose cycle does not advance is
     // stale, and the monitor's `feedback_stale` would end the scenario before its fault).
     let mut cycle = fb0.cycle + 1_000;
+    let mut first_sample_ns = None;
     let r = loop {
         next += period;
         crs_rt::sleep_until(next);
@@ -167,8 +168,23 @@ pub fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
         fb.bus_state = BusState::Running as u32;
         fb.applied_setpoint_sequence = c.published.load(Ordering::Relaxed) + 1_000_000;
         let _ = fb_pub.publish(&fb);
+        let first = *first_sample_ns.get_or_insert(fb.timestamp_ns);
         st.poll()?;
-        if !st.monitor_estops.is_empty() {
+        if let Some(e) = st.monitor_estops.first().copied() {
+            // A feedback silence the monitor detected before the replacement's first sample
+            // was out (its event reached the harness only now) is the stall above, not the
+            // verdict: the fault is that sample.
+            if e.detail == u32::from(Cause::FeedbackSilence.code()) && e.timestamp_ns < first {
+                st.injected = false;
+                sync_stop.store(true, Ordering::Relaxed);
+                let _ = sync.join();
+                return Err(format!(
+                    "stalled: the monitor detected drive-io's silence {:.0} ms after the kill, \
+                     before the replacement's first sample ({:.0} ms)",
+                    (e.timestamp_ns.saturating_sub(t0)) as f64 * 1e-6,
+                    (first - t0) as f64 * 1e-6
+                ));
+            }
             break st.monitor_trip(Cause::FollowingUnchecked, 1.0);
         }
         if monotonic_ns() - t0 > 10_000_000_000 {
