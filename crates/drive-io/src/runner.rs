@@ -205,13 +205,18 @@ impl<B: CanBus> Buses<B> {
     }
 
     fn send(&mut self, iface: usize, f: &CanFrame) -> Result<(), CanError> {
-        match self.buses[iface].send(f) {
-            Ok(()) => Ok(()),
+        let r = self.buses[iface].send(f);
+        self.counting_full(r)
+    }
+
+    /// A send's result with a full transmit queue counted (`tx_full`), not an error.
+    fn counting_full(&mut self, r: Result<(), CanError>) -> Result<(), CanError> {
+        match r {
             Err(CanError::TxFull { .. }) => {
                 self.tx_full += 1;
                 Ok(())
             }
-            Err(e) => Err(e),
+            r => r,
         }
     }
 
@@ -239,11 +244,7 @@ impl<B: CanBus> Buses<B> {
                 Some(p) => p.send(&s),
                 None => self.buses[i].send(&s),
             };
-            match r {
-                Ok(()) => {}
-                Err(CanError::TxFull { .. }) => self.tx_full += 1,
-                Err(e) => return Err(e),
-            }
+            self.counting_full(r)?;
         }
         Ok(())
     }
