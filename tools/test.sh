@@ -16,22 +16,43 @@ FAILED=()
 SKIPPED=()
 T_START=$SECONDS
 
+# Each suite's output is also kept in $SUITE_LOGS/N.log: the summary at the end repeats the
+# failure lines of every failed suite (a CI log is often read from its tail only).
+SUITE_LOGS=${SUITE_LOGS:-out/test-logs}
+rm -rf "$SUITE_LOGS"
+mkdir -p "$SUITE_LOGS"
+FAILED_LOGS=()
+
 # suite NAME COMMAND [ARGS...]: runs COMMAND with `set -e` in a subshell, records the result.
 suite() {
-  local name=$1 t0=$SECONDS rc
+  local name=$1 t0=$SECONDS rc log
   shift
+  log="$SUITE_LOGS/$((${#PASSED[@]} + ${#FAILED[@]} + ${#SKIPPED[@]} + 1)).log"
   echo "== $name"
   set +e
-  (set -euo pipefail; "$@")
+  # tee in a process substitution, not a pipeline: a process a suite leaves behind holding its
+  # stdout must not hang the run; tee gets up to 5 s to write the last lines out.
+  local out tee_pid i
+  exec {out}> >(tee "$log")
+  tee_pid=$!
+  (set -euo pipefail; "$@") >&"$out" 2>&1
   rc=$?
+  exec {out}>&-
+  for i in $(seq 50); do kill -0 "$tee_pid" 2>/dev/null || break; sleep 0.1; done
   set -e
   if [ "$rc" -eq 0 ]; then
     PASSED+=("$name")
     echo "-- $name: passed ($((SECONDS - t0)) s)"
   else
     FAILED+=("$name (exit $rc)")
+    FAILED_LOGS+=("$log")
     echo "-- $name: FAILED (exit $rc, $((SECONDS - t0)) s)"
   fi
+}
+
+# The lines of a failed suite's log that say what failed (at most 25, the last ones).
+failure_lines() {
+  grep -aE 'FAIL|RETRY|panicked|^error(\[E[0-9]+\])?:|test result: FAILED|^---- ' "$1" | cut -c1-400 | tail -25 || true
 }
 
 # skip NAME REASON: a suite not run here, and why.
@@ -143,7 +164,10 @@ suite "ecosystem tools: candump log with can-utils and python-can, logs, plots, 
   bash tools/ecosystem-test.sh
 
 echo
-for s in "${FAILED[@]}"; do echo "   FAILED: $s"; done
+for i in "${!FAILED[@]}"; do
+  echo "   FAILED: ${FAILED[$i]}; what it printed about it (${FAILED_LOGS[$i]}):"
+  failure_lines "${FAILED_LOGS[$i]}" | sed 's/^/      | /'
+done
 for s in "${SKIPPED[@]}"; do echo "   SKIPPED: $s"; done
 total=$((${#PASSED[@]} + ${#FAILED[@]} + ${#SKIPPED[@]}))
 echo "== test.sh: ${#PASSED[@]} passed, ${#FAILED[@]} failed, ${#SKIPPED[@]} skipped of $total suites ($((SECONDS - T_START)) s)"
