@@ -108,8 +108,19 @@ host_safety_matrix() {
   # reset socket as user nobody, whom the monitor itself must refuse (SO_PEERCRED), not the
   # directory's permissions.
   local w; w=$(mktemp -d); chmod 755 "$w"
+  # Timing is asserted: what else ran on the host is part of the result. Stack processes left
+  # by an earlier suite would compete with the matrix's real-time processes.
+  local before left
+  before=$(cut -d' ' -f1-3 /proc/loadavg)
+  left=$(pgrep -a -f '(^|/)(motion-core|drive-io|safety-monitor|sim-plant|winch-emulator|can-wire)( |$)' || true)
+  echo "host matrix: load average $before before the run; stack processes left running: ${left:-none}"
+  local rc=0
   "${CARGO_TARGET_DIR:-target}/debug/safety-hil" --bin-dir "${CARGO_TARGET_DIR:-target}/debug" \
-    --workdir "$w" --assert-timing --attempts 2 --retry-budget 2
+    --workdir "$w" --assert-timing --attempts 2 --retry-budget 2 || rc=$?
+  if [ "$rc" -ne 0 ]; then
+    echo "HOST MATRIX FAILED (exit $rc): load average $before before, $(cut -d' ' -f1-3 /proc/loadavg) after; stack processes left before it: ${left:-none}"
+  fi
+  return "$rc"
 }
 suite "safety monitor fault-injection matrix on the host at the spec's thresholds (wire model; timing asserted)" \
   host_safety_matrix
