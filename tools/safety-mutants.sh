@@ -99,23 +99,26 @@ for n in "$@"; do
   esac
   echo "$fail" | grep -qE -- "$expect" || { ok=0; why+="FAIL line does not match /$expect/; "; }
   tests=""
+  : >"$SCR/logs/$n.unit.log"
   while IFS= read -r ut; do
     [ -n "$ut" ] || continue
+    u=$SCR/logs/$n.unit-${ut##* }.log
     # shellcheck disable=SC2086
-    if (cd "$TREE" && nice -n 10 cargo test -q $ut) >"$SCR/logs/$n.unit.log" 2>&1; then
-      ok=0; why+="unit test passed under the mutant: $ut; "
-    elif grep -qE "^test .* FAILED$|panicked at" "$SCR/logs/$n.unit.log"; then
-      tests+="${ut##* } fails; "
+    if (cd "$TREE" && nice -n 10 cargo test -q $ut) >"$u" 2>&1; then
+      ok=0; why+="unit test passed under the mutant: ${ut##* }; "
+    elif grep -q "panicked at" "$u"; then
+      tests+="unit test ${ut##* } fails; "
     else
-      ok=0; why+="unit test did not run: $ut ($SCR/logs/$n.unit.log); "
+      ok=0; why+="unit test did not run: $ut ($u); "
     fi
+    cat "$u" >>"$SCR/logs/$n.unit.log"
   done < <(sed -n 's/^Unit-test: //p' "$p")
   git -C "$TREE" checkout -q -- .
   s=$(( $(date +%s) - t ))
   if [ $ok = 1 ]; then
     echo "SAFETY-MUTANT OK $n: unpatched PASS, mutant FAIL matching /$expect/; ${tests}(${s} s)"
   else
-    echo "SAFETY-MUTANT BAD $n: ${why}(${s} s; logs $SCR/logs/$n.*)"; bad=1
+    echo "SAFETY-MUTANT BAD $n: ${why}${tests}(${s} s; logs $SCR/logs/$n.*)"; bad=1
   fi
 done
 echo "safety-mutants: $# scenario(s), $(( $(date +%s) - T0 )) s, $([ $bad = 0 ] && echo ALL OK || echo SOME BAD)"
