@@ -19,6 +19,7 @@
 #
 # Patch header (text before the first `diff --git`, ignored by git apply):
 #   Expect: <extended regex the harness's FAIL line must match>
+#   Scenario: none   (no safety-hil scenario covers it: only the unit tests, which must fail)
 #   Unit-test: <cargo test arguments selecting one test that must FAIL under the mutant>
 #
 # Environment: SAFETY_MUTANTS_DIR (scratch, default target/safety-mutants; delete it to
@@ -75,29 +76,36 @@ for b in "${BINS[@]}"; do [ "$b" = --bin ] || cp "$CARGO_TARGET_DIR/debug/$b" "$
 for n in "$@"; do
   p=$ROOT/tests/safety-mutants/$n.patch
   expect=$(sed -n 's/^Expect: //p' "$p" | head -1)
+  scenario=$(sed -n 's/^Scenario: //p' "$p" | head -1)
   t=$(date +%s)
-  # 1. Unpatched: PASS.
-  hil "$UNPATCHED" "$n" "$SCR/logs/$n.unpatched.log"
-  pass=$(line "$n" "$SCR/logs/$n.unpatched.log")
-  echo "  unpatched: $pass"
   ok=1; why=""
-  case $pass in "SAFETY-HIL PASS $n:"*) ;; *) ok=0; why="unpatched tree did not PASS; ";; esac
+  if [ "$scenario" != none ]; then
+    # 1. Unpatched: PASS.
+    hil "$UNPATCHED" "$n" "$SCR/logs/$n.unpatched.log"
+    pass=$(line "$n" "$SCR/logs/$n.unpatched.log")
+    echo "  unpatched: $pass"
+    case $pass in "SAFETY-HIL PASS $n:"*) ;; *) ok=0; why="unpatched tree did not PASS; ";; esac
+  fi
   # 2. The mutant: FAIL for the expected cause, and its unit tests fail.
   if ! git -C "$TREE" apply "$p"; then
     echo "SAFETY-MUTANT BAD $n: the patch does not apply"; bad=1; continue
   fi
-  if ! build "$SCR/logs/$n.build.log"; then
+  if [ "$scenario" = none ]; then
+    : # no scenario covers it: the unit tests are the evidence.
+  elif ! build "$SCR/logs/$n.build.log"; then
     echo "SAFETY-MUTANT BAD $n: the mutant does not build ($SCR/logs/$n.build.log)"
     git -C "$TREE" checkout -q -- . ; bad=1; continue
   fi
-  hil "$CARGO_TARGET_DIR/debug" "$n" "$SCR/logs/$n.mutant.log"
-  fail=$(line "$n" "$SCR/logs/$n.mutant.log")
-  echo "  mutant:    $fail"
-  case $fail in
-    "SAFETY-HIL FAIL $n:"*"after the fault was injected"*) ;;
-    *) ok=0; why+="mutant did not FAIL after the fault was injected; ";;
-  esac
-  echo "$fail" | grep -qE -- "$expect" || { ok=0; why+="FAIL line does not match /$expect/; "; }
+  if [ "$scenario" != none ]; then
+    hil "$CARGO_TARGET_DIR/debug" "$n" "$SCR/logs/$n.mutant.log"
+    fail=$(line "$n" "$SCR/logs/$n.mutant.log")
+    echo "  mutant:    $fail"
+    case $fail in
+      "SAFETY-HIL FAIL $n:"*"after the fault was injected"*) ;;
+      *) ok=0; why+="mutant did not FAIL after the fault was injected; ";;
+    esac
+    echo "$fail" | grep -qE -- "$expect" || { ok=0; why+="FAIL line does not match /$expect/; "; }
+  fi
   tests=""
   : >"$SCR/logs/$n.unit.log"
   while IFS= read -r ut; do
@@ -115,7 +123,12 @@ for n in "$@"; do
   done < <(sed -n 's/^Unit-test: //p' "$p")
   git -C "$TREE" checkout -q -- .
   s=$(( $(date +%s) - t ))
-  if [ $ok = 1 ]; then
+  if [ "$scenario" = none ] && [ -z "$tests" ]; then
+    ok=0; why+="no scenario and no unit test failed; "
+  fi
+  if [ $ok = 1 ] && [ "$scenario" = none ]; then
+    echo "SAFETY-MUTANT OK $n: (no scenario) ${tests}(${s} s)"
+  elif [ $ok = 1 ]; then
     echo "SAFETY-MUTANT OK $n: unpatched PASS, mutant FAIL matching /$expect/; ${tests}(${s} s)"
   else
     echo "SAFETY-MUTANT BAD $n: ${why}${tests}(${s} s; logs $SCR/logs/$n.*)"; bad=1
