@@ -1980,7 +1980,11 @@ fn a_timestamp_jump_does_not_blind_the_rpdo_check() {
     }
     t += 15 * MS;
     m.begin_cycle(t);
-    m.on_setpoint(&sp(seq, HOME, 0, 0.0));
+    // The setpoint before the forged RPDO is jumped too: no setpoint stamped by the producer's
+    // own clock precedes the RPDO, only the monitor's clamp keeps it checked.
+    let mut s = sp(seq, HOME, 0, 0.0);
+    s.timestamp_ns = t + 10_000_000 * MS;
+    m.on_setpoint(&s);
     m.on_rpdo(4, q[4] - 0.15, t + MS);
     let tr = m
         .end_cycle(t + 2 * MS)

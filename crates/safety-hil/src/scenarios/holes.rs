@@ -101,21 +101,34 @@ pub fn reset_from_foreign_process(st: &mut Stack) -> Res<Outcome> {
     })
 }
 
+/// The flutter's length (changes every 25 ms): a window of 8 out-of-band readings in 16 (one
+/// reading every 5 ms) trips within a few changes; 40 changes (1 s) is far past it.
+const FLUTTER_MAX_CHANGES: u32 = 40;
+
 /// One cable's load cell flutters between slack (200 N) and in band (3 kN) at 20 Hz: the
-/// window (8 of the last 16 readings) trips although no reading run is long.
+/// window (8 of the last 16 readings) trips although no reading run is long, and it must trip
+/// while the flutter goes on.
 pub fn flutter_force(st: &mut Stack) -> Res<Outcome> {
     let _ = st.fake()?.clone();
     st.wait_following(false)?;
     let t0 = st.inject();
     let mut slack = true;
     let mut n = 0;
+    // The trip must come DURING the flutter: a steady slack after it would trip any filter,
+    // the one that restarts on each in-range reading too (tools/safety-mutants.sh).
     loop {
+        if n == FLUTTER_MAX_CHANGES {
+            return Err(format!(
+                "the flutter was not caught: no trip in {n} changes ({} ms of 200 N / 3 kN)",
+                n * 25
+            ));
+        }
         st.set_force(2, Some(if slack { 200.0 } else { 3_000.0 }))?;
         slack = !slack;
         n += 1;
         std::thread::sleep(Duration::from_millis(25));
         st.poll()?;
-        if !st.monitor_estops.is_empty() || n > 200 {
+        if !st.monitor_estops.is_empty() {
             break;
         }
     }
@@ -200,10 +213,13 @@ pub fn timestamp_jump(st: &mut Stack) -> Res<Outcome> {
         .store(10_000_000_000_000, Ordering::Relaxed);
     std::thread::sleep(Duration::from_millis(2));
     c.timestamp_lie_ns.store(0, Ordering::Relaxed);
-    // 100 ms of jumped setpoints.
+    // More jumped setpoints than the monitor's setpoint history holds: none from before the
+    // jump is left to check the forged RPDO against (with fewer, the old entries kept the
+    // check armed and a monitor blinded by the jump passed too; tools/safety-mutants.sh).
+    let jumped = safety_monitor::capacity::HISTORY as u64 + 44;
     let p0 = c.published.load(Ordering::Relaxed);
-    st.wait("100 jumped setpoints", 10.0, |_| {
-        Ok(c.published.load(Ordering::Relaxed) >= p0 + 100)
+    st.wait("jumped setpoints past the monitor's history", 10.0, |_| {
+        Ok(c.published.load(Ordering::Relaxed) >= p0 + jumped)
     })?;
     st.poll()?;
     if !st.monitor_estops.is_empty() {
@@ -224,7 +240,9 @@ pub fn timestamp_jump(st: &mut Stack) -> Res<Outcome> {
         cause: "rpdo_mismatch after a timestamp jump".into(),
         detect_ms: ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
-        note: "timestamps +10 000 s, then a forged RPDO1 300 mm off".into(),
+        note: format!(
+            "timestamps +10 000 s for {jumped} setpoints, then a forged RPDO1 300 mm off"
+        ),
     })
 }
 
