@@ -160,9 +160,9 @@ done
 # upgrade of the running stack, isolation, readiness, a ride, the monitor killed, a clean stop;
 # docs/install.md, "The systemd boot test"). Root file system and kernel cached in $CRS_VCAN_CACHE.
 # Not run yet: it does not pass reliably (2026-11-27, after drive-io takes the drives' STO under
-# an overdue heartbeat as the watch's own stop: the monitor kill gives one error line in every
-# run that got there; still failing: trips while the stack starts, from whole-guest stalls of
-# 0.5-1.5 s on this shared TCG host (the monitor's own-frame check, the heartbeat pair window,
+# an overdue heartbeat as the watch's own stop: 3 runs, 0 passed; the monitor kill gave its one
+# error line where drive-io was not already stopped; still failing: trips while the stack
+# starts, from whole-guest stalls of 0.5-1.7 s on this shared TCG host (the monitor's own-frame check, the heartbeat pair window,
 # the 200 ms validation bound); docs/install.md, "Status").
 skip "HIL: the .deb under a real systemd (Debian guest)" \
   "not reliable yet: start-up trips from whole-guest stalls under TCG on a loaded host (the monitor's own-frame check, the safety heartbeat's 200 ms bound); docs/install.md; run by hand: bash tools/systemd-boot-test.sh"
