@@ -18,7 +18,7 @@
 # emulated, a drop-in per unit: tests/boot/guest-test.sh).
 # Env: CRS_VCAN_CACHE (cache dir, shared with tools/vcan-vm.sh; the root file system is cached
 #      there keyed by its package list), BOOT_TIMEOUT (s, default 900), BOOT_MEM (MiB, 2048),
-#      VCAN_ACCEL (tcg|kvm as in vcan-vm.sh).
+#      VCAN_ACCEL (tcg|kvm as in vcan-vm.sh), BOOT_NICE (QEMU's nice; default -10 as root, else 0).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 t_begin=$(date +%s)
@@ -144,11 +144,18 @@ A=${VCAN_ACCEL:-tcg}
 X=(); [ "$A" = kvm ] && X=(-cpu host)
 start=$(date +%s)
 echo "boot-test: image and kernel $((t_pkg - t_begin)) s, build and package $((start - t_pkg)) s" >&2
-timeout "${BOOT_TIMEOUT:-900}" qemu-system-x86_64 -accel "$A" "${X[@]}" -smp 2 -m "${BOOT_MEM:-2048}" \
+# The emulated guest keeps the stack's watchdogs (200 ms for the safety heartbeat, the bound
+# its daemons enforce): a host that deschedules QEMU for longer stalls the whole guest past
+# them (a 1.2 s stall tripped the stack at start on a host shared with parallel builds and
+# tests). So QEMU runs ahead of the host's ordinary work (nice -10 when root; BOOT_NICE).
+NI=${BOOT_NICE:-0}; [ -z "${BOOT_NICE:-}" ] && [ "$(id -u)" = 0 ] && NI=-10
+echo "boot-test: QEMU at nice $NI, host load $(cut -d' ' -f1-3 /proc/loadavg)" >&2
+nice -n "$NI" timeout "${BOOT_TIMEOUT:-900}" qemu-system-x86_64 -accel "$A" "${X[@]}" -smp 2 -m "${BOOT_MEM:-2048}" \
   -nodefaults -no-user-config -display none -serial stdio -no-reboot -kernel "$KC/vmlinux" \
   -initrd "$W/initrd.gz" -append "console=ttyS0 panic=-1 quiet loglevel=3 systemd.show_status=0" \
   </dev/null | stdbuf -oL tr -d '\r' | tee "$W/console.log" || true
 secs=$(( $(date +%s) - start ))
+echo "boot-test: host load after the run $(cut -d' ' -f1-3 /proc/loadavg)" >&2
 total=$(( $(date +%s) - t_begin ))
 n_ok=$(grep -c '^BOOT-CHECK: ok' "$W/console.log" || true)
 n_fail=$(grep -c '^BOOT-CHECK: FAIL' "$W/console.log" || true)

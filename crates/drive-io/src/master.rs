@@ -16,6 +16,7 @@ use crate::config::{DrivesConfig, WinchConfig};
 use crate::eds::{Eds, sdo_abort_text};
 use crate::mapping::Decoded;
 use crate::reset::ResetGrant;
+use crate::safety_watch::SafetyWatch;
 use crate::sdo::{ClientStep, SdoClient};
 use can_transport::RxFrame;
 use crs_ipc::{
@@ -66,6 +67,47 @@ pub enum CommissioningFault {
         sub: u8,
         code: u32,
     },
+}
+
+/// What a drive reports wrong while enabled ([`Master::check_drives`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Finding {
+    TpdoTimeout,
+    ForceTpdoTimeout,
+    Fault,
+    LeftOperation,
+    LeftNmtOperational,
+    IgnoresTarget,
+    FollowingError,
+}
+
+impl Finding {
+    fn code(self) -> u32 {
+        match self {
+            Self::TpdoTimeout | Self::ForceTpdoTimeout => fault_code::PDO_TIMEOUT,
+            Self::Fault | Self::FollowingError => fault_code::DRIVE_FAULT_BIT,
+            Self::LeftOperation | Self::LeftNmtOperational | Self::IgnoresTarget => {
+                fault_code::UNEXPECTED_STATE
+            }
+        }
+    }
+
+    fn text(self) -> &'static str {
+        match self {
+            Self::TpdoTimeout => "TPDO timeout",
+            Self::ForceTpdoTimeout => "cable force TPDO timeout",
+            Self::Fault => "drive reports a fault (CiA 402 Fault or Fault Reaction Active)",
+            Self::LeftOperation => {
+                "drive left Operation Enabled without drive-io's command (Switch On Disabled: \
+                 its torque off, e.g. its STO input)"
+            }
+            Self::LeftNmtOperational => "drive left NMT Operational (NMT stop or pre-operational)",
+            Self::IgnoresTarget => {
+                "drive ignores the target position (statusword bit 12 clear in CSP)"
+            }
+            Self::FollowingError => "drive reports a following error (statusword bit 13 in CSP)",
+        }
+    }
 }
 
 /// Master construction failed: the EDS cannot be read or does not suit the configuration.
@@ -554,12 +596,19 @@ impl Master {
             }
             self.fault_code = code;
             self.fault_node = u32::from(node);
-            tracing::error!(
-                ?state,
-                code,
-                node,
-                "drive bus stopping: quick stop all drives"
-            );
+            if state == BusState::EStop {
+                // A commanded stop (the safety heartbeat's trip, the monitor's or an operator's
+                // e-stop): its cause is the error line of whoever commanded it; the quick stop
+                // that follows is its consequence.
+                tracing::warn!(?state, "drive bus stopping: quick stop all drives (e-stop)");
+            } else {
+                tracing::error!(
+                    ?state,
+                    code,
+                    node,
+                    "drive bus stopping: quick stop all drives"
+                );
+            }
             self.set_phase(Phase::Stopped(state));
         }
     }
@@ -958,17 +1007,24 @@ impl Master {
             };
         }
 
-        // Heartbeat consumer (CiA 301 §7.2.8.3.2.2), active per node once its producer time is set.
+        // Heartbeat consumer (CiA 301 §7.2.8.3.2.2), active per node once its producer time is
+        // set; every loss of one cycle is one line (the first node and how many).
+        let mut lost: Option<u8> = None;
+        let mut n_lost = 0usize;
         for i in 0..self.n {
-            let d = self.drives[i];
+            let d = &mut self.drives[i];
             if d.hb_monitored
                 && !d.hb_lost
                 && now_ns.saturating_sub(d.last_hb_ns) > self.hb_timeout_ns
             {
-                self.drives[i].hb_lost = true;
-                tracing::error!(node = d.node, "heartbeat lost");
-                self.stop(BusState::Fault, fault_code::HEARTBEAT_LOST, d.node);
+                d.hb_lost = true;
+                n_lost += 1;
+                lost.get_or_insert(d.node);
             }
+        }
+        if let Some(node) = lost {
+            tracing::error!(node, nodes = n_lost, "heartbeat lost");
+            self.stop(BusState::Fault, fault_code::HEARTBEAT_LOST, node);
         }
         if matches!(self.phase, Phase::Boot | Phase::Configure | Phase::Enable)
             && now_ns.saturating_sub(boot_start) > self.boot_timeout_ns
@@ -1092,7 +1148,11 @@ impl Master {
             }
             Phase::Ready | Phase::Running => {
                 self.check_drives(now_ns);
-                if let Some(sp) = setpoint.filter(|sp| sp.sequence > self.last_seq) {
+                // A finding stopped the bus: this cycle's setpoint must not re-enter Running
+                // (the stop is latched; the quick stop goes out below).
+                if !self.is_latched()
+                    && let Some(sp) = setpoint.filter(|sp| sp.sequence > self.last_seq)
+                {
                     if self.last_seq > 0 {
                         self.superseded += sp.sequence - self.last_seq - 1;
                     }
@@ -1183,11 +1243,15 @@ impl Master {
             return;
         }
         if self.qs_stage == 0 && elapsed > self.quick_stop_timeout_ns {
-            for d in self.drives[..self.m].iter().filter(|d| !at_rest(d)) {
+            // One line for the event: the first drive that did not acknowledge, and how many.
+            let mut late = self.drives[..self.m].iter().filter(|d| !at_rest(d));
+            let drives = late.clone().count();
+            if let Some(d) = late.next() {
                 tracing::error!(
                     node = d.node,
                     statusword = format_args!("{:#06x}", d.statusword),
                     velocity_counts_per_s = d.velocity,
+                    drives,
                     "quick stop not acknowledged in time: escalating to NMT stop (0x6007 action)"
                 );
             }
@@ -1237,52 +1301,110 @@ impl Master {
         }
     }
 
-    fn check_drives(&mut self, now_ns: u64) {
-        for i in 0..self.m {
-            let d = self.drives[i];
+    /// What a drive (or the force node of its cable) reports wrong while drive-io runs it
+    /// enabled, or None. A stale TPDO first: a statusword not refreshed is no report.
+    fn finding(&self, i: usize, now_ns: u64) -> Option<(Finding, u8)> {
+        let d = &self.drives[i];
+        let stale = |t: u64| now_ns.saturating_sub(t) > self.hb_timeout_ns;
+        let f = if stale(d.rx_ns) || stale(d.vel_rx_ns) {
+            Some(Finding::TpdoTimeout)
+        } else {
             match Ds402State::from_statusword(d.statusword) {
-                Ds402State::OperationEnabled => {}
-                Ds402State::Fault | Ds402State::FaultReactionActive => {
-                    self.stop(BusState::Fault, fault_code::DRIVE_FAULT_BIT, d.node)
+                Ds402State::Fault | Ds402State::FaultReactionActive => Some(Finding::Fault),
+                Ds402State::OperationEnabled
+                    if d.seen_operational && d.last_hb_state != NmtState::Operational.code() =>
+                {
+                    Some(Finding::LeftNmtOperational)
                 }
-                _ => self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, d.node),
+                // CSP (CiA 402 statusword bits 12/13, defined in Operation Enabled only): the
+                // drive must follow the target and report no following error.
+                Ds402State::OperationEnabled if d.statusword & SW_FOLLOWS_TARGET == 0 => {
+                    Some(Finding::IgnoresTarget)
+                }
+                Ds402State::OperationEnabled if d.statusword & SW_FOLLOWING_ERROR != 0 => {
+                    Some(Finding::FollowingError)
+                }
+                Ds402State::OperationEnabled => None,
+                _ => Some(Finding::LeftOperation),
             }
-            // A drive that left Operational (NMT stop / pre-op by someone else) no longer follows.
-            if d.seen_operational && d.last_hb_state != NmtState::Operational.code() {
-                self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, d.node);
-            }
-            // CSP (CiA 402 statusword bits 12/13): the drive must follow the target and report
-            // no following error.
-            if d.statusword & SW_FOLLOWS_TARGET == 0 {
-                tracing::error!(
-                    node = d.node,
-                    statusword = format_args!("{:#06x}", d.statusword),
-                    "drive ignores the target position (statusword bit 12 clear in CSP)"
-                );
-                self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, d.node);
-            }
-            if d.statusword & SW_FOLLOWING_ERROR != 0 {
-                tracing::error!(
-                    node = d.node,
-                    statusword = format_args!("{:#06x}", d.statusword),
-                    "drive reports a following error (statusword bit 13 in CSP)"
-                );
-                self.stop(BusState::Fault, fault_code::DRIVE_FAULT_BIT, d.node);
-            }
-            let stale = |t: u64| now_ns.saturating_sub(t) > self.hb_timeout_ns;
-            if stale(d.rx_ns) || stale(d.vel_rx_ns) {
-                tracing::error!(node = d.node, "TPDO timeout");
-                self.stop(BusState::Fault, fault_code::PDO_TIMEOUT, d.node);
-            }
+        };
+        if let Some(f) = f {
+            return Some((f, d.node));
         }
         // Every cable's force, from its drive or its force sensor.
+        let fnode = &self.drives[self.force_node[i]];
+        stale(fnode.force_rx_ns).then_some((Finding::ForceTpdoTimeout, fnode.node))
+    }
+
+    /// The drives' reports while enabled: any finding stops every drive (latched `Fault`).
+    /// One event is one error line: the first drive's finding is the cause (its node,
+    /// statusword and state), with the number of drives reporting something that cycle (eight
+    /// drives losing their TPDOs in one host stall are one timeout, not eight).
+    fn check_drives(&mut self, now_ns: u64) {
+        let mut first = None;
+        let mut drives = 0usize;
         for i in 0..self.m {
-            let d = self.drives[self.force_node[i]];
-            if now_ns.saturating_sub(d.force_rx_ns) > self.hb_timeout_ns {
-                tracing::error!(node = d.node, cable = i + 1, "cable force TPDO timeout");
-                self.stop(BusState::Fault, fault_code::PDO_TIMEOUT, d.node);
+            if let Some(f) = self.finding(i, now_ns) {
+                drives += 1;
+                first.get_or_insert((i, f));
             }
         }
+        let Some((i, (finding, node))) = first else {
+            return;
+        };
+        let d = &self.drives[i];
+        tracing::error!(
+            node,
+            cable = i + 1,
+            statusword = format_args!("{:#06x}", d.statusword),
+            state = ?Ds402State::from_statusword(d.statusword),
+            drives,
+            "{}",
+            finding.text()
+        );
+        self.stop(BusState::Fault, finding.code(), node);
+    }
+
+    /// Drives drive-io runs enabled (Ready or Running) whose last statusword reports Switch On
+    /// Disabled: their power stage off (the STO input) without drive-io commanding it.
+    pub fn drives_torque_off(&self) -> usize {
+        if !matches!(self.phase, Phase::Ready | Phase::Running) {
+            return 0;
+        }
+        self.drives[..self.m]
+            .iter()
+            .filter(|d| {
+                d.have_tpdo1
+                    && Ds402State::from_statusword(d.statusword) == Ds402State::SwitchOnDisabled
+            })
+            .count()
+    }
+
+    /// The safety monitor's heartbeat for this cycle (the runner calls it once per cycle,
+    /// after the bus was drained, before the cycle): true if it permits motion.
+    ///
+    /// Drives that report their torque off while the heartbeat is overdue are the safety I/O
+    /// node's STO on the same missing heartbeat, i.e. the stop the watch is about to command:
+    /// the watch trips now ([`SafetyWatch::inhibit_on_torque_off`]), so the stop is one
+    /// e-stop with its cause, not eight drive faults. While the heartbeat is on time such a
+    /// drive stays the master's fault ([`Master::cycle`]). A trip is logged once (the error
+    /// line of the event); without a permit (and past the start-up grace) an enabled bus is
+    /// e-stopped (quick stop all, latched).
+    pub fn supervise_safety_heartbeat(&mut self, watch: &mut SafetyWatch, now_ns: u64) -> bool {
+        watch.inhibit_on_torque_off(now_ns, self.drives_torque_off());
+        let permit = watch.permits(now_ns);
+        let grace = watch.in_startup_grace(now_ns);
+        if let Some((reason, at_ns)) = watch.take_trip() {
+            tracing::error!(
+                ?reason,
+                at_ns,
+                "safety heartbeat invalid or missing: e-stop"
+            );
+        }
+        if !permit && !grace && matches!(self.phase, Phase::Ready | Phase::Running) {
+            self.stop(BusState::EStop, fault_code::NONE, 0);
+        }
+        permit
     }
 
     /// Converts and checks a setpoint; on any invalid entry nothing is applied and the bus faults.

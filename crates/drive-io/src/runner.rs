@@ -530,16 +530,10 @@ pub fn run_with<B: CanBus>(
         cycles += 1;
         CYCLES_RUN.store(cycles, Ordering::Relaxed);
 
-        let permit = watch.as_mut().is_none_or(|w| w.permits(cycle_now));
-        let grace = watch
-            .as_mut()
-            .is_some_and(|w| w.in_startup_grace(cycle_now));
-        if let Some((reason, at_ns)) = watch.as_mut().and_then(SafetyWatch::take_trip) {
-            tracing::error!(
-                ?reason,
-                at_ns,
-                "safety heartbeat invalid or missing: e-stop"
-            );
+        // The monitor's heartbeat: without a permit (past the start-up grace) an enabled bus
+        // is e-stopped here, before this cycle's events and its RPDOs.
+        if let Some(w) = watch.as_mut() {
+            master.supervise_safety_heartbeat(w, cycle_now);
         }
         gate.note(
             watch.as_ref().and_then(SafetyWatch::verified_epoch),
@@ -611,10 +605,6 @@ pub fn run_with<B: CanBus>(
                     pending_reset = None;
                 }
             }
-        }
-        if !permit && !grace && matches!(master.state(), BusState::Ready | BusState::Running) {
-            let ev = StateEvent::new(ProcessId::DriveIo, EventKind::EStop, 0);
-            master.on_event(&ev, cycle_now);
         }
         // A setpoint with a foreign contract version is an error: treat as no setpoint (stale).
         let sp = setpoints.latest().unwrap_or_else(|e| {

@@ -175,6 +175,12 @@ pub enum InhibitReason {
     /// or it was NMT-stopped): like any inhibit, left only on a reset the watch has not acted
     /// on, never by the input returning.
     Local,
+    /// The heartbeat was overdue (no valid RUN pair for `silent_ms`, more than two refresh
+    /// times) and `drives_off` drives reported their torque off (Switch On Disabled) without
+    /// drive-io commanding it: the safety I/O node's STO on the same missing heartbeat reached
+    /// the drives before this watch's validation time ran out. The stop this watch was about to
+    /// command, a little earlier ([`SafetyWatch::inhibit_on_torque_off`]).
+    Overdue { silent_ms: u32, drives_off: u8 },
 }
 
 /// A reset epoch read from a valid, complete RUN pair on the monitor's own COB-IDs while the
@@ -461,6 +467,37 @@ impl SafetyWatch {
         }
     }
 
+    /// True while the watch permits but no valid RUN pair arrived for more than two refresh
+    /// times (`refresh_time_ms`): at least one of the monitor's cycles is missing; the
+    /// validation time will inhibit unless a pair arrives.
+    pub fn heartbeat_overdue(&self, now_ns: u64) -> bool {
+        self.state == WatchState::Permit
+            && now_ns.saturating_sub(self.last_valid_ns)
+                > 2 * u64::from(self.cfg.refresh_time_ms) * 1_000_000
+    }
+
+    /// `drives_off` drives report their torque off (Switch On Disabled: their STO input) while
+    /// drive-io commanded operation. If the heartbeat is overdue ([`Self::heartbeat_overdue`])
+    /// that is the safety I/O node's stop on the same missing heartbeat: inhibit now
+    /// ([`InhibitReason::Overdue`]), one trip naming the cause. While valid pairs keep
+    /// arriving nothing changes here: a drive leaving operation under a live monitor is the
+    /// master's fault to report. Returns true if it inhibited.
+    pub fn inhibit_on_torque_off(&mut self, now_ns: u64, drives_off: usize) -> bool {
+        if drives_off == 0 || !self.heartbeat_overdue(now_ns) {
+            return false;
+        }
+        let silent_ms = (now_ns.saturating_sub(self.last_valid_ns) / 1_000_000) as u32;
+        self.last_counter = None;
+        self.inhibit(
+            InhibitReason::Overdue {
+                silent_ms,
+                drives_off: drives_off.min(usize::from(u8::MAX)) as u8,
+            },
+            now_ns,
+        );
+        true
+    }
+
     /// Applies the validation-time check at `now_ns`; true if motion is permitted.
     pub fn permits(&mut self, now_ns: u64) -> bool {
         if self.state == WatchState::Permit
@@ -542,6 +579,47 @@ mod tests {
             WatchState::Permit
         );
         assert!(w.permits(31 * MS));
+    }
+
+    #[test]
+    fn drives_torque_off_under_an_overdue_heartbeat_is_its_stop_under_a_live_one_nothing() {
+        let mut w = SafetyWatch::new(SafetyWatchConfig::default());
+        for k in 0..3 {
+            feed(&mut w, k + 1, SafetyState::Run, u64::from(k) * 15 * MS);
+        }
+        assert!(w.permits(31 * MS));
+        // Pairs on time (the last one 30 ms ago, two refresh times): a drive reporting its
+        // torque off is not the heartbeat's stop; the watch keeps permitting.
+        assert!(!w.heartbeat_overdue(60 * MS));
+        assert!(!w.inhibit_on_torque_off(60 * MS, 8));
+        assert!(w.permits(60 * MS));
+        assert_eq!(w.take_trip(), None);
+        // Overdue (31 ms since the last pair), nothing off: still permitted.
+        assert!(w.heartbeat_overdue(61 * MS));
+        assert!(!w.inhibit_on_torque_off(61 * MS, 0));
+        assert!(w.permits(61 * MS));
+        // Overdue and the drives off: one trip, naming the silence and the drives.
+        assert!(w.inhibit_on_torque_off(70 * MS + 1, 8));
+        assert!(!w.permits(70 * MS + 1));
+        let want = InhibitReason::Overdue {
+            silent_ms: 39,
+            drives_off: 8,
+        };
+        assert_eq!(w.take_trip(), Some((want, 70 * MS + 1)));
+        assert_eq!(w.state(), WatchState::Inhibit(want));
+        // The validation time running out later adds no second trip.
+        assert!(!w.permits(200 * MS));
+        assert_eq!((w.trips(), w.take_trip()), (1, None));
+        // Like every inhibit: the pairs of the epoch in force do not release it.
+        for k in 0..5 {
+            feed(
+                &mut w,
+                10 + k,
+                SafetyState::Run,
+                210 * MS + u64::from(k) * 15 * MS,
+            );
+        }
+        assert!(!w.permits(300 * MS));
     }
 
     #[test]

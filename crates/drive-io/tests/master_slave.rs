@@ -1034,3 +1034,250 @@ fn an_announced_end_in_motion_or_from_another_process_is_still_a_stale_stop() {
         );
     }
 }
+
+/// The log lines a test's code emits (a minimal `tracing` subscriber, installed for one
+/// closure on this thread): level and message of every event.
+#[derive(Clone, Default)]
+struct Capture(std::sync::Arc<std::sync::Mutex<Vec<(tracing::Level, String)>>>);
+
+impl Capture {
+    fn run<R>(&self, f: impl FnOnce() -> R) -> R {
+        tracing::subscriber::with_default(self.clone(), f)
+    }
+    fn take(&self) -> Vec<(tracing::Level, String)> {
+        std::mem::take(&mut *self.0.lock().unwrap())
+    }
+}
+
+impl tracing::Subscriber for Capture {
+    fn enabled(&self, _: &tracing::Metadata<'_>) -> bool {
+        true
+    }
+    fn new_span(&self, _: &tracing::span::Attributes<'_>) -> tracing::span::Id {
+        tracing::span::Id::from_u64(1)
+    }
+    fn record(&self, _: &tracing::span::Id, _: &tracing::span::Record<'_>) {}
+    fn record_follows_from(&self, _: &tracing::span::Id, _: &tracing::span::Id) {}
+    fn event(&self, e: &tracing::Event<'_>) {
+        struct Message(String);
+        impl tracing::field::Visit for Message {
+            fn record_debug(&mut self, f: &tracing::field::Field, v: &dyn std::fmt::Debug) {
+                if f.name() == "message" {
+                    self.0 = format!("{v:?}");
+                }
+            }
+        }
+        let mut m = Message(String::new());
+        e.record(&mut m);
+        self.0.lock().unwrap().push((*e.metadata().level(), m.0));
+    }
+    fn enter(&self, _: &tracing::span::Id) {}
+    fn exit(&self, _: &tracing::span::Id) {}
+}
+
+fn errors(lines: &[(tracing::Level, String)]) -> Vec<&str> {
+    lines
+        .iter()
+        .filter(|(l, _)| *l == tracing::Level::ERROR)
+        .map(|(_, m)| m.as_str())
+        .collect()
+}
+
+/// The safety monitor's cycle on the bus: its configuration signature and a RUN pair.
+fn monitor_cycle(w: &mut drive_io::safety_watch::SafetyWatch, counter: u16, t: u64) {
+    use can_transport::safety_frame::{ConfigSignature, SafetyHeartbeat, SafetyState, encode};
+    let cob = w.config().cob_id;
+    let sig = ConfigSignature {
+        srdo_crc: w.config().srdo_crc(),
+        safety_params_crc: 0x1234_5678,
+    }
+    .encode(cob);
+    let hb = encode(
+        &SafetyHeartbeat {
+            state: SafetyState::Run,
+            cause: 0,
+            counter,
+            epoch: 1,
+        },
+        cob,
+    );
+    for f in sig.iter().chain(&hb) {
+        w.on_frame(f, t);
+    }
+}
+
+/// Booted, the watch permitting on three monitor cycles, the drives following a slow ramp
+/// (Running); returns the watch, the last lengths, the next sequence number and the counter.
+fn running_with_watch(s: &mut Sim) -> (drive_io::safety_watch::SafetyWatch, Vec<f64>, u64, u16) {
+    use drive_io::safety_watch::{SafetyWatch, SafetyWatchConfig};
+    s.boot();
+    let mut w = SafetyWatch::new(SafetyWatchConfig::default());
+    for k in 0..3u16 {
+        monitor_cycle(&mut w, k + 1, s.now - u64::from(2 - k) * 15_000_000);
+    }
+    assert!(s.master.supervise_safety_heartbeat(&mut w, s.now));
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    let (l, seq) = ramp_up(s, &l0, 0.02, 1);
+    (w, l, seq, 3)
+}
+
+/// One runner cycle: the watch's verdict, then the master's cycle with a setpoint that holds
+/// the cable speed (`l` advanced by `v` m per ms).
+fn runner_cycle(
+    s: &mut Sim,
+    w: &mut drive_io::safety_watch::SafetyWatch,
+    l: &mut [f64],
+    seq: &mut u64,
+) -> bool {
+    let permit = s.master.supervise_safety_heartbeat(w, s.now + 1_000_000);
+    for x in l.iter_mut() {
+        *x += 0.02e-3;
+    }
+    let sp = s.setpoint(*seq, l);
+    *seq += 1;
+    s.step(Some(&sp));
+    permit
+}
+
+/// The monitor dies mid-ride: the safety I/O node's STO (on the same missing heartbeat)
+/// reaches the drives before drive-io's validation time runs out. That is the safety stop,
+/// not a fault of every drive: one error line (the trip, naming the overdue heartbeat and the
+/// drives off), the quick stop at warning, bus state EStop; nothing more while it holds.
+#[test]
+fn drives_torque_off_under_a_missing_heartbeat_is_one_e_stop_line() {
+    use drive_io::safety_watch::{InhibitReason, WatchState};
+    let cap = Capture::default();
+    let mut s = Sim::new();
+    let (mut w, mut l, mut seq) = cap.run(|| {
+        let (w, l, seq, _) = running_with_watch(&mut s);
+        (w, l, seq)
+    });
+    assert_eq!(s.master.state(), BusState::Running);
+    let silent_from = s.now;
+    cap.take();
+    cap.run(|| {
+        // No pair from here on; 35 ms later (overdue, within the 50 ms validation time) the
+        // I/O node removes the drives' torque.
+        while s.now < silent_from + 35_000_000 {
+            assert!(runner_cycle(&mut s, &mut w, &mut l, &mut seq));
+            assert_eq!(s.master.state(), BusState::Running);
+        }
+        for sl in &mut s.slaves {
+            sl.set_sto(true);
+        }
+        for _ in 0..300 {
+            runner_cycle(&mut s, &mut w, &mut l, &mut seq);
+        }
+    });
+    let lines = cap.take();
+    assert_eq!(
+        errors(&lines),
+        ["safety heartbeat invalid or missing: e-stop"],
+        "{lines:#?}"
+    );
+    assert!(
+        lines.iter().any(|(lv, m)| *lv == tracing::Level::WARN
+            && m == "drive bus stopping: quick stop all drives (e-stop)"),
+        "{lines:#?}"
+    );
+    assert_eq!(s.master.state(), BusState::EStop);
+    assert_eq!(s.master.feedback().fault_code, fault_code::NONE);
+    assert!(
+        matches!(
+            w.state(),
+            WatchState::Inhibit(InhibitReason::Overdue { drives_off: 4, silent_ms }) if silent_ms < 50
+        ),
+        "{:?}",
+        w.state()
+    );
+    assert_eq!(w.trips(), 1);
+}
+
+/// The same drives' stop while the monitor's pairs keep arriving on time: no stop was
+/// commanded, so a drive that leaves Operation Enabled is still a fault of that drive.
+#[test]
+fn a_drive_leaving_operation_under_a_live_heartbeat_is_still_a_fault() {
+    use drive_io::safety_watch::WatchState;
+    let cap = Capture::default();
+    let mut s = Sim::new();
+    let (mut w, mut l, mut seq, mut counter) = cap.run(|| running_with_watch(&mut s));
+    cap.take();
+    cap.run(|| {
+        for k in 0..200u64 {
+            if k % 15 == 0 {
+                counter += 1;
+                monitor_cycle(&mut w, counter, s.now);
+            }
+            if k == 40 {
+                s.slaves[2].set_sto(true);
+            }
+            assert!(runner_cycle(&mut s, &mut w, &mut l, &mut seq), "cycle {k}");
+        }
+    });
+    let lines = cap.take();
+    assert_eq!(w.state(), WatchState::Permit);
+    assert_eq!(s.master.state(), BusState::Fault);
+    let fb = s.master.feedback();
+    assert_eq!(
+        (fb.fault_code, fb.fault_node),
+        (fault_code::UNEXPECTED_STATE, 3)
+    );
+    let e = errors(&lines);
+    assert_eq!(e.len(), 2, "{lines:#?}");
+    assert!(e[0].starts_with("drive left Operation Enabled"), "{e:?}");
+    assert_eq!(e[1], "drive bus stopping: quick stop all drives");
+}
+
+/// Every drive switching its torque off at once (no safety watch involved): one event, one
+/// line for its cause (the first drive, and how many) and the stop — not one line per drive
+/// (on main: "drive ignores the target position" per drive, bit 12 of a statusword in which
+/// it is undefined).
+#[test]
+fn every_drive_switching_off_is_one_fault_line_not_one_per_drive() {
+    let cap = Capture::default();
+    let mut s = Sim::new();
+    s.boot();
+    let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
+    let (l, mut seq) = ramp_up(&mut s, &l0, 0.02, 1);
+    cap.run(|| {
+        for sl in &mut s.slaves {
+            sl.set_sto(true);
+        }
+        for _ in 0..100 {
+            let sp = s.setpoint(seq, &l);
+            seq += 1;
+            s.step(Some(&sp));
+        }
+    });
+    let lines = cap.take();
+    assert_eq!(s.master.state(), BusState::Fault);
+    assert_eq!(s.master.feedback().fault_code, fault_code::UNEXPECTED_STATE);
+    assert_eq!(errors(&lines).len(), 2, "{lines:#?}");
+}
+
+/// A stall that silences every drive at once (drive-io, or the drives, descheduled): one
+/// heartbeat-loss line naming the first node and how many, and the stop — not one per node.
+#[test]
+fn a_stall_that_silences_every_drive_is_one_heartbeat_line_and_one_stop() {
+    let cap = Capture::default();
+    let mut s = Sim::new();
+    s.boot();
+    cap.run(|| {
+        let mut out = BusFrames::new(1);
+        for k in 1..=400u64 {
+            out.clear();
+            s.master.cycle(s.now + k * 1_000_000, None, &mut out);
+        }
+    });
+    let lines = cap.take();
+    assert_eq!(s.master.state(), BusState::Fault);
+    assert_eq!(s.master.feedback().fault_code, fault_code::HEARTBEAT_LOST);
+    assert_eq!(
+        errors(&lines),
+        [
+            "heartbeat lost",
+            "drive bus stopping: quick stop all drives"
+        ],
+        "{lines:#?}"
+    );
+}
