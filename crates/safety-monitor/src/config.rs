@@ -712,7 +712,11 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             67,
         ),
         ("forces.silence_cycles", fo.silence_cycles, 67),
-        ("can.reader_stall_cycles", raw.can.reader_stall_cycles, 67),
+        (
+            "can.reader_stall_cycles",
+            raw.can.reader_stall_cycles,
+            crate::capacity::MAX_READER_STALL_CYCLES,
+        ),
         (
             "can.safety_io_silence_cycles",
             raw.can.safety_io_silence_cycles,

@@ -31,6 +31,7 @@
 
 use crate::bus_frames::{self, Observed};
 use crate::bus_watch::{ReaderHealth, ReaderWatch};
+use crate::capacity::SENT_OWN_FRAMES;
 use crate::config::MonitorConfig;
 use crate::identity::platform_identity;
 use crate::kinematics::StandardKinematics;
@@ -108,11 +109,12 @@ pub fn random_instance() -> u16 {
 
 /// The frames the monitor sent on its own identifiers recently (COB-ID, data, length): a frame
 /// on those identifiers that it receives and did not send is another node speaking for it
-/// ([`Monitor::on_impersonation`]). 4 frames per cycle; 16 cycles cover the bus reader's batch
-/// delay many times over.
+/// ([`Monitor::on_impersonation`]). As many as the longest reader stall the configuration
+/// allows sends ([`SENT_OWN_FRAMES`]): with 64 (16 cycles) a reader that fell 240 ms behind
+/// read the monitor's own frames as another node's and tripped (a guest stall).
 #[derive(Debug)]
 pub struct SentOwn {
-    ring: [(u16, [u8; 8], u8); 64],
+    ring: [(u16, [u8; 8], u8); SENT_OWN_FRAMES],
     len: usize,
     next: usize,
 }
@@ -120,7 +122,7 @@ pub struct SentOwn {
 impl Default for SentOwn {
     fn default() -> Self {
         Self {
-            ring: [(0, [0; 8], 0); 64],
+            ring: [(0, [0; 8], 0); SENT_OWN_FRAMES],
             len: 0,
             next: 0,
         }
@@ -1167,6 +1169,32 @@ mod tests {
             ));
         }
         assert!(!own.contains(&mine));
+    }
+
+    /// The monitor's own frames of the longest reader stall the configuration allows are
+    /// still recognised when the stalled reader delivers them (the impersonation check must not
+    /// trip on the monitor's own echo); older ones are not remembered.
+    #[test]
+    fn own_frames_of_the_longest_reader_stall_are_recognised() {
+        use crate::capacity::{MAX_READER_STALL_CYCLES, OWN_FRAMES_PER_CYCLE};
+        let frame = |k: u32| {
+            let [a, b, c, d] = k.to_le_bytes();
+            can_transport::CanFrame::new(0x101, &[a, b, c, d, 0, 0, 0, 0]).expect("frame")
+        };
+        let mut sent = SentOwn::default();
+        let frames = OWN_FRAMES_PER_CYCLE as u32 * (MAX_READER_STALL_CYCLES + 1);
+        for k in 0..frames {
+            sent.record(&frame(k));
+        }
+        let first = frame(0);
+        let mut d = [0u8; 8];
+        d.copy_from_slice(first.data());
+        assert!(
+            sent.contains(0x101, &d, 8),
+            "the first frame of a {MAX_READER_STALL_CYCLES}-cycle stall is forgotten"
+        );
+        sent.record(&frame(frames));
+        assert!(!sent.contains(0x101, &d, 8));
     }
 
     #[test]
