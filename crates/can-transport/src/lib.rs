@@ -212,15 +212,6 @@ pub fn open(spec: &TransportSpec) -> Result<Box<dyn CanBus>, CanError> {
     })
 }
 
-/// CLOCK_MONOTONIC in ns (the receive-timestamp clock of [`RxFrame`]).
-pub fn monotonic_ns() -> u64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: valid pointer to a timespec; CLOCK_MONOTONIC always exists on Linux.
-    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    (ts.tv_sec as u64)
-        .saturating_mul(1_000_000_000)
-        .saturating_add(ts.tv_nsec as u64)
-}
+/// The stack's one clock (CLOCK_MONOTONIC ns, defined in crs-rt): the receive-timestamp clock
+/// of [`RxFrame`], the same as the process bus's payload stamps.
+pub use crs_rt::monotonic_ns;

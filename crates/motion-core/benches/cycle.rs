@@ -24,7 +24,7 @@ use cdpr_model::offset_target::{OffsetTarget, region_box};
 use criterion::Criterion;
 use crs_ipc::JointSetpoint;
 use motion_core::daemon::cycle::{Cycle, Reference};
-use motion_core::daemon::realtime::now_ns;
+use motion_core::daemon::realtime::monotonic_ns;
 use motion_core::daemon::trajectory;
 use std::hint::black_box;
 use surrogate::{FitOptions, Region, Surrogate, fit};
@@ -172,8 +172,8 @@ fn per_call_histogram(s: &mut Setup, calls: usize, verdict: bool) {
     let mut sp = JointSetpoint::default();
     // Cost of the timing itself (two clock reads): reported, not subtracted.
     for t in overhead.iter_mut() {
-        let t0 = now_ns();
-        *t = now_ns() - t0;
+        let t0 = monotonic_ns();
+        *t = monotonic_ns() - t0;
     }
     overhead.sort_unstable();
     for (name, cycle) in [
@@ -189,9 +189,9 @@ fn per_call_histogram(s: &mut Setup, calls: usize, verdict: bool) {
         for t in times.iter_mut() {
             k = if k + 1 == s.refs.len() { 0 } else { k + 1 };
             let r = &s.refs[k];
-            let t0 = now_ns();
+            let t0 = monotonic_ns();
             let ok = cycle.compute(black_box(r), &mut sp).is_ok();
-            *t = now_ns() - t0;
+            *t = monotonic_ns() - t0;
             failed += usize::from(!ok);
         }
         assert_eq!(failed, 0, "{failed} references refused");

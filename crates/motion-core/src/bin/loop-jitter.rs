@@ -30,7 +30,7 @@ use cdpr_model::config::{Platform, load_platform};
 use cdpr_model::offset_target::{OffsetTarget, region_box};
 use clap::Parser;
 use crs_ipc::JointSetpoint;
-use motion_core::daemon::realtime::{self, RealtimeSettings, now_ns, sleep_until};
+use motion_core::daemon::realtime::{self, RealtimeSettings, monotonic_ns, sleep_until};
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::trajectory::{self, Waypoint};
 use motion_core::daemon::{self, Command, CommandSource, LoopState, SetpointSink, lifecycle};
@@ -208,9 +208,9 @@ fn bare_block(mut deadline: u64, period_ns: u64, end_ns: u64, out: &mut Samples)
     let mut overruns = 0;
     loop {
         sleep_until(deadline);
-        let woke = now_ns();
+        let woke = monotonic_ns();
         out.record(woke.saturating_sub(deadline));
-        let (d, over) = next_deadline(deadline, now_ns(), period_ns);
+        let (d, over) = next_deadline(deadline, monotonic_ns(), period_ns);
         deadline = d;
         overruns += u64::from(over);
         if woke >= end_ns {
@@ -363,7 +363,7 @@ fn run(args: Args) -> Result<ExitCode, String> {
     let loadavg_before = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
 
     // One continuous timeline, aligned to the period, a few periods ahead.
-    let t0 = now_ns() + 10 * period_ns;
+    let t0 = monotonic_ns() + 10 * period_ns;
     let mut next = t0 - t0 % period_ns + period_ns;
     let mut bare_overruns = 0u64;
     // Its own grid: no drive bus announces a SYNC schedule here.

@@ -119,7 +119,7 @@ impl StagePorts for IoxPorts {
         let cmp = stats.compute.snapshot();
         let s = LoopStatsSample {
             state: outbox.state.load(Ordering::Relaxed),
-            timestamp_ns: realtime::now_ns(),
+            timestamp_ns: realtime::monotonic_ns(),
             cycles: stats.cycles.load(Ordering::Relaxed),
             overruns: stats.overruns.load(Ordering::Relaxed),
             rejected: stats.rejected.load(Ordering::Relaxed),
@@ -359,7 +359,7 @@ fn run(args: Args) -> Result<(), String> {
         .control
         .as_ref()
         .map(|_| Arc::new(RideSlot::new(platform.home, plan_end)));
-    let start_ns = realtime::now_ns() + 50_000_000;
+    let start_ns = realtime::monotonic_ns() + 50_000_000;
     let timeline = Arc::new(Timeline::new(period_ns));
     let sync_lead_ns = cfg.sync_lead_ns;
     let outbox = Arc::new(Outbox::new(64));

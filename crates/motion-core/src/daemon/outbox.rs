@@ -168,7 +168,7 @@ pub fn run_publish_stage(
         }
         ports.sync_schedule(timeline);
         deadline += period_ns;
-        let now = super::realtime::now_ns();
+        let now = super::realtime::monotonic_ns();
         if now > deadline {
             deadline += (now - deadline) / period_ns * period_ns + period_ns;
         }
