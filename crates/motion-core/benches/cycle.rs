@@ -23,6 +23,7 @@ use cdpr_model::config::{Platform, load_platform};
 use cdpr_model::offset_target::{OffsetTarget, region_box};
 use criterion::Criterion;
 use crs_ipc::JointSetpoint;
+use crs_limits::quantile::quantile_sorted;
 use motion_core::daemon::cycle::{Cycle, Reference};
 use motion_core::daemon::realtime::monotonic_ns;
 use motion_core::daemon::trajectory;
@@ -158,10 +159,10 @@ fn criterion_benches(c: &mut Criterion, s: &mut Setup) {
     }
 }
 
-/// Exact quantile of sorted samples (nearest rank).
+/// Exact quantile of sorted samples, by the stack's one definition (nearest rank,
+/// [`crs_limits::quantile`]); every call here has samples.
 fn quantile(sorted: &[u64], q: f64) -> u64 {
-    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
-    sorted[rank - 1]
+    quantile_sorted(sorted, q).expect("samples")
 }
 
 /// Times `calls` single `Cycle::compute` calls and prints p50 / p99 / p99.9 / max. `verdict`:

@@ -30,6 +30,7 @@ use cdpr_model::config::{Platform, load_platform};
 use cdpr_model::offset_target::{OffsetTarget, region_box};
 use clap::Parser;
 use crs_ipc::JointSetpoint;
+use crs_limits::quantile::quantile_sorted;
 use motion_core::daemon::realtime::{self, RealtimeSettings, monotonic_ns, sleep_until};
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::trajectory::{self, Waypoint};
@@ -122,13 +123,8 @@ impl Samples {
     fn summary(&mut self) -> Summary {
         let v = &mut self.values[..self.len];
         v.sort_unstable();
-        let q = |q: f64| -> u64 {
-            if v.is_empty() {
-                return 0;
-            }
-            let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
-            v[rank - 1]
-        };
+        // The stack's one quantile definition (nearest rank), on the preallocated buffer.
+        let q = |q: f64| -> u64 { quantile_sorted(v, q).unwrap_or(0) };
         Summary {
             n: v.len() as u64,
             p50_ns: q(0.5),
