@@ -3,7 +3,7 @@
 //! Every setting is applied and reported; one the process is not permitted to use degrades
 //! with a clear warning instead of failing silently.
 //!
-//! One home (issue 14): motion-core's 1 ms loop, the safety monitor's 15 ms cycle and its bus
+//! One home (each loop had its own copy before): motion-core's 1 ms loop, the safety monitor's 15 ms cycle and its bus
 //! reader, drive-io's SYNC loop and its latency bench, sim-plant's loop and the operator
 //! console's background threads all set themselves up here; no other crate calls
 //! sched_setscheduler, mlockall, sched_setaffinity, PR_SET_TIMERSLACK or clock_nanosleep.

@@ -1,4 +1,4 @@
-//! Per-cycle compute of the 1 ms hard loop (issue #5, target p99 ≤ 2 µs): `Cycle::compute` =
+//! Per-cycle compute of the 1 ms hard loop (target p99 ≤ 2 µs): `Cycle::compute` =
 //! checks (finite, workspace box, velocity/acceleration limits of table 5.1, wrench feasibility
 //! eq. 3.29 with the closed-form forces eq. 3.41) + standard IK (eq. 2.3) + the polynomial
 //! surrogate offset (eq. 5.26), exactly as the daemon runs it on the default platform

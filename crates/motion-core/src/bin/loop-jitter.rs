@@ -1,6 +1,6 @@
 //! `loop-jitter`: wake-up lateness of the daemon's real 1 ms loop next to a bare
 //! `clock_nanosleep(TIMER_ABSTIME)` loop, in the same process, same thread, same settings
-//! (issue #5, "Loop-timing benches on 2 cores").
+//! (the loop-timing bench on 2 cores).
 //!
 //! The daemon side is the real thing: `HardLoop` (trajectory sampler fed by the ruckig planner
 //! thread, checks, IK, surrogate offset) driven by `daemon::run_timed`, with the `[realtime]`
