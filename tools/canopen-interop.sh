@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # CANopen interoperability against python `canopen` + python-can (a CANopen stack not written
-# here; issue 20 item 2), on the host over python-can's udp_multicast bus, which can-transport
+# here), on the host over python-can's udp_multicast bus, which can-transport
 # speaks as `pycan-udp:GROUP:PORT` (the QEMU guest has no python):
 #  (a) drive-io configures (SDO script from config/eds/crs-winch.eds, read-back, DCF) and runs
 #      python canopen LocalNode drives made from the same EDS: NMT, SDO, SYNC, PDOs, quick stop,

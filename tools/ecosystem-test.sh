@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The ecosystem's own tools on what the stack writes (issue #18):
+# The ecosystem's own tools on what the stack writes:
 #  - a `crs sim` run with drive-io's candump log: python-can reads every line, can-utils'
 #    log2asc converts every frame (canplayer replays it where the kernel has CAN);
 #  - the run's logs are plain text (no ANSI escapes) and its plots + index.html exist;

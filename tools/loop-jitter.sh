@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Loop-timing bench (issue #5): wake-up lateness of motion-core's 1 ms loop next to a bare
+# Loop-timing bench: wake-up lateness of motion-core's 1 ms loop next to a bare
 # clock_nanosleep(TIMER_ABSTIME) loop at the same settings, idle and with the other core loaded
 # by stress-ng; cyclictest (Debian rt-tests) as a third, separate-process column. Writes a
 # markdown table (and one JSON per scenario) to $OUT (default out/loop-jitter/).

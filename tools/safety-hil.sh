@@ -6,7 +6,7 @@
 #   the vcan QEMU guest (tools/vcan-vm.sh). Every process runs separately (iceoryx2 + CAN);
 #   each scenario injects one fault (101 mm / 99 mm offsets, frozen and killed motion-core,
 #   killed drive-io, killed monitor, sequence gaps, NaN pose, wrong identity, corrupted safety
-#   frame, forged RPDO, reset refused/accepted, ...; issue 15: overload and slack on one cable
+#   frame, forged RPDO, reset refused/accepted, ...; overload and slack on one cable
 #   (winch-emulator --control-file), unknown applied sequence, bus-off and error-passive (an
 #   error frame with CAN_ERR_FLAG written to vcan, which forwards it to subscribed sockets), a
 #   lost NMT stop) and must end in braked drives with no motion.

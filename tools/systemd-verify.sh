@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Checks the systemd units in systemd/ (issue #5): `systemd-analyze verify` on every unit, plus
+# Checks the systemd units in systemd/: `systemd-analyze verify` on every unit, plus
 # the stack's own policy (Type=notify only where the binary sends sd_notify, every daemon
 # Type=notify with a watchdog, never restarted, real-time limits set, the isolation keys). Exits non-zero on ANY warning or error: systemd-analyze
 # itself exits 0 on e.g. unknown keys or unparsable values ("ignoring"), so its output must be

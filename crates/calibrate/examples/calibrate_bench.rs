@@ -67,7 +67,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let f = result.ok_or("--repeat must be >= 1")?;
     times.sort_by(|a, b| a.total_cmp(b));
-    let median = times[times.len() / 2];
+    // The median by the stack's one quantile definition (nearest rank).
+    let median = crs_limits::quantile::quantile_sorted(&times, 0.5).ok_or("no runs")?;
     println!(
         "rust: {} samples, {} parameters, {} residuals, {} iterations, cost {:.9e}, median {:.3} ms over {} runs",
         obs.len(),

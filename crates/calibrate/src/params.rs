@@ -169,8 +169,8 @@ impl ParamId {
     pub fn bounds(&self) -> Option<(f64, f64)> {
         match self {
             // Steel-rope axial stiffness of a CRS-sized cable including the powertrain: the
-            // nominal 2 MN/m (eq. 6.19) within a factor 10 down and 25 up; issue 13 asks that no
-            // k_F leaves [0.2, 50] MN/m.
+            // nominal 2 MN/m (eq. 6.19) within a factor 10 down and 25 up: no k_F
+            // outside [0.2, 50] MN/m is physical for these ropes.
             ParamId::KF(_) => Some((KF_MIN_N, KF_MAX_N)),
             // Rope stored on the drum and in the powertrain: ≥ 0, at most the drum capacity.
             ParamId::ExtraLength(_) => Some((0.0, STORED_ROPE_MAX_M)),

@@ -418,7 +418,7 @@ pub fn run(
     };
     // The structure test judges the catalogue's best model, before any flexible correction.
     let structure = structure_of(stages.last(), holdout);
-    // 6. Optional flexible correction (issue 13, item 4): for when accuracy matters more than
+    // 6. Optional flexible correction: for when accuracy matters more than
     // explanation. Never a diagnosis: its stage name says so and the selection never adds it.
     let mut flexible_failure = None;
     if cfg.flexible

@@ -1,4 +1,4 @@
-//! How far to trust one calibration run (issue 13, item 5): does the optimiser land on the same
+//! How far to trust one calibration run: does the optimiser land on the same
 //! optimum from other starts, does a second data set give the same geometry, and do the chosen
 //! effects and key parameters survive resampling of the training poses?
 //!

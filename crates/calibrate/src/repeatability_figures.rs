@@ -72,7 +72,7 @@ pub struct Bootstrap {
     pub max_anchor_sd_mm: Option<f64>,
 }
 
-/// Everything item 5 reports.
+/// Everything the repeatability section reports.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Repeatability {
     pub config: RepeatabilityConfig,

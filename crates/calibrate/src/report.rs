@@ -855,7 +855,7 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
     out
 }
 
-/// "Repeatability" (issue 13, item 5): multi-start, second run, bootstrap. A test that failed
+/// "Repeatability": multi-start, second run, bootstrap. A test that failed
 /// says so and how often; it never prints a number for it.
 fn repeatability_section(s: &mut String, r: &crate::repeatability_figures::Repeatability) {
     s.push_str("\n## Repeatability\n\n");
@@ -937,7 +937,7 @@ fn repeatability_section(s: &mut String, r: &crate::repeatability_figures::Repea
     }
 }
 
-/// "Unexplained structure" (issue 13, item 4).
+/// "Unexplained structure": what the best model leaves in the held-out residuals.
 fn structure_section(s: &mut String, st: &crate::structure::StructureReport) {
     s.push_str("\n## Unexplained structure\n\n");
     let flagged: Vec<&crate::structure::CableStructure> =

@@ -1,4 +1,4 @@
-//! "Unexplained structure" (issue 13, item 4): after the best catalogue extension, is there
+//! "Unexplained structure": after the best catalogue extension, is there
 //! structure left in the held-out cable-length residuals that the model does not explain, and
 //! where does it live?
 //!

@@ -1,5 +1,5 @@
 //! A step whose forward kinematics fails on held-out samples is reported as failed, with the
-//! count, never as a number (issue 13): held-out commands with every cable 4 m slack cannot
+//! count, never as a number: held-out commands with every cable 4 m slack cannot
 //! hold the platform (no elastostatic equilibrium exists), so every elastostatic step must fail
 //! there while the kinematic least-squares FK still converges.
 

@@ -1,4 +1,4 @@
-//! Repeatability (issue 13, item 5): on data with one clear effect (drum radius errors and the
+//! Repeatability: on data with one clear effect (drum radius errors and the
 //! tracker noise), every random start of eq. 6.8 must return to the
 //! pipeline's optimum, the bootstrap must keep choosing the effect and give k_F a spread of
 //! the order of its 1σ, and the report must carry the section. A failed second run is reported

@@ -1,4 +1,4 @@
-//! Unexplained structure (issue 13, item 4): with only tracker and force-sensor noise nothing
+//! Unexplained structure: with only tracker and force-sensor noise nothing
 //! is flagged; with a drum radius error and the drum left out of the candidates, the final
 //! model's held-out length residuals are flagged (the catalogue that was allowed does not
 //! explain them), and with the drum allowed the structure goes away.

@@ -71,12 +71,30 @@ pub enum CanError {
 }
 
 /// A CAN bus endpoint. Implementations deliver frames sent by OTHER endpoints only.
+///
+/// Receiving: a transport implements ONE of the two receive methods. One that carries error
+/// frames implements [`CanBus::recv_event_timeout`] and inherits [`CanBus::recv_timeout`] (the
+/// same wait with error frames filtered out); a frames-only transport implements
+/// [`CanBus::recv_timeout`] and inherits [`CanBus::recv_event_timeout`]. Each default calls the
+/// other, so an implementation that overrides neither recurses without end.
 pub trait CanBus: Send {
     /// Queues one frame for transmission (non-blocking; [`CanError::TxFull`] if the queue is full).
     fn send(&mut self, frame: &CanFrame) -> Result<(), CanError>;
     /// Waits up to `timeout` for a frame; `Ok(None)` on timeout. Malformed datagrams are skipped
-    /// (counted in [`CanBus::rx_errors`]), never returned as frames.
-    fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<RxFrame>, CanError>;
+    /// (counted in [`CanBus::rx_errors`]), never returned as frames. The default waits on
+    /// [`CanBus::recv_event_timeout`] until the same deadline, skipping error frames.
+    fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<RxFrame>, CanError> {
+        let deadline =
+            monotonic_ns().saturating_add(timeout.as_nanos().min(u64::MAX as u128) as u64);
+        loop {
+            let left = Duration::from_nanos(deadline.saturating_sub(monotonic_ns()));
+            match self.recv_event_timeout(left)? {
+                Some(RxEvent::Frame(f)) => return Ok(Some(f)),
+                Some(RxEvent::BusError(_)) => continue,
+                None => return Ok(None),
+            }
+        }
+    }
     /// Non-blocking receive.
     fn try_recv(&mut self) -> Result<Option<RxFrame>, CanError> {
         self.recv_timeout(Duration::ZERO)
@@ -96,7 +114,8 @@ pub trait CanBus: Send {
         })
     }
     /// Like [`CanBus::recv_timeout`], but also delivers error frames (after
-    /// [`CanBus::subscribe_bus_errors`]).
+    /// [`CanBus::subscribe_bus_errors`]). The default (a frames-only transport) is
+    /// [`CanBus::recv_timeout`]'s frame.
     fn recv_event_timeout(&mut self, timeout: Duration) -> Result<Option<RxEvent>, CanError> {
         Ok(self.recv_timeout(timeout)?.map(RxEvent::Frame))
     }
@@ -212,15 +231,6 @@ pub fn open(spec: &TransportSpec) -> Result<Box<dyn CanBus>, CanError> {
     })
 }
 
-/// CLOCK_MONOTONIC in ns (the receive-timestamp clock of [`RxFrame`]).
-pub fn monotonic_ns() -> u64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: valid pointer to a timespec; CLOCK_MONOTONIC always exists on Linux.
-    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    (ts.tv_sec as u64)
-        .saturating_mul(1_000_000_000)
-        .saturating_add(ts.tv_nsec as u64)
-}
+/// The stack's one clock (CLOCK_MONOTONIC ns, defined in crs-rt): the receive-timestamp clock
+/// of [`RxFrame`], the same as the process bus's payload stamps.
+pub use crs_rt::monotonic_ns;

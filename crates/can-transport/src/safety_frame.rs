@@ -10,7 +10,7 @@
 //! or hung monitor stops the robot.
 //!
 //! Payload (both frames, little endian; the inverted frame carries `!byte` for every byte),
-//! protocol version 2 (issue 16: the reset epoch):
+//! protocol version 2 (it added the reset epoch):
 //!
 //! | byte | content                                                                  |
 //! |------|--------------------------------------------------------------------------|
@@ -341,7 +341,7 @@ pub fn crc32_ieee(data: &[u8]) -> u32 {
 }
 
 /// The configuration signature the monitor sends every cycle, doubled like the heartbeat, on
-/// [`config_cob_id`] (issue 16, item 3/4). Payload (normal frame; the inverse carries `!byte`):
+/// [`config_cob_id`]. Payload (normal frame; the inverse carries `!byte`):
 ///
 /// | byte | content |
 /// |------|---------|

@@ -106,19 +106,6 @@ impl CanBus for SocketCanBus {
         }
     }
 
-    fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<RxFrame>, CanError> {
-        let deadline =
-            monotonic_ns().saturating_add(timeout.as_nanos().min(u64::MAX as u128) as u64);
-        loop {
-            let left = Duration::from_nanos(deadline.saturating_sub(monotonic_ns()));
-            match self.recv_event_timeout(left)? {
-                Some(RxEvent::Frame(f)) => return Ok(Some(f)),
-                Some(RxEvent::BusError(_)) => continue,
-                None => return Ok(None),
-            }
-        }
-    }
-
     fn recv_event_timeout(&mut self, timeout: Duration) -> Result<Option<RxEvent>, CanError> {
         let deadline =
             monotonic_ns().saturating_add(timeout.as_nanos().min(u64::MAX as u128) as u64);

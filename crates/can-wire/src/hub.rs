@@ -167,7 +167,7 @@ fn realtime_minus_monotonic() -> i128 {
     };
     // SAFETY: clock_gettime writes the timespec we own.
     unsafe { libc::clock_gettime(libc::CLOCK_REALTIME, &mut rt) };
-    let mono = crs_rt::now_ns() as i128;
+    let mono = crs_rt::monotonic_ns() as i128;
     rt.tv_sec as i128 * 1_000_000_000 + rt.tv_nsec as i128 - mono
 }
 
@@ -660,7 +660,7 @@ impl BusRt {
                 // No node sends after now: a stamp from the future is taken as now (read
                 // again: the pass's `now` may predate a send read in this pass).
                 let stamp_ns = if stamp_ns > now {
-                    stamp_ns.min(crs_rt::now_ns())
+                    stamp_ns.min(crs_rt::monotonic_ns())
                 } else {
                     stamp_ns
                 };
@@ -687,7 +687,7 @@ impl BusRt {
                 match &mut self.io {
                     Io::Host(_) => {
                         let mut r = [0u8; RECORD_LEN];
-                        proto::encode_error(&error, stamp_ns.min(crs_rt::now_ns()), &mut r);
+                        proto::encode_error(&error, stamp_ns.min(crs_rt::monotonic_ns()), &mut r);
                         for (n, nd) in self.nodes.iter_mut().enumerate() {
                             if n != node && nd.conn.is_some() && !nd.rx_off {
                                 push(nd, &r, &mut self.hub.rx_dropped[n]);
@@ -817,7 +817,7 @@ impl Hub {
     /// Opens every bus (sockets, interfaces) and starts the statistics writer. Once this
     /// returns, clients can connect.
     pub fn open(cfg: HubConfig, scheduler: String) -> Result<Self, HubError> {
-        let t0 = crs_rt::now_ns();
+        let t0 = crs_rt::monotonic_ns();
         // SAFETY: epoll_create1; checked.
         let raw = unsafe { libc::epoll_create1(libc::EPOLL_CLOEXEC) };
         if raw < 0 {
@@ -880,7 +880,7 @@ impl Hub {
     pub fn loop_state(&self) -> LoopState {
         let nb = self.buses.len();
         LoopState {
-            next_stats: crs_rt::now_ns() + self.cfg.stats_period_ns,
+            next_stats: crs_rt::monotonic_ns() + self.cfg.stats_period_ns,
             dues: Vec::with_capacity(nb),
             pfds: Vec::with_capacity(nb),
             to_writer: self.writer.sender(),
@@ -893,7 +893,7 @@ impl Hub {
     pub fn pass(&mut self, st: &mut LoopState) {
         let lookahead = self.cfg.lookahead_ns;
         let period = self.cfg.stats_period_ns;
-        let now = crs_rt::now_ns();
+        let now = crs_rt::monotonic_ns();
         self.drain_all(now, &st.to_writer);
         for b in &mut self.buses {
             if b.due_at(lookahead).is_some_and(|t| t <= now) {
@@ -927,11 +927,11 @@ impl Hub {
         // Input on a quiet bus is stamped ≥ now, so its arbitration is due ≥ now + lookahead:
         // when the hub wakes anyway by then (plus the coalescing allowance), it need not wake
         // for the input itself.
-        let horizon = crs_rt::now_ns() + lookahead + self.cfg.coalesce_ns;
+        let horizon = crs_rt::monotonic_ns() + lookahead + self.cfg.coalesce_ns;
         if st.pfds.is_empty() || wake <= horizon {
             crs_rt::sleep_until(wake);
         } else {
-            let left = wake.saturating_sub(crs_rt::now_ns());
+            let left = wake.saturating_sub(crs_rt::monotonic_ns());
             let ts = libc::timespec {
                 tv_sec: (left / 1_000_000_000) as libc::time_t,
                 tv_nsec: (left % 1_000_000_000) as libc::c_long,
@@ -952,7 +952,7 @@ impl Hub {
     /// Reads what the nodes sent last, delivers what is complete by now, writes the final
     /// statistics (and the summary lines), removes the sockets.
     pub fn finish(mut self, st: &LoopState) {
-        let now = crs_rt::now_ns();
+        let now = crs_rt::monotonic_ns();
         self.drain_all(now, &st.to_writer);
         for b in &mut self.buses {
             b.advance(now, self.cfg.lookahead_ns);

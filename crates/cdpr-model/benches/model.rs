@@ -1,5 +1,5 @@
 //! Criterion benches of the model hot paths on the CRS icosahedron (8 cables).
-//! Targets (issue #2): standard IK ≤ 150 ns, closed-form forces ≤ 2 µs, LM FK from a
+//! Targets: standard IK ≤ 150 ns, closed-form forces ≤ 2 µs, LM FK from a
 //! 1 cm / 1° guess ≤ 10 µs, elastostatic FK ≤ 30 µs. Figures go to benches/RESULTS.md.
 
 use cdpr_model::config::load_platform;
@@ -51,7 +51,7 @@ fn benches(c: &mut Criterion) {
                 statics::force_distribution(&data, &p.w_e, p.f_min, p.f_max, &mut f).unwrap()
             })
         });
-        // Exact wrench feasibility (eq. 3.29, issue 17): the dedicated vertex solver against
+        // Exact wrench feasibility (eq. 3.29): the dedicated vertex solver against
         // microlp's simplex on the same pose; the closed form above is the hard loop's test.
         let at = statics::structure_matrix(&data);
         let w = DVector::from_column_slice(p.w_e.as_slice());

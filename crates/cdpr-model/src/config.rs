@@ -82,7 +82,7 @@ pub struct Platform {
 }
 
 impl Platform {
-    /// Identity of everything the safety monitor checks the stream against (issue 16): the
+    /// Identity of everything the safety monitor checks the stream against: the
     /// model ([`Model::identity`]: geometry, pulleys, stiffness, load, force limits), the
     /// operating region (workspace box) and the motion limits (table 5.1), SHA-256 over
     /// `"crs-platform-v2"`, the model identity, then position min/max (m), rotation min/max

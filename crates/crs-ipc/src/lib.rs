@@ -71,19 +71,9 @@ fn svc_err(service: &str, op: &'static str, e: impl core::fmt::Debug) -> IpcErro
     }
 }
 
-/// Monotonic clock (CLOCK_MONOTONIC) in ns: the time base of every `*_ns` payload field; it is
-/// shared by all processes on one host.
-pub fn monotonic_ns() -> u64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: clock_gettime writes into the valid timespec we pass; CLOCK_MONOTONIC always exists.
-    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    (ts.tv_sec as u64)
-        .saturating_mul(1_000_000_000)
-        .saturating_add(ts.tv_nsec as u64)
-}
+/// The stack's one clock (CLOCK_MONOTONIC ns, defined in crs-rt): the time base of every
+/// `*_ns` payload field, shared by all processes on one host.
+pub use crs_rt::monotonic_ns;
 
 /// The iceoryx2 configuration all CRS processes use (defaults, passed explicitly).
 pub fn iceoryx_config() -> Config {

@@ -177,7 +177,7 @@ pub mod motion_state {
     /// Graceful end of the setpoint stream: published (kind StateChanged) AFTER the last
     /// setpoint, so the safety monitor disarms its silence watch instead of tripping.
     pub const STOPPING: u32 = 5;
-    /// motion-core announces its plan (kind StateChanged, issue 16): the sequence number of
+    /// motion-core announces its plan (kind StateChanged): the sequence number of
     /// the plan's LAST setpoint, low 32 bits in `detail`, high 32 bits in `detail_node`
     /// ([`crate::StateEvent::plan`], [`crate::StateEvent::plan_end`]). Re-announced about once
     /// per second. The safety monitor accepts [`STOPPING`] only once the stream has reached

@@ -6,7 +6,7 @@ use iceoryx2::prelude::ZeroCopySend;
 /// Event service used only for rare wake-ups (e-stop); see [`crate::IpcNode::wakeup_notifier`].
 pub const WAKEUP_EVENT: &str = "crs/v1/wakeup";
 
-/// Event service "a setpoint was published" (issue 20 item 3): motion-core's publish stage
+/// Event service "a setpoint was published": motion-core's publish stage
 /// notifies it once per pass, after the setpoints are in shared memory; drive-io waits on it
 /// (next to its CAN socket) to send the RPDOs and SYNC of that setpoint at once instead of at
 /// its next free-running tick. See [`crate::IpcNode::setpoint_ready_notifier`].

@@ -1,8 +1,11 @@
-//! # crs-limits: the fixed limits (and the reset-epoch order) every layer agrees on, in one place
+//! # crs-limits: the limits, orders and definitions every layer agrees on, in one place
 //!
 //! A crate without dependencies so that the model library, the surrogate, the IPC contract and
 //! the independent safety monitor can all name the same value without depending on each other
-//! (issue 14: the |Δq| limit lived in three crates under three names, the cable count in three).
+//! (the |Δq| limit once lived in three crates under three names, the cable count in three), and
+//! every report, bench and figure prints its percentiles by one definition ([`quantile`]).
+
+pub mod quantile;
 
 /// Most cables any platform, payload or drive table of the stack holds: the fixed-size arrays of
 /// the `#[repr(C)]` IPC payloads and the allocation-free hot paths are sized by it.

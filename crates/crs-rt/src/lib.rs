@@ -3,7 +3,7 @@
 //! Every setting is applied and reported; one the process is not permitted to use degrades
 //! with a clear warning instead of failing silently.
 //!
-//! One home (issue 14): motion-core's 1 ms loop, the safety monitor's 15 ms cycle and its bus
+//! One home (each loop had its own copy before): motion-core's 1 ms loop, the safety monitor's 15 ms cycle and its bus
 //! reader, drive-io's SYNC loop and its latency bench, sim-plant's loop and the operator
 //! console's background threads all set themselves up here; no other crate calls
 //! sched_setscheduler, mlockall, sched_setaffinity, PR_SET_TIMERSLACK or clock_nanosleep.
@@ -223,16 +223,21 @@ pub fn apply(s: &RealtimeSettings) -> RealtimeReport {
     }
 }
 
-/// Monotonic time in ns (CLOCK_MONOTONIC), the time base of the loop and of the IPC payloads.
+/// Monotonic time in ns (CLOCK_MONOTONIC): the time base of every loop, of every `*_ns`
+/// payload field of the process bus and of the CAN receive stamps. The stack's one clock:
+/// crs-ipc and can-transport re-export it (both depend on this crate), so all processes on one
+/// host stamp with the same function.
 #[inline]
-pub fn now_ns() -> u64 {
+pub fn monotonic_ns() -> u64 {
     let mut ts = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,
     };
-    // SAFETY: clock_gettime writes the timespec we own.
+    // SAFETY: clock_gettime writes the timespec we own; CLOCK_MONOTONIC always exists on Linux.
     unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+    (ts.tv_sec as u64)
+        .saturating_mul(1_000_000_000)
+        .saturating_add(ts.tv_nsec as u64)
 }
 
 /// Sleeps until the absolute CLOCK_MONOTONIC time `deadline_ns` (TIMER_ABSTIME: no drift,
@@ -307,10 +312,10 @@ mod tests {
 
     #[test]
     fn sleep_until_waits_for_the_absolute_deadline() {
-        let t0 = now_ns();
+        let t0 = monotonic_ns();
         let deadline = t0 + 2_000_000;
         sleep_until(deadline);
-        assert!(now_ns() >= deadline, "woke before the deadline");
+        assert!(monotonic_ns() >= deadline, "woke before the deadline");
         // A deadline in the past returns at once (a late cycle does not sleep again).
         sleep_until(t0);
     }

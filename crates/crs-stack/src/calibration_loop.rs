@@ -1,4 +1,4 @@
-//! The closed calibration loop on the running stack (`crs calibrate loop`, issue 8) — record a
+//! The closed calibration loop on the running stack (`crs calibrate loop`) — record a
 //! campaign on the simulated stack with the nominal model, identify, deploy the identified
 //! model and a refitted surrogate, re-run the same campaign and report the MEASURED pose error
 //! at the rest points before and after.
@@ -402,7 +402,7 @@ fn write_monitor_toml(
     let mon = section(&mut t, "monitor", template)?;
     mon.insert("platform".into(), path_value(platform)?);
     // The closed loop's simulated runs use the platform they were told to (the nominal or the
-    // calibrated one): this run's monitor accepts exactly that file (issue 16; on a robot the
+    // calibrated one): this run's monitor accepts exactly that file (the monitor runs only an accepted platform; on a robot the
     // operator accepts with `safety-monitor accept`, which shows the diff first).
     let bytes = std::fs::read(platform).map_err(file(platform))?;
     mon.insert(

@@ -1,6 +1,6 @@
 //! What an identification run leaves on disk (`crs calibrate run|demo|loop`): report.md,
 //! report.json, the plots, `calibrated.toml` (the last step that validated, never a failed one:
-//! issue 13) and the side file with what the platform schema cannot express.
+//! a failed computation never reaches the robot) and the side file with what the platform schema cannot express.
 
 use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
 use calibrate::repeatability::{self, RepeatabilityConfig};
@@ -22,7 +22,7 @@ pub enum OutputError {
     WrittenDoesNotLoad(ConfigError),
     #[error(transparent)]
     Json(#[from] serde_json::Error),
-    /// The final step failed validation (issue 13): what was written instead.
+    /// The final step failed validation: what was written instead.
     #[error("the final calibration step \"{step}\" failed validation ({failure}); {what}")]
     FinalStepFailed {
         step: String,
@@ -64,7 +64,7 @@ pub fn write(
     let toml_path = out.join("calibrated.toml");
     let side_path = out.join("calibrated-effects.toml");
     // Never deploy a model that did not validate: write the last step whose FK converged on
-    // every held-out sample, or nothing (issue 13). Stale outputs of an earlier run go too.
+    // every held-out sample, or nothing (a failed step is reported, never deployed). Stale outputs of an earlier run go too.
     let _ = std::fs::remove_file(&toml_path);
     let _ = std::fs::remove_file(&side_path);
     let written = rep.last_validated_stage();

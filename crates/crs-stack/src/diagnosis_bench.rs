@@ -24,6 +24,7 @@ use calibrate::effects::{Effect, Form};
 use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
 use calibrate::{Observation, from_dataset};
 use cdpr_model::config::{Platform, load_platform};
+use crs_limits::quantile::quantile_sorted;
 use nalgebra::Vector3;
 use sim_plant::config::{Effects, ForceSensors};
 use sim_plant::{CampaignConfig, Plant, PlantConfig, PoseSet, run_campaign};
@@ -1353,14 +1354,11 @@ fn thread_cpu_seconds() -> f64 {
     }
 }
 
+/// The median by the stack's one quantile definition (nearest rank, [`crs_limits::quantile`]).
 fn median(v: &[f64]) -> f64 {
     let mut v = v.to_vec();
     v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v[v.len() / 2]
-    }
+    quantile_sorted(&v, 0.5).unwrap_or(f64::NAN)
 }
 
 #[cfg(test)]

@@ -14,6 +14,7 @@
 
 use cdpr_model::Data;
 use cdpr_model::config::{Platform, load_platform};
+use crs_limits::quantile::quantile_sorted;
 use load_tracking::G;
 use load_tracking::point_load::{self, PointLoad};
 use nalgebra::{Vector3, Vector6};
@@ -316,7 +317,7 @@ pub fn run(c: &WalkConfig) -> Result<WalkResult, WalkError> {
         plant: base_cfg.name.clone(),
         subject_kg: c.subject_kg,
         error_mean_m: errs.iter().sum::<f64>() / ne,
-        error_p95_m: errs[((0.95 * ne).ceil() as usize).clamp(1, errs.len()) - 1],
+        error_p95_m: quantile_sorted(&errs, 0.95).unwrap_or(f64::NAN),
         error_max_m: *errs.last().unwrap_or(&f64::NAN),
         within_seed_share: errs.iter().filter(|e| **e <= SEED_TRACKING_M).count() as f64 / ne,
         mass_mean_kg: est.iter().map(|e| e.mass_kg).sum::<f64>() / ne,

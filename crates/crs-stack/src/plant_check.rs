@@ -26,7 +26,7 @@ pub struct PlantCheck {
     /// The plant built and settled at home; None when the platform has no `f_ini` (no set-up
     /// tension to settle with). An error here is printed after the description.
     pub home: Result<Option<HomeSettle>, PlantError>,
-    /// The plant's conservative twin against the minimum-energy oracle (issue 14 item 4).
+    /// The plant's conservative twin against the minimum-energy oracle (a second formulation sharing no code with the model library).
     pub oracle: Result<OracleAgreement, OracleCheckError>,
 }
 

@@ -1,5 +1,5 @@
-//! The helicopter hover physics as the stack's motion source (`crs sim --source helicopter`,
-//! issue 19 item 1): the [`ride_physics`] model (eq. 5.21–5.22) runs at 1 kHz on its own
+//! The helicopter hover physics as the stack's motion source (`crs sim --source helicopter`):
+//! the [`ride_physics`] model (eq. 5.21–5.22) runs at 1 kHz on its own
 //! thread of the launcher — off motion-core's hard loop, in another process — and publishes
 //! its pose on motion-core's cueing input (`crs/v1/cueing_pose`, motion-core started with
 //! `--input cueing`), where the loop's velocity/acceleration-limited tracker and its checks

@@ -5,6 +5,7 @@
 use cdpr_model::config::Platform;
 use cdpr_model::offset_target::{OffsetTarget, region_box};
 use cdpr_model::{Data, Pose, kinematics};
+use crs_limits::quantile::quantile_sorted;
 use sim_plant::{Plant, load_plant};
 use std::path::Path;
 use surrogate::{FitOptions, Region, Surrogate, fit};
@@ -380,6 +381,6 @@ pub fn stats(v: &[f64]) -> (f64, f64, f64) {
     }
     s.sort_by(f64::total_cmp);
     let mean = s.iter().sum::<f64>() / s.len() as f64;
-    let p95 = s[((s.len() - 1) as f64 * 0.95).round() as usize];
+    let p95 = quantile_sorted(&s, 0.95).unwrap_or(f64::NAN);
     (mean, p95, *s.last().unwrap_or(&f64::NAN))
 }

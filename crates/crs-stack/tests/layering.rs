@@ -176,7 +176,7 @@ fn the_safety_monitor_shares_no_code_with_the_controller() {
 
 #[test]
 fn the_plants_oracle_shares_no_code_with_the_model_library() {
-    // issue 14 item 4: the second formulation of the plant's equilibrium must not reach the
+    // The second formulation of the plant's equilibrium must not reach the
     // equations it checks, nor nalgebra (whose code paths the model library's solvers use).
     let c = closure("plant-oracle");
     let allowed = BTreeSet::from([

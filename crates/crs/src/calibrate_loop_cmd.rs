@@ -1,5 +1,5 @@
 //! `crs calibrate loop` and `crs calibrate campaign`: the command line of
-//! [`crs_stack::calibration_loop`] and [`crs_stack::campaign`]. The closed loop on the running stack (issue 8) — record a campaign on
+//! [`crs_stack::calibration_loop`] and [`crs_stack::campaign`]. The closed loop on the running stack — record a campaign on
 //! the simulated stack with the nominal model, identify, deploy the identified model and a
 //! refitted surrogate, re-run the same campaign and report the MEASURED pose error at the rest
 //! points before and after. `crs calibrate campaign` makes the campaign file.

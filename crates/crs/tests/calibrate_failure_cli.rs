@@ -1,7 +1,7 @@
 //! `crs calibrate run` on a validation set whose commands no model can hold (every cable 4 m
 //! slack): the elastostatic steps' FK fails on every held-out sample, so the report must say
 //! "failed" with the count (never 0.00), the command must exit non-zero with the reason on
-//! stderr, and calibrated.toml may only hold the last validated (kinematic) step (issue 13).
+//! stderr, and calibrated.toml may only hold the last validated (kinematic) step.
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

@@ -1,5 +1,5 @@
-//! `crs commission` (issue 19 item 4) on the running simulated stack, and `crs load track`
-//! (item 3). The commissioning's identified payload is checked against the PLANT's truth (the
+//! `crs commission` on the running simulated stack, and `crs load track`.
+//! The commissioning's identified payload is checked against the PLANT's truth (the
 //! plant is the oracle, the estimator sees only force readings), and a cabin with an extra
 //! 60 kg rider whose weight sits 0.25 m above the floor of the configured load must be refused
 //! (exit non-zero, "REFUSED", commission.toml says not ready), with its COG height found from

@@ -1,4 +1,4 @@
-//! `crs model planar` and `crs model workspace --test both` as a user runs them (issue 17).
+//! `crs model planar` and `crs model workspace --test both` as a user runs them.
 
 use std::process::Command;
 

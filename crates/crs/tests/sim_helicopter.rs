@@ -1,4 +1,4 @@
-//! The helicopter cabin on the stack (issue 19, item 0): `crs sim --platform helicopter` picks
+//! The helicopter cabin on the stack: `crs sim --platform helicopter` picks
 //! the helicopter's daemon, plant, monitor and drives configs and runs its demo tour clean
 //! (`--check`: trajectory completed, no e-stop, every plant step converged, forces within
 //! [f_min, f_max], static error, no rejected reference, no drive fault, no bus stop). The full
@@ -87,7 +87,7 @@ fn helicopter_configs_differ_from_the_icosahedrons_only_in_the_platform() {
             .lines()
             .skip_while(|l| l.starts_with('#'))
             .filter(|l| !l.starts_with("platform = ") && !l.starts_with("waypoints = "))
-            // The accepted platform's hash differs with the platform (issue 16).
+            // The accepted platform's hash differs with the platform (the monitor pins it).
             .filter(|l| !l.starts_with("platform_sha256 = "))
             .filter(|l| !l.starts_with("# Demo"))
             .map(str::to_string)

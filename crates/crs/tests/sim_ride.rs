@@ -1,4 +1,4 @@
-//! The helicopter hover physics flown on the whole stack (issue 19 item 1):
+//! The helicopter hover physics flown on the whole stack:
 //! `crs sim --source helicopter --pilot config/pilot-demo.csv --check` runs the hover model
 //! (eq. 5.21–5.22) at 1 kHz as motion-core's cueing input while sim-plant, the safety monitor,
 //! drive-io and motion-core run as processes; the pilot flies full stick and full / zero

@@ -730,7 +730,7 @@ pub fn scenario_estop(buses: &RigBuses, prefix: &str) -> Res<String> {
     all_in(&rig, Ds402State::QuickStopActive, Duration::from_secs(5))?;
     assert_holds(&mut rig, BusState::EStop)?;
     // Reset: drives are walked back to Operation Enabled holding their position -> Ready.
-    // Only the safety monitor's reset counts (issue 16); this rig runs without the safety
+    // Only the safety monitor's reset counts; this rig runs without the safety
     // heartbeat, so drive-io checks the event's source and a newer epoch (in `detail`).
     let mut reset = StateEvent::new(ProcessId::SafetyMonitor, EventKind::Reset, 2);
     reset.detail = 1;

@@ -9,6 +9,7 @@ use crate::AnalysisError;
 use cdpr_model::config::Platform;
 use cdpr_model::workspace::{self, PositionBox, Reach, ReachableAnalysis};
 use cdpr_model::{Data, Pose};
+use crs_limits::quantile::quantile_sorted;
 use nalgebra::{Vector3, Vector6};
 use serde_json::json;
 use std::fmt::{self, Write as _};
@@ -232,7 +233,7 @@ impl ReachableReport {
                 "reachable": s.reachable, "volume_m3": s.reachable as f64 * cell,
                 "agreement": s.agree as f64 / pr.refs.len() as f64, "failed": s.failed,
                 "mean_error_m": (!errs.is_empty()).then(|| errs.iter().sum::<f64>() / errs.len() as f64),
-                "sensitivity_rel_error_median": rel.get(rel.len() / 2),
+                "sensitivity_rel_error_median": quantile_sorted(rel, 0.5),
                 "sensitivity_rel_error_max": rel.last(),
                 "seconds": plant.seconds,
             });
@@ -421,7 +422,7 @@ impl fmt::Display for ReachableReport {
                     1e3 * s.errs.iter().sum::<f64>() / s.errs.len() as f64
                 )?;
             }
-            if let (Some(med), Some(max)) = (s.rel.get(s.rel.len() / 2), s.rel.last()) {
+            if let (Some(med), Some(max)) = (quantile_sorted(&s.rel, 0.5), s.rel.last()) {
                 writeln!(
                     f,
                     "  sensitivity to +1 kN payload: predicted |Δr| = |K_wx⁻¹Δw| vs measured, relative error median {:.2} %, max {:.2} % ({} poses)",

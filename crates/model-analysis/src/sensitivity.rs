@@ -9,6 +9,7 @@ use cdpr_model::sensitivity::{
     self, Parameter, ParameterErrors, ParameterSensitivity, PoseErrorEstimate,
 };
 use cdpr_model::{Data, Model, Pose, workspace};
+use crs_limits::quantile::quantile_sorted;
 use nalgebra::Vector3;
 use serde_json::json;
 use std::fmt::{self, Write as _};
@@ -131,10 +132,6 @@ fn map(pf: &Platform, e: &ParameterErrors, n: usize) -> Vec<(Pose, MapPoint)> {
         }
     }
     out
-}
-
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
 }
 
 /// The sensitivity of `pf` (named `label` to the reader) at `pose` for the uncertainties of
@@ -275,8 +272,8 @@ impl SensitivityReport {
                 "not_wrench_feasible": m.not_feasible,
                 "failed": m.failed.len(),
                 "failures": m.failed,
-                "median_rms_position_m": (!rms.is_empty()).then(|| quantile(&rms, 0.5)),
-                "p95_rms_position_m": (!rms.is_empty()).then(|| quantile(&rms, 0.95)),
+                "median_rms_position_m": quantile_sorted(&rms, 0.5),
+                "p95_rms_position_m": quantile_sorted(&rms, 0.95),
                 "max_rms_position_m": m.vals.last().map(|v| v.0),
                 "max_at": m.vals.last().map(|v| pose_json(&v.1)),
             });
@@ -433,8 +430,8 @@ impl fmt::Display for SensitivityReport {
                     writeln!(
                         f,
                         "    RMS position error: median {:.2} mm, 95 % {:.2} mm, max {:.2} mm at [{:.2}, {:.2}, {:.2}] m",
-                        quantile(&v, 0.5) * 1e3,
-                        quantile(&v, 0.95) * 1e3,
+                        quantile_sorted(&v, 0.5).unwrap_or(f64::NAN) * 1e3,
+                        quantile_sorted(&v, 0.95).unwrap_or(f64::NAN) * 1e3,
                         worst.0 * 1e3,
                         worst.1.r.x,
                         worst.1.r.y,

@@ -1,4 +1,4 @@
-//! Per-cycle compute of the 1 ms hard loop (issue #5, target p99 ≤ 2 µs): `Cycle::compute` =
+//! Per-cycle compute of the 1 ms hard loop (target p99 ≤ 2 µs): `Cycle::compute` =
 //! checks (finite, workspace box, velocity/acceleration limits of table 5.1, wrench feasibility
 //! eq. 3.29 with the closed-form forces eq. 3.41) + standard IK (eq. 2.3) + the polynomial
 //! surrogate offset (eq. 5.26), exactly as the daemon runs it on the default platform
@@ -23,8 +23,9 @@ use cdpr_model::config::{Platform, load_platform};
 use cdpr_model::offset_target::{OffsetTarget, region_box};
 use criterion::Criterion;
 use crs_ipc::JointSetpoint;
+use crs_limits::quantile::quantile_sorted;
 use motion_core::daemon::cycle::{Cycle, Reference};
-use motion_core::daemon::realtime::now_ns;
+use motion_core::daemon::realtime::monotonic_ns;
 use motion_core::daemon::trajectory;
 use std::hint::black_box;
 use surrogate::{FitOptions, Region, Surrogate, fit};
@@ -158,10 +159,10 @@ fn criterion_benches(c: &mut Criterion, s: &mut Setup) {
     }
 }
 
-/// Exact quantile of sorted samples (nearest rank).
+/// Exact quantile of sorted samples, by the stack's one definition (nearest rank,
+/// [`crs_limits::quantile`]); every call here has samples.
 fn quantile(sorted: &[u64], q: f64) -> u64 {
-    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
-    sorted[rank - 1]
+    quantile_sorted(sorted, q).expect("samples")
 }
 
 /// Times `calls` single `Cycle::compute` calls and prints p50 / p99 / p99.9 / max. `verdict`:
@@ -172,8 +173,8 @@ fn per_call_histogram(s: &mut Setup, calls: usize, verdict: bool) {
     let mut sp = JointSetpoint::default();
     // Cost of the timing itself (two clock reads): reported, not subtracted.
     for t in overhead.iter_mut() {
-        let t0 = now_ns();
-        *t = now_ns() - t0;
+        let t0 = monotonic_ns();
+        *t = monotonic_ns() - t0;
     }
     overhead.sort_unstable();
     for (name, cycle) in [
@@ -189,9 +190,9 @@ fn per_call_histogram(s: &mut Setup, calls: usize, verdict: bool) {
         for t in times.iter_mut() {
             k = if k + 1 == s.refs.len() { 0 } else { k + 1 };
             let r = &s.refs[k];
-            let t0 = now_ns();
+            let t0 = monotonic_ns();
             let ok = cycle.compute(black_box(r), &mut sp).is_ok();
-            *t = now_ns() - t0;
+            *t = monotonic_ns() - t0;
             failed += usize::from(!ok);
         }
         assert_eq!(failed, 0, "{failed} references refused");

@@ -1,4 +1,4 @@
-//! The dynamic wrench in the hard loop's check (issue 19 item 2, eq. 5.13–5.16): with the
+//! The dynamic wrench in the hard loop's check (eq. 5.13–5.16): with the
 //! platform's `[dynamics]` the cycle distributes forces for w = w_e + w_in of the reference's
 //! acceleration, so a reference the static check (w_e alone) accepts can be refused: the
 //! helicopter cabin at its home pose accelerating upwards at 8 m/s² (within table 5.1's

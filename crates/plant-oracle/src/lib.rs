@@ -1,7 +1,7 @@
 //! The simulated plant's second formulation: the static equilibrium of a cable robot as the
 //! MINIMUM OF ITS POTENTIAL ENERGY, computed from scalar cable lengths alone.
 //!
-//! Why it exists (issue 14 item 4): sim-plant is the "ground truth" the stack is measured
+//! Why it exists: sim-plant is the "ground truth" the stack is measured
 //! against, but it solves its equilibrium with the controller's own kinematics, statics and
 //! forward-kinematics code (cdpr-model). An error in those shared equations would appear in
 //! controller and plant alike and no test could see it. This crate shares no code with

@@ -1,5 +1,5 @@
 //! The elastic walls keep what the hard loop follows inside the wrench-feasible region of the
-//! platform for any pilot input (issue 19 item 1): full stick into every wall, edge and corner
+//! platform for any pilot input: full stick into every wall, edge and corner
 //! of the helicopter's operating region, at maximum and minimum thrust, pedals both ways. The
 //! hover model (eq. 5.21–5.22) runs at 1 kHz; its pose goes through motion-core's own cueing
 //! tracker (planner limits of `lifecycle::configure`, with the dynamic wrench) and the loop's

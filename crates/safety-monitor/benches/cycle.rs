@@ -7,7 +7,7 @@
 //!   the default config (Δq, box, motion plausibility, identity before motion, following
 //!   error, RPDO, forces) plus one CAN error frame of warning level (reported, no trip);
 //! * `cycle_full_without_force_and_motion`: the same input with the force and motion checks
-//!   off (the monitor's scope before issue 15), side by side;
+//!   off (the monitor's scope before it supervised forces and motion), side by side;
 //! * `safety_pair_encode_decode`: the doubled heartbeat, producer + consumer side.
 
 use can_transport::safety_frame::{self, PairReceiver, SafetyHeartbeat, SafetyState};

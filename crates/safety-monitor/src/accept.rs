@@ -1,4 +1,4 @@
-//! The explicit accept step of a (re)calibrated platform (issue 16, item 4). The monitor runs
+//! The explicit accept step of a (re)calibrated platform. The monitor runs
 //! only the platform file whose SHA-256 its configuration pins (`[monitor] platform_sha256`);
 //! a calibration writes a NEW platform file and never touches the monitor's accepted copy.
 //! `safety-monitor accept NEW.toml` parses the candidate with the monitor's own parser, shows

@@ -41,7 +41,7 @@ pub struct MonitorSection {
     /// Platform TOML, relative to the config file.
     pub platform: PathBuf,
     /// SHA-256 (hex) of the platform file's bytes as accepted by the operator
-    /// (`safety-monitor accept`, issue 16): a platform file that differs (a calibration wrote
+    /// (`safety-monitor accept`): a platform file that differs (a calibration wrote
     /// it, someone edited it) is refused at start. Required in the robot profile.
     #[serde(default)]
     pub platform_sha256: String,
@@ -228,7 +228,7 @@ pub struct MotionSection {
     pub margin: f64,
 }
 
-/// `[ipc]`: who may own the single-owner streams of the process bus (issue 16). Each list
+/// `[ipc]`: who may own the single-owner streams of the process bus. Each list
 /// names the executables (basename of `/proc/<pid>/exe` of the publisher's process) allowed to
 /// publish that stream; any other publisher, or more than one, trips `foreign_publisher`. An
 /// empty list switches the check off (bench profile only).
@@ -566,7 +566,7 @@ pub struct MonitorConfig {
     /// In cable order (cable i = i-th `[[winch]]`).
     pub winches: Vec<Winch>,
     /// CRC-32 of the safety parameter set: the bytes of this file, the platform file and the
-    /// drives file, in that order (issue 16: logged at start, announced on the bus every cycle).
+    /// drives file, in that order (logged at start, announced on the bus every cycle).
     pub safety_params_crc: u32,
     /// SHA-256 of the platform file's bytes (compared with `monitor.platform_sha256`).
     pub platform_sha256: String,
@@ -689,7 +689,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             "must be -1 (none) or a CPU index".into(),
         ));
     }
-    // Upper bounds (issue 16): a setting beyond them would switch its check off in practice
+    // Upper bounds: a setting beyond them would switch its check off in practice
     // (a silence of minutes, a margin of metres). Cycles are monitor cycles (15 ms: 67 ≈ 1 s).
     let fo = &raw.forces;
     let counts: [(&str, u32, u32); 10] = [
@@ -865,7 +865,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             ));
         }
     }
-    // Profiles (issue 16): outside the bench profile no switch may disable a check.
+    // Profiles: outside the bench profile no switch may disable a check.
     let bench = match m.profile.as_str() {
         PROFILE_ROBOT => false,
         PROFILE_BENCH => true,
@@ -908,7 +908,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
     let platform_file = relative_to(path, &m.platform);
     named("monitor.platform", &platform_file)?;
     let platform = load_platform(&platform_file)?;
-    // The accepted platform (issue 16): the file's bytes must hash to what the operator
+    // The accepted platform: the file's bytes must hash to what the operator
     // accepted; a calibration writes a new file and never changes the accepted one.
     let platform_bytes = std::fs::read(&platform_file).map_err(|source| ConfigError::Read {
         file: platform_file.display().to_string(),

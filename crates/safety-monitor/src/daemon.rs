@@ -81,7 +81,7 @@ pub const EVENT_FUTURE_TOLERANCE_NS: u64 = 50_000_000;
 /// A state event is fresh when its (sender's) timestamp lies within the last
 /// [`RESET_REQUEST_MAX_AGE_NS`] of the monitor's clock — and NOT in its future beyond
 /// [`EVENT_FUTURE_TOLERANCE_NS`]: a future timestamp would otherwise be "fresh" forever (a
-/// replayed or forged request, issue 16).
+/// replayed or forged request).
 pub fn is_fresh(now_ns: u64, event_ns: u64) -> bool {
     event_ns <= now_ns.saturating_add(EVENT_FUTURE_TOLERANCE_NS)
         && now_ns.saturating_sub(event_ns) <= RESET_REQUEST_MAX_AGE_NS
@@ -457,7 +457,7 @@ pub fn run_on(
     if cfg.is_bench() {
         tracing::warn!("BENCH profile: checks may be switched off; not for the robot");
     }
-    // The configuration signature (issue 16): the SRDO configuration CRC the consumers check
+    // The configuration signature: the SRDO configuration CRC the consumers check
     // and the CRC of the safety parameter set, doubled like the heartbeat, every cycle.
     let signature = safety_frame::ConfigSignature {
         srdo_crc: cfg.srdo().crc(),
@@ -465,7 +465,7 @@ pub fn run_on(
     }
     .encode(cob);
 
-    // One owner per stream (issue 16): setpoints, feedback and identity.
+    // One owner per stream: setpoints, feedback and identity.
     let mut owners = [
         crate::ownership::OwnerWatch::new("setpoints", cfg.ipc.setpoint_owners.clone()),
         crate::ownership::OwnerWatch::new("drive feedback", cfg.ipc.feedback_owners.clone()),
@@ -640,7 +640,7 @@ pub fn run_on(
                 && fresh
             {
                 // Accepted only at the end of the announced plan, evaluated at the end of this
-                // cycle after this cycle's setpoints (issue 16; otherwise unplanned_stream_end).
+                // cycle after this cycle's setpoints (otherwise unplanned_stream_end).
                 tracing::info!(
                     at_plan_end = monitor.stream_end_planned(),
                     "motion-core announced the end of its setpoint stream"
@@ -651,14 +651,14 @@ pub fn run_on(
                 && fresh
             {
                 // Anyone may stop; the monitor latches it so that only its verified reset ends
-                // the stop in motion-core and drive-io (issue 16).
+                // the stop in motion-core and drive-io.
                 tracing::warn!(source = ev.source, "e-stop from another process: latched");
                 monitor.on_estop_event(ev.source);
             } else if ev.kind == EventKind::Reset as u32
                 && ev.source != ProcessId::SafetyMonitor as u32
                 && fresh
             {
-                // Only this monitor mints resets (issue 16): anyone else's is ignored, logged
+                // Only this monitor mints resets: anyone else's is ignored, logged
                 // (rate-limited) and, while tripped, answered with the e-stop again.
                 foreign_reset = true;
                 ignored_resets += 1;

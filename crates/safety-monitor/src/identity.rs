@@ -5,7 +5,7 @@
 //! `"crs-model-v1"`, m as u64, a_1..a_m, b_1..b_m (x, y, z each), k_F,1..m, w_e (6),
 //! f_min, f_max, then either -1.0 (no pulleys) or r_p,1..m followed by the unit swivel axes;
 //!
-//! and, around it ([`platform_identity`], issue 16), the workspace box and the motion limits:
+//! and, around it ([`platform_identity`]), the workspace box and the motion limits:
 //! `"crs-platform-v2"`, the model identity, position min/max, rotation min/max (rad), the four
 //! table 5.1 limits (SI).
 //!
@@ -19,7 +19,7 @@ use sha2::{Digest, Sha256};
 /// Domain tag of the canonical serialisation (version 1).
 pub const IDENTITY_TAG: &[u8] = b"crs-model-v1";
 
-/// Domain tag of the platform identity (version 2, issue 16): the model identity above, the
+/// Domain tag of the platform identity (version 2): the model identity above, the
 /// workspace box and the motion limits.
 pub const PLATFORM_TAG: &[u8] = b"crs-platform-v2";
 

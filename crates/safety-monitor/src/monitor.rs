@@ -189,7 +189,7 @@ struct ForceWatch {
 }
 
 /// The monitor's state, with the data each state has: a trip cannot exist without its
-/// record, and the record cannot be read while the monitor is not tripped (issue 14). Private
+/// record, and the record cannot be read while the monitor is not tripped. Private
 /// to [`Monitor`], read through [`Monitor::state`]; the only transition out of
 /// [`MonitorState::Tripped`] consumes an [`authority::ResetToken`]. [`StateCode`] is the same
 /// state without its data.
@@ -355,7 +355,7 @@ pub enum ResetDecision {
     InstanceExhausted,
 }
 
-/// The reset authority (issue 16, type-state): the latch of [`Monitor`] is left only with a
+/// The reset authority (type-state): the latch of [`Monitor`] is left only with a
 /// [`authority::ResetToken`], and the only code that can make one is [`authority::verify`],
 /// the monitor's check of the per-cause evidence. Minting a token advances the reset epoch.
 pub mod authority {
@@ -427,7 +427,7 @@ pub mod authority {
 }
 
 /// Which causes this cycle's inputs POSITIVELY show cleared (not merely absent), for the
-/// per-cause reset evidence (issue 16). Evaluated while tripped (drives NMT-stopped and
+/// per-cause reset evidence. Evaluated while tripped (drives NMT-stopped and
 /// braked, motion-core holding):
 /// * setpoint stream causes (Δq, NaN, box, cable count, sequence, gaps, silence, motion):
 ///   setpoints arrived this cycle and all passed, or the stream is ended (no producer);
@@ -605,7 +605,7 @@ pub struct Monitor {
     /// pose of that cycle (the own-clock velocity check).
     cycle_ref: Option<(u64, DVec3, DMat3)>,
     /// The plan the producer announced (sequence of its last setpoint) and whether the stream
-    /// holds (issue 16: STOPPING only at the end of an announced plan).
+    /// holds (STOPPING only at the end of an announced plan).
     plan: PlanWatch,
 }
 
@@ -782,7 +782,7 @@ impl Monitor {
     }
 
     /// Consumes this cycle's end-of-stream announcement: accepted only at the end of the
-    /// announced plan (issue 16); otherwise `unplanned_stream_end` and the checks stay armed.
+    /// announced plan; otherwise `unplanned_stream_end` and the checks stay armed.
     fn take_stream_end(&mut self) -> bool {
         if !std::mem::take(&mut self.stream_end) {
             return false;
@@ -973,7 +973,7 @@ impl Monitor {
         if !self.lim.workspace.contains(&sp.pose) {
             self.fault(at(Cause::OutsideWorkspace));
         }
-        // Motion is permitted only with a verified platform identity (start-up, issue 15):
+        // Motion is permitted only with a verified platform identity (start-up):
         // the RUN heartbeat lets the drives enable and HOLD; a setpoint that moves the pose
         // while the identity is not verified trips at once. Holding setpoints are tolerated
         // for `identity_grace_cycles` (the identity of a producer the monitor subscribed to

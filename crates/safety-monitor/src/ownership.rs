@@ -1,4 +1,4 @@
-//! One owner per stream (issue 16, item 2): the single-owner streams of the process bus
+//! One owner per stream: the single-owner streams of the process bus
 //! (setpoints, drive feedback, platform identity) must have at most one publisher, and that
 //! publisher must run one of the executables the monitor's configuration names (`[ipc]`).
 //!

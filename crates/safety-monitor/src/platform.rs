@@ -3,7 +3,7 @@
 //! the standard kinematics, the workspace box, the force range and motion limits it checks) plus
 //! those the platform identity hashes (stiffness, load, pulleys).
 //!
-//! Diverse redundancy (issue 14): the motion core reads this file through serde-derived structs
+//! Diverse redundancy: the motion core reads this file through serde-derived structs
 //! and the model library's validation (`cdpr_model::config`, `Model::new`). The monitor shares
 //! none of that: it lets the `toml` crate build the spanned document tree
 //! ([`toml::de::DeTable`]) and walks it by hand with the small typed accessors of [`Walker`];

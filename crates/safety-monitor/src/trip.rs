@@ -57,15 +57,15 @@ pub enum Cause {
     BusObservation = 20,
     /// Another process (the operator console's stop button, an e-stop input) published an
     /// e-stop. The monitor latches it too, so that the stop it caused in motion-core and
-    /// drive-io ends only with the monitor's verified reset (ISO 13849-1 §5.2.2; issue 16).
+    /// drive-io ends only with the monitor's verified reset (ISO 13849-1 §5.2.2).
     EStopEvent = 21,
     /// A state event claiming the monitor's own source that this monitor did not publish (a
     /// second publisher impersonating the monitor, e.g. a forged Reset): the process bus can
-    /// no longer be trusted (issue 16).
+    /// no longer be trusted.
     ForgedEvent = 22,
     /// The drive bus's controller reported bus-off or error-passive (a CAN error frame on the
     /// monitor's own socket; value = 1 bus-off, 2 error-passive): frames to and from the drives,
-    /// the monitor's stop frames among them, may no longer get through (issue 15).
+    /// the monitor's stop frames among them, may no longer get through.
     CanBusError = 23,
     /// A frame on the monitor's own identifiers (the doubled heartbeat and configuration
     /// signature, `safety_cob_id` .. + 3) that this monitor did not send: another node speaks
@@ -84,11 +84,11 @@ pub enum Cause {
     RpdoUnchecked = 27,
     /// The setpoint producer announced the end of its stream (STOPPING) before the end of the
     /// plan it announced, while the stream was not holding, or without any plan announced: a
-    /// forged or premature end that would disarm the silence and sequence checks (issue 16).
+    /// forged or premature end that would disarm the silence and sequence checks.
     UnplannedStreamEnd = 28,
     /// A single-owner stream (setpoints, drive feedback, platform identity) has more than one
     /// publisher, or its publisher is not the process the stack expects (iceoryx2's service
-    /// introspection: publisher count, owning node's process id and executable; issue 16).
+    /// introspection: publisher count, owning node's process id and executable).
     ForeignPublisher = 29,
     /// drive-io's feedback keeps arriving but no sample advances its timestamp and SYNC cycle
     /// (or each lies in the monitor's future) for N cycles: a hung adapter whose publisher

@@ -1,7 +1,7 @@
 //! The monitor's independent implementation agrees with motion-core's (which is a dev-dependency
 //! ONLY: the monitor itself never links motion-core code).
 //! * the platform identity computed from the monitor's own parse equals `Platform::identity()`
-//!   (model, workspace box, limits; issue 16) and its model part `Model::identity()` bit for
+//!   (model, workspace box, limits) and its model part `Model::identity()` bit for
 //!   bit on the project's platform files (a mismatch would trip the monitor at start);
 //! * φ*(x) equals motion-core's standard inverse kinematics to 1e-9 m over the workspace.
 
@@ -86,7 +86,7 @@ fn identity_agrees_with_non_unit_pulley_axes_and_per_cable_values() {
     assert_eq!(ours, theirs);
 }
 
-/// Issue 16: the identity covers the workspace box and the motion limits, not only the model:
+/// The identity covers the workspace box and the motion limits, not only the model:
 /// changing any one of them changes both implementations' identity identically.
 #[test]
 fn identity_covers_workspace_box_and_limits() {

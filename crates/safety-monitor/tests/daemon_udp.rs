@@ -101,7 +101,7 @@ impl Rig {
         let mut cfg = config::load(&cfg_path).unwrap();
         one_bus_with_drive_forces(&mut cfg, &transport);
         cfg.monitor.rt_priority = 0;
-        // The test process itself publishes the setpoints and the identity (issue 16: the
+        // The test process itself publishes the setpoints and the identity (the
         // stream owners are checked by executable).
         let me = std::env::current_exe().unwrap();
         let me = me.file_name().unwrap().to_string_lossy().to_string();

@@ -1,4 +1,4 @@
-//! Issue 16, items 3 and 4: the monitor's safety parameter set. Profiles (no switch that turns
+//! The monitor's safety parameter set. Profiles (no switch that turns
 //! a check off outside the bench profile), the accepted platform (hash pinned), the SRDO
 //! configuration whose CRC goes on the bus, and the CRC of the whole parameter set.
 

@@ -255,7 +255,7 @@ fn silence_for_n_cycles_trips_only_after_the_first_setpoint() {
 #[test]
 fn an_announced_end_of_stream_disarms_silence_and_a_new_stream_rearms() {
     let mut m = monitor();
-    // The producer's plan ends at its setpoint 10 (issue 16); the stream holds at HOME.
+    // The producer's plan ends at its setpoint 10; the stream holds at HOME.
     m.on_plan_announced(10);
     let seq = good_cycle(&mut m, 1, 0);
     m.on_setpoint(&sp(seq, HOME, 0, 0.0));
@@ -490,7 +490,7 @@ fn the_latch_holds_the_first_cause_and_logs_every_trip() {
         (t.fault.cause, t.fault.cable, t.detected_ns),
         (Cause::DqLimit, Some(5), 7)
     );
-    // The record lives in the state (issue 14): the tripped state carries the same record.
+    // The record lives in the state: the tripped state carries the same record.
     match m.state() {
         MonitorState::Tripped(rec) => assert_eq!(rec, t),
         other => panic!("not tripped: {other:?}"),
@@ -505,7 +505,7 @@ fn the_latch_holds_the_first_cause_and_logs_every_trip() {
     assert!(m.latched().contains(Cause::NonFinite));
 }
 
-/// Issue 16: a reset request while armed (or not ready) changes nothing, not even the epoch;
+/// A reset request while armed (or not ready) changes nothing, not even the epoch;
 /// refused requests do not advance it; only an accepted one does, by exactly one.
 #[test]
 fn only_an_accepted_reset_advances_the_epoch() {
@@ -549,7 +549,7 @@ fn only_an_accepted_reset_advances_the_epoch() {
     assert_eq!(n.reset_epoch(), 7);
 }
 
-/// Issue 16: clean cycles are not enough for a cause that cannot recur while stopped: a
+/// Clean cycles are not enough for a cause that cannot recur while stopped: a
 /// following-error latch needs drive-io's feedback following the held setpoint, a feedback
 /// silence needs feedback back; a force latch needs every drive reporting.
 #[test]
@@ -800,7 +800,7 @@ fn history_is_large_enough_for_the_feedback_window() {
     assert!(cfg().feedback.window_setpoints as usize <= HISTORY);
 }
 
-// ---- measured-force supervision (issue 15: seed §5.1, table 5.1) -------------------------
+// ---- measured-force supervision (seed §5.1, table 5.1) ----------------------------------
 
 const MS: u64 = 1_000_000;
 
@@ -1137,7 +1137,7 @@ fn force_config_errors_name_the_key() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-// ---- pose plausibility with the monitor's own clock (issue 15, item 2) -------------------
+// ---- pose plausibility with the monitor's own clock -------------------------------------
 
 /// Feeds `poses` as consecutive setpoints (consistent lengths), `per_cycle` per 15 ms monitor
 /// cycle; returns the first trip.
@@ -1266,7 +1266,7 @@ fn a_producer_faster_than_real_time_trips_on_the_monitors_clock() {
     assert_eq!(run_poses(&mut m, &poses, 15), None);
 }
 
-// ---- checks that cannot be evaluated fail closed (issue 15, item 3) ----------------------
+// ---- checks that cannot be evaluated fail closed ----------------------------------------
 
 #[test]
 fn feedback_whose_applied_setpoint_is_unknown_trips_after_n_cycles() {
@@ -1315,7 +1315,7 @@ fn bus_observation_failures_trip() {
     assert_eq!((t.fault.cause, t.fault.value), (Cause::BusObservation, 3.0));
 }
 
-// ---- start-up: not ready until identity and every drive's feedback (issue 15, item 4) ----
+// ---- start-up: not ready until identity and every drive's feedback ----------------------
 
 #[test]
 fn the_monitor_starts_not_ready_and_arms_only_when_every_drive_is_verified() {
@@ -1579,7 +1579,7 @@ fn bus_off_and_error_passive_trip_overflow_is_a_blind_reader_warnings_pass() {
     }
 }
 
-/// Issue 16, item 2: an end-of-stream announcement (STOPPING) is accepted only at the end of
+/// An end-of-stream announcement (STOPPING) is accepted only at the end of
 /// the plan the producer announced, with the stream holding; otherwise it trips
 /// `unplanned_stream_end` and the silence check stays armed (a forged STOPPING cannot disarm it).
 #[test]

@@ -1,4 +1,4 @@
-//! The plant checked against its independent oracle (issue 14 item 4).
+//! The plant checked against its independent oracle (a formulation sharing no code with it).
 //!
 //! The plant solves its equilibrium with the model library's kinematics, statics and forward
 //! kinematics — the same code the controller runs. [`plant_oracle`] finds the same equilibrium

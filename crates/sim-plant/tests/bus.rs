@@ -1187,7 +1187,7 @@ fn drives_with_a_safety_heartbeat_watch_stay_braked_without_the_monitor() {
     assert_eq!(max_abs_diff(plant.plant_lengths(), &start), 0.0);
 }
 
-/// Issue 16: sim-plant's winches check the monitor's SRDO configuration CRC. With valid RUN
+/// sim-plant's winches check the monitor's SRDO configuration CRC. With valid RUN
 /// heartbeats whose configuration signature carries another CRC (a monitor configured with
 /// another validation time) no drive can be enabled; with the signature of the drives' own
 /// configuration the same sequence enables all eight.

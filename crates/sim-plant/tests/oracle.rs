@@ -1,4 +1,4 @@
-//! The plant against its independent oracle (issue 14 item 4): the model library's
+//! The plant against its independent oracle: the model library's
 //! elastostatic equilibrium (what plant and controller share) and `plant-oracle`'s minimum of
 //! the potential energy agree to round-off on every shipped plant's conservative twin and under
 //! random commands; a robot the oracle is told differently (1 mm anchor, no pulley) disagrees

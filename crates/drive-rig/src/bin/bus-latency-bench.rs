@@ -103,12 +103,10 @@ const P_NS: u64 = 1_000_000;
 /// every setpoint's targets are new.
 const RAMP_M_PER_S: f64 = 1e-3;
 
-/// One quantile definition for this bench: the nearest rank, (n − 1)·q rounded.
+/// The stack's one quantile definition (nearest rank, [`crs_limits::quantile`]) of sorted
+/// samples; 0 for none (the bare timer's lateness when it woke no time).
 fn quantile(sorted: &[u64], q: f64) -> u64 {
-    if sorted.is_empty() {
-        return 0;
-    }
-    sorted[((sorted.len() as f64 - 1.0) * q).round() as usize]
+    crs_limits::quantile::quantile_sorted(sorted, q).unwrap_or(0)
 }
 
 fn place(cpu: Option<usize>, rt: Option<i32>) {

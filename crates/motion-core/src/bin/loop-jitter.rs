@@ -1,6 +1,6 @@
 //! `loop-jitter`: wake-up lateness of the daemon's real 1 ms loop next to a bare
 //! `clock_nanosleep(TIMER_ABSTIME)` loop, in the same process, same thread, same settings
-//! (issue #5, "Loop-timing benches on 2 cores").
+//! (the loop-timing bench on 2 cores).
 //!
 //! The daemon side is the real thing: `HardLoop` (trajectory sampler fed by the ruckig planner
 //! thread, checks, IK, surrogate offset) driven by `daemon::run_timed`, with the `[realtime]`
@@ -30,7 +30,8 @@ use cdpr_model::config::{Platform, load_platform};
 use cdpr_model::offset_target::{OffsetTarget, region_box};
 use clap::Parser;
 use crs_ipc::JointSetpoint;
-use motion_core::daemon::realtime::{self, RealtimeSettings, now_ns, sleep_until};
+use crs_limits::quantile::quantile_sorted;
+use motion_core::daemon::realtime::{self, RealtimeSettings, monotonic_ns, sleep_until};
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::trajectory::{self, Waypoint};
 use motion_core::daemon::{self, Command, CommandSource, LoopState, SetpointSink, lifecycle};
@@ -122,13 +123,8 @@ impl Samples {
     fn summary(&mut self) -> Summary {
         let v = &mut self.values[..self.len];
         v.sort_unstable();
-        let q = |q: f64| -> u64 {
-            if v.is_empty() {
-                return 0;
-            }
-            let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
-            v[rank - 1]
-        };
+        // The stack's one quantile definition (nearest rank), on the preallocated buffer.
+        let q = |q: f64| -> u64 { quantile_sorted(v, q).unwrap_or(0) };
         Summary {
             n: v.len() as u64,
             p50_ns: q(0.5),
@@ -208,9 +204,9 @@ fn bare_block(mut deadline: u64, period_ns: u64, end_ns: u64, out: &mut Samples)
     let mut overruns = 0;
     loop {
         sleep_until(deadline);
-        let woke = now_ns();
+        let woke = monotonic_ns();
         out.record(woke.saturating_sub(deadline));
-        let (d, over) = next_deadline(deadline, now_ns(), period_ns);
+        let (d, over) = next_deadline(deadline, monotonic_ns(), period_ns);
         deadline = d;
         overruns += u64::from(over);
         if woke >= end_ns {
@@ -363,7 +359,7 @@ fn run(args: Args) -> Result<ExitCode, String> {
     let loadavg_before = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
 
     // One continuous timeline, aligned to the period, a few periods ahead.
-    let t0 = now_ns() + 10 * period_ns;
+    let t0 = monotonic_ns() + 10 * period_ns;
     let mut next = t0 - t0 % period_ns + period_ns;
     let mut bare_overruns = 0u64;
     // Its own grid: no drive bus announces a SYNC schedule here.

@@ -88,7 +88,7 @@ struct IoxPorts {
     setpoint_ready: WakeupNotifier,
     notify_failures: u64,
     platform_identity: PlatformIdentity,
-    /// Sequence number of the plan's last setpoint (`motion_state::PLAN`, issue 16): the
+    /// Sequence number of the plan's last setpoint (`motion_state::PLAN`): the
     /// safety monitor accepts the end-of-stream announcement only after it.
     plan_end: u64,
     /// With `--control`: the current ride's end, which replaces `plan_end`.
@@ -119,7 +119,7 @@ impl StagePorts for IoxPorts {
         let cmp = stats.compute.snapshot();
         let s = LoopStatsSample {
             state: outbox.state.load(Ordering::Relaxed),
-            timestamp_ns: realtime::now_ns(),
+            timestamp_ns: realtime::monotonic_ns(),
             cycles: stats.cycles.load(Ordering::Relaxed),
             overruns: stats.overruns.load(Ordering::Relaxed),
             rejected: stats.rejected.load(Ordering::Relaxed),
@@ -269,7 +269,7 @@ fn run(args: Args) -> Result<(), String> {
     let cfg = config::load(&args.config).map_err(|e| e.to_string())?;
     let platform = load_platform(&cfg.platform).map_err(|e| e.to_string())?;
     let model = platform.model.clone();
-    // The identity the safety monitor compares (issue 16): model, workspace box, limits.
+    // The identity the safety monitor compares: model, workspace box, limits.
     let identity = platform.identity_hex();
     tracing::info!(platform = %platform.name, identity = %identity, cables = model.m(), "platform loaded");
 
@@ -359,7 +359,7 @@ fn run(args: Args) -> Result<(), String> {
         .control
         .as_ref()
         .map(|_| Arc::new(RideSlot::new(platform.home, plan_end)));
-    let start_ns = realtime::now_ns() + 50_000_000;
+    let start_ns = realtime::monotonic_ns() + 50_000_000;
     let timeline = Arc::new(Timeline::new(period_ns));
     let sync_lead_ns = cfg.sync_lead_ns;
     let outbox = Arc::new(Outbox::new(64));

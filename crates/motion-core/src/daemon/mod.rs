@@ -491,10 +491,10 @@ pub fn run_timed(
     let mut deadline = start_ns;
     while !stop.load(Ordering::Relaxed) {
         realtime::sleep_until(deadline);
-        let woke = realtime::now_ns();
+        let woke = realtime::monotonic_ns();
         stats.lateness.record(woke.saturating_sub(deadline));
         hard_loop.step(woke, sink, commands, stats);
-        let done = realtime::now_ns();
+        let done = realtime::monotonic_ns();
         stats.compute.record(done - woke);
         after_cycle(hard_loop, done);
         deadline += period_ns;

@@ -87,7 +87,7 @@ pub trait StagePorts {
     /// After the last setpoint of a graceful stop has been sent: the end of the stream.
     fn stream_end(&mut self) {}
     /// After a pass that sent setpoints: tell the readers that follow the stream (drive-io's
-    /// phase-locked SYNC, issue 20 item 3). Here in the stage, not the hard loop: a notify is
+    /// phase-locked SYNC). Here in the stage, not the hard loop: a notify is
     /// a syscall (10–30 µs).
     fn setpoints_sent(&mut self) {}
     /// Once per pass: the drive bus's newest SYNC schedule, if one was announced, into
@@ -168,7 +168,7 @@ pub fn run_publish_stage(
         }
         ports.sync_schedule(timeline);
         deadline += period_ns;
-        let now = super::realtime::now_ns();
+        let now = super::realtime::monotonic_ns();
         if now > deadline {
             deadline += (now - deadline) / period_ns * period_ns + period_ns;
         }

@@ -2,4 +2,4 @@
 //! absolute-deadline periodic timer: the stack's one implementation lives in `crs-rt`; the
 //! daemon's `[realtime]` section is its [`RealtimeSettings`].
 
-pub use crs_rt::{Applied, RealtimeReport, RealtimeSettings, apply, now_ns, sleep_until};
+pub use crs_rt::{Applied, RealtimeReport, RealtimeSettings, apply, monotonic_ns, sleep_until};

@@ -76,7 +76,11 @@ pub struct HistogramSnapshot {
 }
 
 impl HistogramSnapshot {
-    /// Upper bound (ns) of the bucket holding quantile `q` (0..1); the max for q = 1.
+    /// Upper bound (ns) of the bucket holding quantile `q` (0..1); the max for q = 1. The
+    /// quantile is the stack's one definition ([`crs_limits::quantile`], nearest rank ⌈q·n⌉)
+    /// read off the histogram: the upper edge of the bin that holds that rank, so it bounds
+    /// the exact nearest-rank sample from above by at most one bin width. The loop keeps a
+    /// histogram and not the samples because recording must not allocate or sort.
     pub fn quantile_ns(&self, q: f64) -> u64 {
         if self.count == 0 {
             return 0;
@@ -84,7 +88,7 @@ impl HistogramSnapshot {
         if q >= 1.0 {
             return self.max_ns;
         }
-        let target = (q * self.count as f64).ceil().max(1.0) as u64;
+        let target = crs_limits::quantile::nearest_rank(self.count, q);
         let mut acc = 0;
         for (i, n) in self.buckets.iter().enumerate() {
             acc += n;

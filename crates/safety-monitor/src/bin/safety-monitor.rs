@@ -8,7 +8,7 @@
 //! * `safety-monitor identity [--config F]`: print the platform identity the monitor computes.
 //! * `safety-monitor accept NEW.toml [--config F] [--yes]`: show the parameter diff of a
 //!   (re)calibrated platform against the one the monitor runs; with `--yes` make it the
-//!   monitor's accepted platform (issue 16).
+//!   monitor's accepted platform.
 
 use clap::{CommandFactory, Parser, Subcommand};
 use safety_monitor::daemon::{self, ResetReply};
