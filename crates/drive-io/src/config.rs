@@ -391,7 +391,7 @@ pub struct DrivesConfig {
     /// `[safety_heartbeat]`: validate the safety monitor's doubled heartbeat and its
     /// configuration signature, and stop without them (see [`crate::safety_watch`]). Parsed as
     /// optional so the drive side and tests can run without it, but the drive-io daemon refuses
-    /// to start without it ([`DrivesConfig::require_safety_heartbeat`], issue 16).
+    /// to start without it ([`DrivesConfig::require_safety_heartbeat`]).
     #[serde(default)]
     pub safety_heartbeat: Option<crate::safety_watch::SafetyWatchConfig>,
     /// `[[force_sensor]]`: force-measuring nodes (one per pulley load cell, CiA 404).

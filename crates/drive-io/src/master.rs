@@ -938,7 +938,7 @@ impl Master {
     }
 
     /// Handles an e-stop event from the process bus (anyone may stop). A Reset event does
-    /// nothing here: leaving the latch needs a [`ResetGrant`] ([`Master::reset`], issue 16).
+    /// nothing here: leaving the latch needs a [`ResetGrant`] ([`Master::reset`]).
     /// motion-core's announced end of its stream (`motion_state::STOPPING`, published after
     /// its last setpoint) makes the silence that follows a planned end, not a stale stream —
     /// provided that last setpoint commanded rest (see the Running phase).

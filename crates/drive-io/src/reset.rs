@@ -1,4 +1,4 @@
-//! drive-io's reset authority (issue 16; ISO 13849-1 §5.2.2: after a stop, only a manual reset
+//! drive-io's reset authority (ISO 13849-1 §5.2.2: after a stop, only a manual reset
 //! at the safety function, never the return of a signal or another process's say-so, may allow
 //! a restart).
 //!

@@ -27,7 +27,7 @@
 //! only with the monitor's reset of the epoch this watch verified ([`VerifiedEpoch`]; see
 //! docs/safety-monitor.md).
 //!
-//! SRDO configuration (issue 16): the monitor sends a doubled configuration signature
+//! SRDO configuration: the monitor sends a doubled configuration signature
 //! (`can_transport::safety_frame::ConfigSignature`) before every heartbeat pair; a RUN pair
 //! counts only if a signature carrying the CRC of THIS consumer's configuration
 //! ([`SafetyWatchConfig::srdo_crc`]: COB-ID, refresh time, validation time, pair window) arrived
@@ -51,7 +51,7 @@ use serde::Deserialize;
 /// tolerated within the validation time; 0 = repeat and backwards steps are not).
 pub const MAX_COUNTER_STEP: u16 = 16;
 
-/// `[safety_heartbeat]` table of drives.toml: mandatory for the drive-io daemon (issue 16; a
+/// `[safety_heartbeat]` table of drives.toml: mandatory for the drive-io daemon (a
 /// bench-only override exists), absent = no watch on the drive side (winch emulator, plant).
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -186,7 +186,7 @@ pub enum InhibitReason {
 /// A reset epoch read from a valid, complete RUN pair on the monitor's own COB-IDs while the
 /// watch permits: the only authenticated statement of "the monitor accepted reset number N"
 /// on this side of the bus. It has no public constructor; only [`SafetyWatch::verified_epoch`]
-/// makes one (type-state for drive-io's reset authority, issue 16).
+/// makes one (type-state for drive-io's reset authority).
 ///
 /// ```compile_fail,E0603
 /// let forged = drive_io::safety_watch::VerifiedEpoch(7);
@@ -229,7 +229,7 @@ pub struct SafetyWatch {
     trips: u64,
     /// A trip not yet reported through [`SafetyWatch::take_trip`].
     unreported: Option<(InhibitReason, u64)>,
-    /// The configuration signature pair (issue 16): receiver, own CRC, time of the last
+    /// The configuration signature pair: receiver, own CRC, time of the last
     /// signature with a matching CRC (0 = none), the last signature received.
     sig_rx: PairReceiver,
     srdo_crc: u16,
@@ -908,7 +908,7 @@ mod tests {
         );
     }
 
-    /// Issue 16, item 3: a consumer whose SRDO configuration differs from the producer's
+    /// A consumer whose SRDO configuration differs from the producer's
     /// (here its validation time) never permits, however many valid RUN pairs arrive; a
     /// signature mismatch while permitting inhibits at once; without any signature the RUN
     /// pairs release nothing; a signature that stops arriving inhibits after the validation time.

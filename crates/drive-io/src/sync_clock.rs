@@ -1,5 +1,5 @@
 //! When drive-io starts a cycle (RPDOs + SYNC): phase-locked to motion-core's setpoints, with
-//! its own clock as the fallback (issue 20 item 3, docs/can-protocol.md "Cycle timing").
+//! its own clock as the fallback (docs/can-protocol.md "Cycle timing").
 //!
 //! Free-running (`sync_source = "clock"`), drive-io's tick and motion-core's loop are two 1 ms
 //! clocks with an arbitrary phase: a setpoint waits on average half a period (p50 566 µs,

@@ -1,4 +1,4 @@
-//! Issue 16, item 3: every drives configuration shipped in config/ carries the safety
+//! Every drives configuration shipped in config/ carries the safety
 //! monitor's heartbeat (`[safety_heartbeat]`), and the bench-only override that lets drive-io
 //! start without it appears nowhere in config/ or systemd/.
 

@@ -147,7 +147,7 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
     let waypoints = "t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n\
          0.0,0.2,0.0,2.0,0.0,0.0,0.0\n0.0,-0.2,0.1,2.1,0.0,0.0,1.0\n\
          0.0,0.2,-0.1,1.9,1.0,0.0,0.0\n0.0,-0.2,0.0,2.0,0.0,0.0,0.0\n0.0,0.0,0.0,2.0,0.0,0.0,0.0\n";
-    // Stream owners (issue 16): this harness's fake motion core publishes setpoints and the
+    // Stream owners: this harness's fake motion core publishes setpoints and the
     // identity in most scenarios, and its replacement adapter publishes drive feedback in
     // `unknown_applied_sequence`; `foreign_publisher` runs the strict (shipped) owners.
     let strict = format!(

@@ -1,4 +1,4 @@
-//! Measured forces (issue 15): one cable's force leaves the band and stays out.
+//! Measured forces: one cable's force leaves the band and stays out.
 
 use crate::Res;
 use crate::scenarios::{Outcome, ms};

@@ -1,4 +1,4 @@
-//! Issue 16: process-bus hardening and configuration integrity: a forged STOPPING, a foreign
+//! Process-bus hardening and configuration integrity: a forged STOPPING, a foreign
 //! setpoint publisher, drives with another SRDO configuration, tampered safety configs.
 
 use crate::Res;

@@ -1,4 +1,4 @@
-//! Resets and who may give them (issue 16): refused while the fault persists, forged Reset
+//! Resets and who may give them: refused while the fault persists, forged Reset
 //! events, a reset while armed, the dead monitor's heartbeat replayed.
 
 use crate::Res;
@@ -56,7 +56,7 @@ pub fn reset_refused_then_accepted(st: &mut Stack) -> Res<Outcome> {
     })
 }
 
-// Reset authority (issue 16).
+// Reset authority.
 
 /// The safety pairs on the bus: the last decoded heartbeat, and NMT start frames seen.
 #[derive(Default)]
@@ -138,7 +138,7 @@ pub fn require_still_latched(st: &mut Stack, what: &str) -> Res<()> {
     Ok(())
 }
 
-/// Issue 16: Reset events forged by another process release nothing. From any other source
+/// Reset events forged by another process release nothing. From any other source
 /// they are ignored by motion-core and drive-io (and the tripped monitor re-asserts its
 /// e-stop); even with the monitor's source and a newer epoch (which motion-core cannot tell
 /// from the real thing: iceoryx2 0.10 does not authenticate publishers) drive-io stays latched
@@ -235,7 +235,7 @@ pub fn forged_reset_ignored(st: &mut Stack) -> Res<Outcome> {
     })
 }
 
-/// Issue 16: an operator reset while the monitor is armed changes nothing anywhere: no NMT
+/// An operator reset while the monitor is armed changes nothing anywhere: no NMT
 /// start, no Reset event, the same epoch, the drives keep following.
 pub fn reset_while_armed_changes_nothing(st: &mut Stack) -> Res<Outcome> {
     let c = st.fake()?.clone();
@@ -280,7 +280,7 @@ pub fn reset_while_armed_changes_nothing(st: &mut Stack) -> Res<Outcome> {
     })
 }
 
-/// Issue 16 (no self-release): after the monitor died, its recorded heartbeats replayed
+/// No self-release: after the monitor died, its recorded heartbeats replayed
 /// verbatim, then continued with fresh counters and the same epoch, never release the drives'
 /// watch or drive-io.
 pub fn replayed_heartbeat_after_monitor_death(st: &mut Stack) -> Res<Outcome> {
