@@ -159,13 +159,17 @@ done
 # The .deb under a real systemd in a Debian guest (tools/systemd-boot-test.sh: install,
 # upgrade of the running stack, isolation, readiness, a ride, the monitor killed, a clean stop;
 # docs/install.md, "The systemd boot test"). Root file system and kernel cached in $CRS_VCAN_CACHE.
-# Not run yet: it does not pass reliably (2026-11-27, after drive-io takes the drives' STO under
-# an overdue heartbeat as the watch's own stop: 3 runs, 0 passed; the monitor kill gave its one
-# error line where drive-io was not already stopped; still failing: trips while the stack
-# starts, from whole-guest stalls of 0.5-1.7 s on this shared TCG host (the monitor's own-frame check, the heartbeat pair window,
-# the 200 ms validation bound); docs/install.md, "Status").
-skip "HIL: the .deb under a real systemd (Debian guest)" \
-  "not reliable yet: start-up trips from whole-guest stalls under TCG on a loaded host (the monitor's own-frame check, the safety heartbeat's 200 ms bound); docs/install.md; run by hand: bash tools/systemd-boot-test.sh"
+# It passes since the monitor remembers its own frames for the longest reader stall its
+# configuration allows (a guest stall had made it read its own echo as impersonation): 2026-11-27
+# on a quiet host, 5 runs, 5 passed, 92-104 s warm, 126 s with a cold cache (rootfs and kernel
+# built). On a host loaded by other builds the guest stalls 0.5-1.7 s and start-up can trip
+# (docs/install.md, "Status"): CI must run on a quiet machine.
+if [ "${CRS_SKIP_HIL:-0}" = 1 ]; then
+  skip "HIL: the .deb under a real systemd (Debian guest)" "CRS_SKIP_HIL=1"
+else
+  suite "HIL: the .deb under a real systemd (Debian guest: install, upgrade, isolation, a ride, the monitor killed, a clean stop)" \
+    bash tools/systemd-boot-test.sh
+fi
 suite "Debian package: layout, conffiles, man pages of every binary (tools/deb-test.sh)" bash tools/deb-test.sh
 
 # The operator console in headless Chromium against a running `crs sim`, and the ecosystem's
