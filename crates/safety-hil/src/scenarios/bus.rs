@@ -3,7 +3,7 @@
 
 use crate::Res;
 use crate::configs::home_length;
-use crate::scenarios::{Outcome, ms};
+use crate::scenarios::{Outcome, ms, trip_ms};
 use crate::stack::{Stack, open_bus};
 use crs_ipc::monotonic_ns;
 use safety_monitor::Cause;
@@ -67,7 +67,7 @@ pub fn forged_rpdo_with(st: &mut Stack, controlword: u16) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "rpdo_mismatch cable 4".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!("forged RPDO1 (controlword {controlword:#06x}) 300 mm off φ*(x)"),
     })
@@ -95,7 +95,7 @@ pub fn can_bus_error(st: &mut Stack, error: can_transport::BusErrorFrame) -> Res
             "can_bus_error ({}); drive-io BUS_ERROR",
             error.condition().name()
         ),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!("injected error frame {error}"),
     })
@@ -133,7 +133,7 @@ pub fn stop_frame_lost(st: &mut Stack) -> Res<Outcome> {
     }
     Ok(Outcome {
         cause: "dq_limit; NMT stop unsent → heartbeat inhibit".into(),
-        detect_ms: ms(t_cross, ev.timestamp_ns),
+        detect_ms: trip_ms(t_cross, ev.timestamp_ns),
         stop_ms: ms(t_cross, stopped),
         note: "every NMT frame of the monitor fails (ENOBUFS injected); drives stay NMT operational, brake on the STOP pair".into(),
     })

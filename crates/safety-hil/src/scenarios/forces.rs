@@ -1,7 +1,7 @@
 //! Measured forces: one cable's force leaves the band and stays out.
 
 use crate::Res;
-use crate::scenarios::{Outcome, ms};
+use crate::scenarios::{Outcome, ms, trip_ms};
 use crate::stack::Stack;
 use safety_monitor::Cause;
 
@@ -23,7 +23,7 @@ pub fn force_fault(st: &mut Stack, cable: usize, force_n: f64, cause: Cause) -> 
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: format!("{cause} cable {cable}"),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!(
             "emulated load cell reports {force_n} N (t0 = control file written; 8 of 16 readings)"

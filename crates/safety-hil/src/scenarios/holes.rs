@@ -7,7 +7,7 @@
 use crate::Res;
 use crate::configs::home_length;
 use crate::scenarios::reset_authority::{BusSpy, require_still_latched, spy_pairs};
-use crate::scenarios::{Outcome, ms};
+use crate::scenarios::{Outcome, ms, trip_ms};
 use crate::stack::{Stack, describe_answer, open_bus};
 use crs_ipc::{EventKind, IpcNode, ProcessId, StateEvent};
 use safety_monitor::Cause;
@@ -27,7 +27,7 @@ pub fn jump_from_rest(st: &mut Stack) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "motion_acceleration".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: "hold, then 4 mm per 1 ms setpoint (4 m/s) with consistent lengths".into(),
     })
@@ -139,7 +139,7 @@ pub fn flutter_force(st: &mut Stack) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "force_slack cable 2 (flutter)".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!("200 N / 3 kN alternating every 25 ms; {n} changes before the trip"),
     })
@@ -164,7 +164,7 @@ pub fn impersonation_under_isolation(st: &mut Stack) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "impersonation".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!(
             "one RUN pair 0x101/0x102 of epoch {} from another node",
@@ -196,7 +196,7 @@ pub fn state_event_flood(st: &mut Stack) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: Cause::from_code(ev.detail).map_or("?".into(), |c| c.to_string()),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: "2000 events of version 0xDEAD, the operator's e-stop among them".into(),
     })
@@ -238,7 +238,7 @@ pub fn timestamp_jump(st: &mut Stack) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "rpdo_mismatch after a timestamp jump".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!(
             "timestamps +10 000 s for {jumped} setpoints, then a forged RPDO1 300 mm off"
@@ -260,7 +260,7 @@ pub fn estop_circuit_pressed(st: &mut Stack) -> Res<Outcome> {
     require_still_latched(st, "e-stop button released")?;
     Ok(Outcome {
         cause: "estop_circuit".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: "safety I/O node input bit 0 opened (control file), then closed: still latched"
             .into(),
@@ -496,7 +496,7 @@ pub fn stale_published_feedback(st: &mut Stack) -> Res<Outcome> {
     };
     let e1 = st.emu();
     let ev = finish(r.map(|ev| Outcome {
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         ..Outcome::default()
     }))?;
     let _ = bus_thread.join();

@@ -3,7 +3,7 @@
 
 use crate::Res;
 use crate::emulator::DEMAND_FOLLOW;
-use crate::scenarios::{Outcome, ms};
+use crate::scenarios::{Outcome, ms, trip_ms};
 use crate::stack::Stack;
 use crs_ipc::{BusState, EventKind, IpcNode, ProcessId, StateEvent, monotonic_ns};
 use safety_monitor::Cause;
@@ -31,7 +31,7 @@ pub fn forged_stopping(st: &mut Stack) -> Res<Outcome> {
     })?;
     Ok(Outcome {
         cause: "unplanned_stream_end".into(),
-        detect_ms: ms(t0, trip.timestamp_ns),
+        detect_ms: trip_ms(t0, trip.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: "STOPPING forged mid-plan by another process; motion-core e-stopped".into(),
     })
@@ -51,7 +51,7 @@ pub fn foreign_publisher(st: &mut Stack) -> Res<Outcome> {
     }
     Ok(Outcome {
         cause: "foreign_publisher".into(),
-        detect_ms: ms(t0, trip.timestamp_ns),
+        detect_ms: trip_ms(t0, trip.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: "setpoint stream opened by safety-hil (valid setpoints, right identity)".into(),
     })

@@ -2,7 +2,7 @@
 //! killed (and replaced by a faulty adapter), the monitor killed.
 
 use crate::Res;
-use crate::scenarios::{Outcome, ms};
+use crate::scenarios::{Outcome, ms, trip_ms};
 use crate::stack::{Stack, open_bus};
 use crs_ipc::{BusState, DriveFeedback, IpcNode, monotonic_ns};
 use safety_monitor::Cause;
@@ -31,7 +31,7 @@ pub fn motion_core_fault(st: &mut Stack, sig: i32) -> Res<Outcome> {
     }
     Ok(Outcome {
         cause: "setpoint_silence".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: if sig == libc::SIGSTOP {
             "SIGSTOP; after SIGCONT still braked".into()
@@ -67,7 +67,7 @@ pub fn kill_drive_io(st: &mut Stack) -> Res<Outcome> {
     }
     Ok(Outcome {
         cause: Cause::from_code(ev.detail).map_or("?".into(), |c| c.to_string()),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: "drives NMT-stopped by the monitor's own socket".into(),
     })
@@ -197,7 +197,7 @@ pub fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "following_unchecked".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!(
             "drive-io replaced ({:.0} ms gap): Running feedback, applied sequence never published",

@@ -3,7 +3,7 @@
 
 use crate::Res;
 use crate::emulator::DEMAND_FOLLOW;
-use crate::scenarios::{Outcome, ms};
+use crate::scenarios::{Outcome, ms, trip_ms};
 use crate::stack::{Stack, open_bus};
 use crs_ipc::{BusState, EventKind, IpcNode, ProcessId, StateEvent, monotonic_ns};
 use safety_monitor::Cause;
@@ -274,7 +274,7 @@ pub fn reset_while_armed_changes_nothing(st: &mut Stack) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "none (reset while armed); then setpoint_silence".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!("answer {text:?}; no NMT start, no Reset event, epoch {epoch} unchanged"),
     })

@@ -6,7 +6,7 @@ use crate::Res;
 use crate::configs::home_length;
 use crate::emulator::DEMAND_FOLLOW;
 use crate::fake_motion::FakeCtl;
-use crate::scenarios::{Outcome, ms};
+use crate::scenarios::{Outcome, ms, trip_ms};
 use crate::stack::Stack;
 use crs_ipc::{BusState, monotonic_ns};
 use safety_monitor::Cause;
@@ -26,7 +26,7 @@ pub fn offset_101mm(st: &mut Stack) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "dq_limit cable 3".into(),
-        detect_ms: ms(t_cross, ev.timestamp_ns),
+        detect_ms: trip_ms(t_cross, ev.timestamp_ns),
         stop_ms: ms(t_cross, stopped),
         note: "ramp 0.1 m/s; t0 = first setpoint > 100 mm".into(),
     })
@@ -65,7 +65,7 @@ pub fn offset_99mm(st: &mut Stack) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "none at 99 mm (1.5 s held, cable 6 followed); then setpoint_silence".into(),
-        detect_ms: ms(t_pause, ev.timestamp_ns),
+        detect_ms: trip_ms(t_pause, ev.timestamp_ns),
         stop_ms: ms(t_pause, stopped),
         note: "times: from the publisher's stop".into(),
     })
@@ -88,7 +88,7 @@ pub fn publisher_fault(
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: name.into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: note.into(),
     })
@@ -124,7 +124,7 @@ pub fn identity_mismatch(st: &mut Stack) -> Res<Outcome> {
     let t0 = c.wrong_identity_sent_ns.load(Ordering::Relaxed);
     Ok(Outcome {
         cause: "identity_mismatch".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: "re-announced identity with one byte changed (t0 = its announcement)".into(),
     })
@@ -141,7 +141,7 @@ pub fn pose_jump_inside_box(st: &mut Stack) -> Res<Outcome> {
     let stopped = st.require_braked()?;
     Ok(Outcome {
         cause: "motion_velocity".into(),
-        detect_ms: ms(t0, ev.timestamp_ns),
+        detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: "consistent pose + lengths jump 200 mm in one period".into(),
     })
