@@ -1230,7 +1230,7 @@ fn a_drive_leaving_operation_under_a_live_heartbeat_is_still_a_fault() {
 
 /// Every drive switching its torque off at once (no safety watch involved): one event, one
 /// line for its cause (the first drive, and how many) and the stop — not one line per drive
-/// (on main: "drive ignores the target position" per drive, bit 12 of a statusword in which
+/// (it was: "drive ignores the target position" per drive, bit 12 of a statusword in which
 /// it is undefined).
 #[test]
 fn every_drive_switching_off_is_one_fault_line_not_one_per_drive() {
