@@ -20,11 +20,16 @@
 //! * Tests isolate themselves with a service-name prefix: [`IpcNode::with_prefix`] or the
 //!   `CRS_IPC_PREFIX` environment variable read by [`IpcNode::new`].
 
+mod codes;
 pub mod identity_golden;
 mod payloads;
 pub mod ride_control;
 pub mod topics;
 
+pub use codes::{
+    FaultCode, MonitorCode, MonitorState, MotionState, PLAN_OPEN_END, PlantState, TripCause,
+    UnknownCode,
+};
 pub use payloads::*;
 pub use topics::Topic;
 

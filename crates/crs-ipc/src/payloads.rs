@@ -2,6 +2,9 @@
 //! CLOCK_MONOTONIC ([`crate::monotonic_ns`]). Arrays have fixed capacity [`MAX_CABLES`] and a
 //! `cable_count`; entries at index >= `cable_count` are unspecified (zero by convention).
 
+use crate::codes::{
+    FaultCode, MonitorCode, MonitorState, MotionState, PlantState, TripCause, UnknownCode,
+};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of this contract; bump on any layout or meaning change (also part of the type names).
@@ -84,20 +87,20 @@ impl BusState {
     }
 }
 
-/// Reason codes in `DriveFeedback::fault_code` / `StateEvent::detail`.
+/// [`FaultCode`] values as bare `u32`: for drive-io until it is converted to the enum.
 pub mod fault_code {
-    pub const NONE: u32 = 0;
-    pub const HEARTBEAT_LOST: u32 = 1;
-    pub const EMCY: u32 = 2;
-    pub const DRIVE_FAULT_BIT: u32 = 3;
-    pub const BOOT_TIMEOUT: u32 = 4;
-    pub const SETPOINT_INVALID: u32 = 5;
-    pub const SETPOINT_STEP: u32 = 6;
-    pub const UNEXPECTED_STATE: u32 = 7;
-    pub const BUS_ERROR: u32 = 8;
-    pub const PDO_TIMEOUT: u32 = 9;
-    /// A drive's measured cable force beyond drive-io's hard limit.
-    pub const FORCE_LIMIT: u32 = 10;
+    use crate::FaultCode;
+    pub const NONE: u32 = FaultCode::None as u32;
+    pub const HEARTBEAT_LOST: u32 = FaultCode::HeartbeatLost as u32;
+    pub const EMCY: u32 = FaultCode::Emcy as u32;
+    pub const DRIVE_FAULT_BIT: u32 = FaultCode::DriveFaultBit as u32;
+    pub const BOOT_TIMEOUT: u32 = FaultCode::BootTimeout as u32;
+    pub const SETPOINT_INVALID: u32 = FaultCode::SetpointInvalid as u32;
+    pub const SETPOINT_STEP: u32 = FaultCode::SetpointStep as u32;
+    pub const UNEXPECTED_STATE: u32 = FaultCode::UnexpectedState as u32;
+    pub const BUS_ERROR: u32 = FaultCode::BusError as u32;
+    pub const PDO_TIMEOUT: u32 = FaultCode::PdoTimeout as u32;
+    pub const FORCE_LIMIT: u32 = FaultCode::ForceLimit as u32;
 }
 
 /// Drive feedback of one SYNC cycle, published by drive-io.
@@ -117,7 +120,7 @@ pub struct DriveFeedback {
     pub applied_setpoint_write_ns: u64,
     /// [`BusState`] as u32.
     pub bus_state: u32,
-    /// A [`fault_code`] value.
+    /// A [`FaultCode`] value.
     pub fault_code: u32,
     /// Node id of the drive that caused the fault (0 = none).
     pub fault_node: u32,
@@ -148,8 +151,8 @@ impl Default for DriveFeedback {
             timestamp_ns: 0,
             applied_setpoint_sequence: 0,
             applied_setpoint_write_ns: 0,
-            bus_state: BusState::Booting as u32,
-            fault_code: fault_code::NONE,
+            bus_state: BusState::Booting.into(),
+            fault_code: FaultCode::None.into(),
             fault_node: 0,
             last_emcy_code: 0,
             setpoint_age_cycles: 0,
@@ -163,45 +166,16 @@ impl Default for DriveFeedback {
     }
 }
 
-/// `StateEvent::state` / `Heartbeat::state` codes of motion-core (source MotionCore).
+/// [`MotionState`] values as bare `u32`: for drive-io until it is converted to the enum.
 pub mod motion_state {
-    /// Following a plan, a ride or a cueing stream (the setpoints move).
-    pub const RUNNING: u32 = 1;
-    /// Latched e-stop (kind Fault).
-    pub const ESTOPPED: u32 = 2;
-    /// Refused a reference (latched, kind Fault).
-    pub const REFUSED: u32 = 3;
-    /// Idle and holding: nothing to follow (before the first ride, after a plan or ride
-    /// ended or an abort braked to rest, after a reset of a latch); the setpoints stand still.
-    pub const HOLDING: u32 = 4;
-    /// Graceful end of the setpoint stream: published (kind StateChanged) AFTER the last
-    /// setpoint, so the safety monitor disarms its silence watch instead of tripping.
-    pub const STOPPING: u32 = 5;
-    /// motion-core announces its plan (kind StateChanged): the sequence number of
-    /// the plan's LAST setpoint, low 32 bits in `detail`, high 32 bits in `detail_node`
-    /// ([`crate::StateEvent::plan`], [`crate::StateEvent::plan_end`]). Re-announced about once
-    /// per second. The safety monitor accepts [`STOPPING`] only once the stream has reached
-    /// that setpoint and holds. Not a loop state: it never appears in a heartbeat.
-    pub const PLAN: u32 = 6;
-    /// [`PLAN`] end of a stream without a planned end (the motion-cueing input).
-    pub const PLAN_OPEN_END: u64 = u64::MAX;
-}
-
-/// `StateEvent::state` / `Heartbeat::state` codes of the safety monitor (source
-/// SafetyMonitor): `safety_monitor::StateCode::code` encodes them, crs-console decodes them.
-pub mod monitor_state {
-    /// No fault latched: the safety heartbeat says RUN.
-    pub const ARMED: u32 = 1;
-    /// E-stop latched until the monitor accepts an operator reset.
-    pub const TRIPPED: u32 = 2;
-    /// Start-up: not every drive verified yet, the safety heartbeat says STOP.
-    pub const NOT_READY: u32 = 3;
-    /// `StateEvent::detail` of the monitor's epoch announcement (source SafetyMonitor, kind
-    /// StateChanged, `state` = the monitor's state code, `detail_node` = its current reset
-    /// epoch): published about once a second and right before each of its Reset events, so a
-    /// consumer without CAN access (motion-core) knows which epoch the CURRENT monitor
-    /// announces and accepts only a Reset of that epoch.
-    pub const EPOCH_ANNOUNCE: u32 = 0x5AFE_0010;
+    use crate::MotionState;
+    pub const RUNNING: u32 = MotionState::Running as u32;
+    pub const ESTOPPED: u32 = MotionState::EStopped as u32;
+    pub const REFUSED: u32 = MotionState::Refused as u32;
+    pub const HOLDING: u32 = MotionState::Holding as u32;
+    pub const STOPPING: u32 = MotionState::Stopping as u32;
+    pub const PLAN: u32 = MotionState::Plan as u32;
+    pub const PLAN_OPEN_END: u64 = crate::PLAN_OPEN_END;
 }
 
 /// Who publishes a [`StateEvent`] / [`Heartbeat`].
@@ -227,7 +201,7 @@ pub enum EventKind {
     Reset = 2,
     /// A process changed state (`state` holds the process-specific state code).
     StateChanged = 3,
-    /// A process detected a fault (`detail` holds a [`fault_code`]).
+    /// A process detected a fault (`detail` holds a [`FaultCode`]).
     Fault = 4,
 }
 
@@ -243,7 +217,8 @@ pub struct StateEvent {
     pub kind: u32,
     /// Process-specific state code (drive-io: [`BusState`]).
     pub state: u32,
-    /// Detail code (e.g. [`fault_code`]), node id in `detail_node`.
+    /// Detail code (e.g. [`FaultCode`], [`MonitorCode`], [`TripCause`]), node id in
+    /// `detail_node`.
     pub detail: u32,
     pub detail_node: u32,
     pub sequence: u64,
@@ -314,10 +289,10 @@ impl ProcessId {
 
 impl StateEvent {
     /// motion-core's plan announcement: the stream's last planned setpoint is `end_sequence`
-    /// ([`motion_state::PLAN`]).
+    /// ([`MotionState::Plan`]).
     pub fn plan(end_sequence: u64, sequence: u64) -> Self {
         let mut ev = Self::new(ProcessId::MotionCore, EventKind::StateChanged, sequence);
-        ev.state = motion_state::PLAN;
+        ev.state = MotionState::Plan.into();
         ev.detail = end_sequence as u32;
         ev.detail_node = (end_sequence >> 32) as u32;
         ev
@@ -326,8 +301,84 @@ impl StateEvent {
     /// The announced plan end if this is a plan announcement (any source: the receiver decides
     /// whom it believes).
     pub fn plan_end(&self) -> Option<u64> {
-        (self.kind == EventKind::StateChanged as u32 && self.state == motion_state::PLAN)
+        (self.is_state_changed() && self.state == MotionState::Plan.code())
             .then(|| u64::from(self.detail) | (u64::from(self.detail_node) << 32))
+    }
+
+    /// motion-core's state change (source MotionCore, kind StateChanged).
+    pub fn motion(state: MotionState, sequence: u64) -> Self {
+        let mut ev = Self::new(ProcessId::MotionCore, EventKind::StateChanged, sequence);
+        ev.state = state.into();
+        ev
+    }
+
+    /// The safety monitor's state change with a [`MonitorCode`] in `detail` (source
+    /// SafetyMonitor, kind StateChanged); `detail_node` stays 0.
+    pub fn monitor(state: MonitorState, detail: MonitorCode, sequence: u64) -> Self {
+        let mut ev = Self::new(ProcessId::SafetyMonitor, EventKind::StateChanged, sequence);
+        ev.state = state.into();
+        ev.detail = detail.into();
+        ev
+    }
+
+    /// An operator's reset request on the process bus (source Operator, kind StateChanged,
+    /// state [`MonitorCode::ResetRequest`]): the monitor never accepts one from there.
+    pub fn reset_request(sequence: u64) -> Self {
+        let mut ev = Self::new(ProcessId::Operator, EventKind::StateChanged, sequence);
+        ev.state = MonitorCode::ResetRequest.into();
+        ev
+    }
+
+    /// Kind StateChanged.
+    pub fn is_state_changed(&self) -> bool {
+        self.kind == EventKind::StateChanged as u32
+    }
+
+    /// The publisher (unknown codes are [`ProcessId::Unknown`]).
+    pub fn source(&self) -> ProcessId {
+        ProcessId::from_code(self.source)
+    }
+
+    /// `state` read as motion-core's state code.
+    pub fn motion_state(&self) -> Result<MotionState, UnknownCode> {
+        MotionState::try_from(self.state)
+    }
+
+    /// `state` read as the safety monitor's state code.
+    pub fn monitor_state(&self) -> Result<MonitorState, UnknownCode> {
+        MonitorState::try_from(self.state)
+    }
+
+    /// `state` read as drive-io's bus state.
+    pub fn bus_state(&self) -> Result<BusState, UnknownCode> {
+        BusState::try_from(self.state)
+    }
+
+    /// The [`MonitorCode`] in `detail` of a StateChanged event (any source: the receiver
+    /// decides whom it believes); None for another kind or a code that is none of them.
+    pub fn monitor_code(&self) -> Option<MonitorCode> {
+        self.is_state_changed()
+            .then(|| MonitorCode::try_from(self.detail).ok())
+            .flatten()
+    }
+
+    /// A reset request: kind StateChanged with `state` [`MonitorCode::ResetRequest`] (any
+    /// source).
+    pub fn is_reset_request(&self) -> bool {
+        self.is_state_changed() && self.state == MonitorCode::ResetRequest.code()
+    }
+
+    /// The end of motion-core's setpoint stream: source MotionCore, kind StateChanged, state
+    /// [`MotionState::Stopping`].
+    pub fn is_stream_end(&self) -> bool {
+        self.source == ProcessId::MotionCore as u32
+            && self.is_state_changed()
+            && self.state == MotionState::Stopping.code()
+    }
+
+    /// `detail` read as the safety monitor's trip cause (its EStop events).
+    pub fn trip_cause(&self) -> Result<TripCause, UnknownCode> {
+        TripCause::try_from(self.detail)
     }
 
     /// The event as a typed [`Event`].
@@ -374,6 +425,8 @@ pub struct Heartbeat {
 }
 
 impl Heartbeat {
+    /// A heartbeat with a raw state code: for drive-io until it is converted, and for tests
+    /// of foreign codes. The stack's processes use the typed constructors below.
     pub fn new(source: ProcessId, state: u32, sequence: u64) -> Self {
         Self {
             version: CONTRACT_VERSION,
@@ -383,6 +436,55 @@ impl Heartbeat {
             sequence,
             timestamp_ns: crate::monotonic_ns(),
         }
+    }
+}
+
+impl Heartbeat {
+    /// motion-core's heartbeat.
+    pub fn motion(state: MotionState, sequence: u64) -> Self {
+        Self::new(ProcessId::MotionCore, state.into(), sequence)
+    }
+
+    /// The safety monitor's heartbeat.
+    pub fn monitor(state: MonitorState, sequence: u64) -> Self {
+        Self::new(ProcessId::SafetyMonitor, state.into(), sequence)
+    }
+
+    /// drive-io's heartbeat.
+    pub fn bus(state: BusState, sequence: u64) -> Self {
+        Self::new(ProcessId::DriveIo, state.into(), sequence)
+    }
+
+    /// The simulated plant's heartbeat.
+    pub fn plant(state: PlantState, sequence: u64) -> Self {
+        Self::new(ProcessId::SimPlant, state.into(), sequence)
+    }
+
+    /// The publisher (unknown codes are [`ProcessId::Unknown`]).
+    pub fn source(&self) -> ProcessId {
+        ProcessId::from_code(self.source)
+    }
+
+    /// `state` read as motion-core's state code.
+    pub fn motion_state(&self) -> Result<MotionState, UnknownCode> {
+        MotionState::try_from(self.state)
+    }
+
+    /// `state` read as the safety monitor's state code.
+    pub fn monitor_state(&self) -> Result<MonitorState, UnknownCode> {
+        MonitorState::try_from(self.state)
+    }
+}
+
+impl DriveFeedback {
+    /// `bus_state` as drive-io's [`BusState`].
+    pub fn bus(&self) -> Result<BusState, UnknownCode> {
+        BusState::try_from(self.bus_state)
+    }
+
+    /// `fault_code` as a [`FaultCode`].
+    pub fn fault(&self) -> Result<FaultCode, UnknownCode> {
+        FaultCode::try_from(self.fault_code)
     }
 }
 
@@ -546,7 +648,7 @@ impl CueingPose {
 #[repr(C)]
 pub struct LoopStatsSample {
     pub version: u32,
-    /// Loop state code (1 running, 2 e-stopped, 3 refused, 4 holding).
+    /// Loop state code ([`MotionState`]: running, e-stopped, refused, holding).
     pub state: u32,
     pub timestamp_ns: u64,
     pub cycles: u64,
@@ -581,6 +683,13 @@ impl Default for LoopStatsSample {
             compute_p99_ns: 0,
             compute_max_ns: 0,
         }
+    }
+}
+
+impl LoopStatsSample {
+    /// `state` read as motion-core's state code.
+    pub fn motion_state(&self) -> Result<MotionState, UnknownCode> {
+        MotionState::try_from(self.state)
     }
 }
 

@@ -122,8 +122,9 @@ fn state_events_decode_to_their_kind_and_unknown_ones_are_errors() {
             source: ProcessId::Operator
         })
     );
-    let mut s = StateEvent::new(ProcessId::MotionCore, EventKind::StateChanged, 3);
-    s.state = crs_ipc::motion_state::STOPPING;
+    let s = StateEvent::motion(crs_ipc::MotionState::Stopping, 3);
+    assert!(s.is_stream_end());
+    assert_eq!(s.motion_state(), Ok(crs_ipc::MotionState::Stopping));
     assert_eq!(
         s.decode(),
         Ok(Event::StateChanged {
