@@ -3,11 +3,10 @@
 
 use crate::ride::{ControlSeen, LoadedRide, RideSetup};
 use crs_ipc::{
-    BusState, DriveFeedback, EventKind, Heartbeat, JointSetpoint, LoopStatsSample, MAX_CABLES,
-    PlantTruth, ProcessId, StateEvent, motion_state,
+    BusState, DriveFeedback, EventKind, FaultCode, Heartbeat, JointSetpoint, LoopStatsSample,
+    MAX_CABLES, MonitorCode, MonitorState, MotionState, PlantState, PlantTruth, ProcessId,
+    StateEvent, TripCause,
 };
-use safety_monitor::Cause;
-use safety_monitor::daemon::{RESET_ACCEPTED, RESET_NOT_READY, RESET_NOT_TRIPPED, RESET_REFUSED};
 use serde::Serialize;
 use std::collections::VecDeque;
 use std::path::PathBuf;
@@ -187,48 +186,46 @@ pub fn process_name(code: u32) -> &'static str {
 
 /// motion-core's state code in words.
 pub fn motion_state_name(code: u32) -> String {
-    match code {
-        motion_state::RUNNING => "running".into(),
-        motion_state::ESTOPPED => "E-STOPPED (latched)".into(),
-        motion_state::REFUSED => "REFUSED a reference (latched)".into(),
-        motion_state::HOLDING => "idle, holding".into(),
-        motion_state::STOPPING => "stream ended".into(),
-        motion_state::PLAN => "plan announced".into(),
-        c => format!("state {c}"),
+    match MotionState::try_from(code) {
+        Ok(MotionState::Running) => "running".into(),
+        Ok(MotionState::EStopped) => "E-STOPPED (latched)".into(),
+        Ok(MotionState::Refused) => "REFUSED a reference (latched)".into(),
+        Ok(MotionState::Holding) => "idle, holding".into(),
+        Ok(MotionState::Stopping) => "stream ended".into(),
+        Ok(MotionState::Plan) => "plan announced".into(),
+        Err(e) => format!("state {}", e.code),
     }
 }
 
 /// The safety monitor's state code in words.
 pub fn monitor_state_name(code: u32) -> String {
-    use crs_ipc::monitor_state::*;
-    match code {
-        ARMED => "armed".into(),
-        TRIPPED => "TRIPPED".into(),
-        NOT_READY => "not ready".into(),
-        c => format!("state {c}"),
+    match MonitorState::try_from(code) {
+        Ok(MonitorState::Armed) => "armed".into(),
+        Ok(MonitorState::Tripped) => "TRIPPED".into(),
+        Ok(MonitorState::NotReady) => "not ready".into(),
+        Err(e) => format!("state {}", e.code),
     }
 }
 
 /// drive-io's bus state code in words.
 pub fn bus_state_name(code: u32) -> String {
-    BusState::from_u32(code).map_or(format!("state {code}"), |b| format!("{b:?}"))
+    BusState::try_from(code).map_or(format!("state {code}"), |b| format!("{b:?}"))
 }
 
 fn fault_name(code: u32) -> String {
-    use crs_ipc::fault_code::*;
-    match code {
-        NONE => "none".into(),
-        HEARTBEAT_LOST => "drive heartbeat lost".into(),
-        EMCY => "EMCY".into(),
-        DRIVE_FAULT_BIT => "drive fault bit".into(),
-        BOOT_TIMEOUT => "boot timeout".into(),
-        SETPOINT_INVALID => "invalid setpoint".into(),
-        SETPOINT_STEP => "setpoint step".into(),
-        UNEXPECTED_STATE => "unexpected drive state".into(),
-        BUS_ERROR => "bus error".into(),
-        PDO_TIMEOUT => "PDO timeout".into(),
-        FORCE_LIMIT => "cable force beyond the hard limit".into(),
-        c => format!("fault code {c}"),
+    match FaultCode::try_from(code) {
+        Ok(FaultCode::None) => "none".into(),
+        Ok(FaultCode::HeartbeatLost) => "drive heartbeat lost".into(),
+        Ok(FaultCode::Emcy) => "EMCY".into(),
+        Ok(FaultCode::DriveFaultBit) => "drive fault bit".into(),
+        Ok(FaultCode::BootTimeout) => "boot timeout".into(),
+        Ok(FaultCode::SetpointInvalid) => "invalid setpoint".into(),
+        Ok(FaultCode::SetpointStep) => "setpoint step".into(),
+        Ok(FaultCode::UnexpectedState) => "unexpected drive state".into(),
+        Ok(FaultCode::BusError) => "bus error".into(),
+        Ok(FaultCode::PdoTimeout) => "PDO timeout".into(),
+        Ok(FaultCode::ForceLimit) => "cable force beyond the hard limit".into(),
+        Err(e) => format!("fault code {}", e.code),
     }
 }
 
@@ -259,7 +256,8 @@ pub fn estop_in_words(e: &StateEvent) -> Option<String> {
 /// The trip-log text of a state event (what happened, its cause in words), or None for
 /// routine state changes.
 pub fn describe_event(e: &StateEvent) -> Option<(String, String)> {
-    let cause_name = |c: u32| Cause::from_code(c).map_or(format!("cause {c}"), |c| c.to_string());
+    let cause_name =
+        |c: u32| TripCause::try_from(c).map_or(format!("cause {c}"), |c| c.to_string());
     if e.kind == EventKind::EStop as u32 {
         let cause = if e.source == ProcessId::SafetyMonitor as u32 {
             let mut s = cause_name(e.detail);
@@ -293,12 +291,16 @@ pub fn describe_event(e: &StateEvent) -> Option<(String, String)> {
     if e.kind == EventKind::Reset as u32 {
         return Some(("reset".into(), "stack released".into()));
     }
-    if e.source == ProcessId::SafetyMonitor as u32 && e.kind == EventKind::StateChanged as u32 {
-        return match e.detail {
-            RESET_ACCEPTED => Some(("reset request".into(), "accepted".into())),
-            RESET_NOT_TRIPPED => Some(("reset request".into(), "not tripped".into())),
-            RESET_NOT_READY => Some(("reset request".into(), "REFUSED: monitor not ready".into())),
-            RESET_REFUSED => Some((
+    if e.source() == ProcessId::SafetyMonitor {
+        return match e.monitor_code() {
+            Some(MonitorCode::ResetAccepted) => Some(("reset request".into(), "accepted".into())),
+            Some(MonitorCode::ResetNotTripped) => {
+                Some(("reset request".into(), "not tripped".into()))
+            }
+            Some(MonitorCode::ResetNotReady) => {
+                Some(("reset request".into(), "REFUSED: monitor not ready".into()))
+            }
+            Some(MonitorCode::ResetRefused) => Some((
                 "reset request".into(),
                 format!("REFUSED: {} persists", cause_name(e.detail_node)),
             )),
@@ -443,19 +445,22 @@ impl Collector {
             ),
         };
         let monitor = &self.processes[ProcessId::SafetyMonitor as usize];
-        let armed = self.monitor_state == Some(crs_ipc::monitor_state::ARMED) && alive(monitor);
+        let monitor_state = self
+            .monitor_state
+            .and_then(|s| MonitorState::try_from(s).ok());
+        let armed = monitor_state == Some(MonitorState::Armed) && alive(monitor);
         let monitor_words = match (self.monitor_state, alive(monitor)) {
             (None, _) => "no data from the safety monitor".to_string(),
             (Some(s), true) => monitor_state_name(s),
             (Some(s), false) => format!("no heartbeat (last state: {})", monitor_state_name(s)),
         };
         let mut latched = Vec::new();
-        if self.monitor_state == Some(crs_ipc::monitor_state::TRIPPED) {
+        if monitor_state == Some(MonitorState::Tripped) {
             latched.push("the safety monitor is TRIPPED (reset at the monitor)".to_string());
         }
         if let Some(m) = self
             .motion_state
-            .filter(|m| *m == motion_state::ESTOPPED || *m == motion_state::REFUSED)
+            .filter(|m| MotionState::try_from(*m).is_ok_and(MotionState::is_latched))
         {
             latched.push(format!("motion-core: {}", motion_state_name(m)));
         }
@@ -625,9 +630,11 @@ impl Collector {
                     x if x == ProcessId::MotionCore as u32 => motion_state_name(p.state),
                     x if x == ProcessId::SafetyMonitor as u32 => monitor_state_name(p.state),
                     x if x == ProcessId::DriveIo as u32 => bus_state_name(p.state),
-                    x if x == ProcessId::SimPlant as u32 => {
-                        if p.state != 0 { "braked" } else { "released" }.into()
-                    }
+                    x if x == ProcessId::SimPlant as u32 => match PlantState::try_from(p.state) {
+                        Ok(PlantState::Braked) => "braked".into(),
+                        Ok(PlantState::Free) => "released".into(),
+                        Err(e) => format!("state {}", e.code),
+                    },
                     _ => format!("state {}", p.state),
                 },
                 heartbeats: p.heartbeats,
@@ -735,12 +742,12 @@ mod tests {
     #[test]
     fn monitor_trip_names_its_cause() {
         let mut e = StateEvent::new(ProcessId::SafetyMonitor, EventKind::EStop, 1);
-        e.detail = u32::from(Cause::DqLimit.code());
+        e.detail = TripCause::DqLimit.into();
         e.detail_node = 3;
         let (kind, cause) = describe_event(&e).expect("an e-stop is logged");
         assert_eq!(kind, "E-STOP");
         assert!(cause.contains("cable 3"), "{cause}");
-        assert!(cause.contains(&Cause::DqLimit.to_string()), "{cause}");
+        assert!(cause.contains(&TripCause::DqLimit.to_string()), "{cause}");
     }
 
     #[test]

@@ -78,7 +78,7 @@ fn status_reports_no_stack_then_live_values_and_stop_reaches_the_bus() {
     let t0 = Instant::now();
     let mut seen = None;
     for seq in 1.. {
-        hb.publish(&Heartbeat::new(ProcessId::MotionCore, 1, seq))
+        hb.publish(&Heartbeat::motion(crs_ipc::MotionState::Running, seq))
             .unwrap();
         let mut s = JointSetpoint {
             sequence: seq,
@@ -354,7 +354,7 @@ fn start_ride_goes_to_the_control_socket_only_while_the_pre_ride_checks_pass() {
     );
 
     // A fake stack: motion-core and an armed monitor beating.
-    let monitor = std::sync::Arc::new(AtomicU32::new(crs_ipc::monitor_state::ARMED));
+    let monitor = std::sync::Arc::new(AtomicU32::new(crs_ipc::MonitorState::Armed.into()));
     let done = std::sync::Arc::new(AtomicBool::new(false));
     let (m2, d2, p2) = (monitor.clone(), done.clone(), p.clone());
     let beats = std::thread::spawn(move || {
@@ -364,14 +364,10 @@ fn start_ride_goes_to_the_control_socket_only_while_the_pre_ride_checks_pass() {
             if d2.load(Ordering::Relaxed) {
                 break;
             }
-            hb.publish(&Heartbeat::new(ProcessId::MotionCore, 1, seq))
+            hb.publish(&Heartbeat::motion(crs_ipc::MotionState::Running, seq))
                 .unwrap();
-            hb.publish(&Heartbeat::new(
-                ProcessId::SafetyMonitor,
-                m2.load(Ordering::Relaxed),
-                seq,
-            ))
-            .unwrap();
+            let state = crs_ipc::MonitorState::try_from(m2.load(Ordering::Relaxed)).unwrap();
+            hb.publish(&Heartbeat::monitor(state, seq)).unwrap();
             std::thread::sleep(Duration::from_millis(20));
         }
     });
@@ -404,7 +400,7 @@ fn start_ride_goes_to_the_control_socket_only_while_the_pre_ride_checks_pass() {
     );
 
     // A tripped monitor: the start is refused again and nothing reaches the socket.
-    monitor.store(crs_ipc::monitor_state::TRIPPED, Ordering::Relaxed);
+    monitor.store(crs_ipc::MonitorState::Tripped.into(), Ordering::Relaxed);
     wait_status(addr, "the trip latched", |s| {
         s["ride"]["start_allowed"] == false && !check_ok(s, "no latched trip")
     });

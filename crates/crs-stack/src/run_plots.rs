@@ -17,8 +17,8 @@ use crs_console::status::{
     bus_state_name, describe_event, monitor_state_name, motion_state_name, process_name,
 };
 use crs_ipc::{
-    EventKind, JointSetpoint, LoopStatsSample, MAX_CABLES, PlantTruth, ProcessId, StateEvent,
-    motion_state,
+    EventKind, JointSetpoint, LoopStatsSample, MAX_CABLES, PLAN_OPEN_END, PlantTruth, ProcessId,
+    StateEvent,
 };
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -187,7 +187,7 @@ impl RunRecord {
             }
             self.plan_end = Some(end);
             return Some((
-                if end == motion_state::PLAN_OPEN_END {
+                if end == PLAN_OPEN_END {
                     "plan announced: open end (cueing input)".to_string()
                 } else {
                     format!("plan announced: ends with setpoint #{end}")
@@ -200,13 +200,13 @@ impl RunRecord {
             return None;
         }
         *slot = Some(e.state);
-        let words = match e.source {
-            x if x == ProcessId::MotionCore as u32 && e.state == motion_state::STOPPING => {
+        let words = match e.source() {
+            ProcessId::MotionCore if e.is_stream_end() => {
                 "end of the setpoint stream (planned)".to_string()
             }
-            x if x == ProcessId::MotionCore as u32 => motion_state_name(e.state),
-            x if x == ProcessId::SafetyMonitor as u32 => monitor_state_name(e.state),
-            x if x == ProcessId::DriveIo as u32 => format!("bus {}", bus_state_name(e.state)),
+            ProcessId::MotionCore => motion_state_name(e.state),
+            ProcessId::SafetyMonitor => monitor_state_name(e.state),
+            ProcessId::DriveIo => format!("bus {}", bus_state_name(e.state)),
             _ => format!("state {}", e.state),
         };
         Some((words, false))
@@ -1236,17 +1236,18 @@ mod tests {
             let mut e = StateEvent::plan(9000, s);
             e.timestamp_ns = 1_100_000_000 + s * 100_000_000;
             r.event(&e);
-            let mut m = StateEvent::new(ProcessId::SafetyMonitor, EventKind::StateChanged, s);
-            m.state = crs_ipc::monitor_state::ARMED;
-            m.detail = crs_ipc::monitor_state::EPOCH_ANNOUNCE;
+            let mut m = StateEvent::monitor(
+                crs_ipc::MonitorState::Armed,
+                crs_ipc::MonitorCode::EpochAnnounce,
+                s,
+            );
             m.timestamp_ns = e.timestamp_ns;
             r.event(&m);
         }
         let mut e = StateEvent::plan(9500, 9);
         e.timestamp_ns = 2_000_000_000;
         r.event(&e);
-        let mut e = StateEvent::new(ProcessId::MotionCore, EventKind::StateChanged, 10);
-        e.state = motion_state::STOPPING;
+        let mut e = StateEvent::motion(crs_ipc::MotionState::Stopping, 10);
         e.timestamp_ns = 2_900_000_000;
         r.event(&e);
         let words: Vec<String> = r

@@ -766,14 +766,13 @@ pub fn execute_observed(
         .concat(),
         &[],
     )?;
-    let operational = crs_ipc::BusState::Ready as u32;
     wait_for(
         "the drives to be operational (NMT boot, SDO, CiA 402 enable)",
         30.0,
         &mut || {
             let mut ok = false;
             while let Ok(Some(f)) = feedback.receive() {
-                ok |= f.bus_state == operational;
+                ok |= f.bus() == Ok(crs_ipc::BusState::Ready);
             }
             ok
         },
@@ -896,8 +895,8 @@ pub fn execute_observed(
                 // The monitor's trip on somebody's e-stop event echoes that event: the stop
                 // belongs to its sender. The two arrive from different publishers in no fixed
                 // order, so the echo only names the stop if no sender's event is seen.
-                let echo = e.source == ProcessId::SafetyMonitor as u32
-                    && e.detail == safety_monitor::Cause::EStopEvent as u32;
+                let echo = e.source() == ProcessId::SafetyMonitor
+                    && e.trip_cause() == Ok(crs_ipc::TripCause::EStopEvent);
                 if echo {
                     echoed_stop.get_or_insert(words);
                 } else {
@@ -911,12 +910,12 @@ pub fn execute_observed(
             }
         }
         while let Ok(Some(f)) = feedback.receive() {
-            if f.fault_code != 0 {
+            if f.fault() != Ok(crs_ipc::FaultCode::None) {
                 sum.drive_faults += 1;
             }
-            was_running |= f.bus_state == crs_ipc::BusState::Running as u32;
-            if was_running && bus_stop.is_none() && f.bus_state != crs_ipc::BusState::Running as u32
-            {
+            let running = f.bus() == Ok(crs_ipc::BusState::Running);
+            was_running |= running;
+            if was_running && bus_stop.is_none() && !running {
                 bus_stop = Some((f.timestamp_ns, f.bus_state));
             }
             if let Some(r) = recorder.as_mut() {
@@ -1005,7 +1004,7 @@ pub fn execute_observed(
     if let Some((ts, state)) = bus_stop
         && last_sp_ns > ts + 50_000_000
     {
-        let name = crs_ipc::BusState::from_u32(state)
+        let name = crs_ipc::BusState::try_from(state)
             .map_or(format!("state {state}"), |b| format!("{b:?}"));
         sum.bus_stopped_during_run = Some(format!(
             "{name} {:.3} s before the last setpoint",

@@ -3,7 +3,7 @@
 mod common;
 
 use cdpr_model::Pose;
-use crs_ipc::{IpcNode, JointSetpoint};
+use crs_ipc::{IpcNode, JointSetpoint, MotionState};
 use motion_core::daemon::cycle::{Cycle, Reference, Rejection};
 use motion_core::daemon::outbox::{
     Outbox, OutboxSink, StagePorts, publish_pass, run_publish_stage,
@@ -59,7 +59,7 @@ fn announcement(epoch: u32, t: u64) -> crs_ipc::StateEvent {
         crs_ipc::EventKind::StateChanged,
         1,
     );
-    ev.detail = crs_ipc::monitor_state::EPOCH_ANNOUNCE;
+    ev.detail = crs_ipc::MonitorCode::EpochAnnounce.into();
     ev.detail_node = epoch;
     ev.timestamp_ns = t;
     ev
@@ -164,10 +164,10 @@ impl StagePorts for StageIox {
     fn setpoint(&mut self, sp: &JointSetpoint) -> bool {
         self.setpoints.publish(sp).is_ok()
     }
-    fn heartbeat(&mut self, _state: u32, _overruns: u64) {
+    fn heartbeat(&mut self, _state: MotionState, _overruns: u64) {
         self.heartbeats += 1;
     }
-    fn state_changed(&mut self, _from: u32, _to: u32) {}
+    fn state_changed(&mut self, _from: MotionState, _to: MotionState) {}
 }
 
 struct Script(VecDeque<(u64, Command)>, u64);
@@ -269,16 +269,16 @@ fn publish_stage_heartbeats_only_while_the_loop_advances() {
     #[derive(Default)]
     struct Count {
         heartbeats: u64,
-        changes: Vec<(u32, u32)>,
+        changes: Vec<(MotionState, MotionState)>,
     }
     impl StagePorts for Count {
         fn setpoint(&mut self, _: &JointSetpoint) -> bool {
             true
         }
-        fn heartbeat(&mut self, _: u32, _: u64) {
+        fn heartbeat(&mut self, _: MotionState, _: u64) {
             self.heartbeats += 1;
         }
-        fn state_changed(&mut self, from: u32, to: u32) {
+        fn state_changed(&mut self, from: MotionState, to: MotionState) {
             self.changes.push((from, to));
         }
     }
@@ -300,7 +300,17 @@ fn publish_stage_heartbeats_only_while_the_loop_advances() {
         .state
         .store(LoopState::EStopped.code(), Ordering::Relaxed);
     publish_pass(&outbox, &stats, &mut p, &mut c, &mut s, 10);
-    assert_eq!(p.changes, vec![(1, 2)]);
+    assert_eq!(
+        p.changes,
+        vec![(MotionState::Running, MotionState::EStopped)]
+    );
+    assert_eq!(
+        p.changes
+            .iter()
+            .map(|&(a, b)| (u32::from(a), u32::from(b)))
+            .collect::<Vec<_>>(),
+        vec![(1, 2)]
+    );
     // A full outbox drops (counted) instead of blocking the loop.
     let mut sink = OutboxSink(&outbox);
     let ok: Vec<bool> = (0..6)
@@ -321,8 +331,8 @@ fn publish_stage_ends_the_stream_after_the_last_setpoint() {
             self.0.push("setpoint");
             true
         }
-        fn heartbeat(&mut self, _: u32, _: u64) {}
-        fn state_changed(&mut self, _: u32, _: u32) {}
+        fn heartbeat(&mut self, _: MotionState, _: u64) {}
+        fn state_changed(&mut self, _: MotionState, _: MotionState) {}
         fn announce(&mut self) {
             self.0.push("announce");
         }

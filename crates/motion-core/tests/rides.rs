@@ -251,7 +251,7 @@ fn the_loop_comes_up_idle_holding_home_and_moves_only_for_a_verified_ride() {
         crs_ipc::EventKind::StateChanged,
         1,
     );
-    announce.detail = crs_ipc::monitor_state::EPOCH_ANNOUNCE;
+    announce.detail = crs_ipc::MonitorCode::EpochAnnounce.into();
     announce.detail_node = 1;
     announce.timestamp_ns = now;
     assert!(
@@ -285,7 +285,7 @@ fn the_loop_comes_up_idle_holding_home_and_moves_only_for_a_verified_ride() {
 /// it as "what motion-core does").
 #[test]
 fn heartbeats_say_holding_while_idle_and_running_only_while_a_ride_moves() {
-    use crs_ipc::motion_state::{ESTOPPED, HOLDING, RUNNING};
+    use crs_ipc::MotionState::{EStopped as ESTOPPED, Holding as HOLDING, Running as RUNNING};
     let mut r = rig();
     // From the very first cycle (no waypoints: nothing to wait for), for as long as it idles.
     for n in 0..300 {
@@ -293,7 +293,7 @@ fn heartbeats_say_holding_while_idle_and_running_only_while_a_ride_moves() {
         assert_eq!(
             r.hl.state_code(),
             HOLDING,
-            "idle cycle {n} reports {}",
+            "idle cycle {n} reports {:?}",
             r.hl.state_code()
         );
         assert!(r.hl.is_idle());

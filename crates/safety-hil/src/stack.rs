@@ -15,13 +15,11 @@ use crate::emulator::{
 };
 use crate::fake_motion::{Fake, FakeCtl};
 use crs_ipc::{
-    BusState, DriveFeedback, EventKind, Heartbeat, IpcNode, ProcessId, StateEvent, monotonic_ns,
+    BusState, DriveFeedback, EventKind, Heartbeat, IpcNode, MonitorCode, MonitorState, MotionState,
+    ProcessId, StateEvent, monotonic_ns,
 };
 use crs_stack::supervisor::{Supervisor, Usage};
 use safety_monitor::Cause;
-use safety_monitor::daemon::{
-    RESET_ACCEPTED, RESET_DENIED, RESET_EXHAUSTED, RESET_NOT_READY, RESET_NOT_TRIPPED,
-};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
@@ -49,14 +47,15 @@ pub struct Stack {
     /// Monitor e-stop events (kind EStop from the monitor).
     pub monitor_estops: Vec<StateEvent>,
     pub monitor_resets: u32,
-    pub monitor_state: Option<u32>,
+    pub monitor_state: Option<MonitorState>,
     /// Monitor heartbeats (one per monitor cycle) and drive-io feedback samples (one per SYNC
     /// cycle) received: scenarios pace their observations by these, never by sleeps.
     pub monitor_heartbeats: u64,
     pub feedback_count: u64,
     /// motion-core's loop state (its heartbeat), if it runs.
-    pub motion_state: Option<u32>,
-    /// The monitor's answers to reset requests (StateChanged with a RESET_* detail), in order.
+    pub motion_state: Option<MotionState>,
+    /// The monitor's answers to reset requests (StateChanged with a reset answer
+    /// [`MonitorCode`] in `detail`), in order.
     pub reset_answers: Vec<StateEvent>,
     /// The scenario's fault was injected (or its stack was up and following): a failure from
     /// here on is the scenario's verdict, never retried; before it, a stall of the stack.
@@ -282,7 +281,7 @@ impl Stack {
 
     /// The operator turns the safety I/O node's reset key and releases it: waits (on the
     /// safety bus) until the node reported the key turned, then released, then for the
-    /// monitor's answer; returns it (its `detail`: RESET_ACCEPTED, ...).
+    /// monitor's answer; returns it (its `detail`: [`MonitorCode::ResetAccepted`], ...).
     pub fn turn_reset_key(&mut self) -> Res<StateEvent> {
         let mut spy = open_bus(self, "safety")?;
         let cob = 0x180 + u16::from(crate::configs::SAFETY_IO_NODE);
@@ -315,8 +314,7 @@ impl Stack {
     }
 
     pub fn bus_state(&self) -> Option<BusState> {
-        self.last_feedback
-            .and_then(|f| BusState::from_u32(f.bus_state))
+        self.last_feedback.and_then(|f| f.bus().ok())
     }
 
     pub fn poll(&mut self) -> Res<()> {
@@ -325,24 +323,22 @@ impl Stack {
             self.feedback_count += 1;
         }
         while let Ok(Some(e)) = self.events.receive() {
-            if e.source == ProcessId::SafetyMonitor as u32 {
+            if e.source() == ProcessId::SafetyMonitor {
                 if e.kind == EventKind::EStop as u32 {
                     self.monitor_estops.push(e);
                 } else if e.kind == EventKind::Reset as u32 {
                     self.monitor_resets += 1;
-                } else if e.kind == EventKind::StateChanged as u32
-                    && (RESET_ACCEPTED..=RESET_EXHAUSTED).contains(&e.detail)
-                {
+                } else if e.monitor_code().is_some_and(MonitorCode::is_reset_answer) {
                     self.reset_answers.push(e);
                 }
             }
         }
         while let Ok(Some(h)) = self.heartbeats.receive() {
-            if h.source == ProcessId::SafetyMonitor as u32 {
-                self.monitor_state = Some(h.state);
+            if h.source() == ProcessId::SafetyMonitor {
+                self.monitor_state = h.monitor_state().ok();
                 self.monitor_heartbeats += 1;
-            } else if h.source == ProcessId::MotionCore as u32 {
-                self.motion_state = Some(h.state);
+            } else if h.source() == ProcessId::MotionCore {
+                self.motion_state = h.motion_state().ok();
             }
         }
         if let Some(e) = self.procs.exited() {
@@ -479,7 +475,7 @@ impl Stack {
 
     /// motion-core's state from a heartbeat newer than the monitor's next one (its stage
     /// publishes every few cycles, so an older one may still describe the state before).
-    pub fn fresh_motion_state(&mut self) -> Res<Option<u32>> {
+    pub fn fresh_motion_state(&mut self) -> Res<Option<MotionState>> {
         let h0 = self.monitor_heartbeats;
         self.motion_state = None;
         self.wait("motion-core's heartbeat", 10.0, |s| {
@@ -614,15 +610,17 @@ impl Stack {
 
 /// (accepted or nothing to reset, the answer in words) of a monitor's reset answer event.
 pub fn describe_answer(a: &StateEvent) -> (bool, String) {
-    match a.detail {
-        RESET_ACCEPTED => (true, "reset accepted".into()),
-        RESET_NOT_TRIPPED => (
+    match a.monitor_code() {
+        Some(MonitorCode::ResetAccepted) => (true, "reset accepted".into()),
+        Some(MonitorCode::ResetNotTripped) => (
             true,
             "reset not needed: nothing was latched, nothing changed".into(),
         ),
-        RESET_NOT_READY => (false, "reset REFUSED: the monitor is not ready".into()),
-        RESET_DENIED => (false, "reset DENIED: not an authorised channel".into()),
-        RESET_EXHAUSTED => (false, "reset REFUSED: instance exhausted".into()),
+        Some(MonitorCode::ResetNotReady) => {
+            (false, "reset REFUSED: the monitor is not ready".into())
+        }
+        Some(MonitorCode::ResetDenied) => (false, "reset DENIED: not an authorised channel".into()),
+        Some(MonitorCode::ResetExhausted) => (false, "reset REFUSED: instance exhausted".into()),
         _ => (
             false,
             format!(

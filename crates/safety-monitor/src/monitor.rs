@@ -242,40 +242,9 @@ impl MonitorState {
 }
 
 /// The state as a code: [`MonitorState`] without its data, for comparisons and for the state
-/// code on the process bus (`Heartbeat::state` / `StateEvent::state`,
-/// [`crs_ipc::monitor_state`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum StateCode {
-    /// See [`MonitorState::NotReady`].
-    NotReady,
-    /// See [`MonitorState::Armed`].
-    Armed,
-    /// See [`MonitorState::Tripped`].
-    Tripped,
-}
-
-impl StateCode {
-    /// Code in `Heartbeat::state` / `StateEvent::state` (the contract's
-    /// [`crs_ipc::monitor_state`] codes; crs-console decodes the same constants).
-    pub fn code(self) -> u32 {
-        match self {
-            StateCode::Armed => crs_ipc::monitor_state::ARMED,
-            StateCode::Tripped => crs_ipc::monitor_state::TRIPPED,
-            StateCode::NotReady => crs_ipc::monitor_state::NOT_READY,
-        }
-    }
-
-    /// The state of a code received on the process bus; None for a code the contract does
-    /// not define.
-    pub fn from_code(code: u32) -> Option<StateCode> {
-        match code {
-            crs_ipc::monitor_state::ARMED => Some(StateCode::Armed),
-            crs_ipc::monitor_state::TRIPPED => Some(StateCode::Tripped),
-            crs_ipc::monitor_state::NOT_READY => Some(StateCode::NotReady),
-            _ => None,
-        }
-    }
-}
+/// code on the process bus (`Heartbeat::state` / `StateEvent::state`): the contract's
+/// [`crs_ipc::MonitorState`], which crs-console decodes.
+pub use crs_ipc::MonitorState as StateCode;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum IdentityState {
@@ -748,7 +717,7 @@ impl Monitor {
     }
 
     /// The producer announced its plan: `end` is the sequence number of its last planned
-    /// setpoint (`crs_ipc::motion_state::PLAN`; [`crs_ipc::motion_state::PLAN_OPEN_END`] for a
+    /// setpoint (`crs_ipc::MotionState::Plan`; [`crs_ipc::PLAN_OPEN_END`] for a
     /// stream without a planned end).
     pub fn on_plan_announced(&mut self, end: u64) {
         self.plan.end = Some(end);
@@ -762,7 +731,7 @@ impl Monitor {
             // operator ends the ride: accepted only while the platform holds, as at a plan's
             // end; while it moves, an end is refused (a forged STOPPING cannot disarm the
             // checks of a moving platform).
-            (Some(end), Some(_)) if end == crs_ipc::motion_state::PLAN_OPEN_END => {
+            (Some(end), Some(_)) if end == crs_ipc::PLAN_OPEN_END => {
                 self.plan.hold_run >= OPEN_END_HOLD_SETPOINTS
             }
             (Some(end), Some(last)) => last >= end && self.plan.hold_run >= PLAN_HOLD_SETPOINTS,
@@ -1152,7 +1121,7 @@ impl Monitor {
         }
         self.last_applied = fb.applied_setpoint_sequence;
         self.stats.feedback_checked += 1;
-        let state = BusState::from_u32(fb.bus_state);
+        let state = fb.bus().ok();
         if matches!(
             state,
             Some(BusState::EStop | BusState::Fault | BusState::StaleStop)

@@ -496,7 +496,7 @@ fn the_latch_holds_the_first_cause_and_logs_every_trip() {
         other => panic!("not tripped: {other:?}"),
     }
     assert_eq!(m.state().state_code(), StateCode::Tripped);
-    assert_eq!(m.state().code(), crs_ipc::monitor_state::TRIPPED);
+    assert_eq!(m.state().code(), u32::from(crs_ipc::MonitorState::Tripped));
     let hb = m.heartbeat(3);
     assert_eq!(hb.state, can_transport::safety_frame::SafetyState::Stop);
     assert_eq!(hb.cause, Cause::DqLimit.code());
@@ -1626,7 +1626,7 @@ fn stopping_is_accepted_only_at_the_end_of_the_announced_plan() {
 
     // A stream without a planned end (motion cueing) while it moves: refused.
     let mut m = monitor_with(|l| l.motion.check = false);
-    m.on_plan_announced(crs_ipc::motion_state::PLAN_OPEN_END);
+    m.on_plan_announced(crs_ipc::PLAN_OPEN_END);
     for k in 1..=15 {
         m.on_setpoint(&sp(k, moving(k), 0, 0.0));
     }
@@ -1637,7 +1637,7 @@ fn stopping_is_accepted_only_at_the_end_of_the_announced_plan() {
     );
     // ... and once it has held still long enough (the operator ended the ride): accepted.
     let mut m = monitor_with(|l| l.motion.check = false);
-    m.on_plan_announced(crs_ipc::motion_state::PLAN_OPEN_END);
+    m.on_plan_announced(crs_ipc::PLAN_OPEN_END);
     for k in 1..=15 {
         m.on_setpoint(&sp(k, moving(k), 0, 0.0));
     }
@@ -1666,21 +1666,20 @@ fn stopping_is_accepted_only_at_the_end_of_the_announced_plan() {
     assert_eq!(m.state_code(), StateCode::Armed);
 }
 
-/// The state codes on the process bus are the contract's (crs_ipc::monitor_state, which
+/// The state codes on the process bus are the contract's (crs_ipc::MonitorState, which
 /// crs-console decodes) and decode back to the same state.
 #[test]
 fn state_codes_are_the_contract_constants() {
-    use crs_ipc::monitor_state::{ARMED, NOT_READY, TRIPPED};
     for (s, code) in [
-        (StateCode::Armed, ARMED),
-        (StateCode::Tripped, TRIPPED),
-        (StateCode::NotReady, NOT_READY),
+        (StateCode::Armed, 1),
+        (StateCode::Tripped, 2),
+        (StateCode::NotReady, 3),
     ] {
         assert_eq!(s.code(), code);
-        assert_eq!(StateCode::from_code(code), Some(s));
+        assert_eq!(StateCode::try_from(code).ok(), Some(s));
     }
-    assert_eq!(StateCode::from_code(0), None);
-    assert_eq!(StateCode::from_code(4), None);
+    assert_eq!(StateCode::try_from(0).ok(), None);
+    assert_eq!(StateCode::try_from(4).ok(), None);
 }
 
 // ---- issue: the holes a reviewer finds ------------------------------------------------------

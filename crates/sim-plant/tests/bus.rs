@@ -356,7 +356,7 @@ fn home_lengths_option_homes_the_drives_to_the_controllers_full_command() {
         BusState::Running,
         "first setpoint accepted"
     );
-    assert_eq!(rig.feedback().fault_code, 0);
+    assert_eq!(rig.feedback().fault(), Ok(crs_ipc::FaultCode::None));
     let (dp, dr) = Pose::from_array(rig.plant.truth().pose).error_to(&home);
     assert!(dp < 1e-6 && dr < 1e-6, "plant left home: {dp} m, {dr} rad");
     // Move away and hold: the plant holds φ(x) + δ + q_off = φ(x) + q_off(default homing).
@@ -992,12 +992,12 @@ fn run_loop_with_drive_io_over_udp_follows_setpoints() {
     let result = (|| -> Result<(), String> {
         let t0 = Instant::now();
         let mut fb = DriveFeedback::default();
-        while BusState::from_u32(fb.bus_state) != Some(BusState::Ready) {
+        while fb.bus().ok() != Some(BusState::Ready) {
             if let Some(f) = feedback.latest().map_err(|e| e.to_string())? {
                 fb = f;
             }
             if t0.elapsed() > Duration::from_secs(30) {
-                return Err(format!("not Ready: {:?}", BusState::from_u32(fb.bus_state)));
+                return Err(format!("not Ready: {:?}", fb.bus().ok()));
             }
             std::thread::sleep(Duration::from_millis(2));
         }
@@ -1045,10 +1045,10 @@ fn run_loop_with_drive_io_over_udp_follows_setpoints() {
         if let Some(f) = feedback.latest().map_err(|e| e.to_string())? {
             fb = f;
         }
-        if BusState::from_u32(fb.bus_state) != Some(BusState::Running) {
+        if fb.bus().ok() != Some(BusState::Running) {
             return Err(format!(
                 "drive-io state {:?} (fault {} node {})",
-                BusState::from_u32(fb.bus_state),
+                fb.bus().ok(),
                 fb.fault_code,
                 fb.fault_node
             ));
@@ -1301,9 +1301,9 @@ fn slack_and_overload_raise_drive_faults_that_drive_io_sees() {
     let fb = *rig.feedback();
     assert_eq!(rig.master.state(), BusState::Fault);
     assert_eq!(
-        (fb.fault_code, fb.last_emcy_code),
+        (fb.fault(), fb.last_emcy_code),
         (
-            crs_ipc::fault_code::EMCY,
+            Ok(crs_ipc::FaultCode::Emcy),
             u32::from(sim_plant::bus::EMCY_CABLE_SLACK)
         )
     );
@@ -1373,7 +1373,7 @@ fn force_sensors_on_the_bus_report_the_plants_forces() {
     assert_eq!(drive.od_value(0x1801, 2), Some(10));
     rig.move_by([0.0, 0.0, 0.03, 0.0, 0.0, 0.0], 200, 50);
     let f = *rig.feedback();
-    assert_eq!(BusState::from_u32(f.bus_state), Some(BusState::Running));
+    assert_eq!(f.bus().ok(), Some(BusState::Running));
     let measured = rig.plant.measured_forces().to_vec();
     for (i, m) in measured.iter().enumerate() {
         assert!(

@@ -8,7 +8,7 @@ use crs_ipc::{
     WakeupNotifier,
 };
 use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
-use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
+use motion_core::daemon::outbox::{MotionStateCell, Outbox, OutboxSink, StagePorts};
 use motion_core::daemon::ride::{RideControl, RidePhase, RideSlot};
 use motion_core::daemon::ride_socket;
 use motion_core::daemon::stats::LoopStats;
@@ -108,9 +108,9 @@ impl StagePorts for IoxPorts {
     fn setpoint(&mut self, sp: &JointSetpoint) -> bool {
         self.setpoints.publish(sp).is_ok()
     }
-    fn heartbeat(&mut self, state: u32, overruns: u64) {
+    fn heartbeat(&mut self, state: crs_ipc::MotionState, overruns: u64) {
         self.hb_seq += 1;
-        let mut hb = Heartbeat::new(ProcessId::MotionCore, state, self.hb_seq);
+        let mut hb = Heartbeat::motion(state, self.hb_seq);
         hb.overruns = overruns.min(u32::MAX as u64) as u32;
         let _ = self.heartbeats.publish(&hb);
     }
@@ -118,7 +118,7 @@ impl StagePorts for IoxPorts {
         let lat = stats.lateness.snapshot();
         let cmp = stats.compute.snapshot();
         let s = LoopStatsSample {
-            state: outbox.state.load(Ordering::Relaxed),
+            state: outbox.state.load(Ordering::Relaxed).into(),
             timestamp_ns: realtime::monotonic_ns(),
             cycles: stats.cycles.load(Ordering::Relaxed),
             overruns: stats.overruns.load(Ordering::Relaxed),
@@ -181,18 +181,17 @@ impl StagePorts for IoxPorts {
     }
     fn stream_end(&mut self) {
         self.hb_seq += 1;
-        let mut ev = StateEvent::new(ProcessId::MotionCore, EventKind::StateChanged, self.hb_seq);
-        ev.state = crs_ipc::motion_state::STOPPING;
+        let ev = StateEvent::motion(crs_ipc::MotionState::Stopping, self.hb_seq);
         let _ = self.events.publish(&ev);
     }
-    fn state_changed(&mut self, _from: u32, to: u32) {
-        let kind = if LoopState::code_is_latched(to) {
+    fn state_changed(&mut self, _from: crs_ipc::MotionState, to: crs_ipc::MotionState) {
+        let kind = if to.is_latched() {
             EventKind::Fault
         } else {
             EventKind::StateChanged
         };
         let mut ev = StateEvent::new(ProcessId::MotionCore, kind, self.hb_seq);
-        ev.state = to;
+        ev.state = to.into();
         let _ = self.events.publish(&ev);
     }
 }
@@ -351,7 +350,7 @@ fn run(args: Args) -> Result<(), String> {
     // cycle, so the plan's last reference goes out as number `samples` (later if the planner
     // starved the loop). The cueing input has no planned end.
     let plan_end = if cueing {
-        crs_ipc::motion_state::PLAN_OPEN_END
+        crs_ipc::PLAN_OPEN_END
     } else {
         plan.samples as u64
     };
@@ -368,7 +367,7 @@ fn run(args: Args) -> Result<(), String> {
         // announced for a loop that never ran.
         outbox
             .state
-            .store(crs_ipc::motion_state::HOLDING, Ordering::Relaxed);
+            .store(crs_ipc::MotionState::Holding, Ordering::Relaxed);
     }
     let stats = Arc::new(LoopStats::default());
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
@@ -463,7 +462,7 @@ fn run(args: Args) -> Result<(), String> {
         libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
     }
 
-    let state_code = Arc::new(AtomicU32::new(LoopState::Running.code()));
+    let state_code = Arc::new(MotionStateCell::new(LoopState::Running.code()));
     let reporter = {
         let stats = stats.clone();
         let state_code = state_code.clone();
@@ -590,7 +589,7 @@ fn run(args: Args) -> Result<(), String> {
 fn report_loop(
     stats: &LoopStats,
     outbox: &Outbox,
-    state: &AtomicU32,
+    state: &MotionStateCell,
     interval_s: f64,
     file: Option<&std::path::Path>,
 ) {
@@ -622,7 +621,7 @@ fn report_loop(
             let lat = stats.lateness.snapshot();
             let cmp = stats.compute.snapshot();
             tracing::info!(
-                state = state.load(Ordering::Relaxed),
+                state = u32::from(state.load(Ordering::Relaxed)),
                 overruns = stats.overruns.load(Ordering::Relaxed),
                 "cycles {cycles}; lateness {}; compute {}",
                 lat.summary(),
@@ -635,7 +634,7 @@ fn report_loop(
                     "rejected": stats.rejected.load(Ordering::Relaxed),
                     "outbox_dropped": outbox.dropped.load(Ordering::Relaxed),
                     "publish_failures": outbox.publish_failures.load(Ordering::Relaxed),
-                    "state": state.load(Ordering::Relaxed),
+                    "state": u32::from(state.load(Ordering::Relaxed)),
                     "lateness_ns": {"p50": lat.quantile_ns(0.5), "p99": lat.quantile_ns(0.99), "p999": lat.quantile_ns(0.999), "max": lat.max_ns},
                     "compute_ns": {"p50": cmp.quantile_ns(0.5), "p99": cmp.quantile_ns(0.99), "p999": cmp.quantile_ns(0.999), "max": cmp.max_ns},
                 });

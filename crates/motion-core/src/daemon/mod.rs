@@ -140,9 +140,8 @@ impl ResetGate {
                 && now_ns.saturating_sub(stamp) <= age
         };
         if ev.version == crs_ipc::CONTRACT_VERSION
-            && ev.source == crs_ipc::ProcessId::SafetyMonitor as u32
-            && ev.kind == crs_ipc::EventKind::StateChanged as u32
-            && ev.detail == crs_ipc::monitor_state::EPOCH_ANNOUNCE
+            && ev.source() == crs_ipc::ProcessId::SafetyMonitor
+            && ev.monitor_code() == Some(crs_ipc::MonitorCode::EpochAnnounce)
         {
             if fresh(ev.timestamp_ns, ANNOUNCEMENT_MAX_AGE_NS)
                 && self.announced.is_none_or(|(_, t)| ev.timestamp_ns >= t)
@@ -203,22 +202,18 @@ pub enum LoopState {
 }
 
 impl LoopState {
-    /// True for the codes of the latched states (e-stop, refused reference).
-    pub fn code_is_latched(code: u32) -> bool {
-        code == crs_ipc::motion_state::ESTOPPED || code == crs_ipc::motion_state::REFUSED
-    }
-
     /// True in the latched states, which only a [`Command::Reset`] leaves.
     pub fn is_latched(&self) -> bool {
         matches!(self, LoopState::EStopped | LoopState::Refused(_))
     }
 
-    pub fn code(&self) -> u32 {
+    /// The state on the process bus.
+    pub fn code(&self) -> crs_ipc::MotionState {
         match self {
-            LoopState::Running => crs_ipc::motion_state::RUNNING,
-            LoopState::EStopped => crs_ipc::motion_state::ESTOPPED,
-            LoopState::Refused(_) => crs_ipc::motion_state::REFUSED,
-            LoopState::Holding => crs_ipc::motion_state::HOLDING,
+            LoopState::Running => crs_ipc::MotionState::Running,
+            LoopState::EStopped => crs_ipc::MotionState::EStopped,
+            LoopState::Refused(_) => crs_ipc::MotionState::Refused,
+            LoopState::Holding => crs_ipc::MotionState::Holding,
         }
     }
 }
@@ -320,12 +315,12 @@ impl HardLoop {
         }
     }
 
-    /// The state code heartbeats and state events carry (`crs_ipc::motion_state`): what the
+    /// The state heartbeats and state events carry ([`crs_ipc::MotionState`]): what the
     /// loop does, so an idle loop says HOLDING, never RUNNING. [`Self::state`] stays
     /// `Running` while idle: the loop still computes and checks the held reference each cycle.
-    pub fn state_code(&self) -> u32 {
+    pub fn state_code(&self) -> crs_ipc::MotionState {
         match self.state {
-            LoopState::Running if self.is_idle() => crs_ipc::motion_state::HOLDING,
+            LoopState::Running if self.is_idle() => crs_ipc::MotionState::Holding,
             s => s.code(),
         }
     }

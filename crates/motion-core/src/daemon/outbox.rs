@@ -16,8 +16,31 @@ use super::LoopState;
 use super::SetpointSink;
 use super::stats::LoopStats;
 use crossbeam::queue::ArrayQueue;
-use crs_ipc::JointSetpoint;
+use crs_ipc::{JointSetpoint, MotionState};
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+
+/// A [`MotionState`] shared between threads: the loop stores, the stage and the reporter load.
+/// One atomic word (the state's wire code); only [`MotionStateCell::store`] writes it.
+#[derive(Debug)]
+pub struct MotionStateCell(AtomicU32);
+
+impl MotionStateCell {
+    pub fn new(state: MotionState) -> Self {
+        Self(AtomicU32::new(state.into()))
+    }
+
+    #[inline]
+    pub fn store(&self, state: MotionState, order: Ordering) {
+        self.0.store(state.into(), order);
+    }
+
+    /// The stored state. Only `store` writes the word, with a valid code, so the fallback
+    /// never applies; were it to, a latched state is the reading that permits nothing.
+    #[inline]
+    pub fn load(&self, order: Ordering) -> MotionState {
+        MotionState::try_from(self.0.load(order)).unwrap_or(MotionState::EStopped)
+    }
+}
 
 /// Phase of the publish stage after the loop's tick: the loop's compute is ~1-3 µs, its wake-up
 /// lateness under load up to ~100 µs (benches/RESULTS.md), so 200 µs leaves the setpoint ready.
@@ -26,8 +49,8 @@ pub const PUBLISH_PHASE_NS: u64 = 200_000;
 /// Shared between the loop (producer) and the publish stage (consumer). Allocated once at start.
 pub struct Outbox {
     setpoints: ArrayQueue<JointSetpoint>,
-    /// Loop state code after the last cycle ([`LoopState::code`]).
-    pub state: AtomicU32,
+    /// Loop state after the last cycle ([`super::HardLoop::state_code`]).
+    pub state: MotionStateCell,
     /// Setpoints the loop could not hand over because the queue was full (stage stalled).
     pub dropped: AtomicU64,
     /// Setpoints the stage failed to publish over IPC.
@@ -39,7 +62,7 @@ impl Outbox {
     pub fn new(capacity: usize) -> Self {
         Self {
             setpoints: ArrayQueue::new(capacity.max(1)),
-            state: AtomicU32::new(LoopState::Running.code()),
+            state: MotionStateCell::new(LoopState::Running.code()),
             dropped: AtomicU64::new(0),
             publish_failures: AtomicU64::new(0),
         }
@@ -76,10 +99,10 @@ impl SetpointSink for OutboxSink<'_> {
 /// What the publish stage sends; the daemon implements it with iceoryx2 ports.
 pub trait StagePorts {
     fn setpoint(&mut self, sp: &JointSetpoint) -> bool;
-    /// Heartbeat of the loop: `state` code, `overruns` so far.
-    fn heartbeat(&mut self, state: u32, overruns: u64);
-    /// The loop changed state (`from` → `to` codes).
-    fn state_changed(&mut self, from: u32, to: u32);
+    /// Heartbeat of the loop: its `state`, `overruns` so far.
+    fn heartbeat(&mut self, state: MotionState, overruns: u64);
+    /// The loop changed state (`from` → `to`).
+    fn state_changed(&mut self, from: MotionState, to: MotionState);
     /// Periodic loop statistics (about once per second; the stage may allocate, the loop not).
     fn loop_stats(&mut self, _stats: &LoopStats, _outbox: &Outbox) {}
     /// About once per second: re-announce what late subscribers need (the platform identity).
@@ -102,7 +125,7 @@ pub fn publish_pass(
     stats: &LoopStats,
     ports: &mut impl StagePorts,
     last_cycles: &mut u64,
-    last_state: &mut u32,
+    last_state: &mut MotionState,
     heartbeat_every_cycles: u64,
 ) -> usize {
     let mut n = 0;

@@ -87,7 +87,7 @@ pub fn can_bus_error(st: &mut Stack, error: can_transport::BusErrorFrame) -> Res
     st.wait(
         "drive-io stopped on the error frame (Fault BUS_ERROR)",
         10.0,
-        |s| Ok(s.last_feedback.map(|f| f.fault_code) == Some(crs_ipc::fault_code::BUS_ERROR)),
+        |s| Ok(s.last_feedback.and_then(|f| f.fault().ok()) == Some(crs_ipc::FaultCode::BusError)),
     )?;
     let stopped = st.require_braked()?;
     Ok(Outcome {

@@ -11,7 +11,6 @@ use crate::scenarios::{Outcome, ms, trip_ms};
 use crate::stack::{Stack, describe_answer, open_bus};
 use crs_ipc::{EventKind, IpcNode, ProcessId, StateEvent};
 use safety_monitor::Cause;
-use safety_monitor::daemon::{RESET_DENIED, RESET_REQUEST};
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
@@ -49,8 +48,7 @@ pub fn reset_from_foreign_process(st: &mut Stack) -> Res<Outcome> {
     let node = IpcNode::with_prefix("shil-foreign", &st.prefix).map_err(|e| e.to_string())?;
     let publ = node.publisher::<StateEvent>().map_err(|e| e.to_string())?;
     let answers0 = st.reset_answers.len();
-    let mut req = StateEvent::new(ProcessId::Operator, EventKind::StateChanged, 7);
-    req.state = RESET_REQUEST;
+    let req = StateEvent::reset_request(7);
     publ.publish(&req).map_err(|e| e.to_string())?;
     st.wait(
         "the monitor's answer to the process-bus request",
@@ -58,7 +56,7 @@ pub fn reset_from_foreign_process(st: &mut Stack) -> Res<Outcome> {
         |s| Ok(s.reset_answers.len() > answers0),
     )?;
     let a = st.reset_answers[answers0];
-    if a.detail != RESET_DENIED {
+    if a.monitor_code() != Some(crs_ipc::MonitorCode::ResetDenied) {
         return Err(format!(
             "a reset request on the process bus was not denied: {}",
             describe_answer(&a).1

@@ -5,7 +5,7 @@ use crate::Res;
 use crate::emulator::DEMAND_FOLLOW;
 use crate::scenarios::{Outcome, ms, trip_ms};
 use crate::stack::Stack;
-use crs_ipc::{BusState, EventKind, IpcNode, ProcessId, StateEvent, monotonic_ns};
+use crs_ipc::{BusState, IpcNode, StateEvent, monotonic_ns};
 use safety_monitor::Cause;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -20,14 +20,13 @@ pub fn forged_stopping(st: &mut Stack) -> Res<Outcome> {
     st.wait_following(true)?;
     let node = IpcNode::with_prefix("shil-forger", &st.prefix).map_err(|e| e.to_string())?;
     let publ = node.publisher::<StateEvent>().map_err(|e| e.to_string())?;
-    let mut ev = StateEvent::new(ProcessId::MotionCore, EventKind::StateChanged, 1);
-    ev.state = crs_ipc::motion_state::STOPPING;
+    let ev = StateEvent::motion(crs_ipc::MotionState::Stopping, 1);
     let t0 = monotonic_ns();
     publ.publish(&ev).map_err(|e| e.to_string())?;
     let trip = st.monitor_trip(Cause::UnplannedStreamEnd, 10.0)?;
     let stopped = st.require_braked()?;
     st.wait("motion-core latched (E-STOPPED)", 10.0, |s| {
-        Ok(s.motion_state == Some(crs_ipc::motion_state::ESTOPPED))
+        Ok(s.motion_state == Some(crs_ipc::MotionState::EStopped))
     })?;
     Ok(Outcome {
         cause: "unplanned_stream_end".into(),
@@ -63,7 +62,7 @@ pub fn foreign_publisher(st: &mut Stack) -> Res<Outcome> {
 /// not when motion-core starts.
 pub fn heartbeat_config_crc_mismatch(st: &mut Stack) -> Res<Outcome> {
     st.wait("the monitor RUN (every drive operational)", 30.0, |s| {
-        Ok(s.monitor_state == Some(safety_monitor::StateCode::Armed.code()))
+        Ok(s.monitor_state == Some(crs_ipc::MonitorState::Armed))
     })?;
     st.start_motion_core()?;
     // Watch for 3 s of monitor cycles: no drive enabled, none following, drive-io never

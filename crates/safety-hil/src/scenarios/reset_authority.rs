@@ -157,7 +157,7 @@ pub fn forged_reset_ignored(st: &mut Stack) -> Res<Outcome> {
     st.monitor_trip(Cause::EStopEvent, 10.0)?;
     st.require_braked()?;
     st.wait("motion-core latched (E-STOPPED)", 10.0, |s| {
-        Ok(s.motion_state == Some(crs_ipc::motion_state::ESTOPPED))
+        Ok(s.motion_state == Some(crs_ipc::MotionState::EStopped))
     })?;
     spy_pairs(st, bus.as_mut(), &mut spy, 3)?;
     let epoch = spy.last.map(|h| h.epoch).ok_or("no safety pair seen")?;
@@ -185,7 +185,7 @@ pub fn forged_reset_ignored(st: &mut Stack) -> Res<Outcome> {
     require_still_latched(st, "reset forged with another source")?;
     // motion-core's heartbeat after the forgeries (its stage publishes every few cycles).
     let state = st.fresh_motion_state()?;
-    if state != Some(crs_ipc::motion_state::ESTOPPED) {
+    if state != Some(crs_ipc::MotionState::EStopped) {
         return Err(format!(
             "motion-core left its latch on a forged reset (state {:?})",
             state
@@ -204,7 +204,7 @@ pub fn forged_reset_ignored(st: &mut Stack) -> Res<Outcome> {
     )?;
     require_still_latched(st, "reset forged with the monitor's source")?;
     let state = st.fresh_motion_state()?;
-    if state != Some(crs_ipc::motion_state::ESTOPPED) {
+    if state != Some(crs_ipc::MotionState::EStopped) {
         return Err(format!(
             "motion-core should be e-stopped again after the monitor's answer (state {:?})",
             state
@@ -263,7 +263,7 @@ pub fn reset_while_armed_changes_nothing(st: &mut Stack) -> Res<Outcome> {
     let e = st.emu()?;
     if st.bus_state() != Some(BusState::Running)
         || e.drives.iter().any(|d| d.demand != DEMAND_FOLLOW)
-        || st.monitor_state != Some(1)
+        || st.monitor_state != Some(crs_ipc::MonitorState::Armed)
     {
         return Err("the stack should still run".into());
     }

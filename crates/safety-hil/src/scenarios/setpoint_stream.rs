@@ -45,7 +45,7 @@ pub fn offset_99mm(st: &mut Stack) -> Res<Outcome> {
         st.poll()?;
         std::thread::sleep(Duration::from_millis(5));
     }
-    if !st.monitor_estops.is_empty() || st.monitor_state != Some(1) {
+    if !st.monitor_estops.is_empty() || st.monitor_state != Some(crs_ipc::MonitorState::Armed) {
         return Err(format!(
             "99 mm tripped the monitor: {:?}",
             st.monitor_estops
@@ -165,7 +165,7 @@ pub fn lying_timestamps(st: &mut Stack) -> Res<Outcome> {
         Ok(s.bus_state() == Some(BusState::Fault))
     })?;
     let fc = st.last_feedback.map(|f| f.fault_code).unwrap_or(0);
-    if fc != crs_ipc::fault_code::SETPOINT_STEP {
+    if crs_ipc::FaultCode::try_from(fc) != Ok(crs_ipc::FaultCode::SetpointStep) {
         return Err(format!(
             "drive-io faulted with code {fc}, expected SETPOINT_STEP"
         ));

@@ -7,7 +7,7 @@
 
 use cdpr_model::config::load_platform;
 use clap::{CommandFactory, Parser};
-use crs_ipc::{Heartbeat, IpcNode, PlantTruth, ProcessId, TrackerPose};
+use crs_ipc::{Heartbeat, IpcNode, PlantTruth, TrackerPose};
 use drive_io::DrivesConfig;
 use sim_plant::bus::{self, BusOptions, ConfigFiles, PlantBus};
 use sim_plant::load_plant;
@@ -265,7 +265,12 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
             }
             was_converged = truth.converged != 0;
             if truth.sequence.is_multiple_of(100) {
-                let hb = Heartbeat::new(ProcessId::SimPlant, truth.braked, truth.sequence);
+                let state = if truth.braked != 0 {
+                    crs_ipc::PlantState::Braked
+                } else {
+                    crs_ipc::PlantState::Free
+                };
+                let hb = Heartbeat::plant(state, truth.sequence);
                 let _ = heartbeat_pub.publish(&hb);
             }
         },
