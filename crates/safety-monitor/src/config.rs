@@ -631,293 +631,453 @@ fn parse_err(file: &Path, text: &str, e: toml::de::Error) -> ConfigError {
     }
 }
 
-/// Loads `config/safety-monitor.toml` and the files it names.
-pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
-    let text = read(path)?;
-    let raw: RawConfig = toml::from_str(&text).map_err(|e| parse_err(path, &text, e))?;
-    let file = path.display().to_string();
-    let bad = |key: &str, reason: String| ConfigError::Invalid {
-        file: file.clone(),
-        key: key.to_string(),
-        reason,
-    };
-    let m = &raw.monitor;
-    if !(1..=100).contains(&m.cycle_ms) {
-        return Err(bad("monitor.cycle_ms", "must be in 1..=100".into()));
-    }
-    if !(m.dq_limit_mm.is_finite() && m.dq_limit_mm > 0.0) {
-        return Err(bad("monitor.dq_limit_mm", "must be a number > 0".into()));
-    }
-    if m.dq_limit_mm > DELTA_Q_LIMIT_M * 1e3 {
-        return Err(bad(
-            "monitor.dq_limit_mm",
-            format!(
-                "{} mm is above the 100 mm limit of the spec (sec. 5.6, eq. 5.27): refused",
-                m.dq_limit_mm
-            ),
-        ));
-    }
-    if m.silence_cycles == 0 {
-        return Err(bad("monitor.silence_cycles", "must be >= 1".into()));
-    }
-    if m.gap_window_cycles == 0 || m.gap_window_cycles > 10_000 {
-        return Err(bad(
-            "monitor.gap_window_cycles",
-            "must be in 1..=10000".into(),
-        ));
-    }
-    if m.identity_grace_cycles == 0 {
-        return Err(bad("monitor.identity_grace_cycles", "must be >= 1".into()));
-    }
-    for (key, v) in [
-        ("monitor.workspace_margin_m", m.workspace_margin_m),
-        ("monitor.workspace_margin_deg", m.workspace_margin_deg),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(bad(key, "must be a finite number >= 0".into()));
+/// Builds a [`ConfigError::Invalid`] of one file: the file and the key it names.
+struct At<'a>(&'a str);
+
+impl At<'_> {
+    fn err(&self, key: &str, reason: impl Into<String>) -> ConfigError {
+        ConfigError::Invalid {
+            file: self.0.to_string(),
+            key: key.to_string(),
+            reason: reason.into(),
         }
     }
-    if m.reset_clear_cycles == 0 {
-        return Err(bad("monitor.reset_clear_cycles", "must be >= 1".into()));
-    }
-    if !(0..=99).contains(&m.rt_priority) {
-        return Err(bad("monitor.rt_priority", "must be in 0..=99".into()));
-    }
-    if m.cpu < -1 {
-        return Err(bad(
-            "monitor.cpu",
-            "must be -1 (none) or a CPU index".into(),
-        ));
-    }
-    // Upper bounds: a setting beyond them would switch its check off in practice
-    // (a silence of minutes, a margin of metres). Cycles are monitor cycles (15 ms: 67 ≈ 1 s).
-    let fo = &raw.forces;
-    let counts: [(&str, u32, u32); 10] = [
-        ("monitor.silence_cycles", m.silence_cycles, 67),
-        (
-            "monitor.max_missing_setpoints",
-            m.max_missing_setpoints,
-            100,
-        ),
-        (
-            "monitor.identity_grace_cycles",
-            m.identity_grace_cycles,
-            200,
-        ),
-        ("monitor.reset_clear_cycles", m.reset_clear_cycles, 1000),
-        ("feedback.silence_cycles", raw.feedback.silence_cycles, 67),
-        (
-            "feedback.unchecked_cycles",
-            raw.feedback.unchecked_cycles,
-            67,
-        ),
-        ("forces.silence_cycles", fo.silence_cycles, 67),
-        (
-            "can.reader_stall_cycles",
-            raw.can.reader_stall_cycles,
-            crate::capacity::MAX_READER_STALL_CYCLES,
-        ),
-        (
-            "can.safety_io_silence_cycles",
-            raw.can.safety_io_silence_cycles,
-            67,
-        ),
-        (
-            "forces.window_readings",
-            fo.window_readings,
-            crate::capacity::MAX_FORCE_WINDOW,
-        ),
-    ];
-    for (key, v, max) in counts {
-        if v > max {
-            return Err(bad(key, format!("{v} is above the bound {max}: refused")));
+}
+
+impl MonitorSection {
+    fn validate(&self, at: &At) -> Result<(), ConfigError> {
+        if !(1..=100).contains(&self.cycle_ms) {
+            return Err(at.err("monitor.cycle_ms", "must be in 1..=100"));
         }
-    }
-    let reals: [(&str, f64, f64); 7] = [
-        ("monitor.workspace_margin_m", m.workspace_margin_m, 0.5),
-        ("monitor.workspace_margin_deg", m.workspace_margin_deg, 5.0),
-        (
-            "feedback.following_error_mm",
-            raw.feedback.following_error_mm,
-            100.0,
-        ),
-        ("forces.overload_margin_n", fo.overload_margin_n, 5000.0),
-        ("forces.hard_limit_n", fo.hard_limit_n, MAX_HARD_LIMIT_N),
-        (
-            "motion.setpoint_period_ms",
-            raw.motion.setpoint_period_ms,
-            MAX_SETPOINT_PERIOD_MS,
-        ),
-        ("motion.margin", raw.motion.margin, 1.0),
-    ];
-    for (key, v, max) in reals {
-        if v > max {
-            return Err(bad(key, format!("{v} is above the bound {max}: refused")));
+        if !(self.dq_limit_mm.is_finite() && self.dq_limit_mm > 0.0) {
+            return Err(at.err("monitor.dq_limit_mm", "must be a number > 0"));
         }
-    }
-    let f = &raw.feedback;
-    if !(f.following_error_mm.is_finite() && f.following_error_mm > 0.0) {
-        return Err(bad(
-            "feedback.following_error_mm",
-            "must be a number > 0".into(),
-        ));
-    }
-    if f.check_following_error && f.unchecked_cycles == 0 {
-        return Err(bad(
-            "feedback.unchecked_cycles",
-            "must be >= 1 while check_following_error is on (an unverifiable check must trip)"
-                .into(),
-        ));
-    }
-    if !(1..=crate::capacity::HISTORY as u32).contains(&f.window_setpoints) {
-        return Err(bad(
-            "feedback.window_setpoints",
-            format!("must be in 1..={}", crate::capacity::HISTORY),
-        ));
-    }
-    if fo.window_readings == 0 {
-        return Err(bad("forces.window_readings", "must be >= 1".into()));
-    }
-    if !(1..=fo.window_readings).contains(&fo.window_violations) {
-        return Err(bad(
-            "forces.window_violations",
-            format!(
-                "must be in 1..=forces.window_readings ({}), got {}",
-                fo.window_readings, fo.window_violations
-            ),
-        ));
-    }
-    if raw.can.safety_io_silence_cycles == 0 {
-        return Err(bad("can.safety_io_silence_cycles", "must be >= 1".into()));
-    }
-    for (key, v) in [
-        ("forces.slack_margin_n", fo.slack_margin_n),
-        ("forces.overload_margin_n", fo.overload_margin_n),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(bad(key, format!("must be a number >= 0, got {v}")));
-        }
-    }
-    if !(fo.hard_limit_n.is_finite() && fo.hard_limit_n > 0.0) {
-        return Err(bad("forces.hard_limit_n", "must be a number > 0".into()));
-    }
-    if fo.check && fo.silence_cycles == 0 {
-        return Err(bad(
-            "forces.silence_cycles",
-            "must be >= 1: a drive without force readings must trip (fail closed)".into(),
-        ));
-    }
-    let mo = &raw.motion;
-    if !(mo.setpoint_period_ms.is_finite() && mo.setpoint_period_ms > 0.0) {
-        return Err(bad(
-            "motion.setpoint_period_ms",
-            "must be a number > 0".into(),
-        ));
-    }
-    if !(mo.margin.is_finite() && (0.0..=1.0).contains(&mo.margin)) {
-        return Err(bad(
-            "motion.margin",
-            "must be in 0..=1 (a fraction of the limit)".into(),
-        ));
-    }
-    let c = &raw.can;
-    if let Some(t) = &c.transport {
-        t.parse::<can_transport::TransportSpec>()
-            .map_err(|e| bad("can.transport", e.to_string()))?;
-    }
-    if c.safety_cob_id == 0 || c.safety_cob_id >= 0x7FC || c.safety_cob_id.is_multiple_of(2) {
-        return Err(bad(
-            "can.safety_cob_id",
-            "must be an odd 11-bit id below 0x7FC (the heartbeat pair uses id and id + 1, the \
-             configuration signature id + 2 and id + 3)"
-                .into(),
-        ));
-    }
-    if c.safety_validation_time_ms <= m.cycle_ms
-        || c.safety_validation_time_ms > MAX_SAFETY_VALIDATION_MS
-    {
-        return Err(bad(
-            "can.safety_validation_time_ms",
-            format!(
-                "{} ms must be above monitor.cycle_ms ({} ms) and at most {MAX_SAFETY_VALIDATION_MS} ms",
-                c.safety_validation_time_ms, m.cycle_ms
-            ),
-        ));
-    }
-    if c.safety_pair_window_ms == 0 || c.safety_pair_window_ms > c.safety_validation_time_ms {
-        return Err(bad(
-            "can.safety_pair_window_ms",
-            "must be >= 1 and <= can.safety_validation_time_ms".into(),
-        ));
-    }
-    for (key, names) in [
-        ("ipc.setpoint_owners", &raw.ipc.setpoint_owners),
-        ("ipc.feedback_owners", &raw.ipc.feedback_owners),
-        ("ipc.identity_owners", &raw.ipc.identity_owners),
-    ] {
-        if let Some(n) = names
-            .iter()
-            .find(|n| n.is_empty() || n.contains('/') || n.len() > 255)
-        {
-            return Err(bad(
-                key,
-                format!("{n:?}: an executable's file name (no path, 1..=255 bytes)"),
+        if self.dq_limit_mm > DELTA_Q_LIMIT_M * 1e3 {
+            return Err(at.err(
+                "monitor.dq_limit_mm",
+                format!(
+                    "{} mm is above the 100 mm limit of the spec (sec. 5.6, eq. 5.27): refused",
+                    self.dq_limit_mm
+                ),
             ));
         }
+        if self.silence_cycles == 0 {
+            return Err(at.err("monitor.silence_cycles", "must be >= 1"));
+        }
+        if self.gap_window_cycles == 0 || self.gap_window_cycles > 10_000 {
+            return Err(at.err("monitor.gap_window_cycles", "must be in 1..=10000"));
+        }
+        if self.identity_grace_cycles == 0 {
+            return Err(at.err("monitor.identity_grace_cycles", "must be >= 1"));
+        }
+        for (key, v) in [
+            ("monitor.workspace_margin_m", self.workspace_margin_m),
+            ("monitor.workspace_margin_deg", self.workspace_margin_deg),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(at.err(key, "must be a finite number >= 0"));
+            }
+        }
+        if self.reset_clear_cycles == 0 {
+            return Err(at.err("monitor.reset_clear_cycles", "must be >= 1"));
+        }
+        if !(0..=99).contains(&self.rt_priority) {
+            return Err(at.err("monitor.rt_priority", "must be in 0..=99"));
+        }
+        if self.cpu < -1 {
+            return Err(at.err("monitor.cpu", "must be -1 (none) or a CPU index"));
+        }
+        Ok(())
     }
-    // Profiles: outside the bench profile no switch may disable a check.
-    let bench = match m.profile.as_str() {
-        PROFILE_ROBOT => false,
-        PROFILE_BENCH => true,
-        other => {
-            return Err(bad(
+
+    /// The profile: false for the robot, true for the bench.
+    fn is_bench(&self, at: &At) -> Result<bool, ConfigError> {
+        match self.profile.as_str() {
+            PROFILE_ROBOT => Ok(false),
+            PROFILE_BENCH => Ok(true),
+            other => Err(at.err(
                 "monitor.profile",
                 format!("{other:?}: must be \"{PROFILE_ROBOT}\" or \"{PROFILE_BENCH}\""),
-            ));
-        }
-    };
-    if !bench {
-        let off: [(&str, bool); 9] = [
-            ("monitor.require_ready", !m.require_ready),
-            (
-                "feedback.check_following_error",
-                !raw.feedback.check_following_error,
-            ),
-            ("feedback.silence_cycles", raw.feedback.silence_cycles == 0),
-            ("forces.check", !fo.check),
-            ("motion.check", !raw.motion.check),
-            ("can.check_rpdo", !c.check_rpdo),
-            ("ipc.setpoint_owners", raw.ipc.setpoint_owners.is_empty()),
-            ("ipc.feedback_owners", raw.ipc.feedback_owners.is_empty()),
-            ("ipc.identity_owners", raw.ipc.identity_owners.is_empty()),
-        ];
-        if let Some((key, _)) = off.iter().find(|(_, is_off)| *is_off) {
-            return Err(bad(
-                key,
-                "switches a check off: only allowed with monitor.profile = \"bench\"".into(),
-            ));
+            )),
         }
     }
-    // A file this one names but that cannot be opened is this file's error, at the key that
-    // names it; what is wrong inside it is reported by its own parser, with its own lines.
-    let named = |key: &str, f: &Path| match std::fs::metadata(f) {
+}
+
+impl FeedbackSection {
+    fn validate(&self, at: &At) -> Result<(), ConfigError> {
+        if !(self.following_error_mm.is_finite() && self.following_error_mm > 0.0) {
+            return Err(at.err("feedback.following_error_mm", "must be a number > 0"));
+        }
+        if self.check_following_error && self.unchecked_cycles == 0 {
+            return Err(at.err(
+                "feedback.unchecked_cycles",
+                "must be >= 1 while check_following_error is on (an unverifiable check must trip)",
+            ));
+        }
+        if !(1..=crate::capacity::HISTORY as u32).contains(&self.window_setpoints) {
+            return Err(at.err(
+                "feedback.window_setpoints",
+                format!("must be in 1..={}", crate::capacity::HISTORY),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl ForcesSection {
+    /// The reading window (checked before the safety I/O node's silence, as it always was).
+    fn validate_window(&self, at: &At) -> Result<(), ConfigError> {
+        if self.window_readings == 0 {
+            return Err(at.err("forces.window_readings", "must be >= 1"));
+        }
+        if !(1..=self.window_readings).contains(&self.window_violations) {
+            return Err(at.err(
+                "forces.window_violations",
+                format!(
+                    "must be in 1..=forces.window_readings ({}), got {}",
+                    self.window_readings, self.window_violations
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn validate(&self, at: &At) -> Result<(), ConfigError> {
+        for (key, v) in [
+            ("forces.slack_margin_n", self.slack_margin_n),
+            ("forces.overload_margin_n", self.overload_margin_n),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(at.err(key, format!("must be a number >= 0, got {v}")));
+            }
+        }
+        if !(self.hard_limit_n.is_finite() && self.hard_limit_n > 0.0) {
+            return Err(at.err("forces.hard_limit_n", "must be a number > 0"));
+        }
+        if self.check && self.silence_cycles == 0 {
+            return Err(at.err(
+                "forces.silence_cycles",
+                "must be >= 1: a drive without force readings must trip (fail closed)",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Against the platform's force limits (table 5.1).
+    fn validate_for(
+        &self,
+        at: &At,
+        platform: &PlatformParams,
+        platform_file: &Path,
+    ) -> Result<(), ConfigError> {
+        if self.slack_margin_n > platform.f_min_n {
+            return Err(at.err(
+                "forces.slack_margin_n",
+                format!(
+                    "{} N is above the platform's f_min_n ({} N): the slack limit would be below 0 N",
+                    self.slack_margin_n, platform.f_min_n
+                ),
+            ));
+        }
+        if self.check && self.hard_limit_n < platform.f_max_n {
+            return Err(at.err(
+                "forces.hard_limit_n",
+                format!(
+                    "{} N is below the platform's f_max_n ({} N of {}): every allowed force would trip",
+                    self.hard_limit_n,
+                    platform.f_max_n,
+                    platform_file.display()
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl MotionSection {
+    fn validate(&self, at: &At) -> Result<(), ConfigError> {
+        if !(self.setpoint_period_ms.is_finite() && self.setpoint_period_ms > 0.0) {
+            return Err(at.err("motion.setpoint_period_ms", "must be a number > 0"));
+        }
+        if !(self.margin.is_finite() && (0.0..=1.0).contains(&self.margin)) {
+            return Err(at.err(
+                "motion.margin",
+                "must be in 0..=1 (a fraction of the limit)",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl CanSection {
+    fn validate_safety_io(&self, at: &At) -> Result<(), ConfigError> {
+        if self.safety_io_silence_cycles == 0 {
+            return Err(at.err("can.safety_io_silence_cycles", "must be >= 1"));
+        }
+        Ok(())
+    }
+
+    /// `cycle_ms`: the monitor's cycle, below the consumers' validation time.
+    fn validate(&self, at: &At, cycle_ms: u32) -> Result<(), ConfigError> {
+        if let Some(t) = &self.transport {
+            t.parse::<can_transport::TransportSpec>()
+                .map_err(|e| at.err("can.transport", e.to_string()))?;
+        }
+        if self.safety_cob_id == 0
+            || self.safety_cob_id >= 0x7FC
+            || self.safety_cob_id.is_multiple_of(2)
+        {
+            return Err(at.err(
+                "can.safety_cob_id",
+                "must be an odd 11-bit id below 0x7FC (the heartbeat pair uses id and id + 1, \
+                 the configuration signature id + 2 and id + 3)",
+            ));
+        }
+        if self.safety_validation_time_ms <= cycle_ms
+            || self.safety_validation_time_ms > MAX_SAFETY_VALIDATION_MS
+        {
+            return Err(at.err(
+                "can.safety_validation_time_ms",
+                format!(
+                    "{} ms must be above monitor.cycle_ms ({} ms) and at most {MAX_SAFETY_VALIDATION_MS} ms",
+                    self.safety_validation_time_ms, cycle_ms
+                ),
+            ));
+        }
+        if self.safety_pair_window_ms == 0
+            || self.safety_pair_window_ms > self.safety_validation_time_ms
+        {
+            return Err(at.err(
+                "can.safety_pair_window_ms",
+                "must be >= 1 and <= can.safety_validation_time_ms",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl IpcSection {
+    fn validate(&self, at: &At) -> Result<(), ConfigError> {
+        for (key, names) in [
+            ("ipc.setpoint_owners", &self.setpoint_owners),
+            ("ipc.feedback_owners", &self.feedback_owners),
+            ("ipc.identity_owners", &self.identity_owners),
+        ] {
+            if let Some(n) = names
+                .iter()
+                .find(|n| n.is_empty() || n.contains('/') || n.len() > 255)
+            {
+                return Err(at.err(
+                    key,
+                    format!("{n:?}: an executable's file name (no path, 1..=255 bytes)"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl ResetSection {
+    /// The reset channels (ISO 13849-1 §5.2.2: the operator's manual reset at the safety
+    /// function): the socket and its operator group, if any. `config`: this file (the socket
+    /// path is relative to it); `has_safety_io`: the drives file has the node with the key.
+    fn channels(
+        &self,
+        at: &At,
+        config: &Path,
+        has_safety_io: bool,
+        drives_file: &Path,
+    ) -> Result<Option<(PathBuf, u32)>, ConfigError> {
+        if self.key && !has_safety_io {
+            return Err(at.err(
+                "reset.key",
+                format!(
+                    "the reset key is read from the safety I/O node, but the drives file {} has \
+                     no [safety_io] (set reset.key = false and configure reset.socket)",
+                    drives_file.display()
+                ),
+            ));
+        }
+        let reset_socket = if self.socket.is_empty() {
+            if !self.operator_group.is_empty() {
+                return Err(at.err(
+                    "reset.operator_group",
+                    "given without reset.socket (the group is checked on the socket's peers)",
+                ));
+            }
+            None
+        } else {
+            if self.operator_group.is_empty() {
+                return Err(at.err(
+                    "reset.operator_group",
+                    "missing: the reset socket accepts only members of this group (name or gid)",
+                ));
+            }
+            let gid = crate::reset_socket::resolve_group(&self.operator_group)
+                .map_err(|e| at.err("reset.operator_group", e))?;
+            Some((relative_to(config, &self.socket), gid))
+        };
+        if !self.key && reset_socket.is_none() {
+            return Err(at.err(
+                "reset",
+                "no reset channel: enable reset.key (the safety I/O node's key) or configure \
+                 reset.socket; without one a trip can never be reset",
+            ));
+        }
+        Ok(reset_socket)
+    }
+}
+
+impl RawConfig {
+    /// Every section on its own, in the order the errors have always been reported; returns
+    /// whether the profile is the bench's.
+    fn validate(&self, at: &At) -> Result<bool, ConfigError> {
+        self.monitor.validate(at)?;
+        self.validate_bounds(at)?;
+        self.feedback.validate(at)?;
+        self.forces.validate_window(at)?;
+        self.can.validate_safety_io(at)?;
+        self.forces.validate(at)?;
+        self.motion.validate(at)?;
+        self.can.validate(at, self.monitor.cycle_ms)?;
+        self.ipc.validate(at)?;
+        let bench = self.monitor.is_bench(at)?;
+        if !bench {
+            self.validate_robot_profile(at)?;
+        }
+        Ok(bench)
+    }
+
+    /// Upper bounds: a setting beyond them would switch its check off in practice (a silence
+    /// of minutes, a margin of metres). Cycles are monitor cycles (15 ms: 67 ≈ 1 s).
+    fn validate_bounds(&self, at: &At) -> Result<(), ConfigError> {
+        let (m, fo) = (&self.monitor, &self.forces);
+        let counts: [(&str, u32, u32); 10] = [
+            ("monitor.silence_cycles", m.silence_cycles, 67),
+            (
+                "monitor.max_missing_setpoints",
+                m.max_missing_setpoints,
+                100,
+            ),
+            (
+                "monitor.identity_grace_cycles",
+                m.identity_grace_cycles,
+                200,
+            ),
+            ("monitor.reset_clear_cycles", m.reset_clear_cycles, 1000),
+            ("feedback.silence_cycles", self.feedback.silence_cycles, 67),
+            (
+                "feedback.unchecked_cycles",
+                self.feedback.unchecked_cycles,
+                67,
+            ),
+            ("forces.silence_cycles", fo.silence_cycles, 67),
+            (
+                "can.reader_stall_cycles",
+                self.can.reader_stall_cycles,
+                crate::capacity::MAX_READER_STALL_CYCLES,
+            ),
+            (
+                "can.safety_io_silence_cycles",
+                self.can.safety_io_silence_cycles,
+                67,
+            ),
+            (
+                "forces.window_readings",
+                fo.window_readings,
+                crate::capacity::MAX_FORCE_WINDOW,
+            ),
+        ];
+        for (key, v, max) in counts {
+            if v > max {
+                return Err(at.err(key, format!("{v} is above the bound {max}: refused")));
+            }
+        }
+        let reals: [(&str, f64, f64); 7] = [
+            ("monitor.workspace_margin_m", m.workspace_margin_m, 0.5),
+            ("monitor.workspace_margin_deg", m.workspace_margin_deg, 5.0),
+            (
+                "feedback.following_error_mm",
+                self.feedback.following_error_mm,
+                100.0,
+            ),
+            ("forces.overload_margin_n", fo.overload_margin_n, 5000.0),
+            ("forces.hard_limit_n", fo.hard_limit_n, MAX_HARD_LIMIT_N),
+            (
+                "motion.setpoint_period_ms",
+                self.motion.setpoint_period_ms,
+                MAX_SETPOINT_PERIOD_MS,
+            ),
+            ("motion.margin", self.motion.margin, 1.0),
+        ];
+        for (key, v, max) in reals {
+            if v > max {
+                return Err(at.err(key, format!("{v} is above the bound {max}: refused")));
+            }
+        }
+        Ok(())
+    }
+
+    /// Outside the bench profile no switch may disable a check.
+    fn validate_robot_profile(&self, at: &At) -> Result<(), ConfigError> {
+        let off: [(&str, bool); 9] = [
+            ("monitor.require_ready", !self.monitor.require_ready),
+            (
+                "feedback.check_following_error",
+                !self.feedback.check_following_error,
+            ),
+            ("feedback.silence_cycles", self.feedback.silence_cycles == 0),
+            ("forces.check", !self.forces.check),
+            ("motion.check", !self.motion.check),
+            ("can.check_rpdo", !self.can.check_rpdo),
+            ("ipc.setpoint_owners", self.ipc.setpoint_owners.is_empty()),
+            ("ipc.feedback_owners", self.ipc.feedback_owners.is_empty()),
+            ("ipc.identity_owners", self.ipc.identity_owners.is_empty()),
+        ];
+        if let Some((key, _)) = off.iter().find(|(_, is_off)| *is_off) {
+            return Err(at.err(
+                key,
+                "switches a check off: only allowed with monitor.profile = \"bench\"",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A file the configuration names but that cannot be opened is the configuration's error, at
+/// the key that names it; what is wrong inside it is reported by its own parser, with its own
+/// lines.
+fn named(at: &At, key: &str, f: &Path) -> Result<(), ConfigError> {
+    match std::fs::metadata(f) {
         Ok(md) if md.is_file() => Ok(()),
-        Ok(_) => Err(bad(key, format!("{} is not a file", f.display()))),
-        Err(e) => Err(bad(key, format!("{}: cannot open: {e}", f.display()))),
-    };
-    let platform_file = relative_to(path, &m.platform);
-    named("monitor.platform", &platform_file)?;
-    let platform = load_platform(&platform_file)?;
-    // The accepted platform: the file's bytes must hash to what the operator
-    // accepted; a calibration writes a new file and never changes the accepted one.
-    let platform_bytes = std::fs::read(&platform_file).map_err(|source| ConfigError::Read {
-        file: platform_file.display().to_string(),
+        Ok(_) => Err(at.err(key, format!("{} is not a file", f.display()))),
+        Err(e) => Err(at.err(key, format!("{}: cannot open: {e}", f.display()))),
+    }
+}
+
+fn read_bytes(file: &Path) -> Result<Vec<u8>, ConfigError> {
+    std::fs::read(file).map_err(|source| ConfigError::Read {
+        file: file.display().to_string(),
         source,
-    })?;
+    })
+}
+
+/// The platform the configuration names, its bytes and their SHA-256 (hex), checked against
+/// the accepted one: the file's bytes must hash to what the operator accepted; a calibration
+/// writes a new file and never changes the accepted one.
+fn accepted_platform(
+    at: &At,
+    platform_file: &Path,
+    m: &MonitorSection,
+    bench: bool,
+) -> Result<(PlatformParams, Vec<u8>, String), ConfigError> {
+    named(at, "monitor.platform", platform_file)?;
+    let platform = load_platform(platform_file)?;
+    let platform_bytes = read_bytes(platform_file)?;
     let platform_sha256 = crate::identity::hex(&sha256_of(&platform_bytes));
     match (m.platform_sha256.is_empty(), bench) {
         (true, false) => {
-            return Err(bad(
+            return Err(at.err(
                 "monitor.platform_sha256",
                 format!(
                     "missing: the robot profile runs only an accepted platform (run \
@@ -927,7 +1087,7 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             ));
         }
         (false, _) if !m.platform_sha256.eq_ignore_ascii_case(&platform_sha256) => {
-            return Err(bad(
+            return Err(at.err(
                 "monitor.platform_sha256",
                 format!(
                     "{} has SHA-256 {platform_sha256}, not the accepted {}: the platform file \
@@ -939,69 +1099,56 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
         }
         _ => {}
     }
-    let drives_file = relative_to(path, &c.drives);
-    named("can.drives", &drives_file)?;
+    Ok((platform, platform_bytes, platform_sha256))
+}
+
+/// The drives file the configuration names, with `can.transport` (a single interface's
+/// transport) applied.
+fn drives_with_transport(
+    at: &At,
+    drives_file: &Path,
+    transport: Option<&String>,
+) -> Result<Drives, ConfigError> {
+    named(at, "can.drives", drives_file)?;
+    let mut drives = load_drives(drives_file)?;
+    if let Some(t) = transport {
+        if drives.interfaces.len() != 1 {
+            return Err(at.err(
+                "can.transport",
+                format!(
+                    "the drives file {} has {} interfaces: the monitor takes their transports \
+                     from it (remove can.transport; override with --transport NAME=SPEC)",
+                    drives_file.display(),
+                    drives.interfaces.len()
+                ),
+            ));
+        }
+        drives.interfaces[0].transport = t.clone();
+    }
+    Ok(drives)
+}
+
+/// Loads `config/safety-monitor.toml` and the files it names.
+pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
+    let text = read(path)?;
+    let raw: RawConfig = toml::from_str(&text).map_err(|e| parse_err(path, &text, e))?;
+    let file = path.display().to_string();
+    let at = At(&file);
+    let bench = raw.validate(&at)?;
+    let platform_file = relative_to(path, &raw.monitor.platform);
+    let (platform, platform_bytes, platform_sha256) =
+        accepted_platform(&at, &platform_file, &raw.monitor, bench)?;
+    let drives_file = relative_to(path, &raw.can.drives);
     let Drives {
-        mut interfaces,
+        interfaces,
         safety_interfaces,
         safety_io,
         winches,
         layout,
-    } = load_drives(&drives_file)?;
-    if let Some(t) = &raw.can.transport {
-        if interfaces.len() != 1 {
-            return Err(ConfigError::Invalid {
-                file: path.display().to_string(),
-                key: "can.transport".into(),
-                reason: format!(
-                    "the drives file {} has {} interfaces: the monitor takes their transports \
-                     from it (remove can.transport; override with --transport NAME=SPEC)",
-                    drives_file.display(),
-                    interfaces.len()
-                ),
-            });
-        }
-        interfaces[0].transport = t.clone();
-    }
-    // Reset channels (ISO 13849-1 §5.2.2: the operator's manual reset at the safety function).
-    let rs = &raw.reset;
-    if rs.key && safety_io.is_none() {
-        return Err(bad(
-            "reset.key",
-            format!(
-                "the reset key is read from the safety I/O node, but the drives file {} has no \
-                 [safety_io] (set reset.key = false and configure reset.socket)",
-                drives_file.display()
-            ),
-        ));
-    }
-    let reset_socket = if rs.socket.is_empty() {
-        if !rs.operator_group.is_empty() {
-            return Err(bad(
-                "reset.operator_group",
-                "given without reset.socket (the group is checked on the socket's peers)".into(),
-            ));
-        }
-        None
-    } else {
-        if rs.operator_group.is_empty() {
-            return Err(bad(
-                "reset.operator_group",
-                "missing: the reset socket accepts only members of this group (name or gid)".into(),
-            ));
-        }
-        let gid = crate::reset_socket::resolve_group(&rs.operator_group)
-            .map_err(|e| bad("reset.operator_group", e))?;
-        Some((relative_to(path, &rs.socket), gid))
-    };
-    if !rs.key && reset_socket.is_none() {
-        return Err(bad(
-            "reset",
-            "no reset channel: enable reset.key (the safety I/O node's key) or configure \
-             reset.socket; without one a trip can never be reset"
-                .into(),
-        ));
-    }
+    } = drives_with_transport(&at, &drives_file, raw.can.transport.as_ref())?;
+    let reset_socket = raw
+        .reset
+        .channels(&at, path, safety_io.is_some(), &drives_file)?;
     if winches.len() != platform.cables() {
         return Err(ConfigError::Invalid {
             file: drives_file.display().to_string(),
@@ -1014,30 +1161,9 @@ pub fn load(path: &Path) -> Result<MonitorConfig, ConfigError> {
             ),
         });
     }
-    if fo.slack_margin_n > platform.f_min_n {
-        return Err(bad(
-            "forces.slack_margin_n",
-            format!(
-                "{} N is above the platform's f_min_n ({} N): the slack limit would be below 0 N",
-                fo.slack_margin_n, platform.f_min_n
-            ),
-        ));
-    }
-    if fo.check && fo.hard_limit_n < platform.f_max_n {
-        return Err(bad(
-            "forces.hard_limit_n",
-            format!(
-                "{} N is below the platform's f_max_n ({} N of {}): every allowed force would trip",
-                fo.hard_limit_n,
-                platform.f_max_n,
-                platform_file.display()
-            ),
-        ));
-    }
-    let drives_bytes = std::fs::read(&drives_file).map_err(|source| ConfigError::Read {
-        file: drives_file.display().to_string(),
-        source,
-    })?;
+    raw.forces.validate_for(&at, &platform, &platform_file)?;
+    // The safety parameter set the consumers check: this file, the platform, the drives.
+    let drives_bytes = read_bytes(&drives_file)?;
     let mut set = Vec::with_capacity(text.len() + platform_bytes.len() + drives_bytes.len());
     set.extend_from_slice(text.as_bytes());
     set.extend_from_slice(&platform_bytes);
@@ -1128,13 +1254,58 @@ pub fn load_drives(path: &Path) -> Result<Drives, ConfigError> {
         key,
         reason,
     };
-    let interfaces: Vec<Interface> = match (&raw.bus.transport, raw.bus.interfaces.is_empty()) {
+    let interfaces = drive_interfaces(&raw.bus, &invalid)?;
+    let out = drive_winches(&raw.winches, &interfaces, &invalid)?;
+    if out.is_empty() || out.len() > crs_ipc::MAX_CABLES {
+        return Err(invalid(
+            "winch".into(),
+            format!("need 1..={} [[winch]] entries", crs_ipc::MAX_CABLES),
+        ));
+    }
+    let safety_io = match &raw.safety_io {
+        None => None,
+        Some(io) => {
+            let iface = interfaces
+                .iter()
+                .position(|i| i.name == io.interface)
+                .ok_or_else(|| {
+                    invalid(
+                        "safety_io.interface".into(),
+                        format!("{:?}: no such interface", io.interface),
+                    )
+                })?;
+            if !(1..=127).contains(&io.node_id) {
+                return Err(invalid(
+                    "safety_io.node_id".into(),
+                    "must be in 1..=127".into(),
+                ));
+            }
+            Some((iface, io.node_id as u8))
+        }
+    };
+    let safety_interfaces = match safety_io {
+        Some((iface, _)) => vec![iface],
+        None => (0..interfaces.len()).collect(),
+    };
+    let mut layout = bus_layout(&raw, &interfaces, &out, &invalid)?;
+    layout.safety_io = safety_io.map(|(iface, node)| (iface, 0x180 + u16::from(node)));
+    Ok(Drives {
+        interfaces,
+        safety_interfaces,
+        safety_io,
+        winches: out,
+        layout,
+    })
+}
+
+/// `[bus]`: one `transport` or `[[bus.interface]]` tables with distinct names.
+fn drive_interfaces(bus: &RawBus, invalid: &Invalid<'_>) -> Result<Vec<Interface>, ConfigError> {
+    let interfaces: Vec<Interface> = match (&bus.transport, bus.interfaces.is_empty()) {
         (Some(t), true) => vec![Interface {
             name: SINGLE_INTERFACE_NAME.into(),
             transport: t.clone(),
         }],
-        (None, false) => raw
-            .bus
+        (None, false) => bus
             .interfaces
             .iter()
             .map(|i| Interface {
@@ -1163,13 +1334,19 @@ pub fn load_drives(path: &Path) -> Result<Drives, ConfigError> {
             ));
         }
     }
-    let mut out: Vec<Winch> = Vec::with_capacity(raw.winches.len());
-    for (i, w) in raw.winches.iter().enumerate() {
-        let bad = |k: &str, r: &str| ConfigError::Invalid {
-            file: file.clone(),
-            key: format!("winch[{i}].{k}"),
-            reason: r.to_string(),
-        };
+    Ok(interfaces)
+}
+
+/// The `[[winch]]` entries: interface, node id (unique per interface), the counts-to-length
+/// scaling.
+fn drive_winches(
+    raw: &[RawWinch],
+    interfaces: &[Interface],
+    invalid: &Invalid<'_>,
+) -> Result<Vec<Winch>, ConfigError> {
+    let mut out: Vec<Winch> = Vec::with_capacity(raw.len());
+    for (i, w) in raw.iter().enumerate() {
+        let bad = |k: &str, r: &str| invalid(format!("winch[{i}].{k}"), r.to_string());
         let interface = match &w.interface {
             None if interfaces.len() == 1 => 0,
             None => {
@@ -1213,48 +1390,11 @@ pub fn load_drives(path: &Path) -> Result<Drives, ConfigError> {
             offset_counts: w.offset_counts as f64,
         });
     }
-    if out.is_empty() || out.len() > crs_ipc::MAX_CABLES {
-        return Err(ConfigError::Invalid {
-            file,
-            key: "winch".into(),
-            reason: format!("need 1..={} [[winch]] entries", crs_ipc::MAX_CABLES),
-        });
-    }
-    let safety_io = match &raw.safety_io {
-        None => None,
-        Some(io) => {
-            let iface = interfaces
-                .iter()
-                .position(|i| i.name == io.interface)
-                .ok_or_else(|| {
-                    invalid(
-                        "safety_io.interface".into(),
-                        format!("{:?}: no such interface", io.interface),
-                    )
-                })?;
-            if !(1..=127).contains(&io.node_id) {
-                return Err(invalid(
-                    "safety_io.node_id".into(),
-                    "must be in 1..=127".into(),
-                ));
-            }
-            Some((iface, io.node_id as u8))
-        }
-    };
-    let safety_interfaces = match safety_io {
-        Some((iface, _)) => vec![iface],
-        None => (0..interfaces.len()).collect(),
-    };
-    let mut layout = bus_layout(&raw, &interfaces, &out, &invalid)?;
-    layout.safety_io = safety_io.map(|(iface, node)| (iface, 0x180 + u16::from(node)));
-    Ok(Drives {
-        interfaces,
-        safety_interfaces,
-        safety_io,
-        winches: out,
-        layout,
-    })
+    Ok(out)
 }
+
+/// An error of the drives file at a key.
+type Invalid<'a> = dyn Fn(String, String) -> ConfigError + 'a;
 
 /// The bytes of a PDO's objects in frame order: (index, sub, offset, value type); the error
 /// names the object the monitor cannot decode.
@@ -1276,125 +1416,20 @@ fn pdo_objects(objects: &[String]) -> Result<Vec<(u16, u8, usize, Value)>, Strin
     Ok(out)
 }
 
+/// A drive's force in its own TPDO: (COB-ID, frame length, offset, type).
+type DriveForce = (u16, usize, usize, Value);
+
 /// Each drive's RPDO (controlword + target) and each cable's force frame, as drive-io
 /// configures them (docs/can-protocol.md), from the drives file's own keys.
 fn bus_layout(
     raw: &RawDrives,
     interfaces: &[Interface],
     winches: &[Winch],
-    invalid: &dyn Fn(String, String) -> ConfigError,
+    invalid: &Invalid<'_>,
 ) -> Result<BusLayout, ConfigError> {
-    let iface_of = |name: &Option<String>, key: String| -> Result<usize, ConfigError> {
-        match name {
-            None if interfaces.len() == 1 => Ok(0),
-            None => Err(invalid(key, "missing (several interfaces)".into())),
-            Some(n) => interfaces
-                .iter()
-                .position(|i| &i.name == n)
-                .ok_or_else(|| invalid(key, format!("{n:?}: no such interface"))),
-        }
-    };
     let mut layout = BusLayout::default();
     for (i, (rw, w)) in raw.winches.iter().zip(winches).enumerate() {
-        let key = |k: &str| format!("winch[{i}].{k}");
-        let n = u16::from(w.node_id);
-        let mode = rw
-            .mapping
-            .as_deref()
-            .unwrap_or(if rw.rpdo.is_empty() && rw.tpdo.is_empty() {
-                "default"
-            } else {
-                "custom"
-            });
-        // The drive's force, if it measures it: (TPDO COB-ID, frame length, offset, type).
-        let force_obj = match &rw.force_object {
-            None => (0x2110, 0),
-            Some(o) => parse_object(o)
-                .ok_or_else(|| invalid(key("force_object"), format!("{o:?}: not an object")))?,
-        };
-        let force_by_drive = match &rw.force {
-            Some(RawForce::Name(s)) if s == "drive" => true,
-            Some(RawForce::Name(s)) => {
-                return Err(invalid(
-                    key("force"),
-                    format!("{s:?}: \"drive\" or a node id"),
-                ));
-            }
-            Some(RawForce::Node(_)) => false,
-            None => !raw.force_sensors.iter().any(|s| s.cable == i as i64 + 1),
-        };
-        let (rpdo, drive_force) = match mode {
-            "default" => {
-                let fv = object_value(force_obj.0, force_obj.1).ok_or_else(|| {
-                    invalid(key("force_object"), "the monitor cannot decode it".into())
-                })?;
-                (
-                    RpdoLayout::default_for(w.interface, w.node_id),
-                    // TPDO2: velocity actual (i32), then the force object.
-                    force_by_drive.then_some((0x280 + n, 4 + fv.bytes(), 4, fv)),
-                )
-            }
-            "custom" => {
-                let mut rpdo = None;
-                for (k, p) in rw.rpdo.iter().enumerate() {
-                    let objs = pdo_objects(&p.objects)
-                        .map_err(|r| invalid(format!("winch[{i}].rpdo[{k}].objects"), r))?;
-                    let cw = objs.iter().find(|o| (o.0, o.1) == (0x6040, 0));
-                    let t = objs.iter().find(|o| (o.0, o.1) == (0x607A, 0));
-                    if let (Some(cw), Some(t)) = (cw, t) {
-                        let cob = p
-                            .cob_id
-                            .map_or(0x200 + 0x100 * (p.number.clamp(1, 4) as u16 - 1) + n, |c| {
-                                (c & 0x7FF) as u16
-                            });
-                        rpdo = Some(RpdoLayout {
-                            interface: w.interface,
-                            cob_id: cob,
-                            len: objs.iter().map(|o| o.3.bytes()).sum(),
-                            controlword_at: cw.2,
-                            target_at: t.2,
-                        });
-                    }
-                }
-                let rpdo = rpdo.ok_or_else(|| {
-                    invalid(
-                        key("rpdo"),
-                        "the monitor needs one RPDO mapping both 0x6040 and 0x607A".into(),
-                    )
-                })?;
-                let mut force = None;
-                if force_by_drive {
-                    for (k, p) in rw.tpdo.iter().enumerate() {
-                        let objs = pdo_objects(&p.objects)
-                            .map_err(|r| invalid(format!("winch[{i}].tpdo[{k}].objects"), r))?;
-                        if let Some(o) = objs.iter().find(|o| (o.0, o.1) == force_obj) {
-                            let cob = p.cob_id.map_or(
-                                0x180 + 0x100 * (p.number.clamp(1, 4) as u16 - 1) + n,
-                                |c| (c & 0x7FF) as u16,
-                            );
-                            force = Some((cob, objs.iter().map(|o| o.3.bytes()).sum(), o.2, o.3));
-                        }
-                    }
-                    if force.is_none() {
-                        return Err(invalid(
-                            key("tpdo"),
-                            "force = \"drive\" but no [[winch.tpdo]] maps the force object".into(),
-                        ));
-                    }
-                }
-                (rpdo, force)
-            }
-            other => {
-                return Err(invalid(
-                    key("mapping"),
-                    format!(
-                        "{other:?}: the monitor decodes \"default\" and \"custom\" mappings only \
-                         (a fixed mapping is in the drive's EDS, which the monitor does not read: \
-                         write it out as mapping = \"custom\")"
-                    ),
-                ));
-            }
-        };
+        let (rpdo, drive_force) = drive_pdos(raw, i, rw, w, invalid)?;
         layout.rpdo.push(rpdo);
         if let Some((cob_id, len, at, value)) = drive_force {
             layout.force.push(ForceLayout {
@@ -1408,65 +1443,223 @@ fn bus_layout(
             });
             continue;
         }
-        // The cable's load cell.
-        let (j, fs) = match &rw.force {
-            Some(RawForce::Node(node)) => raw
-                .force_sensors
-                .iter()
-                .enumerate()
-                .find(|(_, s)| s.node_id == *node)
-                .ok_or_else(|| {
-                    invalid(
-                        key("force"),
-                        format!("no [[force_sensor]] with node_id {node}"),
-                    )
-                })?,
-            _ => raw
-                .force_sensors
-                .iter()
-                .enumerate()
-                .find(|(_, s)| s.cable == i as i64 + 1)
-                .ok_or_else(|| invalid(key("force"), "no force source".into()))?,
-        };
-        let skey = |k: &str| format!("force_sensor[{j}].{k}");
-        if fs.mapping.as_deref().is_some_and(|m| m != "default") {
-            return Err(invalid(
-                skey("mapping"),
-                "the monitor decodes the default mapping of a force sensor only".into(),
-            ));
-        }
-        let (oi, os) = match &fs.object {
-            None => (0x9130, 1),
-            Some(o) => parse_object(o)
-                .ok_or_else(|| invalid(skey("object"), format!("{o:?}: not an object")))?,
-        };
-        let value = object_value(oi, os)
-            .ok_or_else(|| invalid(skey("object"), "not a CiA 404 process value".into()))?;
-        if !(1..=127).contains(&fs.node_id) {
-            return Err(invalid(skey("node_id"), "must be in 1..=127".into()));
-        }
-        if !(fs.n_per_unit.is_finite() && fs.n_per_unit != 0.0) {
-            return Err(invalid(
-                skey("n_per_unit"),
-                "must be finite and not 0".into(),
-            ));
-        }
-        let tpdo = fs.tpdo.unwrap_or(1).clamp(1, 4) as u16;
-        layout.force.push(ForceLayout {
-            interface: iface_of(&fs.interface, skey("interface"))?,
-            cob_id: fs
-                .cob_id
-                .map_or(0x180 + 0x100 * (tpdo - 1) + fs.node_id as u16, |c| {
-                    (c & 0x7FF) as u16
-                }),
-            len: value.bytes(),
-            at: 0,
-            value,
-            n_per_unit: fs.n_per_unit,
-            node: fs.node_id as u8,
-        });
+        layout
+            .force
+            .push(load_cell(raw, i, rw, interfaces, invalid)?);
     }
     Ok(layout)
+}
+
+/// Winch `i`'s RPDO and, if the drive measures the cable's force, the TPDO carrying it.
+fn drive_pdos(
+    raw: &RawDrives,
+    i: usize,
+    rw: &RawWinch,
+    w: &Winch,
+    invalid: &Invalid<'_>,
+) -> Result<(RpdoLayout, Option<DriveForce>), ConfigError> {
+    let key = |k: &str| format!("winch[{i}].{k}");
+    let n = u16::from(w.node_id);
+    let mode = rw
+        .mapping
+        .as_deref()
+        .unwrap_or(if rw.rpdo.is_empty() && rw.tpdo.is_empty() {
+            "default"
+        } else {
+            "custom"
+        });
+    // The drive's force, if it measures it: (TPDO COB-ID, frame length, offset, type).
+    let force_obj = match &rw.force_object {
+        None => (0x2110, 0),
+        Some(o) => parse_object(o)
+            .ok_or_else(|| invalid(key("force_object"), format!("{o:?}: not an object")))?,
+    };
+    let force_by_drive = match &rw.force {
+        Some(RawForce::Name(s)) if s == "drive" => true,
+        Some(RawForce::Name(s)) => {
+            return Err(invalid(
+                key("force"),
+                format!("{s:?}: \"drive\" or a node id"),
+            ));
+        }
+        Some(RawForce::Node(_)) => false,
+        None => !raw.force_sensors.iter().any(|s| s.cable == i as i64 + 1),
+    };
+    match mode {
+        "default" => {
+            let fv = object_value(force_obj.0, force_obj.1).ok_or_else(|| {
+                invalid(key("force_object"), "the monitor cannot decode it".into())
+            })?;
+            Ok((
+                RpdoLayout::default_for(w.interface, w.node_id),
+                // TPDO2: velocity actual (i32), then the force object.
+                force_by_drive.then_some((0x280 + n, 4 + fv.bytes(), 4, fv)),
+            ))
+        }
+        "custom" => {
+            let rpdo = custom_rpdo(i, rw, w, invalid)?;
+            let force = if force_by_drive {
+                Some(custom_force_tpdo(i, rw, n, force_obj, invalid)?)
+            } else {
+                None
+            };
+            Ok((rpdo, force))
+        }
+        other => Err(invalid(
+            key("mapping"),
+            format!(
+                "{other:?}: the monitor decodes \"default\" and \"custom\" mappings only \
+                 (a fixed mapping is in the drive's EDS, which the monitor does not read: \
+                 write it out as mapping = \"custom\")"
+            ),
+        )),
+    }
+}
+
+/// A custom mapping's RPDO: the one mapping both the controlword and the target position.
+fn custom_rpdo(
+    i: usize,
+    rw: &RawWinch,
+    w: &Winch,
+    invalid: &Invalid<'_>,
+) -> Result<RpdoLayout, ConfigError> {
+    let n = u16::from(w.node_id);
+    let mut rpdo = None;
+    for (k, p) in rw.rpdo.iter().enumerate() {
+        let objs = pdo_objects(&p.objects)
+            .map_err(|r| invalid(format!("winch[{i}].rpdo[{k}].objects"), r))?;
+        let cw = objs.iter().find(|o| (o.0, o.1) == (0x6040, 0));
+        let t = objs.iter().find(|o| (o.0, o.1) == (0x607A, 0));
+        if let (Some(cw), Some(t)) = (cw, t) {
+            let cob = p
+                .cob_id
+                .map_or(0x200 + 0x100 * (p.number.clamp(1, 4) as u16 - 1) + n, |c| {
+                    (c & 0x7FF) as u16
+                });
+            rpdo = Some(RpdoLayout {
+                interface: w.interface,
+                cob_id: cob,
+                len: objs.iter().map(|o| o.3.bytes()).sum(),
+                controlword_at: cw.2,
+                target_at: t.2,
+            });
+        }
+    }
+    rpdo.ok_or_else(|| {
+        invalid(
+            format!("winch[{i}].rpdo"),
+            "the monitor needs one RPDO mapping both 0x6040 and 0x607A".into(),
+        )
+    })
+}
+
+/// A custom mapping's TPDO carrying the drive's force object.
+fn custom_force_tpdo(
+    i: usize,
+    rw: &RawWinch,
+    n: u16,
+    force_obj: (u16, u8),
+    invalid: &Invalid<'_>,
+) -> Result<DriveForce, ConfigError> {
+    let mut force = None;
+    for (k, p) in rw.tpdo.iter().enumerate() {
+        let objs = pdo_objects(&p.objects)
+            .map_err(|r| invalid(format!("winch[{i}].tpdo[{k}].objects"), r))?;
+        if let Some(o) = objs.iter().find(|o| (o.0, o.1) == force_obj) {
+            let cob = p
+                .cob_id
+                .map_or(0x180 + 0x100 * (p.number.clamp(1, 4) as u16 - 1) + n, |c| {
+                    (c & 0x7FF) as u16
+                });
+            force = Some((cob, objs.iter().map(|o| o.3.bytes()).sum(), o.2, o.3));
+        }
+    }
+    force.ok_or_else(|| {
+        invalid(
+            format!("winch[{i}].tpdo"),
+            "force = \"drive\" but no [[winch.tpdo]] maps the force object".into(),
+        )
+    })
+}
+
+/// The load cell of winch `i`'s cable (a `[[force_sensor]]`, CiA 404).
+fn load_cell(
+    raw: &RawDrives,
+    i: usize,
+    rw: &RawWinch,
+    interfaces: &[Interface],
+    invalid: &Invalid<'_>,
+) -> Result<ForceLayout, ConfigError> {
+    let key = |k: &str| format!("winch[{i}].{k}");
+    let (j, fs) = match &rw.force {
+        Some(RawForce::Node(node)) => raw
+            .force_sensors
+            .iter()
+            .enumerate()
+            .find(|(_, s)| s.node_id == *node)
+            .ok_or_else(|| {
+                invalid(
+                    key("force"),
+                    format!("no [[force_sensor]] with node_id {node}"),
+                )
+            })?,
+        _ => raw
+            .force_sensors
+            .iter()
+            .enumerate()
+            .find(|(_, s)| s.cable == i as i64 + 1)
+            .ok_or_else(|| invalid(key("force"), "no force source".into()))?,
+    };
+    let skey = |k: &str| format!("force_sensor[{j}].{k}");
+    if fs.mapping.as_deref().is_some_and(|m| m != "default") {
+        return Err(invalid(
+            skey("mapping"),
+            "the monitor decodes the default mapping of a force sensor only".into(),
+        ));
+    }
+    let (oi, os) = match &fs.object {
+        None => (0x9130, 1),
+        Some(o) => parse_object(o)
+            .ok_or_else(|| invalid(skey("object"), format!("{o:?}: not an object")))?,
+    };
+    let value = object_value(oi, os)
+        .ok_or_else(|| invalid(skey("object"), "not a CiA 404 process value".into()))?;
+    if !(1..=127).contains(&fs.node_id) {
+        return Err(invalid(skey("node_id"), "must be in 1..=127".into()));
+    }
+    if !(fs.n_per_unit.is_finite() && fs.n_per_unit != 0.0) {
+        return Err(invalid(
+            skey("n_per_unit"),
+            "must be finite and not 0".into(),
+        ));
+    }
+    let interface = match &fs.interface {
+        None if interfaces.len() == 1 => 0,
+        None => {
+            return Err(invalid(
+                skey("interface"),
+                "missing (several interfaces)".into(),
+            ));
+        }
+        Some(n) => interfaces
+            .iter()
+            .position(|i| &i.name == n)
+            .ok_or_else(|| invalid(skey("interface"), format!("{n:?}: no such interface")))?,
+    };
+    let tpdo = fs.tpdo.unwrap_or(1).clamp(1, 4) as u16;
+    Ok(ForceLayout {
+        interface,
+        cob_id: fs
+            .cob_id
+            .map_or(0x180 + 0x100 * (tpdo - 1) + fs.node_id as u16, |c| {
+                (c & 0x7FF) as u16
+            }),
+        len: value.bytes(),
+        at: 0,
+        value,
+        n_per_unit: fs.n_per_unit,
+        node: fs.node_id as u8,
+    })
 }
 
 /// SHA-256 of a file's bytes (the accepted-platform hash).

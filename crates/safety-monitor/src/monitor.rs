@@ -1381,7 +1381,38 @@ impl Monitor {
     pub fn end_cycle(&mut self, now_ns: u64) -> CycleReport {
         self.stats.cycles += 1;
         let ending = self.take_stream_end();
-        // Frozen / dead motion loop.
+        self.check_setpoint_silence(ending);
+        self.check_sequence_gaps();
+        self.check_identity();
+        self.check_feedback_silence();
+        self.check_motion_own_clock(now_ns);
+        self.check_following_unchecked();
+        self.check_rpdo_unchecked();
+        self.check_safety_io_silence();
+        // Start-up conditions, from this cycle's drive states and readings.
+        let readiness = self.readiness();
+        self.check_force_silence();
+        self.count_waiting_consumer();
+        let (new_trip, became_ready) = self.latch(now_ns, &readiness);
+        if ending {
+            self.disarm_at_stream_end();
+        }
+        let report = CycleReport {
+            state: self.state.state_code(),
+            new_trip,
+            faults: self.faults,
+            setpoints: self.new_setpoints,
+            missing: self.missing,
+            became_ready,
+            readiness,
+        };
+        self.clear_cycle();
+        report
+    }
+
+    /// Frozen / dead motion loop: no new setpoint for `silence_cycles` (not after the stream's
+    /// announced end).
+    fn check_setpoint_silence(&mut self, ending: bool) {
         if self.seen_setpoint && !ending {
             if self.new_setpoints == 0 {
                 self.silent_cycles = self.silent_cycles.saturating_add(1);
@@ -1396,7 +1427,10 @@ impl Monitor {
                 });
             }
         }
-        // Lost setpoints over the sliding window.
+    }
+
+    /// Lost setpoints over the sliding window.
+    fn check_sequence_gaps(&mut self) {
         self.stats.setpoints_missing += u64::from(self.missing);
         let old = std::mem::replace(&mut self.gap_ring[self.gap_pos], self.missing);
         self.gap_pos = (self.gap_pos + 1) % self.gap_ring.len();
@@ -1408,7 +1442,10 @@ impl Monitor {
                 ..Fault::new(Cause::SequenceGaps)
             });
         }
-        // Platform identity.
+    }
+
+    /// The platform identity: a mismatch, or setpoints without an identity beyond the grace.
+    fn check_identity(&mut self) {
         match self.identity_state {
             IdentityState::Mismatch => self.fault(Fault::new(Cause::IdentityMismatch)),
             IdentityState::Verified => self.unverified_cycles = 0,
@@ -1425,7 +1462,10 @@ impl Monitor {
                 }
             }
         }
-        // Dead drive adapter.
+    }
+
+    /// Dead drive adapter: no (advancing) feedback for `feedback_silence_cycles`.
+    fn check_feedback_silence(&mut self) {
         if self.seen_feedback && self.lim.feedback_silence_cycles > 0 {
             if self.feedback_count == 0 {
                 self.feedback_silent = self.feedback_silent.saturating_add(1);
@@ -1447,8 +1487,10 @@ impl Monitor {
                 });
             }
         }
-        self.check_motion_own_clock(now_ns);
-        // Feedback that arrives but cannot be checked, cycle after cycle, fails closed.
+    }
+
+    /// Feedback that arrives but cannot be checked, cycle after cycle, fails closed.
+    fn check_following_unchecked(&mut self) {
         if self.fb_unchecked > 0 && self.fb_checked == 0 {
             self.unchecked_streak = self.unchecked_streak.saturating_add(1);
         } else if self.fb_checked > 0 {
@@ -1463,7 +1505,10 @@ impl Monitor {
         }
         self.fb_checked = 0;
         self.fb_unchecked = 0;
-        // RPDOs that enable operation but cannot be checked, cycle after cycle, fail closed.
+    }
+
+    /// RPDOs that enable operation but cannot be checked, cycle after cycle, fail closed.
+    fn check_rpdo_unchecked(&mut self) {
         if self.rpdo_unchecked > 0 && self.rpdo_checked == 0 {
             self.rpdo_unchecked_streak = self.rpdo_unchecked_streak.saturating_add(1);
         } else if self.rpdo_checked > 0 {
@@ -1481,8 +1526,11 @@ impl Monitor {
         }
         self.rpdo_checked = 0;
         self.rpdo_unchecked = 0;
-        // The safety I/O node: once it reported, a silence trips (its e-stop circuit, reset key
-        // and STO output can no longer be read).
+    }
+
+    /// The safety I/O node: once it reported, a silence trips (its e-stop circuit, reset key
+    /// and STO output can no longer be read).
+    fn check_safety_io_silence(&mut self) {
         if self.lim.safety_io {
             if self.io_reports > 0 {
                 self.io_silent = 0;
@@ -1497,12 +1545,13 @@ impl Monitor {
                 });
             }
         }
-        // Start-up conditions, from this cycle's drive states and readings.
-        let readiness = self.readiness();
-        // Cables without force readings: the force check cannot be evaluated. Once the monitor
-        // has been ready every cable is supervised whatever its drive's NMT state (a drive that
-        // someone stopped keeps being supervised: its load cell still reports, or its silence
-        // trips), except while tripped (the monitor itself NMT-stops the drives then).
+    }
+
+    /// Cables without force readings: the force check cannot be evaluated. Once the monitor
+    /// has been ready every cable is supervised whatever its drive's NMT state (a drive that
+    /// someone stopped keeps being supervised: its load cell still reports, or its silence
+    /// trips), except while tripped (the monitor itself NMT-stops the drives then).
+    fn check_force_silence(&mut self) {
         let tripped = self.state.is_tripped();
         if self.lim.forces.check {
             for i in 0..self.m {
@@ -1527,19 +1576,28 @@ impl Monitor {
         for w in &mut self.force[..self.m] {
             w.readings = 0;
         }
-        // A consumer waits for a reset of this instance: the safety I/O node keeps the torque
-        // off although the monitor says RUN (its watch stopped under another monitor instance
-        // or epoch), or drive-io reports a latched stop.
+    }
+
+    /// A consumer waits for a reset of this instance: the safety I/O node keeps the torque
+    /// off although the monitor says RUN (its watch stopped under another monitor instance
+    /// or epoch), or drive-io reports a latched stop.
+    fn count_waiting_consumer(&mut self) {
         let sto_off = self.lim.safety_io && self.io_reports > 0 && !self.io_sto_released;
         if self.state == MonitorState::Armed && (sto_off || self.fb_latched) {
             self.waiting_streak = self.waiting_streak.saturating_add(1);
         } else {
             self.waiting_streak = 0;
         }
+    }
+
+    /// The latch: the cycle's first fault trips (once), a clean cycle counts towards a reset
+    /// and arms a monitor whose start-up conditions hold. Returns (the new trip, became
+    /// ready).
+    fn latch(&mut self, now_ns: u64, readiness: &Readiness) -> (Option<TripRecord>, bool) {
         let mut new_trip = None;
         let mut became_ready = false;
         if self.state.is_tripped() {
-            self.update_evidence(now_ns, &readiness);
+            self.update_evidence(now_ns, readiness);
         }
         if let Some(first) = self.first {
             self.clear_streak = 0;
@@ -1567,27 +1625,24 @@ impl Monitor {
                 became_ready = true;
             }
         }
-        if ending {
-            // Clean end of the stream: disarm until the next setpoint.
-            self.seen_setpoint = false;
-            self.silent_cycles = 0;
-            self.last_sequence = None;
-            self.identity_state = IdentityState::Unknown;
-            self.unverified_cycles = 0;
-            self.prev_pose = None;
-            self.last_pose = None;
-            self.cycle_ref = None;
-            self.plan = PlanWatch::default();
-        }
-        let report = CycleReport {
-            state: self.state.state_code(),
-            new_trip,
-            faults: self.faults,
-            setpoints: self.new_setpoints,
-            missing: self.missing,
-            became_ready,
-            readiness,
-        };
+        (new_trip, became_ready)
+    }
+
+    /// Clean end of the stream: disarm the stream's checks until the next setpoint.
+    fn disarm_at_stream_end(&mut self) {
+        self.seen_setpoint = false;
+        self.silent_cycles = 0;
+        self.last_sequence = None;
+        self.identity_state = IdentityState::Unknown;
+        self.unverified_cycles = 0;
+        self.prev_pose = None;
+        self.last_pose = None;
+        self.cycle_ref = None;
+        self.plan = PlanWatch::default();
+    }
+
+    /// Forgets this cycle's faults and per-cycle counts (after the report took them).
+    fn clear_cycle(&mut self) {
         self.last_faults = self.faults;
         self.faults.clear();
         self.first = None;
@@ -1599,7 +1654,6 @@ impl Monitor {
         self.fb_latched = false;
         self.force_out_of_range = false;
         self.io_reports = 0;
-        report
     }
 
     /// While tripped: latch this cycle's causes and advance / reset each latched cause's

@@ -92,132 +92,146 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(args: Args) -> Result<ExitCode, Box<dyn std::error::Error>> {
+type Res = Result<ExitCode, Box<dyn std::error::Error>>;
+
+fn run(args: Args) -> Res {
     match args.cmd {
-        Some(Cmd::Reset { timeout_ms, socket }) => {
-            let socket = match socket {
-                Some(s) => s,
-                None => {
-                    let cfg = safety_monitor::config::load(&args.config)?;
-                    cfg.reset_socket.map(|(p, _)| p).ok_or_else(|| {
-                        format!(
-                            "{}: no [reset] socket configured (the reset is the safety I/O \
-                             node's key)",
-                            args.config.display()
-                        )
-                    })?
-                }
-            };
-            match daemon::request_reset(&socket, Duration::from_millis(timeout_ms))? {
-                ResetReply::Accepted => {
-                    println!("reset accepted: e-stop released, drives re-enabled by drive-io");
-                    Ok(ExitCode::SUCCESS)
-                }
-                ResetReply::NotTripped => {
-                    println!("reset not needed: nothing was latched, nothing changed");
-                    Ok(ExitCode::SUCCESS)
-                }
-                ResetReply::NotReady => {
-                    println!(
-                        "reset REFUSED: the monitor is not ready yet (not every drive is operational \
-                         with live force readings; see its log)"
-                    );
-                    Ok(ExitCode::FAILURE)
-                }
-                ResetReply::Refused(c) => {
-                    println!(
-                        "reset REFUSED: the cause persists ({})",
-                        c.map_or("unknown".to_string(), |c| c.to_string())
-                    );
-                    Ok(ExitCode::FAILURE)
-                }
-                ResetReply::Denied(why) => {
-                    println!("reset DENIED: {why}");
-                    Ok(ExitCode::FAILURE)
-                }
-                ResetReply::Exhausted => {
-                    println!(
-                        "reset REFUSED: this monitor instance has counted all the resets it can; \
-                         restart it (then reset the new instance)"
-                    );
-                    Ok(ExitCode::FAILURE)
-                }
-            }
+        Some(Cmd::Reset { timeout_ms, socket }) => reset(&args.config, timeout_ms, socket),
+        Some(Cmd::Accept { platform, yes }) => accept(&args.config, &platform, yes),
+        Some(Cmd::Identity) => identity(&args.config),
+        None => monitor(&args),
+    }
+}
+
+/// `safety-monitor reset`: asks the running monitor on its reset socket.
+fn reset(config: &std::path::Path, timeout_ms: u64, socket: Option<std::path::PathBuf>) -> Res {
+    let socket = match socket {
+        Some(s) => s,
+        None => {
+            let cfg = safety_monitor::config::load(config)?;
+            cfg.reset_socket.map(|(p, _)| p).ok_or_else(|| {
+                format!(
+                    "{}: no [reset] socket configured (the reset is the safety I/O \
+                     node's key)",
+                    config.display()
+                )
+            })?
         }
-        Some(Cmd::Accept { platform, yes }) => {
-            let r = safety_monitor::accept::accept(&args.config, &platform, yes)?;
+    };
+    match daemon::request_reset(&socket, Duration::from_millis(timeout_ms))? {
+        ResetReply::Accepted => {
+            println!("reset accepted: e-stop released, drives re-enabled by drive-io");
+            Ok(ExitCode::SUCCESS)
+        }
+        ResetReply::NotTripped => {
+            println!("reset not needed: nothing was latched, nothing changed");
+            Ok(ExitCode::SUCCESS)
+        }
+        ResetReply::NotReady => {
             println!(
-                "monitor config {}: runs {} ({})",
-                args.config.display(),
-                r.current.display(),
-                r.current_status
+                "reset REFUSED: the monitor is not ready yet (not every drive is operational \
+                 with live force readings; see its log)"
             );
-            println!("candidate {}:", platform.display());
-            println!("  sha256   {}", r.new_sha256);
-            println!("  identity {}", r.new_identity);
-            if r.diff.is_empty() {
-                println!("  no parameter differs");
-            } else {
-                println!("  {} parameter(s) differ:", r.diff.len());
-                for l in &r.diff {
-                    println!("    {l}");
-                }
-            }
-            match r.written {
-                Some(copy) => {
-                    tracing::warn!(
-                        copy = %copy.display(),
-                        sha256 = %r.new_sha256,
-                        "platform ACCEPTED for the safety monitor"
-                    );
-                    println!(
-                        "ACCEPTED: the monitor now runs {} (sha256 {}); restart it",
-                        copy.display(),
-                        r.new_sha256
-                    );
-                    Ok(ExitCode::SUCCESS)
-                }
-                None => {
-                    println!("not accepted: review the diff, then run again with --yes");
-                    Ok(ExitCode::FAILURE)
-                }
-            }
+            Ok(ExitCode::FAILURE)
         }
-        Some(Cmd::Identity) => {
-            let cfg = safety_monitor::config::load(&args.config)?;
-            let id = safety_monitor::identity::platform_identity(&cfg.platform);
+        ResetReply::Refused(c) => {
             println!(
-                "{id}  {} ({} cables)",
-                cfg.platform_file.display(),
-                cfg.platform.cables()
+                "reset REFUSED: the cause persists ({})",
+                c.map_or("unknown".to_string(), |c| c.to_string())
+            );
+            Ok(ExitCode::FAILURE)
+        }
+        ResetReply::Denied(why) => {
+            println!("reset DENIED: {why}");
+            Ok(ExitCode::FAILURE)
+        }
+        ResetReply::Exhausted => {
+            println!(
+                "reset REFUSED: this monitor instance has counted all the resets it can; \
+                 restart it (then reset the new instance)"
+            );
+            Ok(ExitCode::FAILURE)
+        }
+    }
+}
+
+/// `safety-monitor accept`: the diff against the running platform, the copy with `--yes`.
+fn accept(config: &std::path::Path, platform: &std::path::Path, yes: bool) -> Res {
+    let r = safety_monitor::accept::accept(config, platform, yes)?;
+    println!(
+        "monitor config {}: runs {} ({})",
+        config.display(),
+        r.current.display(),
+        r.current_status
+    );
+    println!("candidate {}:", platform.display());
+    println!("  sha256   {}", r.new_sha256);
+    println!("  identity {}", r.new_identity);
+    if r.diff.is_empty() {
+        println!("  no parameter differs");
+    } else {
+        println!("  {} parameter(s) differ:", r.diff.len());
+        for l in &r.diff {
+            println!("    {l}");
+        }
+    }
+    match r.written {
+        Some(copy) => {
+            tracing::warn!(
+                copy = %copy.display(),
+                sha256 = %r.new_sha256,
+                "platform ACCEPTED for the safety monitor"
+            );
+            println!(
+                "ACCEPTED: the monitor now runs {} (sha256 {}); restart it",
+                copy.display(),
+                r.new_sha256
             );
             Ok(ExitCode::SUCCESS)
         }
         None => {
-            let mut cfg = safety_monitor::config::load(&args.config)?;
-            cfg.override_transports(&args.transport)?;
-            // SAFETY: the handler only stores to an atomic (async-signal-safe).
-            unsafe {
-                libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
-                libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
-            }
-            let ipc = node("safety-monitor", &args.ipc_prefix)?;
-            let (tx, rx) = daemon::open_buses(&cfg)?;
-            // WATCHDOG=1 only while the 15 ms cycle advances (READY=1 comes from run_on).
-            let watchdog = crs_service::Watchdog::spawn(|| {
-                daemon::CYCLES_RUN.load(std::sync::atomic::Ordering::Relaxed)
-            })?;
-            let s = daemon::run_on(&cfg, tx, rx, &ipc, &STOP);
-            crs_service::notify_stopping();
-            if let Some(w) = watchdog {
-                w.stop();
-            }
-            let s = s?;
-            tracing::info!(
-                ?s,
-                "safety monitor stopped (the drives brake without its heartbeat)"
-            );
-            Ok(ExitCode::SUCCESS)
+            println!("not accepted: review the diff, then run again with --yes");
+            Ok(ExitCode::FAILURE)
         }
     }
+}
+
+/// `safety-monitor identity`: the platform identity the monitor computes.
+fn identity(config: &std::path::Path) -> Res {
+    let cfg = safety_monitor::config::load(config)?;
+    let id = safety_monitor::identity::platform_identity(&cfg.platform);
+    println!(
+        "{id}  {} ({} cables)",
+        cfg.platform_file.display(),
+        cfg.platform.cables()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The monitor process itself, until SIGINT/SIGTERM.
+fn monitor(args: &Args) -> Res {
+    let mut cfg = safety_monitor::config::load(&args.config)?;
+    cfg.override_transports(&args.transport)?;
+    // SAFETY: the handler only stores to an atomic (async-signal-safe).
+    unsafe {
+        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+    }
+    let ipc = node("safety-monitor", &args.ipc_prefix)?;
+    let (tx, rx) = daemon::open_buses(&cfg)?;
+    // WATCHDOG=1 only while the 15 ms cycle advances (READY=1 comes from run_on).
+    let watchdog = crs_service::Watchdog::spawn(|| {
+        daemon::CYCLES_RUN.load(std::sync::atomic::Ordering::Relaxed)
+    })?;
+    let s = daemon::run_on(&cfg, tx, rx, &ipc, &STOP);
+    crs_service::notify_stopping();
+    if let Some(w) = watchdog {
+        w.stop();
+    }
+    let s = s?;
+    tracing::info!(
+        ?s,
+        "safety monitor stopped (the drives brake without its heartbeat)"
+    );
+    Ok(ExitCode::SUCCESS)
 }
