@@ -523,7 +523,7 @@ impl Stack {
             Ok(!s.monitor_estops.is_empty())
         })?;
         let e = self.monitor_estops[0];
-        if !causes.iter().any(|c| e.detail == u32::from(c.code())) {
+        if !causes.iter().any(|c| e.trip_cause() == Ok(*c)) {
             return Err(format!(
                 "monitor tripped with cause {:?} (cable {}), expected one of {causes:?}",
                 Cause::from_code(e.detail),

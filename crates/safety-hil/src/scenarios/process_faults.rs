@@ -174,7 +174,7 @@ pub fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
             // A feedback silence the monitor detected before the replacement's first sample
             // was out (its event reached the harness only now) is the stall above, not the
             // verdict: the fault is that sample.
-            if e.detail == u32::from(Cause::FeedbackSilence.code()) && e.timestamp_ns < first {
+            if e.trip_cause() == Ok(Cause::FeedbackSilence) && e.timestamp_ns < first {
                 st.injected = false;
                 sync_stop.store(true, Ordering::Relaxed);
                 let _ = sync.join();
