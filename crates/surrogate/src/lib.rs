@@ -46,6 +46,7 @@ mod certificate;
 mod design;
 mod file;
 mod fit;
+mod json_layout;
 mod model;
 mod region;
 
