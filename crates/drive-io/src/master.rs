@@ -2,7 +2,7 @@
 //! [`crate::runner`] ties it to a bus, the 1 ms SYNC timer and iceoryx2.
 //!
 //! Sequence: NMT reset-communication (per node) -> wait boot-up of every drive and force
-//! sensor -> SDO start-up script of each ([`crate::commissioning`]: identity checks first, then
+//! sensor -> SDO start-up script of each ([`drive_commissioning::commissioning`]: identity checks first, then
 //! PDOs, heartbeats, option codes, mode; read-back) -> NMT start (per node) -> SYNC every
 //! period, RPDOs (encoded from each drive's mapping) walk each drive to Operation Enabled
 //! holding its actual position -> Ready -> Running on the first new setpoint. TPDOs are
@@ -10,18 +10,19 @@
 //! EMCY, drive fault bit, invalid setpoint => quick stop ALL drives and hold (latched until the
 //! safety monitor's reset, [`Master::reset`] with a [`ResetGrant`]).
 
-use crate::canopen::*;
-use crate::commissioning::{NodeKind, Plan, SdoOp};
-use crate::config::{DrivesConfig, WinchConfig};
-use crate::eds::{Eds, sdo_abort_text};
-use crate::mapping::Decoded;
 use crate::reset::ResetGrant;
-use crate::safety_watch::SafetyWatch;
-use crate::sdo::{ClientStep, SdoClient};
 use can_transport::RxFrame;
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, JointSetpoint, MAX_CABLES, StateEvent, fault_code,
 };
+use drive_bus::canopen::*;
+use drive_bus::eds::{Eds, sdo_abort_text};
+use drive_bus::mapping::Decoded;
+use drive_bus::safety_watch::SafetyWatch;
+use drive_bus::sdo::{ClientStep, SdoClient};
+pub use drive_commissioning::commissioning::SetupError;
+use drive_commissioning::commissioning::{NodeKind, Plan, SdoOp};
+use drives_config::{DrivesConfig, WinchConfig};
 
 const SDO_RETRIES: u8 = 3;
 /// Drives and force sensors.
@@ -110,17 +111,6 @@ impl Finding {
     }
 }
 
-/// Master construction failed: the EDS cannot be read or does not suit the configuration.
-#[derive(Debug, thiserror::Error)]
-pub enum SetupError {
-    #[error("EDS: {0}")]
-    Eds(#[from] crate::eds::EdsError),
-    #[error(transparent)]
-    Plan(#[from] crate::commissioning::PlanError),
-    #[error("TPDO COB-ID 0x{cob_id:03X} is configured for node {a} and node {b} on one interface")]
-    CobCollision { cob_id: u16, a: u8, b: u8 },
-}
-
 #[derive(Debug, Clone, Copy)]
 struct DriveView {
     node: u8,
@@ -138,7 +128,7 @@ struct DriveView {
     position: i32,
     velocity: i32,
     rx_ns: u64,
-    /// Next step of the drive's start-up script ([`crate::commissioning::plan`]).
+    /// Next step of the drive's start-up script ([`drive_commissioning::commissioning::plan`]).
     sdo: usize,
     sdo_outstanding: bool,
     sdo_sent_ns: u64,
@@ -266,12 +256,18 @@ impl Master {
     /// simulated load cell's); fails if an EDS cannot be read or lacks what the configuration
     /// needs.
     pub fn new(cfg: &DrivesConfig) -> Result<Self, SetupError> {
-        Self::from_plans(cfg, crate::commissioning::plan_all(cfg, None)?)
+        Self::from_plans(
+            cfg,
+            drive_commissioning::commissioning::plan_all(cfg, None)?,
+        )
     }
 
     /// A master whose drives are all described by `eds` (force sensors by their own).
     pub fn with_eds(cfg: &DrivesConfig, eds: Eds) -> Result<Self, SetupError> {
-        Self::from_plans(cfg, crate::commissioning::plan_all(cfg, Some(&eds))?)
+        Self::from_plans(
+            cfg,
+            drive_commissioning::commissioning::plan_all(cfg, Some(&eds))?,
+        )
     }
 
     fn from_plans(cfg: &DrivesConfig, plans: Vec<Plan>) -> Result<Self, SetupError> {
@@ -303,7 +299,7 @@ impl Master {
                 p.mapping
                     .pdos
                     .iter()
-                    .filter(|p| p.used && p.direction == crate::mapping::Direction::FromNode)
+                    .filter(|p| p.used && p.direction == drive_bus::mapping::Direction::FromNode)
                     .map(move |p| ((iface, p.cob_id), k))
             })
             .collect();
@@ -495,7 +491,7 @@ impl Master {
 
     /// `(index, sub, value)` configured in node `i` (drives first, then force sensors; for
     /// its DCF); empty until it is done.
-    pub fn configured_values(&self, i: usize) -> Vec<(u16, u8, crate::eds::DcfValue)> {
+    pub fn configured_values(&self, i: usize) -> Vec<(u16, u8, drive_bus::eds::DcfValue)> {
         match (self.plans.get(i), self.drives.get(i)) {
             (Some(p), Some(d)) if d.sdo >= p.ops.len() => p.configured_values(),
             _ => Vec::new(),

@@ -1,16 +1,16 @@
 //! The drive-io process loop: SYNC timer + bus + iceoryx2 around [`Master`].
 
-use crate::canopen::{BusFrames, sync};
-use crate::config::{DrivesConfig, MAX_INTERFACES, SyncSource};
 use crate::master::Master;
 use crate::reset::{Ignored, ResetGate, is_reset_event};
-use crate::safety_watch::SafetyWatch;
 use crate::sync_clock::{IsoClock, IsoDue, SyncClock};
 use can_transport::{CanBus, CanError, CanFrame, RxEvent, wait_readable_any};
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, ProcessId,
     SetpointReadyListener, StateEvent, SyncSchedule, monotonic_ns,
 };
+use drive_bus::canopen::{BusFrames, sync};
+use drive_bus::safety_watch::SafetyWatch;
+use drives_config::{DrivesConfig, MAX_INTERFACES, SyncSource};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
@@ -27,7 +27,7 @@ pub enum RunError {
     Commissioning(String),
     /// The configuration does not fit its bus budget.
     #[error(transparent)]
-    Budget(crate::budget::BudgetError),
+    Budget(drive_commissioning::budget::BudgetError),
     /// One bus must be opened per configured interface.
     #[error("drive-io runs {configured} CAN interface(s) but {opened} bus(es) were opened")]
     Interfaces { configured: usize, opened: usize },
@@ -339,7 +339,7 @@ pub fn run_with<B: CanBus>(
         tracing::info!(node = p.node, kind = %p.kind, eds = %p.eds.file, "configured from its EDS");
     }
     // The bus budget of the frames these plans produce: refused before anything is sent.
-    for ib in crate::budget::of_plans(cfg, master.plans()) {
+    for ib in drive_commissioning::budget::of_plans(cfg, master.plans()) {
         match (ib.check(), budget) {
             (Ok(()), _) => tracing::info!(
                 interface = %ib.name,
@@ -717,8 +717,8 @@ fn drain_ready(listener: &SetpointReadyListener, schedule: &mut Schedule) -> boo
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::canopen::{NmtState, heartbeat, nmt};
     use can_transport::RxFrame;
+    use drive_bus::canopen::{NmtState, heartbeat, nmt};
     use std::sync::{Arc, Mutex};
 
     /// What a fake interface was handed: (path, frame); path 0 = the interface's own socket,

@@ -1,11 +1,16 @@
-//! Drive bus configuration (config/drives.toml): transport, timing, per-winch scaling.
+//! Drive bus configuration (config/drives.toml): transport, timing, per-winch scaling. One
+//! reader for every process on the drive bus: drive-io's master, the simulated plant, the
+//! winch emulator and the stack.
 
-use crate::commissioning::Parameter;
-use crate::force_sensor::{ForceSensorConfig, ForceSource};
-use crate::identity::Identity;
-use crate::mapping::{MappingMode, ObjectRef, PdoSpec};
+mod winch;
+
+pub use winch::{Parameter, ParameterValue, validate_winch, winch_mapping_mode};
+
 use can_transport::TransportSpec;
-use crs_ipc::MAX_CABLES;
+use crs_limits::MAX_CABLES;
+use drive_bus::force_sensor::{ForceSensorConfig, ForceSource};
+use drive_bus::identity::Identity;
+use drive_bus::mapping::{MappingMode, ObjectRef, PdoSpec};
 use serde::Deserialize;
 use std::f64::consts::PI;
 
@@ -30,9 +35,7 @@ fn invalid(field: impl Into<String>, reason: impl Into<String>) -> ConfigError {
     }
 }
 
-/// At most this many CAN interfaces (`[[bus.interface]]`) per drive-io: PCIe/USB CAN cards
-/// have 1–4 channels, two cards 8.
-pub const MAX_INTERFACES: usize = 8;
+pub use drive_bus::canopen::MAX_INTERFACES;
 
 /// One CAN interface of the drive bus system (`[[bus.interface]]`): its transport, bit rate and
 /// load budget. The drives on it are the `[[winch]]` entries naming it.
@@ -47,7 +50,7 @@ pub struct InterfaceConfig {
     #[serde(default = "d_bitrate")]
     pub bitrate_bit_per_s: u32,
     /// Load budget: the configuration's frames may fill at most this share of the bus
-    /// (worst-case bit stuffing, [`crate::budget`]); may be set below the default, never above.
+    /// (worst-case bit stuffing, [`drive_commissioning::budget`]); may be set below the default, never above.
     #[serde(default = "d_budget")]
     pub budget_percent: f64,
 }
@@ -176,7 +179,7 @@ fn d_qs_decel() -> f64 {
     14.0
 }
 
-/// What starts drive-io's cycle ([`BusConfig::sync_source`], [`crate::sync_clock`]).
+/// What starts drive-io's cycle ([`BusConfig::sync_source`], [`drive_io::sync_clock`]).
 #[derive(Debug, Clone, Copy, Default, Deserialize, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum SyncSource {
@@ -389,11 +392,11 @@ pub struct DrivesConfig {
     #[serde(rename = "winch")]
     pub winches: Vec<WinchConfig>,
     /// `[safety_heartbeat]`: validate the safety monitor's doubled heartbeat and its
-    /// configuration signature, and stop without them (see [`crate::safety_watch`]). Parsed as
+    /// configuration signature, and stop without them (see [`drive_bus::safety_watch`]). Parsed as
     /// optional so the drive side and tests can run without it, but the drive-io daemon refuses
     /// to start without it ([`DrivesConfig::require_safety_heartbeat`]).
     #[serde(default)]
-    pub safety_heartbeat: Option<crate::safety_watch::SafetyWatchConfig>,
+    pub safety_heartbeat: Option<drive_bus::safety_watch::SafetyWatchConfig>,
     /// `[[force_sensor]]`: force-measuring nodes (one per pulley load cell, CiA 404).
     #[serde(default, rename = "force_sensor")]
     pub force_sensors: Vec<ForceSensorConfig>,
@@ -427,26 +430,32 @@ impl DrivesConfig {
     }
 
     /// The drives' EDS (`bus.eds`, else the simulated winch's built-in one).
-    pub fn load_eds(&self) -> Result<crate::eds::Eds, crate::eds::EdsError> {
+    pub fn load_eds(&self) -> Result<drive_bus::eds::Eds, drive_bus::eds::EdsError> {
         match &self.bus.eds {
-            Some(p) => crate::eds::Eds::load(&self.resolve(p)),
-            None => Ok(crate::eds::Eds::builtin_winch().clone()),
+            Some(p) => drive_bus::eds::Eds::load(&self.resolve(p)),
+            None => Ok(drive_bus::eds::Eds::builtin_winch().clone()),
         }
     }
 
     /// The EDS of winch `i` (`winch[i].eds`, else `bus.eds`, else the simulated winch's).
-    pub fn load_winch_eds(&self, i: usize) -> Result<crate::eds::Eds, crate::eds::EdsError> {
+    pub fn load_winch_eds(
+        &self,
+        i: usize,
+    ) -> Result<drive_bus::eds::Eds, drive_bus::eds::EdsError> {
         match self.winches.get(i).and_then(|w| w.eds.as_ref()) {
-            Some(p) => crate::eds::Eds::load(&self.resolve(p)),
+            Some(p) => drive_bus::eds::Eds::load(&self.resolve(p)),
             None => self.load_eds(),
         }
     }
 
     /// The EDS of force sensor `j` (`force_sensor[j].eds`, else the built-in CiA 404 load cell).
-    pub fn load_sensor_eds(&self, j: usize) -> Result<crate::eds::Eds, crate::eds::EdsError> {
+    pub fn load_sensor_eds(
+        &self,
+        j: usize,
+    ) -> Result<drive_bus::eds::Eds, drive_bus::eds::EdsError> {
         match self.force_sensors.get(j).and_then(|s| s.eds.as_ref()) {
-            Some(p) => crate::eds::Eds::load(&self.resolve(p)),
-            None => Ok(crate::eds::Eds::builtin_load_cell().clone()),
+            Some(p) => drive_bus::eds::Eds::load(&self.resolve(p)),
+            None => Ok(drive_bus::eds::Eds::builtin_load_cell().clone()),
         }
     }
 
@@ -907,7 +916,7 @@ impl DrivesConfig {
                     "0..max cable length does not fit the i32 position range (0x607A) with this scaling/offset",
                 ));
             }
-            crate::commissioning::validate_winch(self, i).map_err(|(k, r)| invalid(k, r))?;
+            winch::validate_winch(self, i).map_err(|(k, r)| invalid(k, r))?;
         }
         if !(b.quick_stop_deceleration_m_per_s2.is_finite()
             && b.quick_stop_deceleration_m_per_s2 > 0.0)

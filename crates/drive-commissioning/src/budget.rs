@@ -1,6 +1,6 @@
 //! The bus budget: what a configuration puts on each CAN interface, in bits on the wire and
 //! time, against a load budget — refused above it, naming the interface and the frames that
-//! fill it (`drive-io --print-plan` prints it; [`crate::master::Master::new`] and `crs sim`
+//! fill it (`drive-io --print-plan` prints it; [`drive_io::master::Master::new`] and `crs sim`
 //! refuse an over-budget configuration before anything starts).
 //!
 //! Bits are counted with worst-case bit stuffing ([`can_transport::wire::bits`]): a frame of n
@@ -22,8 +22,10 @@
 //!   frame and every higher-priority periodic frame that can be pending then (the safety pairs
 //!   where they travel) — are off the wire within `rpdo_guard_us`.
 
-use crate::config::{DrivesConfig, SyncSource};
+use crate::commissioning::{NodeKind, Plan, SetupError};
 use can_transport::wire::bits::worst_case_bits;
+use drive_bus::mapping::{Direction, Transmission};
+use drives_config::{DrivesConfig, SyncSource};
 
 /// Headroom for EMCY: one 8-byte EMCY per node per this period (a drive's EMCY inhibit time,
 /// 0x1015, is typically 10–100 ms; faults are rare, bursts are what matters).
@@ -468,7 +470,7 @@ pub fn budget(
         ib.lines.push(line(
             format!("safety I/O inputs node {}", io.node_id),
             Sender::Node(io.node_id),
-            crate::config::safety_io_tpdo_cob_id(io.node_id),
+            drives_config::safety_io_tpdo_cob_id(io.node_id),
             2,
             Rate::Every {
                 ms: f64::from(io.inputs_period_ms),
@@ -553,8 +555,8 @@ pub fn fixed_layout(node: u8) -> Vec<PdoFrame> {
 
 /// The budget of `cfg` for the nodes' plans (their configured PDO frames,
 /// [`crate::commissioning::plan_all`]).
-pub fn of_plans(cfg: &DrivesConfig, plans: &[crate::commissioning::Plan]) -> Vec<InterfaceBudget> {
-    let (drives, extra) = crate::commissioning::budget_frames(cfg, plans);
+pub fn of_plans(cfg: &DrivesConfig, plans: &[Plan]) -> Vec<InterfaceBudget> {
+    let (drives, extra) = budget_frames(cfg, plans);
     budget(cfg, |i| drives.get(i).cloned().unwrap_or_default(), &extra)
 }
 
@@ -569,12 +571,61 @@ pub fn check(cfg: &DrivesConfig) -> Result<Vec<InterfaceBudget>, CheckError> {
     Ok(all)
 }
 
+/// The plans' PDO frames in the bus budget's terms ([`budget`]): per cable its
+/// drive's frames, and every force sensor as an extra node (interface, node id, frames,
+/// heartbeat period ms). An event-driven TPDO counts as one frame every
+/// max(1, ⌊inhibit time / SYNC period⌋) SYNCs — its worst case when the inhibit time is at least
+/// one period; with a shorter inhibit time it may come more often than that.
+#[allow(clippy::type_complexity)]
+pub fn budget_frames(
+    cfg: &DrivesConfig,
+    plans: &[Plan],
+) -> (Vec<Vec<PdoFrame>>, Vec<(usize, u8, Vec<PdoFrame>, f64)>) {
+    let period_us = cfg.bus.sync_period_us.max(1);
+    let convert = |p: &Plan| -> Vec<PdoFrame> {
+        p.pdo_frames()
+            .iter()
+            .map(|f| PdoFrame {
+                cob_id: f.cob_id,
+                dlc: f.dlc,
+                rpdo: f.direction == Direction::ToNode,
+                every_n_sync: match f.transmission {
+                    Transmission::Sync { every } => u16::from(every.max(1)),
+                    Transmission::Event { inhibit_us, .. } => {
+                        u16::try_from((inhibit_us / period_us).max(1)).unwrap_or(u16::MAX)
+                    }
+                },
+            })
+            .collect()
+    };
+    let mut drives = Vec::new();
+    let mut extra = Vec::new();
+    // plan_all: the drives in cable order, then the force sensors in their order.
+    let mut j = 0;
+    for p in plans {
+        match p.kind {
+            NodeKind::Drive { .. } => drives.push(convert(p)),
+            NodeKind::ForceSensor { .. } => {
+                j += 1;
+                let j = j - 1;
+                extra.push((
+                    cfg.sensor_interface(j),
+                    p.node,
+                    convert(p),
+                    f64::from(cfg.bus.heartbeat_producer_ms),
+                ));
+            }
+        }
+    }
+    (drives, extra)
+}
+
 /// Why [`check`] refused a configuration.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckError {
     /// The nodes' configuration could not be planned (EDS, mapping).
     #[error(transparent)]
-    Setup(#[from] crate::master::SetupError),
+    Setup(#[from] SetupError),
     #[error(transparent)]
     Budget(#[from] BudgetError),
 }
@@ -678,7 +729,7 @@ mod tests {
         // With a safety I/O node on its own interface they travel there only.
         let cfg = drives(&[2, 2, 2, 2, 0], "");
         let mut cfg = cfg;
-        cfg.safety_io = Some(crate::config::SafetyIoConfig {
+        cfg.safety_io = Some(drives_config::SafetyIoConfig {
             interface: "can4".into(),
             node_id: 0x30,
             inputs_period_ms: 10,
@@ -716,5 +767,49 @@ mod tests {
             "{}",
             b[0]
         );
+    }
+
+    /// The simulated winch's default mapping is the layout the budget assumes today; a vendor
+    /// drive with a load cell has 6 + 6 B every SYNC, 4 B every 10th, and the cell's 4 B.
+    #[test]
+    fn budget_frames_are_the_configured_mappings() {
+        let c = DrivesConfig::parse(
+            "[bus]\ntransport = \"udpbus:239.255.70.1:20000\"\n[[winch]]\nnode_id = 3\n\
+             drum_diameter_m = 0.305\ngear_ratio = 10.0\ncounts_per_rev = 1048576\nsign = -1\n\
+             max_cable_length_m = 20.0\n",
+        )
+        .unwrap();
+        let plans = crate::commissioning::plan_all(&c, None).unwrap();
+        let (drives, extra) = budget_frames(&c, &plans);
+        assert_eq!(drives, vec![fixed_layout(3)]);
+        assert!(extra.is_empty());
+        let vendor = format!(
+            "{}/../../config/eds/vendor-csp-drive.eds",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let c = DrivesConfig::parse(&format!(
+            "[bus]\ntransport = \"udpbus:239.255.70.1:20000\"\neds = \"{vendor}\"\n\
+             [[winch]]\nnode_id = 3\ndrum_diameter_m = 0.305\ngear_ratio = 10.0\n\
+             counts_per_rev = 1048576\nsign = 1\n\
+             [[force_sensor]]\nnode_id = 40\ncable = 1\nn_per_unit = 0.1\nevery_n_syncs = 2\n"
+        ))
+        .unwrap();
+        let plans = crate::commissioning::plan_all(&c, None).unwrap();
+        let (drives, extra) = budget_frames(&c, &plans);
+        let f = |cob_id, dlc, rpdo, every_n_sync| PdoFrame {
+            cob_id,
+            dlc,
+            rpdo,
+            every_n_sync,
+        };
+        assert_eq!(
+            drives[0],
+            vec![
+                f(0x203, 6, true, 1),
+                f(0x183, 6, false, 1),
+                f(0x283, 4, false, 10)
+            ]
+        );
+        assert_eq!(extra, vec![(0, 40, vec![f(0x1A8, 4, false, 2)], 10.0)]);
     }
 }
