@@ -992,8 +992,25 @@ impl Master {
         self.toggle = !self.toggle;
         self.applied_this_cycle = false;
         let boot_start = *self.boot_start_ns.get_or_insert(now_ns);
-        // drive-io's own heartbeat (the drives' 0x1016 consumer watches it), unless withheld
-        // as the last escalation of a stop.
+        self.send_own_heartbeat(now_ns, out);
+        self.consume_heartbeats(now_ns);
+        self.check_boot_timeout(now_ns, boot_start);
+        match self.phase {
+            Phase::Boot => self.cycle_boot(now_ns, out),
+            Phase::Configure => self.cycle_configure(now_ns, out),
+            Phase::Enable => self.cycle_enable(out),
+            Phase::Ready | Phase::Running => self.cycle_follow(now_ns, setpoint, out),
+            Phase::Stopped(_) => {
+                self.push_quick_stop(out);
+                self.supervise_quick_stop(now_ns, out);
+            }
+        }
+        self.update_feedback(now_ns);
+    }
+
+    /// drive-io's own heartbeat (the drives' 0x1016 consumer watches it), unless withheld
+    /// as the last escalation of a stop.
+    fn send_own_heartbeat(&mut self, now_ns: u64, out: &mut BusFrames) {
         if !self.hb_inhibit && now_ns >= self.next_master_hb_ns {
             out.push_all(heartbeat(self.master_node_id, NmtState::Operational));
             self.next_master_hb_ns = if now_ns - self.next_master_hb_ns > self.master_hb_ns {
@@ -1002,9 +1019,11 @@ impl Master {
                 self.next_master_hb_ns + self.master_hb_ns
             };
         }
+    }
 
-        // Heartbeat consumer (CiA 301 §7.2.8.3.2.2), active per node once its producer time is
-        // set; every loss of one cycle is one line (the first node and how many).
+    /// Heartbeat consumer (CiA 301 §7.2.8.3.2.2), active per node once its producer time is
+    /// set; every loss of one cycle is one line (the first node and how many).
+    fn consume_heartbeats(&mut self, now_ns: u64) {
         let mut lost: Option<u8> = None;
         let mut n_lost = 0usize;
         for i in 0..self.n {
@@ -1022,6 +1041,11 @@ impl Master {
             tracing::error!(node, nodes = n_lost, "heartbeat lost");
             self.stop(BusState::Fault, fault_code::HEARTBEAT_LOST, node);
         }
+    }
+
+    /// Boot, configuration and enabling must end within the boot timeout; the error names the
+    /// first node not there yet.
+    fn check_boot_timeout(&mut self, now_ns: u64, boot_start: u64) {
         if matches!(self.phase, Phase::Boot | Phase::Configure | Phase::Enable)
             && now_ns.saturating_sub(boot_start) > self.boot_timeout_ns
         {
@@ -1041,165 +1065,179 @@ impl Master {
             tracing::error!(node, phase = ?self.phase, "boot timeout");
             self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
         }
+    }
 
-        match self.phase {
-            Phase::Boot => {
-                if self.cycle == 1 {
-                    // Addressed per node: other devices on the bus (the safety monitor's I/O,
-                    // another master's nodes) are not drive-io's to reset.
-                    for d in &self.drives[..self.n] {
-                        out.push(usize::from(d.iface), nmt(NMT_RESET_COMM, d.node));
-                    }
-                }
-                if self.drives[..self.n].iter().all(|d| d.booted) {
-                    for d in &mut self.drives[..self.n] {
-                        d.last_hb_ns = now_ns;
-                    }
-                    self.set_phase(Phase::Configure);
-                }
-            }
-            Phase::Configure => {
-                let sdo_timeout = self.sdo_timeout_ns;
-                let mut timed_out = None;
-                for i in 0..self.n {
-                    let d = self.drives[i];
-                    let Some(&op) = self.plans[i].ops.get(d.sdo) else {
-                        continue;
-                    };
-                    let rx_cob = COB_SDO_RX_BASE + u16::from(d.node);
-                    if let Some(next) = self.drives[i].sdo_next.take() {
-                        // The next segment of a segmented transfer.
-                        let f = can_transport::CanFrame::new_std_lossy(rx_cob, &next);
-                        out.push(usize::from(d.iface), f);
-                        self.drives[i].sdo_sent_ns = now_ns;
-                        continue;
-                    }
-                    if d.sdo_outstanding && now_ns.saturating_sub(d.sdo_sent_ns) < sdo_timeout {
-                        continue;
-                    }
-                    if d.sdo_outstanding && d.sdo_tries >= SDO_RETRIES {
-                        let (index, sub) = op.index_sub();
-                        timed_out = Some(CommissioningFault::Timeout {
-                            node: d.node,
-                            index,
-                            sub,
-                        });
-                        continue;
-                    }
-                    // A new transfer, or the whole transfer again after a timeout.
-                    let req = self.start_sdo(i, op);
-                    let f = can_transport::CanFrame::new_std_lossy(rx_cob, &req);
-                    out.push(usize::from(d.iface), f);
-                    let d = &mut self.drives[i];
-                    d.sdo_outstanding = true;
-                    d.sdo_sent_ns = now_ns;
-                    d.sdo_tries += 1;
-                }
-                if let Some(f) = timed_out {
-                    self.commissioning_failed(f);
-                } else if self.configured() {
-                    tracing::info!(
-                        nodes = self.n,
-                        "all drives and force sensors identified, configured and verified"
-                    );
-                    for d in &self.drives[..self.n] {
-                        out.push(usize::from(d.iface), nmt(NMT_START, d.node));
-                    }
-                    self.set_phase(Phase::Enable);
-                }
-            }
-            Phase::Enable => {
-                if std::mem::take(&mut self.restart_nmt) {
-                    for d in &self.drives[..self.m] {
-                        out.push(usize::from(d.iface), nmt(NMT_START, d.node));
-                    }
-                }
-                let mut all_enabled = true;
-                for i in 0..self.m {
-                    let d = self.drives[i];
-                    let st = Ds402State::from_statusword(d.statusword);
-                    // After an NMT restart, wait for the heartbeat to say operational too; in
-                    // CSP, wait for statusword bit 12 (the drive follows the target).
-                    all_enabled &= d.have_tpdo1
-                        && st == Ds402State::OperationEnabled
-                        && d.statusword & SW_FOLLOWS_TARGET != 0
-                        && (!d.seen_operational || d.last_hb_state == NmtState::Operational.code());
-                    if d.have_tpdo1 {
-                        // Enable while holding the actual position: the drive must not jump.
-                        self.target[i] = d.position;
-                        self.push_rpdos(i, enable_step(st, self.toggle), d.position, out);
-                    }
-                }
-                // Every TPDO drive-io supervises has arrived (the velocity may come every n-th
-                // SYNC only; the forces from the drives or their force sensors).
-                all_enabled &= self.drives[..self.m].iter().all(|d| d.vel_rx_ns > 0)
-                    && self.force_node[..self.m]
-                        .iter()
-                        .all(|&k| self.drives[k].force_rx_ns > 0);
-                out.request_sync();
-                if all_enabled {
-                    self.setpoint_age = 0;
-                    self.set_phase(Phase::Ready);
-                }
-            }
-            Phase::Ready | Phase::Running => {
-                self.check_drives(now_ns);
-                // A finding stopped the bus: this cycle's setpoint must not re-enter Running
-                // (the stop is latched; the quick stop goes out below).
-                if !self.is_latched()
-                    && let Some(sp) = setpoint.filter(|sp| sp.sequence > self.last_seq)
-                {
-                    if self.last_seq > 0 {
-                        self.superseded += sp.sequence - self.last_seq - 1;
-                    }
-                    self.last_seq = sp.sequence;
-                    if self.apply_setpoint(sp, now_ns) {
-                        if self.phase == Phase::Ready {
-                            // A new stream: an old end announcement does not cover it.
-                            self.stream_end = false;
-                        }
-                        self.last_at_rest = sp.cable_velocity_m_per_s[..self.m]
-                            .iter()
-                            .all(|v| *v == 0.0);
-                        self.setpoint_age = 0;
-                        self.set_phase(Phase::Running);
-                    }
-                } else if self.phase == Phase::Running {
-                    self.setpoint_age = self.setpoint_age.saturating_add(1);
-                    if self.setpoint_age > self.stale_cycles && self.stream_end && self.last_at_rest
-                    {
-                        // The planned end of the stream, at rest: a normal state. The drives
-                        // stay enabled holding the last target; a new stream (sequence numbers
-                        // from 1 again) is followed from here.
-                        tracing::info!(
-                            sequence = self.last_seq,
-                            "motion-core ended its stream at rest: drives holding position"
-                        );
-                        self.stream_end = false;
-                        self.last_seq = 0;
-                        self.applied_seq = 0;
-                        self.setpoint_age = 0;
-                        self.set_phase(Phase::Ready);
-                    } else if self.setpoint_age > self.stale_cycles {
-                        tracing::warn!(cycles = self.setpoint_age, "setpoints stale");
-                        self.stop(BusState::StaleStop, fault_code::NONE, 0);
-                    }
-                }
-                if matches!(self.phase, Phase::Ready | Phase::Running) {
-                    for i in 0..self.m {
-                        self.push_rpdos(i, CW_ENABLE_OPERATION, self.target[i], out);
-                    }
-                    out.request_sync();
-                } else {
-                    self.push_quick_stop(out);
-                }
-            }
-            Phase::Stopped(_) => {
-                self.push_quick_stop(out);
-                self.supervise_quick_stop(now_ns, out);
+    /// Boot: reset every node's communication once, wait for every boot-up message.
+    fn cycle_boot(&mut self, now_ns: u64, out: &mut BusFrames) {
+        if self.cycle == 1 {
+            // Addressed per node: other devices on the bus (the safety monitor's I/O,
+            // another master's nodes) are not drive-io's to reset.
+            for d in &self.drives[..self.n] {
+                out.push(usize::from(d.iface), nmt(NMT_RESET_COMM, d.node));
             }
         }
-        self.update_feedback(now_ns);
+        if self.drives[..self.n].iter().all(|d| d.booted) {
+            for d in &mut self.drives[..self.n] {
+                d.last_hb_ns = now_ns;
+            }
+            self.set_phase(Phase::Configure);
+        }
+    }
+
+    /// Configure: each node's start-up script, one SDO transfer at a time per node (retried
+    /// on timeout); NMT start once every node is configured and verified.
+    fn cycle_configure(&mut self, now_ns: u64, out: &mut BusFrames) {
+        let sdo_timeout = self.sdo_timeout_ns;
+        let mut timed_out = None;
+        for i in 0..self.n {
+            let d = self.drives[i];
+            let Some(&op) = self.plans[i].ops.get(d.sdo) else {
+                continue;
+            };
+            let rx_cob = COB_SDO_RX_BASE + u16::from(d.node);
+            if let Some(next) = self.drives[i].sdo_next.take() {
+                // The next segment of a segmented transfer.
+                let f = can_transport::CanFrame::new_std_lossy(rx_cob, &next);
+                out.push(usize::from(d.iface), f);
+                self.drives[i].sdo_sent_ns = now_ns;
+                continue;
+            }
+            if d.sdo_outstanding && now_ns.saturating_sub(d.sdo_sent_ns) < sdo_timeout {
+                continue;
+            }
+            if d.sdo_outstanding && d.sdo_tries >= SDO_RETRIES {
+                let (index, sub) = op.index_sub();
+                timed_out = Some(CommissioningFault::Timeout {
+                    node: d.node,
+                    index,
+                    sub,
+                });
+                continue;
+            }
+            // A new transfer, or the whole transfer again after a timeout.
+            let req = self.start_sdo(i, op);
+            let f = can_transport::CanFrame::new_std_lossy(rx_cob, &req);
+            out.push(usize::from(d.iface), f);
+            let d = &mut self.drives[i];
+            d.sdo_outstanding = true;
+            d.sdo_sent_ns = now_ns;
+            d.sdo_tries += 1;
+        }
+        if let Some(f) = timed_out {
+            self.commissioning_failed(f);
+        } else if self.configured() {
+            tracing::info!(
+                nodes = self.n,
+                "all drives and force sensors identified, configured and verified"
+            );
+            for d in &self.drives[..self.n] {
+                out.push(usize::from(d.iface), nmt(NMT_START, d.node));
+            }
+            self.set_phase(Phase::Enable);
+        }
+    }
+
+    /// Enable: walk every drive's CiA 402 state machine to Operation Enabled, holding its
+    /// actual position; Ready once every drive follows and every supervised TPDO arrived.
+    fn cycle_enable(&mut self, out: &mut BusFrames) {
+        if std::mem::take(&mut self.restart_nmt) {
+            for d in &self.drives[..self.m] {
+                out.push(usize::from(d.iface), nmt(NMT_START, d.node));
+            }
+        }
+        let mut all_enabled = true;
+        for i in 0..self.m {
+            let d = self.drives[i];
+            let st = Ds402State::from_statusword(d.statusword);
+            // After an NMT restart, wait for the heartbeat to say operational too; in
+            // CSP, wait for statusword bit 12 (the drive follows the target).
+            all_enabled &= d.have_tpdo1
+                && st == Ds402State::OperationEnabled
+                && d.statusword & SW_FOLLOWS_TARGET != 0
+                && (!d.seen_operational || d.last_hb_state == NmtState::Operational.code());
+            if d.have_tpdo1 {
+                // Enable while holding the actual position: the drive must not jump.
+                self.target[i] = d.position;
+                self.push_rpdos(i, enable_step(st, self.toggle), d.position, out);
+            }
+        }
+        // Every TPDO drive-io supervises has arrived (the velocity may come every n-th
+        // SYNC only; the forces from the drives or their force sensors).
+        all_enabled &= self.drives[..self.m].iter().all(|d| d.vel_rx_ns > 0)
+            && self.force_node[..self.m]
+                .iter()
+                .all(|&k| self.drives[k].force_rx_ns > 0);
+        out.request_sync();
+        if all_enabled {
+            self.setpoint_age = 0;
+            self.set_phase(Phase::Ready);
+        }
+    }
+
+    /// Ready / Running: the drives' checks, the newest setpoint (or its absence), then the
+    /// targets (or the quick stop a finding latched) to every drive.
+    fn cycle_follow(&mut self, now_ns: u64, setpoint: Option<&JointSetpoint>, out: &mut BusFrames) {
+        self.check_drives(now_ns);
+        // A finding stopped the bus: this cycle's setpoint must not re-enter Running
+        // (the stop is latched; the quick stop goes out below).
+        if !self.is_latched()
+            && let Some(sp) = setpoint.filter(|sp| sp.sequence > self.last_seq)
+        {
+            self.take_setpoint(sp, now_ns);
+        } else if self.phase == Phase::Running {
+            self.age_setpoint();
+        }
+        if matches!(self.phase, Phase::Ready | Phase::Running) {
+            for i in 0..self.m {
+                self.push_rpdos(i, CW_ENABLE_OPERATION, self.target[i], out);
+            }
+            out.request_sync();
+        } else {
+            self.push_quick_stop(out);
+        }
+    }
+
+    /// A setpoint newer than the last one: counted (superseded ones too), applied if it passes
+    /// the checks, and the bus is Running.
+    fn take_setpoint(&mut self, sp: &JointSetpoint, now_ns: u64) {
+        if self.last_seq > 0 {
+            self.superseded += sp.sequence - self.last_seq - 1;
+        }
+        self.last_seq = sp.sequence;
+        if self.apply_setpoint(sp, now_ns) {
+            if self.phase == Phase::Ready {
+                // A new stream: an old end announcement does not cover it.
+                self.stream_end = false;
+            }
+            self.last_at_rest = sp.cable_velocity_m_per_s[..self.m]
+                .iter()
+                .all(|v| *v == 0.0);
+            self.setpoint_age = 0;
+            self.set_phase(Phase::Running);
+        }
+    }
+
+    /// Running without a new setpoint: past the stale limit, the announced end of a stream at
+    /// rest returns to Ready; anything else stops the bus.
+    fn age_setpoint(&mut self) {
+        self.setpoint_age = self.setpoint_age.saturating_add(1);
+        if self.setpoint_age > self.stale_cycles && self.stream_end && self.last_at_rest {
+            // The planned end of the stream, at rest: a normal state. The drives
+            // stay enabled holding the last target; a new stream (sequence numbers
+            // from 1 again) is followed from here.
+            tracing::info!(
+                sequence = self.last_seq,
+                "motion-core ended its stream at rest: drives holding position"
+            );
+            self.stream_end = false;
+            self.last_seq = 0;
+            self.applied_seq = 0;
+            self.setpoint_age = 0;
+            self.set_phase(Phase::Ready);
+        } else if self.setpoint_age > self.stale_cycles {
+            tracing::warn!(cycles = self.setpoint_age, "setpoints stale");
+            self.stop(BusState::StaleStop, fault_code::NONE, 0);
+        }
     }
 
     /// CiA 402 quick stop supervision: every drive must acknowledge the stop in a TPDO sent
