@@ -774,24 +774,35 @@ impl Master {
         }
     }
 
+    /// An SDO response of node `i`: the transfer's next step; once it is done, the answer
+    /// checked and the node's start-up script advanced.
     fn on_sdo(&mut self, i: usize, data: &[u8; 8]) {
         let d = self.drives[i];
         let Some(&op) = self.plans[i].ops.get(d.sdo) else {
             return;
         };
-        if !d.sdo_outstanding {
+        if !d.sdo_outstanding || !self.sdo_transfer_done(i, op, data) {
             return;
         }
-        let node = d.node;
+        match self.check_answer(i, op) {
+            Some(fault) => self.commissioning_failed(fault),
+            None => self.next_op(i, op),
+        }
+    }
+
+    /// The SDO client's step on `data`; true once the transfer of `op` completed. A refused
+    /// informational read moves on; any other abort or protocol error fails start-up.
+    fn sdo_transfer_done(&mut self, i: usize, op: SdoOp, data: &[u8; 8]) -> bool {
+        let node = self.drives[i].node;
         let (index, sub) = op.index_sub();
         match self.sdo_client[i].on_response(data) {
             // Stray or mismatched response: ignore, the timeout handles a silent node.
-            ClientStep::Ignored => return,
+            ClientStep::Ignored => false,
             ClientStep::Send(next) => {
                 // The next segment goes out with the next cycle (a segmented answer is
                 // followed to its end, never taken for a timeout).
                 self.drives[i].sdo_next = Some(next);
-                return;
+                false
             }
             ClientStep::Aborted(code) if matches!(op, SdoOp::Read { .. }) => {
                 // Informational (device name, versions): the node need not have it.
@@ -802,11 +813,8 @@ impl Master {
                     reason = sdo_abort_text(code),
                     "node refused an informational read"
                 );
-                let d = &mut self.drives[i];
-                d.sdo_outstanding = false;
-                d.sdo_tries = 0;
-                d.sdo += 1;
-                return;
+                self.next_op(i, op);
+                false
             }
             ClientStep::Aborted(code) => {
                 self.commissioning_failed(CommissioningFault::Abort {
@@ -816,7 +824,7 @@ impl Master {
                     write: op.is_write(),
                     code,
                 });
-                return;
+                false
             }
             ClientStep::Failed { code, abort } => {
                 self.drives[i].sdo_next = Some(abort);
@@ -826,10 +834,17 @@ impl Master {
                     sub,
                     code,
                 });
-                return;
+                false
             }
-            ClientStep::Done => {}
+            ClientStep::Done => true,
         }
+    }
+
+    /// What a completed transfer of `op` answered, against what the script expects: the
+    /// read-back of a written value, a checked value or text; an informational read is logged.
+    fn check_answer(&self, i: usize, op: SdoOp) -> Option<CommissioningFault> {
+        let node = self.drives[i].node;
+        let (index, sub) = op.index_sub();
         let c = &self.sdo_client[i];
         let masked = |v: u32, len: u8| {
             if len >= 4 {
@@ -841,46 +856,36 @@ impl Master {
         match op {
             SdoOp::Verify { value, len, .. } => {
                 let got = masked(c.data_u32(), len);
-                if got != masked(value, len) {
-                    self.commissioning_failed(CommissioningFault::Readback {
-                        node,
-                        index,
-                        sub,
-                        wrote: masked(value, len),
-                        read: got,
-                    });
-                    return;
-                }
+                (got != masked(value, len)).then_some(CommissioningFault::Readback {
+                    node,
+                    index,
+                    sub,
+                    wrote: masked(value, len),
+                    read: got,
+                })
             }
             SdoOp::Check { value, len, .. } => {
                 let got = masked(c.data_u32(), len);
-                if got != masked(value, len) {
-                    self.commissioning_failed(CommissioningFault::Check {
+                (got != masked(value, len)).then_some(CommissioningFault::Check {
+                    node,
+                    index,
+                    sub,
+                    expected: masked(value, len),
+                    found: got,
+                })
+            }
+            SdoOp::VerifyBytes { at, len, check, .. } => (c.data() != self.plans[i].bytes(at, len))
+                .then_some(if check {
+                    CommissioningFault::CheckText { node, index, sub }
+                } else {
+                    CommissioningFault::Readback {
                         node,
                         index,
                         sub,
-                        expected: masked(value, len),
-                        found: got,
-                    });
-                    return;
-                }
-            }
-            SdoOp::VerifyBytes { at, len, check, .. } => {
-                if c.data() != self.plans[i].bytes(at, len) {
-                    self.commissioning_failed(if check {
-                        CommissioningFault::CheckText { node, index, sub }
-                    } else {
-                        CommissioningFault::Readback {
-                            node,
-                            index,
-                            sub,
-                            wrote: 0,
-                            read: 0,
-                        }
-                    });
-                    return;
-                }
-            }
+                        wrote: 0,
+                        read: 0,
+                    }
+                }),
             SdoOp::Read { .. } => {
                 tracing::info!(
                     node,
@@ -888,14 +893,19 @@ impl Master {
                     value = %String::from_utf8_lossy(c.data()),
                     "node reports"
                 );
+                None
             }
-            SdoOp::Write { .. } | SdoOp::WriteBytes { .. } => {}
+            SdoOp::Write { .. } | SdoOp::WriteBytes { .. } => None,
         }
+    }
+
+    /// Node `i`'s script moves past `op`.
+    fn next_op(&mut self, i: usize, op: SdoOp) {
         let d = &mut self.drives[i];
         d.sdo_outstanding = false;
         d.sdo_tries = 0;
         d.sdo += 1;
-        if (index, sub) == (OD_PRODUCER_HEARTBEAT_MS, 0) && op.is_write() {
+        if op.index_sub() == (OD_PRODUCER_HEARTBEAT_MS, 0) && op.is_write() {
             // The node produces heartbeats at the configured period from now on.
             d.hb_monitored = true;
         }

@@ -726,9 +726,37 @@ impl DrivesConfig {
         Ok(())
     }
 
+    /// Every section checked, in this order (the first error found is reported).
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let b = &self.bus;
         self.validate_interfaces()?;
+        self.validate_bus_timing()?;
+        self.validate_bus_limits()?;
+        if self.winches.is_empty() || self.winches.len() > MAX_CABLES {
+            return Err(invalid(
+                "winch",
+                format!(
+                    "need 1..={MAX_CABLES} [[winch]] entries, got {}",
+                    self.winches.len()
+                ),
+            ));
+        }
+        self.validate_safety()?;
+        self.validate_winches()?;
+        let b = &self.bus;
+        if !(b.quick_stop_deceleration_m_per_s2.is_finite()
+            && b.quick_stop_deceleration_m_per_s2 > 0.0)
+        {
+            return Err(invalid(
+                "bus.quick_stop_deceleration_m_per_s2",
+                "must be finite and > 0",
+            ));
+        }
+        self.validate_force_sensors()
+    }
+
+    /// `[bus]`: the SYNC period and what is timed in it, heartbeats, boot and SDO timeouts.
+    fn validate_bus_timing(&self) -> Result<(), ConfigError> {
+        let b = &self.bus;
         if !(250..=100_000).contains(&b.sync_period_us) {
             return Err(invalid("bus.sync_period_us", "must be in 250..=100000"));
         }
@@ -777,6 +805,12 @@ impl DrivesConfig {
                 "must be >= 1",
             ));
         }
+        Ok(())
+    }
+
+    /// `[bus]`: force, speed and acceleration bounds, drive-io's node and heartbeat, the drives' safety functions (0x1016 consumer, 0x6007), following error, quick stop timeout.
+    fn validate_bus_limits(&self) -> Result<(), ConfigError> {
+        let b = &self.bus;
         if !(b.force_hard_limit_n > 0.0 && b.force_hard_limit_n <= FORCE_HARD_LIMIT_BOUND_N) {
             return Err(invalid(
                 "bus.force_hard_limit_n",
@@ -836,15 +870,12 @@ impl DrivesConfig {
         if b.quick_stop_timeout_ms == 0 {
             return Err(invalid("bus.quick_stop_timeout_ms", "must be >= 1"));
         }
-        if self.winches.is_empty() || self.winches.len() > MAX_CABLES {
-            return Err(invalid(
-                "winch",
-                format!(
-                    "need 1..={MAX_CABLES} [[winch]] entries, got {}",
-                    self.winches.len()
-                ),
-            ));
-        }
+        Ok(())
+    }
+
+    /// `[safety_heartbeat]` and `[safety_io]`.
+    fn validate_safety(&self) -> Result<(), ConfigError> {
+        let b = &self.bus;
         if let Some(sh) = &self.safety_heartbeat {
             sh.validate()
                 .map_err(|(field, reason)| invalid(field, reason))?;
@@ -880,6 +911,11 @@ impl DrivesConfig {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// Every `[[winch]]`: node id, scaling, position range, mapping, force source, parameters.
+    fn validate_winches(&self) -> Result<(), ConfigError> {
         for (i, w) in self.winches.iter().enumerate() {
             let f = |name: &str| format!("winch[{i}].{name}");
             if !(1..=127).contains(&w.node_id) {
@@ -918,14 +954,12 @@ impl DrivesConfig {
             }
             winch::validate_winch(self, i).map_err(|(k, r)| invalid(k, r))?;
         }
-        if !(b.quick_stop_deceleration_m_per_s2.is_finite()
-            && b.quick_stop_deceleration_m_per_s2 > 0.0)
-        {
-            return Err(invalid(
-                "bus.quick_stop_deceleration_m_per_s2",
-                "must be finite and > 0",
-            ));
-        }
+        Ok(())
+    }
+
+    /// Every `[[force_sensor]]`: its table, interface, node id and cable.
+    fn validate_force_sensors(&self) -> Result<(), ConfigError> {
+        let b = &self.bus;
         for (j, s) in self.force_sensors.iter().enumerate() {
             s.validate(
                 j,
