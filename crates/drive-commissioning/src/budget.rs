@@ -330,22 +330,61 @@ pub fn budget(
     extra_nodes: &[(usize, u8, Vec<PdoFrame>, f64)],
 ) -> Vec<InterfaceBudget> {
     let b = &cfg.bus;
-    let itfs = cfg.interfaces();
-    let period_s = f64::from(b.sync_period_us) * 1e-6;
-    let mut out: Vec<InterfaceBudget> = itfs
+    let mk = LineMaker {
+        period_s: f64::from(b.sync_period_us) * 1e-6,
+    };
+    let safety_itfs = cfg.safety_frame_interfaces();
+    let mut out: Vec<InterfaceBudget> = cfg
+        .interfaces()
         .iter()
-        .map(|itf| InterfaceBudget {
-            name: itf.name.clone(),
-            bitrate_bit_per_s: itf.bitrate_bit_per_s,
-            budget_percent: itf.budget_percent,
-            period_us: b.sync_period_us,
-            lines: Vec::new(),
-            rpdo_guard_us: (b.sync_source == SyncSource::Isochronous).then_some(b.rpdo_guard_us),
+        .enumerate()
+        .map(|(k, itf)| {
+            let mut ib = InterfaceBudget {
+                name: itf.name.clone(),
+                bitrate_bit_per_s: itf.bitrate_bit_per_s,
+                budget_percent: itf.budget_percent,
+                period_us: b.sync_period_us,
+                lines: Vec::new(),
+                rpdo_guard_us: (b.sync_source == SyncSource::Isochronous)
+                    .then_some(b.rpdo_guard_us),
+            };
+            bus_lines(cfg, mk, safety_itfs.contains(&k), &mut ib.lines);
+            ib
         })
         .collect();
-    let line = |what: String, sender, cob_id: u16, dlc: u8, rate: Rate| {
+    for (i, w) in cfg.winches.iter().enumerate() {
+        if let Some(ib) = out.get_mut(cfg.winch_interface(i)) {
+            let hb_ms = f64::from(b.heartbeat_producer_ms);
+            node_lines(mk, w.node_id, "drive", &pdo_frames(i), hb_ms, &mut ib.lines);
+        }
+    }
+    for (iface, node, pdos, hb_ms) in extra_nodes {
+        if let Some(ib) = out.get_mut(*iface) {
+            node_lines(mk, *node, "force sensor", pdos, *hb_ms, &mut ib.lines);
+        }
+    }
+    if let (Some(io), Some(iface)) = (&cfg.safety_io, cfg.safety_io_interface())
+        && let Some(ib) = out.get_mut(iface)
+    {
+        safety_io_lines(mk, io, &mut ib.lines);
+    }
+    // RPDOs and TPDOs of a node were numbered in one sequence: renumber per direction.
+    for ib in &mut out {
+        renumber(&mut ib.lines);
+    }
+    out
+}
+
+/// Makes the lines of one SYNC period's budget.
+#[derive(Clone, Copy)]
+struct LineMaker {
+    period_s: f64,
+}
+
+impl LineMaker {
+    fn line(self, what: String, sender: Sender, cob_id: u16, dlc: u8, rate: Rate) -> Line {
         let per_s = match rate {
-            Rate::EverySync(n) => 1.0 / (period_s * f64::from(n.max(1))),
+            Rate::EverySync(n) => 1.0 / (self.period_s * f64::from(n.max(1))),
             Rate::Every { ms } => 1000.0 / ms,
         };
         Line {
@@ -357,149 +396,128 @@ pub fn budget(
             bits: worst_case_bits(false, dlc),
             per_s,
         }
-    };
-    let safety_itfs = cfg.safety_frame_interfaces();
-    for (ib_index, ib) in out.iter_mut().enumerate() {
-        ib.lines.push(line(
-            "SYNC".into(),
-            Sender::Master,
-            0x080,
-            0,
-            Rate::EverySync(1),
-        ));
-        ib.lines.push(line(
-            "heartbeat drive-io".into(),
-            Sender::Master,
-            0x700 + u16::from(b.master_node_id),
-            1,
-            Rate::Every {
-                ms: f64::from(b.master_heartbeat_ms),
-            },
-        ));
-        ib.lines.push(line(
-            "SDO headroom (request + response)".into(),
-            Sender::Reserve,
-            0x600,
-            8,
-            Rate::Every {
-                ms: SDO_RESERVE_PERIOD_MS / 2.0,
-            },
-        ));
-        if let Some(sh) = cfg
-            .safety_heartbeat
-            .as_ref()
-            .filter(|_| safety_itfs.contains(&ib_index))
-        {
-            // Two doubled frames per refresh time: the configuration signature pair, then the
-            // heartbeat pair (docs/safety-monitor.md).
-            for (k, what) in [
-                "safety heartbeat",
-                "safety heartbeat (inverse)",
-                "safety signature",
-                "safety signature (inverse)",
-            ]
-            .iter()
-            .enumerate()
-            {
-                ib.lines.push(line(
-                    (*what).into(),
-                    Sender::Monitor,
-                    sh.cob_id + k as u16,
-                    8,
-                    Rate::Every {
-                        ms: f64::from(sh.refresh_time_ms),
-                    },
-                ));
-            }
-        }
     }
-    let mut node_lines = |iface: usize, node: u8, what: &str, pdos: &[PdoFrame], hb_ms: f64| {
-        let Some(ib) = out.get_mut(iface) else {
-            return;
-        };
-        for (k, p) in pdos.iter().enumerate() {
-            let name = if p.rpdo {
-                format!("RPDO{} node {node}", k + 1)
-            } else {
-                format!("TPDO{} node {node}", k + 1)
-            };
-            ib.lines.push(line(
-                name,
-                if p.rpdo {
-                    Sender::Master
-                } else {
-                    Sender::Node(node)
+}
+
+/// What every interface carries: the SYNC, drive-io's heartbeat, the SDO headroom, and the
+/// monitor's doubled frames where `safety` (the safety frame's interfaces).
+fn bus_lines(cfg: &DrivesConfig, mk: LineMaker, safety: bool, lines: &mut Vec<Line>) {
+    let b = &cfg.bus;
+    lines.push(mk.line("SYNC".into(), Sender::Master, 0x080, 0, Rate::EverySync(1)));
+    lines.push(mk.line(
+        "heartbeat drive-io".into(),
+        Sender::Master,
+        0x700 + u16::from(b.master_node_id),
+        1,
+        Rate::Every {
+            ms: f64::from(b.master_heartbeat_ms),
+        },
+    ));
+    lines.push(mk.line(
+        "SDO headroom (request + response)".into(),
+        Sender::Reserve,
+        0x600,
+        8,
+        Rate::Every {
+            ms: SDO_RESERVE_PERIOD_MS / 2.0,
+        },
+    ));
+    if let Some(sh) = cfg.safety_heartbeat.as_ref().filter(|_| safety) {
+        // Two doubled frames per refresh time: the configuration signature pair, then the
+        // heartbeat pair (docs/safety-monitor.md).
+        for (k, what) in [
+            "safety heartbeat",
+            "safety heartbeat (inverse)",
+            "safety signature",
+            "safety signature (inverse)",
+        ]
+        .iter()
+        .enumerate()
+        {
+            lines.push(mk.line(
+                (*what).into(),
+                Sender::Monitor,
+                sh.cob_id + k as u16,
+                8,
+                Rate::Every {
+                    ms: f64::from(sh.refresh_time_ms),
                 },
-                p.cob_id,
-                p.dlc,
-                Rate::EverySync(p.every_n_sync),
             ));
         }
-        ib.lines.push(line(
-            format!("heartbeat {what} node {node}"),
-            Sender::Node(node),
-            0x700 + u16::from(node),
-            1,
-            Rate::Every { ms: hb_ms },
-        ));
-        ib.lines.push(line(
-            format!("EMCY headroom node {node}"),
-            Sender::Reserve,
-            0x080 + u16::from(node),
-            8,
-            Rate::Every {
-                ms: EMCY_RESERVE_PERIOD_MS,
-            },
-        ));
-    };
-    for (i, w) in cfg.winches.iter().enumerate() {
-        node_lines(
-            cfg.winch_interface(i),
-            w.node_id,
-            "drive",
-            &pdo_frames(i),
-            f64::from(b.heartbeat_producer_ms),
-        );
     }
-    for (iface, node, pdos, hb_ms) in extra_nodes {
-        node_lines(*iface, *node, "force sensor", pdos, *hb_ms);
-    }
-    if let (Some(io), Some(iface)) = (&cfg.safety_io, cfg.safety_io_interface())
-        && let Some(ib) = out.get_mut(iface)
-    {
-        ib.lines.push(line(
-            format!("safety I/O inputs node {}", io.node_id),
-            Sender::Node(io.node_id),
-            drives_config::safety_io_tpdo_cob_id(io.node_id),
-            2,
-            Rate::Every {
-                ms: f64::from(io.inputs_period_ms),
+}
+
+/// One node's PDOs, heartbeat and EMCY headroom.
+fn node_lines(
+    mk: LineMaker,
+    node: u8,
+    what: &str,
+    pdos: &[PdoFrame],
+    hb_ms: f64,
+    lines: &mut Vec<Line>,
+) {
+    for (k, p) in pdos.iter().enumerate() {
+        let name = if p.rpdo {
+            format!("RPDO{} node {node}", k + 1)
+        } else {
+            format!("TPDO{} node {node}", k + 1)
+        };
+        lines.push(mk.line(
+            name,
+            if p.rpdo {
+                Sender::Master
+            } else {
+                Sender::Node(node)
             },
-        ));
-        ib.lines.push(line(
-            format!("heartbeat safety I/O node {}", io.node_id),
-            Sender::Node(io.node_id),
-            0x700 + u16::from(io.node_id),
-            1,
-            Rate::Every {
-                ms: f64::from(io.heartbeat_ms),
-            },
-        ));
-        ib.lines.push(line(
-            format!("EMCY headroom node {}", io.node_id),
-            Sender::Reserve,
-            0x080 + u16::from(io.node_id),
-            8,
-            Rate::Every {
-                ms: EMCY_RESERVE_PERIOD_MS,
-            },
+            p.cob_id,
+            p.dlc,
+            Rate::EverySync(p.every_n_sync),
         ));
     }
-    // RPDOs and TPDOs of a node were numbered in one sequence: renumber per direction.
-    for ib in &mut out {
-        renumber(&mut ib.lines);
-    }
-    out
+    lines.push(mk.line(
+        format!("heartbeat {what} node {node}"),
+        Sender::Node(node),
+        0x700 + u16::from(node),
+        1,
+        Rate::Every { ms: hb_ms },
+    ));
+    lines.push(emcy_headroom(mk, node));
+}
+
+/// The safety I/O node's inputs TPDO, heartbeat and EMCY headroom.
+fn safety_io_lines(mk: LineMaker, io: &drives_config::SafetyIoConfig, lines: &mut Vec<Line>) {
+    lines.push(mk.line(
+        format!("safety I/O inputs node {}", io.node_id),
+        Sender::Node(io.node_id),
+        drives_config::safety_io_tpdo_cob_id(io.node_id),
+        2,
+        Rate::Every {
+            ms: f64::from(io.inputs_period_ms),
+        },
+    ));
+    lines.push(mk.line(
+        format!("heartbeat safety I/O node {}", io.node_id),
+        Sender::Node(io.node_id),
+        0x700 + u16::from(io.node_id),
+        1,
+        Rate::Every {
+            ms: f64::from(io.heartbeat_ms),
+        },
+    ));
+    lines.push(emcy_headroom(mk, io.node_id));
+}
+
+/// The EMCY a node may send, reserved at [`EMCY_RESERVE_PERIOD_MS`].
+fn emcy_headroom(mk: LineMaker, node: u8) -> Line {
+    mk.line(
+        format!("EMCY headroom node {node}"),
+        Sender::Reserve,
+        0x080 + u16::from(node),
+        8,
+        Rate::Every {
+            ms: EMCY_RESERVE_PERIOD_MS,
+        },
+    )
 }
 
 /// "RPDO1, RPDO2 …" and "TPDO1 …" per node, counted per direction.

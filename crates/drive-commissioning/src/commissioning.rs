@@ -16,7 +16,7 @@ use drive_bus::eds::{DataType, DcfValue, Eds, OdEntry};
 use drive_bus::force_sensor::{ForceSensorConfig, OD_AI_DECIMAL_DIGITS, OD_AI_PHYSICAL_UNIT};
 use drive_bus::identity::{Identity, OD_DEVICE_NAME};
 use drive_bus::mapping::*;
-use drives_config::{DrivesConfig, ParameterValue, winch_mapping_mode};
+use drives_config::{BusConfig, DrivesConfig, ParameterValue, WinchConfig, winch_mapping_mode};
 use std::sync::Arc;
 
 /// One SDO transfer of the start-up script.
@@ -784,7 +784,6 @@ pub fn interpolation_period(period_us: u32) -> Option<(u8, i8)> {
 /// and object (or TOML key).
 pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanError> {
     let w = &cfg.winches[i];
-    let bus = &cfg.bus;
     let n = w.node_id;
     let mut b = Builder {
         eds,
@@ -811,12 +810,42 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
             ),
         ));
     }
-    let assign = |o: ObjectRef| drive_role(o, force_obj);
     let feedback_every =
         w.feedback_every_n_syncs
             .unwrap_or(if own_force { 1 } else { DEFAULT_FEEDBACK_EVERY });
-    let mode = winch_mapping_mode(w);
-    let mut pdos = match mode {
+    let mut pdos = drive_pdos(&mut b, w, force_obj, feedback_every)?;
+    let used: Vec<(Direction, u16)> = pdos.iter().map(|p| (p.direction, p.number)).collect();
+    check_roles(&b, &pdos, winch_mapping_mode(w), force_obj)?;
+    b.disable_others(&used, &mut pdos)?;
+    write_drive_settings(&mut b, &cfg.bus, w, eds)?;
+    write_parameters(&mut b, w)?;
+    b.write(OD_MODES_OF_OPERATION, 0, i64::from(MODE_CSP), true)?;
+    b.entry(OD_MODES_DISPLAY, 0)?;
+    b.verify.push(SdoOp::Verify {
+        index: OD_MODES_DISPLAY,
+        sub: 0,
+        value: u32::from(MODE_CSP as u8),
+        len: 1,
+    });
+    let n_per_unit = w.force_n_per_unit.unwrap_or(DEFAULT_FORCE_N_PER_UNIT);
+    Ok(b.finish(NodeMapping {
+        node: n,
+        pdos,
+        force_n_per_unit: n_per_unit,
+    }))
+}
+
+/// The PDOs of drive `w` as its mapping mode asks: drive-io's default layout, the
+/// custom `[[winch.rpdo]]` / `[[winch.tpdo]]` lists (both written), or the EDS's fixed mapping.
+fn drive_pdos(
+    b: &mut Builder<'_>,
+    w: &WinchConfig,
+    force_obj: Option<ObjectRef>,
+    feedback_every: u8,
+) -> Result<Vec<Pdo>, PlanError> {
+    let n = w.node_id;
+    let assign = |o: ObjectRef| drive_role(o, force_obj);
+    let pdos = match winch_mapping_mode(w) {
         MappingMode::Default => {
             let layout: Vec<_> = default_drive_layout(force_obj, feedback_every)
                 .into_iter()
@@ -864,8 +893,16 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
             b.fixed(&assign, &tt_of)?
         }
     };
-    let used: Vec<(Direction, u16)> = pdos.iter().map(|p| (p.direction, p.number)).collect();
-    // Every role drive-io needs, exactly once.
+    Ok(pdos)
+}
+
+/// Every role drive-io needs, exactly once, among the used PDOs.
+fn check_roles(
+    b: &Builder<'_>,
+    pdos: &[Pdo],
+    mode: MappingMode,
+    force_obj: Option<ObjectRef>,
+) -> Result<(), PlanError> {
     let needed: &[(Role, &str)] = &[
         (Role::Controlword, "controlword 0x6040 in an RPDO"),
         (Role::TargetPosition, "target position 0x607A in an RPDO"),
@@ -895,7 +932,17 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
             ));
         }
     }
-    b.disable_others(&used, &mut pdos)?;
+    Ok(())
+}
+
+/// SYNC consumer, heartbeats, the CiA 402 option codes, the quick stop deceleration, the
+/// interpolation period and the limits the drive supports (in its units).
+fn write_drive_settings(
+    b: &mut Builder<'_>,
+    bus: &BusConfig,
+    w: &WinchConfig,
+    eds: &Eds,
+) -> Result<(), PlanError> {
     // SYNC consumer (bit 30 clear: the drive does not produce SYNC).
     b.write_optional(0x1005, 0, i64::from(COB_SYNC))?;
     b.write_optional(0x1006, 0, i64::from(bus.sync_period_us))?;
@@ -959,6 +1006,12 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
     if window.is_finite() && window <= f64::from(u32::MAX) {
         b.write_optional(OD_FOLLOWING_ERROR_WINDOW, 0, window as i64)?;
     }
+    Ok(())
+}
+
+/// The vendor parameters of `w` (`[[winch]] parameters`): integers written and verified,
+/// texts written as bytes (segmented beyond 4) and read back where readable.
+fn write_parameters(b: &mut Builder<'_>, w: &WinchConfig) -> Result<(), PlanError> {
     for p in &w.parameters {
         let o = p.object;
         match &p.value {
@@ -999,20 +1052,7 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
             }
         }
     }
-    b.write(OD_MODES_OF_OPERATION, 0, i64::from(MODE_CSP), true)?;
-    b.entry(OD_MODES_DISPLAY, 0)?;
-    b.verify.push(SdoOp::Verify {
-        index: OD_MODES_DISPLAY,
-        sub: 0,
-        value: u32::from(MODE_CSP as u8),
-        len: 1,
-    });
-    let n_per_unit = w.force_n_per_unit.unwrap_or(DEFAULT_FORCE_N_PER_UNIT);
-    Ok(b.finish(NodeMapping {
-        node: n,
-        pdos,
-        force_n_per_unit: n_per_unit,
-    }))
+    Ok(())
 }
 
 /// The start-up script of force sensor `j` of `cfg`: identity (and unit) checks, the TPDO
