@@ -52,13 +52,13 @@ use crate::plant::{Equilibrium, Plant, PlantError, TensionSetup};
 use can_transport::{CanBus, CanError, CanFrame};
 use cdpr_model::config::Platform;
 use cdpr_model::{Data, Pose, kinematics};
+use cia402_drive::bank_set::DriveBanks;
+use cia402_drive::safety_io::SafetyIoNode;
+use cia402_drive::slave::MotionDemand;
 use crs_ipc::{CONTRACT_VERSION, MAX_CABLES, PlantTruth, TrackerPose};
-use drive_io::bank_set::DriveBanks;
-use drive_io::canopen::Ds402State;
-use drive_io::canopen::FrameBuf;
-use drive_io::config::{DrivesConfig, WinchConfig};
-use drive_io::safety_io::SafetyIoNode;
-use drive_io::slave::MotionDemand;
+use drive_bus::canopen::Ds402State;
+use drive_bus::canopen::FrameBuf;
+use drives_config::{DrivesConfig, WinchConfig};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -89,7 +89,7 @@ pub enum BusPlantError {
     Eds {
         drives: String,
         #[source]
-        source: drive_io::eds::EdsError,
+        source: drive_bus::eds::EdsError,
     },
     #[error(
         "{plant}: the plant has {plant_m} cables but {drives}: `winch` has {drives_m} [[winch]] \
