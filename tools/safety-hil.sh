@@ -2,7 +2,7 @@
 # usage: tools/safety-hil.sh [--only SCENARIO]
 #   The safety monitor's fault-injection matrix on real SocketCAN: builds static binaries of
 #   safety-hil (crates/safety-hil), safety-monitor (crates/safety-monitor), drive-io + winch-emulator
-#   (crates/drive-io), motion-core and can-wire, and runs `safety-hil --buses vcan` inside
+#   (crates/drive-io, crates/drive-rig), motion-core and can-wire, and runs `safety-hil --buses vcan` inside
 #   the vcan QEMU guest (tools/vcan-vm.sh). Every process runs separately (iceoryx2 + CAN);
 #   each scenario injects one fault (101 mm / 99 mm offsets, frozen and killed motion-core,
 #   killed drive-io, killed monitor, sequence gaps, NaN pose, wrong identity, corrupted safety

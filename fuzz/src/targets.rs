@@ -4,7 +4,7 @@
 
 use can_transport::CanFrame;
 use can_transport::safety_frame::{self, SafetyHeartbeat, SafetyState};
-use drive_io::safety_watch::{SafetyWatch, SafetyWatchConfig};
+use drive_bus::safety_watch::{SafetyWatch, SafetyWatchConfig};
 use nalgebra::Vector3;
 use rand::Rng;
 use rand::rngs::SmallRng;
@@ -99,7 +99,7 @@ fn frames_from(b: &[u8]) -> Vec<CanFrame> {
 }
 
 fn frame_seeds(_: &Path) -> Vec<Vec<u8>> {
-    use drive_io::canopen as co;
+    use drive_bus::canopen as co;
     let hb = SafetyHeartbeat {
         state: SafetyState::Run,
         cause: 0,
@@ -172,11 +172,11 @@ pub fn all() -> Vec<Target> {
         },
         Target {
             name: "drives-toml",
-            what: "drives.toml (drive_io::DrivesConfig::parse)",
+            what: "drives.toml (drives_config::DrivesConfig::parse)",
             locate: Locate::LineOrKey,
             seeds: |d| read(d, &["drives.toml"]),
             run: |b, _| match text(b) {
-                Some(t) => verdict(drive_io::DrivesConfig::parse(t)),
+                Some(t) => verdict(drives_config::DrivesConfig::parse(t)),
                 None => Verdict::Rejected("not UTF-8 (line 1)".into()),
             },
         },
@@ -284,11 +284,11 @@ pub fn all() -> Vec<Target> {
         },
         Target {
             name: "eds",
-            what: "CiA 306 EDS/DCF (drive_io::eds::Eds::parse)",
+            what: "CiA 306 EDS/DCF (drive_bus::eds::Eds::parse)",
             locate: Locate::LineOrKey,
             seeds: |d| read(d, &["eds/crs-winch.eds"]),
             run: |b, _| match text(b) {
-                Some(t) => verdict(drive_io::eds::Eds::parse(t, "fuzz.eds")),
+                Some(t) => verdict(drive_bus::eds::Eds::parse(t, "fuzz.eds")),
                 None => Verdict::Rejected("not UTF-8 (line 1)".into()),
             },
         },
@@ -362,20 +362,20 @@ pub fn all() -> Vec<Target> {
         },
         Target {
             name: "canopen-frame",
-            what: "CANopen decoding: NMT/SYNC/PDO/EMCY/SDO (drive_io::canopen), the monitor's bus observer",
+            what: "CANopen decoding: NMT/SYNC/PDO/EMCY/SDO (drive_bus::canopen), the monitor's bus observer",
             locate: Locate::No,
             seeds: frame_seeds,
             run: |b, _| {
                 for f in frames_from(b) {
-                    let _ = drive_io::canopen::decode(&f);
+                    let _ = drive_bus::canopen::decode(&f);
                     for iface in 0..2 {
                         let _ = safety_monitor::bus_frames::observe(monitor_layout(), iface, &f);
                     }
                     let mut d = [0u8; 8];
                     let n = f.data().len();
                     d[..n].copy_from_slice(f.data());
-                    let _ = drive_io::canopen::parse_sdo_request(&d);
-                    let _ = drive_io::canopen::parse_sdo_response(&d);
+                    let _ = drive_bus::canopen::parse_sdo_request(&d);
+                    let _ = drive_bus::canopen::parse_sdo_response(&d);
                 }
                 Verdict::Accepted
             },
@@ -455,7 +455,7 @@ pub fn all() -> Vec<Target> {
         },
         Target {
             name: "safety-watch",
-            what: "SafetyWatch state machine (drive_io::safety_watch) under arbitrary frame sequences and times",
+            what: "SafetyWatch state machine (drive_bus::safety_watch) under arbitrary frame sequences and times",
             locate: Locate::No,
             seeds: |_| vec![watch_seed()],
             run: run_watch,

@@ -5,7 +5,7 @@
 //! validation time). Everything else is an error the consumer must treat as "not safe".
 //!
 //! The safety monitor (crates/safety-monitor) sends one pair every cycle (15 ms); the drives and
-//! drive-io (`drive_io::safety_watch`) brake when no valid pair with state [`SafetyState::Run`]
+//! drive-io (`drive_bus::safety_watch`) brake when no valid pair with state [`SafetyState::Run`]
 //! arrived within the validation time (CiA 304's SCT, safety cycle time; e.g. 50 ms), so a dead
 //! or hung monitor stops the robot.
 //!

@@ -4,9 +4,12 @@
 //! one row per sample. Units are fixed (SI: m, rad, N) and declared in the file; a reader
 //! rejects a file that does not declare them, never guesses. Every error names the line.
 
+pub mod table;
+
 use cdpr_model::Pose;
 use std::fmt;
 use std::io::{BufRead, BufReader, Write};
+
 use std::path::Path;
 
 /// Value of the mandatory `# format:` line.
@@ -193,26 +196,32 @@ pub fn write_dataset(mut w: impl Write, ds: &Dataset) -> std::io::Result<()> {
     for (k, v) in &ds.metadata {
         writeln!(w, "# {k}: {}", v.replace('\n', " "))?;
     }
-    writeln!(w, "{}", ds.columns().join(","))?;
-    let mut line = String::new();
+    // The rows through the `csv` crate; every field is a number, so nothing is ever quoted.
+    let mut out = csv::WriterBuilder::new()
+        .quote_style(csv::QuoteStyle::Never)
+        .from_writer(&mut w);
+    out.write_record(ds.columns())
+        .map_err(std::io::Error::other)?;
+    let mut fields: Vec<String> = Vec::new();
     for s in &ds.samples {
-        line.clear();
-        use std::fmt::Write as _;
-        let _ = write!(line, "{},{},{}", s.sample, s.pose_index, s.phase as u8);
-        for v in &s.q_cmd {
-            let _ = write!(line, ",{v}");
-        }
-        for v in s.pose.to_array() {
-            let _ = write!(line, ",{v}");
-        }
-        for v in s.forces.iter().flatten() {
-            let _ = write!(line, ",{v}");
-        }
-        for v in s.pose_ref.map(|p| p.to_array()).iter().flatten() {
-            let _ = write!(line, ",{v}");
-        }
-        writeln!(w, "{line}")?;
+        fields.clear();
+        fields.extend([
+            s.sample.to_string(),
+            s.pose_index.to_string(),
+            (s.phase as u8).to_string(),
+        ]);
+        // `{}` of an f64 is Rust's shortest round-trip form.
+        let numbers = s
+            .q_cmd
+            .iter()
+            .copied()
+            .chain(s.pose.to_array())
+            .chain(s.forces.iter().flatten().copied())
+            .chain(s.pose_ref.map(|p| p.to_array()).into_iter().flatten());
+        fields.extend(numbers.map(|v| v.to_string()));
+        out.write_record(&fields).map_err(std::io::Error::other)?;
     }
+    out.flush()?;
     Ok(())
 }
 
@@ -286,72 +295,77 @@ pub fn read_dataset(r: impl BufRead, name: &str) -> Result<Dataset, DatasetError
     let mut metadata = Vec::new();
     let mut format_seen = false;
     let mut units_seen = false;
-    let mut layout: Option<Layout> = None;
     let mut samples = Vec::new();
-    let mut lines_read = 0;
-    for (n, line) in r.lines().enumerate() {
-        let ln = n + 1;
-        lines_read = ln;
-        let line = line.map_err(|e| err(Some(ln), Problem::Read(e)))?;
-        let line = line.trim_end_matches('\r');
+    // Up to the header row line by line (the metadata lines are not CSV); the rows after it
+    // through the `csv` crate.
+    let mut r = r;
+    let mut ln = 0;
+    let mut buf = String::new();
+    let lay = loop {
+        buf.clear();
+        if r.read_line(&mut buf)
+            .map_err(|e| err(Some(ln + 1), Problem::Read(e)))?
+            == 0
+        {
+            return Err(err(Some(ln.max(1)), Problem::NoHeader));
+        }
+        ln += 1;
+        let line = buf.trim_end_matches(['\n', '\r']);
         if line.trim().is_empty() {
             continue;
         }
         if let Some(c) = line.strip_prefix('#') {
-            if layout.is_some() {
-                // Comment lines after the header are allowed (e.g. `# unreachable: …`).
-                if let Some((k, v)) = c.split_once(':') {
-                    metadata.push((k.trim().to_string(), v.trim().to_string()));
-                }
-                continue;
-            }
             let Some((k, v)) = c.split_once(':') else {
                 return Err(err(Some(ln), Problem::MetadataLine));
             };
             let (k, v) = (k.trim(), v.trim());
             match k {
-                "format" => {
-                    if v != FORMAT {
-                        return Err(err(
-                            Some(ln),
-                            Problem::Format {
-                                found: v.to_string(),
-                            },
-                        ));
-                    }
-                    format_seen = true;
+                "format" if v != FORMAT => {
+                    let found = v.to_string();
+                    return Err(err(Some(ln), Problem::Format { found }));
                 }
-                "units" => {
-                    if v != UNITS {
-                        return Err(err(
-                            Some(ln),
-                            Problem::Units {
-                                found: v.to_string(),
-                            },
-                        ));
-                    }
-                    units_seen = true;
+                "format" => format_seen = true,
+                "units" if v != UNITS => {
+                    let found = v.to_string();
+                    return Err(err(Some(ln), Problem::Units { found }));
                 }
+                "units" => units_seen = true,
                 _ => metadata.push((k.to_string(), v.to_string())),
             }
             continue;
         }
-        match &layout {
-            None => {
-                if !format_seen {
-                    return Err(err(Some(ln), Problem::MissingFormat));
-                }
-                if !units_seen {
-                    return Err(err(Some(ln), Problem::MissingUnits));
-                }
-                layout = Some(Layout::parse(line).map_err(|m| err(Some(ln), m))?);
-            }
-            Some(lay) => samples.push(lay.row(line).map_err(|m| err(Some(ln), m))?),
+        if !format_seen {
+            return Err(err(Some(ln), Problem::MissingFormat));
         }
-    }
-    let Some(lay) = layout else {
-        return Err(err(Some(lines_read.max(1)), Problem::NoHeader));
+        if !units_seen {
+            return Err(err(Some(ln), Problem::MissingUnits));
+        }
+        break Layout::parse(line).map_err(|m| err(Some(ln), m))?;
     };
+    let header_line = ln;
+    // The rows through the `csv` crate (crate::table).
+    let mut body = String::new();
+    r.read_to_string(&mut body)
+        .map_err(|e| err(Some(header_line + 1), Problem::Read(e)))?;
+    table::for_each_record(
+        &body,
+        |line, record| {
+            let ln = header_line + line;
+            samples.push(lay.row(record).map_err(|m| err(Some(ln), m))?);
+            Ok(())
+        },
+        // Comment lines after the header are allowed; `# key: value` ones (e.g.
+        // `# unreachable: …`) are kept as metadata.
+        |_, c| {
+            if let Some((k, v)) = c.split_once(':') {
+                metadata.push((k.trim().to_string(), v.trim().to_string()));
+            }
+        },
+        |line, message| {
+            let e = std::io::Error::new(std::io::ErrorKind::InvalidData, message);
+            err(Some(header_line + line), Problem::Read(e))
+        },
+    )?;
     Ok(Dataset {
         metadata,
         m: lay.m,
@@ -456,8 +470,8 @@ impl Layout {
         })
     }
 
-    fn row(&self, line: &str) -> Result<Sample, Problem> {
-        let fields: Vec<&str> = line.split(',').map(|c| c.trim()).collect();
+    fn row(&self, record: &csv::StringRecord) -> Result<Sample, Problem> {
+        let fields: Vec<&str> = record.iter().map(|c| c.trim()).collect();
         if fields.len() != self.n_cols {
             return Err(Problem::FieldCount {
                 expected: self.n_cols,

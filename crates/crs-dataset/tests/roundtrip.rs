@@ -70,6 +70,34 @@ fn minimal_file_without_optional_columns_reads() {
     assert_eq!(ds.samples[0].q_cmd[7], 8.0);
 }
 
+#[test]
+fn comments_after_the_header_crlf_and_blank_lines_read_as_written() {
+    let ds = sample_set(true);
+    let t = text(&ds);
+    let mut lines: Vec<String> = t.lines().map(str::to_string).collect();
+    let hdr = lines.iter().position(|l| !l.starts_with('#')).unwrap();
+    // A comment with commas and spaces after the header keeps its text exactly.
+    let note = "# unreachable: pose_index 39 phase 0 x_ref [-1.5000, 0.0000, 1.5000]: cable 4";
+    lines.insert(hdr + 2, note.to_string());
+    lines.insert(hdr + 3, "   ".to_string());
+    lines.insert(hdr + 4, String::new());
+    let crlf = lines.join("\r\n") + "\r\n";
+    let back = read_dataset(crlf.as_bytes(), "crlf").unwrap();
+    assert_eq!(back.samples, ds.samples);
+    assert_eq!(
+        back.meta("unreachable"),
+        Some("pose_index 39 phase 0 x_ref [-1.5000, 0.0000, 1.5000]: cable 4")
+    );
+    // A bad row after the comment and the blank line is named by its line in the file.
+    let mut bad = lines.clone();
+    let last = bad.len() - 1;
+    bad[last] = bad[last].replacen(',', ",x", 1);
+    for end in ["\n", "\r\n"] {
+        let e = read_dataset(bad.join(end).as_bytes(), "bad.csv").unwrap_err();
+        assert_eq!(e.line, Some(last + 1), "{e}");
+    }
+}
+
 fn err_of(t: &str) -> (Option<usize>, String) {
     let e = read_dataset(t.as_bytes(), "bad.csv").unwrap_err();
     assert!(e.to_string().starts_with("bad.csv"));

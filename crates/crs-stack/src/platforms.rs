@@ -493,8 +493,7 @@ mod tests {
                     .expect("relaxed copies");
                 let d = motion_core::daemon::config::load(&out.daemon).expect("daemon loads");
                 assert_eq!(d.realtime.period_ns, 4_000_000, "{}", k.name);
-                let drives =
-                    drive_io::config::DrivesConfig::load(&out.drives).expect("drives load");
+                let drives = drives_config::DrivesConfig::load(&out.drives).expect("drives load");
                 assert_eq!(drives.bus.sync_period_us, 4000);
                 assert_eq!(drives.bus.stale_setpoint_cycles, 100);
                 let mon = safety_monitor::config::load(&out.monitor).expect("monitor loads");
@@ -520,7 +519,7 @@ mod tests {
     /// lossy stream (`sequence_gaps`; the CI failure of the 32-sample buffer at the 4 ms loop).
     fn setpoint_buffer_outlasts_the_heartbeat_watch(
         d: &motion_core::daemon::config::DaemonConfig,
-        drives: &drive_io::config::DrivesConfig,
+        drives: &drives_config::DrivesConfig,
         name: &str,
     ) {
         let watch = drives
@@ -541,7 +540,7 @@ mod tests {
         for k in KNOWN {
             let s = shipped(&k);
             let d = motion_core::daemon::config::load(&s.daemon).expect("daemon loads");
-            let drives = drive_io::config::DrivesConfig::load(&s.drives).expect("drives load");
+            let drives = drives_config::DrivesConfig::load(&s.drives).expect("drives load");
             setpoint_buffer_outlasts_the_heartbeat_watch(&d, &drives, k.name);
         }
     }

@@ -297,7 +297,7 @@ pub enum SimError {
     Drives {
         drives: PathBuf,
         #[source]
-        source: drive_io::config::ConfigError,
+        source: drives_config::ConfigError,
     },
     /// The drives wait for the monitor's heartbeat but no monitor runs (`monitor_exe`: the
     /// binary that is not built; None: `--no-monitor`).
@@ -386,7 +386,7 @@ pub enum SimError {
     Budget {
         drives: PathBuf,
         #[source]
-        source: drive_io::budget::CheckError,
+        source: drive_commissioning::budget::CheckError,
     },
     /// The launcher's own iceoryx2 node or subscribers.
     #[error(transparent)]
@@ -478,16 +478,17 @@ pub fn execute_observed(
     // Drives that validate the monitor's safety heartbeat never enable without it: refuse the
     // run up front instead of letting drive-io time out waiting for operational drives.
     let drives_cfg =
-        drive_io::config::DrivesConfig::load(&a.drives).map_err(|source| SimError::Drives {
+        drives_config::DrivesConfig::load(&a.drives).map_err(|source| SimError::Drives {
             drives: a.drives.clone(),
             source,
         })?;
     // The bus budget of every interface, with the frames every node will be configured with:
     // a layout the wire cannot carry is refused before anything starts.
-    let budgets = drive_io::budget::check(&drives_cfg).map_err(|source| SimError::Budget {
-        drives: a.drives.clone(),
-        source,
-    })?;
+    let budgets =
+        drive_commissioning::budget::check(&drives_cfg).map_err(|source| SimError::Budget {
+            drives: a.drives.clone(),
+            source,
+        })?;
     let bus_mode = transport::BusMode::parse(&a.transport)?;
     if drives_cfg.safety_heartbeat.is_some() && !with_monitor {
         return Err(SimError::HeartbeatWithoutMonitor {
@@ -751,7 +752,7 @@ pub fn execute_observed(
     // The heartbeat is mandatory for drive-io: only a run without the monitor (--no-monitor, a
     // bench) with a drives config without it runs the test rigs' bench executable instead.
     let drive_io_exe = if !with_monitor && drives_cfg.safety_heartbeat.is_none() {
-        exe(drive_io::config::BENCH_EXECUTABLE)
+        exe(drives_config::BENCH_EXECUTABLE)
     } else {
         exe("drive-io")
     };

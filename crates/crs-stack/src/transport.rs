@@ -4,7 +4,7 @@
 //! ports with the hub forwarding between them (the QEMU guest), or explicit transports.
 
 use crate::supervisor::{SpawnError, Supervisor};
-use drive_io::config::DrivesConfig;
+use drives_config::DrivesConfig;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 

@@ -138,6 +138,39 @@ fn the_contract_crates_depend_on_no_other_layer() {
 }
 
 #[test]
+fn the_drive_side_links_no_master() {
+    // The simulated plant and the winch emulator's drive side are the master's counterpart:
+    // they share the protocol (drive-bus) and drives.toml (drives-config) with drive-io, not
+    // its master, its start-up plans or its loop, so an error there cannot hide on both sides.
+    for krate in ["cia402-drive", "sim-plant"] {
+        forbid(krate, &["drive-io", "drive-commissioning"]);
+    }
+    assert!(closure("sim-plant").contains("cia402-drive"));
+    // What both sides share sits below both: no master, no drive side, no IPC.
+    forbid(
+        "drive-bus",
+        &[
+            "drives-config",
+            "cia402-drive",
+            "drive-commissioning",
+            "drive-io",
+            "crs-ipc",
+            "iceoryx2",
+        ],
+    );
+    forbid(
+        "drives-config",
+        &["cia402-drive", "drive-commissioning", "drive-io", "crs-ipc"],
+    );
+    forbid(
+        "drive-commissioning",
+        &["drive-io", "cia402-drive", "crs-ipc"],
+    );
+    // The master's daemon holds the master only: the drive side is a test counterpart.
+    forbid("drive-io", &["cia402-drive"]);
+}
+
+#[test]
 fn the_closure_is_transitive() {
     // motion-core → crs-ipc → iceoryx2: a rule on a transitive crate can fail.
     let c = closure("motion-core");
@@ -150,6 +183,9 @@ fn the_daemon_does_not_link_the_bus_the_simulator_or_the_stack() {
         "motion-core",
         &[
             "drive-io",
+            "drive-bus",
+            "drives-config",
+            "cia402-drive",
             "can-transport",
             "socketcan",
             "sim-plant",
@@ -169,6 +205,10 @@ fn the_safety_monitor_shares_no_code_with_the_controller() {
             "surrogate",
             "sim-plant",
             "drive-io",
+            "drive-bus",
+            "drives-config",
+            "cia402-drive",
+            "drive-commissioning",
             "crs-stack",
         ],
     );

@@ -3,8 +3,9 @@
 //! way to run without the safety monitor's heartbeat ([`Bench`]): the production binary has no
 //! switch for it.
 
-use crate::{DrivesConfig, runner};
+use crate::runner;
 use clap::Parser;
+use drives_config::DrivesConfig;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -75,11 +76,11 @@ pub fn run(args: Args, bench: Bench) -> Result<(), Box<dyn std::error::Error>> {
         tracing::error!(
             "BENCH EXECUTABLE {}: running WITHOUT the safety monitor's heartbeat; a dead or \
              absent monitor does not stop the drives. Never use this on the robot.",
-            crate::config::BENCH_EXECUTABLE
+            drives_config::BENCH_EXECUTABLE
         );
         eprintln!(
             "drive-io: WARNING: {}: no safety heartbeat validation",
-            crate::config::BENCH_EXECUTABLE
+            drives_config::BENCH_EXECUTABLE
         );
     }
     // SAFETY: the handler only stores to an atomic (async-signal-safe).
@@ -127,9 +128,9 @@ pub fn run(args: Args, bench: Bench) -> Result<(), Box<dyn std::error::Error>> {
 /// `--print-plan`: what drive-io will check, write and read back in every drive and force
 /// sensor, with EDS names, and the PDO frames each puts on the bus.
 fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
-    use crate::commissioning::SdoOp;
-    use crate::mapping::{Direction, Transmission};
-    let plans = crate::commissioning::plan_all(cfg, None)?;
+    use drive_bus::mapping::{Direction, Transmission};
+    use drive_commissioning::commissioning::SdoOp;
+    let plans = drive_commissioning::commissioning::plan_all(cfg, None)?;
     for plan in &plans {
         let (n, eds) = (plan.node, &plan.eds);
         println!(
@@ -186,7 +187,7 @@ fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     // The bus budget of every interface with these frames (docs/can-protocol.md "Bus budget").
-    let budgets = crate::budget::of_plans(cfg, &plans);
+    let budgets = drive_commissioning::budget::of_plans(cfg, &plans);
     for ib in &budgets {
         print!("{ib}");
     }

@@ -2,7 +2,7 @@
 //! [`crate::runner`] ties it to a bus, the 1 ms SYNC timer and iceoryx2.
 //!
 //! Sequence: NMT reset-communication (per node) -> wait boot-up of every drive and force
-//! sensor -> SDO start-up script of each ([`crate::commissioning`]: identity checks first, then
+//! sensor -> SDO start-up script of each ([`drive_commissioning::commissioning`]: identity checks first, then
 //! PDOs, heartbeats, option codes, mode; read-back) -> NMT start (per node) -> SYNC every
 //! period, RPDOs (encoded from each drive's mapping) walk each drive to Operation Enabled
 //! holding its actual position -> Ready -> Running on the first new setpoint. TPDOs are
@@ -10,18 +10,19 @@
 //! EMCY, drive fault bit, invalid setpoint => quick stop ALL drives and hold (latched until the
 //! safety monitor's reset, [`Master::reset`] with a [`ResetGrant`]).
 
-use crate::canopen::*;
-use crate::commissioning::{NodeKind, Plan, SdoOp};
-use crate::config::{DrivesConfig, WinchConfig};
-use crate::eds::{Eds, sdo_abort_text};
-use crate::mapping::Decoded;
 use crate::reset::ResetGrant;
-use crate::safety_watch::SafetyWatch;
-use crate::sdo::{ClientStep, SdoClient};
 use can_transport::RxFrame;
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, JointSetpoint, MAX_CABLES, StateEvent, fault_code,
 };
+use drive_bus::canopen::*;
+use drive_bus::eds::{Eds, sdo_abort_text};
+use drive_bus::mapping::Decoded;
+use drive_bus::safety_watch::SafetyWatch;
+use drive_bus::sdo::{ClientStep, SdoClient};
+pub use drive_commissioning::commissioning::SetupError;
+use drive_commissioning::commissioning::{NodeKind, Plan, SdoOp};
+use drives_config::{DrivesConfig, WinchConfig};
 
 const SDO_RETRIES: u8 = 3;
 /// Drives and force sensors.
@@ -110,17 +111,6 @@ impl Finding {
     }
 }
 
-/// Master construction failed: the EDS cannot be read or does not suit the configuration.
-#[derive(Debug, thiserror::Error)]
-pub enum SetupError {
-    #[error("EDS: {0}")]
-    Eds(#[from] crate::eds::EdsError),
-    #[error(transparent)]
-    Plan(#[from] crate::commissioning::PlanError),
-    #[error("TPDO COB-ID 0x{cob_id:03X} is configured for node {a} and node {b} on one interface")]
-    CobCollision { cob_id: u16, a: u8, b: u8 },
-}
-
 #[derive(Debug, Clone, Copy)]
 struct DriveView {
     node: u8,
@@ -138,7 +128,7 @@ struct DriveView {
     position: i32,
     velocity: i32,
     rx_ns: u64,
-    /// Next step of the drive's start-up script ([`crate::commissioning::plan`]).
+    /// Next step of the drive's start-up script ([`drive_commissioning::commissioning::plan`]).
     sdo: usize,
     sdo_outstanding: bool,
     sdo_sent_ns: u64,
@@ -266,12 +256,18 @@ impl Master {
     /// simulated load cell's); fails if an EDS cannot be read or lacks what the configuration
     /// needs.
     pub fn new(cfg: &DrivesConfig) -> Result<Self, SetupError> {
-        Self::from_plans(cfg, crate::commissioning::plan_all(cfg, None)?)
+        Self::from_plans(
+            cfg,
+            drive_commissioning::commissioning::plan_all(cfg, None)?,
+        )
     }
 
     /// A master whose drives are all described by `eds` (force sensors by their own).
     pub fn with_eds(cfg: &DrivesConfig, eds: Eds) -> Result<Self, SetupError> {
-        Self::from_plans(cfg, crate::commissioning::plan_all(cfg, Some(&eds))?)
+        Self::from_plans(
+            cfg,
+            drive_commissioning::commissioning::plan_all(cfg, Some(&eds))?,
+        )
     }
 
     fn from_plans(cfg: &DrivesConfig, plans: Vec<Plan>) -> Result<Self, SetupError> {
@@ -303,7 +299,7 @@ impl Master {
                 p.mapping
                     .pdos
                     .iter()
-                    .filter(|p| p.used && p.direction == crate::mapping::Direction::FromNode)
+                    .filter(|p| p.used && p.direction == drive_bus::mapping::Direction::FromNode)
                     .map(move |p| ((iface, p.cob_id), k))
             })
             .collect();
@@ -495,7 +491,7 @@ impl Master {
 
     /// `(index, sub, value)` configured in node `i` (drives first, then force sensors; for
     /// its DCF); empty until it is done.
-    pub fn configured_values(&self, i: usize) -> Vec<(u16, u8, crate::eds::DcfValue)> {
+    pub fn configured_values(&self, i: usize) -> Vec<(u16, u8, drive_bus::eds::DcfValue)> {
         match (self.plans.get(i), self.drives.get(i)) {
             (Some(p), Some(d)) if d.sdo >= p.ops.len() => p.configured_values(),
             _ => Vec::new(),
@@ -778,24 +774,35 @@ impl Master {
         }
     }
 
+    /// An SDO response of node `i`: the transfer's next step; once it is done, the answer
+    /// checked and the node's start-up script advanced.
     fn on_sdo(&mut self, i: usize, data: &[u8; 8]) {
         let d = self.drives[i];
         let Some(&op) = self.plans[i].ops.get(d.sdo) else {
             return;
         };
-        if !d.sdo_outstanding {
+        if !d.sdo_outstanding || !self.sdo_transfer_done(i, op, data) {
             return;
         }
-        let node = d.node;
+        match self.check_answer(i, op) {
+            Some(fault) => self.commissioning_failed(fault),
+            None => self.next_op(i, op),
+        }
+    }
+
+    /// The SDO client's step on `data`; true once the transfer of `op` completed. A refused
+    /// informational read moves on; any other abort or protocol error fails start-up.
+    fn sdo_transfer_done(&mut self, i: usize, op: SdoOp, data: &[u8; 8]) -> bool {
+        let node = self.drives[i].node;
         let (index, sub) = op.index_sub();
         match self.sdo_client[i].on_response(data) {
             // Stray or mismatched response: ignore, the timeout handles a silent node.
-            ClientStep::Ignored => return,
+            ClientStep::Ignored => false,
             ClientStep::Send(next) => {
                 // The next segment goes out with the next cycle (a segmented answer is
                 // followed to its end, never taken for a timeout).
                 self.drives[i].sdo_next = Some(next);
-                return;
+                false
             }
             ClientStep::Aborted(code) if matches!(op, SdoOp::Read { .. }) => {
                 // Informational (device name, versions): the node need not have it.
@@ -806,11 +813,8 @@ impl Master {
                     reason = sdo_abort_text(code),
                     "node refused an informational read"
                 );
-                let d = &mut self.drives[i];
-                d.sdo_outstanding = false;
-                d.sdo_tries = 0;
-                d.sdo += 1;
-                return;
+                self.next_op(i, op);
+                false
             }
             ClientStep::Aborted(code) => {
                 self.commissioning_failed(CommissioningFault::Abort {
@@ -820,7 +824,7 @@ impl Master {
                     write: op.is_write(),
                     code,
                 });
-                return;
+                false
             }
             ClientStep::Failed { code, abort } => {
                 self.drives[i].sdo_next = Some(abort);
@@ -830,10 +834,17 @@ impl Master {
                     sub,
                     code,
                 });
-                return;
+                false
             }
-            ClientStep::Done => {}
+            ClientStep::Done => true,
         }
+    }
+
+    /// What a completed transfer of `op` answered, against what the script expects: the
+    /// read-back of a written value, a checked value or text; an informational read is logged.
+    fn check_answer(&self, i: usize, op: SdoOp) -> Option<CommissioningFault> {
+        let node = self.drives[i].node;
+        let (index, sub) = op.index_sub();
         let c = &self.sdo_client[i];
         let masked = |v: u32, len: u8| {
             if len >= 4 {
@@ -845,46 +856,36 @@ impl Master {
         match op {
             SdoOp::Verify { value, len, .. } => {
                 let got = masked(c.data_u32(), len);
-                if got != masked(value, len) {
-                    self.commissioning_failed(CommissioningFault::Readback {
-                        node,
-                        index,
-                        sub,
-                        wrote: masked(value, len),
-                        read: got,
-                    });
-                    return;
-                }
+                (got != masked(value, len)).then_some(CommissioningFault::Readback {
+                    node,
+                    index,
+                    sub,
+                    wrote: masked(value, len),
+                    read: got,
+                })
             }
             SdoOp::Check { value, len, .. } => {
                 let got = masked(c.data_u32(), len);
-                if got != masked(value, len) {
-                    self.commissioning_failed(CommissioningFault::Check {
+                (got != masked(value, len)).then_some(CommissioningFault::Check {
+                    node,
+                    index,
+                    sub,
+                    expected: masked(value, len),
+                    found: got,
+                })
+            }
+            SdoOp::VerifyBytes { at, len, check, .. } => (c.data() != self.plans[i].bytes(at, len))
+                .then_some(if check {
+                    CommissioningFault::CheckText { node, index, sub }
+                } else {
+                    CommissioningFault::Readback {
                         node,
                         index,
                         sub,
-                        expected: masked(value, len),
-                        found: got,
-                    });
-                    return;
-                }
-            }
-            SdoOp::VerifyBytes { at, len, check, .. } => {
-                if c.data() != self.plans[i].bytes(at, len) {
-                    self.commissioning_failed(if check {
-                        CommissioningFault::CheckText { node, index, sub }
-                    } else {
-                        CommissioningFault::Readback {
-                            node,
-                            index,
-                            sub,
-                            wrote: 0,
-                            read: 0,
-                        }
-                    });
-                    return;
-                }
-            }
+                        wrote: 0,
+                        read: 0,
+                    }
+                }),
             SdoOp::Read { .. } => {
                 tracing::info!(
                     node,
@@ -892,14 +893,19 @@ impl Master {
                     value = %String::from_utf8_lossy(c.data()),
                     "node reports"
                 );
+                None
             }
-            SdoOp::Write { .. } | SdoOp::WriteBytes { .. } => {}
+            SdoOp::Write { .. } | SdoOp::WriteBytes { .. } => None,
         }
+    }
+
+    /// Node `i`'s script moves past `op`.
+    fn next_op(&mut self, i: usize, op: SdoOp) {
         let d = &mut self.drives[i];
         d.sdo_outstanding = false;
         d.sdo_tries = 0;
         d.sdo += 1;
-        if (index, sub) == (OD_PRODUCER_HEARTBEAT_MS, 0) && op.is_write() {
+        if op.index_sub() == (OD_PRODUCER_HEARTBEAT_MS, 0) && op.is_write() {
             // The node produces heartbeats at the configured period from now on.
             d.hb_monitored = true;
         }
@@ -996,8 +1002,25 @@ impl Master {
         self.toggle = !self.toggle;
         self.applied_this_cycle = false;
         let boot_start = *self.boot_start_ns.get_or_insert(now_ns);
-        // drive-io's own heartbeat (the drives' 0x1016 consumer watches it), unless withheld
-        // as the last escalation of a stop.
+        self.send_own_heartbeat(now_ns, out);
+        self.consume_heartbeats(now_ns);
+        self.check_boot_timeout(now_ns, boot_start);
+        match self.phase {
+            Phase::Boot => self.cycle_boot(now_ns, out),
+            Phase::Configure => self.cycle_configure(now_ns, out),
+            Phase::Enable => self.cycle_enable(out),
+            Phase::Ready | Phase::Running => self.cycle_follow(now_ns, setpoint, out),
+            Phase::Stopped(_) => {
+                self.push_quick_stop(out);
+                self.supervise_quick_stop(now_ns, out);
+            }
+        }
+        self.update_feedback(now_ns);
+    }
+
+    /// drive-io's own heartbeat (the drives' 0x1016 consumer watches it), unless withheld
+    /// as the last escalation of a stop.
+    fn send_own_heartbeat(&mut self, now_ns: u64, out: &mut BusFrames) {
         if !self.hb_inhibit && now_ns >= self.next_master_hb_ns {
             out.push_all(heartbeat(self.master_node_id, NmtState::Operational));
             self.next_master_hb_ns = if now_ns - self.next_master_hb_ns > self.master_hb_ns {
@@ -1006,9 +1029,11 @@ impl Master {
                 self.next_master_hb_ns + self.master_hb_ns
             };
         }
+    }
 
-        // Heartbeat consumer (CiA 301 §7.2.8.3.2.2), active per node once its producer time is
-        // set; every loss of one cycle is one line (the first node and how many).
+    /// Heartbeat consumer (CiA 301 §7.2.8.3.2.2), active per node once its producer time is
+    /// set; every loss of one cycle is one line (the first node and how many).
+    fn consume_heartbeats(&mut self, now_ns: u64) {
         let mut lost: Option<u8> = None;
         let mut n_lost = 0usize;
         for i in 0..self.n {
@@ -1026,6 +1051,11 @@ impl Master {
             tracing::error!(node, nodes = n_lost, "heartbeat lost");
             self.stop(BusState::Fault, fault_code::HEARTBEAT_LOST, node);
         }
+    }
+
+    /// Boot, configuration and enabling must end within the boot timeout; the error names the
+    /// first node not there yet.
+    fn check_boot_timeout(&mut self, now_ns: u64, boot_start: u64) {
         if matches!(self.phase, Phase::Boot | Phase::Configure | Phase::Enable)
             && now_ns.saturating_sub(boot_start) > self.boot_timeout_ns
         {
@@ -1045,165 +1075,179 @@ impl Master {
             tracing::error!(node, phase = ?self.phase, "boot timeout");
             self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
         }
+    }
 
-        match self.phase {
-            Phase::Boot => {
-                if self.cycle == 1 {
-                    // Addressed per node: other devices on the bus (the safety monitor's I/O,
-                    // another master's nodes) are not drive-io's to reset.
-                    for d in &self.drives[..self.n] {
-                        out.push(usize::from(d.iface), nmt(NMT_RESET_COMM, d.node));
-                    }
-                }
-                if self.drives[..self.n].iter().all(|d| d.booted) {
-                    for d in &mut self.drives[..self.n] {
-                        d.last_hb_ns = now_ns;
-                    }
-                    self.set_phase(Phase::Configure);
-                }
-            }
-            Phase::Configure => {
-                let sdo_timeout = self.sdo_timeout_ns;
-                let mut timed_out = None;
-                for i in 0..self.n {
-                    let d = self.drives[i];
-                    let Some(&op) = self.plans[i].ops.get(d.sdo) else {
-                        continue;
-                    };
-                    let rx_cob = COB_SDO_RX_BASE + u16::from(d.node);
-                    if let Some(next) = self.drives[i].sdo_next.take() {
-                        // The next segment of a segmented transfer.
-                        let f = can_transport::CanFrame::new_std_lossy(rx_cob, &next);
-                        out.push(usize::from(d.iface), f);
-                        self.drives[i].sdo_sent_ns = now_ns;
-                        continue;
-                    }
-                    if d.sdo_outstanding && now_ns.saturating_sub(d.sdo_sent_ns) < sdo_timeout {
-                        continue;
-                    }
-                    if d.sdo_outstanding && d.sdo_tries >= SDO_RETRIES {
-                        let (index, sub) = op.index_sub();
-                        timed_out = Some(CommissioningFault::Timeout {
-                            node: d.node,
-                            index,
-                            sub,
-                        });
-                        continue;
-                    }
-                    // A new transfer, or the whole transfer again after a timeout.
-                    let req = self.start_sdo(i, op);
-                    let f = can_transport::CanFrame::new_std_lossy(rx_cob, &req);
-                    out.push(usize::from(d.iface), f);
-                    let d = &mut self.drives[i];
-                    d.sdo_outstanding = true;
-                    d.sdo_sent_ns = now_ns;
-                    d.sdo_tries += 1;
-                }
-                if let Some(f) = timed_out {
-                    self.commissioning_failed(f);
-                } else if self.configured() {
-                    tracing::info!(
-                        nodes = self.n,
-                        "all drives and force sensors identified, configured and verified"
-                    );
-                    for d in &self.drives[..self.n] {
-                        out.push(usize::from(d.iface), nmt(NMT_START, d.node));
-                    }
-                    self.set_phase(Phase::Enable);
-                }
-            }
-            Phase::Enable => {
-                if std::mem::take(&mut self.restart_nmt) {
-                    for d in &self.drives[..self.m] {
-                        out.push(usize::from(d.iface), nmt(NMT_START, d.node));
-                    }
-                }
-                let mut all_enabled = true;
-                for i in 0..self.m {
-                    let d = self.drives[i];
-                    let st = Ds402State::from_statusword(d.statusword);
-                    // After an NMT restart, wait for the heartbeat to say operational too; in
-                    // CSP, wait for statusword bit 12 (the drive follows the target).
-                    all_enabled &= d.have_tpdo1
-                        && st == Ds402State::OperationEnabled
-                        && d.statusword & SW_FOLLOWS_TARGET != 0
-                        && (!d.seen_operational || d.last_hb_state == NmtState::Operational.code());
-                    if d.have_tpdo1 {
-                        // Enable while holding the actual position: the drive must not jump.
-                        self.target[i] = d.position;
-                        self.push_rpdos(i, enable_step(st, self.toggle), d.position, out);
-                    }
-                }
-                // Every TPDO drive-io supervises has arrived (the velocity may come every n-th
-                // SYNC only; the forces from the drives or their force sensors).
-                all_enabled &= self.drives[..self.m].iter().all(|d| d.vel_rx_ns > 0)
-                    && self.force_node[..self.m]
-                        .iter()
-                        .all(|&k| self.drives[k].force_rx_ns > 0);
-                out.request_sync();
-                if all_enabled {
-                    self.setpoint_age = 0;
-                    self.set_phase(Phase::Ready);
-                }
-            }
-            Phase::Ready | Phase::Running => {
-                self.check_drives(now_ns);
-                // A finding stopped the bus: this cycle's setpoint must not re-enter Running
-                // (the stop is latched; the quick stop goes out below).
-                if !self.is_latched()
-                    && let Some(sp) = setpoint.filter(|sp| sp.sequence > self.last_seq)
-                {
-                    if self.last_seq > 0 {
-                        self.superseded += sp.sequence - self.last_seq - 1;
-                    }
-                    self.last_seq = sp.sequence;
-                    if self.apply_setpoint(sp, now_ns) {
-                        if self.phase == Phase::Ready {
-                            // A new stream: an old end announcement does not cover it.
-                            self.stream_end = false;
-                        }
-                        self.last_at_rest = sp.cable_velocity_m_per_s[..self.m]
-                            .iter()
-                            .all(|v| *v == 0.0);
-                        self.setpoint_age = 0;
-                        self.set_phase(Phase::Running);
-                    }
-                } else if self.phase == Phase::Running {
-                    self.setpoint_age = self.setpoint_age.saturating_add(1);
-                    if self.setpoint_age > self.stale_cycles && self.stream_end && self.last_at_rest
-                    {
-                        // The planned end of the stream, at rest: a normal state. The drives
-                        // stay enabled holding the last target; a new stream (sequence numbers
-                        // from 1 again) is followed from here.
-                        tracing::info!(
-                            sequence = self.last_seq,
-                            "motion-core ended its stream at rest: drives holding position"
-                        );
-                        self.stream_end = false;
-                        self.last_seq = 0;
-                        self.applied_seq = 0;
-                        self.setpoint_age = 0;
-                        self.set_phase(Phase::Ready);
-                    } else if self.setpoint_age > self.stale_cycles {
-                        tracing::warn!(cycles = self.setpoint_age, "setpoints stale");
-                        self.stop(BusState::StaleStop, fault_code::NONE, 0);
-                    }
-                }
-                if matches!(self.phase, Phase::Ready | Phase::Running) {
-                    for i in 0..self.m {
-                        self.push_rpdos(i, CW_ENABLE_OPERATION, self.target[i], out);
-                    }
-                    out.request_sync();
-                } else {
-                    self.push_quick_stop(out);
-                }
-            }
-            Phase::Stopped(_) => {
-                self.push_quick_stop(out);
-                self.supervise_quick_stop(now_ns, out);
+    /// Boot: reset every node's communication once, wait for every boot-up message.
+    fn cycle_boot(&mut self, now_ns: u64, out: &mut BusFrames) {
+        if self.cycle == 1 {
+            // Addressed per node: other devices on the bus (the safety monitor's I/O,
+            // another master's nodes) are not drive-io's to reset.
+            for d in &self.drives[..self.n] {
+                out.push(usize::from(d.iface), nmt(NMT_RESET_COMM, d.node));
             }
         }
-        self.update_feedback(now_ns);
+        if self.drives[..self.n].iter().all(|d| d.booted) {
+            for d in &mut self.drives[..self.n] {
+                d.last_hb_ns = now_ns;
+            }
+            self.set_phase(Phase::Configure);
+        }
+    }
+
+    /// Configure: each node's start-up script, one SDO transfer at a time per node (retried
+    /// on timeout); NMT start once every node is configured and verified.
+    fn cycle_configure(&mut self, now_ns: u64, out: &mut BusFrames) {
+        let sdo_timeout = self.sdo_timeout_ns;
+        let mut timed_out = None;
+        for i in 0..self.n {
+            let d = self.drives[i];
+            let Some(&op) = self.plans[i].ops.get(d.sdo) else {
+                continue;
+            };
+            let rx_cob = COB_SDO_RX_BASE + u16::from(d.node);
+            if let Some(next) = self.drives[i].sdo_next.take() {
+                // The next segment of a segmented transfer.
+                let f = can_transport::CanFrame::new_std_lossy(rx_cob, &next);
+                out.push(usize::from(d.iface), f);
+                self.drives[i].sdo_sent_ns = now_ns;
+                continue;
+            }
+            if d.sdo_outstanding && now_ns.saturating_sub(d.sdo_sent_ns) < sdo_timeout {
+                continue;
+            }
+            if d.sdo_outstanding && d.sdo_tries >= SDO_RETRIES {
+                let (index, sub) = op.index_sub();
+                timed_out = Some(CommissioningFault::Timeout {
+                    node: d.node,
+                    index,
+                    sub,
+                });
+                continue;
+            }
+            // A new transfer, or the whole transfer again after a timeout.
+            let req = self.start_sdo(i, op);
+            let f = can_transport::CanFrame::new_std_lossy(rx_cob, &req);
+            out.push(usize::from(d.iface), f);
+            let d = &mut self.drives[i];
+            d.sdo_outstanding = true;
+            d.sdo_sent_ns = now_ns;
+            d.sdo_tries += 1;
+        }
+        if let Some(f) = timed_out {
+            self.commissioning_failed(f);
+        } else if self.configured() {
+            tracing::info!(
+                nodes = self.n,
+                "all drives and force sensors identified, configured and verified"
+            );
+            for d in &self.drives[..self.n] {
+                out.push(usize::from(d.iface), nmt(NMT_START, d.node));
+            }
+            self.set_phase(Phase::Enable);
+        }
+    }
+
+    /// Enable: walk every drive's CiA 402 state machine to Operation Enabled, holding its
+    /// actual position; Ready once every drive follows and every supervised TPDO arrived.
+    fn cycle_enable(&mut self, out: &mut BusFrames) {
+        if std::mem::take(&mut self.restart_nmt) {
+            for d in &self.drives[..self.m] {
+                out.push(usize::from(d.iface), nmt(NMT_START, d.node));
+            }
+        }
+        let mut all_enabled = true;
+        for i in 0..self.m {
+            let d = self.drives[i];
+            let st = Ds402State::from_statusword(d.statusword);
+            // After an NMT restart, wait for the heartbeat to say operational too; in
+            // CSP, wait for statusword bit 12 (the drive follows the target).
+            all_enabled &= d.have_tpdo1
+                && st == Ds402State::OperationEnabled
+                && d.statusword & SW_FOLLOWS_TARGET != 0
+                && (!d.seen_operational || d.last_hb_state == NmtState::Operational.code());
+            if d.have_tpdo1 {
+                // Enable while holding the actual position: the drive must not jump.
+                self.target[i] = d.position;
+                self.push_rpdos(i, enable_step(st, self.toggle), d.position, out);
+            }
+        }
+        // Every TPDO drive-io supervises has arrived (the velocity may come every n-th
+        // SYNC only; the forces from the drives or their force sensors).
+        all_enabled &= self.drives[..self.m].iter().all(|d| d.vel_rx_ns > 0)
+            && self.force_node[..self.m]
+                .iter()
+                .all(|&k| self.drives[k].force_rx_ns > 0);
+        out.request_sync();
+        if all_enabled {
+            self.setpoint_age = 0;
+            self.set_phase(Phase::Ready);
+        }
+    }
+
+    /// Ready / Running: the drives' checks, the newest setpoint (or its absence), then the
+    /// targets (or the quick stop a finding latched) to every drive.
+    fn cycle_follow(&mut self, now_ns: u64, setpoint: Option<&JointSetpoint>, out: &mut BusFrames) {
+        self.check_drives(now_ns);
+        // A finding stopped the bus: this cycle's setpoint must not re-enter Running
+        // (the stop is latched; the quick stop goes out below).
+        if !self.is_latched()
+            && let Some(sp) = setpoint.filter(|sp| sp.sequence > self.last_seq)
+        {
+            self.take_setpoint(sp, now_ns);
+        } else if self.phase == Phase::Running {
+            self.age_setpoint();
+        }
+        if matches!(self.phase, Phase::Ready | Phase::Running) {
+            for i in 0..self.m {
+                self.push_rpdos(i, CW_ENABLE_OPERATION, self.target[i], out);
+            }
+            out.request_sync();
+        } else {
+            self.push_quick_stop(out);
+        }
+    }
+
+    /// A setpoint newer than the last one: counted (superseded ones too), applied if it passes
+    /// the checks, and the bus is Running.
+    fn take_setpoint(&mut self, sp: &JointSetpoint, now_ns: u64) {
+        if self.last_seq > 0 {
+            self.superseded += sp.sequence - self.last_seq - 1;
+        }
+        self.last_seq = sp.sequence;
+        if self.apply_setpoint(sp, now_ns) {
+            if self.phase == Phase::Ready {
+                // A new stream: an old end announcement does not cover it.
+                self.stream_end = false;
+            }
+            self.last_at_rest = sp.cable_velocity_m_per_s[..self.m]
+                .iter()
+                .all(|v| *v == 0.0);
+            self.setpoint_age = 0;
+            self.set_phase(Phase::Running);
+        }
+    }
+
+    /// Running without a new setpoint: past the stale limit, the announced end of a stream at
+    /// rest returns to Ready; anything else stops the bus.
+    fn age_setpoint(&mut self) {
+        self.setpoint_age = self.setpoint_age.saturating_add(1);
+        if self.setpoint_age > self.stale_cycles && self.stream_end && self.last_at_rest {
+            // The planned end of the stream, at rest: a normal state. The drives
+            // stay enabled holding the last target; a new stream (sequence numbers
+            // from 1 again) is followed from here.
+            tracing::info!(
+                sequence = self.last_seq,
+                "motion-core ended its stream at rest: drives holding position"
+            );
+            self.stream_end = false;
+            self.last_seq = 0;
+            self.applied_seq = 0;
+            self.setpoint_age = 0;
+            self.set_phase(Phase::Ready);
+        } else if self.setpoint_age > self.stale_cycles {
+            tracing::warn!(cycles = self.setpoint_age, "setpoints stale");
+            self.stop(BusState::StaleStop, fault_code::NONE, 0);
+        }
     }
 
     /// CiA 402 quick stop supervision: every drive must acknowledge the stop in a TPDO sent

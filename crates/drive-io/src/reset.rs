@@ -24,9 +24,9 @@
 //!
 //! [`Master::reset`]: crate::master::Master::reset
 
-use crate::safety_watch::VerifiedEpoch;
 use can_transport::safety_frame::reset_epoch;
 use crs_ipc::{EventKind, ProcessId, StateEvent};
+use drive_bus::safety_watch::VerifiedEpoch;
 
 /// A reset event older than this (drive-io's clock) is stale: a replay or a history sample.
 /// The monitor publishes its Reset a few cycles after the NMT start; drive-io reads events every
@@ -174,8 +174,8 @@ pub fn is_reset_event(ev: &StateEvent) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::safety_watch::{SafetyWatch, SafetyWatchConfig};
     use can_transport::safety_frame::{DEFAULT_COB_ID, SafetyHeartbeat, SafetyState, encode};
+    use drive_bus::safety_watch::{SafetyWatch, SafetyWatchConfig};
 
     fn reset_event(source: ProcessId, epoch: u32) -> StateEvent {
         let mut ev = StateEvent::new(source, EventKind::Reset, 1);

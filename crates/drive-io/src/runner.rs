@@ -1,16 +1,17 @@
 //! The drive-io process loop: SYNC timer + bus + iceoryx2 around [`Master`].
 
-use crate::canopen::{BusFrames, sync};
-use crate::config::{DrivesConfig, MAX_INTERFACES, SyncSource};
 use crate::master::Master;
 use crate::reset::{Ignored, ResetGate, is_reset_event};
-use crate::safety_watch::SafetyWatch;
 use crate::sync_clock::{IsoClock, IsoDue, SyncClock};
 use can_transport::{CanBus, CanError, CanFrame, RxEvent, wait_readable_any};
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, Heartbeat, IpcError, IpcNode, JointSetpoint, ProcessId,
-    SetpointReadyListener, StateEvent, SyncSchedule, monotonic_ns,
+    SetpointReadyListener, StateEvent, SyncSchedule, TopicPublisher, TopicSubscriber,
+    WakeupNotifier, monotonic_ns,
 };
+use drive_bus::canopen::{BusFrames, sync};
+use drive_bus::safety_watch::SafetyWatch;
+use drives_config::{DrivesConfig, MAX_INTERFACES, SyncSource};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
@@ -27,7 +28,7 @@ pub enum RunError {
     Commissioning(String),
     /// The configuration does not fit its bus budget.
     #[error(transparent)]
-    Budget(crate::budget::BudgetError),
+    Budget(drive_commissioning::budget::BudgetError),
     /// One bus must be opened per configured interface.
     #[error("drive-io runs {configured} CAN interface(s) but {opened} bus(es) were opened")]
     Interfaces { configured: usize, opened: usize },
@@ -307,7 +308,8 @@ pub enum Budget {
     RunAnywayForTest,
 }
 
-/// [`run`] with a choice of what to do about the bus budget.
+/// [`run`] with a choice of what to do about the bus budget: the daemon's lifecycle,
+/// configure → activate → run → deactivate.
 pub fn run_with<B: CanBus>(
     cfg: &DrivesConfig,
     buses: Vec<B>,
@@ -315,6 +317,84 @@ pub fn run_with<B: CanBus>(
     stop: &AtomicBool,
     budget: Budget,
 ) -> Result<RunSummary, RunError> {
+    let configured = configure(cfg, buses, ipc, budget)?;
+    let mut d = activate(configured, cfg, ipc)?;
+    while !stop.load(Ordering::Relaxed) {
+        step(&mut d)?;
+    }
+    Ok(deactivate(d))
+}
+
+/// The iceoryx2 ports of the loop, opened before anything is sent.
+struct Ports {
+    setpoints: TopicSubscriber<JointSetpoint>,
+    events: TopicSubscriber<StateEvent>,
+    feedback: TopicPublisher<DriveFeedback>,
+    event_pub: TopicPublisher<StateEvent>,
+    heartbeat: TopicPublisher<Heartbeat>,
+    /// Wakes sleeping watchers on stops only (rare): notify() costs 10-30 us, never per cycle.
+    wakeup: WakeupNotifier,
+}
+
+/// What [`configure`] prepared: the ports, the master with its nodes' start-up plans (their
+/// bus budget checked), the safety watch, the buses. Nothing is on the bus yet.
+struct Configured<B: CanBus> {
+    ports: Ports,
+    master: Master,
+    watch: Option<SafetyWatch>,
+    buses: Buses<B>,
+    dcf_pending: Option<std::path::PathBuf>,
+}
+
+/// Counters of the loop, reported by [`deactivate`] ([`RunSummary`]).
+#[derive(Default)]
+struct LoopStats {
+    cycles: u64,
+    overruns: u32,
+    syncs: u64,
+    sync_late_max_ns: u64,
+    sync_priority_paths: u32,
+    rpdos_late_at_sync: u64,
+    rpdos_queued_behind: u64,
+    event_seq: u64,
+    schedule_seq: u64,
+    ignored_resets: u64,
+    bad_events: u64,
+}
+
+/// The running daemon: everything the loop touches, allocated before the first cycle.
+struct Active<B: CanBus> {
+    ports: Ports,
+    master: Master,
+    watch: Option<SafetyWatch>,
+    buses: Buses<B>,
+    dcf_pending: Option<std::path::PathBuf>,
+    schedule: Schedule,
+    /// Isochronous: where the SYNC instants are published for motion-core's timeline.
+    schedule_pub: Option<TopicPublisher<SyncSchedule>>,
+    /// The "setpoint published" event (all modes but clock): a cycle starts on it.
+    ready_port: Option<SetpointReadyListener>,
+    /// False once the event channel failed: drive-io's own clock for good.
+    ready_live: bool,
+    out: BusFrames,
+    period_ns: u64,
+    /// Reset authority: the latch is left only with the monitor's reset event whose epoch the
+    /// watch verified on CAN, newer than the epoch in force.
+    gate: ResetGate,
+    pending_reset: Option<(StateEvent, u64)>,
+    /// systemd (Type=notify): told once the drives are operational.
+    notified_ready: bool,
+    stats: LoopStats,
+}
+
+/// Configure: the ports, the master from the nodes' EDS, the bus budget (refused before
+/// anything is sent), the safety watch.
+fn configure<B: CanBus>(
+    cfg: &DrivesConfig,
+    buses: Vec<B>,
+    ipc: &IpcNode,
+    budget: Budget,
+) -> Result<Configured<B>, RunError> {
     // Timer slack 1 ns (kernel default 50 µs), so the ppoll deadline of the SYNC tick is met as
     // closely as the scheduler allows. The prctl only fails for an invalid argument; say so.
     if let Err(e) = crs_rt::set_timer_slack(1) {
@@ -327,19 +407,43 @@ pub fn run_with<B: CanBus>(
             opened: buses.len(),
         });
     }
-    let setpoints = ipc.subscriber::<JointSetpoint>()?;
-    let events = ipc.subscriber::<StateEvent>()?;
-    let feedback = ipc.publisher::<DriveFeedback>()?;
-    let event_pub = ipc.publisher::<StateEvent>()?;
-    let heartbeat = ipc.publisher::<Heartbeat>()?;
-    // Wake sleeping watchers on stops only (rare): notify() costs 10-30 us, never per cycle.
-    let wakeup = ipc.wakeup_notifier()?;
-    let mut master = Master::new(cfg)?;
+    let ports = Ports {
+        setpoints: ipc.subscriber::<JointSetpoint>()?,
+        events: ipc.subscriber::<StateEvent>()?,
+        feedback: ipc.publisher::<DriveFeedback>()?,
+        event_pub: ipc.publisher::<StateEvent>()?,
+        heartbeat: ipc.publisher::<Heartbeat>()?,
+        wakeup: ipc.wakeup_notifier()?,
+    };
+    let master = Master::new(cfg)?;
     for p in master.plans() {
         tracing::info!(node = p.node, kind = %p.kind, eds = %p.eds.file, "configured from its EDS");
     }
-    // The bus budget of the frames these plans produce: refused before anything is sent.
-    for ib in crate::budget::of_plans(cfg, master.plans()) {
+    check_budget(cfg, &master, budget)?;
+    // Optional validation of the safety monitor's doubled heartbeat (drives.toml
+    // `[safety_heartbeat]`): without a valid RUN pair within the validation time the bus is
+    // e-stopped and resets are refused.
+    let watch = cfg.safety_heartbeat.map(SafetyWatch::new);
+    if let Some(w) = &watch {
+        tracing::info!(config = ?w.config(), "validating the safety monitor's heartbeat");
+    } else {
+        tracing::warn!(
+            "no [safety_heartbeat]: resets are checked against the monitor's event only \
+             (source and epoch, not authenticated; bench setups only)"
+        );
+    }
+    Ok(Configured {
+        ports,
+        master,
+        watch,
+        buses: Buses::new(buses),
+        dcf_pending: cfg.bus.dcf_dir.as_ref().map(|d| cfg.resolve(d)),
+    })
+}
+
+/// The bus budget of the frames the master's plans produce.
+fn check_budget(cfg: &DrivesConfig, master: &Master, budget: Budget) -> Result<(), RunError> {
+    for ib in drive_commissioning::budget::of_plans(cfg, master.plans()) {
         match (ib.check(), budget) {
             (Ok(()), _) => tracing::info!(
                 interface = %ib.name,
@@ -355,44 +459,35 @@ pub fn run_with<B: CanBus>(
             }
         }
     }
-    let mut dcf_pending = cfg.bus.dcf_dir.as_ref().map(|d| cfg.resolve(d));
-    let period = master.sync_period_ns();
-    let mut out = BusFrames::new(n_itf);
-    let mut event_seq = 0u64;
-    let mut overruns = 0u32;
-    let mut cycles = 0u64;
-    let mut syncs = 0u64;
-    let mut sync_late_max_ns = 0u64;
-    // Optional validation of the safety monitor's doubled heartbeat (drives.toml
-    // `[safety_heartbeat]`): without a valid RUN pair within the validation time the bus is
-    // e-stopped and resets are refused.
-    let mut watch = cfg.safety_heartbeat.map(SafetyWatch::new);
-    if let Some(w) = &watch {
-        tracing::info!(config = ?w.config(), "validating the safety monitor's heartbeat");
-    } else {
-        tracing::warn!(
-            "no [safety_heartbeat]: resets are checked against the monitor's event only \
-             (source and epoch, not authenticated; bench setups only)"
-        );
-    }
-    // Reset authority: the latch is left only with the monitor's reset event whose epoch the
-    // watch verified on CAN, newer than the epoch in force.
-    let mut gate = ResetGate::new();
-    let mut pending_reset: Option<(StateEvent, u64)> = None;
-    let mut ignored_resets = 0u64;
-    let mut bad_events = 0u64;
-    let mut buses = Buses::new(buses);
+    Ok(())
+}
+
+/// Activate: the cycle's clock (isochronous, setpoint or clock), the SYNC's own transmit
+/// paths, the schedule publisher and the setpoint event.
+fn activate<B: CanBus>(
+    c: Configured<B>,
+    cfg: &DrivesConfig,
+    ipc: &IpcNode,
+) -> Result<Active<B>, RunError> {
+    let Configured {
+        ports,
+        master,
+        watch,
+        mut buses,
+        dcf_pending,
+    } = c;
+    let period_ns = master.sync_period_ns();
     let start_ns = monotonic_ns();
-    let mut schedule = match cfg.bus.sync_source {
+    let schedule = match cfg.bus.sync_source {
         SyncSource::Isochronous => Schedule::Iso(IsoClock::new(
-            period,
+            period_ns,
             u64::from(cfg.bus.rpdo_guard_us) * 1000,
             u64::from(cfg.bus.sync_spin_us) * 1000,
             start_ns,
         )),
         source => Schedule::Free(SyncClock::new(
             source,
-            period,
+            period_ns,
             u64::from(cfg.bus.setpoint_wait_us) * 1000,
             start_ns,
         )),
@@ -404,284 +499,354 @@ pub fn run_with<B: CanBus>(
         Schedule::Iso(_) => buses.open_sync_paths()?,
         Schedule::Free(_) => 0,
     };
-    let (mut rpdos_late_at_sync, mut rpdos_queued_behind) = (0u64, 0u64);
     let schedule_pub = match &schedule {
         Schedule::Iso(_) => Some(ipc.publisher::<SyncSchedule>()?),
         Schedule::Free(_) => None,
     };
-    let mut schedule_seq = 0u64;
-    // The "setpoint published" event (all modes but clock): a cycle starts on it.
     let ready_port = match cfg.bus.sync_source {
         SyncSource::Setpoint | SyncSource::Isochronous => Some(ipc.setpoint_ready_listener()?),
         SyncSource::Clock => None,
     };
-    // Dropped to None (own clock for good) if the event channel fails.
-    let mut ready = ready_port.as_ref();
     tracing::info!(
         sync_source = cfg.bus.sync_source.name(),
-        interfaces = n_itf,
+        interfaces = cfg.interfaces().len(),
         multiplexed = buses.fds.is_some(),
         "cycle timing"
     );
-    // systemd (Type=notify): ready once the drives are operational (NMT boot, SDO, CiA 402
-    // enabled), so motion-core (After= drive-io) starts on drives that follow its setpoints, as
-    // `crs sim` starts it.
-    let mut notified_ready = false;
-    while !stop.load(Ordering::Relaxed) {
-        // Wait for what is due next, handling TPDOs / heartbeats / EMCY / SDO as they arrive.
-        let mut now = monotonic_ns();
-        loop {
-            let wake = schedule.wake_at_ns();
-            if now >= wake {
+    Ok(Active {
+        ports,
+        master,
+        watch,
+        out: BusFrames::new(cfg.interfaces().len()),
+        buses,
+        dcf_pending,
+        schedule,
+        schedule_pub,
+        ready_port,
+        ready_live: true,
+        period_ns,
+        gate: ResetGate::new(),
+        pending_reset: None,
+        notified_ready: false,
+        stats: LoopStats {
+            sync_priority_paths,
+            ..LoopStats::default()
+        },
+    })
+}
+
+/// Run, one step: wait for what is due, then either the isochronous SYNC instant or a cycle.
+fn step<B: CanBus>(d: &mut Active<B>) -> Result<(), RunError> {
+    let now = wait_until_due(d)?;
+    if sync_instant(d, now)? {
+        return Ok(());
+    }
+    let cycle_now = start_cycle(d, now)?;
+    take_events(d, cycle_now);
+    apply_pending_reset(d, cycle_now);
+    write_cycle(d, cycle_now)?;
+    publish(d)
+}
+
+/// Waits for what is due next, handling TPDOs / heartbeats / EMCY / SDO and the setpoint
+/// event as they arrive. Returns the time it woke.
+fn wait_until_due<B: CanBus>(d: &mut Active<B>) -> Result<u64, RunError> {
+    let mut now = monotonic_ns();
+    loop {
+        let wake = d.schedule.wake_at_ns();
+        if now >= wake {
+            return Ok(now);
+        }
+        let left = Duration::from_nanos(wake - now);
+        let ready = d.ready_port.as_ref().filter(|_| d.ready_live);
+        match d.buses.fds {
+            Some(bus_fds) => {
+                let mut fds = [-1; MAX_INTERFACES + 1];
+                fds[..MAX_INTERFACES].copy_from_slice(&bus_fds);
+                if let Some(l) = ready {
+                    fds[MAX_INTERFACES] = l.raw_fd();
+                }
+                let readable = wait_readable_any(fds, left).map_err(|e| CanError::Io {
+                    iface: d.buses.buses[0].interface().to_string(),
+                    op: "ppoll",
+                    source: e,
+                })?;
+                if readable[MAX_INTERFACES]
+                    && let Some(l) = ready
+                    && drain_ready(l, &mut d.schedule)
+                {
+                    d.ready_live = false;
+                }
+                if readable[..MAX_INTERFACES].iter().any(|r| *r) {
+                    d.buses.drain(&mut d.master, d.watch.as_mut())?;
+                }
+            }
+            None => {
+                // A transport without a descriptor: receive in slices of 50 µs.
+                let slice = left.min(Duration::from_micros(50));
+                if d.buses.buses.len() == 1 {
+                    if let Some(ev) = d.buses.buses[0].recv_event_timeout(slice)? {
+                        on_rx(0, ev, &mut d.master, d.watch.as_mut());
+                    }
+                } else {
+                    std::thread::sleep(slice);
+                    d.buses.drain(&mut d.master, d.watch.as_mut())?;
+                }
+                if let Some(l) = ready
+                    && drain_ready(l, &mut d.schedule)
+                {
+                    d.ready_live = false;
+                }
+            }
+        }
+        now = monotonic_ns();
+    }
+}
+
+/// Isochronous: the SYNC instant (after the period's cycle) is its own step. True if this
+/// wake-up was the SYNC instant.
+fn sync_instant<B: CanBus>(d: &mut Active<B>, now: u64) -> Result<bool, RunError> {
+    let Schedule::Iso(iso) = &mut d.schedule else {
+        return Ok(false);
+    };
+    if iso.due(now) != IsoDue::Sync {
+        return Ok(false);
+    }
+    // Active wait for the instant: the timer's wake-up jitter must not reach the wire.
+    let at = iso.sync_at_ns();
+    let mut t = now;
+    while t < at {
+        std::hint::spin_loop();
+        t = monotonic_ns();
+    }
+    let s = &mut d.stats;
+    if d.out.sync_requested() {
+        d.buses.send_sync()?;
+        s.syncs += 1;
+        // CiA 402 CSP with RPDO transmission type 1: a drive applies the last RPDO
+        // received before the SYNC; one still queued now is applied a period late.
+        // Checked after the SYNC is out (no system call before it), on the interfaces
+        // whose SYNC went through its own path (the others' backlog holds the SYNC).
+        if d.buses.backlog_behind_sync() {
+            s.rpdos_late_at_sync += 1;
+        }
+    }
+    let sent = monotonic_ns();
+    s.sync_late_max_ns = s.sync_late_max_ns.max(sent.saturating_sub(at));
+    let skipped = iso.sync_sent(sent);
+    if skipped > 0 {
+        s.overruns = s.overruns.saturating_add(skipped);
+        d.master.add_overruns(skipped);
+    }
+    Ok(true)
+}
+
+/// Starts a cycle at `now`: drains what is already queued and counts the cycle. Returns the
+/// cycle's time.
+fn start_cycle<B: CanBus>(d: &mut Active<B>, now: u64) -> Result<u64, RunError> {
+    // Drain what is already queued (after a preemption the wait loop above is skipped):
+    // judging heartbeats/TPDOs before reading them would fault on our own lateness.
+    // Bounded so a flooded bus cannot stall the cycle.
+    d.buses.drain(&mut d.master, d.watch.as_mut())?;
+    // Cycle time = after the drain, so every frame handled is older than the cycle.
+    let cycle_now = monotonic_ns();
+    let s = &mut d.stats;
+    match &mut d.schedule {
+        Schedule::Free(clock) => {
+            let (_trigger, missed) = clock.start(now);
+            if missed > 0 {
+                s.overruns = s.overruns.saturating_add(missed);
+                d.master.add_overruns(missed);
+            }
+        }
+        Schedule::Iso(iso) => {
+            iso.cycle_started();
+        }
+    }
+    s.cycles += 1;
+    CYCLES_RUN.store(s.cycles, Ordering::Relaxed);
+    Ok(cycle_now)
+}
+
+/// The monitor's heartbeat and this cycle's state events into the master; a reset event of
+/// the monitor is kept for [`apply_pending_reset`].
+fn take_events<B: CanBus>(d: &mut Active<B>, cycle_now: u64) {
+    // The monitor's heartbeat: without a permit (past the start-up grace) an enabled bus
+    // is e-stopped here, before this cycle's events and its RPDOs.
+    if let Some(w) = d.watch.as_mut() {
+        d.master.supervise_safety_heartbeat(w, cycle_now);
+    }
+    d.gate.note(
+        d.watch.as_ref().and_then(SafetyWatch::verified_epoch),
+        d.master.is_latched(),
+    );
+    // Every event of this cycle is drained: a sample of a foreign contract version is
+    // skipped (and logged, rate-limited) without ending the drain, so a flood of bad events
+    // cannot hold an e-stop back by a cycle per bad sample. Bounded by the buffer's worth.
+    let s = &mut d.stats;
+    for _ in 0..4 * <StateEvent as crs_ipc::Topic>::SUBSCRIBER_BUFFER {
+        let ev = match d.ports.events.receive() {
+            Ok(Some(ev)) => ev,
+            Ok(None) => break,
+            Err(e @ crs_ipc::IpcError::Version { .. }) => {
+                s.bad_events += 1;
+                if s.bad_events.is_power_of_two() {
+                    tracing::warn!(error = %e, bad_events = s.bad_events, "bad state event ignored");
+                }
+                continue;
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "state event receive failed");
                 break;
             }
-            let left = Duration::from_nanos(wake - now);
-            match buses.fds {
-                Some(bus_fds) => {
-                    let mut fds = [-1; MAX_INTERFACES + 1];
-                    fds[..MAX_INTERFACES].copy_from_slice(&bus_fds);
-                    if let Some(l) = ready {
-                        fds[MAX_INTERFACES] = l.raw_fd();
-                    }
-                    let readable = wait_readable_any(fds, left).map_err(|e| CanError::Io {
-                        iface: buses.buses[0].interface().to_string(),
-                        op: "ppoll",
-                        source: e,
-                    })?;
-                    if readable[MAX_INTERFACES]
-                        && let Some(l) = ready
-                        && drain_ready(l, &mut schedule)
-                    {
-                        ready = None;
-                    }
-                    if readable[..MAX_INTERFACES].iter().any(|r| *r) {
-                        buses.drain(&mut master, watch.as_mut())?;
-                    }
-                }
-                None => {
-                    // A transport without a descriptor: receive in slices of 50 µs.
-                    let slice = left.min(Duration::from_micros(50));
-                    if buses.buses.len() == 1 {
-                        if let Some(ev) = buses.buses[0].recv_event_timeout(slice)? {
-                            on_rx(0, ev, &mut master, watch.as_mut());
-                        }
-                    } else {
-                        std::thread::sleep(slice);
-                        buses.drain(&mut master, watch.as_mut())?;
-                    }
-                    if let Some(l) = ready
-                        && drain_ready(l, &mut schedule)
-                    {
-                        ready = None;
-                    }
-                }
-            }
-            now = monotonic_ns();
+        };
+        if ev.source == ProcessId::DriveIo as u32 {
+            continue;
         }
-        // Isochronous: the SYNC instant (after the period's cycle) is its own step.
-        if let Schedule::Iso(iso) = &mut schedule
-            && iso.due(now) == IsoDue::Sync
-        {
-            // Active wait for the instant: the timer's wake-up jitter must not reach the wire.
-            let at = iso.sync_at_ns();
-            let mut t = now;
-            while t < at {
-                std::hint::spin_loop();
-                t = monotonic_ns();
-            }
-            if out.sync_requested() {
-                buses.send_sync()?;
-                syncs += 1;
-                // CiA 402 CSP with RPDO transmission type 1: a drive applies the last RPDO
-                // received before the SYNC; one still queued now is applied a period late.
-                // Checked after the SYNC is out (no system call before it), on the interfaces
-                // whose SYNC went through its own path (the others' backlog holds the SYNC).
-                if buses.backlog_behind_sync() {
-                    rpdos_late_at_sync += 1;
-                }
-            }
-            let sent = monotonic_ns();
-            sync_late_max_ns = sync_late_max_ns.max(sent.saturating_sub(at));
-            let skipped = iso.sync_sent(sent);
-            if skipped > 0 {
-                overruns = overruns.saturating_add(skipped);
-                master.add_overruns(skipped);
+        if is_reset_event(&ev) {
+            if ev.source == ProcessId::SafetyMonitor as u32 {
+                d.pending_reset = Some((ev, cycle_now));
+            } else {
+                log_ignored(&mut s.ignored_resets, Ignored::Source(ev.source), ev.source);
             }
             continue;
         }
-        // Drain what is already queued (after a preemption the wait loop above is skipped):
-        // judging heartbeats/TPDOs before reading them would fault on our own lateness.
-        // Bounded so a flooded bus cannot stall the cycle.
-        buses.drain(&mut master, watch.as_mut())?;
-        // Cycle time = after the drain, so every frame handled is older than the cycle.
-        let cycle_now = monotonic_ns();
-        match &mut schedule {
-            Schedule::Free(clock) => {
-                let (_trigger, missed) = clock.start(now);
-                if missed > 0 {
-                    overruns = overruns.saturating_add(missed);
-                    master.add_overruns(missed);
-                }
-            }
-            Schedule::Iso(iso) => {
-                iso.cycle_started();
-            }
-        }
-        cycles += 1;
-        CYCLES_RUN.store(cycles, Ordering::Relaxed);
+        d.master.on_event(&ev, cycle_now);
+    }
+}
 
-        // The monitor's heartbeat: without a permit (past the start-up grace) an enabled bus
-        // is e-stopped here, before this cycle's events and its RPDOs.
-        if let Some(w) = watch.as_mut() {
-            master.supervise_safety_heartbeat(w, cycle_now);
-        }
-        gate.note(
-            watch.as_ref().and_then(SafetyWatch::verified_epoch),
-            master.is_latched(),
-        );
-        // Every event of this cycle is drained: a sample of a foreign contract version is
-        // skipped (and logged, rate-limited) without ending the drain, so a flood of bad events
-        // cannot hold an e-stop back by a cycle per bad sample. Bounded by the buffer's worth.
-        let mut drained = 0usize;
-        loop {
-            if drained >= 4 * <StateEvent as crs_ipc::Topic>::SUBSCRIBER_BUFFER {
-                break;
+/// The monitor's pending reset through the gate into the master, retried within
+/// [`RESET_VERIFY_WINDOW_NS`] while the watch has not verified its epoch.
+fn apply_pending_reset<B: CanBus>(d: &mut Active<B>, cycle_now: u64) {
+    let Some((ev, t0)) = d.pending_reset else {
+        return;
+    };
+    // Freshness is judged at the event's arrival (t0): the wait for the watch below
+    // must not make a fresh event stale.
+    let verdict = match &d.watch {
+        Some(w) => d.gate.check(&ev, w.verified_epoch(), t0),
+        None => d.gate.check_unauthenticated(&ev, t0),
+    };
+    let in_window = cycle_now.saturating_sub(t0) < RESET_VERIFY_WINDOW_NS;
+    match verdict {
+        Ok(grant) => match d.master.reset(grant, cycle_now) {
+            Ok(epoch) => {
+                d.gate.granted(epoch);
+                d.pending_reset = None;
             }
-            drained += 1;
-            let ev = match events.receive() {
-                Ok(Some(ev)) => ev,
-                Ok(None) => break,
-                Err(e @ crs_ipc::IpcError::Version { .. }) => {
-                    bad_events += 1;
-                    if bad_events.is_power_of_two() {
-                        tracing::warn!(error = %e, bad_events, "bad state event ignored");
-                    }
-                    continue;
-                }
-                Err(e) => {
-                    tracing::warn!(error = %e, "state event receive failed");
-                    break;
-                }
-            };
-            if ev.source == ProcessId::DriveIo as u32 {
-                continue;
+            Err(_) if !d.master.is_latched() => d.pending_reset = None,
+            // Latched but a heartbeat is stale: retry within the window.
+            Err(_) if in_window => {}
+            Err(_) => {
+                tracing::warn!("reset not applied: a drive heartbeat is stale");
+                d.pending_reset = None;
             }
-            if is_reset_event(&ev) {
-                if ev.source == ProcessId::SafetyMonitor as u32 {
-                    pending_reset = Some((ev, cycle_now));
-                } else {
-                    log_ignored(&mut ignored_resets, Ignored::Source(ev.source), ev.source);
-                }
-                continue;
-            }
-            master.on_event(&ev, cycle_now);
-        }
-        if let Some((ev, t0)) = pending_reset {
-            // Freshness is judged at the event's arrival (t0): the wait for the watch below
-            // must not make a fresh event stale.
-            let verdict = match &watch {
-                Some(w) => gate.check(&ev, w.verified_epoch(), t0),
-                None => gate.check_unauthenticated(&ev, t0),
-            };
-            let in_window = cycle_now.saturating_sub(t0) < RESET_VERIFY_WINDOW_NS;
-            match verdict {
-                Ok(grant) => match master.reset(grant, cycle_now) {
-                    Ok(epoch) => {
-                        gate.granted(epoch);
-                        pending_reset = None;
-                    }
-                    Err(_) if !master.is_latched() => pending_reset = None,
-                    // Latched but a heartbeat is stale: retry within the window.
-                    Err(_) if in_window => {}
-                    Err(_) => {
-                        tracing::warn!("reset not applied: a drive heartbeat is stale");
-                        pending_reset = None;
-                    }
-                },
-                // The watch has not verified the epoch yet: retry within the window.
-                Err(Ignored::NotVerified { .. }) if in_window => {}
-                Err(why) => {
-                    log_ignored(&mut ignored_resets, why, ev.source);
-                    pending_reset = None;
-                }
-            }
-        }
-        // A setpoint with a foreign contract version is an error: treat as no setpoint (stale).
-        let sp = setpoints.latest().unwrap_or_else(|e| {
-            tracing::error!(error = %e, "setpoint rejected");
-            None
-        });
-        out.clear();
-        master.cycle(cycle_now, sp.as_ref(), &mut out);
-        let iso = matches!(schedule, Schedule::Iso(_));
-        if buses.send_frames(&out, iso)? {
-            rpdos_queued_behind += 1;
-        }
-        if !iso && out.sync_requested() {
-            buses.send_sync()?;
-            syncs += 1;
-        }
-        master.mark_written(monotonic_ns());
-        if let Some(msg) = master.describe_commissioning_fault() {
-            // Start-up stops: the quick-stop frames of this cycle are on the bus already.
-            return Err(RunError::Commissioning(msg));
-        }
-        if dcf_pending.is_some() && master.configured() {
-            // Once, right after start-up (not in the steady loop).
-            if let Some(dir) = dcf_pending.take() {
-                write_dcfs(&master, &dir)?;
-            }
-        }
-        feedback.publish(master.feedback())?;
-        if !notified_ready && matches!(master.state(), BusState::Ready | BusState::Running) {
-            crs_service::notify_ready("drives operational, SYNC loop running");
-            notified_ready = true;
-        }
-        if let Some(ev) = master.take_state_event(event_seq + 1) {
-            event_seq += 1;
-            tracing::info!(state = ?BusState::from_u32(ev.state), detail = ev.detail, node = ev.detail_node, "bus state");
-            event_pub.publish(&ev)?;
-            if ev.kind == EventKind::Fault as u32 || ev.state == BusState::EStop as u32 {
-                wakeup.notify()?;
-            }
-        }
-        if cycles.is_multiple_of(100) {
-            let mut hb = Heartbeat::new(ProcessId::DriveIo, master.state() as u32, cycles);
-            hb.overruns = overruns;
-            heartbeat.publish(&hb)?;
-        }
-        if let (Some(p), Schedule::Iso(iso)) = (&schedule_pub, &schedule)
-            && (cycles == 1 || cycles.is_multiple_of(1000))
-        {
-            schedule_seq += 1;
-            p.publish(&SyncSchedule::new(iso.sync_at_ns(), period, schedule_seq))?;
+        },
+        // The watch has not verified the epoch yet: retry within the window.
+        Err(Ignored::NotVerified { .. }) if in_window => {}
+        Err(why) => {
+            log_ignored(&mut d.stats.ignored_resets, why, ev.source);
+            d.pending_reset = None;
         }
     }
-    let (setpoint_cycles, clock_cycles) = schedule.counts();
+}
+
+/// The master's cycle on the newest setpoint, its frames on the bus (and the SYNC right after
+/// them outside isochronous mode); start-up stops on a commissioning fault.
+fn write_cycle<B: CanBus>(d: &mut Active<B>, cycle_now: u64) -> Result<(), RunError> {
+    // A setpoint with a foreign contract version is an error: treat as no setpoint (stale).
+    let sp = d.ports.setpoints.latest().unwrap_or_else(|e| {
+        tracing::error!(error = %e, "setpoint rejected");
+        None
+    });
+    d.out.clear();
+    d.master.cycle(cycle_now, sp.as_ref(), &mut d.out);
+    let iso = matches!(d.schedule, Schedule::Iso(_));
+    if d.buses.send_frames(&d.out, iso)? {
+        d.stats.rpdos_queued_behind += 1;
+    }
+    if !iso && d.out.sync_requested() {
+        d.buses.send_sync()?;
+        d.stats.syncs += 1;
+    }
+    d.master.mark_written(monotonic_ns());
+    if let Some(msg) = d.master.describe_commissioning_fault() {
+        // Start-up stops: the quick-stop frames of this cycle are on the bus already.
+        return Err(RunError::Commissioning(msg));
+    }
+    if d.dcf_pending.is_some() && d.master.configured() {
+        // Once, right after start-up (not in the steady loop).
+        if let Some(dir) = d.dcf_pending.take() {
+            write_dcfs(&d.master, &dir)?;
+        }
+    }
+    Ok(())
+}
+
+/// The cycle's feedback, readiness, state event, heartbeat and SYNC schedule.
+fn publish<B: CanBus>(d: &mut Active<B>) -> Result<(), RunError> {
+    let (p, s) = (&d.ports, &mut d.stats);
+    p.feedback.publish(d.master.feedback())?;
+    // Ready once the drives are operational (NMT boot, SDO, CiA 402 enabled), so motion-core
+    // (After= drive-io) starts on drives that follow its setpoints, as `crs sim` starts it.
+    if !d.notified_ready && matches!(d.master.state(), BusState::Ready | BusState::Running) {
+        crs_service::notify_ready("drives operational, SYNC loop running");
+        d.notified_ready = true;
+    }
+    if let Some(ev) = d.master.take_state_event(s.event_seq + 1) {
+        s.event_seq += 1;
+        tracing::info!(state = ?BusState::from_u32(ev.state), detail = ev.detail, node = ev.detail_node, "bus state");
+        p.event_pub.publish(&ev)?;
+        if ev.kind == EventKind::Fault as u32 || ev.state == BusState::EStop as u32 {
+            p.wakeup.notify()?;
+        }
+    }
+    if s.cycles.is_multiple_of(100) {
+        let mut hb = Heartbeat::new(ProcessId::DriveIo, d.master.state() as u32, s.cycles);
+        hb.overruns = s.overruns;
+        p.heartbeat.publish(&hb)?;
+    }
+    if let (Some(sp), Schedule::Iso(iso)) = (&d.schedule_pub, &d.schedule)
+        && (s.cycles == 1 || s.cycles.is_multiple_of(1000))
+    {
+        s.schedule_seq += 1;
+        sp.publish(&SyncSchedule::new(
+            iso.sync_at_ns(),
+            d.period_ns,
+            s.schedule_seq,
+        ))?;
+    }
+    Ok(())
+}
+
+/// Deactivate: the summary of the run (the ports and buses close when dropped).
+fn deactivate<B: CanBus>(d: Active<B>) -> RunSummary {
+    let (setpoint_cycles, clock_cycles) = d.schedule.counts();
+    let s = &d.stats;
     tracing::info!(
         setpoint_cycles,
         clock_cycles,
-        syncs,
-        sync_late_max_us = sync_late_max_ns as f64 / 1000.0,
-        sync_priority_paths,
-        rpdos_late_at_sync,
-        rpdos_queued_behind,
+        syncs = s.syncs,
+        sync_late_max_us = s.sync_late_max_ns as f64 / 1000.0,
+        sync_priority_paths = s.sync_priority_paths,
+        rpdos_late_at_sync = s.rpdos_late_at_sync,
+        rpdos_queued_behind = s.rpdos_queued_behind,
         "cycles started by a setpoint / by drive-io's own clock"
     );
-    Ok(RunSummary {
-        cycles,
-        overruns,
-        final_state: master.state(),
-        tx_full_drops: buses.tx_full,
+    RunSummary {
+        cycles: s.cycles,
+        overruns: s.overruns,
+        final_state: d.master.state(),
+        tx_full_drops: d.buses.tx_full,
         setpoint_cycles,
         clock_cycles,
-        syncs,
-        sync_late_max_ns,
-        superseded_setpoints: master.superseded_setpoints(),
-        sync_priority_paths,
-        rpdos_late_at_sync,
-        rpdos_queued_behind,
-    })
+        syncs: s.syncs,
+        sync_late_max_ns: s.sync_late_max_ns,
+        superseded_setpoints: d.master.superseded_setpoints(),
+        sync_priority_paths: s.sync_priority_paths,
+        rpdos_late_at_sync: s.rpdos_late_at_sync,
+        rpdos_queued_behind: s.rpdos_queued_behind,
+    }
 }
 
 /// One received frame or bus error into the safety watch and the master.
@@ -717,8 +882,8 @@ fn drain_ready(listener: &SetpointReadyListener, schedule: &mut Schedule) -> boo
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::canopen::{NmtState, heartbeat, nmt};
     use can_transport::RxFrame;
+    use drive_bus::canopen::{NmtState, heartbeat, nmt};
     use std::sync::{Arc, Mutex};
 
     /// What a fake interface was handed: (path, frame); path 0 = the interface's own socket,

@@ -25,7 +25,7 @@
 //! * notifications faster than half a period (a burst after a stall, a foreign notifier) never
 //!   send SYNC faster than that: the drives' interpolation sees at most 2 kHz.
 
-use crate::config::SyncSource;
+use drives_config::SyncSource;
 
 /// What started a cycle.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -2,9 +2,9 @@
 //! invalid TOML is rejected with an error naming the field.
 
 use can_transport::CanFrame;
-use drive_io::DrivesConfig;
-use drive_io::canopen::{self, FrameBuf, parse_sdo_request, parse_sdo_response};
-use drive_io::slave::DriveSlave;
+use cia402_drive::slave::DriveSlave;
+use drive_bus::canopen::{self, FrameBuf, parse_sdo_request, parse_sdo_response};
+use drives_config::DrivesConfig;
 use proptest::prelude::*;
 
 const GOOD: &str = r#"
@@ -69,10 +69,7 @@ fn good_config_and_scaling() {
     assert_eq!(w.length_to_counts(rev), Some(10 * 1048576));
     assert_eq!(cfg.bus.sync_period_us, 1000);
     // The SYNC is the bus clock by default; one interface named can0 at 1 Mbit/s, 70 % budget.
-    assert_eq!(
-        cfg.bus.sync_source,
-        drive_io::config::SyncSource::Isochronous
-    );
+    assert_eq!(cfg.bus.sync_source, drives_config::SyncSource::Isochronous);
     assert_eq!(
         (cfg.bus.setpoint_wait_us, cfg.bus.rpdo_guard_us),
         (250, 400)

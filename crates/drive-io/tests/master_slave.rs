@@ -1,11 +1,12 @@
 //! Deterministic master <-> slave tests without a bus: frames are passed directly in virtual time.
 
 use can_transport::RxFrame;
+use cia402_drive::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
 use crs_ipc::{BusState, JointSetpoint, fault_code};
-use drive_io::canopen::{self, BusFrames, Ds402State, FrameBuf, Message};
-use drive_io::eds::{BUILTIN_WINCH_EDS, Eds};
-use drive_io::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
-use drive_io::{DrivesConfig, Master};
+use drive_bus::canopen::{self, BusFrames, Ds402State, FrameBuf, Message};
+use drive_bus::eds::{BUILTIN_WINCH_EDS, Eds};
+use drive_io::Master;
+use drives_config::DrivesConfig;
 
 struct Sim {
     cfg: DrivesConfig,
@@ -1084,7 +1085,7 @@ fn errors(lines: &[(tracing::Level, String)]) -> Vec<&str> {
 }
 
 /// The safety monitor's cycle on the bus: its configuration signature and a RUN pair.
-fn monitor_cycle(w: &mut drive_io::safety_watch::SafetyWatch, counter: u16, t: u64) {
+fn monitor_cycle(w: &mut drive_bus::safety_watch::SafetyWatch, counter: u16, t: u64) {
     use can_transport::safety_frame::{ConfigSignature, SafetyHeartbeat, SafetyState, encode};
     let cob = w.config().cob_id;
     let sig = ConfigSignature {
@@ -1108,8 +1109,8 @@ fn monitor_cycle(w: &mut drive_io::safety_watch::SafetyWatch, counter: u16, t: u
 
 /// Booted, the watch permitting on three monitor cycles, the drives following a slow ramp
 /// (Running); returns the watch, the last lengths, the next sequence number and the counter.
-fn running_with_watch(s: &mut Sim) -> (drive_io::safety_watch::SafetyWatch, Vec<f64>, u64, u16) {
-    use drive_io::safety_watch::{SafetyWatch, SafetyWatchConfig};
+fn running_with_watch(s: &mut Sim) -> (drive_bus::safety_watch::SafetyWatch, Vec<f64>, u64, u16) {
+    use drive_bus::safety_watch::{SafetyWatch, SafetyWatchConfig};
     s.boot();
     let mut w = SafetyWatch::new(SafetyWatchConfig::default());
     for k in 0..3u16 {
@@ -1125,7 +1126,7 @@ fn running_with_watch(s: &mut Sim) -> (drive_io::safety_watch::SafetyWatch, Vec<
 /// the cable speed (`l` advanced by `v` m per ms).
 fn runner_cycle(
     s: &mut Sim,
-    w: &mut drive_io::safety_watch::SafetyWatch,
+    w: &mut drive_bus::safety_watch::SafetyWatch,
     l: &mut [f64],
     seq: &mut u64,
 ) -> bool {
@@ -1145,7 +1146,7 @@ fn runner_cycle(
 /// drives off), the quick stop at warning, bus state EStop; nothing more while it holds.
 #[test]
 fn drives_torque_off_under_a_missing_heartbeat_is_one_e_stop_line() {
-    use drive_io::safety_watch::{InhibitReason, WatchState};
+    use drive_bus::safety_watch::{InhibitReason, WatchState};
     let cap = Capture::default();
     let mut s = Sim::new();
     let (mut w, mut l, mut seq) = cap.run(|| {
@@ -1197,7 +1198,7 @@ fn drives_torque_off_under_a_missing_heartbeat_is_one_e_stop_line() {
 /// commanded, so a drive that leaves Operation Enabled is still a fault of that drive.
 #[test]
 fn a_drive_leaving_operation_under_a_live_heartbeat_is_still_a_fault() {
-    use drive_io::safety_watch::WatchState;
+    use drive_bus::safety_watch::WatchState;
     let cap = Capture::default();
     let mut s = Sim::new();
     let (mut w, mut l, mut seq, mut counter) = cap.run(|| running_with_watch(&mut s));

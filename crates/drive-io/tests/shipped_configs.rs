@@ -2,8 +2,8 @@
 //! monitor's heartbeat (`[safety_heartbeat]`), and the bench-only override that lets drive-io
 //! start without it appears nowhere in config/ or systemd/.
 
-use drive_io::DrivesConfig;
-use drive_io::config::BENCH_EXECUTABLE;
+use drives_config::BENCH_EXECUTABLE;
+use drives_config::DrivesConfig;
 use std::path::{Path, PathBuf};
 
 fn repo() -> PathBuf {

@@ -4,13 +4,14 @@
 //! separate CiA 404 load cells (`config/eds/crs-load-cell.eds`). Frames are passed directly.
 
 use can_transport::{CanFrame, RxFrame};
+use cia402_drive::force_node::ForceNode;
+use cia402_drive::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
 use crs_ipc::{BusState, JointSetpoint, fault_code};
-use drive_io::canopen::{self, BusFrames, Ds402State, FrameBuf, Message};
-use drive_io::eds::Eds;
-use drive_io::force_node::ForceNode;
-use drive_io::mapping::{Direction, Transmission};
-use drive_io::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
-use drive_io::{DrivesConfig, Master};
+use drive_bus::canopen::{self, BusFrames, Ds402State, FrameBuf, Message};
+use drive_bus::eds::Eds;
+use drive_bus::mapping::{Direction, Transmission};
+use drive_io::Master;
+use drives_config::DrivesConfig;
 
 const VENDOR_EDS: &str = include_str!("../../../config/eds/vendor-csp-drive.eds");
 
@@ -502,9 +503,9 @@ fn a_fixed_mapping_is_adopted_and_checked() {
         "mapping = \"fixed\"\neds = \"{}\"",
         eds_path.display()
     ));
-    let plan = &drive_io::commissioning::plan_all(&cfg, None).unwrap()[0];
+    let plan = &drive_commissioning::commissioning::plan_all(&cfg, None).unwrap()[0];
     // The mapping is checked, not written.
-    use drive_io::commissioning::SdoOp;
+    use drive_commissioning::commissioning::SdoOp;
     assert!(
         !plan
             .ops

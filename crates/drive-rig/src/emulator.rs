@@ -3,16 +3,16 @@
 //! it exists so drive-io can be tested without the physics.
 
 use can_transport::{CanBus, RxEvent};
+use cia402_drive::bank_set::DriveBanks;
+use cia402_drive::force_node::ForceNode;
+use cia402_drive::safety_io::SafetyIoNode;
+use cia402_drive::slave::{MotionDemand, WinchAxis};
 use crs_ipc::MAX_CABLES;
-use drive_io::bank_set::DriveBanks;
-use drive_io::canopen::FrameBuf;
-use drive_io::canopen::{Ds402State, NmtState};
-use drive_io::config::{DrivesConfig, WinchConfig};
-use drive_io::eds::{Eds, EdsError};
-use drive_io::force_node::ForceNode;
-use drive_io::safety_io::SafetyIoNode;
-use drive_io::safety_watch::SafetyWatchConfig;
-use drive_io::slave::{MotionDemand, WinchAxis};
+use drive_bus::canopen::FrameBuf;
+use drive_bus::canopen::{Ds402State, NmtState};
+use drive_bus::eds::{Eds, EdsError};
+use drive_bus::safety_watch::SafetyWatchConfig;
+use drives_config::{DrivesConfig, WinchConfig};
 use std::sync::Arc;
 use std::sync::atomic::{
     AtomicBool, AtomicI32, AtomicU8, AtomicU16, AtomicU32, AtomicU64, Ordering,
@@ -46,7 +46,7 @@ pub struct EmulatorConfig {
     pub force_nodes: Vec<(usize, usize, ForceNode)>,
     /// The safety I/O node (drives.toml `[safety_io]`) the emulator plays too: with it the
     /// drives ignore the monitor's frames and the node drives their STO inputs.
-    pub safety_io: Option<drive_io::config::SafetyIoConfig>,
+    pub safety_io: Option<drives_config::SafetyIoConfig>,
 }
 
 impl EmulatorConfig {

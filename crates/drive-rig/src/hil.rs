@@ -14,9 +14,9 @@ use crs_ipc::{
     BusState, DriveFeedback, EventKind, IpcNode, JointSetpoint, ProcessId, StateEvent,
     TopicPublisher, TopicSubscriber, WakeupNotifier, fault_code, monotonic_ns,
 };
-use drive_io::canopen::{Ds402State, NmtState};
-use drive_io::config::{DrivesConfig, SyncSource};
+use drive_bus::canopen::{Ds402State, NmtState};
 use drive_io::runner;
+use drives_config::{DrivesConfig, SyncSource};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;

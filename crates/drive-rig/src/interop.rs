@@ -10,9 +10,9 @@ use crs_ipc::{
     BusState, DriveFeedback, EventKind, IpcNode, JointSetpoint, ProcessId, StateEvent,
     TopicPublisher, TopicSubscriber, fault_code, monotonic_ns,
 };
-use drive_io::canopen::Ds402State;
-use drive_io::config::DrivesConfig;
+use drive_bus::canopen::Ds402State;
 use drive_io::runner;
+use drives_config::DrivesConfig;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
@@ -296,7 +296,7 @@ pub fn scenario_emcy(cfg: DrivesConfig, prefix: &str, node: u8, code: u16) -> Re
     x.shutdown()?;
     Ok(format!(
         "EMCY {code:#06x} ({}) from node {node} -> Fault",
-        drive_io::canopen::emcy_name(code)
+        drive_bus::canopen::emcy_name(code)
     ))
 }
 

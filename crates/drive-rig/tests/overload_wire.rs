@@ -7,9 +7,9 @@
 //! below the budget with no frame dropped.
 
 use crs_ipc::IpcNode;
-use drive_io::config::DrivesConfig;
 use drive_io::runner::{self, Budget};
 use drive_rig::emulator::{self, EmulatorConfig, EmulatorControl};
+use drives_config::DrivesConfig;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -116,7 +116,9 @@ fn eight_drives_on_one_bus_are_refused_and_forced_past_the_check_fail_on_the_wir
     let over = drives(1, 8, 1);
     let cfg = DrivesConfig::parse(&over).unwrap();
     // Refused at load (the budget reads the plans every node will be configured with) ...
-    let e = drive_io::budget::check(&cfg).unwrap_err().to_string();
+    let e = drive_commissioning::budget::check(&cfg)
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("\"can0\"") && e.contains("budget of 70") && e.contains("TPDO"),
         "{e}"
@@ -152,7 +154,7 @@ fn eight_drives_on_one_bus_are_refused_and_forced_past_the_check_fail_on_the_wir
     // The same drives in a budgeted layout: four buses, feedback every 10th SYNC.
     let fits = drives(4, 2, 10);
     let cfg = DrivesConfig::parse(&fits).unwrap();
-    drive_io::budget::check(&cfg).unwrap();
+    drive_commissioning::budget::check(&cfg).unwrap();
     // (Its latencies are not asserted: when this shared 2-core host stalls the emulator, the
     // drives it plays answer several SYNCs in one burst, which the wire queues faithfully —
     // milliseconds of queueing that say nothing about the layout. Saturation and drops do.)

@@ -6,9 +6,9 @@
 
 use can_transport::{CanBus, CanError, CanFrame, RxFrame};
 use crs_ipc::IpcNode;
-use drive_io::config::DrivesConfig;
 use drive_io::runner;
 use drive_rig::emulator::{self, EmulatorConfig, EmulatorControl};
+use drives_config::DrivesConfig;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};

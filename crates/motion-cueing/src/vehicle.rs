@@ -151,43 +151,36 @@ impl VehicleTrack {
             line,
             message,
         };
-        let mut rows = text
-            .lines()
-            .enumerate()
-            .map(|(i, l)| (i + 1, l.trim()))
-            .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
-        let (hl, header) = rows
-            .next()
-            .ok_or_else(|| line_err(1, "empty: no header line".into()))?;
-        let names: Vec<&str> = header.split(',').map(str::trim).collect();
-        if names != COLUMNS {
-            return Err(line_err(
-                hl,
-                format!("header must be `{}`, got `{header}`", COLUMNS.join(",")),
-            ));
-        }
+        use crs_dataset::table::{TableError, read_table};
+        let table = read_table(text, &COLUMNS).map_err(|e| match e {
+            TableError::NoHeader { .. } => line_err(1, "empty: no header line".into()),
+            TableError::Header {
+                line,
+                expected,
+                found,
+            } => line_err(line, format!("header must be `{expected}`, got `{found}`")),
+            TableError::Columns {
+                line,
+                found,
+                expected,
+            } => line_err(line, format!("has {found} columns, expected {expected}")),
+            TableError::Csv { line, message } => line_err(line, message),
+        })?;
         let mut samples: Vec<(f64, VehicleSample)> = Vec::new();
-        for (ln, row) in rows {
-            let cells: Vec<&str> = row.split(',').collect();
-            if cells.len() != COLUMNS.len() {
-                return Err(line_err(
-                    ln,
-                    format!("has {} columns, expected {}", cells.len(), COLUMNS.len()),
-                ));
-            }
+        for row in &table.rows {
             let mut v = [0.0; 7];
-            for (c, cell) in cells.iter().enumerate() {
+            for (c, cell) in row.fields.iter().enumerate() {
                 let field = |message: String| VehicleError::Field {
                     file: file.to_string(),
-                    line: ln,
+                    line: row.line,
                     column: c + 1,
                     name: COLUMNS[c].to_string(),
                     message,
                 };
                 let x: f64 = cell
-                    .trim()
+                    .text
                     .parse()
-                    .map_err(|_| field(format!("not a number: `{}`", cell.trim())))?;
+                    .map_err(|_| field(format!("not a number: `{}`", cell.text)))?;
                 if !x.is_finite() {
                     return Err(field(format!("not finite: {x}")));
                 }

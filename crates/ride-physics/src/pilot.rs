@@ -130,44 +130,37 @@ impl PilotTrack {
             line,
             message,
         };
-        let mut rows = text
-            .lines()
-            .enumerate()
-            .map(|(i, l)| (i + 1, l.trim()))
-            .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
-        let (hl, header) = rows
-            .next()
-            .ok_or_else(|| line_err(1, "empty: no header line".into()))?;
-        let names: Vec<&str> = header.split(',').map(str::trim).collect();
-        if names != COLUMNS {
-            return Err(line_err(
-                hl,
-                format!("header must be `{}`, got `{header}`", COLUMNS.join(",")),
-            ));
-        }
+        use crs_dataset::table::{TableError, read_table};
+        let table = read_table(text, &COLUMNS).map_err(|e| match e {
+            TableError::NoHeader { .. } => line_err(1, "empty: no header line".into()),
+            TableError::Header {
+                line,
+                expected,
+                found,
+            } => line_err(line, format!("header must be `{expected}`, got `{found}`")),
+            TableError::Columns {
+                line,
+                found,
+                expected,
+            } => line_err(line, format!("has {found} columns, expected {expected}")),
+            TableError::Csv { line, message } => line_err(line, message),
+        })?;
+        let hl = table.header_line;
         let mut samples: Vec<(f64, PilotInput)> = Vec::new();
-        for (ln, row) in rows {
-            let cells: Vec<&str> = row.split(',').collect();
-            if cells.len() != COLUMNS.len() {
-                return Err(line_err(
-                    ln,
-                    format!("has {} columns, expected {}", cells.len(), COLUMNS.len()),
-                ));
-            }
+        for row in &table.rows {
             let mut v = [0.0; 5];
-            let mut col = 1;
-            for (k, cell) in cells.iter().enumerate() {
+            for (k, cell) in row.fields.iter().enumerate() {
                 let field = |message: String| PilotError::Field {
                     file: file.to_string(),
-                    line: ln,
-                    column: col + (cell.len() - cell.trim_start().len()),
+                    line: row.line,
+                    column: cell.column,
                     name: COLUMNS[k].to_string(),
                     message,
                 };
                 let x: f64 = cell
-                    .trim()
+                    .text
                     .parse()
-                    .map_err(|_| field(format!("`{}` is not a number", cell.trim())))?;
+                    .map_err(|_| field(format!("`{}` is not a number", cell.text)))?;
                 let (lo, hi) = match k {
                     0 => (0.0, f64::MAX),
                     1 => (0.0, 1.0),
@@ -187,7 +180,6 @@ impl PilotTrack {
                     )));
                 }
                 v[k] = x;
-                col += cell.len() + 1;
             }
             samples.push((
                 v[0],

@@ -141,7 +141,7 @@ impl Stack {
             .with_grace(Duration::from_secs(10));
         // The buses first (the wire hub, or vcan ports it forwards between): every process of
         // the scenario, the harness itself included (its injections and spying), is a node.
-        let drives = drive_io::config::DrivesConfig::load(&dir.join("drives.toml"))
+        let drives = drives_config::DrivesConfig::load(&dir.join("drives.toml"))
             .map_err(|e| e.to_string())?;
         let hub = match &bin_dir {
             Some(d) => d.join("can-wire"),

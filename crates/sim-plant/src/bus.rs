@@ -52,13 +52,13 @@ use crate::plant::{Equilibrium, Plant, PlantError, TensionSetup};
 use can_transport::{CanBus, CanError, CanFrame};
 use cdpr_model::config::Platform;
 use cdpr_model::{Data, Pose, kinematics};
+use cia402_drive::bank_set::DriveBanks;
+use cia402_drive::safety_io::SafetyIoNode;
+use cia402_drive::slave::MotionDemand;
 use crs_ipc::{CONTRACT_VERSION, MAX_CABLES, PlantTruth, TrackerPose};
-use drive_io::bank_set::DriveBanks;
-use drive_io::canopen::Ds402State;
-use drive_io::canopen::FrameBuf;
-use drive_io::config::{DrivesConfig, WinchConfig};
-use drive_io::safety_io::SafetyIoNode;
-use drive_io::slave::MotionDemand;
+use drive_bus::canopen::Ds402State;
+use drive_bus::canopen::FrameBuf;
+use drives_config::{DrivesConfig, WinchConfig};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -89,7 +89,7 @@ pub enum BusPlantError {
     Eds {
         drives: String,
         #[source]
-        source: drive_io::eds::EdsError,
+        source: drive_bus::eds::EdsError,
     },
     #[error(
         "{plant}: the plant has {plant_m} cables but {drives}: `winch` has {drives_m} [[winch]] \
@@ -243,6 +243,131 @@ impl BusOptions {
     }
 }
 
+/// The plant, the drives config and the control platform describe the same robot: cable
+/// counts and the drum (the scaling drive-io and this plant both use).
+fn check_same_robot(
+    drives: &DrivesConfig,
+    control: &Platform,
+    m: usize,
+    files: &ConfigFiles,
+) -> Result<(), BusPlantError> {
+    if drives.winches.len() != m {
+        return Err(BusPlantError::CableCount {
+            plant: files.plant.clone(),
+            plant_m: m,
+            drives: files.drives.clone(),
+            drives_m: drives.winches.len(),
+        });
+    }
+    if control.model.m() != m {
+        return Err(BusPlantError::ControlCableCount {
+            control: files.control.clone(),
+            control_m: control.model.m(),
+            plant: files.plant.clone(),
+            plant_m: m,
+        });
+    }
+    // The drives config's scaling is the one both drive-io and this plant use; a platform
+    // whose drum differs would mean the configuration describes two different robots.
+    let drum = control.winch.drum_diameter;
+    if let Some((index, w)) = drives
+        .winches
+        .iter()
+        .enumerate()
+        .find(|(_, w)| (w.drum_diameter_m - drum).abs() > 1e-9 * drum.abs().max(1.0))
+    {
+        return Err(BusPlantError::DrumDiameter {
+            drives: files.drives.clone(),
+            index,
+            drives_m: w.drum_diameter_m,
+            control: files.control.clone(),
+            control_m: drum,
+        });
+    }
+    Ok(())
+}
+
+/// The set-up tension: the option, else the platform's f_ini, else mid-range.
+fn initial_tension(
+    opts: &BusOptions,
+    control: &Platform,
+    m: usize,
+) -> Result<Vec<f64>, BusPlantError> {
+    let f_ini = match &opts.f_ini_n {
+        Some(f) => f.clone(),
+        None => control.f_ini.clone().unwrap_or_else(|| {
+            let p = control.model.params();
+            vec![0.5 * (p.f_min + p.f_max); m]
+        }),
+    };
+    if f_ini.len() != m || f_ini.iter().any(|f| !(f.is_finite() && *f > 0.0)) {
+        return Err(BusPlantError::Option {
+            name: "f_ini_n",
+            reason: format!("need {m} finite forces > 0, got {f_ini:?}"),
+        });
+    }
+    Ok(f_ini)
+}
+
+/// The encoders' home lengths: the option, else the control model's φ(x_home).
+fn home_lengths(opts: &BusOptions, phi_home: &[f64], m: usize) -> Result<Vec<f64>, BusPlantError> {
+    match &opts.home_lengths_m {
+        None => Ok(phi_home.to_vec()),
+        Some(q) => {
+            if q.len() != m || q.iter().any(|l| !l.is_finite()) {
+                return Err(BusPlantError::Option {
+                    name: "home_lengths_m",
+                    reason: format!("need {m} finite lengths (m), got {q:?}"),
+                });
+            }
+            Ok(q.clone())
+        }
+    }
+}
+
+/// The safety I/O node of the layout: its interface, the node, its frames.
+type SafetyIo = (usize, SafetyIoNode, FrameBuf);
+
+/// The drive banks, one per CAN interface, and the safety I/O node when the layout has one.
+fn drive_banks(
+    drives: &DrivesConfig,
+    opts: &BusOptions,
+    files: &ConfigFiles,
+) -> Result<(DriveBanks, Option<SafetyIo>), BusPlantError> {
+    // The winches implement the object dictionary of their EDS (drives.toml `winch[i].eds`
+    // or `bus.eds`, else the simulated winch's config/eds/crs-winch.eds), one bank of drives
+    // per CAN interface; the pulleys' load cells of the `[[force_sensor]]` table report the
+    // measured forces too.
+    let mut bank =
+        DriveBanks::from_config(drives, opts.default_heartbeat_ms).map_err(|source| {
+            BusPlantError::Eds {
+                drives: files.drives.clone(),
+                source,
+            }
+        })?;
+    // With a safety I/O node the drives are real CiA 402 drives: they ignore the monitor's
+    // frames and the node removes their torque through STO; without one the simulated
+    // drives validate the monitor's heartbeat themselves (their own watch).
+    let safety_io = match (
+        &drives.safety_io,
+        drives.safety_heartbeat,
+        drives.safety_io_interface(),
+    ) {
+        (Some(io), Some(watch), Some(iface)) => {
+            bank.set_sto(true);
+            Some((iface, SafetyIoNode::new(io, watch), FrameBuf::default()))
+        }
+        _ => None,
+    };
+    if let (Some(sw), None) = (drives.safety_heartbeat, &safety_io) {
+        // The simulated drives validate the safety monitor's heartbeat (drives.toml
+        // `[safety_heartbeat]` without `[safety_io]`): without it they quick-stop and the
+        // brakes hold.
+        bank.enable_safety_watch(sw);
+    }
+    Ok((bank, safety_io))
+}
+
 /// What one plant cycle did.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CycleReport {
@@ -277,7 +402,7 @@ pub struct PlantBus {
     /// the time that really passed since).
     last_sync_ns: Vec<Option<u64>>,
     /// The safety I/O node (drives.toml `[safety_io]`): its interface, the node, its frames.
-    safety_io: Option<(usize, SafetyIoNode, FrameBuf)>,
+    safety_io: Option<SafetyIo>,
     /// The operator's devices on the node, set from outside ([`PlantBus::io_inputs`]): bit 0
     /// e-stop button pressed (circuit open), bit 1 reset key turned.
     io_inputs: std::sync::Arc<std::sync::atomic::AtomicU8>,
@@ -321,52 +446,8 @@ impl PlantBus {
             source,
         })?;
         let m = plant.m();
-        if drives.winches.len() != m {
-            return Err(BusPlantError::CableCount {
-                plant: files.plant,
-                plant_m: m,
-                drives: files.drives,
-                drives_m: drives.winches.len(),
-            });
-        }
-        if control.model.m() != m {
-            return Err(BusPlantError::ControlCableCount {
-                control: files.control,
-                control_m: control.model.m(),
-                plant: files.plant,
-                plant_m: m,
-            });
-        }
-        // The drives config's scaling is the one both drive-io and this plant use; a platform
-        // whose drum differs would mean the configuration describes two different robots.
-        let drum = control.winch.drum_diameter;
-        if let Some((index, w)) = drives
-            .winches
-            .iter()
-            .enumerate()
-            .find(|(_, w)| (w.drum_diameter_m - drum).abs() > 1e-9 * drum.abs().max(1.0))
-        {
-            return Err(BusPlantError::DrumDiameter {
-                drives: files.drives,
-                index,
-                drives_m: w.drum_diameter_m,
-                control: files.control,
-                control_m: drum,
-            });
-        }
-        let f_ini = match &opts.f_ini_n {
-            Some(f) => f.clone(),
-            None => control.f_ini.clone().unwrap_or_else(|| {
-                let p = control.model.params();
-                vec![0.5 * (p.f_min + p.f_max); m]
-            }),
-        };
-        if f_ini.len() != m || f_ini.iter().any(|f| !(f.is_finite() && *f > 0.0)) {
-            return Err(BusPlantError::Option {
-                name: "f_ini_n",
-                reason: format!("need {m} finite forces > 0, got {f_ini:?}"),
-            });
-        }
+        check_same_robot(drives, control, m, &files)?;
+        let f_ini = initial_tension(&opts, control, m)?;
         let home = control.home;
         // eq. (3.14) / (6.24): q_off = φ̂_el(x_ini, f_ini) − φ(x_ini).
         let setup = plant
@@ -383,18 +464,7 @@ impl PlantBus {
                 detail: e.to_string(),
             }
         })?;
-        let home_drive = match &opts.home_lengths_m {
-            None => data.q.clone(),
-            Some(q) => {
-                if q.len() != m || q.iter().any(|l| !l.is_finite()) {
-                    return Err(BusPlantError::Option {
-                        name: "home_lengths_m",
-                        reason: format!("need {m} finite lengths (m), got {q:?}"),
-                    });
-                }
-                q.clone()
-            }
-        };
+        let home_drive = home_lengths(&opts, &data.q, m)?;
         let q_off: Vec<f64> = setup
             .q_cmd
             .iter()
@@ -420,38 +490,8 @@ impl PlantBus {
                 plant: files.plant.clone(),
                 source,
             })?;
-        // The winches implement the object dictionary of their EDS (drives.toml `winch[i].eds`
-        // or `bus.eds`, else the simulated winch's config/eds/crs-winch.eds), one bank of drives
-        // per CAN interface; the pulleys' load cells of the `[[force_sensor]]` table report the
-        // measured forces too.
-        let mut bank =
-            DriveBanks::from_config(drives, opts.default_heartbeat_ms).map_err(|source| {
-                BusPlantError::Eds {
-                    drives: files.drives.clone(),
-                    source,
-                }
-            })?;
+        let (bank, safety_io) = drive_banks(drives, &opts, &files)?;
         let interfaces = bank.interfaces();
-        // With a safety I/O node the drives are real CiA 402 drives: they ignore the monitor's
-        // frames and the node removes their torque through STO; without one the simulated
-        // drives validate the monitor's heartbeat themselves (their own watch).
-        let safety_io = match (
-            &drives.safety_io,
-            drives.safety_heartbeat,
-            drives.safety_io_interface(),
-        ) {
-            (Some(io), Some(watch), Some(iface)) => {
-                bank.set_sto(true);
-                Some((iface, SafetyIoNode::new(io, watch), FrameBuf::default()))
-            }
-            _ => None,
-        };
-        if let (Some(sw), None) = (drives.safety_heartbeat, &safety_io) {
-            // The simulated drives validate the safety monitor's heartbeat (drives.toml
-            // `[safety_heartbeat]` without `[safety_io]`): without it they quick-stop and the
-            // brakes hold.
-            bank.enable_safety_watch(sw);
-        }
         let axes = home_drive
             .iter()
             .map(|l| {

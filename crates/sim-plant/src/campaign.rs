@@ -260,129 +260,149 @@ pub fn parse_campaign(
     }
     c.seed = raw.campaign.seed;
     if let Some(p) = &raw.poses {
-        let v3 = |v: &Option<Spanned<[f64; 3]>>,
-                  key: &str,
-                  dflt: Vector3<f64>,
-                  deg: bool|
-         -> Result<Vector3<f64>, ConfigError> {
-            match v {
-                None => Ok(dflt),
-                Some(s) => {
-                    let a = s.get_ref();
-                    if !a.iter().all(|x| x.is_finite()) {
-                        return Err(loc.err(s.span(), key, "must be finite"));
-                    }
-                    let k = if deg {
-                        std::f64::consts::PI / 180.0
-                    } else {
-                        1.0
-                    };
-                    Ok(Vector3::new(a[0] * k, a[1] * k, a[2] * k))
-                }
-            }
-        };
-        let min = v3(
-            &p.position_min_m,
-            "poses.position_min_m",
-            Vector3::new(-1.5, -1.5, 1.25),
-            false,
-        )?;
-        let max = v3(
-            &p.position_max_m,
-            "poses.position_max_m",
-            Vector3::new(1.5, 1.5, 2.0),
-            false,
-        )?;
-        if (0..3).any(|k| min[k] > max[k]) {
-            let span = p
-                .position_max_m
-                .as_ref()
-                .or(p.position_min_m.as_ref())
-                .map(|s| s.span())
-                .unwrap_or(0..0);
-            return Err(loc.err(
-                span,
-                "poses.position_max_m",
-                "must be >= position_min_m per axis",
-            ));
-        }
-        c.poses = match p.kind.get_ref().as_str() {
-            "grid" => {
-                let points = match &p.points {
-                    None => [5, 5, 4],
-                    Some(s) => {
-                        let a = s.get_ref();
-                        if a.iter().any(|n| *n < 1 || *n > 1000) {
-                            return Err(loc.err(
-                                s.span(),
-                                "poses.points",
-                                "each entry must be in 1..=1000",
-                            ));
-                        }
-                        [a[0] as usize, a[1] as usize, a[2] as usize]
-                    }
-                };
-                let rotations = match &p.rotations_deg {
-                    None => default_rotations(),
-                    Some(s) => {
-                        if s.get_ref()
-                            .iter()
-                            .flatten()
-                            .any(|x| !x.is_finite() || x.abs() > 90.0)
-                        {
-                            return Err(loc.err(
-                                s.span(),
-                                "poses.rotations_deg",
-                                "angles must be finite and within ±90°",
-                            ));
-                        }
-                        s.get_ref()
-                            .iter()
-                            .map(|r| pose_deg([0.0; 3], *r).phi)
-                            .collect()
-                    }
-                };
-                PoseSet::Grid {
-                    min,
-                    max,
-                    points,
-                    rotations,
-                }
-            }
-            "random" => {
-                let count = match &p.count {
-                    None => 91,
-                    Some(s) => {
-                        if *s.get_ref() < 1 || *s.get_ref() > 1_000_000 {
-                            return Err(loc.err(s.span(), "poses.count", "must be in 1..=1000000"));
-                        }
-                        *s.get_ref() as usize
-                    }
-                };
-                let rotation_max = v3(
-                    &p.rotation_max_deg,
-                    "poses.rotation_max_deg",
-                    Vector3::new(5.0, 5.0, 5.0),
-                    true,
-                )?;
-                PoseSet::Random {
-                    min,
-                    max,
-                    count,
-                    rotation_max,
-                    seed: p.seed.unwrap_or(0),
-                }
-            }
-            other => {
-                return Err(loc.err(
-                    p.kind.span(),
-                    "poses.kind",
-                    format!("must be \"grid\" or \"random\", got \"{other}\""),
-                ));
-            }
-        };
+        c.poses = poses(&loc, p)?;
     }
     Ok(c)
+}
+
+/// An optional 3-vector of the `[poses]` table (degrees converted when `deg`).
+fn vec3_or(
+    loc: &Locator,
+    v: &Option<Spanned<[f64; 3]>>,
+    key: &str,
+    dflt: Vector3<f64>,
+    deg: bool,
+) -> Result<Vector3<f64>, ConfigError> {
+    match v {
+        None => Ok(dflt),
+        Some(s) => {
+            let a = s.get_ref();
+            if !a.iter().all(|x| x.is_finite()) {
+                return Err(loc.err(s.span(), key, "must be finite"));
+            }
+            let k = if deg {
+                std::f64::consts::PI / 180.0
+            } else {
+                1.0
+            };
+            Ok(Vector3::new(a[0] * k, a[1] * k, a[2] * k))
+        }
+    }
+}
+
+/// The `[poses]` table: a grid or random poses in the position box.
+fn poses(loc: &Locator, p: &RawPoses) -> Result<PoseSet, ConfigError> {
+    let min = vec3_or(
+        loc,
+        &p.position_min_m,
+        "poses.position_min_m",
+        Vector3::new(-1.5, -1.5, 1.25),
+        false,
+    )?;
+    let max = vec3_or(
+        loc,
+        &p.position_max_m,
+        "poses.position_max_m",
+        Vector3::new(1.5, 1.5, 2.0),
+        false,
+    )?;
+    if (0..3).any(|k| min[k] > max[k]) {
+        let span = p
+            .position_max_m
+            .as_ref()
+            .or(p.position_min_m.as_ref())
+            .map(|s| s.span())
+            .unwrap_or(0..0);
+        return Err(loc.err(
+            span,
+            "poses.position_max_m",
+            "must be >= position_min_m per axis",
+        ));
+    }
+    match p.kind.get_ref().as_str() {
+        "grid" => grid(loc, p, min, max),
+        "random" => random(loc, p, min, max),
+        other => Err(loc.err(
+            p.kind.span(),
+            "poses.kind",
+            format!("must be \"grid\" or \"random\", got \"{other}\""),
+        )),
+    }
+}
+
+fn grid(
+    loc: &Locator,
+    p: &RawPoses,
+    min: Vector3<f64>,
+    max: Vector3<f64>,
+) -> Result<PoseSet, ConfigError> {
+    let points = match &p.points {
+        None => [5, 5, 4],
+        Some(s) => {
+            let a = s.get_ref();
+            if a.iter().any(|n| *n < 1 || *n > 1000) {
+                return Err(loc.err(s.span(), "poses.points", "each entry must be in 1..=1000"));
+            }
+            [a[0] as usize, a[1] as usize, a[2] as usize]
+        }
+    };
+    let rotations = match &p.rotations_deg {
+        None => default_rotations(),
+        Some(s) => {
+            if s.get_ref()
+                .iter()
+                .flatten()
+                .any(|x| !x.is_finite() || x.abs() > 90.0)
+            {
+                return Err(loc.err(
+                    s.span(),
+                    "poses.rotations_deg",
+                    "angles must be finite and within ±90°",
+                ));
+            }
+            s.get_ref()
+                .iter()
+                .map(|r| pose_deg([0.0; 3], *r).phi)
+                .collect()
+        }
+    };
+    Ok(PoseSet::Grid {
+        min,
+        max,
+        points,
+        rotations,
+    })
+}
+
+fn random(
+    loc: &Locator,
+    p: &RawPoses,
+    min: Vector3<f64>,
+    max: Vector3<f64>,
+) -> Result<PoseSet, ConfigError> {
+    let count = match &p.count {
+        None => 91,
+        Some(s) => {
+            if *s.get_ref() < 1 || *s.get_ref() > 1_000_000 {
+                return Err(loc.err(s.span(), "poses.count", "must be in 1..=1000000"));
+            }
+            *s.get_ref() as usize
+        }
+    };
+    let rotation_max = vec3_or(
+        loc,
+        &p.rotation_max_deg,
+        "poses.rotation_max_deg",
+        Vector3::new(5.0, 5.0, 5.0),
+        true,
+    )?;
+    Ok(PoseSet::Random {
+        min,
+        max,
+        count,
+        rotation_max,
+        seed: p.seed.unwrap_or(0),
+    })
 }
 
 /// A reference pose (or tension-test step) that was not sampled, and why.
@@ -476,43 +496,12 @@ pub fn run_campaign(
     let model = &control.model;
     let mut data = Data::new(model);
     let p = model.params();
-    let mut q_off = vec![0.0; m];
-    if campaign.control == ControlKind::Kinematic {
-        // eq. (3.14) / (6.24): q_off = φ̂_el(x_ini, f_ini) − φ(x_ini), the left term on the plant.
-        let f_ini = control
-            .f_ini
-            .as_ref()
-            .ok_or(CampaignError::NoInitialTension)?;
-        let setup = plant
-            .setup_tension(&control.home, f_ini)
-            .map_err(CampaignError::Setup)?;
-        kinematics::inverse(model, &mut data, &control.home)
-            .map_err(|e| CampaignError::ControlHome(e.to_string()))?;
-        for (o, (c, q)) in q_off.iter_mut().zip(setup.q_cmd.iter().zip(&data.q)) {
-            *o = c - q;
-        }
-        // Settle at home with that command so the run starts from the set-up state.
-        plant.step(&setup.q_cmd).map_err(CampaignError::Setup)?;
-    }
+    let q_off = match campaign.control {
+        ControlKind::Kinematic => kinematic_offsets(plant, control, &mut data)?,
+        ControlKind::Elastostatic => vec![0.0; m],
+    };
     let mut ds = Dataset::new(m, campaign.force_columns, true);
-    ds.metadata.push((
-        "platform".into(),
-        format!("{} ({platform_label})", control.name),
-    ));
-    ds.metadata
-        .push(("control_model".into(), campaign.control.name().into()));
-    ds.metadata.push(("campaign".into(), campaign.name.clone()));
-    ds.metadata.push(("seed".into(), seed.to_string()));
-    ds.metadata
-        .push(("force_limits_n".into(), format!("{} {}", p.f_min, p.f_max)));
-    if let Some(s) = campaign.tension_test {
-        ds.metadata
-            .push(("tension_test_shortening_m".into(), s.to_string()));
-    }
-    if campaign.control == ControlKind::Kinematic {
-        let off: Vec<String> = q_off.iter().map(|v| v.to_string()).collect();
-        ds.metadata.push(("q_off_m".into(), off.join(" ")));
-    }
+    ds.metadata = header_metadata(control, campaign, platform_label, seed, &q_off);
     let mut unreachable = Vec::new();
     let mut q_cmd = vec![0.0; m];
     let mut f_ref = vec![0.0; m];
@@ -588,21 +577,79 @@ pub fn run_campaign(
             }
         }
     }
-    for u in &unreachable {
-        let x = u.pose_ref.to_array();
-        ds.metadata.push((
-            "unreachable".into(),
-            format!(
-                "pose_index {} phase {} x_ref [{:.4}, {:.4}, {:.4}, {:.5}, {:.5}, {:.5}]: {}",
-                u.pose_index, u.phase as u8, x[0], x[1], x[2], x[3], x[4], x[5], u.reason
-            ),
-        ));
-    }
+    ds.metadata.extend(unreachable.iter().map(unreachable_line));
     Ok(CampaignResult {
         dataset: ds,
         unreachable,
         q_off,
     })
+}
+
+/// eq. (3.14) / (6.24): q_off = φ̂_el(x_ini, f_ini) − φ(x_ini), the left term on the plant;
+/// the plant is left settled at home with that command, so the run starts from the set-up state.
+fn kinematic_offsets(
+    plant: &mut Plant,
+    control: &Platform,
+    data: &mut Data,
+) -> Result<Vec<f64>, CampaignError> {
+    let f_ini = control
+        .f_ini
+        .as_ref()
+        .ok_or(CampaignError::NoInitialTension)?;
+    let setup = plant
+        .setup_tension(&control.home, f_ini)
+        .map_err(CampaignError::Setup)?;
+    kinematics::inverse(&control.model, data, &control.home)
+        .map_err(|e| CampaignError::ControlHome(e.to_string()))?;
+    let q_off = setup
+        .q_cmd
+        .iter()
+        .zip(&data.q)
+        .map(|(c, q)| c - q)
+        .collect();
+    plant.step(&setup.q_cmd).map_err(CampaignError::Setup)?;
+    Ok(q_off)
+}
+
+/// The data set's metadata lines before the samples (docs/data-format.md).
+fn header_metadata(
+    control: &Platform,
+    campaign: &CampaignConfig,
+    platform_label: &str,
+    seed: u64,
+    q_off: &[f64],
+) -> Vec<(String, String)> {
+    let p = control.model.params();
+    let mut md = vec![
+        (
+            "platform".into(),
+            format!("{} ({platform_label})", control.name),
+        ),
+        ("control_model".into(), campaign.control.name().into()),
+        ("campaign".into(), campaign.name.clone()),
+        ("seed".into(), seed.to_string()),
+        ("force_limits_n".into(), format!("{} {}", p.f_min, p.f_max)),
+    ];
+    if let Some(s) = campaign.tension_test {
+        md.push(("tension_test_shortening_m".into(), s.to_string()));
+    }
+    if campaign.control == ControlKind::Kinematic {
+        let off: Vec<String> = q_off.iter().map(|v| v.to_string()).collect();
+        md.push(("q_off_m".into(), off.join(" ")));
+    }
+    md
+}
+
+/// An `unreachable` metadata line.
+fn unreachable_line(u: &Unreachable) -> (String, String) {
+    let x = u.pose_ref.to_array();
+    (
+        "unreachable".into(),
+        format!(
+            "pose_index {} phase {} x_ref [{:.4}, {:.4}, {:.4}, {:.5}, {:.5}, {:.5}]: {}",
+            u.pose_index, u.phase as u8, x[0], x[1], x[2], x[3], x[4], x[5], u.reason
+        ),
+    )
 }
 
 /// Steps the plant and checks the true forces against [f_lo, f_hi] (eq. 3.29, 3.33).

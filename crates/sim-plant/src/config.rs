@@ -471,178 +471,249 @@ pub fn parse_plant(text: &str, file: &str, base_dir: &Path) -> Result<PlantConfi
         return Err(loc.err(raw.plant.name.span(), "plant.name", "must not be empty"));
     }
     let m = platform.model.m();
-    let mut fx = Effects::default();
-
-    if let Some(g) = raw.geometry_deviation.filter(|g| g.enabled) {
-        let zeros = vec![Vector3::zeros(); m];
-        let da = match &g.frame_anchor_offsets_m {
-            Some(v) => loc.vec3s(v, "geometry_deviation.frame_anchor_offsets_m", m)?,
-            None => zeros.clone(),
-        };
-        let db = match &g.platform_anchor_offsets_m {
-            Some(v) => loc.vec3s(v, "geometry_deviation.platform_anchor_offsets_m", m)?,
-            None => zeros,
-        };
-        fx.geometry = Some(GeometryDeviation {
-            frame_anchor_offsets: da,
-            platform_anchor_offsets: db,
-        });
-    }
-    if let Some(p) = raw.pulleys.filter(|p| p.enabled) {
-        let radius = loc.per_cable(&p.radius_m, "pulleys.radius_m", m, 0.0, false)?;
-        let axis = loc.vec3s(&p.swivel_axes, "pulleys.swivel_axes", m)?;
-        if let Some(i) = axis.iter().position(|a| a.norm() < 1e-12) {
-            return Err(loc.err(
-                p.swivel_axes.span(),
-                format!("pulleys.swivel_axes[{i}]"),
-                "must be a non-zero vector",
-            ));
-        }
-        fx.pulleys = Some(PulleyEffect { radius, axis });
-    }
-    if let Some(p) = raw.powertrain.filter(|p| p.enabled) {
-        let k_f = match &p.cable_k_f_n {
-            Some(v) => loc.per_cable(v, "powertrain.cable_k_f_n", m, 0.0, true)?,
-            None => platform.model.params().k_f.clone(),
-        };
-        let extra_length = loc.per_cable(
-            &p.extra_length_m,
-            "powertrain.extra_length_m",
-            m,
-            0.0,
-            false,
-        )?;
-        let series_compliance = match &p.series_compliance_m_per_n {
-            Some(v) => loc.per_cable(v, "powertrain.series_compliance_m_per_n", m, 0.0, false)?,
-            None => vec![0.0; m],
-        };
-        fx.powertrain = Some(Powertrain {
-            k_f,
-            extra_length,
-            series_compliance,
-        });
-    }
-    if let Some(s) = raw.stiffness.filter(|s| s.enabled) {
-        fx.stiffness = Some(TensionStiffness {
-            exponent: loc.scalar(&s.exponent, "stiffness.exponent", 0.0, 0.95, false)?,
-            force_offset: loc.scalar(
-                &s.force_offset_n,
-                "stiffness.force_offset_n",
-                0.0,
-                1e7,
-                true,
-            )?,
-            reference_force: loc.scalar(
-                &s.reference_force_n,
-                "stiffness.reference_force_n",
-                0.0,
-                1e7,
-                true,
-            )?,
-        });
-    }
-    if let Some(h) = raw.hysteresis.filter(|h| h.enabled) {
-        fx.hysteresis = Some(Hysteresis {
-            half_width: loc.scalar(&h.half_width_n, "hysteresis.half_width_n", 0.0, 1e6, false)?,
-            stiffness_ratio: loc.scalar(
-                &h.stiffness_ratio,
-                "hysteresis.stiffness_ratio",
-                0.0,
-                1e3,
-                true,
-            )?,
-        });
-    }
-    if let Some(s) = raw.sag.filter(|s| s.enabled) {
-        fx.sag = Some(Sag {
-            mass_per_length: loc.scalar(
-                &s.mass_per_length_kg_per_m,
-                "sag.mass_per_length_kg_per_m",
-                0.0,
-                1e3,
-                true,
-            )?,
-            gravity: match &s.gravity_m_per_s2 {
-                Some(g) => loc.scalar(g, "sag.gravity_m_per_s2", 0.0, 100.0, true)?,
-                None => STANDARD_GRAVITY,
-            },
-        });
-    }
-    if let Some(w) = raw.winch_errors.filter(|w| w.enabled) {
-        fx.winch = Some(WinchErrors {
-            length_scale: match &w.length_scale {
-                Some(v) => loc.per_cable(v, "winch_errors.length_scale", m, 0.0, true)?,
-                None => vec![1.0; m],
-            },
-            encoder_offset: match &w.encoder_offset_m {
-                Some(v) => loc.per_cable(
-                    v,
-                    "winch_errors.encoder_offset_m",
-                    m,
-                    f64::NEG_INFINITY,
-                    true,
-                )?,
-                None => vec![0.0; m],
-            },
-        });
-    }
-    if let Some(l) = raw.load.filter(|l| l.enabled) {
-        let c = loc.fixed::<3>(&l.center_of_gravity_m, "load.center_of_gravity_m")?;
-        let w = match &l.extra_wrench_n_nm {
-            Some(w) => Vector6::from_row_slice(&loc.fixed::<6>(w, "load.extra_wrench_n_nm")?),
-            None => Vector6::zeros(),
-        };
-        fx.load = Some(Load {
-            mass: loc.scalar(&l.mass_kg, "load.mass_kg", 0.0, 1e6, false)?,
-            center_of_gravity: Vector3::new(c[0], c[1], c[2]),
-            extra_wrench: w,
-            gravity: match &l.gravity_m_per_s2 {
-                Some(g) => loc.scalar(g, "load.gravity_m_per_s2", 0.0, 100.0, true)?,
-                None => STANDARD_GRAVITY,
-            },
-        });
-    }
-    if let Some(t) = raw.tracker.filter(|t| t.enabled) {
-        fx.tracker = Some(Tracker {
-            position_noise: loc.scalar(
-                &t.position_noise_m,
-                "tracker.position_noise_m",
-                0.0,
-                1.0,
-                false,
-            )?,
-            rotation_noise: loc
-                .scalar(
-                    &t.rotation_noise_deg,
-                    "tracker.rotation_noise_deg",
-                    0.0,
-                    90.0,
-                    false,
-                )?
-                .to_radians(),
-        });
-    }
-    if let Some(f) = raw.force_sensors.filter(|f| f.enabled) {
-        fx.force_sensors = Some(ForceSensors {
-            noise: loc.scalar(&f.noise_n, "force_sensors.noise_n", 0.0, 1e6, false)?,
-            offset: match &f.offset_n {
-                Some(v) => {
-                    loc.per_cable(v, "force_sensors.offset_n", m, f64::NEG_INFINITY, true)?
-                }
-                None => vec![0.0; m],
-            },
-            gain: match &f.gain {
-                Some(v) => loc.per_cable(v, "force_sensors.gain", m, 0.0, true)?,
-                None => vec![1.0; m],
-            },
-        });
-    }
+    let k_f = &platform.model.params().k_f;
+    let fx = Effects {
+        geometry: raw
+            .geometry_deviation
+            .filter(|g| g.enabled)
+            .map(|g| geometry(&loc, &g, m))
+            .transpose()?,
+        pulleys: raw
+            .pulleys
+            .filter(|p| p.enabled)
+            .map(|p| pulleys(&loc, &p, m))
+            .transpose()?,
+        powertrain: raw
+            .powertrain
+            .filter(|p| p.enabled)
+            .map(|p| powertrain(&loc, &p, m, k_f))
+            .transpose()?,
+        stiffness: raw
+            .stiffness
+            .filter(|s| s.enabled)
+            .map(|s| stiffness(&loc, &s))
+            .transpose()?,
+        hysteresis: raw
+            .hysteresis
+            .filter(|h| h.enabled)
+            .map(|h| hysteresis(&loc, &h))
+            .transpose()?,
+        sag: raw
+            .sag
+            .filter(|s| s.enabled)
+            .map(|s| sag(&loc, &s))
+            .transpose()?,
+        winch: raw
+            .winch_errors
+            .filter(|w| w.enabled)
+            .map(|w| winch(&loc, &w, m))
+            .transpose()?,
+        load: raw
+            .load
+            .filter(|l| l.enabled)
+            .map(|l| load(&loc, &l))
+            .transpose()?,
+        tracker: raw
+            .tracker
+            .filter(|t| t.enabled)
+            .map(|t| tracker(&loc, &t))
+            .transpose()?,
+        force_sensors: raw
+            .force_sensors
+            .filter(|f| f.enabled)
+            .map(|f| force_sensors(&loc, &f, m))
+            .transpose()?,
+    };
     Ok(PlantConfig {
         name: raw.plant.name.into_inner(),
         platform_path,
         platform,
         seed: raw.plant.seed,
         effects: fx,
+    })
+}
+
+// One function per effect section: its values checked against their ranges, errors naming the
+// key and its line.
+
+fn geometry(loc: &Locator, g: &RawGeometry, m: usize) -> Result<GeometryDeviation, ConfigError> {
+    let zeros = vec![Vector3::zeros(); m];
+    let da = match &g.frame_anchor_offsets_m {
+        Some(v) => loc.vec3s(v, "geometry_deviation.frame_anchor_offsets_m", m)?,
+        None => zeros.clone(),
+    };
+    let db = match &g.platform_anchor_offsets_m {
+        Some(v) => loc.vec3s(v, "geometry_deviation.platform_anchor_offsets_m", m)?,
+        None => zeros,
+    };
+    Ok(GeometryDeviation {
+        frame_anchor_offsets: da,
+        platform_anchor_offsets: db,
+    })
+}
+
+fn pulleys(loc: &Locator, p: &RawPulleys, m: usize) -> Result<PulleyEffect, ConfigError> {
+    let radius = loc.per_cable(&p.radius_m, "pulleys.radius_m", m, 0.0, false)?;
+    let axis = loc.vec3s(&p.swivel_axes, "pulleys.swivel_axes", m)?;
+    if let Some(i) = axis.iter().position(|a| a.norm() < 1e-12) {
+        return Err(loc.err(
+            p.swivel_axes.span(),
+            format!("pulleys.swivel_axes[{i}]"),
+            "must be a non-zero vector",
+        ));
+    }
+    Ok(PulleyEffect { radius, axis })
+}
+
+fn powertrain(
+    loc: &Locator,
+    p: &RawPowertrain,
+    m: usize,
+    platform_k_f: &[f64],
+) -> Result<Powertrain, ConfigError> {
+    let k_f = match &p.cable_k_f_n {
+        Some(v) => loc.per_cable(v, "powertrain.cable_k_f_n", m, 0.0, true)?,
+        None => platform_k_f.to_vec(),
+    };
+    let extra_length = loc.per_cable(
+        &p.extra_length_m,
+        "powertrain.extra_length_m",
+        m,
+        0.0,
+        false,
+    )?;
+    let series_compliance = match &p.series_compliance_m_per_n {
+        Some(v) => loc.per_cable(v, "powertrain.series_compliance_m_per_n", m, 0.0, false)?,
+        None => vec![0.0; m],
+    };
+    Ok(Powertrain {
+        k_f,
+        extra_length,
+        series_compliance,
+    })
+}
+
+fn stiffness(loc: &Locator, s: &RawStiffness) -> Result<TensionStiffness, ConfigError> {
+    Ok(TensionStiffness {
+        exponent: loc.scalar(&s.exponent, "stiffness.exponent", 0.0, 0.95, false)?,
+        force_offset: loc.scalar(
+            &s.force_offset_n,
+            "stiffness.force_offset_n",
+            0.0,
+            1e7,
+            true,
+        )?,
+        reference_force: loc.scalar(
+            &s.reference_force_n,
+            "stiffness.reference_force_n",
+            0.0,
+            1e7,
+            true,
+        )?,
+    })
+}
+
+fn hysteresis(loc: &Locator, h: &RawHysteresis) -> Result<Hysteresis, ConfigError> {
+    Ok(Hysteresis {
+        half_width: loc.scalar(&h.half_width_n, "hysteresis.half_width_n", 0.0, 1e6, false)?,
+        stiffness_ratio: loc.scalar(
+            &h.stiffness_ratio,
+            "hysteresis.stiffness_ratio",
+            0.0,
+            1e3,
+            true,
+        )?,
+    })
+}
+
+fn sag(loc: &Locator, s: &RawSag) -> Result<Sag, ConfigError> {
+    Ok(Sag {
+        mass_per_length: loc.scalar(
+            &s.mass_per_length_kg_per_m,
+            "sag.mass_per_length_kg_per_m",
+            0.0,
+            1e3,
+            true,
+        )?,
+        gravity: match &s.gravity_m_per_s2 {
+            Some(g) => loc.scalar(g, "sag.gravity_m_per_s2", 0.0, 100.0, true)?,
+            None => STANDARD_GRAVITY,
+        },
+    })
+}
+
+fn winch(loc: &Locator, w: &RawWinch, m: usize) -> Result<WinchErrors, ConfigError> {
+    Ok(WinchErrors {
+        length_scale: match &w.length_scale {
+            Some(v) => loc.per_cable(v, "winch_errors.length_scale", m, 0.0, true)?,
+            None => vec![1.0; m],
+        },
+        encoder_offset: match &w.encoder_offset_m {
+            Some(v) => loc.per_cable(
+                v,
+                "winch_errors.encoder_offset_m",
+                m,
+                f64::NEG_INFINITY,
+                true,
+            )?,
+            None => vec![0.0; m],
+        },
+    })
+}
+
+fn load(loc: &Locator, l: &RawLoad) -> Result<Load, ConfigError> {
+    let c = loc.fixed::<3>(&l.center_of_gravity_m, "load.center_of_gravity_m")?;
+    let w = match &l.extra_wrench_n_nm {
+        Some(w) => Vector6::from_row_slice(&loc.fixed::<6>(w, "load.extra_wrench_n_nm")?),
+        None => Vector6::zeros(),
+    };
+    Ok(Load {
+        mass: loc.scalar(&l.mass_kg, "load.mass_kg", 0.0, 1e6, false)?,
+        center_of_gravity: Vector3::new(c[0], c[1], c[2]),
+        extra_wrench: w,
+        gravity: match &l.gravity_m_per_s2 {
+            Some(g) => loc.scalar(g, "load.gravity_m_per_s2", 0.0, 100.0, true)?,
+            None => STANDARD_GRAVITY,
+        },
+    })
+}
+
+fn tracker(loc: &Locator, t: &RawTracker) -> Result<Tracker, ConfigError> {
+    Ok(Tracker {
+        position_noise: loc.scalar(
+            &t.position_noise_m,
+            "tracker.position_noise_m",
+            0.0,
+            1.0,
+            false,
+        )?,
+        rotation_noise: loc
+            .scalar(
+                &t.rotation_noise_deg,
+                "tracker.rotation_noise_deg",
+                0.0,
+                90.0,
+                false,
+            )?
+            .to_radians(),
+    })
+}
+
+fn force_sensors(
+    loc: &Locator,
+    f: &RawForceSensors,
+    m: usize,
+) -> Result<ForceSensors, ConfigError> {
+    Ok(ForceSensors {
+        noise: loc.scalar(&f.noise_n, "force_sensors.noise_n", 0.0, 1e6, false)?,
+        offset: match &f.offset_n {
+            Some(v) => loc.per_cable(v, "force_sensors.offset_n", m, f64::NEG_INFINITY, true)?,
+            None => vec![0.0; m],
+        },
+        gain: match &f.gain {
+            Some(v) => loc.per_cable(v, "force_sensors.gain", m, 0.0, true)?,
+            None => vec![1.0; m],
+        },
     })
 }
 

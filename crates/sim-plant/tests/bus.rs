@@ -13,8 +13,9 @@ use cdpr_model::{Data, Pose, kinematics};
 use crs_ipc::{
     BusState, DriveFeedback, EventKind, IpcNode, JointSetpoint, PlantTruth, ProcessId, StateEvent,
 };
-use drive_io::canopen::{self, Ds402State, NmtState};
-use drive_io::{DrivesConfig, Master};
+use drive_bus::canopen::{self, Ds402State, NmtState};
+use drive_io::Master;
+use drives_config::DrivesConfig;
 use sim_plant::bus::{self, BusOptions, BusPlantError, PlantBus};
 use sim_plant::{Plant, PlantConfig, load_plant};
 use std::path::PathBuf;
@@ -63,7 +64,7 @@ fn shipped() -> DrivesConfig {
 fn one_interface(mut d: DrivesConfig) -> DrivesConfig {
     let transport = d.interfaces()[0].transport.clone();
     d.bus.transport = None;
-    d.bus.interfaces = vec![drive_io::config::InterfaceConfig {
+    d.bus.interfaces = vec![drives_config::InterfaceConfig {
         name: "can0".into(),
         transport,
         bitrate_bit_per_s: 1_000_000,
@@ -1199,7 +1200,7 @@ fn winches_refuse_a_monitor_with_another_srdo_configuration() {
     d.safety_io = None;
     let d = one_interface(d);
     let own = d.safety_heartbeat.unwrap();
-    let other = drive_io::safety_watch::SafetyWatchConfig {
+    let other = drive_bus::safety_watch::SafetyWatchConfig {
         validation_time_ms: own.validation_time_ms + 100,
         ..own
     };
@@ -1396,13 +1397,13 @@ fn drives_without_a_heartbeat_watch_are_stopped_by_the_safety_io_nodes_sto() {
     use can_transport::safety_frame::{self, ConfigSignature, SafetyHeartbeat, SafetyState};
     let mut d = one_interface(shipped());
     let own = d.safety_heartbeat.unwrap();
-    d.bus.interfaces.push(drive_io::config::InterfaceConfig {
+    d.bus.interfaces.push(drives_config::InterfaceConfig {
         name: "safety".into(),
         transport: "udpbus:239.255.70.1:20999".into(),
         bitrate_bit_per_s: 1_000_000,
         budget_percent: 70.0,
     });
-    d.safety_io = Some(drive_io::config::SafetyIoConfig {
+    d.safety_io = Some(drives_config::SafetyIoConfig {
         interface: "safety".into(),
         node_id: 0x30,
         inputs_period_ms: 10,
@@ -1496,7 +1497,10 @@ fn drives_without_a_heartbeat_watch_are_stopped_by_the_safety_io_nodes_sto() {
     for i in 0..8 {
         let s = plant.drives().slave(i).unwrap();
         assert_eq!(s.ds402_state(), Ds402State::SwitchOnDisabled, "drive {i}");
-        assert!(matches!(s.demand(), drive_io::slave::MotionDemand::Hold));
+        assert!(matches!(
+            s.demand(),
+            cia402_drive::slave::MotionDemand::Hold
+        ));
     }
     // Enable operation is refused while STO holds.
     for i in 0..8 {

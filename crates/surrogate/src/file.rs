@@ -184,52 +184,6 @@ pub enum FileError {
     },
 }
 
-/// Puts every JSON array that holds only scalars (numbers, literals) on one line, e.g. a pose or
-/// an exponent tuple `[0, 0, 1, 0, 0, 2]`, for a file that reads and diffs well. Whitespace only:
-/// the parsed content (and so the checksum) is unchanged. Strings are skipped verbatim.
-fn compact_scalar_arrays(pretty: &str) -> String {
-    let b = pretty.as_bytes();
-    let mut out = String::with_capacity(pretty.len());
-    let mut i = 0;
-    let mut copied = 0; // bytes of `pretty` before this index are in `out`
-    let mut in_string = false;
-    while i < b.len() {
-        let c = b[i];
-        if in_string {
-            match c {
-                b'\\' => i += 1, // skip the escaped byte
-                b'"' => in_string = false,
-                _ => {}
-            }
-        } else if c == b'"' {
-            in_string = true;
-        } else if c == b'[' {
-            let close = b[i + 1..]
-                .iter()
-                .position(|x| matches!(x, b'[' | b']' | b'{' | b'}' | b'"'))
-                .map(|p| i + 1 + p);
-            if let Some(j) = close.filter(|&j| b[j] == b']') {
-                // All ASCII boundaries, so slicing is on char boundaries.
-                out.push_str(&pretty[copied..i]);
-                let items: Vec<&str> = pretty[i + 1..j]
-                    .split(',')
-                    .map(str::trim)
-                    .filter(|t| !t.is_empty())
-                    .collect();
-                out.push('[');
-                out.push_str(&items.join(", "));
-                out.push(']');
-                i = j + 1;
-                copied = i;
-                continue;
-            }
-        }
-        i += 1;
-    }
-    out.push_str(&pretty[copied.min(pretty.len())..]);
-    out
-}
-
 fn canonical_bytes(format_version: u32, payload: &Payload) -> Result<Vec<u8>, serde_json::Error> {
     let mut bytes = format!("{FORMAT_NAME}\n{format_version}\n").into_bytes();
     serde_json::to_writer(&mut bytes, payload)?;
@@ -277,7 +231,7 @@ impl Surrogate {
             checksum_sha256: checksum,
             payload,
         };
-        let mut text = compact_scalar_arrays(&serde_json::to_string_pretty(&file)?);
+        let mut text = crate::json_layout::to_string(&file)?;
         text.push('\n');
         Ok(text)
     }
@@ -608,22 +562,6 @@ mod tests {
         })
         .unwrap()
         .0
-    }
-
-    #[test]
-    fn scalar_arrays_are_compacted_without_touching_strings() {
-        let v = serde_json::json!({
-            "s": "a [1,\n 2] \"q\" [x]",
-            "n": [[1, 2], [3.5, -4e-7]],
-            "e": [],
-            "o": [{"a": [true, null]}]
-        });
-        let pretty = serde_json::to_string_pretty(&v).unwrap();
-        let c = compact_scalar_arrays(&pretty);
-        assert!(c.contains("[1, 2]") && c.contains("[3.5, -4e-7]") && c.contains("[true, null]"));
-        assert!(c.contains(r#""a [1,\n 2] \"q\" [x]""#), "{c}");
-        let back: serde_json::Value = serde_json::from_str(&c).unwrap();
-        assert_eq!(back, v);
     }
 
     #[test]

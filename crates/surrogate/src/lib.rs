@@ -21,33 +21,8 @@
 //! * **Evaluate (1 ms loop):** [`Surrogate::eval`] — fixed cost, no allocation, clamps to the
 //!   region boundary outside the region.
 //!
-//! Design choices (see the module sources for details):
-//!
-//! * **Basis:** tensor products `prod_i P_{a_i}(u_i)` of Legendre polynomials with
-//!   `sum a_i <= d` (`C(6+d, d)` per cable: 84 for `d = 3`) in `u = (x - centre) / half_width`.
-//!   Legendre polynomials keep the column-scaled design matrix well conditioned (~3.4 at
-//!   `d = 3`, ~7 at `d = 5`; monomials are several times worse).
-//!   `|P_n| <= 1` on `[-1, 1]` gives the certified all-pose bound `sum_k |c_jk|`.
-//! * **Samples:** fit on Halton points `1..=n_fit` (default `6 x` coefficients) in Chebyshev
-//!   (arcsine) density, denser towards the faces where fit errors and the bound peak; validate
-//!   on the `3^6` grid (corners, edge/face midpoints) plus further uniform Halton points
-//!   (default 10 000).
-//! * **Solve:** SVD of the column-scaled design matrix; reports its condition number; optional
-//!   ridge; refuses a rank-deficient un-regularised problem.
-//! * **Outside the region:** normalised coordinates are clamped to `[-1, 1]`, i.e. the offset
-//!   is the value on the region boundary, never an extrapolation.
-//!
-//! File format (`format_version` 1), pretty JSON:
-//!
-//! ```text
-//! { "format": "crs-surrogate", "format_version": 1, "checksum_sha256": "<64 hex>",
-//!   "payload": { platform_id, description, coordinates, region, normalisation, basis, degree,
-//!                n_cables, exponents, coefficients_m[cable][k], fit_options, validation } }
-//! ```
-//!
-//! `checksum_sha256` = SHA-256 of `"crs-surrogate\n1\n" + compact_json(payload)`; `f64` values are
-//! written in shortest round-trip form and parsed bit-exactly. `load` checks syntax/schema,
-//! format, version, checksum, platform identity, internal consistency and re-proves the bound.
+//! Why this basis, these samples and clamping instead of extrapolation: docs/adr/0003; the
+//! file format: docs/surrogate.md, "The file".
 //!
 //! ```
 //! use surrogate::{fit, FitOptions, Region};
@@ -71,6 +46,7 @@ mod certificate;
 mod design;
 mod file;
 mod fit;
+mod json_layout;
 mod model;
 mod region;
 

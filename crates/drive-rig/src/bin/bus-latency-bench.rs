@@ -43,9 +43,9 @@
 use can_transport::{BusErrorFrame, CanBus, CanError, CanFrame, RxEvent, RxFrame};
 use clap::Parser;
 use crs_ipc::{IpcNode, JointSetpoint, MAX_CABLES, SyncSchedule, monotonic_ns};
-use drive_io::config::{DrivesConfig, SyncSource};
 use drive_io::runner;
 use drive_rig::emulator::{self, EmulatorConfig, EmulatorControl};
+use drives_config::{DrivesConfig, SyncSource};
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::Mutex;

@@ -49,7 +49,7 @@ fn parse_u16(s: &str) -> Result<u16, String> {
     .map_err(|e| format!("{s}: {e}"))
 }
 
-fn config(a: &Args) -> Result<drive_io::DrivesConfig, String> {
+fn config(a: &Args) -> Result<drives_config::DrivesConfig, String> {
     let abs = |p: &str| {
         std::path::absolute(p)
             .map(|p| p.display().to_string())
@@ -99,7 +99,7 @@ fn config(a: &Args) -> Result<drive_io::DrivesConfig, String> {
             ));
         }
     }
-    drive_io::DrivesConfig::parse(&text).map_err(|e| e.to_string())
+    drives_config::DrivesConfig::parse(&text).map_err(|e| e.to_string())
 }
 
 fn main() -> ExitCode {

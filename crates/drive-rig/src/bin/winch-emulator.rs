@@ -2,8 +2,8 @@
 //! kinematically (5 m/s, 14 m/s^2). Not the plant: see crates/sim-plant for the physics.
 
 use clap::Parser;
-use drive_io::DrivesConfig;
 use drive_rig::emulator::{self, EmulatorConfig, EmulatorControl};
+use drives_config::DrivesConfig;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::Ordering;

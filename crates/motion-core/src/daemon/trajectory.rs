@@ -127,37 +127,30 @@ pub fn read_ride(path: &Path) -> Result<RideFile, WaypointError> {
 
 /// Parses a waypoint CSV's text as a [`RideFile`] named `file`.
 pub fn parse_ride(text: &str, file_name: &str) -> Result<RideFile, WaypointError> {
+    use crs_dataset::table::{TableError, read_table};
+    let file = || file_name.to_string();
+    let table = read_table(text, &HEADER).map_err(|e| match e {
+        TableError::NoHeader { lines } => WaypointError::Empty {
+            file: file(),
+            line: lines.max(1),
+        },
+        TableError::Header { line, .. } | TableError::Csv { line, .. } => {
+            WaypointError::Header { file: file(), line }
+        }
+        TableError::Columns { line, found, .. } => WaypointError::Columns {
+            file: file(),
+            line,
+            found,
+        },
+    })?;
     let mut out = Vec::new();
     let mut lines = Vec::new();
-    let file = || file_name.to_string();
-    let mut header_seen = false;
-    for (n, line) in text.lines().enumerate() {
-        let ln = n + 1;
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let cols: Vec<&str> = line.split(',').map(str::trim).collect();
-        if !header_seen {
-            if cols != HEADER {
-                return Err(WaypointError::Header {
-                    file: file(),
-                    line: ln,
-                });
-            }
-            header_seen = true;
-            continue;
-        }
-        if cols.len() != 7 {
-            return Err(WaypointError::Columns {
-                file: file(),
-                line: ln,
-                found: cols.len(),
-            });
-        }
+    for row in &table.rows {
+        let ln = row.line;
         let mut v = [0.0; 7];
-        for (k, c) in cols.iter().enumerate() {
+        for (k, c) in row.fields.iter().enumerate() {
             v[k] = c
+                .text
                 .parse::<f64>()
                 .ok()
                 .filter(|x| x.is_finite())
@@ -165,7 +158,7 @@ pub fn parse_ride(text: &str, file_name: &str) -> Result<RideFile, WaypointError
                     file: file(),
                     line: ln,
                     column: HEADER[k],
-                    value: c.to_string(),
+                    value: c.text.clone(),
                 })?;
         }
         if let Some(prev) = out.last().map(|w: &Waypoint| w.not_before_s)
@@ -187,12 +180,6 @@ pub fn parse_ride(text: &str, file_name: &str) -> Result<RideFile, WaypointError
                 v[5].to_radians(),
                 v[6].to_radians(),
             ]),
-        });
-    }
-    if !header_seen {
-        return Err(WaypointError::Empty {
-            file: file(),
-            line: text.lines().count().max(1),
         });
     }
     Ok(RideFile {

@@ -8,7 +8,7 @@
 use cdpr_model::config::load_platform;
 use clap::{CommandFactory, Parser};
 use crs_ipc::{Heartbeat, IpcNode, PlantTruth, TrackerPose};
-use drive_io::DrivesConfig;
+use drives_config::DrivesConfig;
 use sim_plant::bus::{self, BusOptions, ConfigFiles, PlantBus};
 use sim_plant::load_plant;
 use std::path::PathBuf;

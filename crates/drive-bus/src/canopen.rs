@@ -635,12 +635,16 @@ impl FrameBuf {
     }
 }
 
+/// At most this many CAN interfaces (`[[bus.interface]]`) per drive-io: PCIe/USB CAN cards
+/// have 1–4 channels, two cards 8.
+pub const MAX_INTERFACES: usize = 8;
+
 /// The frames of one drive-io cycle on every CAN interface (index = the interface's position
 /// in `DrivesConfig::interfaces()`), plus whether the cycle ends with a SYNC on every interface
 /// (sent by the runner: right after the frames, or at the isochronous SYNC instant).
 #[derive(Debug, Clone)]
 pub struct BusFrames {
-    bufs: [FrameBuf; crate::config::MAX_INTERFACES],
+    bufs: [FrameBuf; MAX_INTERFACES],
     interfaces: usize,
     sync: bool,
 }
@@ -650,7 +654,7 @@ impl BusFrames {
     pub fn new(interfaces: usize) -> Self {
         Self {
             bufs: std::array::from_fn(|_| FrameBuf::default()),
-            interfaces: interfaces.clamp(1, crate::config::MAX_INTERFACES),
+            interfaces: interfaces.clamp(1, MAX_INTERFACES),
             sync: false,
         }
     }

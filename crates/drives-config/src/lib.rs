@@ -1,11 +1,16 @@
-//! Drive bus configuration (config/drives.toml): transport, timing, per-winch scaling.
+//! Drive bus configuration (config/drives.toml): transport, timing, per-winch scaling. One
+//! reader for every process on the drive bus: drive-io's master, the simulated plant, the
+//! winch emulator and the stack.
 
-use crate::commissioning::Parameter;
-use crate::force_sensor::{ForceSensorConfig, ForceSource};
-use crate::identity::Identity;
-use crate::mapping::{MappingMode, ObjectRef, PdoSpec};
+mod winch;
+
+pub use winch::{Parameter, ParameterValue, validate_winch, winch_mapping_mode};
+
 use can_transport::TransportSpec;
-use crs_ipc::MAX_CABLES;
+use crs_limits::MAX_CABLES;
+use drive_bus::force_sensor::{ForceSensorConfig, ForceSource};
+use drive_bus::identity::Identity;
+use drive_bus::mapping::{MappingMode, ObjectRef, PdoSpec};
 use serde::Deserialize;
 use std::f64::consts::PI;
 
@@ -30,9 +35,7 @@ fn invalid(field: impl Into<String>, reason: impl Into<String>) -> ConfigError {
     }
 }
 
-/// At most this many CAN interfaces (`[[bus.interface]]`) per drive-io: PCIe/USB CAN cards
-/// have 1–4 channels, two cards 8.
-pub const MAX_INTERFACES: usize = 8;
+pub use drive_bus::canopen::MAX_INTERFACES;
 
 /// One CAN interface of the drive bus system (`[[bus.interface]]`): its transport, bit rate and
 /// load budget. The drives on it are the `[[winch]]` entries naming it.
@@ -47,7 +50,7 @@ pub struct InterfaceConfig {
     #[serde(default = "d_bitrate")]
     pub bitrate_bit_per_s: u32,
     /// Load budget: the configuration's frames may fill at most this share of the bus
-    /// (worst-case bit stuffing, [`crate::budget`]); may be set below the default, never above.
+    /// (worst-case bit stuffing, [`drive_commissioning::budget`]); may be set below the default, never above.
     #[serde(default = "d_budget")]
     pub budget_percent: f64,
 }
@@ -176,7 +179,7 @@ fn d_qs_decel() -> f64 {
     14.0
 }
 
-/// What starts drive-io's cycle ([`BusConfig::sync_source`], [`crate::sync_clock`]).
+/// What starts drive-io's cycle ([`BusConfig::sync_source`], [`drive_io::sync_clock`]).
 #[derive(Debug, Clone, Copy, Default, Deserialize, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum SyncSource {
@@ -389,11 +392,11 @@ pub struct DrivesConfig {
     #[serde(rename = "winch")]
     pub winches: Vec<WinchConfig>,
     /// `[safety_heartbeat]`: validate the safety monitor's doubled heartbeat and its
-    /// configuration signature, and stop without them (see [`crate::safety_watch`]). Parsed as
+    /// configuration signature, and stop without them (see [`drive_bus::safety_watch`]). Parsed as
     /// optional so the drive side and tests can run without it, but the drive-io daemon refuses
     /// to start without it ([`DrivesConfig::require_safety_heartbeat`]).
     #[serde(default)]
-    pub safety_heartbeat: Option<crate::safety_watch::SafetyWatchConfig>,
+    pub safety_heartbeat: Option<drive_bus::safety_watch::SafetyWatchConfig>,
     /// `[[force_sensor]]`: force-measuring nodes (one per pulley load cell, CiA 404).
     #[serde(default, rename = "force_sensor")]
     pub force_sensors: Vec<ForceSensorConfig>,
@@ -427,26 +430,32 @@ impl DrivesConfig {
     }
 
     /// The drives' EDS (`bus.eds`, else the simulated winch's built-in one).
-    pub fn load_eds(&self) -> Result<crate::eds::Eds, crate::eds::EdsError> {
+    pub fn load_eds(&self) -> Result<drive_bus::eds::Eds, drive_bus::eds::EdsError> {
         match &self.bus.eds {
-            Some(p) => crate::eds::Eds::load(&self.resolve(p)),
-            None => Ok(crate::eds::Eds::builtin_winch().clone()),
+            Some(p) => drive_bus::eds::Eds::load(&self.resolve(p)),
+            None => Ok(drive_bus::eds::Eds::builtin_winch().clone()),
         }
     }
 
     /// The EDS of winch `i` (`winch[i].eds`, else `bus.eds`, else the simulated winch's).
-    pub fn load_winch_eds(&self, i: usize) -> Result<crate::eds::Eds, crate::eds::EdsError> {
+    pub fn load_winch_eds(
+        &self,
+        i: usize,
+    ) -> Result<drive_bus::eds::Eds, drive_bus::eds::EdsError> {
         match self.winches.get(i).and_then(|w| w.eds.as_ref()) {
-            Some(p) => crate::eds::Eds::load(&self.resolve(p)),
+            Some(p) => drive_bus::eds::Eds::load(&self.resolve(p)),
             None => self.load_eds(),
         }
     }
 
     /// The EDS of force sensor `j` (`force_sensor[j].eds`, else the built-in CiA 404 load cell).
-    pub fn load_sensor_eds(&self, j: usize) -> Result<crate::eds::Eds, crate::eds::EdsError> {
+    pub fn load_sensor_eds(
+        &self,
+        j: usize,
+    ) -> Result<drive_bus::eds::Eds, drive_bus::eds::EdsError> {
         match self.force_sensors.get(j).and_then(|s| s.eds.as_ref()) {
-            Some(p) => crate::eds::Eds::load(&self.resolve(p)),
-            None => Ok(crate::eds::Eds::builtin_load_cell().clone()),
+            Some(p) => drive_bus::eds::Eds::load(&self.resolve(p)),
+            None => Ok(drive_bus::eds::Eds::builtin_load_cell().clone()),
         }
     }
 
@@ -717,9 +726,37 @@ impl DrivesConfig {
         Ok(())
     }
 
+    /// Every section checked, in this order (the first error found is reported).
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let b = &self.bus;
         self.validate_interfaces()?;
+        self.validate_bus_timing()?;
+        self.validate_bus_limits()?;
+        if self.winches.is_empty() || self.winches.len() > MAX_CABLES {
+            return Err(invalid(
+                "winch",
+                format!(
+                    "need 1..={MAX_CABLES} [[winch]] entries, got {}",
+                    self.winches.len()
+                ),
+            ));
+        }
+        self.validate_safety()?;
+        self.validate_winches()?;
+        let b = &self.bus;
+        if !(b.quick_stop_deceleration_m_per_s2.is_finite()
+            && b.quick_stop_deceleration_m_per_s2 > 0.0)
+        {
+            return Err(invalid(
+                "bus.quick_stop_deceleration_m_per_s2",
+                "must be finite and > 0",
+            ));
+        }
+        self.validate_force_sensors()
+    }
+
+    /// `[bus]`: the SYNC period and what is timed in it, heartbeats, boot and SDO timeouts.
+    fn validate_bus_timing(&self) -> Result<(), ConfigError> {
+        let b = &self.bus;
         if !(250..=100_000).contains(&b.sync_period_us) {
             return Err(invalid("bus.sync_period_us", "must be in 250..=100000"));
         }
@@ -768,6 +805,12 @@ impl DrivesConfig {
                 "must be >= 1",
             ));
         }
+        Ok(())
+    }
+
+    /// `[bus]`: force, speed and acceleration bounds, drive-io's node and heartbeat, the drives' safety functions (0x1016 consumer, 0x6007), following error, quick stop timeout.
+    fn validate_bus_limits(&self) -> Result<(), ConfigError> {
+        let b = &self.bus;
         if !(b.force_hard_limit_n > 0.0 && b.force_hard_limit_n <= FORCE_HARD_LIMIT_BOUND_N) {
             return Err(invalid(
                 "bus.force_hard_limit_n",
@@ -827,15 +870,12 @@ impl DrivesConfig {
         if b.quick_stop_timeout_ms == 0 {
             return Err(invalid("bus.quick_stop_timeout_ms", "must be >= 1"));
         }
-        if self.winches.is_empty() || self.winches.len() > MAX_CABLES {
-            return Err(invalid(
-                "winch",
-                format!(
-                    "need 1..={MAX_CABLES} [[winch]] entries, got {}",
-                    self.winches.len()
-                ),
-            ));
-        }
+        Ok(())
+    }
+
+    /// `[safety_heartbeat]` and `[safety_io]`.
+    fn validate_safety(&self) -> Result<(), ConfigError> {
+        let b = &self.bus;
         if let Some(sh) = &self.safety_heartbeat {
             sh.validate()
                 .map_err(|(field, reason)| invalid(field, reason))?;
@@ -871,6 +911,11 @@ impl DrivesConfig {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// Every `[[winch]]`: node id, scaling, position range, mapping, force source, parameters.
+    fn validate_winches(&self) -> Result<(), ConfigError> {
         for (i, w) in self.winches.iter().enumerate() {
             let f = |name: &str| format!("winch[{i}].{name}");
             if !(1..=127).contains(&w.node_id) {
@@ -907,16 +952,14 @@ impl DrivesConfig {
                     "0..max cable length does not fit the i32 position range (0x607A) with this scaling/offset",
                 ));
             }
-            crate::commissioning::validate_winch(self, i).map_err(|(k, r)| invalid(k, r))?;
+            winch::validate_winch(self, i).map_err(|(k, r)| invalid(k, r))?;
         }
-        if !(b.quick_stop_deceleration_m_per_s2.is_finite()
-            && b.quick_stop_deceleration_m_per_s2 > 0.0)
-        {
-            return Err(invalid(
-                "bus.quick_stop_deceleration_m_per_s2",
-                "must be finite and > 0",
-            ));
-        }
+        Ok(())
+    }
+
+    /// Every `[[force_sensor]]`: its table, interface, node id and cable.
+    fn validate_force_sensors(&self) -> Result<(), ConfigError> {
+        let b = &self.bus;
         for (j, s) in self.force_sensors.iter().enumerate() {
             s.validate(
                 j,

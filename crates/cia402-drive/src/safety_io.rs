@@ -23,13 +23,13 @@
 //!
 //! Pure logic: frames and times in, frames out ([`FrameBuf`]); no I/O, no allocation.
 
-use crate::canopen::{
+use can_transport::CanFrame;
+use drive_bus::canopen::{
     FrameBuf, NMT_ENTER_PREOP, NMT_RESET_COMM, NMT_RESET_NODE, NMT_START, NMT_STOP, NmtState,
     heartbeat,
 };
-use crate::config::{SafetyIoConfig, safety_io_tpdo_cob_id};
-use crate::safety_watch::{SafetyWatch, SafetyWatchConfig};
-use can_transport::CanFrame;
+use drive_bus::safety_watch::{SafetyWatch, SafetyWatchConfig};
+use drives_config::{SafetyIoConfig, safety_io_tpdo_cob_id};
 
 /// Input bit: the e-stop circuit is closed (button released).
 pub const INPUT_ESTOP_CLOSED: u8 = 0x01;
@@ -252,14 +252,14 @@ mod tests {
         assert_eq!(out.as_slice()[0].id(), 0x730);
         // Self-starting; pre-operational (NMT "enter pre-op"), RUN pairs release nothing.
         assert_eq!(n.nmt_state(), NmtState::Operational);
-        n.handle_frame(&crate::canopen::nmt(NMT_ENTER_PREOP, 0x30), 0, &mut out);
+        n.handle_frame(&drive_bus::canopen::nmt(NMT_ENTER_PREOP, 0x30), 0, &mut out);
         let mut t = MS;
         for k in 0..5 {
             monitor_cycle(&mut n, &w, k, SafetyState::Run, t, &mut out);
             t += 15 * MS;
         }
         assert!(!n.sto_released(), "not operational");
-        n.handle_frame(&crate::canopen::nmt(NMT_START, 0), t, &mut out);
+        n.handle_frame(&drive_bus::canopen::nmt(NMT_START, 0), t, &mut out);
         for k in 5..10 {
             monitor_cycle(&mut n, &w, k, SafetyState::Run, t, &mut out);
             t += 15 * MS;
@@ -273,7 +273,7 @@ mod tests {
         // A STOP pair, the e-stop button and the monitor's NMT stop each remove it.
         let (mut n, w) = node();
         n.start(0, &mut out);
-        n.handle_frame(&crate::canopen::nmt(NMT_START, 0x30), 0, &mut out);
+        n.handle_frame(&drive_bus::canopen::nmt(NMT_START, 0x30), 0, &mut out);
         let mut t = MS;
         for k in 0..5 {
             monitor_cycle(&mut n, &w, k, SafetyState::Run, t, &mut out);
@@ -311,13 +311,13 @@ mod tests {
         assert!(n.sto_released(), "released by the monitor's reset");
         monitor_cycle_e(&mut n, &w, 13, SafetyState::Stop, 2, t + 15 * MS, &mut out);
         assert!(!n.sto_released(), "STOP pair");
-        n.handle_frame(&crate::canopen::nmt(NMT_STOP, 0), t + 16 * MS, &mut out);
+        n.handle_frame(&drive_bus::canopen::nmt(NMT_STOP, 0), t + 16 * MS, &mut out);
         assert_eq!(n.nmt_state(), NmtState::Stopped);
         // Its TPDO1 reports the inputs and the output, on change.
         out.clear();
         let (mut n, w) = node();
         n.start(0, &mut out);
-        n.handle_frame(&crate::canopen::nmt(NMT_START, 0), 0, &mut out);
+        n.handle_frame(&drive_bus::canopen::nmt(NMT_START, 0), 0, &mut out);
         n.set_inputs(true, true);
         monitor_cycle(&mut n, &w, 0, SafetyState::Run, MS, &mut out);
         let tpdo = out

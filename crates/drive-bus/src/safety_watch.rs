@@ -35,8 +35,8 @@
 //! ([`InhibitReason::ConfigCrc`]), so a consumer configured differently from the producer never
 //! permits.
 //!
-//! Used by the drive side ([`crate::slave::DriveBank::enable_safety_watch`], the
-//! `winch-emulator`) and by drive-io's master loop ([`crate::runner`]) when `drives.toml` has a
+//! Used by the drive side (`cia402_drive::bank::DriveBank::enable_safety_watch`, the
+//! `winch-emulator`) and by drive-io's master loop (`drive_io::runner`) when `drives.toml` has a
 //! `[safety_heartbeat]` table. Pure logic: frames and times in, decisions out; no I/O, no
 //! allocation.
 
@@ -189,7 +189,7 @@ pub enum InhibitReason {
 /// makes one (type-state for drive-io's reset authority).
 ///
 /// ```compile_fail,E0603
-/// let forged = drive_io::safety_watch::VerifiedEpoch(7);
+/// let forged = drive_bus::safety_watch::VerifiedEpoch(7);
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VerifiedEpoch(u32);
@@ -806,105 +806,6 @@ mod tests {
         assert_eq!(
             c.validate().unwrap_err().0,
             "safety_heartbeat.pair_window_ms"
-        );
-    }
-
-    /// The drive side: no enable without the heartbeat; a lost heartbeat quick-stops an enabled
-    /// drive within the validation time; the release does not re-enable by itself.
-    #[test]
-    fn drive_bank_with_watch_blocks_enable_and_quick_stops() {
-        use crate::canopen::*;
-        use crate::slave::{DriveBank, MotionDemand};
-        let mut bank = DriveBank::new(&[1, 2], 10);
-        bank.enable_safety_watch(SafetyWatchConfig::default());
-        bank.start(0);
-        bank.handle_frame(&nmt(NMT_START, 0), 0);
-        for node in [1, 2] {
-            bank.handle_frame(&sdo_download(node, OD_MODES_OF_OPERATION, 0, 8, 1), 0);
-        }
-        let enable = |bank: &mut DriveBank, t: u64| {
-            for cw in [CW_SHUTDOWN, CW_SWITCH_ON, CW_ENABLE_OPERATION] {
-                for node in [1, 2] {
-                    bank.handle_frame(&rpdo1(node, cw, 0), t);
-                }
-            }
-        };
-        enable(&mut bank, MS);
-        for i in 0..2 {
-            assert_eq!(bank.slave(i).unwrap().ds402_state(), Ds402State::SwitchedOn);
-            assert_eq!(bank.demand(i), MotionDemand::Hold);
-        }
-        // Valid heartbeats: the watch releases, now the master can enable.
-        for k in 0..3u16 {
-            for f in pair(k, SafetyState::Run) {
-                bank.handle_frame(&f, (2 + u64::from(k)) * MS);
-            }
-        }
-        enable(&mut bank, 5 * MS);
-        for i in 0..2 {
-            assert_eq!(
-                bank.slave(i).unwrap().ds402_state(),
-                Ds402State::OperationEnabled
-            );
-        }
-        // Silence: still permitted at the validation time, quick stop right after it.
-        let last = 4 * MS;
-        bank.poll(last + 50 * MS);
-        assert_eq!(
-            bank.slave(0).unwrap().ds402_state(),
-            Ds402State::OperationEnabled
-        );
-        bank.poll(last + 50 * MS + 1);
-        for i in 0..2 {
-            assert_eq!(
-                bank.slave(i).unwrap().ds402_state(),
-                Ds402State::QuickStopActive
-            );
-            assert_eq!(bank.demand(i), MotionDemand::QuickStop);
-        }
-        assert!(matches!(
-            bank.take_safety_trip(),
-            Some((InhibitReason::Timeout, _))
-        ));
-        // A master trying to re-enable (transition 16) is refused while inhibited.
-        for node in [1, 2] {
-            bank.handle_frame(&rpdo1(node, CW_ENABLE_OPERATION, 0), 60 * MS);
-        }
-        assert_eq!(
-            bank.slave(1).unwrap().ds402_state(),
-            Ds402State::QuickStopActive
-        );
-        // The same epoch back (a replay, or the monitor's frames resuming without a reset):
-        // no self-release.
-        for k in 10..13u16 {
-            for f in pair(k, SafetyState::Run) {
-                bank.handle_frame(&f, (60 + u64::from(k)) * MS);
-            }
-        }
-        for node in [1, 2] {
-            bank.handle_frame(&rpdo1(node, CW_ENABLE_OPERATION, 0), 74 * MS);
-        }
-        assert_eq!(
-            bank.slave(1).unwrap().ds402_state(),
-            Ds402State::QuickStopActive
-        );
-        // A newer epoch (the monitor accepted a reset): released, but the drives stay stopped
-        // until the master enables.
-        for k in 13..16u16 {
-            for f in pair_e(k, SafetyState::Run, 2) {
-                bank.handle_frame(&f, (62 + u64::from(k)) * MS);
-            }
-        }
-        assert_eq!(
-            bank.slave(0).unwrap().ds402_state(),
-            Ds402State::QuickStopActive
-        );
-        for node in [1, 2] {
-            bank.handle_frame(&rpdo1(node, CW_ENABLE_OPERATION, 0), 78 * MS);
-        }
-        assert_eq!(
-            bank.slave(0).unwrap().ds402_state(),
-            Ds402State::OperationEnabled
         );
     }
 

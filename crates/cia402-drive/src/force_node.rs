@@ -6,11 +6,11 @@
 //! the measured force ([`ForceNode::set_force_n`]) and the node reports it as its process value
 //! in the unit its EDS gives (0x6131 physical unit, CiA 303-2 prefix; 0x6132 decimal digits).
 
-use crate::canopen::{FrameBuf, NmtState};
-use crate::eds::{DataType, Eds};
-use crate::force_sensor::{OD_AI_DECIMAL_DIGITS, OD_AI_PHYSICAL_UNIT};
 use crate::slave::{DriveSlave, SlaveEvent};
 use can_transport::CanFrame;
+use drive_bus::canopen::{FrameBuf, NmtState};
+use drive_bus::eds::{DataType, Eds};
+use drive_bus::force_sensor::{OD_AI_DECIMAL_DIGITS, OD_AI_PHYSICAL_UNIT};
 
 /// The process value objects of CiA 404's analog input, by data type (INTEGER32, INTEGER16,
 /// REAL32), in the order a node is searched for its channel.
@@ -115,7 +115,7 @@ impl ForceNode {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::canopen::*;
+    use drive_bus::canopen::*;
 
     #[test]
     fn reports_the_force_in_its_eds_unit_on_sync() {

@@ -2,7 +2,7 @@
 //! and decodes the TPDOs from that mapping (never from fixed offsets, COB-IDs or lengths), and
 //! the frames each node puts on the bus ([`PdoFrame`], for the bus budget).
 //!
-//! The mapping of a node comes from drives.toml and its EDS ([`crate::commissioning`]):
+//! The mapping of a node comes from drives.toml and its EDS (`drive_commissioning::commissioning`):
 //! `mapping = "default"` (drive-io writes its CSP mapping, [`default_drive_layout`]),
 //! `"fixed"` (adopted as the EDS defaults say, checked by SDO upload) or `"custom"` (the
 //! `[[winch.rpdo]]` / `[[winch.tpdo]]` lists, written by drive-io). The types here hold the

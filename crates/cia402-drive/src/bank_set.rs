@@ -2,12 +2,13 @@
 //! unique only on its own interface), addressed by cable index as one bank is. Used by the
 //! simulated plant and the winch emulator.
 
-use crate::config::DrivesConfig;
-use crate::eds::{Eds, EdsError};
+use crate::bank::DriveBank;
 use crate::force_node::ForceNode;
-use crate::safety_watch::{InhibitReason, SafetyWatchConfig, WatchState};
-use crate::slave::{DriveBank, DriveSlave, MotionDemand};
+use crate::slave::{DriveSlave, MotionDemand};
 use can_transport::{CanBus, CanError, CanFrame};
+use drive_bus::eds::{Eds, EdsError};
+use drive_bus::safety_watch::{InhibitReason, SafetyWatchConfig, WatchState};
+use drives_config::DrivesConfig;
 
 /// The drives of every interface, in cable order (see the module docs).
 pub struct DriveBanks {

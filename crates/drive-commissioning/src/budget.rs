@@ -1,6 +1,6 @@
 //! The bus budget: what a configuration puts on each CAN interface, in bits on the wire and
 //! time, against a load budget — refused above it, naming the interface and the frames that
-//! fill it (`drive-io --print-plan` prints it; [`crate::master::Master::new`] and `crs sim`
+//! fill it (`drive-io --print-plan` prints it; [`drive_io::master::Master::new`] and `crs sim`
 //! refuse an over-budget configuration before anything starts).
 //!
 //! Bits are counted with worst-case bit stuffing ([`can_transport::wire::bits`]): a frame of n
@@ -22,8 +22,10 @@
 //!   frame and every higher-priority periodic frame that can be pending then (the safety pairs
 //!   where they travel) — are off the wire within `rpdo_guard_us`.
 
-use crate::config::{DrivesConfig, SyncSource};
+use crate::commissioning::{NodeKind, Plan, SetupError};
 use can_transport::wire::bits::worst_case_bits;
+use drive_bus::mapping::{Direction, Transmission};
+use drives_config::{DrivesConfig, SyncSource};
 
 /// Headroom for EMCY: one 8-byte EMCY per node per this period (a drive's EMCY inhibit time,
 /// 0x1015, is typically 10–100 ms; faults are rare, bursts are what matters).
@@ -328,22 +330,61 @@ pub fn budget(
     extra_nodes: &[(usize, u8, Vec<PdoFrame>, f64)],
 ) -> Vec<InterfaceBudget> {
     let b = &cfg.bus;
-    let itfs = cfg.interfaces();
-    let period_s = f64::from(b.sync_period_us) * 1e-6;
-    let mut out: Vec<InterfaceBudget> = itfs
+    let mk = LineMaker {
+        period_s: f64::from(b.sync_period_us) * 1e-6,
+    };
+    let safety_itfs = cfg.safety_frame_interfaces();
+    let mut out: Vec<InterfaceBudget> = cfg
+        .interfaces()
         .iter()
-        .map(|itf| InterfaceBudget {
-            name: itf.name.clone(),
-            bitrate_bit_per_s: itf.bitrate_bit_per_s,
-            budget_percent: itf.budget_percent,
-            period_us: b.sync_period_us,
-            lines: Vec::new(),
-            rpdo_guard_us: (b.sync_source == SyncSource::Isochronous).then_some(b.rpdo_guard_us),
+        .enumerate()
+        .map(|(k, itf)| {
+            let mut ib = InterfaceBudget {
+                name: itf.name.clone(),
+                bitrate_bit_per_s: itf.bitrate_bit_per_s,
+                budget_percent: itf.budget_percent,
+                period_us: b.sync_period_us,
+                lines: Vec::new(),
+                rpdo_guard_us: (b.sync_source == SyncSource::Isochronous)
+                    .then_some(b.rpdo_guard_us),
+            };
+            bus_lines(cfg, mk, safety_itfs.contains(&k), &mut ib.lines);
+            ib
         })
         .collect();
-    let line = |what: String, sender, cob_id: u16, dlc: u8, rate: Rate| {
+    for (i, w) in cfg.winches.iter().enumerate() {
+        if let Some(ib) = out.get_mut(cfg.winch_interface(i)) {
+            let hb_ms = f64::from(b.heartbeat_producer_ms);
+            node_lines(mk, w.node_id, "drive", &pdo_frames(i), hb_ms, &mut ib.lines);
+        }
+    }
+    for (iface, node, pdos, hb_ms) in extra_nodes {
+        if let Some(ib) = out.get_mut(*iface) {
+            node_lines(mk, *node, "force sensor", pdos, *hb_ms, &mut ib.lines);
+        }
+    }
+    if let (Some(io), Some(iface)) = (&cfg.safety_io, cfg.safety_io_interface())
+        && let Some(ib) = out.get_mut(iface)
+    {
+        safety_io_lines(mk, io, &mut ib.lines);
+    }
+    // RPDOs and TPDOs of a node were numbered in one sequence: renumber per direction.
+    for ib in &mut out {
+        renumber(&mut ib.lines);
+    }
+    out
+}
+
+/// Makes the lines of one SYNC period's budget.
+#[derive(Clone, Copy)]
+struct LineMaker {
+    period_s: f64,
+}
+
+impl LineMaker {
+    fn line(self, what: String, sender: Sender, cob_id: u16, dlc: u8, rate: Rate) -> Line {
         let per_s = match rate {
-            Rate::EverySync(n) => 1.0 / (period_s * f64::from(n.max(1))),
+            Rate::EverySync(n) => 1.0 / (self.period_s * f64::from(n.max(1))),
             Rate::Every { ms } => 1000.0 / ms,
         };
         Line {
@@ -355,149 +396,128 @@ pub fn budget(
             bits: worst_case_bits(false, dlc),
             per_s,
         }
-    };
-    let safety_itfs = cfg.safety_frame_interfaces();
-    for (ib_index, ib) in out.iter_mut().enumerate() {
-        ib.lines.push(line(
-            "SYNC".into(),
-            Sender::Master,
-            0x080,
-            0,
-            Rate::EverySync(1),
-        ));
-        ib.lines.push(line(
-            "heartbeat drive-io".into(),
-            Sender::Master,
-            0x700 + u16::from(b.master_node_id),
-            1,
-            Rate::Every {
-                ms: f64::from(b.master_heartbeat_ms),
-            },
-        ));
-        ib.lines.push(line(
-            "SDO headroom (request + response)".into(),
-            Sender::Reserve,
-            0x600,
-            8,
-            Rate::Every {
-                ms: SDO_RESERVE_PERIOD_MS / 2.0,
-            },
-        ));
-        if let Some(sh) = cfg
-            .safety_heartbeat
-            .as_ref()
-            .filter(|_| safety_itfs.contains(&ib_index))
-        {
-            // Two doubled frames per refresh time: the configuration signature pair, then the
-            // heartbeat pair (docs/safety-monitor.md).
-            for (k, what) in [
-                "safety heartbeat",
-                "safety heartbeat (inverse)",
-                "safety signature",
-                "safety signature (inverse)",
-            ]
-            .iter()
-            .enumerate()
-            {
-                ib.lines.push(line(
-                    (*what).into(),
-                    Sender::Monitor,
-                    sh.cob_id + k as u16,
-                    8,
-                    Rate::Every {
-                        ms: f64::from(sh.refresh_time_ms),
-                    },
-                ));
-            }
-        }
     }
-    let mut node_lines = |iface: usize, node: u8, what: &str, pdos: &[PdoFrame], hb_ms: f64| {
-        let Some(ib) = out.get_mut(iface) else {
-            return;
-        };
-        for (k, p) in pdos.iter().enumerate() {
-            let name = if p.rpdo {
-                format!("RPDO{} node {node}", k + 1)
-            } else {
-                format!("TPDO{} node {node}", k + 1)
-            };
-            ib.lines.push(line(
-                name,
-                if p.rpdo {
-                    Sender::Master
-                } else {
-                    Sender::Node(node)
+}
+
+/// What every interface carries: the SYNC, drive-io's heartbeat, the SDO headroom, and the
+/// monitor's doubled frames where `safety` (the safety frame's interfaces).
+fn bus_lines(cfg: &DrivesConfig, mk: LineMaker, safety: bool, lines: &mut Vec<Line>) {
+    let b = &cfg.bus;
+    lines.push(mk.line("SYNC".into(), Sender::Master, 0x080, 0, Rate::EverySync(1)));
+    lines.push(mk.line(
+        "heartbeat drive-io".into(),
+        Sender::Master,
+        0x700 + u16::from(b.master_node_id),
+        1,
+        Rate::Every {
+            ms: f64::from(b.master_heartbeat_ms),
+        },
+    ));
+    lines.push(mk.line(
+        "SDO headroom (request + response)".into(),
+        Sender::Reserve,
+        0x600,
+        8,
+        Rate::Every {
+            ms: SDO_RESERVE_PERIOD_MS / 2.0,
+        },
+    ));
+    if let Some(sh) = cfg.safety_heartbeat.as_ref().filter(|_| safety) {
+        // Two doubled frames per refresh time: the configuration signature pair, then the
+        // heartbeat pair (docs/safety-monitor.md).
+        for (k, what) in [
+            "safety heartbeat",
+            "safety heartbeat (inverse)",
+            "safety signature",
+            "safety signature (inverse)",
+        ]
+        .iter()
+        .enumerate()
+        {
+            lines.push(mk.line(
+                (*what).into(),
+                Sender::Monitor,
+                sh.cob_id + k as u16,
+                8,
+                Rate::Every {
+                    ms: f64::from(sh.refresh_time_ms),
                 },
-                p.cob_id,
-                p.dlc,
-                Rate::EverySync(p.every_n_sync),
             ));
         }
-        ib.lines.push(line(
-            format!("heartbeat {what} node {node}"),
-            Sender::Node(node),
-            0x700 + u16::from(node),
-            1,
-            Rate::Every { ms: hb_ms },
-        ));
-        ib.lines.push(line(
-            format!("EMCY headroom node {node}"),
-            Sender::Reserve,
-            0x080 + u16::from(node),
-            8,
-            Rate::Every {
-                ms: EMCY_RESERVE_PERIOD_MS,
-            },
-        ));
-    };
-    for (i, w) in cfg.winches.iter().enumerate() {
-        node_lines(
-            cfg.winch_interface(i),
-            w.node_id,
-            "drive",
-            &pdo_frames(i),
-            f64::from(b.heartbeat_producer_ms),
-        );
     }
-    for (iface, node, pdos, hb_ms) in extra_nodes {
-        node_lines(*iface, *node, "force sensor", pdos, *hb_ms);
-    }
-    if let (Some(io), Some(iface)) = (&cfg.safety_io, cfg.safety_io_interface())
-        && let Some(ib) = out.get_mut(iface)
-    {
-        ib.lines.push(line(
-            format!("safety I/O inputs node {}", io.node_id),
-            Sender::Node(io.node_id),
-            crate::config::safety_io_tpdo_cob_id(io.node_id),
-            2,
-            Rate::Every {
-                ms: f64::from(io.inputs_period_ms),
+}
+
+/// One node's PDOs, heartbeat and EMCY headroom.
+fn node_lines(
+    mk: LineMaker,
+    node: u8,
+    what: &str,
+    pdos: &[PdoFrame],
+    hb_ms: f64,
+    lines: &mut Vec<Line>,
+) {
+    for (k, p) in pdos.iter().enumerate() {
+        let name = if p.rpdo {
+            format!("RPDO{} node {node}", k + 1)
+        } else {
+            format!("TPDO{} node {node}", k + 1)
+        };
+        lines.push(mk.line(
+            name,
+            if p.rpdo {
+                Sender::Master
+            } else {
+                Sender::Node(node)
             },
-        ));
-        ib.lines.push(line(
-            format!("heartbeat safety I/O node {}", io.node_id),
-            Sender::Node(io.node_id),
-            0x700 + u16::from(io.node_id),
-            1,
-            Rate::Every {
-                ms: f64::from(io.heartbeat_ms),
-            },
-        ));
-        ib.lines.push(line(
-            format!("EMCY headroom node {}", io.node_id),
-            Sender::Reserve,
-            0x080 + u16::from(io.node_id),
-            8,
-            Rate::Every {
-                ms: EMCY_RESERVE_PERIOD_MS,
-            },
+            p.cob_id,
+            p.dlc,
+            Rate::EverySync(p.every_n_sync),
         ));
     }
-    // RPDOs and TPDOs of a node were numbered in one sequence: renumber per direction.
-    for ib in &mut out {
-        renumber(&mut ib.lines);
-    }
-    out
+    lines.push(mk.line(
+        format!("heartbeat {what} node {node}"),
+        Sender::Node(node),
+        0x700 + u16::from(node),
+        1,
+        Rate::Every { ms: hb_ms },
+    ));
+    lines.push(emcy_headroom(mk, node));
+}
+
+/// The safety I/O node's inputs TPDO, heartbeat and EMCY headroom.
+fn safety_io_lines(mk: LineMaker, io: &drives_config::SafetyIoConfig, lines: &mut Vec<Line>) {
+    lines.push(mk.line(
+        format!("safety I/O inputs node {}", io.node_id),
+        Sender::Node(io.node_id),
+        drives_config::safety_io_tpdo_cob_id(io.node_id),
+        2,
+        Rate::Every {
+            ms: f64::from(io.inputs_period_ms),
+        },
+    ));
+    lines.push(mk.line(
+        format!("heartbeat safety I/O node {}", io.node_id),
+        Sender::Node(io.node_id),
+        0x700 + u16::from(io.node_id),
+        1,
+        Rate::Every {
+            ms: f64::from(io.heartbeat_ms),
+        },
+    ));
+    lines.push(emcy_headroom(mk, io.node_id));
+}
+
+/// The EMCY a node may send, reserved at [`EMCY_RESERVE_PERIOD_MS`].
+fn emcy_headroom(mk: LineMaker, node: u8) -> Line {
+    mk.line(
+        format!("EMCY headroom node {node}"),
+        Sender::Reserve,
+        0x080 + u16::from(node),
+        8,
+        Rate::Every {
+            ms: EMCY_RESERVE_PERIOD_MS,
+        },
+    )
 }
 
 /// "RPDO1, RPDO2 …" and "TPDO1 …" per node, counted per direction.
@@ -553,8 +573,8 @@ pub fn fixed_layout(node: u8) -> Vec<PdoFrame> {
 
 /// The budget of `cfg` for the nodes' plans (their configured PDO frames,
 /// [`crate::commissioning::plan_all`]).
-pub fn of_plans(cfg: &DrivesConfig, plans: &[crate::commissioning::Plan]) -> Vec<InterfaceBudget> {
-    let (drives, extra) = crate::commissioning::budget_frames(cfg, plans);
+pub fn of_plans(cfg: &DrivesConfig, plans: &[Plan]) -> Vec<InterfaceBudget> {
+    let (drives, extra) = budget_frames(cfg, plans);
     budget(cfg, |i| drives.get(i).cloned().unwrap_or_default(), &extra)
 }
 
@@ -569,12 +589,61 @@ pub fn check(cfg: &DrivesConfig) -> Result<Vec<InterfaceBudget>, CheckError> {
     Ok(all)
 }
 
+/// The plans' PDO frames in the bus budget's terms ([`budget`]): per cable its
+/// drive's frames, and every force sensor as an extra node (interface, node id, frames,
+/// heartbeat period ms). An event-driven TPDO counts as one frame every
+/// max(1, ⌊inhibit time / SYNC period⌋) SYNCs — its worst case when the inhibit time is at least
+/// one period; with a shorter inhibit time it may come more often than that.
+#[allow(clippy::type_complexity)]
+pub fn budget_frames(
+    cfg: &DrivesConfig,
+    plans: &[Plan],
+) -> (Vec<Vec<PdoFrame>>, Vec<(usize, u8, Vec<PdoFrame>, f64)>) {
+    let period_us = cfg.bus.sync_period_us.max(1);
+    let convert = |p: &Plan| -> Vec<PdoFrame> {
+        p.pdo_frames()
+            .iter()
+            .map(|f| PdoFrame {
+                cob_id: f.cob_id,
+                dlc: f.dlc,
+                rpdo: f.direction == Direction::ToNode,
+                every_n_sync: match f.transmission {
+                    Transmission::Sync { every } => u16::from(every.max(1)),
+                    Transmission::Event { inhibit_us, .. } => {
+                        u16::try_from((inhibit_us / period_us).max(1)).unwrap_or(u16::MAX)
+                    }
+                },
+            })
+            .collect()
+    };
+    let mut drives = Vec::new();
+    let mut extra = Vec::new();
+    // plan_all: the drives in cable order, then the force sensors in their order.
+    let mut j = 0;
+    for p in plans {
+        match p.kind {
+            NodeKind::Drive { .. } => drives.push(convert(p)),
+            NodeKind::ForceSensor { .. } => {
+                j += 1;
+                let j = j - 1;
+                extra.push((
+                    cfg.sensor_interface(j),
+                    p.node,
+                    convert(p),
+                    f64::from(cfg.bus.heartbeat_producer_ms),
+                ));
+            }
+        }
+    }
+    (drives, extra)
+}
+
 /// Why [`check`] refused a configuration.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckError {
     /// The nodes' configuration could not be planned (EDS, mapping).
     #[error(transparent)]
-    Setup(#[from] crate::master::SetupError),
+    Setup(#[from] SetupError),
     #[error(transparent)]
     Budget(#[from] BudgetError),
 }
@@ -678,7 +747,7 @@ mod tests {
         // With a safety I/O node on its own interface they travel there only.
         let cfg = drives(&[2, 2, 2, 2, 0], "");
         let mut cfg = cfg;
-        cfg.safety_io = Some(crate::config::SafetyIoConfig {
+        cfg.safety_io = Some(drives_config::SafetyIoConfig {
             interface: "can4".into(),
             node_id: 0x30,
             inputs_period_ms: 10,
@@ -716,5 +785,49 @@ mod tests {
             "{}",
             b[0]
         );
+    }
+
+    /// The simulated winch's default mapping is the layout the budget assumes today; a vendor
+    /// drive with a load cell has 6 + 6 B every SYNC, 4 B every 10th, and the cell's 4 B.
+    #[test]
+    fn budget_frames_are_the_configured_mappings() {
+        let c = DrivesConfig::parse(
+            "[bus]\ntransport = \"udpbus:239.255.70.1:20000\"\n[[winch]]\nnode_id = 3\n\
+             drum_diameter_m = 0.305\ngear_ratio = 10.0\ncounts_per_rev = 1048576\nsign = -1\n\
+             max_cable_length_m = 20.0\n",
+        )
+        .unwrap();
+        let plans = crate::commissioning::plan_all(&c, None).unwrap();
+        let (drives, extra) = budget_frames(&c, &plans);
+        assert_eq!(drives, vec![fixed_layout(3)]);
+        assert!(extra.is_empty());
+        let vendor = format!(
+            "{}/../../config/eds/vendor-csp-drive.eds",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let c = DrivesConfig::parse(&format!(
+            "[bus]\ntransport = \"udpbus:239.255.70.1:20000\"\neds = \"{vendor}\"\n\
+             [[winch]]\nnode_id = 3\ndrum_diameter_m = 0.305\ngear_ratio = 10.0\n\
+             counts_per_rev = 1048576\nsign = 1\n\
+             [[force_sensor]]\nnode_id = 40\ncable = 1\nn_per_unit = 0.1\nevery_n_syncs = 2\n"
+        ))
+        .unwrap();
+        let plans = crate::commissioning::plan_all(&c, None).unwrap();
+        let (drives, extra) = budget_frames(&c, &plans);
+        let f = |cob_id, dlc, rpdo, every_n_sync| PdoFrame {
+            cob_id,
+            dlc,
+            rpdo,
+            every_n_sync,
+        };
+        assert_eq!(
+            drives[0],
+            vec![
+                f(0x203, 6, true, 1),
+                f(0x183, 6, false, 1),
+                f(0x283, 4, false, 10)
+            ]
+        );
+        assert_eq!(extra, vec![(0, 40, vec![f(0x1A8, 4, false, 2)], 10.0)]);
     }
 }

@@ -11,15 +11,12 @@
 //! Objects are *required* (start-up stops if the EDS lacks them) or *optional* (written only
 //! if the EDS lists them: the limits, the communication cycle period, the interpolation period).
 
-use crate::canopen::*;
-use crate::config::{DrivesConfig, WinchConfig};
-use crate::eds::{DataType, DcfValue, Eds, OdEntry};
-use crate::force_sensor::{
-    ForceSensorConfig, ForceSource, OD_AI_DECIMAL_DIGITS, OD_AI_PHYSICAL_UNIT,
-};
-use crate::identity::{Identity, OD_DEVICE_NAME};
-use crate::mapping::*;
-use serde::Deserialize;
+use drive_bus::canopen::*;
+use drive_bus::eds::{DataType, DcfValue, Eds, OdEntry};
+use drive_bus::force_sensor::{ForceSensorConfig, OD_AI_DECIMAL_DIGITS, OD_AI_PHYSICAL_UNIT};
+use drive_bus::identity::{Identity, OD_DEVICE_NAME};
+use drive_bus::mapping::*;
+use drives_config::{BusConfig, DrivesConfig, ParameterValue, WinchConfig, winch_mapping_mode};
 use std::sync::Arc;
 
 /// One SDO transfer of the start-up script.
@@ -131,20 +128,16 @@ pub enum PlanError {
     },
 }
 
-/// A vendor parameter written at start-up (`[[winch]] parameters = [{ object = "0x2000sub1",
-/// value = 3 }]`; a string value is written as bytes, segmented beyond 4).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Parameter {
-    pub object: ObjectRef,
-    pub value: ParameterValue,
-}
-
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(untagged)]
-pub enum ParameterValue {
-    Integer(i64),
-    Text(String),
+/// Planning the nodes (and so building drive-io's master) failed: an EDS cannot be read or does
+/// not suit the configuration, or two nodes' TPDOs share a COB-ID on one interface.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    #[error("EDS: {0}")]
+    Eds(#[from] drive_bus::eds::EdsError),
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+    #[error("TPDO COB-ID 0x{cob_id:03X} is configured for node {a} and node {b} on one interface")]
+    CobCollision { cob_id: u16, a: u8, b: u8 },
 }
 
 /// CiA 402 0x6007 abort connection option codes.
@@ -786,130 +779,11 @@ pub fn interpolation_period(period_us: u32) -> Option<(u8, i8)> {
     })
 }
 
-/// The mapping mode of winch `w` (explicit lists imply custom).
-pub fn winch_mapping_mode(w: &WinchConfig) -> MappingMode {
-    match w.mapping {
-        Some(m) => m,
-        None if !w.rpdo.is_empty() || !w.tpdo.is_empty() => MappingMode::Custom,
-        None => MappingMode::Default,
-    }
-}
-
-/// Checks of winch `i`'s mapping, force and parameter keys that need no EDS; `(field, reason)`.
-pub fn validate_winch(cfg: &DrivesConfig, i: usize) -> Result<(), (String, String)> {
-    let w = &cfg.winches[i];
-    let f = |k: &str| format!("winch[{i}].{k}");
-    w.identity.validate(&format!("winch[{i}]"))?;
-    let mode = winch_mapping_mode(w);
-    let lists = !w.rpdo.is_empty() || !w.tpdo.is_empty();
-    if mode == MappingMode::Custom && !lists {
-        return Err((
-            f("mapping"),
-            "\"custom\" needs [[winch.rpdo]] and [[winch.tpdo]] lists".into(),
-        ));
-    }
-    if mode != MappingMode::Custom && lists {
-        return Err((
-            f("mapping"),
-            "[[winch.rpdo]] / [[winch.tpdo]] lists are a custom mapping: set mapping = \"custom\" or remove them".into(),
-        ));
-    }
-    for (name, list, dir) in [
-        ("rpdo", &w.rpdo, Direction::ToNode),
-        ("tpdo", &w.tpdo, Direction::FromNode),
-    ] {
-        for (k, p) in list.iter().enumerate() {
-            let key = |x: &str| format!("winch[{i}].{name}[{k}].{x}");
-            if !(1..=512).contains(&p.number) || list[..k].iter().any(|o| o.number == p.number) {
-                return Err((key("number"), "must be 1..=512 and unique".into()));
-            }
-            if p.cob_id.is_none() && predefined_cob_base(dir, p.number).is_none() {
-                return Err((key("cob_id"), "required for PDOs beyond 4".into()));
-            }
-            if p.objects.is_empty() {
-                return Err((key("objects"), "must name at least one object".into()));
-            }
-            if dir == Direction::ToNode
-                && (p.inhibit_time_us.is_some() || p.event_timer_ms.is_some())
-            {
-                return Err((key("inhibit_time_us"), "TPDOs only".into()));
-            }
-            if p.inhibit_time_us
-                .is_some_and(|us| us % 100 != 0 || us / 100 > u32::from(u16::MAX))
-            {
-                return Err((
-                    key("inhibit_time_us"),
-                    "must be a multiple of 100 µs up to 6553500".into(),
-                ));
-            }
-        }
-    }
-    if let Some(n) = w.feedback_every_n_syncs {
-        if !(1..=240).contains(&n) {
-            return Err((f("feedback_every_n_syncs"), "must be 1..=240".into()));
-        }
-        if u64::from(n) * u64::from(cfg.bus.sync_period_us)
-            >= u64::from(cfg.bus.heartbeat_timeout_ms) * 1000
-        {
-            return Err((
-                f("feedback_every_n_syncs"),
-                "the feedback must arrive within bus.heartbeat_timeout_ms".into(),
-            ));
-        }
-    }
-    if let Some(s) = w.force_n_per_unit
-        && !(s.is_finite() && s != 0.0)
-    {
-        return Err((f("force_n_per_unit"), "must be finite and non-zero".into()));
-    }
-    match w.force {
-        Some(ForceSource::Sensor(n)) => match cfg.force_sensors.iter().find(|s| s.node_id == n) {
-            None => return Err((f("force"), format!("no [[force_sensor]] has node_id {n}"))),
-            Some(s) if s.cable != i + 1 => {
-                return Err((
-                    f("force"),
-                    format!(
-                        "force sensor node {n} measures cable {}, not this one ({})",
-                        s.cable,
-                        i + 1
-                    ),
-                ));
-            }
-            Some(_) => {}
-        },
-        Some(ForceSource::Drive) if cfg.force_sensors.iter().any(|s| s.cable == i + 1) => {
-            return Err((
-                f("force"),
-                format!("\"drive\", but a [[force_sensor]] measures cable {}", i + 1),
-            ));
-        }
-        Some(ForceSource::Drive) => {}
-        None => {}
-    }
-    if cfg.force_sensor_of(i).is_some()
-        && (w.force_object.is_some() || w.force_n_per_unit.is_some())
-    {
-        return Err((f("force_object"), "only with force = \"drive\"".into()));
-    }
-    for (k, p) in w.parameters.iter().enumerate() {
-        if let ParameterValue::Text(t) = &p.value
-            && (t.is_empty() || t.len() > crate::sdo::SDO_MAX)
-        {
-            return Err((
-                format!("winch[{i}].parameters[{k}].value"),
-                format!("a text value must be 1..={} bytes", crate::sdo::SDO_MAX),
-            ));
-        }
-    }
-    Ok(())
-}
-
 /// The start-up script of drive `i` of `cfg` from its EDS: identity checks, PDOs, settings,
 /// then the read-back of every value written and of 0x6061 == CSP. The error names drive, EDS
 /// and object (or TOML key).
 pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanError> {
     let w = &cfg.winches[i];
-    let bus = &cfg.bus;
     let n = w.node_id;
     let mut b = Builder {
         eds,
@@ -936,12 +810,42 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
             ),
         ));
     }
-    let assign = |o: ObjectRef| drive_role(o, force_obj);
     let feedback_every =
         w.feedback_every_n_syncs
             .unwrap_or(if own_force { 1 } else { DEFAULT_FEEDBACK_EVERY });
-    let mode = winch_mapping_mode(w);
-    let mut pdos = match mode {
+    let mut pdos = drive_pdos(&mut b, w, force_obj, feedback_every)?;
+    let used: Vec<(Direction, u16)> = pdos.iter().map(|p| (p.direction, p.number)).collect();
+    check_roles(&b, &pdos, winch_mapping_mode(w), force_obj)?;
+    b.disable_others(&used, &mut pdos)?;
+    write_drive_settings(&mut b, &cfg.bus, w, eds)?;
+    write_parameters(&mut b, w)?;
+    b.write(OD_MODES_OF_OPERATION, 0, i64::from(MODE_CSP), true)?;
+    b.entry(OD_MODES_DISPLAY, 0)?;
+    b.verify.push(SdoOp::Verify {
+        index: OD_MODES_DISPLAY,
+        sub: 0,
+        value: u32::from(MODE_CSP as u8),
+        len: 1,
+    });
+    let n_per_unit = w.force_n_per_unit.unwrap_or(DEFAULT_FORCE_N_PER_UNIT);
+    Ok(b.finish(NodeMapping {
+        node: n,
+        pdos,
+        force_n_per_unit: n_per_unit,
+    }))
+}
+
+/// The PDOs of drive `w` as its mapping mode asks: drive-io's default layout, the
+/// custom `[[winch.rpdo]]` / `[[winch.tpdo]]` lists (both written), or the EDS's fixed mapping.
+fn drive_pdos(
+    b: &mut Builder<'_>,
+    w: &WinchConfig,
+    force_obj: Option<ObjectRef>,
+    feedback_every: u8,
+) -> Result<Vec<Pdo>, PlanError> {
+    let n = w.node_id;
+    let assign = |o: ObjectRef| drive_role(o, force_obj);
+    let pdos = match winch_mapping_mode(w) {
         MappingMode::Default => {
             let layout: Vec<_> = default_drive_layout(force_obj, feedback_every)
                 .into_iter()
@@ -989,8 +893,16 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
             b.fixed(&assign, &tt_of)?
         }
     };
-    let used: Vec<(Direction, u16)> = pdos.iter().map(|p| (p.direction, p.number)).collect();
-    // Every role drive-io needs, exactly once.
+    Ok(pdos)
+}
+
+/// Every role drive-io needs, exactly once, among the used PDOs.
+fn check_roles(
+    b: &Builder<'_>,
+    pdos: &[Pdo],
+    mode: MappingMode,
+    force_obj: Option<ObjectRef>,
+) -> Result<(), PlanError> {
     let needed: &[(Role, &str)] = &[
         (Role::Controlword, "controlword 0x6040 in an RPDO"),
         (Role::TargetPosition, "target position 0x607A in an RPDO"),
@@ -1020,7 +932,17 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
             ));
         }
     }
-    b.disable_others(&used, &mut pdos)?;
+    Ok(())
+}
+
+/// SYNC consumer, heartbeats, the CiA 402 option codes, the quick stop deceleration, the
+/// interpolation period and the limits the drive supports (in its units).
+fn write_drive_settings(
+    b: &mut Builder<'_>,
+    bus: &BusConfig,
+    w: &WinchConfig,
+    eds: &Eds,
+) -> Result<(), PlanError> {
     // SYNC consumer (bit 30 clear: the drive does not produce SYNC).
     b.write_optional(0x1005, 0, i64::from(COB_SYNC))?;
     b.write_optional(0x1006, 0, i64::from(bus.sync_period_us))?;
@@ -1084,6 +1006,12 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
     if window.is_finite() && window <= f64::from(u32::MAX) {
         b.write_optional(OD_FOLLOWING_ERROR_WINDOW, 0, window as i64)?;
     }
+    Ok(())
+}
+
+/// The vendor parameters of `w` (`[[winch]] parameters`): integers written and verified,
+/// texts written as bytes (segmented beyond 4) and read back where readable.
+fn write_parameters(b: &mut Builder<'_>, w: &WinchConfig) -> Result<(), PlanError> {
     for p in &w.parameters {
         let o = p.object;
         match &p.value {
@@ -1124,20 +1052,7 @@ pub fn plan_drive(cfg: &DrivesConfig, i: usize, eds: &Eds) -> Result<Plan, PlanE
             }
         }
     }
-    b.write(OD_MODES_OF_OPERATION, 0, i64::from(MODE_CSP), true)?;
-    b.entry(OD_MODES_DISPLAY, 0)?;
-    b.verify.push(SdoOp::Verify {
-        index: OD_MODES_DISPLAY,
-        sub: 0,
-        value: u32::from(MODE_CSP as u8),
-        len: 1,
-    });
-    let n_per_unit = w.force_n_per_unit.unwrap_or(DEFAULT_FORCE_N_PER_UNIT);
-    Ok(b.finish(NodeMapping {
-        node: n,
-        pdos,
-        force_n_per_unit: n_per_unit,
-    }))
+    Ok(())
 }
 
 /// The start-up script of force sensor `j` of `cfg`: identity (and unit) checks, the TPDO
@@ -1249,10 +1164,7 @@ pub fn plan_force_sensor(cfg: &DrivesConfig, j: usize, eds: &Eds) -> Result<Plan
 
 /// The plans of every node of `cfg`: the drives in cable order, then the force sensors. Each
 /// EDS is read once per path. `drive_eds` overrides every drive's EDS (tests).
-pub fn plan_all(
-    cfg: &DrivesConfig,
-    drive_eds: Option<&Eds>,
-) -> Result<Vec<Plan>, crate::master::SetupError> {
+pub fn plan_all(cfg: &DrivesConfig, drive_eds: Option<&Eds>) -> Result<Vec<Plan>, SetupError> {
     let mut cache: Vec<(Option<String>, Eds)> = Vec::new();
     let mut plans = Vec::new();
     for i in 0..cfg.winches.len() {
@@ -1279,62 +1191,10 @@ pub fn plan_all(
     Ok(plans)
 }
 
-/// The plans' PDO frames in the bus budget's terms ([`crate::budget::budget`]): per cable its
-/// drive's frames, and every force sensor as an extra node (interface, node id, frames,
-/// heartbeat period ms). An event-driven TPDO counts as one frame every
-/// max(1, ⌊inhibit time / SYNC period⌋) SYNCs — its worst case when the inhibit time is at least
-/// one period; with a shorter inhibit time it may come more often than that.
-#[allow(clippy::type_complexity)]
-pub fn budget_frames(
-    cfg: &DrivesConfig,
-    plans: &[Plan],
-) -> (
-    Vec<Vec<crate::budget::PdoFrame>>,
-    Vec<(usize, u8, Vec<crate::budget::PdoFrame>, f64)>,
-) {
-    let period_us = cfg.bus.sync_period_us.max(1);
-    let convert = |p: &Plan| -> Vec<crate::budget::PdoFrame> {
-        p.pdo_frames()
-            .iter()
-            .map(|f| crate::budget::PdoFrame {
-                cob_id: f.cob_id,
-                dlc: f.dlc,
-                rpdo: f.direction == Direction::ToNode,
-                every_n_sync: match f.transmission {
-                    Transmission::Sync { every } => u16::from(every.max(1)),
-                    Transmission::Event { inhibit_us, .. } => {
-                        u16::try_from((inhibit_us / period_us).max(1)).unwrap_or(u16::MAX)
-                    }
-                },
-            })
-            .collect()
-    };
-    let mut drives = Vec::new();
-    let mut extra = Vec::new();
-    // plan_all: the drives in cable order, then the force sensors in their order.
-    let mut j = 0;
-    for p in plans {
-        match p.kind {
-            NodeKind::Drive { .. } => drives.push(convert(p)),
-            NodeKind::ForceSensor { .. } => {
-                j += 1;
-                let j = j - 1;
-                extra.push((
-                    cfg.sensor_interface(j),
-                    p.node,
-                    convert(p),
-                    f64::from(cfg.bus.heartbeat_producer_ms),
-                ));
-            }
-        }
-    }
-    (drives, extra)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::DrivesConfig;
+    use drives_config::DrivesConfig;
 
     fn cfg() -> DrivesConfig {
         DrivesConfig::parse(
@@ -1442,7 +1302,7 @@ mod tests {
     #[test]
     fn missing_or_unmappable_objects_name_drive_eds_and_object() {
         let c = cfg();
-        let text = crate::eds::BUILTIN_WINCH_EDS.replace("[6007]", "[2FF7]");
+        let text = drive_bus::eds::BUILTIN_WINCH_EDS.replace("[6007]", "[2FF7]");
         let eds = Eds::parse(&text, "vendor.eds").unwrap();
         let e = plan_drive(&c, 0, &eds).unwrap_err().to_string();
         assert!(
@@ -1450,7 +1310,7 @@ mod tests {
             "{e}"
         );
         // Pulley force not mappable: refused before anything is written.
-        let text = crate::eds::BUILTIN_WINCH_EDS.replace(
+        let text = drive_bus::eds::BUILTIN_WINCH_EDS.replace(
             "ParameterName=Pulley force (mN)\nObjectType=0x7\nDataType=0x0004\nAccessType=ro\nDefaultValue=0\nPDOMapping=1",
             "ParameterName=Pulley force (mN)\nObjectType=0x7\nDataType=0x0004\nAccessType=ro\nDefaultValue=0\nPDOMapping=0",
         );
@@ -1461,7 +1321,7 @@ mod tests {
             "{e}"
         );
         // No force object at all and no force sensor: the message says what to configure.
-        let text = crate::eds::BUILTIN_WINCH_EDS.replace("[2110]", "[2111]");
+        let text = drive_bus::eds::BUILTIN_WINCH_EDS.replace("[2110]", "[2111]");
         let eds = Eds::parse(&text, "vendor.eds").unwrap();
         let e = plan_drive(&c, 0, &eds).unwrap_err().to_string();
         assert!(
@@ -1471,50 +1331,11 @@ mod tests {
         // A limit outside the EDS range is refused with the reason.
         let mut c2 = c.clone();
         c2.bus.abort_connection_option = 3;
-        let text = crate::eds::BUILTIN_WINCH_EDS
+        let text = drive_bus::eds::BUILTIN_WINCH_EDS
             .replace("LowLimit=0\nHighLimit=3", "LowLimit=0\nHighLimit=1");
         let eds = Eds::parse(&text, "vendor.eds").unwrap();
         let e = plan_drive(&c2, 0, &eds).unwrap_err().to_string();
         assert!(e.contains("0x6007") && e.contains("HighLimit"), "{e}");
-    }
-
-    /// The simulated winch's default mapping is the layout the budget assumes today; a vendor
-    /// drive with a load cell has 6 + 6 B every SYNC, 4 B every 10th, and the cell's 4 B.
-    #[test]
-    fn budget_frames_are_the_configured_mappings() {
-        let c = cfg();
-        let plans = plan_all(&c, None).unwrap();
-        let (drives, extra) = budget_frames(&c, &plans);
-        assert_eq!(drives, vec![crate::budget::fixed_layout(3)]);
-        assert!(extra.is_empty());
-        let vendor = format!(
-            "{}/../../config/eds/vendor-csp-drive.eds",
-            env!("CARGO_MANIFEST_DIR")
-        );
-        let c = DrivesConfig::parse(&format!(
-            "[bus]\ntransport = \"udpbus:239.255.70.1:20000\"\neds = \"{vendor}\"\n\
-             [[winch]]\nnode_id = 3\ndrum_diameter_m = 0.305\ngear_ratio = 10.0\n\
-             counts_per_rev = 1048576\nsign = 1\n\
-             [[force_sensor]]\nnode_id = 40\ncable = 1\nn_per_unit = 0.1\nevery_n_syncs = 2\n"
-        ))
-        .unwrap();
-        let plans = plan_all(&c, None).unwrap();
-        let (drives, extra) = budget_frames(&c, &plans);
-        let f = |cob_id, dlc, rpdo, every_n_sync| crate::budget::PdoFrame {
-            cob_id,
-            dlc,
-            rpdo,
-            every_n_sync,
-        };
-        assert_eq!(
-            drives[0],
-            vec![
-                f(0x203, 6, true, 1),
-                f(0x183, 6, false, 1),
-                f(0x283, 4, false, 10)
-            ]
-        );
-        assert_eq!(extra, vec![(0, 40, vec![f(0x1A8, 4, false, 2)], 10.0)]);
     }
 
     #[test]

@@ -1,7 +1,8 @@
-//! Drive-side emulation (`drive_io::slave`): NMT, SDO, CiA 402 transitions, CSP latching.
+//! Drive-side emulation (`cia402_drive::slave`): NMT, SDO, CiA 402 transitions, CSP latching.
 
-use drive_io::canopen::*;
-use drive_io::slave::{DriveBank, DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
+use cia402_drive::bank::DriveBank;
+use cia402_drive::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
+use drive_bus::canopen::*;
 
 fn frames(out: &FrameBuf) -> Vec<Message> {
     out.as_slice().iter().map(decode).collect()

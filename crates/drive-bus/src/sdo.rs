@@ -331,109 +331,10 @@ impl SdoServer {
     pub fn handle(&mut self, d: &[u8; 8], od: &mut impl ObjectAccess) -> Option<[u8; 8]> {
         let (index, sub) = index_sub(d);
         match d[0] >> 5 {
-            // Initiate download.
-            1 => {
-                self.state = ServerState::Idle;
-                let expedited = d[0] & 0x02 != 0;
-                let sized = d[0] & 0x01 != 0;
-                if expedited {
-                    let n = if sized {
-                        4 - usize::from((d[0] >> 2) & 0x03)
-                    } else {
-                        4
-                    };
-                    return match od.sdo_write(index, sub, &d[4..4 + n]) {
-                        Ok(()) => Some(header(0x60, index, sub)),
-                        Err(code) => self.abort(index, sub, code),
-                    };
-                }
-                let size = if sized {
-                    u32::from_le_bytes([d[4], d[5], d[6], d[7]]) as usize
-                } else {
-                    0
-                };
-                if size > SDO_MAX {
-                    return self.abort(index, sub, ABORT_OUT_OF_MEMORY);
-                }
-                *self = Self {
-                    state: ServerState::Download,
-                    index,
-                    sub,
-                    len: size,
-                    ..Self::default()
-                };
-                Some(header(0x60, index, sub))
-            }
-            // Download segment.
-            0 if self.state == ServerState::Download => {
-                let (index, sub) = (self.index, self.sub);
-                if (d[0] & 0x10 != 0) != self.toggle {
-                    return self.abort(index, sub, ABORT_TOGGLE);
-                }
-                let n = 7 - usize::from((d[0] >> 1) & 0x07);
-                if self.pos + n > SDO_MAX {
-                    return self.abort(index, sub, ABORT_OUT_OF_MEMORY);
-                }
-                self.buf[self.pos..self.pos + n].copy_from_slice(&d[1..1 + n]);
-                self.pos += n;
-                let resp = [0x20 | (u8::from(self.toggle) << 4), 0, 0, 0, 0, 0, 0, 0];
-                self.toggle = !self.toggle;
-                if d[0] & 0x01 == 0 {
-                    return Some(resp);
-                }
-                self.state = ServerState::Idle;
-                if self.len != 0 && self.len != self.pos {
-                    return self.abort(index, sub, ABORT_LENGTH);
-                }
-                let (buf, pos) = (self.buf, self.pos);
-                match od.sdo_write(index, sub, &buf[..pos]) {
-                    Ok(()) => Some(resp),
-                    Err(code) => self.abort(index, sub, code),
-                }
-            }
-            // Initiate upload.
-            2 => {
-                self.state = ServerState::Idle;
-                let mut buf = [0u8; SDO_MAX];
-                let n = match od.sdo_read(index, sub, &mut buf) {
-                    Ok(n) => n.min(SDO_MAX),
-                    Err(code) => return self.abort(index, sub, code),
-                };
-                if (1..=4).contains(&n) {
-                    let mut r = header(0x43 | ((4 - n as u8) << 2), index, sub);
-                    r[4..4 + n].copy_from_slice(&buf[..n]);
-                    return Some(r);
-                }
-                *self = Self {
-                    state: ServerState::Upload,
-                    index,
-                    sub,
-                    buf,
-                    len: n,
-                    ..Self::default()
-                };
-                let mut r = header(0x41, index, sub);
-                r[4..].copy_from_slice(&(n as u32).to_le_bytes());
-                Some(r)
-            }
-            // Upload segment.
-            3 if self.state == ServerState::Upload => {
-                if (d[0] & 0x10 != 0) != self.toggle {
-                    return self.abort(self.index, self.sub, ABORT_TOGGLE);
-                }
-                let rest = self.len - self.pos;
-                let n = rest.min(7);
-                let last = rest <= 7;
-                let mut r = [0u8; 8];
-                r[0] = (u8::from(self.toggle) << 4) | (((7 - n) as u8) << 1) | u8::from(last);
-                r[1..1 + n].copy_from_slice(&self.buf[self.pos..self.pos + n]);
-                self.pos += n;
-                self.toggle = !self.toggle;
-                if last {
-                    self.state = ServerState::Idle;
-                }
-                Some(r)
-            }
+            1 => self.initiate_download(d, index, sub, od),
+            0 if self.state == ServerState::Download => self.download_segment(d, od),
+            2 => self.initiate_upload(index, sub, od),
+            3 if self.state == ServerState::Upload => self.upload_segment(d),
             // The client aborts: nothing to answer.
             4 => {
                 self.state = ServerState::Idle;
@@ -448,6 +349,124 @@ impl SdoServer {
                 self.abort(i, s, ABORT_COMMAND)
             }
         }
+    }
+
+    /// Initiate download: an expedited write at once, or the start of a segmented one.
+    fn initiate_download(
+        &mut self,
+        d: &[u8; 8],
+        index: u16,
+        sub: u8,
+        od: &mut impl ObjectAccess,
+    ) -> Option<[u8; 8]> {
+        self.state = ServerState::Idle;
+        let expedited = d[0] & 0x02 != 0;
+        let sized = d[0] & 0x01 != 0;
+        if expedited {
+            let n = if sized {
+                4 - usize::from((d[0] >> 2) & 0x03)
+            } else {
+                4
+            };
+            return match od.sdo_write(index, sub, &d[4..4 + n]) {
+                Ok(()) => Some(header(0x60, index, sub)),
+                Err(code) => self.abort(index, sub, code),
+            };
+        }
+        let size = if sized {
+            u32::from_le_bytes([d[4], d[5], d[6], d[7]]) as usize
+        } else {
+            0
+        };
+        if size > SDO_MAX {
+            return self.abort(index, sub, ABORT_OUT_OF_MEMORY);
+        }
+        *self = Self {
+            state: ServerState::Download,
+            index,
+            sub,
+            len: size,
+            ..Self::default()
+        };
+        Some(header(0x60, index, sub))
+    }
+
+    /// Download segment: appended; the last one writes the whole value.
+    fn download_segment(&mut self, d: &[u8; 8], od: &mut impl ObjectAccess) -> Option<[u8; 8]> {
+        let (index, sub) = (self.index, self.sub);
+        if (d[0] & 0x10 != 0) != self.toggle {
+            return self.abort(index, sub, ABORT_TOGGLE);
+        }
+        let n = 7 - usize::from((d[0] >> 1) & 0x07);
+        if self.pos + n > SDO_MAX {
+            return self.abort(index, sub, ABORT_OUT_OF_MEMORY);
+        }
+        self.buf[self.pos..self.pos + n].copy_from_slice(&d[1..1 + n]);
+        self.pos += n;
+        let resp = [0x20 | (u8::from(self.toggle) << 4), 0, 0, 0, 0, 0, 0, 0];
+        self.toggle = !self.toggle;
+        if d[0] & 0x01 == 0 {
+            return Some(resp);
+        }
+        self.state = ServerState::Idle;
+        if self.len != 0 && self.len != self.pos {
+            return self.abort(index, sub, ABORT_LENGTH);
+        }
+        let (buf, pos) = (self.buf, self.pos);
+        match od.sdo_write(index, sub, &buf[..pos]) {
+            Ok(()) => Some(resp),
+            Err(code) => self.abort(index, sub, code),
+        }
+    }
+
+    /// Initiate upload: up to 4 bytes expedited, more segmented.
+    fn initiate_upload(
+        &mut self,
+        index: u16,
+        sub: u8,
+        od: &mut impl ObjectAccess,
+    ) -> Option<[u8; 8]> {
+        self.state = ServerState::Idle;
+        let mut buf = [0u8; SDO_MAX];
+        let n = match od.sdo_read(index, sub, &mut buf) {
+            Ok(n) => n.min(SDO_MAX),
+            Err(code) => return self.abort(index, sub, code),
+        };
+        if (1..=4).contains(&n) {
+            let mut r = header(0x43 | ((4 - n as u8) << 2), index, sub);
+            r[4..4 + n].copy_from_slice(&buf[..n]);
+            return Some(r);
+        }
+        *self = Self {
+            state: ServerState::Upload,
+            index,
+            sub,
+            buf,
+            len: n,
+            ..Self::default()
+        };
+        let mut r = header(0x41, index, sub);
+        r[4..].copy_from_slice(&(n as u32).to_le_bytes());
+        Some(r)
+    }
+
+    /// Upload segment: the next up to 7 bytes.
+    fn upload_segment(&mut self, d: &[u8; 8]) -> Option<[u8; 8]> {
+        if (d[0] & 0x10 != 0) != self.toggle {
+            return self.abort(self.index, self.sub, ABORT_TOGGLE);
+        }
+        let rest = self.len - self.pos;
+        let n = rest.min(7);
+        let last = rest <= 7;
+        let mut r = [0u8; 8];
+        r[0] = (u8::from(self.toggle) << 4) | (((7 - n) as u8) << 1) | u8::from(last);
+        r[1..1 + n].copy_from_slice(&self.buf[self.pos..self.pos + n]);
+        self.pos += n;
+        self.toggle = !self.toggle;
+        if last {
+            self.state = ServerState::Idle;
+        }
+        Some(r)
     }
 }
 

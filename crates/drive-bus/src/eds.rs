@@ -312,6 +312,339 @@ pub fn parse_number(s: &str) -> Option<EdsValue> {
     })
 }
 
+/// The keys of one section: lower-case key → (value, 1-based line).
+type Keys = BTreeMap<String, (String, usize)>;
+
+/// [`Eds::parse`]'s state while it reads the sections of one file.
+struct Parser<'a> {
+    file: &'a str,
+    /// `[XXXXName]` / `[XXXXValue]`: per-sub names and (DCF) values of compact arrays.
+    compact_names: BTreeMap<u16, BTreeMap<u8, String>>,
+    compact_values: BTreeMap<u16, BTreeMap<u8, (String, usize)>>,
+    objects: BTreeMap<u16, OdObject>,
+    entries: BTreeMap<(u16, u8), OdEntry>,
+}
+
+impl Parser<'_> {
+    fn err(&self, line: usize, reason: String) -> EdsError {
+        EdsError {
+            file: self.file.to_string(),
+            line,
+            reason,
+        }
+    }
+
+    /// The text split into its sections (comments and blank lines kept with their section).
+    fn sections(&self, text: &str) -> Result<Vec<Section>, EdsError> {
+        let mut sections: Vec<Section> = Vec::new();
+        for (n, raw) in text.lines().enumerate() {
+            let line = raw.trim();
+            if line.is_empty() || line.starts_with(';') {
+                if let Some(s) = sections.last_mut() {
+                    s.lines.push(raw.to_string());
+                }
+                continue;
+            }
+            if let Some(h) = line.strip_prefix('[') {
+                let Some(name) = h.strip_suffix(']') else {
+                    return Err(self.err(n + 1, format!("section header without `]`: {line}")));
+                };
+                let name = name.trim().to_string();
+                if sections.iter().any(|s| s.name.eq_ignore_ascii_case(&name)) {
+                    return Err(self.err(n + 1, format!("section [{name}] appears twice")));
+                }
+                sections.push(Section {
+                    name,
+                    line: n + 1,
+                    lines: Vec::new(),
+                });
+                continue;
+            }
+            let Some(s) = sections.last_mut() else {
+                return Err(self.err(n + 1, "key before the first [section]".into()));
+            };
+            if !line.contains('=') {
+                return Err(self.err(n + 1, format!("expected key=value, got `{line}`")));
+            }
+            s.lines.push(raw.to_string());
+        }
+        Ok(sections)
+    }
+
+    /// The `[XXXXName]` / `[XXXXValue]` sections of compact arrays.
+    fn compact_tables(&mut self, sections: &[Section]) -> Result<(), EdsError> {
+        for s in sections {
+            let lower = s.name.to_ascii_lowercase();
+            let (idx, into_names) = if let Some(i) = lower.strip_suffix("name") {
+                (i, true)
+            } else if let Some(i) = lower.strip_suffix("value") {
+                (i, false)
+            } else {
+                continue;
+            };
+            if idx.len() != 4 || !idx.chars().all(|c| c.is_ascii_hexdigit()) {
+                continue;
+            }
+            let index =
+                u16::from_str_radix(idx, 16).map_err(|e| self.err(s.line, e.to_string()))?;
+            for (k, l) in s.lines.iter().enumerate() {
+                let t = l.trim();
+                if t.is_empty() || t.starts_with(';') {
+                    continue;
+                }
+                let (key, value) = t.split_once('=').unwrap_or((t, ""));
+                let key = key.trim();
+                if key.eq_ignore_ascii_case("NrOfEntries") {
+                    continue;
+                }
+                let Some(sub) = key.parse::<u8>().ok().filter(|n| *n > 0) else {
+                    return Err(self.err(
+                        s.line + 1 + k,
+                        format!("[{}]: `{key}` is not a sub-index 1..=255", s.name),
+                    ));
+                };
+                let value = value.trim().to_string();
+                if into_names {
+                    self.compact_names
+                        .entry(index)
+                        .or_default()
+                        .insert(sub, value);
+                } else {
+                    self.compact_values
+                        .entry(index)
+                        .or_default()
+                        .insert(sub, (value, s.line + 1 + k));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// A numeric key of `s` (absent or empty: `None`).
+    fn num(&self, keys: &Keys, s: &Section, key: &str) -> Result<Option<EdsValue>, EdsError> {
+        match keys.get(key) {
+            None => Ok(None),
+            Some((v, _)) if v.is_empty() => Ok(None),
+            Some((v, l)) => parse_number(v)
+                .map(Some)
+                .ok_or_else(|| self.err(*l, format!("[{}] {key}: not a number: `{v}`", s.name))),
+        }
+    }
+
+    /// One object section `[XXXX]` or sub-object section `[XXXXsubN]`.
+    fn object(&mut self, s: &Section, index: u16, sub: Option<u8>) -> Result<(), EdsError> {
+        let mut keys = Keys::new();
+        for (k, l) in s.lines.iter().enumerate() {
+            let t = l.trim();
+            if t.is_empty() || t.starts_with(';') {
+                continue;
+            }
+            let (key, value) = t.split_once('=').unwrap_or((t, ""));
+            keys.insert(
+                key.trim().to_ascii_lowercase(),
+                (value.trim().to_string(), s.line + 1 + k),
+            );
+        }
+        let name = keys
+            .get("parametername")
+            .map(|(v, _)| v.clone())
+            .ok_or_else(|| self.err(s.line, format!("[{}] has no ParameterName", s.name)))?;
+        let object_type = self.num(&keys, s, "objecttype")?.map_or(7, |v| v.value);
+        if !(0..=9).contains(&object_type) {
+            return Err(self.err(s.line, format!("[{}] ObjectType {object_type}", s.name)));
+        }
+        let compact = self.compact(&keys, s, sub, object_type)?;
+        if sub.is_none() {
+            self.objects.insert(
+                index,
+                OdObject {
+                    name: name.clone(),
+                    object_type: object_type as u8,
+                    compact,
+                },
+            );
+            if (object_type == 8 || object_type == 9) && compact.is_none() {
+                return Ok(()); // ARRAY/RECORD: the data are in the [XXXXsubN] sections
+            }
+        }
+        let entry = self.entry(&keys, s, index, sub.unwrap_or(0), name)?;
+        match compact {
+            None => {
+                self.entries.insert((index, entry.sub), entry);
+            }
+            Some(n) => self.expand_compact(entry, n, s.line)?,
+        }
+        Ok(())
+    }
+
+    /// `CompactSubObj=n` of an ARRAY's object section (1..=254, without SubNumber).
+    fn compact(
+        &self,
+        keys: &Keys,
+        s: &Section,
+        sub: Option<u8>,
+        object_type: i64,
+    ) -> Result<Option<u8>, EdsError> {
+        let Some(n) = self
+            .num(keys, s, "compactsubobj")?
+            .map(|v| v.value)
+            .filter(|n| *n != 0)
+        else {
+            return Ok(None);
+        };
+        if sub.is_some() || object_type != 8 {
+            return Err(self.err(
+                s.line,
+                format!(
+                    "[{}] CompactSubObj belongs to the object section of an ARRAY \
+                     (ObjectType=0x8)",
+                    s.name
+                ),
+            ));
+        }
+        if !(1..=254).contains(&n) {
+            return Err(self.err(
+                s.line,
+                format!("[{}] CompactSubObj={n}: must be 1..=254", s.name),
+            ));
+        }
+        if self
+            .num(keys, s, "subnumber")?
+            .is_some_and(|v| v.value != 0)
+        {
+            return Err(self.err(
+                s.line,
+                format!("[{}] has both SubNumber and CompactSubObj", s.name),
+            ));
+        }
+        Ok(Some(n as u8))
+    }
+
+    /// The entry a section describes: data type, access, default (range-checked), limits.
+    fn entry(
+        &self,
+        keys: &Keys,
+        s: &Section,
+        index: u16,
+        sub: u8,
+        name: String,
+    ) -> Result<OdEntry, EdsError> {
+        let data_type = self
+            .num(keys, s, "datatype")?
+            .ok_or_else(|| self.err(s.line, format!("[{}] has no DataType", s.name)))?;
+        let access = keys
+            .get("accesstype")
+            .ok_or_else(|| self.err(s.line, format!("[{}] has no AccessType", s.name)))?;
+        let access = Access::parse(&access.0).ok_or_else(|| {
+            self.err(
+                access.1,
+                format!(
+                    "[{}] AccessType `{}` is not ro/wo/rw/rwr/rww/const",
+                    s.name, access.0
+                ),
+            )
+        })?;
+        let pdo = self
+            .num(keys, s, "pdomapping")?
+            .is_some_and(|v| v.value != 0);
+        let entry = OdEntry {
+            index,
+            sub,
+            name,
+            data_type: DataType::from_code(data_type.value as u16),
+            access,
+            default: self.num(keys, s, "defaultvalue").unwrap_or(None),
+            default_text: keys
+                .get("defaultvalue")
+                .map(|(v, _)| v.clone())
+                .filter(|v| !v.is_empty()),
+            parameter_value: self.num(keys, s, "parametervalue").unwrap_or(None),
+            pdo_mappable: pdo,
+            low: self.num(keys, s, "lowlimit")?.map(|v| v.value),
+            high: self.num(keys, s, "highlimit")?.map(|v| v.value),
+            line: s.line,
+        };
+        if let Some(d) = entry.default
+            && !d.plus_node_id
+            && entry.data_type.size().is_some()
+        {
+            let v = d.value;
+            // Unsigned32 defaults like 0x80000000 are bit patterns; signed types may be
+            // written as their two's complement hex.
+            let fits = entry.check_range(v).is_ok()
+                || (entry.data_type.is_signed()
+                    && entry.data_type.range().is_some_and(|(lo, _)| {
+                        v >= 0 && v < (-lo) * 2 && entry.check_range(v + 2 * lo).is_ok()
+                    }));
+            if !fits {
+                return Err(self.err(
+                    s.line,
+                    format!("[{}] DefaultValue {v} out of range", s.name),
+                ));
+            }
+        }
+        Ok(entry)
+    }
+
+    /// CompactSubObj=n: sub 0 holds n, subs 1..=n share the object's description (names and
+    /// DCF values from `[XXXXName]` / `[XXXXValue]`).
+    fn expand_compact(&mut self, entry: OdEntry, n: u8, line: usize) -> Result<(), EdsError> {
+        let index = entry.index;
+        self.entries.insert(
+            (index, 0),
+            OdEntry {
+                index,
+                sub: 0,
+                name: "Highest sub-index supported".into(),
+                data_type: DataType::Unsigned8,
+                access: Access::Ro,
+                default: Some(EdsValue {
+                    value: i64::from(n),
+                    plus_node_id: false,
+                }),
+                default_text: Some(n.to_string()),
+                parameter_value: None,
+                pdo_mappable: false,
+                low: None,
+                high: None,
+                line,
+            },
+        );
+        let names = self.compact_names.get(&index);
+        let values = self.compact_values.get(&index);
+        for k in 1..=n {
+            let mut e = entry.clone();
+            e.sub = k;
+            e.name = names
+                .and_then(|m| m.get(&k))
+                .cloned()
+                .unwrap_or_else(|| format!("{}{k}", entry.name));
+            e.parameter_value = match values.and_then(|m| m.get(&k)) {
+                None => None,
+                Some((v, _)) if v.is_empty() => None,
+                Some((v, l)) => Some(parse_number(v).ok_or_else(|| {
+                    self.err(*l, format!("[{index:04X}Value] {k}: not a number: `{v}`"))
+                })?),
+            };
+            self.entries.insert((index, k), e);
+        }
+        Ok(())
+    }
+
+    /// Every `[XXXXsubN]` has its object section `[XXXX]`.
+    fn check_sub_sections(&self) -> Result<(), EdsError> {
+        for ((index, sub), e) in &self.entries {
+            if *sub != 0 && !self.objects.contains_key(index) {
+                return Err(self.err(
+                    e.line,
+                    format!("[{index:04X}sub{sub:X}] without its object section [{index:04X}]"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Object section names: `1017` or `1600sub2` (hex, case-insensitive).
 fn object_section(name: &str) -> Option<(u16, Option<u8>)> {
     let lower = name.to_ascii_lowercase();
@@ -360,270 +693,25 @@ impl Eds {
 
     /// Parses EDS/DCF text; `file` is used in error messages.
     pub fn parse(text: &str, file: &str) -> Result<Self, EdsError> {
-        let err = |line: usize, reason: String| EdsError {
-            file: file.to_string(),
-            line,
-            reason,
+        let mut p = Parser {
+            file,
+            compact_names: BTreeMap::new(),
+            compact_values: BTreeMap::new(),
+            objects: BTreeMap::new(),
+            entries: BTreeMap::new(),
         };
-        let mut sections: Vec<Section> = Vec::new();
-        for (n, raw) in text.lines().enumerate() {
-            let line = raw.trim();
-            if line.is_empty() || line.starts_with(';') {
-                if let Some(s) = sections.last_mut() {
-                    s.lines.push(raw.to_string());
-                }
-                continue;
-            }
-            if let Some(h) = line.strip_prefix('[') {
-                let Some(name) = h.strip_suffix(']') else {
-                    return Err(err(n + 1, format!("section header without `]`: {line}")));
-                };
-                let name = name.trim().to_string();
-                if sections.iter().any(|s| s.name.eq_ignore_ascii_case(&name)) {
-                    return Err(err(n + 1, format!("section [{name}] appears twice")));
-                }
-                sections.push(Section {
-                    name,
-                    line: n + 1,
-                    lines: Vec::new(),
-                });
-                continue;
-            }
-            let Some(s) = sections.last_mut() else {
-                return Err(err(n + 1, "key before the first [section]".into()));
-            };
-            if !line.contains('=') {
-                return Err(err(n + 1, format!("expected key=value, got `{line}`")));
-            }
-            s.lines.push(raw.to_string());
-        }
-        // `[XXXXName]` / `[XXXXValue]`: per-sub names and (DCF) values of compact arrays.
-        let mut compact_names: BTreeMap<u16, BTreeMap<u8, String>> = BTreeMap::new();
-        let mut compact_values: BTreeMap<u16, BTreeMap<u8, (String, usize)>> = BTreeMap::new();
+        let sections = p.sections(text)?;
+        p.compact_tables(&sections)?;
         for s in &sections {
-            let lower = s.name.to_ascii_lowercase();
-            let (idx, into_names) = if let Some(i) = lower.strip_suffix("name") {
-                (i, true)
-            } else if let Some(i) = lower.strip_suffix("value") {
-                (i, false)
-            } else {
-                continue;
-            };
-            if idx.len() != 4 || !idx.chars().all(|c| c.is_ascii_hexdigit()) {
-                continue;
-            }
-            let index = u16::from_str_radix(idx, 16).map_err(|e| err(s.line, e.to_string()))?;
-            for (k, l) in s.lines.iter().enumerate() {
-                let t = l.trim();
-                if t.is_empty() || t.starts_with(';') {
-                    continue;
-                }
-                let (key, value) = t.split_once('=').unwrap_or((t, ""));
-                let key = key.trim();
-                if key.eq_ignore_ascii_case("NrOfEntries") {
-                    continue;
-                }
-                let Some(sub) = key.parse::<u8>().ok().filter(|n| *n > 0) else {
-                    return Err(err(
-                        s.line + 1 + k,
-                        format!("[{}]: `{key}` is not a sub-index 1..=255", s.name),
-                    ));
-                };
-                let value = value.trim().to_string();
-                if into_names {
-                    compact_names.entry(index).or_default().insert(sub, value);
-                } else {
-                    compact_values
-                        .entry(index)
-                        .or_default()
-                        .insert(sub, (value, s.line + 1 + k));
-                }
+            if let Some((index, sub)) = object_section(&s.name) {
+                p.object(s, index, sub)?;
             }
         }
-        let mut objects = BTreeMap::new();
-        let mut entries = BTreeMap::new();
-        for s in &sections {
-            let Some((index, sub)) = object_section(&s.name) else {
-                continue;
-            };
-            let mut keys: BTreeMap<String, (String, usize)> = BTreeMap::new();
-            for (k, l) in s.lines.iter().enumerate() {
-                let t = l.trim();
-                if t.is_empty() || t.starts_with(';') {
-                    continue;
-                }
-                let (key, value) = t.split_once('=').unwrap_or((t, ""));
-                keys.insert(
-                    key.trim().to_ascii_lowercase(),
-                    (value.trim().to_string(), s.line + 1 + k),
-                );
-            }
-            let num = |key: &str| -> Result<Option<EdsValue>, EdsError> {
-                match keys.get(key) {
-                    None => Ok(None),
-                    Some((v, _)) if v.is_empty() => Ok(None),
-                    Some((v, l)) => parse_number(v)
-                        .map(Some)
-                        .ok_or_else(|| err(*l, format!("[{}] {key}: not a number: `{v}`", s.name))),
-                }
-            };
-            let name = keys
-                .get("parametername")
-                .map(|(v, _)| v.clone())
-                .ok_or_else(|| err(s.line, format!("[{}] has no ParameterName", s.name)))?;
-            let object_type = num("objecttype")?.map_or(7, |v| v.value);
-            if !(0..=9).contains(&object_type) {
-                return Err(err(
-                    s.line,
-                    format!("[{}] ObjectType {object_type}", s.name),
-                ));
-            }
-            let compact = num("compactsubobj")?.map(|v| v.value).filter(|n| *n != 0);
-            if let Some(n) = compact {
-                if sub.is_some() || object_type != 8 {
-                    return Err(err(
-                        s.line,
-                        format!(
-                            "[{}] CompactSubObj belongs to the object section of an ARRAY \
-                             (ObjectType=0x8)",
-                            s.name
-                        ),
-                    ));
-                }
-                if !(1..=254).contains(&n) {
-                    return Err(err(
-                        s.line,
-                        format!("[{}] CompactSubObj={n}: must be 1..=254", s.name),
-                    ));
-                }
-                if num("subnumber")?.is_some_and(|v| v.value != 0) {
-                    return Err(err(
-                        s.line,
-                        format!("[{}] has both SubNumber and CompactSubObj", s.name),
-                    ));
-                }
-            }
-            if sub.is_none() {
-                objects.insert(
-                    index,
-                    OdObject {
-                        name: name.clone(),
-                        object_type: object_type as u8,
-                        compact: compact.map(|n| n as u8),
-                    },
-                );
-                if (object_type == 8 || object_type == 9) && compact.is_none() {
-                    continue; // ARRAY/RECORD: the data are in the [XXXXsubN] sections
-                }
-            }
-            let data_type = num("datatype")?
-                .ok_or_else(|| err(s.line, format!("[{}] has no DataType", s.name)))?;
-            let access = keys
-                .get("accesstype")
-                .ok_or_else(|| err(s.line, format!("[{}] has no AccessType", s.name)))?;
-            let access = Access::parse(&access.0).ok_or_else(|| {
-                err(
-                    access.1,
-                    format!(
-                        "[{}] AccessType `{}` is not ro/wo/rw/rwr/rww/const",
-                        s.name, access.0
-                    ),
-                )
-            })?;
-            let pdo = num("pdomapping")?.is_some_and(|v| v.value != 0);
-            let entry = OdEntry {
-                index,
-                sub: sub.unwrap_or(0),
-                name: name.clone(),
-                data_type: DataType::from_code(data_type.value as u16),
-                access,
-                default: num("defaultvalue").unwrap_or(None),
-                default_text: keys
-                    .get("defaultvalue")
-                    .map(|(v, _)| v.clone())
-                    .filter(|v| !v.is_empty()),
-                parameter_value: num("parametervalue").unwrap_or(None),
-                pdo_mappable: pdo,
-                low: num("lowlimit")?.map(|v| v.value),
-                high: num("highlimit")?.map(|v| v.value),
-                line: s.line,
-            };
-            if let Some(d) = entry.default
-                && !d.plus_node_id
-                && entry.data_type.size().is_some()
-            {
-                let v = d.value;
-                // Unsigned32 defaults like 0x80000000 are bit patterns; signed types may be
-                // written as their two's complement hex.
-                let fits = entry.check_range(v).is_ok()
-                    || (entry.data_type.is_signed()
-                        && entry.data_type.range().is_some_and(|(lo, _)| {
-                            v >= 0 && v < (-lo) * 2 && entry.check_range(v + 2 * lo).is_ok()
-                        }));
-                if !fits {
-                    return Err(err(
-                        s.line,
-                        format!("[{}] DefaultValue {v} out of range", s.name),
-                    ));
-                }
-            }
-            let Some(n) = compact else {
-                entries.insert((index, entry.sub), entry);
-                continue;
-            };
-            // CompactSubObj=n: sub 0 holds n, subs 1..=n share the object's description.
-            let n = n as u8;
-            entries.insert(
-                (index, 0),
-                OdEntry {
-                    index,
-                    sub: 0,
-                    name: "Highest sub-index supported".into(),
-                    data_type: DataType::Unsigned8,
-                    access: Access::Ro,
-                    default: Some(EdsValue {
-                        value: i64::from(n),
-                        plus_node_id: false,
-                    }),
-                    default_text: Some(n.to_string()),
-                    parameter_value: None,
-                    pdo_mappable: false,
-                    low: None,
-                    high: None,
-                    line: s.line,
-                },
-            );
-            let names = compact_names.get(&index);
-            let values = compact_values.get(&index);
-            for k in 1..=n {
-                let mut e = entry.clone();
-                e.sub = k;
-                e.name = names
-                    .and_then(|m| m.get(&k))
-                    .cloned()
-                    .unwrap_or_else(|| format!("{name}{k}"));
-                e.parameter_value = match values.and_then(|m| m.get(&k)) {
-                    None => None,
-                    Some((v, _)) if v.is_empty() => None,
-                    Some((v, l)) => Some(parse_number(v).ok_or_else(|| {
-                        err(*l, format!("[{index:04X}Value] {k}: not a number: `{v}`"))
-                    })?),
-                };
-                entries.insert((index, k), e);
-            }
-        }
-        for ((index, sub), e) in &entries {
-            if *sub != 0 && !objects.contains_key(index) {
-                return Err(err(
-                    e.line,
-                    format!("[{index:04X}sub{sub:X}] without its object section [{index:04X}]"),
-                ));
-            }
-        }
+        p.check_sub_sections()?;
         Ok(Self {
             file: file.to_string(),
-            objects,
-            entries,
+            objects: p.objects,
+            entries: p.entries,
             sections,
         })
     }

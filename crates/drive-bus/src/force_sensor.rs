@@ -6,7 +6,7 @@
 //! optionally the channel's physical unit 0x6131 and decimal digits 0x6132, which fix what one
 //! unit of the process value is) like the drives.
 //!
-//! The simulated node that plays such a device is [`crate::force_node::ForceNode`]; its EDS is
+//! The simulated node that plays such a device is `cia402_drive::force_node::ForceNode`; its EDS is
 //! `config/eds/crs-load-cell.eds` ([`crate::eds::Eds::builtin_load_cell`]).
 
 use crate::identity::Identity;
