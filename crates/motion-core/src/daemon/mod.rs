@@ -93,7 +93,7 @@ pub const EVENT_FUTURE_TOLERANCE_NS: u64 = 50_000_000;
 /// * fresh: stamped within [`RESET_MAX_AGE_NS`] before the loop's clock, not in its future;
 /// * a reset: count >= 1 of its monitor instance ([`crs_limits::reset_epoch`]) — a restarted
 ///   monitor's start epoch is none;
-/// * of the epoch the CURRENT monitor announced (`crs_ipc::monitor_state::EPOCH_ANNOUNCE`,
+/// * of the epoch the CURRENT monitor announced (`crs_ipc::MonitorCode::EpochAnnounce`,
 ///   fresh, stamped no later than the event): never "any epoch first";
 /// * one this loop has not acted on ([`crs_limits::reset_epoch::releases`] against the last
 ///   accepted epoch).
