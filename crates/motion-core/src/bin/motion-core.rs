@@ -1,12 +1,13 @@
 //! `motion-core`: the 1 ms hard-loop daemon (spec sec. 5.6). See `motion_core::daemon`.
 
-use cdpr_model::config::load_platform;
+use cdpr_model::config::{Platform, load_platform};
 use clap::{CommandFactory, Parser};
 use crs_ipc::{
     CueingPose, EventKind, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlatformId,
     PlatformIdentity, ProcessId, StateEvent, SyncSchedule, TopicPublisher, TopicSubscriber,
     WakeupNotifier,
 };
+use motion_core::daemon::config::DaemonConfig;
 use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
 use motion_core::daemon::outbox::{MotionStateCell, Outbox, OutboxSink, StagePorts};
 use motion_core::daemon::ride::{RideControl, RidePhase, RideSlot};
@@ -15,8 +16,8 @@ use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::timeline::Timeline;
 use motion_core::daemon::trajectory::{self, Waypoint};
 use motion_core::daemon::{
-    self, Command, CommandSource, LoopState, ResetGate, ResetIgnored, config, lifecycle, outbox,
-    realtime,
+    self, Command, CommandSource, HardLoop, LoopState, ResetGate, ResetIgnored, config, lifecycle,
+    outbox, realtime,
 };
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -264,26 +265,57 @@ fn main() -> ExitCode {
     }
 }
 
+/// What `configure` read and checked before anything runs.
+struct Setup {
+    cfg: DaemonConfig,
+    platform: Platform,
+    configured: lifecycle::Configured,
+    cueing: bool,
+    /// The operator's ride control socket (`--control`).
+    control: Option<PathBuf>,
+    waypoint_file: Option<PathBuf>,
+    waypoints: Vec<Waypoint>,
+    /// The plan's last setpoint's sequence number (crs_ipc::PLAN_OPEN_END for cueing).
+    plan_end: u64,
+}
+
+/// The threads and shared state of a running daemon.
+struct Running {
+    outbox: Arc<Outbox>,
+    stats: Arc<LoopStats>,
+    timeline: Arc<Timeline>,
+    rides: Option<Arc<RideSlot>>,
+    state_code: Arc<MotionStateCell>,
+    stage: std::thread::JoinHandle<()>,
+    reporter: std::thread::JoinHandle<()>,
+    node: IpcNode,
+    /// The operators' and the monitor's events (subscribed before the real-time settings).
+    commands: Option<TopicSubscriber<StateEvent>>,
+    start_ns: u64,
+}
+
+type PlanError = Arc<std::sync::Mutex<Option<trajectory::PlanningFailed>>>;
+
 fn run(args: Args) -> Result<(), String> {
+    let setup = configure(&args)?;
+    let mut running = start_threads(&setup)?;
+    let plan_error: PlanError = Arc::new(std::sync::Mutex::new(None));
+    let mut hard_loop = activate(setup, &running, &plan_error)?;
+    run_loop(&args, &mut running, &mut hard_loop);
+    deactivate(running, hard_loop, &plan_error)
+}
+
+/// Configure: the daemon TOML, the platform, the surrogate, the waypoints; the whole plan
+/// verified with the loop's own checks before anything moves (a plan that would leave the
+/// workspace or the wrench-feasible set is refused, naming where).
+fn configure(args: &Args) -> Result<Setup, String> {
     let cfg = config::load(&args.config).map_err(|e| e.to_string())?;
     let platform = load_platform(&cfg.platform).map_err(|e| e.to_string())?;
-    let model = platform.model.clone();
     // The identity the safety monitor compares: model, workspace box, limits.
     let identity = platform.identity_hex();
-    tracing::info!(platform = %platform.name, identity = %identity, cables = model.m(), "platform loaded");
-
+    tracing::info!(platform = %platform.name, identity = %identity, cables = platform.model.m(), "platform loaded");
     let configured = lifecycle::configure(&cfg, &platform).map_err(|e| e.to_string())?;
-    match configured.surrogate() {
-        None => tracing::info!(
-            "no surrogate configured: zero offset, pure standard kinematics (eq. 2.3)"
-        ),
-        Some(s) => tracing::info!(
-            path = %s.path.display(),
-            bound_mm = s.certified_bound_mm,
-            "surrogate loaded (eq. 5.26)"
-        ),
-    }
-
+    log_configuration(&configured);
     let cueing = args.input == "cueing";
     if cueing && args.control.is_some() {
         return Err("--control takes waypoint rides: not with --input cueing".into());
@@ -300,8 +332,53 @@ fn run(args: Args) -> Result<(), String> {
         Some(p) => trajectory::read_waypoints(p).map_err(|e| e.to_string())?,
         None => Vec::new(),
     };
+    let plan = match &waypoint_file {
+        Some(p) => {
+            let ride = trajectory::read_ride(p).map_err(|e| e.to_string())?;
+            configured.verify_ride(&ride).map_err(|e| e.to_string())?
+        }
+        None => configured
+            .verify_plan(&waypoints)
+            .map_err(|e| e.to_string())?,
+    };
+    tracing::info!(
+        samples = plan.samples,
+        duration_s = plan.duration_s,
+        "plan verified (workspace, limits, eq. 3.29)"
+    );
+    // Sequence numbers count published setpoints from 1, one per cycle, so the plan's last
+    // reference goes out as number `samples` (later if the planner starved the loop). The
+    // cueing input has no planned end.
+    let plan_end = if cueing {
+        crs_ipc::PLAN_OPEN_END
+    } else {
+        plan.samples as u64
+    };
+    Ok(Setup {
+        cfg,
+        platform,
+        configured,
+        cueing,
+        control: args.control.clone(),
+        waypoint_file,
+        waypoints,
+        plan_end,
+    })
+}
+
+/// The surrogate and the wrench check in force, in the log.
+fn log_configuration(configured: &lifecycle::Configured) {
+    match configured.surrogate() {
+        None => tracing::info!(
+            "no surrogate configured: zero offset, pure standard kinematics (eq. 2.3)"
+        ),
+        Some(s) => tracing::info!(
+            path = %s.path.display(),
+            bound_mm = s.certified_bound_mm,
+            "surrogate loaded (eq. 5.26)"
+        ),
+    }
     let lim = configured.planner_limits();
-    let period_s = configured.period_s();
     match configured.dynamic_limits() {
         Some(d) => tracing::info!(
             acceleration_factor = d.acceleration_factor,
@@ -317,52 +394,21 @@ fn run(args: Args) -> Result<(), String> {
             "static wrench w_e checked (no [dynamics] in the platform TOML, or dynamic_wrench = false)"
         ),
     }
-    // Verify the whole plan with the loop's own checks before anything moves: a plan that
-    // would leave the workspace or the wrench-feasible set is refused, naming where.
-    let plan = match &waypoint_file {
-        Some(p) => {
-            let ride = trajectory::read_ride(p).map_err(|e| e.to_string())?;
-            configured.verify_ride(&ride).map_err(|e| e.to_string())?
-        }
-        None => configured
-            .verify_plan(&waypoints)
-            .map_err(|e| e.to_string())?,
-    };
-    tracing::info!(
-        samples = plan.samples,
-        duration_s = plan.duration_s,
-        "plan verified (workspace, limits, eq. 3.29)"
-    );
-    let plan_error = Arc::new(std::sync::Mutex::new(
-        None::<motion_core::daemon::trajectory::PlanningFailed>,
-    ));
-    let pe = plan_error.clone();
-    let on_plan_error = move |e: motion_core::daemon::trajectory::PlanningFailed| {
-        tracing::error!("planner: {e}");
-        *pe.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
-    };
+}
 
-    // The publish stage owns the iceoryx2 publishers (iceoryx2's `ipc::Service` ports are not
-    // `Send`, and publishing allocates: see `daemon::outbox`). It is spawned before the
-    // real-time settings so it does not inherit the loop's priority; it sets its own below it.
-    let period_ns = cfg.realtime.period_ns;
-    // The plan's last setpoint: sequence numbers count published setpoints from 1, one per
-    // cycle, so the plan's last reference goes out as number `samples` (later if the planner
-    // starved the loop). The cueing input has no planned end.
-    let plan_end = if cueing {
-        crs_ipc::PLAN_OPEN_END
-    } else {
-        plan.samples as u64
-    };
-    let rides = args
+/// Starts the publish stage and the reporter, the signal handlers, then the loop thread's
+/// real-time settings (last, so start-up allocations happen before mlockall/SCHED_FIFO and
+/// only the loop gets its priority).
+fn start_threads(setup: &Setup) -> Result<Running, String> {
+    let cfg = &setup.cfg;
+    let rides = setup
         .control
         .as_ref()
-        .map(|_| Arc::new(RideSlot::new(platform.home, plan_end)));
+        .map(|_| Arc::new(RideSlot::new(setup.platform.home, setup.plan_end)));
     let start_ns = realtime::monotonic_ns() + 50_000_000;
-    let timeline = Arc::new(Timeline::new(period_ns));
-    let sync_lead_ns = cfg.sync_lead_ns;
+    let timeline = Arc::new(Timeline::new(cfg.realtime.period_ns));
     let outbox = Arc::new(Outbox::new(64));
-    if rides.is_some() && waypoint_file.is_none() {
+    if rides.is_some() && setup.waypoint_file.is_none() {
         // Comes up idle: the first heartbeat says so, and no RUNNING -> HOLDING change is
         // announced for a loop that never ran.
         outbox
@@ -370,103 +416,17 @@ fn run(args: Args) -> Result<(), String> {
             .store(crs_ipc::MotionState::Holding, Ordering::Relaxed);
     }
     let stats = Arc::new(LoopStats::default());
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
-    let stage = {
-        let outbox = outbox.clone();
-        let stats = stats.clone();
-        let timeline = timeline.clone();
-        let rides = rides.clone();
-        let identity =
-            PlatformIdentity::new(PlatformId::new(platform.identity()), model.m() as u32);
-        let mut rt = cfg.realtime;
-        rt.priority = (rt.priority - 1).max(0);
-        rt.lock_memory = false;
-        std::thread::Builder::new()
-            .name("crs-publish".into())
-            .spawn(move || {
-                let ports = (|| -> Result<IoxPorts, String> {
-                    let node = IpcNode::new("motion-core-publish").map_err(|e| e.to_string())?;
-                    let ports = IoxPorts {
-                        setpoints: node
-                            .publisher::<JointSetpoint>()
-                            .map_err(|e| e.to_string())?,
-                        heartbeats: node.publisher::<Heartbeat>().map_err(|e| e.to_string())?,
-                        events: node.publisher::<StateEvent>().map_err(|e| e.to_string())?,
-                        identity: node
-                            .publisher::<PlatformIdentity>()
-                            .map_err(|e| e.to_string())?,
-                        loop_stats: node
-                            .publisher::<LoopStatsSample>()
-                            .map_err(|e| e.to_string())?,
-                        sync_schedule: node
-                            .subscriber::<SyncSchedule>()
-                            .map_err(|e| e.to_string())?,
-                        sync_lead_ns,
-                        last_schedule: 0,
-                        setpoint_ready: node
-                            .setpoint_ready_notifier()
-                            .map_err(|e| e.to_string())?,
-                        notify_failures: 0,
-                        platform_identity: identity,
-                        plan_end,
-                        rides,
-                        hb_seq: 0,
-                        _node: node,
-                    };
-                    ports
-                        .identity
-                        .publish(&identity)
-                        .map_err(|e| e.to_string())?;
-                    let mut ports = ports;
-                    ports.announce_plan();
-                    Ok(ports)
-                })();
-                let mut ports = match ports {
-                    Ok(p) => {
-                        let _ = ready_tx.send(Ok(()));
-                        p
-                    }
-                    Err(e) => {
-                        let _ = ready_tx.send(Err(e));
-                        return;
-                    }
-                };
-                for (name, applied) in realtime::apply(&rt).lines() {
-                    if let realtime::Applied::Degraded(_) = applied {
-                        tracing::warn!("publish stage realtime {name}: {applied}");
-                    }
-                }
-                outbox::run_publish_stage(
-                    &outbox,
-                    &stats,
-                    &mut ports,
-                    start_ns,
-                    &timeline,
-                    outbox::PUBLISH_PHASE_NS.min(period_ns / 2),
-                    10,
-                    &STOP,
-                );
-            })
-            .map_err(|e| e.to_string())?
-    };
-    ready_rx
-        .recv()
-        .map_err(|_| "publish stage died during start-up".to_string())??;
-
+    let stage = spawn_publish_stage(setup, &outbox, &stats, &timeline, &rides, start_ns)?;
     let node = IpcNode::new("motion-core").map_err(|e| e.to_string())?;
     let commands = node.subscriber::<StateEvent>().map_err(|e| e.to_string())?;
-
     // SAFETY: installing an async-signal-safe handler that only stores to an atomic.
     unsafe {
         libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
         libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
     }
-
     let state_code = Arc::new(MotionStateCell::new(LoopState::Running.code()));
     let reporter = {
-        let stats = stats.clone();
-        let state_code = state_code.clone();
-        let outbox = outbox.clone();
+        let (stats, state_code, outbox) = (stats.clone(), state_code.clone(), outbox.clone());
         let interval = cfg.stats_interval_s;
         let file = cfg.stats_file.clone();
         std::thread::Builder::new()
@@ -474,9 +434,6 @@ fn run(args: Args) -> Result<(), String> {
             .spawn(move || report_loop(&stats, &outbox, &state_code, interval, file.as_deref()))
             .map_err(|e| e.to_string())?
     };
-
-    // Real-time settings last, so start-up allocations happen before mlockall/SCHED_FIFO, and
-    // only this thread (the loop) gets the loop's priority.
     let report = realtime::apply(&cfg.realtime);
     for (name, applied) in report.lines() {
         match applied {
@@ -484,11 +441,145 @@ fn run(args: Args) -> Result<(), String> {
             _ => tracing::info!("realtime {name}: {applied}"),
         }
     }
-    tracing::info!(period_us = period_ns / 1000, "hard loop starting");
-    sd_notify("READY=1\nSTATUS=motion loop running");
+    Ok(Running {
+        outbox,
+        stats,
+        timeline,
+        rides,
+        state_code,
+        stage,
+        reporter,
+        node,
+        commands: Some(commands),
+        start_ns,
+    })
+}
 
-    let mut hard_loop = configured.activate(waypoints, on_plan_error);
-    if cueing {
+/// The publish stage owns the iceoryx2 publishers (iceoryx2's `ipc::Service` ports are not
+/// `Send`, and publishing allocates: see `daemon::outbox`). It is spawned before the real-time
+/// settings so it does not inherit the loop's priority; it sets its own below it. Returns once
+/// its ports are open (or with the reason they are not).
+fn spawn_publish_stage(
+    setup: &Setup,
+    outbox: &Arc<Outbox>,
+    stats: &Arc<LoopStats>,
+    timeline: &Arc<Timeline>,
+    rides: &Option<Arc<RideSlot>>,
+    start_ns: u64,
+) -> Result<std::thread::JoinHandle<()>, String> {
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
+    let (outbox, stats, timeline, rides) = (
+        outbox.clone(),
+        stats.clone(),
+        timeline.clone(),
+        rides.clone(),
+    );
+    let identity = PlatformIdentity::new(
+        PlatformId::new(setup.platform.identity()),
+        setup.platform.model.m() as u32,
+    );
+    let period_ns = setup.cfg.realtime.period_ns;
+    let sync_lead_ns = setup.cfg.sync_lead_ns;
+    let plan_end = setup.plan_end;
+    let mut rt = setup.cfg.realtime;
+    rt.priority = (rt.priority - 1).max(0);
+    rt.lock_memory = false;
+    let stage = std::thread::Builder::new()
+        .name("crs-publish".into())
+        .spawn(move || {
+            let ports = open_ports(identity, sync_lead_ns, plan_end, rides);
+            let mut ports = match ports {
+                Ok(p) => {
+                    let _ = ready_tx.send(Ok(()));
+                    p
+                }
+                Err(e) => {
+                    let _ = ready_tx.send(Err(e));
+                    return;
+                }
+            };
+            for (name, applied) in realtime::apply(&rt).lines() {
+                if let realtime::Applied::Degraded(_) = applied {
+                    tracing::warn!("publish stage realtime {name}: {applied}");
+                }
+            }
+            outbox::run_publish_stage(
+                &outbox,
+                &stats,
+                &mut ports,
+                start_ns,
+                &timeline,
+                outbox::PUBLISH_PHASE_NS.min(period_ns / 2),
+                10,
+                &STOP,
+            );
+        })
+        .map_err(|e| e.to_string())?;
+    ready_rx
+        .recv()
+        .map_err(|_| "publish stage died during start-up".to_string())??;
+    Ok(stage)
+}
+
+/// The publish stage's iceoryx2 ports; the platform identity published and the plan announced.
+fn open_ports(
+    identity: PlatformIdentity,
+    sync_lead_ns: u64,
+    plan_end: u64,
+    rides: Option<Arc<RideSlot>>,
+) -> Result<IoxPorts, String> {
+    let node = IpcNode::new("motion-core-publish").map_err(|e| e.to_string())?;
+    let ports = IoxPorts {
+        setpoints: node
+            .publisher::<JointSetpoint>()
+            .map_err(|e| e.to_string())?,
+        heartbeats: node.publisher::<Heartbeat>().map_err(|e| e.to_string())?,
+        events: node.publisher::<StateEvent>().map_err(|e| e.to_string())?,
+        identity: node
+            .publisher::<PlatformIdentity>()
+            .map_err(|e| e.to_string())?,
+        loop_stats: node
+            .publisher::<LoopStatsSample>()
+            .map_err(|e| e.to_string())?,
+        sync_schedule: node
+            .subscriber::<SyncSchedule>()
+            .map_err(|e| e.to_string())?,
+        sync_lead_ns,
+        last_schedule: 0,
+        setpoint_ready: node.setpoint_ready_notifier().map_err(|e| e.to_string())?,
+        notify_failures: 0,
+        platform_identity: identity,
+        plan_end,
+        rides,
+        hb_seq: 0,
+        _node: node,
+    };
+    ports
+        .identity
+        .publish(&identity)
+        .map_err(|e| e.to_string())?;
+    let mut ports = ports;
+    ports.announce_plan();
+    Ok(ports)
+}
+
+/// Activate: the hard loop with its inputs (the cueing stream, the operator's rides).
+fn activate(setup: Setup, running: &Running, plan_error: &PlanError) -> Result<HardLoop, String> {
+    let (cfg, platform) = (&setup.cfg, &setup.platform);
+    let lim = setup.configured.planner_limits();
+    let period_s = setup.configured.period_s();
+    tracing::info!(
+        period_us = cfg.realtime.period_ns / 1000,
+        "hard loop starting"
+    );
+    sd_notify("READY=1\nSTATUS=motion loop running");
+    let pe = plan_error.clone();
+    let on_plan_error = move |e: trajectory::PlanningFailed| {
+        tracing::error!("planner: {e}");
+        *pe.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+    };
+    let mut hard_loop = setup.configured.activate(setup.waypoints, on_plan_error);
+    if setup.cueing {
         let limits = CueingLimits {
             linear_velocity: lim.linear_velocity,
             linear_acceleration: lim.linear_acceleration,
@@ -496,49 +587,71 @@ fn run(args: Args) -> Result<(), String> {
             angular_acceleration: lim.angular_acceleration,
         };
         let filter = CueingFilter::new(&platform.home, limits, period_s);
-        let sub = node.subscriber::<CueingPose>().map_err(|e| e.to_string())?;
+        let sub = running
+            .node
+            .subscriber::<CueingPose>()
+            .map_err(|e| e.to_string())?;
         hard_loop = hard_loop.with_cueing(filter, Box::new(IoxCueing(sub)));
         tracing::info!("reference input: motion-cueing stream (crs/v1/cueing_pose)");
     }
-    if let (Some(path), Some(slot)) = (&args.control, &rides) {
+    if let (Some(path), Some(slot)) = (&setup.control, &running.rides) {
         hard_loop = hard_loop.with_rides(slot.clone(), lim, period_s, platform.home);
-        let control = RideControl::new(
-            lifecycle::configure_checks(&cfg, &platform).map_err(|e| e.to_string())?,
-        );
-        let listener = ride_socket::bind(path)
-            .map_err(|e| format!("{}: cannot bind the control socket: {e}", path.display()))?;
-        let slot = slot.clone();
-        std::thread::Builder::new()
-            .name("crs-ride-control".into())
-            .spawn(move || {
-                for conn in listener.incoming() {
-                    let Ok(conn) = conn else { continue };
-                    let on_error = |e: trajectory::PlanningFailed| {
-                        tracing::error!("ride planner: {e}; the loop holds where the plan ended")
-                    };
-                    match ride_socket::serve_one(conn, &control, &slot, on_error) {
-                        Ok(reply) => tracing::info!("operator: {reply}"),
-                        Err(e) => tracing::warn!("control socket: {e}"),
-                    }
-                }
-            })
-            .map_err(|e| e.to_string())?;
-        tracing::info!(
-            socket = %path.display(),
-            "idle, holding the home pose: rides start with `crs ride start FILE`"
-        );
+        serve_rides(path, slot.clone(), cfg, platform)?;
     }
-    let mut sink = OutboxSink(&outbox);
+    Ok(hard_loop)
+}
+
+/// The operator's ride control socket, served by its own thread.
+fn serve_rides(
+    path: &std::path::Path,
+    slot: Arc<RideSlot>,
+    cfg: &DaemonConfig,
+    platform: &Platform,
+) -> Result<(), String> {
+    let control =
+        RideControl::new(lifecycle::configure_checks(cfg, platform).map_err(|e| e.to_string())?);
+    let listener = ride_socket::bind(path)
+        .map_err(|e| format!("{}: cannot bind the control socket: {e}", path.display()))?;
+    std::thread::Builder::new()
+        .name("crs-ride-control".into())
+        .spawn(move || {
+            for conn in listener.incoming() {
+                let Ok(conn) = conn else { continue };
+                let on_error = |e: trajectory::PlanningFailed| {
+                    tracing::error!("ride planner: {e}; the loop holds where the plan ended")
+                };
+                match ride_socket::serve_one(conn, &control, &slot, on_error) {
+                    Ok(reply) => tracing::info!("operator: {reply}"),
+                    Err(e) => tracing::warn!("control socket: {e}"),
+                }
+            }
+        })
+        .map_err(|e| e.to_string())?;
+    tracing::info!(
+        socket = %path.display(),
+        "idle, holding the home pose: rides start with `crs ride start FILE`"
+    );
+    Ok(())
+}
+
+/// Run: the 1 ms loop until a signal, or `--exit-after-plan-s` after the plan, ride or cueing
+/// stream ended.
+fn run_loop(args: &Args, running: &mut Running, hard_loop: &mut HardLoop) {
+    let Some(commands) = running.commands.take() else {
+        return;
+    };
+    let (outbox, state_code, rides) = (&running.outbox, &running.state_code, &running.rides);
+    let mut sink = OutboxSink(outbox);
     let mut cmds = IoxCommands(commands, ResetGate::new());
     let mut plan_done_at: Option<u64> = None;
     let exit_after = args.exit_after_plan_s.map(|s| (s * 1e9) as u64);
     daemon::run_timed(
-        &mut hard_loop,
-        start_ns,
-        &timeline,
+        hard_loop,
+        running.start_ns,
+        &running.timeline,
         &mut sink,
         &mut cmds,
-        &stats,
+        &running.stats,
         &STOP,
         |hl, now| {
             let code = hl.state_code();
@@ -565,9 +678,14 @@ fn run(args: Args) -> Result<(), String> {
             }
         },
     );
+}
+
+/// Deactivate: the threads stopped, the loop's figures logged, a planning failure returned.
+fn deactivate(running: Running, hard_loop: HardLoop, plan_error: &PlanError) -> Result<(), String> {
     STOP.store(true, Ordering::Relaxed);
-    let _ = stage.join();
-    let _ = reporter.join();
+    let _ = running.stage.join();
+    let _ = running.reporter.join();
+    let stats = &running.stats;
     tracing::info!(
         "loop stopped: {} cycles, {} overruns, {} rejected references; lateness {}; compute {}",
         stats.cycles.load(Ordering::Relaxed),
