@@ -18,9 +18,12 @@
 //! more than data without any effect produce (thresholds in [`SelectConfig`], from baseline
 //! runs of `crs calibrate bench-diagnosis`), or along the weighted residual with a significant
 //! score and a lower BIC; when neither held-out error gets worse; when its FK converges and its
-//! parameters fit inside their physical ranges. The one with the largest combined gain is
-//! added; then the remaining candidates are scored again, while one passes. When none passes
+//! parameters fit inside their physical ranges. The one whose signature explains the training
+//! rows best (the largest BIC drop) is added; then the remaining candidates are scored again, while one passes. When none passes
 //! alone, the most promising pairs are fitted together (two effects that only help together).
+//! When several pass, the best of them are also fitted in pairs (two effects that each take
+//! part of the other's signature alone, e.g. a drum and stored rope): a pair competes with the
+//! singles when each member is needed next to the other on the training rows.
 //!
 //! An effect may come in several **forms** ([`Form`]) where real machines differ in how its
 //! signature looks: hysteresis as a force band or a length offset, with the direction of
@@ -930,8 +933,11 @@ fn best_form(
 }
 
 /// Two effects fitted together, each in the form that fits the pair best: the pair in the
-/// members' single forms, and each member's other forms next to the other's (the lowest BIC
-/// of the fits that moved).
+/// members' single forms, and next to the other's each member's forms with another number of
+/// parameters (the lowest BIC of the fits that moved). What a partner can absorb depends on
+/// how many parameters a member has — stored rope per cable can carry a per-cable drum
+/// scale, one drive-train compliance cannot — while forms of equal size (the hysteresis'
+/// direction sources) were already ranked by their single fits.
 fn fit_pair(
     current: &Fit,
     spec: &FitSpec,
@@ -939,9 +945,17 @@ fn fit_pair(
     a: (Effect, Form),
     b: (Effect, Form),
 ) -> (Addition, Result<CandidateFit, FitError>) {
+    let m = current.model.m();
+    let others = |(e, form): (Effect, Form)| {
+        let k = e.params_of(form, m).len();
+        e.forms()
+            .iter()
+            .copied()
+            .filter(move |f| e.params_of(*f, m).len() != k)
+    };
     let mut combos = vec![(a.1, b.1)];
-    combos.extend(a.0.forms().iter().filter(|f| **f != a.1).map(|f| (*f, b.1)));
-    combos.extend(b.0.forms().iter().filter(|f| **f != b.1).map(|f| (a.1, *f)));
+    combos.extend(others(a).map(|f| (f, b.1)));
+    combos.extend(others(b).map(|f| (a.1, f)));
     let mut best: Option<(Addition, Result<CandidateFit, FitError>, f64)> = None;
     for (fa, fb) in combos {
         let add = Addition {
