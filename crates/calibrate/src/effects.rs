@@ -18,9 +18,12 @@
 //! more than data without any effect produce (thresholds in [`SelectConfig`], from baseline
 //! runs of `crs calibrate bench-diagnosis`), or along the weighted residual with a significant
 //! score and a lower BIC; when neither held-out error gets worse; when its FK converges and its
-//! parameters fit inside their physical ranges. The one with the largest combined gain is
-//! added; then the remaining candidates are scored again, while one passes. When none passes
+//! parameters fit inside their physical ranges. The one whose signature explains the training
+//! rows best (the largest BIC drop) is added; then the remaining candidates are scored again, while one passes. When none passes
 //! alone, the most promising pairs are fitted together (two effects that only help together).
+//! When several pass, the best of them are also fitted in pairs (two effects that each take
+//! part of the other's signature alone, e.g. a drum and stored rope): a pair competes with the
+//! singles when each member is needed next to the other on the training rows.
 //!
 //! An effect may come in several **forms** ([`Form`]) where real machines differ in how its
 //! signature looks: hysteresis as a force band or a length offset, with the direction of
@@ -362,6 +365,10 @@ pub struct CandidateScore {
     pub freed: Vec<String>,
     /// How its fit started (0, or the restart that reached the lowest cost).
     pub start: String,
+    /// It passed every gate but one: its parameters are pressed against a range limit (its
+    /// shape does not fit alone — e.g. stored rope carrying a drum's scale runs to the drum's
+    /// capacity); it may still fit next to another effect.
+    pub misfit_alone: bool,
     pub accepted: bool,
     pub verdict: String,
 }
@@ -689,6 +696,7 @@ impl Round<'_> {
             stalled: false,
             freed: Vec::new(),
             start: String::new(),
+            misfit_alone: false,
             accepted: false,
             verdict: String::new(),
         };
@@ -869,6 +877,7 @@ impl Round<'_> {
             }
         };
         let ok = cs.fk_failure.is_none() && gain_ok && worse_ok && physical;
+        cs.misfit_alone = cs.fk_failure.is_none() && gain_ok && worse_ok && !physical;
         (cs, ok.then_some(f))
     }
 }
@@ -885,18 +894,26 @@ fn rank(c: &CandidateScore) -> f64 {
 }
 
 /// The candidate's lowest-BIC form: every form fitted from the current model.
+/// Also returns the training cost of each form whose fit moved (what a pair containing the
+/// effect in that form is tested against).
 fn best_form(
     current: &Fit,
     spec: &FitSpec,
     train: &[Observation],
     effect: Effect,
-) -> (Form, Result<CandidateFit, FitError>) {
+) -> (Form, Result<CandidateFit, FitError>, Vec<(Form, f64)>) {
     let mut best: Option<(Form, Result<CandidateFit, FitError>, f64)> = None;
+    let mut costs = Vec::new();
     for &form in effect.forms() {
         let add = Addition {
             parts: vec![(effect, form)],
         };
         let r = fit_addition(current, spec, train, &add);
+        if let Ok(cf) = &r
+            && cf.moved
+        {
+            costs.push((form, cf.fit.cost));
+        }
         let b = match &r {
             // A fit that did not move ranks after every one that did.
             Ok(cf) => {
@@ -910,8 +927,55 @@ fn best_form(
         }
     }
     match best {
-        Some((f, r, _)) => (f, r),
-        None => (Form::Standard, Err(FitError::NoParameters)),
+        Some((f, r, _)) => (f, r, costs),
+        None => (Form::Standard, Err(FitError::NoParameters), costs),
+    }
+}
+
+/// Two effects fitted together, each in the form that fits the pair best: the pair in the
+/// members' single forms, and next to the other's each member's forms with another number of
+/// parameters (the lowest BIC of the fits that moved). What a partner can absorb depends on
+/// how many parameters a member has — stored rope per cable can carry a per-cable drum
+/// scale, one drive-train compliance cannot — while forms of equal size (the hysteresis'
+/// direction sources) were already ranked by their single fits.
+fn fit_pair(
+    current: &Fit,
+    spec: &FitSpec,
+    train: &[Observation],
+    a: (Effect, Form),
+    b: (Effect, Form),
+) -> (Addition, Result<CandidateFit, FitError>) {
+    let m = current.model.m();
+    let others = |(e, form): (Effect, Form)| {
+        let k = e.params_of(form, m).len();
+        e.forms()
+            .iter()
+            .copied()
+            .filter(move |f| e.params_of(*f, m).len() != k)
+    };
+    let mut combos = vec![(a.1, b.1)];
+    combos.extend(others(a).map(|f| (f, b.1)));
+    combos.extend(others(b).map(|f| (a.1, f)));
+    let mut best: Option<(Addition, Result<CandidateFit, FitError>, f64)> = None;
+    for (fa, fb) in combos {
+        let add = Addition {
+            parts: vec![(a.0, fa), (b.0, fb)],
+        };
+        let r = fit_addition(current, spec, train, &add);
+        let v = match &r {
+            Ok(cf) => {
+                bic(cf.fit.cost, cf.fit.n_residuals, cf.fit.free.len())
+                    + if cf.moved { 0.0 } else { 1e12 }
+            }
+            Err(_) => f64::INFINITY,
+        };
+        if best.as_ref().is_none_or(|(.., bv)| v < *bv) {
+            best = Some((add, r, v));
+        }
+    }
+    match best {
+        Some((add, r, _)) => (add, r),
+        None => (Addition { parts: vec![a, b] }, Err(FitError::NoParameters)),
     }
 }
 
@@ -993,6 +1057,10 @@ pub fn select(
         let mut rows: Vec<CandidateScore> = Vec::new();
         let mut best: Option<(usize, Fit)> = None;
         let mut tried: Vec<(Effect, Form)> = Vec::new();
+        // Per single candidate (aligned with `tried`): the training cost of each of its forms
+        // alone, and whether it passed.
+        let mut form_costs: Vec<Vec<(Form, f64)>> = Vec::new();
+        let mut passed: Vec<bool> = Vec::new();
         for &effect in &cfg.candidates {
             if chosen.iter().any(|(e, _)| *e == effect)
                 || (effect.needs_forces() && (!has_forces || current.kind == Kind::Kinematic))
@@ -1001,14 +1069,16 @@ pub fn select(
                 continue;
             }
             on_candidate(effect);
-            let (form, cf) = best_form(&current, spec, train, effect);
+            let (form, cf, costs) = best_form(&current, spec, train, effect);
             tried.push((effect, form));
+            form_costs.push(costs);
             let (cs, pass) = round.judge(
                 &Addition {
                     parts: vec![(effect, form)],
                 },
                 cf,
             );
+            passed.push(pass.is_some());
             if let Some(f) = pass
                 && best
                     .as_ref()
@@ -1017,6 +1087,80 @@ pub fn select(
                 best = Some((rows.len(), f));
             }
             rows.push(cs);
+        }
+        // Two effects that each pass alone may each be carrying part of the other's signature
+        // (a drum scale and stored rope both lengthen loaded, long cables): the one ranked first
+        // absorbs what the other explains and is sized wrong, and the other then no longer
+        // shows on held-out data next to it (or, carrying the other's signature alone, runs
+        // against a range limit). So the (at most three best-ranked) candidates that pass, or
+        // fail only by a parameter at its range limit, are also fitted in pairs (a pair needs
+        // one member that passes alone), each member in the form that fits the pair best; a
+        // pair competes with the singles by the same rank (the BIC drop) when it passes against
+        // the current model and each member is needed next to the other on the training rows:
+        // the likelihood-ratio statistic of adding it to the other alone (in the pair's form)
+        // exceeds the χ²_k critical value of the score test.
+        if best.is_some() && chosen.len() + 2 <= cfg.max_effects {
+            let mut passing: Vec<usize> = (0..passed.len())
+                .filter(|&i| passed[i] || rows[i].misfit_alone)
+                .collect();
+            passing.sort_by(|&a, &b| rank(&rows[b]).total_cmp(&rank(&rows[a])));
+            passing.truncate(3);
+            for (x, &a) in passing.iter().enumerate() {
+                for &b in &passing[x + 1..] {
+                    if !(passed[a] || passed[b]) {
+                        continue;
+                    }
+                    let (add, cf) = fit_pair(&current, spec, train, tried[a], tried[b]);
+                    let pair_fit = cf
+                        .as_ref()
+                        .ok()
+                        .map(|c| (c.fit.cost, c.fit.n_residuals, c.fit.free.len()));
+                    let (mut cs, pass) = round.judge(&add, cf);
+                    // The cost of `member` alone in `form` (its fit not moving leaves the
+                    // current model).
+                    let alone = |member: usize, form: Form| {
+                        form_costs[member]
+                            .iter()
+                            .find(|(f, _)| *f == form)
+                            .map_or(current.cost, |(_, c)| *c)
+                    };
+                    // parts[0] is a's effect, parts[1] b's: each tested next to the other alone.
+                    let m = current.model.m();
+                    let lr = pair_fit.map(|(cost, n, p)| {
+                        let s2 = 2.0 * cost / (n as f64 - p as f64).max(1.0);
+                        [(0, b), (1, a)].map(|(k, other)| {
+                            let (e, f) = add.parts[k];
+                            let stat = 2.0 * (alone(other, add.parts[1 - k].1) - cost) / s2;
+                            (
+                                e,
+                                stat,
+                                chi2_critical(e.params_of(f, m).len(), cfg.z_critical),
+                            )
+                        })
+                    });
+                    let needed = lr.is_some_and(|l| l.iter().all(|(_, s, c)| s > c));
+                    if pass.is_some() && !needed {
+                        let weak: Vec<String> = lr
+                            .iter()
+                            .flatten()
+                            .filter(|(_, s, c)| s <= c)
+                            .map(|(e, s, c)| format!("{} {s:.1} ≤ {c:.1}", e.name()))
+                            .collect();
+                        cs.verdict = format!(
+                            "passes, but a member adds nothing significant next to the other alone (likelihood ratio on the training rows: {}): not a pair",
+                            weak.join(", ")
+                        );
+                    }
+                    if let Some(f) = pass.filter(|_| needed)
+                        && best
+                            .as_ref()
+                            .is_none_or(|(bi, _)| rank(&cs) > rank(&rows[*bi]))
+                    {
+                        best = Some((rows.len(), f));
+                    }
+                    rows.push(cs);
+                }
+            }
         }
         // Nothing passes alone: two effects that only help together. The pairs of the (at most
         // three) candidates with a significant score statistic — the training residual points
