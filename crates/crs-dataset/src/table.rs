@@ -59,6 +59,27 @@ pub enum TableError {
     Csv { line: usize, message: String },
 }
 
+impl TableError {
+    /// The line the error is on (1 for a text without a header) and what is wrong, in words
+    /// without the line: for formats whose errors read `file:line: message`.
+    pub fn line_and_message(&self) -> (usize, String) {
+        match self {
+            TableError::NoHeader { .. } => (1, "empty: no header line".into()),
+            TableError::Header {
+                line,
+                expected,
+                found,
+            } => (*line, format!("header must be `{expected}`, got `{found}`")),
+            TableError::Columns {
+                line,
+                found,
+                expected,
+            } => (*line, format!("has {found} columns, expected {expected}")),
+            TableError::Csv { line, message } => (*line, message.clone()),
+        }
+    }
+}
+
 /// 1-based line of the first character at or after a byte offset that is not a line end.
 #[derive(Default)]
 struct LineCounter {

@@ -130,20 +130,9 @@ impl PilotTrack {
             line,
             message,
         };
-        use crs_dataset::table::{TableError, read_table};
-        let table = read_table(text, &COLUMNS).map_err(|e| match e {
-            TableError::NoHeader { .. } => line_err(1, "empty: no header line".into()),
-            TableError::Header {
-                line,
-                expected,
-                found,
-            } => line_err(line, format!("header must be `{expected}`, got `{found}`")),
-            TableError::Columns {
-                line,
-                found,
-                expected,
-            } => line_err(line, format!("has {found} columns, expected {expected}")),
-            TableError::Csv { line, message } => line_err(line, message),
+        let table = crs_dataset::table::read_table(text, &COLUMNS).map_err(|e| {
+            let (line, message) = e.line_and_message();
+            line_err(line, message)
         })?;
         let hl = table.header_line;
         let mut samples: Vec<(f64, PilotInput)> = Vec::new();
