@@ -18,7 +18,8 @@ enum Mode {
 }
 
 enum Frame {
-    Object,
+    /// `has_key`: a key was written (the closing brace goes on its own line).
+    Object { has_key: bool },
     /// `first`: the next element is the first; `pending`: an element was announced
     /// (`begin_array_value`) and its separator not yet written.
     Array {
@@ -34,8 +35,6 @@ pub struct ScalarArraysInline {
     stack: Vec<Frame>,
     /// Containers open (the indent level).
     depth: usize,
-    /// Whether the innermost object has written a key.
-    has_key: Vec<bool>,
     /// A key is being written (its string is not a value).
     in_key: bool,
 }
@@ -150,14 +149,13 @@ impl Formatter for ScalarArraysInline {
     fn begin_object<W: ?Sized + Write>(&mut self, w: &mut W) -> io::Result<()> {
         self.open_value(w, false)?;
         self.depth += 1;
-        self.stack.push(Frame::Object);
-        self.has_key.push(false);
+        self.stack.push(Frame::Object { has_key: false });
         w.write_all(b"{")
     }
 
     fn begin_object_key<W: ?Sized + Write>(&mut self, w: &mut W, first: bool) -> io::Result<()> {
-        if let Some(k) = self.has_key.last_mut() {
-            *k = true;
+        if let Some(Frame::Object { has_key }) = self.stack.last_mut() {
+            *has_key = true;
         }
         self.in_key = true;
         w.write_all(if first { b"\n" } else { b",\n" })?;
@@ -179,8 +177,7 @@ impl Formatter for ScalarArraysInline {
 
     fn end_object<W: ?Sized + Write>(&mut self, w: &mut W) -> io::Result<()> {
         self.depth -= 1;
-        self.stack.pop();
-        if self.has_key.pop().unwrap_or(false) {
+        if let Some(Frame::Object { has_key: true }) = self.stack.pop() {
             w.write_all(b"\n")?;
             indent(w, self.depth)?;
         }

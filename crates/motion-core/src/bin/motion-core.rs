@@ -9,7 +9,7 @@ use crs_ipc::{
 };
 use motion_core::daemon::config::DaemonConfig;
 use motion_core::daemon::cueing::{CueingFilter, CueingLimits, CueingSource};
-use motion_core::daemon::outbox::{MotionStateCell, Outbox, OutboxSink, StagePorts};
+use motion_core::daemon::outbox::{Outbox, OutboxSink, StagePorts};
 use motion_core::daemon::ride::{RideControl, RidePhase, RideSlot};
 use motion_core::daemon::ride_socket;
 use motion_core::daemon::stats::LoopStats;
@@ -285,7 +285,6 @@ struct Running {
     stats: Arc<LoopStats>,
     timeline: Arc<Timeline>,
     rides: Option<Arc<RideSlot>>,
-    state_code: Arc<MotionStateCell>,
     stage: std::thread::JoinHandle<()>,
     reporter: std::thread::JoinHandle<()>,
     node: IpcNode,
@@ -424,14 +423,13 @@ fn start_threads(setup: &Setup) -> Result<Running, String> {
         libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
         libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
     }
-    let state_code = Arc::new(MotionStateCell::new(LoopState::Running.code()));
     let reporter = {
-        let (stats, state_code, outbox) = (stats.clone(), state_code.clone(), outbox.clone());
+        let (stats, outbox) = (stats.clone(), outbox.clone());
         let interval = cfg.stats_interval_s;
         let file = cfg.stats_file.clone();
         std::thread::Builder::new()
             .name("crs-stats".into())
-            .spawn(move || report_loop(&stats, &outbox, &state_code, interval, file.as_deref()))
+            .spawn(move || report_loop(&stats, &outbox, interval, file.as_deref()))
             .map_err(|e| e.to_string())?
     };
     let report = realtime::apply(&cfg.realtime);
@@ -446,7 +444,6 @@ fn start_threads(setup: &Setup) -> Result<Running, String> {
         stats,
         timeline,
         rides,
-        state_code,
         stage,
         reporter,
         node,
@@ -640,7 +637,7 @@ fn run_loop(args: &Args, running: &mut Running, hard_loop: &mut HardLoop) {
     let Some(commands) = running.commands.take() else {
         return;
     };
-    let (outbox, state_code, rides) = (&running.outbox, &running.state_code, &running.rides);
+    let (outbox, rides) = (&running.outbox, &running.rides);
     let mut sink = OutboxSink(outbox);
     let mut cmds = IoxCommands(commands, ResetGate::new());
     let mut plan_done_at: Option<u64> = None;
@@ -654,9 +651,8 @@ fn run_loop(args: &Args, running: &mut Running, hard_loop: &mut HardLoop) {
         &running.stats,
         &STOP,
         |hl, now| {
-            let code = hl.state_code();
-            state_code.store(code, Ordering::Relaxed);
-            outbox.state.store(code, Ordering::Relaxed);
+            // The publish stage's heartbeats and the reporter both read the loop state here.
+            outbox.state.store(hl.state_code(), Ordering::Relaxed);
             if let Some(after) = exit_after {
                 let latched = hl.state().is_latched();
                 // With --control the loop idles until an operator starts a ride: its plan is
@@ -707,7 +703,6 @@ fn deactivate(running: Running, hard_loop: HardLoop, plan_error: &PlanError) -> 
 fn report_loop(
     stats: &LoopStats,
     outbox: &Outbox,
-    state: &MotionStateCell,
     interval_s: f64,
     file: Option<&std::path::Path>,
 ) {
@@ -739,7 +734,7 @@ fn report_loop(
             let lat = stats.lateness.snapshot();
             let cmp = stats.compute.snapshot();
             tracing::info!(
-                state = u32::from(state.load(Ordering::Relaxed)),
+                state = u32::from(outbox.state.load(Ordering::Relaxed)),
                 overruns = stats.overruns.load(Ordering::Relaxed),
                 "cycles {cycles}; lateness {}; compute {}",
                 lat.summary(),
@@ -752,7 +747,7 @@ fn report_loop(
                     "rejected": stats.rejected.load(Ordering::Relaxed),
                     "outbox_dropped": outbox.dropped.load(Ordering::Relaxed),
                     "publish_failures": outbox.publish_failures.load(Ordering::Relaxed),
-                    "state": u32::from(state.load(Ordering::Relaxed)),
+                    "state": u32::from(outbox.state.load(Ordering::Relaxed)),
                     "lateness_ns": {"p50": lat.quantile_ns(0.5), "p99": lat.quantile_ns(0.99), "p999": lat.quantile_ns(0.999), "max": lat.max_ns},
                     "compute_ns": {"p50": cmp.quantile_ns(0.5), "p99": cmp.quantile_ns(0.99), "p999": cmp.quantile_ns(0.999), "max": cmp.max_ns},
                 });
