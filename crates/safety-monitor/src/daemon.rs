@@ -2,8 +2,9 @@
 //! around [`Monitor`], iceoryx2 in, iceoryx2 + CAN out, as configure → activate → cycle →
 //! deactivate ([`run_on`]).
 //!
-//! Per cycle ([`Daemon::cycle`]): drain the platform identity, the state events, EVERY setpoint
-//! and feedback sample since the last cycle and the bus reader thread's observations; close
+//! Per cycle ([`Daemon::cycle`]): drain the state events, EVERY setpoint and feedback sample
+//! since the last cycle, then the platform identity (announced before the setpoints it
+//! covers), and the bus reader thread's observations; close
 //! the cycle; on a new trip send the stop from the monitor's OWN CAN socket (quick stop, NMT
 //! stop, STOP heartbeat) and latch an e-stop event on iceoryx2, so the stop works even if
 //! motion-core or drive-io hang; act on an operator's reset; publish the doubled safety
@@ -650,10 +651,13 @@ impl Daemon<'_> {
         self.st.sum.max_lateness_ns = self.st.sum.max_lateness_ns.max(late);
         self.st.monitor.begin_cycle(now);
 
-        self.drain_identities();
         let mut req = self.drain_events(now);
         self.poll_reset_socket(now, &mut req);
         self.drain_streams();
+        // After the setpoints: a producer announces its identity before its first setpoint,
+        // so every identity announced before a setpoint read above is read here, and the
+        // setpoints are judged against it at the end of the cycle.
+        self.drain_identities();
         self.drain_bus(&reader.queue, &mut req);
         self.check_observers(reader);
         let report = self.st.monitor.end_cycle(now);

@@ -515,6 +515,11 @@ pub struct Monitor {
     gap_sum: u64,
     identity_state: IdentityState,
     unverified_cycles: u32,
+    /// The first setpoint (its sequence) of this cycle that moved the pose while the identity was not verified. Judged at
+    /// the end of the cycle, after every identity announced by then was read: the identity
+    /// and the setpoints are two topics, so an identity published before the first moving
+    /// setpoint can be read after it within one cycle.
+    moved_unverified: Option<u64>,
     seen_feedback: bool,
     feedback_silent: u32,
     /// Stale samples (not advancing, or stamped in the future) arrived since the last fresh
@@ -633,6 +638,7 @@ impl Monitor {
             gap_sum: 0,
             identity_state: IdentityState::Unknown,
             unverified_cycles: 0,
+            moved_unverified: None,
             seen_feedback: false,
             feedback_silent: 0,
             stale_since_fresh: false,
@@ -950,11 +956,8 @@ impl Monitor {
         if self.identity_state != IdentityState::Verified
             && self.last_pose.is_some_and(|p| p != sp.pose)
         {
-            self.fault(Fault {
-                value: f64::from(self.unverified_cycles),
-                limit: 0.0,
-                ..at(Cause::IdentityMissing)
-            });
+            // Judged in `check_identity` at the end of this cycle (same cycle, so no later).
+            self.moved_unverified.get_or_insert(sp.sequence);
         }
         self.last_pose = Some(sp.pose);
         if self.lim.motion.check {
@@ -1446,6 +1449,16 @@ impl Monitor {
 
     /// The platform identity: a mismatch, or setpoints without an identity beyond the grace.
     fn check_identity(&mut self) {
+        if let Some(sequence) = self.moved_unverified
+            && self.identity_state != IdentityState::Verified
+        {
+            self.fault(Fault {
+                value: f64::from(self.unverified_cycles),
+                limit: 0.0,
+                sequence,
+                ..Fault::new(Cause::IdentityMissing)
+            });
+        }
         match self.identity_state {
             IdentityState::Mismatch => self.fault(Fault::new(Cause::IdentityMismatch)),
             IdentityState::Verified => self.unverified_cycles = 0,
@@ -1647,6 +1660,7 @@ impl Monitor {
         self.faults.clear();
         self.first = None;
         self.new_setpoints = 0;
+        self.moved_unverified = None;
         self.missing = 0;
         self.feedback_count = 0;
         self.fb_following = false;

@@ -330,13 +330,41 @@ fn motion_needs_a_verified_identity_holding_does_not() {
     let t = m.end_cycle(30_000_000).new_trip.expect("trip");
     assert_eq!(t.fault.cause, Cause::IdentityMissing);
     assert_eq!(t.fault.sequence, seq);
-    // With the identity announced before (motion-core announces before its first setpoint,
-    // the daemon drains identities before setpoints) the same motion passes.
+    // With the identity announced before the motion the same motion passes.
     let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
     let seq = good_cycle(&mut m, 1, 15_000_000);
     m.on_identity(&PlatformIdentity::new(own, 8));
     m.on_setpoint(&sp(seq, moved, 0, 0.0));
     assert!(m.end_cycle(30_000_000).new_trip.is_none());
+    // The identity and the setpoints are two topics: an identity announced before the first
+    // moving setpoint may be read after it in the same cycle (the daemon drains identities
+    // after the setpoints). Judged at the end of the cycle, the motion passes...
+    let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
+    let seq = good_cycle(&mut m, 1, 15_000_000);
+    m.on_setpoint(&sp(seq, moved, 0, 0.0));
+    m.on_identity(&PlatformIdentity::new(own, 8));
+    assert!(m.end_cycle(30_000_000).new_trip.is_none());
+    // ...but not into the next cycle: an identity that comes a cycle late does not excuse it.
+    let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
+    let seq = good_cycle(&mut m, 1, 15_000_000);
+    m.on_setpoint(&sp(seq, moved, 0, 0.0));
+    let t = m.end_cycle(30_000_000).new_trip.expect("trip");
+    assert_eq!(t.fault.cause, Cause::IdentityMissing);
+    m.on_identity(&PlatformIdentity::new(own, 8));
+    assert_eq!(m.trip().unwrap().fault.cause, Cause::IdentityMissing);
+    // A wrong identity read after the motion: mismatch and missing both trip.
+    let mut other = *own.as_bytes();
+    other[3] ^= 1;
+    let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
+    let seq = good_cycle(&mut m, 1, 15_000_000);
+    m.on_setpoint(&sp(seq, moved, 0, 0.0));
+    m.on_identity(&PlatformIdentity::new(PlatformId::new(other), 8));
+    let t = m.end_cycle(30_000_000).new_trip.expect("trip");
+    assert!(
+        matches!(t.fault.cause, Cause::IdentityMissing | Cause::IdentityMismatch),
+        "{:?}",
+        t.fault.cause
+    );
 }
 
 /// A fresh drive-io sample (its SYNC cycle and timestamp advance with every call, as drive-io's
