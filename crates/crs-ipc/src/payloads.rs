@@ -87,22 +87,6 @@ impl BusState {
     }
 }
 
-/// [`FaultCode`] values as bare `u32`: for drive-io until it is converted to the enum.
-pub mod fault_code {
-    use crate::FaultCode;
-    pub const NONE: u32 = FaultCode::None as u32;
-    pub const HEARTBEAT_LOST: u32 = FaultCode::HeartbeatLost as u32;
-    pub const EMCY: u32 = FaultCode::Emcy as u32;
-    pub const DRIVE_FAULT_BIT: u32 = FaultCode::DriveFaultBit as u32;
-    pub const BOOT_TIMEOUT: u32 = FaultCode::BootTimeout as u32;
-    pub const SETPOINT_INVALID: u32 = FaultCode::SetpointInvalid as u32;
-    pub const SETPOINT_STEP: u32 = FaultCode::SetpointStep as u32;
-    pub const UNEXPECTED_STATE: u32 = FaultCode::UnexpectedState as u32;
-    pub const BUS_ERROR: u32 = FaultCode::BusError as u32;
-    pub const PDO_TIMEOUT: u32 = FaultCode::PdoTimeout as u32;
-    pub const FORCE_LIMIT: u32 = FaultCode::ForceLimit as u32;
-}
-
 /// Drive feedback of one SYNC cycle, published by drive-io.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("crs_ipc::DriveFeedback.v1")]
@@ -164,18 +148,6 @@ impl Default for DriveFeedback {
             statusword: [0; MAX_CABLES],
         }
     }
-}
-
-/// [`MotionState`] values as bare `u32`: for drive-io until it is converted to the enum.
-pub mod motion_state {
-    use crate::MotionState;
-    pub const RUNNING: u32 = MotionState::Running as u32;
-    pub const ESTOPPED: u32 = MotionState::EStopped as u32;
-    pub const REFUSED: u32 = MotionState::Refused as u32;
-    pub const HOLDING: u32 = MotionState::Holding as u32;
-    pub const STOPPING: u32 = MotionState::Stopping as u32;
-    pub const PLAN: u32 = MotionState::Plan as u32;
-    pub const PLAN_OPEN_END: u64 = crate::PLAN_OPEN_END;
 }
 
 /// Who publishes a [`StateEvent`] / [`Heartbeat`].

@@ -130,16 +130,21 @@ pub fn run(args: Args, bench: Bench) -> Result<(), Box<dyn std::error::Error>> {
 fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
     use drive_bus::mapping::{Direction, Transmission};
     use drive_commissioning::commissioning::SdoOp;
+    use std::fmt::Write as _;
+    // Written at once at the end: a reader that closes the pipe early (`| head`) ends the
+    // output, not the process with a panic.
+    let mut out = String::new();
     let plans = drive_commissioning::commissioning::plan_all(cfg, None)?;
     for plan in &plans {
         let (n, eds) = (plan.node, &plan.eds);
-        println!(
+        writeln!(
+            out,
             "# {} node {n} ({}), EDS {} ({} SDO transfers)",
             plan.kind,
             plan.key,
             eds.file,
             plan.ops.len()
-        );
+        )?;
         for op in &plan.ops {
             let (index, sub) = op.index_sub();
             let text = |at, len| String::from_utf8_lossy(plan.bytes(at, len)).into_owned();
@@ -159,7 +164,7 @@ fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
                 ),
                 SdoOp::Read { .. } => ("read  ", String::new()),
             };
-            println!("{n:3} {what} {value:10}  {}", eds.describe(index, sub));
+            writeln!(out, "{n:3} {what} {value:10}  {}", eds.describe(index, sub))?;
         }
         for f in plan.pdo_frames() {
             let dir = match f.direction {
@@ -174,7 +179,8 @@ fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
                     event_timer_ms,
                 } => format!("on change, inhibit {inhibit_us} us, event timer {event_timer_ms} ms"),
             };
-            println!(
+            writeln!(
+                out,
                 "{n:3} frame  0x{:03X} DLC {} {dir}, {when}{}",
                 f.cob_id,
                 f.dlc,
@@ -183,16 +189,26 @@ fn print_plan(cfg: &DrivesConfig) -> Result<(), Box<dyn std::error::Error>> {
                 } else {
                     " (unused, cannot be disabled)"
                 }
-            );
+            )?;
         }
     }
     // The bus budget of every interface with these frames (docs/can-protocol.md "Bus budget").
     let budgets = drive_commissioning::budget::of_plans(cfg, &plans);
     for ib in &budgets {
-        print!("{ib}");
+        write!(out, "{ib}")?;
     }
+    write_stdout(&out)?;
     for ib in &budgets {
         ib.check()?;
     }
     Ok(())
+}
+
+/// Writes `text` to stdout; a closed pipe is the reader's choice, not an error.
+fn write_stdout(text: &str) -> std::io::Result<()> {
+    use std::io::Write as _;
+    match std::io::stdout().lock().write_all(text.as_bytes()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        r => r,
+    }
 }

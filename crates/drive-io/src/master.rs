@@ -13,7 +13,7 @@
 use crate::reset::ResetGrant;
 use can_transport::RxFrame;
 use crs_ipc::{
-    BusState, DriveFeedback, EventKind, JointSetpoint, MAX_CABLES, StateEvent, fault_code,
+    BusState, DriveFeedback, EventKind, FaultCode, JointSetpoint, MAX_CABLES, StateEvent,
 };
 use drive_bus::canopen::*;
 use drive_bus::eds::{Eds, sdo_abort_text};
@@ -83,12 +83,12 @@ enum Finding {
 }
 
 impl Finding {
-    fn code(self) -> u32 {
+    fn code(self) -> FaultCode {
         match self {
-            Self::TpdoTimeout | Self::ForceTpdoTimeout => fault_code::PDO_TIMEOUT,
-            Self::Fault | Self::FollowingError => fault_code::DRIVE_FAULT_BIT,
+            Self::TpdoTimeout | Self::ForceTpdoTimeout => FaultCode::PdoTimeout,
+            Self::Fault | Self::FollowingError => FaultCode::DriveFaultBit,
             Self::LeftOperation | Self::LeftNmtOperational | Self::IgnoresTarget => {
-                fault_code::UNEXPECTED_STATE
+                FaultCode::UnexpectedState
             }
         }
     }
@@ -233,7 +233,7 @@ pub struct Master {
     /// Setpoints of the stream never read by a cycle: a newer one was published before the
     /// cycle read the subscriber (sequence numbers skipped between two cycles' reads).
     superseded: u64,
-    /// motion-core announced the planned end of its setpoint stream (`motion_state::STOPPING`).
+    /// motion-core announced the planned end of its setpoint stream (`MotionState::Stopping`).
     stream_end: bool,
     /// The last applied setpoint commanded rest (every cable speed zero).
     last_at_rest: bool,
@@ -242,7 +242,7 @@ pub struct Master {
     setpoint_age: u32,
     applied_seq: u64,
     applied_this_cycle: bool,
-    fault_code: u32,
+    fault_code: FaultCode,
     fault_node: u32,
     last_emcy: u32,
     state_changed: bool,
@@ -368,7 +368,7 @@ impl Master {
             setpoint_age: 0,
             applied_seq: 0,
             applied_this_cycle: false,
-            fault_code: fault_code::NONE,
+            fault_code: FaultCode::None,
             fault_node: 0,
             last_emcy: 0,
             state_changed: true,
@@ -568,7 +568,7 @@ impl Master {
         };
         let mut ev = StateEvent::new(crs_ipc::ProcessId::DriveIo, kind, sequence);
         ev.state = self.state() as u32;
-        ev.detail = self.fault_code;
+        ev.detail = u32::from(self.fault_code);
         ev.detail_node = self.fault_node;
         Some(ev)
     }
@@ -580,7 +580,7 @@ impl Master {
         self.state_changed |= self.state() != before;
     }
 
-    fn stop(&mut self, state: BusState, code: u32, node: u8) {
+    fn stop(&mut self, state: BusState, code: FaultCode, node: u8) {
         // The first cause is kept: a fault must not be masked by its consequences.
         if matches!(self.phase, Phase::Stopped(BusState::Fault)) {
             return;
@@ -600,7 +600,7 @@ impl Master {
             } else {
                 tracing::error!(
                     ?state,
-                    code,
+                    ?code,
                     node,
                     "drive bus stopping: quick stop all drives"
                 );
@@ -676,7 +676,7 @@ impl Master {
             if (f.is_nan() || f.abs() > self.force_limit_n) && !booting {
                 let node = d.node;
                 tracing::error!(node, force_n = f, "cable force beyond the hard limit");
-                self.stop(BusState::Fault, fault_code::FORCE_LIMIT, node);
+                self.stop(BusState::Fault, FaultCode::ForceLimit, node);
             }
         }
         true
@@ -717,7 +717,7 @@ impl Master {
                         node,
                         "node booted mid-run (boot-up message): its configuration is lost; fault"
                     );
-                    self.stop(BusState::Fault, fault_code::UNEXPECTED_STATE, node);
+                    self.stop(BusState::Fault, FaultCode::UnexpectedState, node);
                 }
             }
             // Error code 0 is "error reset / no error": informational.
@@ -734,7 +734,7 @@ impl Master {
                     error_register = format_args!("{error_register:#04x}"),
                     "EMCY"
                 );
-                self.stop(BusState::Fault, fault_code::EMCY, node);
+                self.stop(BusState::Fault, FaultCode::Emcy, node);
             }
             Message::SdoResponse { data, .. } => self.on_sdo(i, &data),
             _ => {}
@@ -914,12 +914,12 @@ impl Master {
     /// Handles an error frame of the bus controller (the runner subscribes to them): bus-off
     /// and error-passive mean that RPDOs and SYNC may no longer reach the drives (and their
     /// TPDOs no longer reach us), so every drive is stopped (quick stop; latched `Fault`,
-    /// `fault_code::BUS_ERROR`, reset only through the monitor). Other conditions are logged.
+    /// `FaultCode::BusError`, reset only through the monitor). Other conditions are logged.
     pub fn on_bus_error(&mut self, error: &can_transport::BusErrorFrame) {
         let c = error.condition();
         if c.is_loss_of_communication() {
             tracing::error!(%error, "CAN bus {}: stopping every drive", c.name());
-            self.stop(BusState::Fault, fault_code::BUS_ERROR, 0);
+            self.stop(BusState::Fault, FaultCode::BusError, 0);
         } else {
             tracing::warn!(%error, "CAN error frame");
         }
@@ -940,20 +940,20 @@ impl Master {
             | CommissioningFault::CheckText { node, .. }
             | CommissioningFault::Protocol { node, .. } => node,
         };
-        self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
+        self.stop(BusState::Fault, FaultCode::BootTimeout, node);
     }
 
     /// Handles an e-stop event from the process bus (anyone may stop). A Reset event does
     /// nothing here: leaving the latch needs a [`ResetGrant`] ([`Master::reset`]).
-    /// motion-core's announced end of its stream (`motion_state::STOPPING`, published after
+    /// motion-core's announced end of its stream (`MotionState::Stopping`, published after
     /// its last setpoint) makes the silence that follows a planned end, not a stale stream —
     /// provided that last setpoint commanded rest (see the Running phase).
     pub fn on_event(&mut self, ev: &StateEvent, _now_ns: u64) {
         if ev.kind == EventKind::EStop as u32 {
-            self.stop(BusState::EStop, fault_code::NONE, 0);
+            self.stop(BusState::EStop, FaultCode::None, 0);
         } else if ev.kind == EventKind::StateChanged as u32
             && ev.source == crs_ipc::ProcessId::MotionCore as u32
-            && ev.state == crs_ipc::motion_state::STOPPING
+            && ev.motion_state() == Ok(crs_ipc::MotionState::Stopping)
         {
             self.stream_end = true;
         }
@@ -982,7 +982,7 @@ impl Master {
         tracing::info!(epoch, "reset: re-enabling drives");
         self.hb_inhibit = false;
         self.restart_nmt = std::mem::take(&mut self.nmt_stopped);
-        self.fault_code = fault_code::NONE;
+        self.fault_code = FaultCode::None;
         self.fault_node = 0;
         self.set_phase(Phase::Enable);
         self.boot_start_ns = Some(now_ns);
@@ -1049,7 +1049,7 @@ impl Master {
         }
         if let Some(node) = lost {
             tracing::error!(node, nodes = n_lost, "heartbeat lost");
-            self.stop(BusState::Fault, fault_code::HEARTBEAT_LOST, node);
+            self.stop(BusState::Fault, FaultCode::HeartbeatLost, node);
         }
     }
 
@@ -1073,7 +1073,7 @@ impl Master {
                 })
                 .map_or(0, |(_, (d, _))| d.node);
             tracing::error!(node, phase = ?self.phase, "boot timeout");
-            self.stop(BusState::Fault, fault_code::BOOT_TIMEOUT, node);
+            self.stop(BusState::Fault, FaultCode::BootTimeout, node);
         }
     }
 
@@ -1246,7 +1246,7 @@ impl Master {
             self.set_phase(Phase::Ready);
         } else if self.setpoint_age > self.stale_cycles {
             tracing::warn!(cycles = self.setpoint_age, "setpoints stale");
-            self.stop(BusState::StaleStop, fault_code::NONE, 0);
+            self.stop(BusState::StaleStop, FaultCode::None, 0);
         }
     }
 
@@ -1446,7 +1446,7 @@ impl Master {
             );
         }
         if !permit && !grace && matches!(self.phase, Phase::Ready | Phase::Running) {
-            self.stop(BusState::EStop, fault_code::NONE, 0);
+            self.stop(BusState::EStop, FaultCode::None, 0);
         }
         permit
     }
@@ -1459,7 +1459,7 @@ impl Master {
                 expected = self.m,
                 "setpoint cable count/version mismatch"
             );
-            self.stop(BusState::Fault, fault_code::SETPOINT_INVALID, 0);
+            self.stop(BusState::Fault, FaultCode::SetpointInvalid, 0);
             return false;
         }
         let mut counts = [0i32; MAX_CABLES];
@@ -1507,7 +1507,7 @@ impl Master {
                     length = sp.cable_length_m[i],
                     "setpoint cable length out of range"
                 );
-                self.stop(BusState::Fault, fault_code::SETPOINT_INVALID, node);
+                self.stop(BusState::Fault, FaultCode::SetpointInvalid, node);
                 return false;
             };
             // +2 counts: rounding of the commanded and the measured position.
@@ -1522,7 +1522,7 @@ impl Master {
                     periods,
                     "setpoint step exceeds max cable speed"
                 );
-                self.stop(BusState::Fault, fault_code::SETPOINT_STEP, node);
+                self.stop(BusState::Fault, FaultCode::SetpointStep, node);
                 return false;
             }
             // Acceleration: the step's speed may change by at most max_accel × Δt from the
@@ -1540,7 +1540,7 @@ impl Master {
                     periods,
                     "setpoint step accelerates the cable beyond max_cable_acceleration"
                 );
-                self.stop(BusState::Fault, fault_code::SETPOINT_STEP, node);
+                self.stop(BusState::Fault, FaultCode::SetpointStep, node);
                 return false;
             }
             vel[i] = v;
@@ -1578,7 +1578,7 @@ impl Master {
             Phase::Running => BusState::Running,
             Phase::Stopped(s) => s,
         } as u32;
-        f.fault_code = self.fault_code;
+        f.fault_code = u32::from(self.fault_code);
         f.fault_node = self.fault_node;
         f.last_emcy_code = self.last_emcy;
         f.setpoint_age_cycles = self.setpoint_age;

@@ -2,7 +2,7 @@
 
 use can_transport::RxFrame;
 use cia402_drive::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
-use crs_ipc::{BusState, JointSetpoint, fault_code};
+use crs_ipc::{BusState, FaultCode, JointSetpoint};
 use drive_bus::canopen::{self, BusFrames, Ds402State, FrameBuf, Message};
 use drive_bus::eds::{BUILTIN_WINCH_EDS, Eds};
 use drive_io::Master;
@@ -346,7 +346,7 @@ fn heartbeat_loss_faults_and_stops_all() {
         "fault after {k} cycles"
     );
     let fb = s.master.feedback();
-    assert_eq!(fb.fault_code, fault_code::HEARTBEAT_LOST);
+    assert_eq!(fb.fault().unwrap(), FaultCode::HeartbeatLost);
     assert_eq!(fb.fault_node, u32::from(s.cfg.winches[1].node_id));
     s.step(None);
     assert!(
@@ -367,8 +367,8 @@ fn invalid_setpoints_fault_without_moving() {
         s.step(Some(&sp));
         assert_eq!(s.master.state(), BusState::Fault);
         assert_eq!(
-            s.master.feedback().fault_code,
-            fault_code::SETPOINT_INVALID,
+            s.master.feedback().fault().unwrap(),
+            FaultCode::SetpointInvalid,
             "{bad}"
         );
     }
@@ -382,7 +382,10 @@ fn invalid_setpoints_fault_without_moving() {
         .collect();
     let sp = s.setpoint(1, &l);
     s.step(Some(&sp));
-    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    assert_eq!(
+        s.master.feedback().fault().unwrap(),
+        FaultCode::SetpointStep
+    );
     let mut s = Sim::new();
     s.boot();
     let l0: Vec<f64> = s.master.feedback().cable_length_m[..4].to_vec();
@@ -398,13 +401,19 @@ fn invalid_setpoints_fault_without_moving() {
     let l: Vec<f64> = l.iter().map(|x| x + 0.0055).collect();
     let sp = s.setpoint(seq + 1, &l); // stamped 1 ms after the previous one
     s.step(Some(&sp));
-    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    assert_eq!(
+        s.master.feedback().fault().unwrap(),
+        FaultCode::SetpointStep
+    );
     // Wrong cable count.
     let mut s = Sim::new();
     s.boot();
     let sp = s.setpoint(1, &[5.0; 3]);
     s.step(Some(&sp));
-    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_INVALID);
+    assert_eq!(
+        s.master.feedback().fault().unwrap(),
+        FaultCode::SetpointInvalid
+    );
 }
 
 #[test]
@@ -418,8 +427,8 @@ fn emcy_and_drive_fault_stop_all() {
     assert_eq!(s.master.state(), BusState::Fault);
     let fb = s.master.feedback();
     assert_eq!(
-        (fb.fault_code, fb.fault_node, fb.last_emcy_code),
-        (fault_code::EMCY, 4, 0x2310)
+        (fb.fault().unwrap(), fb.fault_node, fb.last_emcy_code),
+        (FaultCode::Emcy, 4, 0x2310)
     );
     s.step(None);
     for (i, sl) in s.slaves.iter().enumerate() {
@@ -457,7 +466,10 @@ fn a_force_beyond_the_hard_limit_stops_all_drives_on_drive_ios_own() {
     s.step(None);
     assert_eq!(s.master.state(), BusState::Fault);
     let fb = s.master.feedback();
-    assert_eq!((fb.fault_code, fb.fault_node), (fault_code::FORCE_LIMIT, 3));
+    assert_eq!(
+        (fb.fault().unwrap(), fb.fault_node),
+        (FaultCode::ForceLimit, 3)
+    );
     s.step(None);
     assert!(
         s.slaves
@@ -472,7 +484,7 @@ fn a_force_beyond_the_hard_limit_stops_all_drives_on_drive_ios_own() {
     let sp = s.setpoint(1, &l);
     s.step(Some(&sp));
     s.step(None);
-    assert_eq!(s.master.feedback().fault_code, fault_code::FORCE_LIMIT);
+    assert_eq!(s.master.feedback().fault().unwrap(), FaultCode::ForceLimit);
 }
 
 #[test]
@@ -493,14 +505,20 @@ fn the_step_limit_runs_on_drive_ios_own_clock_not_the_senders_timestamps() {
     let mut sp = s.setpoint(2, &l);
     sp.timestamp_ns += 100_000_000;
     s.step(Some(&sp));
-    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    assert_eq!(
+        s.master.feedback().fault().unwrap(),
+        FaultCode::SetpointStep
+    );
     // Sequence numbers that jump by 100 do not buy more than drive-io's own time + 1 period.
     let mut s = Sim::new();
     let l0 = start(&mut s);
     let mut sp = s.setpoint(101, &l);
     sp.timestamp_ns += 100_000_000;
     s.step(Some(&sp));
-    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    assert_eq!(
+        s.master.feedback().fault().unwrap(),
+        FaultCode::SetpointStep
+    );
     let _ = l0;
     // Two setpoints within one SYNC (phase slip): 2 periods of motion (9 mm at 4.5 m/s) pass.
     let mut s = Sim::new();
@@ -542,7 +560,10 @@ fn a_step_out_of_a_hold_is_acceleration_checked() {
     let l: Vec<f64> = l0.iter().map(|x| x + 0.0045).collect();
     let sp = s.setpoint(2, &l);
     s.step(Some(&sp));
-    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    assert_eq!(
+        s.master.feedback().fault().unwrap(),
+        FaultCode::SetpointStep
+    );
     for _ in 0..20 {
         s.step(None);
     }
@@ -565,7 +586,10 @@ fn a_step_out_of_a_hold_is_acceleration_checked() {
     let l: Vec<f64> = l0.iter().map(|x| x + 0.0045).collect();
     let sp = s.setpoint(31, &l);
     s.step(Some(&sp));
-    assert_eq!(s.master.feedback().fault_code, fault_code::SETPOINT_STEP);
+    assert_eq!(
+        s.master.feedback().fault().unwrap(),
+        FaultCode::SetpointStep
+    );
     // The same speed reached at the allowed acceleration, then an abrupt hold: fine.
     let mut s = Sim::new();
     s.boot();
@@ -614,8 +638,8 @@ fn a_superseded_setpoints_successor_read_early_is_no_speed_jump() {
         s.step_after(Some(&sp), 200_000);
         if faults {
             assert_eq!(
-                s.master.feedback().fault_code,
-                fault_code::SETPOINT_STEP,
+                s.master.feedback().fault().unwrap(),
+                FaultCode::SetpointStep,
                 "a doubled speed within one sequence number must fault"
             );
             continue;
@@ -669,7 +693,7 @@ fn bus_off_or_error_passive_stops_every_drive_and_latches() {
         }
         assert_eq!(s.master.state(), BusState::Fault, "{what}");
         assert!(s.master.is_latched());
-        assert_eq!(s.master.feedback().fault_code, fault_code::BUS_ERROR);
+        assert_eq!(s.master.feedback().fault().unwrap(), FaultCode::BusError);
         assert!(
             s.slaves
                 .iter()
@@ -969,7 +993,7 @@ fn rig_config() -> DrivesConfig {
 /// motion-core's end-of-stream announcement from `source`.
 fn stream_end(source: crs_ipc::ProcessId) -> crs_ipc::StateEvent {
     let mut ev = crs_ipc::StateEvent::new(source, crs_ipc::EventKind::StateChanged, 9);
-    ev.state = crs_ipc::motion_state::STOPPING;
+    ev.state = u32::from(crs_ipc::MotionState::Stopping);
     ev
 }
 
@@ -1182,7 +1206,7 @@ fn drives_torque_off_under_a_missing_heartbeat_is_one_e_stop_line() {
         "{lines:#?}"
     );
     assert_eq!(s.master.state(), BusState::EStop);
-    assert_eq!(s.master.feedback().fault_code, fault_code::NONE);
+    assert_eq!(s.master.feedback().fault().unwrap(), FaultCode::None);
     assert!(
         matches!(
             w.state(),
@@ -1220,8 +1244,8 @@ fn a_drive_leaving_operation_under_a_live_heartbeat_is_still_a_fault() {
     assert_eq!(s.master.state(), BusState::Fault);
     let fb = s.master.feedback();
     assert_eq!(
-        (fb.fault_code, fb.fault_node),
-        (fault_code::UNEXPECTED_STATE, 3)
+        (fb.fault().unwrap(), fb.fault_node),
+        (FaultCode::UnexpectedState, 3)
     );
     let e = errors(&lines);
     assert_eq!(e.len(), 2, "{lines:#?}");
@@ -1252,7 +1276,10 @@ fn every_drive_switching_off_is_one_fault_line_not_one_per_drive() {
     });
     let lines = cap.take();
     assert_eq!(s.master.state(), BusState::Fault);
-    assert_eq!(s.master.feedback().fault_code, fault_code::UNEXPECTED_STATE);
+    assert_eq!(
+        s.master.feedback().fault().unwrap(),
+        FaultCode::UnexpectedState
+    );
     assert_eq!(errors(&lines).len(), 2, "{lines:#?}");
 }
 
@@ -1272,7 +1299,10 @@ fn a_stall_that_silences_every_drive_is_one_heartbeat_line_and_one_stop() {
     });
     let lines = cap.take();
     assert_eq!(s.master.state(), BusState::Fault);
-    assert_eq!(s.master.feedback().fault_code, fault_code::HEARTBEAT_LOST);
+    assert_eq!(
+        s.master.feedback().fault().unwrap(),
+        FaultCode::HeartbeatLost
+    );
     assert_eq!(
         errors(&lines),
         [

@@ -118,3 +118,23 @@ fn the_daemon_refuses_to_start_without_the_heartbeat() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `drive-io --print-plan | head -0`: the reader has closed the pipe before drive-io writes;
+/// drive-io ends quietly with success, it does not panic on the broken pipe.
+#[test]
+fn print_plan_into_a_closed_pipe_ends_quietly() {
+    use std::process::{Command, Stdio};
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_drive-io"))
+        .arg("--config")
+        .arg(repo().join("config/drives.toml"))
+        .arg("--print-plan")
+        .stdout(Stdio::from(writer))
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(out.status.success(), "{:?}: {err}", out.status);
+}

@@ -6,7 +6,7 @@
 use can_transport::{CanFrame, RxFrame};
 use cia402_drive::force_node::ForceNode;
 use cia402_drive::slave::{DriveSlave, MotionDemand, SlaveEvent, WinchAxis};
-use crs_ipc::{BusState, JointSetpoint, fault_code};
+use crs_ipc::{BusState, FaultCode, JointSetpoint};
 use drive_bus::canopen::{self, BusFrames, Ds402State, FrameBuf, Message};
 use drive_bus::eds::Eds;
 use drive_bus::mapping::{Direction, Transmission};
@@ -408,8 +408,8 @@ fn statusword_bit_13_or_a_cell_beyond_the_force_limit_stops_every_drive() {
     let f = *r.master.feedback();
     assert_eq!(BusState::from_u32(f.bus_state), Some(BusState::Fault));
     assert_eq!(
-        (f.fault_code, f.fault_node),
-        (fault_code::DRIVE_FAULT_BIT, 2)
+        (f.fault().unwrap(), f.fault_node),
+        (FaultCode::DriveFaultBit, 2)
     );
 
     // A load cell reading beyond bus.force_hard_limit_n (14 kN): fault naming the cell.
@@ -419,7 +419,10 @@ fn statusword_bit_13_or_a_cell_beyond_the_force_limit_stops_every_drive() {
     r.step(None);
     r.step(None);
     let f = *r.master.feedback();
-    assert_eq!((f.fault_code, f.fault_node), (fault_code::FORCE_LIMIT, 34));
+    assert_eq!(
+        (f.fault().unwrap(), f.fault_node),
+        (FaultCode::ForceLimit, 34)
+    );
 
     // A cell that falls silent: its TPDO times out (300 ms).
     let mut r = Rig::new(config(""), &[vendor_eds(), vendor_eds()]);
@@ -431,8 +434,8 @@ fn statusword_bit_13_or_a_cell_beyond_the_force_limit_stops_every_drive() {
     let f = *r.master.feedback();
     assert_eq!(f.fault_node, 34, "code {}", f.fault_code);
     assert!(matches!(
-        f.fault_code,
-        fault_code::PDO_TIMEOUT | fault_code::HEARTBEAT_LOST
+        f.fault().unwrap(),
+        FaultCode::PdoTimeout | FaultCode::HeartbeatLost
     ));
 }
 

@@ -11,8 +11,8 @@
 
 use crate::emulator::{self, EmulatorConfig, EmulatorControl};
 use crs_ipc::{
-    BusState, DriveFeedback, EventKind, IpcNode, JointSetpoint, ProcessId, StateEvent,
-    TopicPublisher, TopicSubscriber, WakeupNotifier, fault_code, monotonic_ns,
+    BusState, DriveFeedback, EventKind, FaultCode, IpcNode, JointSetpoint, ProcessId, StateEvent,
+    TopicPublisher, TopicSubscriber, WakeupNotifier, monotonic_ns,
 };
 use drive_bus::canopen::{Ds402State, NmtState};
 use drive_io::runner;
@@ -673,7 +673,7 @@ pub fn scenario_heartbeat_loss(buses: &RigBuses, prefix: &str) -> Res<String> {
         return fail("no fault after heartbeat loss");
     };
     let node = rig.cfg.winches[victim].node_id;
-    if f.fault_code != fault_code::HEARTBEAT_LOST || f.fault_node != u32::from(node) {
+    if f.fault() != Ok(FaultCode::HeartbeatLost) || f.fault_node != u32::from(node) {
         return fail(format!(
             "fault {} node {}, expected HEARTBEAT_LOST node {node}",
             f.fault_code, f.fault_node

@@ -7,8 +7,8 @@
 //! error); the drives are another process.
 
 use crs_ipc::{
-    BusState, DriveFeedback, EventKind, IpcNode, JointSetpoint, ProcessId, StateEvent,
-    TopicPublisher, TopicSubscriber, fault_code, monotonic_ns,
+    BusState, DriveFeedback, EventKind, FaultCode, IpcNode, JointSetpoint, ProcessId, StateEvent,
+    TopicPublisher, TopicSubscriber, monotonic_ns,
 };
 use drive_bus::canopen::Ds402State;
 use drive_io::runner;
@@ -284,7 +284,7 @@ pub fn scenario_emcy(cfg: DrivesConfig, prefix: &str, node: u8, code: u16) -> Re
     let mut x = External::start(cfg, prefix)?;
     let l0 = boot(&mut x)?;
     let f = x.stream(Duration::from_secs(10), |_| l0.clone())?;
-    if f.fault_code != fault_code::EMCY
+    if f.fault() != Ok(FaultCode::Emcy)
         || f.fault_node != u32::from(node)
         || f.last_emcy_code != u32::from(code)
     {
@@ -301,10 +301,11 @@ pub fn scenario_emcy(cfg: DrivesConfig, prefix: &str, node: u8, code: u16) -> Re
 }
 
 /// A python drive stops its heartbeat (or reboots): drive-io faults with `want` naming it.
-pub fn scenario_fault(cfg: DrivesConfig, prefix: &str, node: u8, want: u32) -> Res<String> {
+pub fn scenario_fault(cfg: DrivesConfig, prefix: &str, node: u8, want: FaultCode) -> Res<String> {
     let mut x = External::start(cfg, prefix)?;
     let l0 = boot(&mut x)?;
     let f = x.stream(Duration::from_secs(10), |_| l0.clone())?;
+    let want = u32::from(want);
     if f.fault_code != want || f.fault_node != u32::from(node) {
         return Err(format!(
             "expected fault {want} from node {node}, got fault {} node {}",

@@ -361,7 +361,10 @@ fn motion_needs_a_verified_identity_holding_does_not() {
     m.on_identity(&PlatformIdentity::new(PlatformId::new(other), 8));
     let t = m.end_cycle(30_000_000).new_trip.expect("trip");
     assert!(
-        matches!(t.fault.cause, Cause::IdentityMissing | Cause::IdentityMismatch),
+        matches!(
+            t.fault.cause,
+            Cause::IdentityMissing | Cause::IdentityMismatch
+        ),
         "{:?}",
         t.fault.cause
     );

@@ -110,10 +110,10 @@ fn main() -> ExitCode {
         "run" => interop::scenario_run(cfg, &prefix),
         "emcy" => interop::scenario_emcy(cfg, &prefix, a.node, a.code),
         "heartbeat" => {
-            interop::scenario_fault(cfg, &prefix, a.node, crs_ipc::fault_code::HEARTBEAT_LOST)
+            interop::scenario_fault(cfg, &prefix, a.node, crs_ipc::FaultCode::HeartbeatLost)
         }
         "reboot" => {
-            interop::scenario_fault(cfg, &prefix, a.node, crs_ipc::fault_code::UNEXPECTED_STATE)
+            interop::scenario_fault(cfg, &prefix, a.node, crs_ipc::FaultCode::UnexpectedState)
         }
         "refused" => interop::scenario_refused(
             cfg,

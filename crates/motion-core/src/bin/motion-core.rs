@@ -89,7 +89,7 @@ struct IoxPorts {
     setpoint_ready: WakeupNotifier,
     notify_failures: u64,
     platform_identity: PlatformIdentity,
-    /// Sequence number of the plan's last setpoint (`motion_state::PLAN`): the
+    /// Sequence number of the plan's last setpoint (`MotionState::Plan`): the
     /// safety monitor accepts the end-of-stream announcement only after it.
     plan_end: u64,
     /// With `--control`: the current ride's end, which replaces `plan_end`.

@@ -59,7 +59,7 @@ pub struct RideSlot {
     /// The pose the loop's reference is at (f64 bits), consistent while idle.
     pose_bits: [AtomicU64; 6],
     /// Sequence number of the last setpoint of the current (or last) ride: the end of the
-    /// stream the safety monitor is told about (`crs_ipc::motion_state::PLAN`).
+    /// stream the safety monitor is told about (`crs_ipc::MotionState::Plan`).
     plan_end: AtomicU64,
     /// Rides the loop has taken.
     started: AtomicU64,

@@ -5,7 +5,7 @@
 //! braked drives.
 
 use crate::Res;
-use crate::configs::home_length;
+use crate::configs::{LOAD_CELL_EVERY_N_SYNCS, home_length};
 use crate::scenarios::reset_authority::{BusSpy, require_still_latched, spy_pairs};
 use crate::scenarios::{Outcome, ms, trip_ms};
 use crate::stack::{Stack, describe_answer, open_bus};
@@ -99,13 +99,20 @@ pub fn reset_from_foreign_process(st: &mut Stack) -> Res<Outcome> {
     })
 }
 
-/// The flutter's length (changes every 25 ms): a window of 8 out-of-band readings in 16 (one
-/// reading every 5 ms) trips within a few changes; 40 changes (1 s) is far past it.
+/// The flutter's length: a window of 8 out-of-band readings in 16 trips within a few changes;
+/// 40 changes is far past it.
 const FLUTTER_MAX_CHANGES: u32 = 40;
 
-/// One cable's load cell flutters between slack (200 N) and in band (3 kN) at 20 Hz: the
-/// window (8 of the last 16 readings) trips although no reading run is long, and it must trip
-/// while the flutter goes on.
+/// One phase of the flutter, in drive-io SYNC cycles: 5 load-cell readings (one every
+/// `LOAD_CELL_EVERY_N_SYNCS` SYNCs), 25 ms at the host's 1 kHz. Paced by drive-io's feedback,
+/// not by the harness's clock: in the emulated guest (4 ms SYNC, stalls) a phase of fixed
+/// wall time holds one or two readings, and the slack share of the window is then decided by
+/// aliasing, not by the flutter.
+const FLUTTER_PHASE_SYNCS: u64 = 5 * LOAD_CELL_EVERY_N_SYNCS as u64;
+
+/// One cable's load cell flutters between slack (200 N) and in band (3 kN), 5 readings each:
+/// the window (8 of the last 16 readings) trips although no reading run is long, and it must
+/// trip while the flutter goes on.
 pub fn flutter_force(st: &mut Stack) -> Res<Outcome> {
     let _ = st.fake()?.clone();
     st.wait_following(false)?;
@@ -117,15 +124,17 @@ pub fn flutter_force(st: &mut Stack) -> Res<Outcome> {
     loop {
         if n == FLUTTER_MAX_CHANGES {
             return Err(format!(
-                "the flutter was not caught: no trip in {n} changes ({} ms of 200 N / 3 kN)",
-                n * 25
+                "the flutter was not caught: no trip in {n} changes of 200 N / 3 kN, \
+                 {FLUTTER_PHASE_SYNCS} SYNC cycles each"
             ));
         }
         st.set_force(2, Some(if slack { 200.0 } else { 3_000.0 }))?;
         slack = !slack;
         n += 1;
-        std::thread::sleep(Duration::from_millis(25));
-        st.poll()?;
+        let f0 = st.feedback_count;
+        st.wait("one phase of the flutter (drive-io feedback)", 10.0, |s| {
+            Ok(!s.monitor_estops.is_empty() || s.feedback_count >= f0 + FLUTTER_PHASE_SYNCS)
+        })?;
         if !st.monitor_estops.is_empty() {
             break;
         }
@@ -139,7 +148,10 @@ pub fn flutter_force(st: &mut Stack) -> Res<Outcome> {
         cause: "force_slack cable 2 (flutter)".into(),
         detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
-        note: format!("200 N / 3 kN alternating every 25 ms; {n} changes before the trip"),
+        note: format!(
+            "200 N / 3 kN alternating every {FLUTTER_PHASE_SYNCS} SYNCs (5 load-cell readings); \
+             {n} changes before the trip"
+        ),
     })
 }
 

@@ -35,12 +35,35 @@ pub fn reset_refused_then_accepted(st: &mut Stack) -> Res<Outcome> {
     st.wait("the monitor's Reset event", 10.0, |s| {
         Ok(s.monitor_resets > 0)
     })?;
-    st.wait("drive-io re-enabled and following", 30.0, |s| {
+    // A trip after the accepted reset ends the wait at once, naming its cause; a timeout
+    // says which of the three conditions was still missing.
+    let estops_before = st.monitor_estops.len();
+    let mut missing = String::new();
+    let waited = st.wait("drive-io re-enabled and following", 30.0, |s| {
+        if let Some(e) = s.monitor_estops.get(estops_before) {
+            return Err(format!(
+                "the monitor tripped again after the accepted reset: cause {:?} (cable {})",
+                Cause::from_code(e.detail),
+                e.detail_node
+            ));
+        }
         let e = s.emu()?;
-        Ok(matches!(s.bus_state(), Some(BusState::Running))
-            && e.drives.iter().all(|d| d.demand == DEMAND_FOLLOW)
-            && !e.inhibit)
-    })?;
+        let bus = s.bus_state();
+        let not_following = e
+            .drives
+            .iter()
+            .filter(|d| d.demand != DEMAND_FOLLOW)
+            .count();
+        missing = format!(
+            "drive-io bus state {bus:?}, {not_following} drive(s) not following, emulator \
+             inhibit {}",
+            e.inhibit
+        );
+        Ok(matches!(bus, Some(BusState::Running)) && not_following == 0 && !e.inhibit)
+    });
+    if let Err(e) = waited {
+        return Err(format!("{e} (last seen: {missing})"));
+    }
     let back_ms = (monotonic_ns() - t_reset) as f64 * 1e-6;
     // End of the scenario: the publisher stops => braked again.
     c.paused.store(true, Ordering::Relaxed);
