@@ -1060,21 +1060,41 @@ fn an_announced_end_in_motion_or_from_another_process_is_still_a_stale_stop() {
     }
 }
 
-/// The log lines a test's code emits (a minimal `tracing` subscriber, installed for one
-/// closure on this thread): level and message of every event.
+/// The log lines a test's code emits: level and message of every event of one closure on
+/// this thread. One process-wide subscriber routes each event to the capture of its thread:
+/// a subscriber set per thread (`with_default`) lost events now and then while tests ran in
+/// parallel (tracing caches a call site's interest process-wide, and a site first reached
+/// on a thread without that subscriber can be cached as uninteresting).
 #[derive(Clone, Default)]
-struct Capture(std::sync::Arc<std::sync::Mutex<Vec<(tracing::Level, String)>>>);
+struct Capture(Lines);
+
+type Lines = std::sync::Arc<std::sync::Mutex<Vec<(tracing::Level, String)>>>;
+
+thread_local! {
+    static CAPTURING: std::cell::RefCell<Option<Lines>> = const { std::cell::RefCell::new(None) };
+}
 
 impl Capture {
     fn run<R>(&self, f: impl FnOnce() -> R) -> R {
-        tracing::subscriber::with_default(self.clone(), f)
+        static ROUTER: std::sync::Once = std::sync::Once::new();
+        ROUTER.call_once(|| {
+            tracing::subscriber::set_global_default(Router).expect("the only global subscriber");
+        });
+        tracing::callsite::rebuild_interest_cache();
+        CAPTURING.with(|c| *c.borrow_mut() = Some(self.0.clone()));
+        let r = f();
+        CAPTURING.with(|c| *c.borrow_mut() = None);
+        r
     }
     fn take(&self) -> Vec<(tracing::Level, String)> {
         std::mem::take(&mut *self.0.lock().unwrap())
     }
 }
 
-impl tracing::Subscriber for Capture {
+/// The process-wide subscriber of [`Capture`].
+struct Router;
+
+impl tracing::Subscriber for Router {
     fn enabled(&self, _: &tracing::Metadata<'_>) -> bool {
         true
     }
@@ -1092,9 +1112,13 @@ impl tracing::Subscriber for Capture {
                 }
             }
         }
-        let mut m = Message(String::new());
-        e.record(&mut m);
-        self.0.lock().unwrap().push((*e.metadata().level(), m.0));
+        CAPTURING.with(|c| {
+            if let Some(lines) = &*c.borrow() {
+                let mut m = Message(String::new());
+                e.record(&mut m);
+                lines.lock().unwrap().push((*e.metadata().level(), m.0));
+            }
+        });
     }
     fn enter(&self, _: &tracing::span::Id) {}
     fn exit(&self, _: &tracing::span::Id) {}

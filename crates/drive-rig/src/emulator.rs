@@ -96,6 +96,11 @@ pub struct EmulatorControl {
     /// safety HIL matrix needs; the emulator has no physics).
     force_override_mask: AtomicU32,
     force_override_mn: [AtomicI32; MAX_CABLES],
+    /// When the emulation loop first reported winch i's current override (CLOCK_MONOTONIC ns,
+    /// 0: not yet, or no override): the instant the injected force exists for the load cell,
+    /// which a harness measures detection from (the control file's polling is the rig's
+    /// latency, not the system's).
+    force_override_applied_ns: [AtomicU64; MAX_CABLES],
     /// Safety I/O node inputs: bit 0 e-stop circuit OPEN (button pressed), bit 1 reset key
     /// turned (0 = released button, key at rest: the default).
     pub io_inputs: AtomicU8,
@@ -156,11 +161,18 @@ impl EmulatorControl {
     pub fn left_follow_ns(&self, i: usize) -> u64 {
         self.left_follow_ns[i].load(Ordering::Acquire)
     }
+    /// When the loop first reported winch `i`'s current force override (0: not yet / none).
+    pub fn force_override_applied_ns(&self, i: usize) -> u64 {
+        self.force_override_applied_ns
+            .get(i)
+            .map_or(0, |t| t.load(Ordering::Acquire))
+    }
     /// Makes winch `i` report `force_n` (None: the normal stand-in) from its next SYNC on.
     pub fn set_force_override(&self, i: usize, force_n: Option<f64>) {
         if i >= MAX_CABLES {
             return;
         }
+        self.force_override_applied_ns[i].store(0, Ordering::Release);
         match force_n {
             Some(f) => {
                 let mn = (f * 1000.0).clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32;
@@ -176,6 +188,12 @@ impl EmulatorControl {
     /// The measured force winch `i` reports (mN), given the stand-in's.
     fn reported_force_mn(&self, i: usize, stand_in_mn: i32) -> i32 {
         if self.force_override_mask.load(Ordering::Acquire) & (1 << i) != 0 {
+            let _ = self.force_override_applied_ns[i].compare_exchange(
+                0,
+                crs_ipc::monotonic_ns(),
+                Ordering::AcqRel,
+                Ordering::Relaxed,
+            );
             self.force_override_mn[i].load(Ordering::Acquire)
         } else {
             stand_in_mn

@@ -13,6 +13,8 @@ pub struct DriveStatus {
     pub statusword: u16,
     pub demand: u8,
     pub left_follow_ns: u64,
+    /// When the emulation loop first reported this winch's injected force (0: not yet/none).
+    pub force_override_applied_ns: u64,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -39,13 +41,14 @@ pub fn parse_status(text: &str) -> Option<EmuStatus> {
                 s.safety_tripped_ns = f[5].parse().ok()?;
                 header = true;
             }
-            Some(&"drive") if f.len() == 8 => s.drives.push(DriveStatus {
+            Some(&"drive") if f.len() == 9 => s.drives.push(DriveStatus {
                 length_m: f[2].parse().ok()?,
                 velocity_m_per_s: f[3].parse().ok()?,
                 nmt: f[4].parse().ok()?,
                 statusword: f[5].parse().ok()?,
                 demand: f[6].parse().ok()?,
                 left_follow_ns: f[7].parse().ok()?,
+                force_override_applied_ns: f[8].parse().ok()?,
             }),
             _ => {}
         }
@@ -104,7 +107,7 @@ mod tests {
     fn status_files_parse_and_partial_ones_do_not() {
         let mut text = String::from("emulator 123 45 1 2 99\n");
         for i in 0..8 {
-            text.push_str(&format!("drive {i} 6.5 0.0 5 4663 2 0\n"));
+            text.push_str(&format!("drive {i} 6.5 0.0 5 4663 2 0 {}\n", 1000 + i));
         }
         let s = parse_status(&text).expect("a complete status");
         assert_eq!(
@@ -113,6 +116,7 @@ mod tests {
         );
         assert_eq!(s.drives.len(), 8);
         assert_eq!(s.drives[3].demand, DEMAND_FOLLOW);
+        assert_eq!(s.drives[5].force_override_applied_ns, 1005);
         // A status written half (7 drives) or with a bad number is no status.
         let cut: String = text.lines().take(8).map(|l| format!("{l}\n")).collect();
         assert!(parse_status(&cut).is_none());

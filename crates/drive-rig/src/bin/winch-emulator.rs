@@ -118,7 +118,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
 /// Status file format (one record per line, space separated):
 /// `emulator <monotonic_ns> <syncs> <safety_inhibit 0|1> <safety_trips> <safety_tripped_ns>` then
 /// per drive `drive <i> <length_m> <velocity_m_per_s> <nmt code> <statusword> <demand 0 hold|1
-/// quick stop|2 follow> <left_follow_ns>`.
+/// quick stop|2 follow> <left_follow_ns> <force_override_applied_ns>`.
 fn write_status_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
     use std::fmt::Write as _;
     let tmp = path.with_extension("tmp");
@@ -142,13 +142,14 @@ fn write_status_loop(path: &std::path::Path, c: &EmulatorControl, m: usize) {
             for i in 0..m {
                 let _ = writeln!(
                     text,
-                    "drive {i} {:.9} {:.9} {} {} {} {}",
+                    "drive {i} {:.9} {:.9} {} {} {} {} {}",
                     c.length_m(i),
                     c.velocity_m_per_s(i),
                     c.nmt_state(i).map_or(255, |s| s.code()),
                     c.ds402_state(i).statusword(),
                     c.demand_code(i),
-                    c.left_follow_ns(i)
+                    c.left_follow_ns(i),
+                    c.force_override_applied_ns(i)
                 );
             }
         });

@@ -7,11 +7,13 @@ use safety_monitor::Cause;
 
 /// One cable's measured force leaves [f_min − 500 N, f_max + 1000 N] (test cabin: 1000 /
 /// 9000 N) and stays there: the monitor's force check (8 of the last 16 readings) trips on that
-/// cable.
+/// cable. Timed from the instant the emulation loop first reported the injected force (the
+/// fault exists for the load cell); how long the emulator took to read the control file is
+/// the rig's latency and is printed separately.
 pub fn force_fault(st: &mut Stack, cable: usize, force_n: f64, cause: Cause) -> Res<Outcome> {
     let _ = st.fake()?.clone();
     st.wait_following(false)?;
-    let t0 = st.inject();
+    let written = st.inject();
     st.set_force(cable, Some(force_n))?;
     let ev = st.monitor_trip(cause, 10.0)?;
     if ev.detail_node as usize != cable {
@@ -21,12 +23,21 @@ pub fn force_fault(st: &mut Stack, cable: usize, force_n: f64, cause: Cause) -> 
         ));
     }
     let stopped = st.require_braked()?;
+    let t0 = st.emu()?.drives[cable - 1].force_override_applied_ns;
+    if t0 < written {
+        return Err(format!(
+            "the emulator's status does not show when it applied the injected force on cable \
+             {cable} (applied_ns {t0}, control file written at {written})"
+        ));
+    }
     Ok(Outcome {
         cause: format!("{cause} cable {cable}"),
         detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
         note: format!(
-            "emulated load cell reports {force_n} N (t0 = control file written; 8 of 16 readings)"
+            "emulated load cell reports {force_n} N (t0 = the emulator's first pass with it, \
+             {:.1} ms after the control file was written; 8 of 16 readings)",
+            (t0 - written) as f64 * 1e-6
         ),
     })
 }

@@ -14,9 +14,6 @@ use crate::Res;
 use crate::configs::LOAD_CELL_EVERY_N_SYNCS;
 use crate::scenarios::Outcome;
 
-/// The winch emulator re-reads its control file (injected forces) this often.
-pub const CONTROL_FILE_POLL_MS: f64 = 5.0;
-
 /// The monitor's cycle of the generated config (`[monitor] cycle_ms`).
 pub const MONITOR_CYCLE_MS: f64 = 15.0;
 
@@ -88,19 +85,12 @@ pub fn bound(name: &str, t: &TimingArgs) -> Option<Bound> {
             )) + 2.0,
             t,
         ),
-        // 8 of the last 16 load-cell readings out of band: the emulator's control file is
-        // read every 5 ms, then 8 readings, then the monitor's cycle.
+        // 8 of the last 16 load-cell readings out of band, from the emulator's first pass
+        // with the injected force (the first reading goes out within one reading period),
+        // then the monitor's cycle.
         "overload_one_cable" | "slack_one_cable" => {
             let readings = 8.0 * f64::from(LOAD_CELL_EVERY_N_SYNCS) * t.period_ms;
-            by_monitor(
-                2.0 + (CONTROL_FILE_POLL_MS + readings) / MONITOR_CYCLE_MS,
-                t,
-            )
-        }
-        // One reading beyond the hard limit trips at once.
-        "force_hard_limit_negative" => {
-            let reading = f64::from(LOAD_CELL_EVERY_N_SYNCS) * t.period_ms;
-            by_monitor(2.0 + (CONTROL_FILE_POLL_MS + reading) / MONITOR_CYCLE_MS, t)
+            by_monitor(2.0 + readings / MONITOR_CYCLE_MS, t)
         }
         // Nothing on the monitor detects it: the drives' watch brakes after the SCT.
         "kill_monitor" | "corrupted_safety_frame" => Bound {
@@ -212,9 +202,10 @@ mod tests {
 
     #[test]
     fn the_force_window_bound_counts_eight_load_cell_readings() {
-        // 5 ms control file + 8 readings every 5 SYNCs at 1 kHz + 2 cycles.
+        // 8 readings every 5 SYNCs at 1 kHz + 2 cycles, from the emulator's first pass with
+        // the injected force.
         let b = bound("overload_one_cable", &HOST).expect("bounded");
-        assert!((b.detect_ms.expect("monitor") - (5.0 + 40.0 + 30.0)).abs() < 1e-9);
+        assert!((b.detect_ms.expect("monitor") - (40.0 + 30.0)).abs() < 1e-9);
     }
 
     #[test]
