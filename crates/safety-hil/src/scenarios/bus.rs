@@ -8,6 +8,7 @@ use crate::stack::{Stack, open_bus};
 use crs_ipc::monotonic_ns;
 use safety_monitor::Cause;
 use std::sync::atomic::Ordering;
+use std::time::Duration;
 
 pub fn corrupted_safety_frame(st: &mut Stack) -> Res<Outcome> {
     let _ = st.fake()?.clone();
@@ -58,9 +59,25 @@ pub fn forged_rpdo_with(st: &mut Stack, controlword: u16) -> Res<Outcome> {
     let counts_per_m = 10.0 * 1_048_576.0 / (std::f64::consts::PI * 0.305);
     let target = 200_000_000.0 - (home_length() + 0.3) * counts_per_m;
     let f = safety_monitor::bus_frames::rpdo1(4, controlword, target.round() as i32);
+    // A faulty adapter sends its RPDO every SYNC period until it is stopped: one frame lost
+    // by the emulated guest's bus (a stalled hub) must not decide the scenario. On the host
+    // the timing bound still holds the monitor to the first frame.
     let t0 = monotonic_ns();
-    bus.send(&f).map_err(|e| e.to_string())?;
-    let ev = st.monitor_trip(Cause::RpdoMismatch, 10.0)?;
+    let period = Duration::from_micros(u64::from(st.period_us));
+    let mut sent = 0u32;
+    while st.monitor_estops.is_empty() {
+        if monotonic_ns() - t0 > 10_000_000_000 {
+            return Err(format!(
+                "no trip in 10 s of forged RPDOs ({sent} sent, one per {} us)",
+                st.period_us
+            ));
+        }
+        bus.send(&f).map_err(|e| e.to_string())?;
+        sent += 1;
+        std::thread::sleep(period);
+        st.poll()?;
+    }
+    let ev = st.monitor_trip(Cause::RpdoMismatch, 1.0)?;
     if ev.detail_node != 4 {
         return Err(format!("tripped on cable {}, expected 4", ev.detail_node));
     }
@@ -69,7 +86,10 @@ pub fn forged_rpdo_with(st: &mut Stack, controlword: u16) -> Res<Outcome> {
         cause: "rpdo_mismatch cable 4".into(),
         detect_ms: trip_ms(t0, ev.timestamp_ns),
         stop_ms: ms(t0, stopped),
-        note: format!("forged RPDO1 (controlword {controlword:#06x}) 300 mm off φ*(x)"),
+        note: format!(
+            "forged RPDO1 (controlword {controlword:#06x}) 300 mm off φ*(x), {sent} sent \
+             before the trip"
+        ),
     })
 }
 
