@@ -29,6 +29,10 @@ use std::time::{Duration, Instant};
 /// the key: ten times the shipped `reset_clear_cycles` (3).
 pub const CLEAN_SETPOINTS_BEFORE_KEY: u64 = 30;
 
+/// Monitor cycles (its heartbeats) after those setpoints before the key: twice the shipped
+/// `reset_clear_cycles`.
+pub const MONITOR_CYCLES_BEFORE_KEY: u64 = 6;
+
 pub struct Stack {
     pub name: &'static str,
     pub dir: PathBuf,
@@ -413,6 +417,14 @@ impl Stack {
             Ok(c.published.load(std::sync::atomic::Ordering::Relaxed)
                 >= p0 + CLEAN_SETPOINTS_BEFORE_KEY)
         })?;
+        // Published is not yet seen: a monitor the emulated guest stalled may not have run
+        // the cycles its clear evidence needs over them.
+        let h0 = self.monitor_heartbeats;
+        self.wait(
+            "the monitor's cycles over the finite setpoints",
+            20.0,
+            |s| Ok(s.monitor_heartbeats >= h0 + MONITOR_CYCLES_BEFORE_KEY),
+        )?;
         Ok(())
     }
 
