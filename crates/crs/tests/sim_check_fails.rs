@@ -1,5 +1,5 @@
 //! `crs sim --check` fails each way the README says a pass rules out: every branch of the
-//! verdict (`crs_stack::sim_run::Summary::check_failures`, and a run that does not complete)
+//! verdict (`sim_runs::sim_run::Summary::check_failures`, and a run that does not complete)
 //! with a run of the real stack that must fail it, for the reason the verdict names. The other
 //! stack tests only ever see `SIM-CHECK: PASS`; a verdict that could not fail would pass them.
 //!

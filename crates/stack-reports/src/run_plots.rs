@@ -11,7 +11,7 @@
 //! Routine events (motion-core's plan announcement and the monitor's epoch announcement, each
 //! about once a second) are kept only when they change something.
 
-use crate::sim_run::Summary;
+use sim_runs::sim_run::Summary;
 use cdpr_model::Pose;
 use crs_console::status::{
     bus_state_name, describe_event, monitor_state_name, motion_state_name, process_name,

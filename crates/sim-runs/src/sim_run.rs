@@ -22,8 +22,8 @@
 
 use crate::campaign::{timed_waypoints, write_waypoints};
 use crate::rest_recording::{RestErrors, RestRecorder, rest_errors, to_dataset};
-use crate::supervisor::{self, Supervisor};
-use crate::transport;
+use crs_supervisor::supervisor::{self, Supervisor};
+use crs_supervisor::transport;
 use cdpr_model::Pose;
 use cdpr_model::config::load_platform;
 use crs_ipc::{
@@ -166,7 +166,7 @@ pub struct Summary {
     pub cueing: Option<crate::cueing_run::CueingSummary>,
     /// The wire model's final statistics per bus (load, frames dropped at a full transmit
     /// queue, worst frame latency); empty without the hub (`--transport udpbus` / explicit).
-    pub wire: Vec<crate::transport::WireSummary>,
+    pub wire: Vec<crs_supervisor::transport::WireSummary>,
     pub duration_s: f64,
 }
 
@@ -381,7 +381,7 @@ pub enum SimError {
     )]
     OperatorStartWithoutRide,
     #[error(transparent)]
-    Transport(#[from] crate::transport::BadTransport),
+    Transport(#[from] crs_supervisor::transport::BadTransport),
     #[error("{}: {source}", drives.display())]
     Budget {
         drives: PathBuf,

@@ -24,9 +24,9 @@
 //! (identification by `calibration_output`, the fit by `surrogate_evaluation`), showing its
 //! progress through the caller's [`Progress`](crate::progress::Progress).
 
-use crate::campaign::timed_waypoints;
-use crate::campaign::write_waypoints;
-use crate::sim_run::{self, SimOptions, Summary};
+use sim_runs::campaign::timed_waypoints;
+use sim_runs::campaign::write_waypoints;
+use sim_runs::sim_run::{self, SimOptions, Summary};
 use calibrate::Observation;
 use calibrate::pipeline::PipelineReport;
 use calibrate::{from_dataset, split};
@@ -98,7 +98,7 @@ pub enum LoopError {
     },
     /// Writing or timing the campaign.
     #[error(transparent)]
-    Campaign(#[from] crate::campaign::CampaignError),
+    Campaign(#[from] sim_runs::campaign::CampaignError),
     /// The controller cannot be configured for the nominal platform.
     #[error(transparent)]
     Configure(#[from] lifecycle::ConfigureError),
@@ -209,7 +209,7 @@ pub trait LoopTools {
 }
 
 /// The loop's tools from this library: the surrogate fit of `crs surrogate fit`
-/// ([`fit_platform`](crate::surrogate_evaluation::fit_platform)) and the identification of
+/// ([`fit_platform`](plant_experiments::surrogate_evaluation::fit_platform)) and the identification of
 /// `crs calibrate run --no-extension --ridge-kf λ`, every other option at its default
 /// ([`identify_and_report`](crate::calibration_output::identify_and_report)); `progress` shows
 /// them running.
@@ -225,7 +225,7 @@ impl LoopTools for StackTools<'_> {
     ) -> Result<(surrogate::Surrogate, surrogate::FitReport), surrogate::FitError> {
         self.progress
             .start(&format!("fitting the surrogate of `{}`", pf.name));
-        let r = crate::surrogate_evaluation::fit_platform(pf, opts);
+        let r = plant_experiments::surrogate_evaluation::fit_platform(pf, opts);
         self.progress.finish();
         r
     }
