@@ -12,7 +12,7 @@
 //! One branch has no run here: plant steps without equilibrium. No plant the shipped configs
 //! can express loses its equilibrium along a plan motion-core accepts (a cabin too heavy to
 //! tension at home stops sim-plant at start instead); the branch is covered by the verdict's
-//! unit test in crates/crs-stack/src/sim_run.rs.
+//! unit test in crates/sim-runs/src/sim_run.rs.
 mod common;
 use common::{root, stack_bin_dir};
 use std::io::{BufRead, BufReader, Read, Write};
