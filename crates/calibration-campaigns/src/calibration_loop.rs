@@ -24,15 +24,15 @@
 //! (identification by `calibration_output`, the fit by `surrogate_evaluation`), showing its
 //! progress through the caller's [`Progress`](crate::progress::Progress).
 
-use sim_runs::campaign::timed_waypoints;
-use sim_runs::campaign::write_waypoints;
-use sim_runs::sim_run::{self, SimOptions, Summary};
 use calibrate::Observation;
 use calibrate::pipeline::PipelineReport;
 use calibrate::{from_dataset, split};
 use cdpr_model::config::{Platform, load_platform};
 use motion_core::daemon::lifecycle;
 use motion_core::daemon::trajectory;
+use sim_runs::campaign::timed_waypoints;
+use sim_runs::campaign::write_waypoints;
+use sim_runs::sim_run::{self, SimOptions, Summary};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -7,8 +7,8 @@
 //! afford on two cores.
 
 use bench_plant::Kind;
-use cdpr_model::config::load_platform;
 use calibration_campaigns::diagnosis_bench::{BenchConfig, Generator, RunResult, independent_run};
+use cdpr_model::config::load_platform;
 use std::path::PathBuf;
 
 fn config() -> BenchConfig {

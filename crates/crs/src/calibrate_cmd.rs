@@ -7,11 +7,11 @@ use calibrate::Observation;
 use calibrate::effects::Effect;
 use calibrate::pipeline::{PipelineConfig, PipelineReport};
 use calibrate::repeatability::RepeatabilityConfig;
-use cdpr_model::config::Platform;
-use clap::Args;
 use calibration_campaigns::calibration_output::{self, Identification};
 use calibration_campaigns::diagnosis_bench::{BenchConfig, Generator, run as run_bench};
 use calibration_campaigns::progress::Spinner;
+use cdpr_model::config::Platform;
+use clap::Args;
 use std::path::PathBuf;
 
 #[derive(clap::Subcommand, Debug)]

@@ -5,8 +5,8 @@
 //! points before and after. `crs calibrate campaign` makes the campaign file.
 
 use calibration_campaigns::calibration_loop::{LoopOptions, StackTools};
-use sim_runs::campaign::{self, CampaignRequest};
 use calibration_campaigns::progress::Spinner;
+use sim_runs::campaign::{self, CampaignRequest};
 use std::path::PathBuf;
 
 type BoxErr = Box<dyn std::error::Error>;

@@ -4,8 +4,8 @@
 
 use crate::sim_cmd::SimArgs;
 use calibration_campaigns::commission::{self, CommissionConfig, Verdict};
-use stack_reports::commission_report::CommissionReport;
 use plant_experiments::load_experiment::{self, WalkConfig};
+use stack_reports::commission_report::CommissionReport;
 use std::path::PathBuf;
 
 type BoxErr = Box<dyn std::error::Error>;

@@ -3,10 +3,10 @@
 //! writes the summary) plus the `--check` verdict.
 
 use crate::console_cmd::SimConsoleArgs;
-use sim_runs::platforms;
-use stack_reports::sim_observer::SimObserver;
-use sim_runs::sim_run::{SimOptions, execute_observed};
 use crs_supervisor::timing::TimingProfile;
+use sim_runs::platforms;
+use sim_runs::sim_run::{SimOptions, execute_observed};
+use stack_reports::sim_observer::SimObserver;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]

@@ -242,7 +242,8 @@ fn plant(ctx: &Context) -> Result<Figures, FiguresError> {
             ..Default::default()
         };
         let out = ctx.scratch.join(format!("plant-{key}.csv"));
-        let rec = plant_experiments::plant_record::record(cfg, &camp, &out).map_err(|e| f(e.to_string()))?;
+        let rec = plant_experiments::plant_record::record(cfg, &camp, &out)
+            .map_err(|e| f(e.to_string()))?;
         let e =
             pose_errors(&rec.result.dataset).ok_or_else(|| f(format!("{key}: no pose sample")))?;
         let reference_poses = rec
@@ -288,8 +289,9 @@ fn surrogate_fit(ctx: &Context) -> Result<Figures, FiguresError> {
         let pf =
             cdpr_model::config::load_platform(ctx.root.join(format!("config/{platform}.toml")))
                 .map_err(|e| f(e.to_string()))?;
-        let (_, r) = plant_experiments::surrogate_evaluation::fit_platform(&pf, &Default::default())
-            .map_err(|e| f(e.to_string()))?;
+        let (_, r) =
+            plant_experiments::surrogate_evaluation::fit_platform(&pf, &Default::default())
+                .map_err(|e| f(e.to_string()))?;
         put(&mut m, &format!("{key}.condition"), r.condition_number);
         put(
             &mut m,

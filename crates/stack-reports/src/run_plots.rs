@@ -11,7 +11,6 @@
 //! Routine events (motion-core's plan announcement and the monitor's epoch announcement, each
 //! about once a second) are kept only when they change something.
 
-use sim_runs::sim_run::Summary;
 use cdpr_model::Pose;
 use crs_console::status::{
     bus_state_name, describe_event, monitor_state_name, motion_state_name, process_name,
@@ -20,6 +19,7 @@ use crs_ipc::{
     EventKind, JointSetpoint, LoopStatsSample, MAX_CABLES, PLAN_OPEN_END, PlantTruth, ProcessId,
     StateEvent,
 };
+use sim_runs::sim_run::Summary;
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 

@@ -1,10 +1,10 @@
 //! What `crs sim` runs next to the stack ([`RunObserver`]): the operator console while the run
 //! lasts (`--console ADDR`) and the run's report (`<out>/index.html` + its plots, [`run_plots`]).
 
-use sim_runs::console_setup::console_config;
 use crate::run_plots::{self, RunRecord};
-use sim_runs::sim_run::{RunObserver, RunStart, Summary};
 use crs_ipc::{JointSetpoint, LoopStatsSample, PlantTruth, StateEvent};
+use sim_runs::console_setup::console_config;
+use sim_runs::sim_run::{RunObserver, RunStart, Summary};
 use std::net::SocketAddr;
 use std::path::Path;
 
