@@ -24,7 +24,7 @@ T=$(cd "$T" && pwd)
 EXTRA=""; for b in $BINS; do [ "$b" = crs ] || EXTRA="$EXTRA $T/$b"; done
 LOG=$(mktemp); trap 'rm -f "$LOG"' EXIT
 # The guest gets config/ and tests/hil/ (the inner tours and the guest script). Its timing is
-# the `emulated` profile of crs_stack::timing, written by `crs sim --timing emulated` itself
+# the `emulated` profile of crs_supervisor::timing, written by `crs sim --timing emulated` itself
 # (TCG cannot run four 1 kHz processes; a 1 ms loop there stalls for up to a second): 4 ms loop
 # and SYNC, no SCHED_FIFO/mlockall, watchdogs scaled to match, 0.1 of the demo speed, through
 # the inner waypoints of each tour (tests/hil/waypoints-*.csv say why). Everything else

@@ -1,6 +1,6 @@
 #!/bin/sh
 # Runs inside the vcan guest (tools/stack-hil.sh): both cabins in one boot, each with the
-# `emulated` timing profile (crs_stack::timing) and its inner tour, on the wire model over real
+# `emulated` timing profile (crs_supervisor::timing) and its inner tour, on the wire model over real
 # vcan (`--transport vcan`: a vcan port per process and interface, can-wire forwarding).
 rc=0
 for p in icosahedron helicopter; do

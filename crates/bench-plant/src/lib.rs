@@ -9,7 +9,7 @@
 //! * The equilibrium is the minimum of the robot's potential energy ([`equilibrium`]) with
 //!   cable lengths from plant-oracle (pulleys from the tangent condition); every force
 //!   direction, moment arm and end force comes out of differences of energies. No structure
-//!   matrix, no φ_el, no cdpr-model, no nalgebra (`crates/crs-stack/tests/layering.rs`).
+//!   matrix, no φ_el, no cdpr-model, no nalgebra (`crates/crs/tests/layering.rs`).
 //! * Each effect has its own physics and its own parameters ([`scenario::Kind`]): drum radius
 //!   errors counted from the set-up or from zero and a rope-layer step; length hysteresis
 //!   switched by the command direction or by the force direction, with and without a dead
@@ -22,7 +22,7 @@
 //!   ([`campaign`]), read through a noisy tracker and load cells.
 //!
 //! The crate knows neither calibrate nor any data-set format: it returns rows of numbers, the
-//! caller (crs-stack) writes them as data sets.
+//! caller (calibration-campaigns' `bench_generator`) writes them as data sets.
 //!
 //! Units: SI (m, rad, N, kg). Poses are `[x, y, z, φx, φy, φz]` with R = R_x R_y R_z (eq. 2.2).
 

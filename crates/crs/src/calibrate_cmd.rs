@@ -1,17 +1,17 @@
 //! `crs calibrate …`: identification, residual diagnosis and model extension from measured
 //! data sets (docs/data-format.md), with a Markdown/JSON/SVG report and the identified model
 //! written back as a platform TOML (crates/calibrate, docs/calibration.md); the identification
-//! run is `crs_stack::calibration_output`, the diagnosis benchmark `crs_stack::diagnosis_bench`.
+//! run is `calibration_campaigns::calibration_output`, the diagnosis benchmark `calibration_campaigns::diagnosis_bench`.
 
 use calibrate::Observation;
 use calibrate::effects::Effect;
 use calibrate::pipeline::{PipelineConfig, PipelineReport};
 use calibrate::repeatability::RepeatabilityConfig;
+use calibration_campaigns::calibration_output::{self, Identification};
+use calibration_campaigns::diagnosis_bench::{BenchConfig, Generator, run as run_bench};
+use calibration_campaigns::progress::Spinner;
 use cdpr_model::config::Platform;
 use clap::Args;
-use crs_stack::calibration_output::{self, Identification};
-use crs_stack::diagnosis_bench::{BenchConfig, Generator, run as run_bench};
-use crs_stack::progress::Spinner;
 use std::path::PathBuf;
 
 #[derive(clap::Subcommand, Debug)]
@@ -94,10 +94,10 @@ pub struct GenerateArgs {
 }
 
 fn generate(a: GenerateArgs) -> Result<(), Box<dyn std::error::Error>> {
-    use crs_stack::bench_generator::{kinds, write_scenario};
+    use calibration_campaigns::bench_generator::{kinds, write_scenario};
     let k = kinds(&a.scenario)?;
     let (seed, u) = match a.bench_seed {
-        Some(n) => crs_stack::diagnosis_bench::independent_draw(&k, n),
+        Some(n) => calibration_campaigns::diagnosis_bench::independent_draw(&k, n),
         None if a.magnitude.len() == 1 && k.len() > 1 => (a.seed, vec![a.magnitude[0]; k.len()]),
         None => (a.seed, a.magnitude.clone()),
     };
@@ -304,7 +304,7 @@ fn bench(a: BenchArgs) -> Result<(), Box<dyn std::error::Error>> {
 }
 
 /// Identifies from `base`, writes the report, plots, calibrated.toml and the side file into
-/// `opts.out` (`crs_stack::calibration_output::identify`) and prints the stage table.
+/// `opts.out` (`calibration_campaigns::calibration_output::identify`) and prints the stage table.
 pub(crate) fn calibrate_and_report(
     base: &Platform,
     train: &[Observation],
@@ -358,7 +358,7 @@ pub fn run(cmd: CalibrateCommand) -> Result<(), Box<dyn std::error::Error>> {
             validation_seed_offset,
             opts,
         } => {
-            let demo = crs_stack::calibration_demo::record(
+            let demo = calibration_campaigns::calibration_demo::record(
                 &plant,
                 &campaign,
                 validation_seed_offset,

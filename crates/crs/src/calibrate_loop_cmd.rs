@@ -1,12 +1,12 @@
 //! `crs calibrate loop` and `crs calibrate campaign`: the command line of
-//! [`crs_stack::calibration_loop`] and [`crs_stack::campaign`]. The closed loop on the running stack — record a campaign on
+//! [`calibration_campaigns::calibration_loop`] and [`sim_runs::campaign`]. The closed loop on the running stack — record a campaign on
 //! the simulated stack with the nominal model, identify, deploy the identified model and a
 //! refitted surrogate, re-run the same campaign and report the MEASURED pose error at the rest
 //! points before and after. `crs calibrate campaign` makes the campaign file.
 
-use crs_stack::calibration_loop::{LoopOptions, StackTools};
-use crs_stack::campaign::{self, CampaignRequest};
-use crs_stack::progress::Spinner;
+use calibration_campaigns::calibration_loop::{LoopOptions, StackTools};
+use calibration_campaigns::progress::Spinner;
+use sim_runs::campaign::{self, CampaignRequest};
 use std::path::PathBuf;
 
 type BoxErr = Box<dyn std::error::Error>;
@@ -114,7 +114,7 @@ pub fn run_loop(a: LoopArgs, command: &str) -> Result<(), BoxErr> {
     let mut tools = StackTools {
         progress: &mut progress,
     };
-    crs_stack::calibration_loop::run_loop(a.options(), command, &mut tools)?;
+    calibration_campaigns::calibration_loop::run_loop(a.options(), command, &mut tools)?;
     Ok(())
 }
 

@@ -1,7 +1,7 @@
 //! `crs console` and `crs sim --console ADDR`: the operator console (`crs-console`) with the
-//! platform geometry and the plan of the daemon TOML (`crs_stack::console_setup`).
+//! platform geometry and the plan of the daemon TOML (`sim_runs::console_setup`).
 
-use crs_stack::sim_observer::ConsoleRequest;
+use stack_reports::sim_observer::ConsoleRequest;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
@@ -65,7 +65,7 @@ impl SimConsoleArgs {
 pub fn run(a: ConsoleArgs) -> Result<(), Box<dyn std::error::Error>> {
     // The console's own log (stop requests, events): journal under systemd, else stdout.
     crs_log::init("crs-console");
-    crs_stack::console_setup::serve(crs_stack::console_setup::ServeOptions {
+    sim_runs::console_setup::serve(sim_runs::console_setup::ServeOptions {
         addr: a.addr,
         token: a.token,
         prefix: a.prefix,

@@ -1,8 +1,8 @@
 //! `crs sim --source cueing --vehicle FILE.csv`: a vehicle's motion through the motion cueing
 //! (classical washout with tilt coordination, crate `motion-cueing`) as the stack's motion
-//! source (`crs_stack::cueing_run`), with what the rider perceives of it.
+//! source (`sim_runs::cueing_run`), with what the rider perceives of it.
 
-use crs_stack::cueing_run::CueingSpec;
+use sim_runs::cueing_run::CueingSpec;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug, Clone)]

@@ -1,7 +1,7 @@
 //! `crs figures`: regenerate the docs' headline figures into one JSON file
-//! ([`crs_stack::figures`]; the repository keeps the last run in benches/figures.json).
+//! ([`stack_reports::figures`]; the repository keeps the last run in benches/figures.json).
 
-use crs_stack::figures::{Context, GROUPS, regenerate};
+use stack_reports::figures::{Context, GROUPS, regenerate};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]

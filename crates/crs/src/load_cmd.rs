@@ -1,11 +1,11 @@
 //! `crs load track` (the seed's walking-subject load tracking on the plant, sec. 5.3) and
 //! `crs commission` (set-up identification and the pre-ride payload check, eq. 6.21–6.24,
-//! 3.42). The work is in `crs_stack::{load_experiment, commission}`.
+//! 3.42). The work is in `plant_experiments::load_experiment` and `calibration_campaigns::commission`.
 
 use crate::sim_cmd::SimArgs;
-use crs_stack::commission::{self, CommissionConfig, Verdict};
-use crs_stack::commission_report::CommissionReport;
-use crs_stack::load_experiment::{self, WalkConfig};
+use calibration_campaigns::commission::{self, CommissionConfig, Verdict};
+use plant_experiments::load_experiment::{self, WalkConfig};
+use stack_reports::commission_report::CommissionReport;
 use std::path::PathBuf;
 
 type BoxErr = Box<dyn std::error::Error>;

@@ -53,7 +53,7 @@ pub struct RecordArgs {
 pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
     match cmd {
         PlantCommand::Check { plant } => {
-            let c = crs_stack::plant_check::check(&plant)?;
+            let c = plant_experiments::plant_check::check(&plant)?;
             print!("{c}");
             match c.failure() {
                 Some(f) => Err(f.into()),
@@ -88,7 +88,7 @@ pub fn run(cmd: PlantCommand) -> Result<(), Box<dyn std::error::Error>> {
             if a.seed.is_some() {
                 camp.seed = a.seed;
             }
-            let rec = crs_stack::plant_record::record(cfg, &camp, &a.out)?;
+            let rec = plant_experiments::plant_record::record(cfg, &camp, &a.out)?;
             eprint!("{rec}");
             if let Some(e) = pose_errors(&rec.result.dataset) {
                 println!("{e}");

@@ -1,7 +1,7 @@
 //! `crs sim --source helicopter`: the helicopter hover physics (eq. 5.21–5.22) as the stack's
-//! motion source (`crs_stack::ride_run`), flown by a pilot CSV, a script or a game controller.
+//! motion source (`sim_runs::ride_run`), flown by a pilot CSV, a script or a game controller.
 
-use crs_stack::ride_run::{PilotSpec, RideSpec};
+use sim_runs::ride_run::{PilotSpec, RideSpec};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug, Clone)]

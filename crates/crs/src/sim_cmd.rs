@@ -1,12 +1,12 @@
 //! `crs sim`: the whole simulated stack as separate processes, as a user runs it — the
-//! command line of [`crs_stack::sim_run`] (which starts, follows and stops the processes and
+//! command line of [`sim_runs::sim_run`] (which starts, follows and stops the processes and
 //! writes the summary) plus the `--check` verdict.
 
 use crate::console_cmd::SimConsoleArgs;
-use crs_stack::platforms;
-use crs_stack::sim_observer::SimObserver;
-use crs_stack::sim_run::{SimOptions, execute_observed};
-use crs_stack::timing::TimingProfile;
+use crs_supervisor::timing::TimingProfile;
+use sim_runs::platforms;
+use sim_runs::sim_run::{SimOptions, execute_observed};
+use stack_reports::sim_observer::SimObserver;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -59,7 +59,7 @@ pub struct SimArgs {
     /// Static (at rest) position error bound for --check, mm. The default is twice the largest
     /// at-rest error seen on the shipped plants (4.9 mm at the end of the demo hover flight,
     /// 0.15–0.44 mm after the tours).
-    #[arg(long, default_value_t = crs_stack::sim_run::DEFAULT_MAX_STATIC_ERROR_MM)]
+    #[arg(long, default_value_t = sim_runs::sim_run::DEFAULT_MAX_STATIC_ERROR_MM)]
     pub(crate) max_static_error_mm: f64,
     /// Safety-monitor TOML (its [monitor] platform must be the daemon's platform) [default:
     /// the platform's, config/safety-monitor.toml for the icosahedron].

@@ -2,8 +2,8 @@
 //! (sec. 5.6, eq. 5.23–5.27), its file check, and its evaluation on the simulated plant.
 
 use cdpr_model::config::load_platform;
-use crs_stack::surrogate_evaluation::{evaluate, fit_and_save, load_for_platform};
-use crs_stack::surrogate_report;
+use plant_experiments::surrogate_evaluation::{evaluate, fit_and_save, load_for_platform};
+use stack_reports::surrogate_report;
 use std::path::PathBuf;
 use surrogate::{Basis, FitOptions};
 

@@ -1,5 +1,5 @@
 //! `crs timing PROFILE --out DIR`: the daemon, drives and monitor configs of a timing profile
-//! (`crs_stack::timing`), for running the installed units on a slow or emulated machine: point
+//! (`crs_supervisor::timing`), for running the installed units on a slow or emulated machine: point
 //! the units at DIR (e.g. a drop-in with `Environment=CRS_CONFIG_DIR=DIR`). The files are the
 //! configuration directory's (installed: /etc/crs/config) with only the timing keys changed.
 
@@ -20,9 +20,9 @@ pub struct TimingArgs {
 }
 
 pub fn run(a: TimingArgs) -> Result<(), Box<dyn std::error::Error>> {
-    let files = crs_stack::platforms::run_files(
+    let files = sim_runs::platforms::run_files(
         a.platform.as_deref(),
-        &crs_stack::platforms::Overrides::default(),
+        &sim_runs::platforms::Overrides::default(),
         &a.profile,
         &a.out,
     )?;

@@ -1,5 +1,5 @@
 //! The docs' headline figures (the README maps the docs; docs/figures.md says where each figure
-//! comes from) against the file `crs figures` writes (benches/figures.json, `crs_stack::figures`):
+//! comes from) against the file `crs figures` writes (benches/figures.json, `stack_reports::figures`):
 //! every number listed below, where the doc named with it prints it, must be the file's value to
 //! the precision printed (half a unit of its last digit). And the file must be what the code
 //! makes: the groups marked `in_ci` are regenerated here (debug build, ~20 s) and compared
@@ -587,7 +587,7 @@ fn figures_file() -> PathBuf {
     root().join("benches/figures.json")
 }
 
-fn load(path: &std::path::Path) -> crs_stack::figures::FigureFile {
+fn load(path: &std::path::Path) -> stack_reports::figures::FigureFile {
     serde_json::from_str(
         &std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
     )

@@ -1,5 +1,5 @@
 //! `crs sim --check` fails each way the README says a pass rules out: every branch of the
-//! verdict (`crs_stack::sim_run::Summary::check_failures`, and a run that does not complete)
+//! verdict (`sim_runs::sim_run::Summary::check_failures`, and a run that does not complete)
 //! with a run of the real stack that must fail it, for the reason the verdict names. The other
 //! stack tests only ever see `SIM-CHECK: PASS`; a verdict that could not fail would pass them.
 //!
@@ -12,7 +12,7 @@
 //! One branch has no run here: plant steps without equilibrium. No plant the shipped configs
 //! can express loses its equilibrium along a plan motion-core accepts (a cabin too heavy to
 //! tension at home stops sim-plant at start instead); the branch is covered by the verdict's
-//! unit test in crates/crs-stack/src/sim_run.rs.
+//! unit test in crates/sim-runs/src/sim_run.rs.
 mod common;
 use common::{root, stack_bin_dir};
 use std::io::{BufRead, BufReader, Read, Write};

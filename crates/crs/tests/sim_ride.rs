@@ -106,7 +106,7 @@ fn pilot_errors_and_missing_controllers_are_refused_before_anything_starts() {
     );
     let e = run("script:loops");
     assert!(e.contains("unknown pilot script `loops`"), "{e}");
-    if crs_stack::gamepad::devices(std::path::Path::new("/dev/input")).is_empty() {
+    if sim_runs::gamepad::devices(std::path::Path::new("/dev/input")).is_empty() {
         let e = run("gamepad");
         assert!(e.contains("no game controller found"), "{e}");
     }

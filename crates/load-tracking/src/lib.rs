@@ -12,7 +12,7 @@
 //!   keeps the forces closest to f_ref (eq. 3.41) along a planned path (eq. 3.42).
 //!
 //! Model layer (Model + Data, free functions); the tools that run it on the plant or the stack
-//! live in `crs-stack` (`load_experiment`, `commission`).
+//! live in `plant-experiments` (`load_experiment`) and `calibration-campaigns` (`commission`).
 
 pub mod payload;
 pub mod point_load;

@@ -5,7 +5,7 @@
 //! against, but it solves its equilibrium with the controller's own kinematics, statics and
 //! forward-kinematics code (cdpr-model). An error in those shared equations would appear in
 //! controller and plant alike and no test could see it. This crate shares no code with
-//! cdpr-model (it depends on glam only; `crates/crs-stack/tests/layering.rs` pins that) and
+//! cdpr-model (it depends on glam only; `crates/crs/tests/layering.rs` pins that) and
 //! shares as little of the *formulation* as possible:
 //!
 //! * The model library balances forces: A^T(x) f + w_e = 0 (eq. 2.43) with the structure matrix

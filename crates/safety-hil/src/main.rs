@@ -17,7 +17,7 @@
 //! Files: this one holds the command line, the scenario table and the run; `configs` the
 //! generated configs, `fake_motion` the fake motion-core publisher, `emulator` the winch
 //! emulator's status and control files, `stack` one scenario's processes (on
-//! `crs_stack::supervisor::Supervisor`) and their observation, `cpu_share` the monitor's CPU
+//! `crs_supervisor::supervisor::Supervisor`) and their observation, `cpu_share` the monitor's CPU
 //! measurement, `scenarios/` the scenarios grouped by topic.
 
 mod configs;
@@ -101,10 +101,10 @@ pub struct Args {
 pub type Res<T> = Result<T, String>;
 
 /// The scenarios' bus layout from `--buses`.
-pub fn bus_mode(args: &Args) -> Res<crs_stack::transport::BusMode> {
+pub fn bus_mode(args: &Args) -> Res<crs_supervisor::transport::BusMode> {
     match args.buses.as_str() {
         "wire" | "vcan" => {
-            crs_stack::transport::BusMode::parse(&args.buses).map_err(|e| e.to_string())
+            crs_supervisor::transport::BusMode::parse(&args.buses).map_err(|e| e.to_string())
         }
         other => Err(format!("--buses {other:?}: wire or vcan")),
     }

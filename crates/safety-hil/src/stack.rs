@@ -18,7 +18,7 @@ use crs_ipc::{
     BusState, DriveFeedback, EventKind, Heartbeat, IpcNode, MonitorCode, MonitorState, MotionState,
     ProcessId, StateEvent, monotonic_ns,
 };
-use crs_stack::supervisor::{Supervisor, Usage};
+use crs_supervisor::supervisor::{Supervisor, Usage};
 use safety_monitor::Cause;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -39,7 +39,7 @@ pub struct Stack {
     pub cfg: PathBuf,
     bin_dir: Option<PathBuf>,
     /// The scenario's CAN buses (each process's transports, the wire hub).
-    pub buses: crs_stack::transport::StackBuses,
+    pub buses: crs_supervisor::transport::StackBuses,
     pub period_us: u32,
     pub prefix: String,
     procs: Supervisor,
@@ -114,7 +114,7 @@ impl Stack {
         name: &'static str,
         dir: &Path,
         bin_dir: Option<PathBuf>,
-        bus_mode: &crs_stack::transport::BusMode,
+        bus_mode: &crs_supervisor::transport::BusMode,
         period_us: u32,
         emulator_rt_priority: Option<u32>,
     ) -> Res<Stack> {
@@ -151,7 +151,7 @@ impl Stack {
             Some(d) => d.join("can-wire"),
             None => PathBuf::from("can-wire"),
         };
-        let buses = crs_stack::transport::start(
+        let buses = crs_supervisor::transport::start(
             bus_mode,
             &drives,
             &["winch-emulator", "safety-monitor", "drive-io", "safety-hil"],

@@ -259,7 +259,7 @@ impl WorkspaceArgs {
         let rot = triple("--rotation-deg", &self.rotation_deg)?;
         let (json, n) = (self.common.json, self.resolution);
         if self.reachable {
-            let (mut r, note) = crs_stack::reachable_on_plant::analyse(
+            let (mut r, note) = plant_experiments::reachable_on_plant::analyse(
                 &pf,
                 &self.common.platform,
                 bounds,

@@ -44,7 +44,7 @@ pub fn sim_command(crs: &Path, transport: &str, cfg: &[PathBuf; 3], out: &Path) 
 }
 
 /// Copies of the stack's daemon, drives and monitor TOML with the `relaxed` timing profile
-/// (crs_stack::timing: 4 ms loop and SYNC, longer watchdogs). The tests run DEBUG builds of four
+/// (crs_supervisor::timing: 4 ms loop and SYNC, longer watchdogs). The tests run DEBUG builds of four
 /// processes on a shared 2-core host, where the spec's 1 ms / 50 ms watchdogs trip on
 /// scheduling stalls (seen: the drives' safety-heartbeat timeout, then sequence gaps). They
 /// assert behaviour, not timing: timing is the benches' job (benches/RESULTS.md). Returns
@@ -61,7 +61,7 @@ pub fn relaxed_configs(dir: &Path) -> [PathBuf; 3] {
 /// [`relaxed_configs`] of another platform's daemon, drives and monitor TOML in config/ (e.g.
 /// the helicopter's `motion-core-helicopter.toml`, `safety-monitor-helicopter.toml`).
 pub fn relaxed_configs_of(dir: &Path, daemon: &str, drives: &str, monitor: &str) -> [PathBuf; 3] {
-    use crs_stack::timing::{TimedConfigs, TimingProfile, write_profile};
+    use crs_supervisor::timing::{TimedConfigs, TimingProfile, write_profile};
     let c = root().join("config");
     let files = TimedConfigs {
         daemon: c.join(daemon),

@@ -24,15 +24,16 @@
 //! (identification by `calibration_output`, the fit by `surrogate_evaluation`), showing its
 //! progress through the caller's [`Progress`](crate::progress::Progress).
 
-use crate::campaign::timed_waypoints;
-use crate::campaign::write_waypoints;
-use crate::sim_run::{self, SimOptions, Summary};
 use calibrate::Observation;
 use calibrate::pipeline::PipelineReport;
 use calibrate::{from_dataset, split};
 use cdpr_model::config::{Platform, load_platform};
+use motion_core::daemon::config::DaemonConfig;
 use motion_core::daemon::lifecycle;
 use motion_core::daemon::trajectory;
+use sim_runs::campaign::timed_waypoints;
+use sim_runs::campaign::write_waypoints;
+use sim_runs::sim_run::{self, SimOptions, Summary};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -98,7 +99,7 @@ pub enum LoopError {
     },
     /// Writing or timing the campaign.
     #[error(transparent)]
-    Campaign(#[from] crate::campaign::CampaignError),
+    Campaign(#[from] sim_runs::campaign::CampaignError),
     /// The controller cannot be configured for the nominal platform.
     #[error(transparent)]
     Configure(#[from] lifecycle::ConfigureError),
@@ -209,7 +210,7 @@ pub trait LoopTools {
 }
 
 /// The loop's tools from this library: the surrogate fit of `crs surrogate fit`
-/// ([`fit_platform`](crate::surrogate_evaluation::fit_platform)) and the identification of
+/// ([`fit_platform`](plant_experiments::surrogate_evaluation::fit_platform)) and the identification of
 /// `crs calibrate run --no-extension --ridge-kf λ`, every other option at its default
 /// ([`identify_and_report`](crate::calibration_output::identify_and_report)); `progress` shows
 /// them running.
@@ -225,7 +226,7 @@ impl LoopTools for StackTools<'_> {
     ) -> Result<(surrogate::Surrogate, surrogate::FitReport), surrogate::FitError> {
         self.progress
             .start(&format!("fitting the surrogate of `{}`", pf.name));
-        let r = crate::surrogate_evaluation::fit_platform(pf, opts);
+        let r = plant_experiments::surrogate_evaluation::fit_platform(pf, opts);
         self.progress.finish();
         r
     }
@@ -619,9 +620,33 @@ fn stack_run(
     Ok((sum, attempt + 1))
 }
 
-/// Runs the closed loop (see the module doc) and writes its report.
-pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Result<(), LoopError> {
-    let t_start = Instant::now();
+/// The loop's seven steps, as printed.
+const STEPS: usize = 7;
+
+fn step(k: usize, what: &str) {
+    println!("\n[{k}/{STEPS}] {what}");
+}
+
+/// The loop checked and set up before any fit or run: the campaign as run, its plan verified on
+/// the nominal platform, the run directories.
+struct LoopPlan {
+    nominal: Platform,
+    daemon_tpl: DaemonConfig,
+    wps: Vec<trajectory::Waypoint>,
+    dir_b: PathBuf,
+    dir_i: PathBuf,
+    dir_a: PathBuf,
+    /// The campaign as run (first N poses).
+    campaign: PathBuf,
+    plan_s: f64,
+    timeout_s: f64,
+    name: String,
+    with_sg: bool,
+}
+
+/// The options and the files checked, the campaign written and verified with motion-core's own
+/// checks on the nominal platform; nothing runs yet.
+fn prepare_loop(a: &LoopOptions) -> Result<LoopPlan, LoopError> {
     if !(a.dwell_s.is_finite() && a.settle_s > 0.0 && a.dwell_s > a.settle_s) {
         return Err(LoopError::Dwell {
             dwell_s: a.dwell_s,
@@ -673,7 +698,6 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
     for d in [&dir_b, &dir_i, &dir_a] {
         std::fs::create_dir_all(d).map_err(output(d))?;
     }
-    // The campaign as run (first N poses).
     let campaign = a.out.join("campaign.csv");
     write_waypoints(
         &campaign,
@@ -698,49 +722,93 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
         nominal_checks.period_s(),
         a.dwell_s,
     )?;
-    let timeout_s = 1.5 * (plan_s + a.dwell_s) + 60.0;
     let name = a
         .campaign
         .file_stem()
         .map_or("campaign".into(), |n| n.to_string_lossy().into_owned());
-    let with_sg = !a.no_surrogate;
-    let steps = 7;
-    let step = |k: usize, what: &str| println!("\n[{k}/{steps}] {what}");
-    println!(
-        "crs calibrate loop: {} poses of {}, rest {} s each (plan {plan_s:.0} s per run), plant {}, controller {}",
-        wps.len(),
-        a.campaign.display(),
-        a.dwell_s,
-        a.plant.display(),
-        if with_sg {
-            "kinematics + surrogate"
-        } else {
-            "kinematics only (--no-surrogate)"
-        }
-    );
-    let sim_cmd_line = |dir: &Path| {
-        format!(
-            "crs sim --config {} --monitor-config {} --plant {} --drives {} --waypoints {} --dwell-s {} --settle-s {} --hold-s {} --record {} --out {}{}",
-            dir.join("motion-core.toml").display(),
-            dir.join("safety-monitor.toml").display(),
-            a.plant.display(),
-            a.drives.display(),
-            campaign.display(),
-            a.dwell_s,
-            a.settle_s,
-            a.dwell_s,
-            dir.join("campaign.csv").display(),
-            dir.display(),
-            if a.rt_priority >= 6 {
-                format!(" --rt-priority {}", a.rt_priority)
-            } else {
-                String::new()
-            }
-        )
-    };
-    let mut commands = Vec::new();
+    Ok(LoopPlan {
+        nominal,
+        daemon_tpl,
+        wps,
+        dir_b,
+        dir_i,
+        dir_a,
+        campaign,
+        plan_s,
+        timeout_s: 1.5 * (plan_s + a.dwell_s) + 60.0,
+        name,
+        with_sg: !a.no_surrogate,
+    })
+}
 
-    // 1-2. Before: the nominal platform (+ its surrogate).
+/// The `crs sim` command line of one of the loop's runs (for the report).
+fn sim_command_line(a: &LoopOptions, campaign: &Path, dir: &Path) -> String {
+    format!(
+        "crs sim --config {} --monitor-config {} --plant {} --drives {} --waypoints {} --dwell-s {} --settle-s {} --hold-s {} --record {} --out {}{}",
+        dir.join("motion-core.toml").display(),
+        dir.join("safety-monitor.toml").display(),
+        a.plant.display(),
+        a.drives.display(),
+        campaign.display(),
+        a.dwell_s,
+        a.settle_s,
+        a.dwell_s,
+        dir.join("campaign.csv").display(),
+        dir.display(),
+        if a.rt_priority >= 6 {
+            format!(" --rt-priority {}", a.rt_priority)
+        } else {
+            String::new()
+        }
+    )
+}
+
+/// The campaign on the stack with the run's configs in `dir`, every rest point required.
+#[allow(clippy::too_many_arguments)]
+fn campaign_run(
+    a: &LoopOptions,
+    plan: &LoopPlan,
+    platform: &Path,
+    surrogate: Option<(PathBuf, Option<surrogate::FitReport>)>,
+    (daemon_config, monitor_config): (PathBuf, PathBuf),
+    dir: &Path,
+    label: &str,
+    commands: &mut Vec<String>,
+) -> Result<RunReport, LoopError> {
+    let record = dir.join("campaign.csv");
+    let (summary, attempts) = stack_run(
+        a,
+        &daemon_config,
+        &monitor_config,
+        &plan.campaign,
+        dir,
+        &record,
+        plan.timeout_s,
+        &plan.name,
+    )?;
+    commands.push(sim_command_line(a, &plan.campaign, dir));
+    all_rest_points(label, &summary, plan.wps.len(), dir)?;
+    let (surrogate, fit) = surrogate.unzip();
+    Ok(RunReport {
+        platform: platform.to_path_buf(),
+        surrogate,
+        surrogate_max_offset_mm: fit.flatten().map(|r| r.max_abs_offset_mm),
+        daemon_config,
+        monitor_config,
+        record,
+        attempts,
+        summary,
+    })
+}
+
+/// Steps 1–2: the nominal platform's surrogate, then the campaign on the stack (before).
+fn run_before(
+    a: &LoopOptions,
+    plan: &LoopPlan,
+    tools: &mut dyn LoopTools,
+    commands: &mut Vec<String>,
+) -> Result<RunReport, LoopError> {
+    let with_sg = plan.with_sg;
     step(
         1,
         if with_sg {
@@ -749,47 +817,88 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
             "no surrogate (--no-surrogate)"
         },
     );
-    let sg_b = dir_b.join("surrogate.json");
-    let rep_sg_b = maybe_fit_surrogate(tools, with_sg, &a.platform, &a, &sg_b, &mut commands)?;
-    let (daemon_b, monitor_b) = write_run_configs(
-        &a,
-        &dir_b,
+    let sg = plan.dir_b.join("surrogate.json");
+    let fit = maybe_fit_surrogate(tools, with_sg, &a.platform, a, &sg, commands)?;
+    let configs = write_run_configs(
+        a,
+        &plan.dir_b,
         &a.platform,
-        with_sg.then_some(sg_b.as_path()),
-        &campaign,
+        with_sg.then_some(sg.as_path()),
+        &plan.campaign,
     )?;
     step(2, "campaign on the stack with the nominal model (before)");
-    let rec_b = dir_b.join("campaign.csv");
-    let (sum_b, attempts_b) = stack_run(
-        &a, &daemon_b, &monitor_b, &campaign, &dir_b, &rec_b, timeout_s, &name,
-    )?;
-    commands.push(sim_cmd_line(&dir_b));
-    all_rest_points("before", &sum_b, wps.len(), &dir_b)?;
+    campaign_run(
+        a,
+        plan,
+        &a.platform,
+        with_sg.then_some((sg, fit)),
+        configs,
+        &plan.dir_b,
+        "before",
+        commands,
+    )
+}
 
-    // 3. Identification from the nominal model.
+/// What step 3 identified: its report and the calibrated platform it wrote.
+struct Identified {
+    report: PipelineReport,
+    calibrated: PathBuf,
+    platform: Platform,
+}
+
+/// Step 3: identification from the nominal model on the recording of the run before.
+fn identify(
+    a: &LoopOptions,
+    plan: &LoopPlan,
+    tools: &mut dyn LoopTools,
+    record: &Path,
+    commands: &mut Vec<String>,
+) -> Result<Identified, LoopError> {
     step(3, "identification from the nominal model on the recording");
-    let ds = crs_dataset::load_dataset(&rec_b)?;
-    let obs = from_dataset(&ds, nominal.model.m()).map_err(|source| LoopError::Observations {
-        record: rec_b.clone(),
-        source,
-    })?;
+    let holdout = a.holdout_every;
+    let ds = crs_dataset::load_dataset(record)?;
+    let obs =
+        from_dataset(&ds, plan.nominal.model.m()).map_err(|source| LoopError::Observations {
+            record: record.to_path_buf(),
+            source,
+        })?;
     let (train, held) = split(&obs, holdout);
     let cal_cmd = format!(
         "crs calibrate run --platform {} --data {} --holdout-every {holdout} --no-extension --ridge-kf {} --out {}",
         a.platform.display(),
-        rec_b.display(),
+        record.display(),
         a.ridge_kf,
-        dir_i.display()
+        plan.dir_i.display()
     );
-    let rep: PipelineReport = tools.identify(
-        &nominal, &train, &held, &dir_i, holdout, a.ridge_kf, &cal_cmd,
+    let report: PipelineReport = tools.identify(
+        &plan.nominal,
+        &train,
+        &held,
+        &plan.dir_i,
+        holdout,
+        a.ridge_kf,
+        &cal_cmd,
     )?;
     commands.push(cal_cmd);
-    let calibrated = dir_i.join("calibrated.toml");
-    let deployed_stage = rep.final_stage().name.clone();
-    let cal_pf = load_platform(&calibrated)?;
+    let calibrated = plan.dir_i.join("calibrated.toml");
+    let platform = load_platform(&calibrated)?;
+    Ok(Identified {
+        report,
+        calibrated,
+        platform,
+    })
+}
 
-    // 4-5. After: the calibrated platform (+ its refitted surrogate).
+/// Steps 4–6: the calibrated platform's surrogate, its daemon and monitor configs checked with
+/// motion-core's own checks, then the same campaign on the stack (after).
+fn run_after(
+    a: &LoopOptions,
+    plan: &LoopPlan,
+    tools: &mut dyn LoopTools,
+    id: &Identified,
+    commands: &mut Vec<String>,
+) -> Result<RunReport, LoopError> {
+    let with_sg = plan.with_sg;
     step(
         4,
         if with_sg {
@@ -798,64 +907,104 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
             "no surrogate (--no-surrogate)"
         },
     );
-    let sg_a = dir_a.join("surrogate.json");
-    let rep_sg_a = maybe_fit_surrogate(tools, with_sg, &calibrated, &a, &sg_a, &mut commands)?;
+    let sg = plan.dir_a.join("surrogate.json");
+    let fit = maybe_fit_surrogate(tools, with_sg, &id.calibrated, a, &sg, commands)?;
     step(
         5,
         "daemon and safety-monitor configuration for the calibrated model",
     );
-    let (daemon_a, monitor_a) = write_run_configs(
-        &a,
-        &dir_a,
-        &calibrated,
-        with_sg.then_some(sg_a.as_path()),
-        &campaign,
+    let (daemon, monitor) = write_run_configs(
+        a,
+        &plan.dir_a,
+        &id.calibrated,
+        with_sg.then_some(sg.as_path()),
+        &plan.campaign,
     )?;
-    lifecycle::configure_checks(&daemon_tpl, &cal_pf)?
-        .verify_plan(&wps)
+    lifecycle::configure_checks(&plan.daemon_tpl, &id.platform)?
+        .verify_plan(&plan.wps)
         .map_err(|source| LoopError::CalibratedRefuses {
-            calibrated: calibrated.clone(),
+            calibrated: id.calibrated.clone(),
             source,
         })?;
     println!(
         "  {} (platform `{}`), {}",
-        daemon_a.display(),
-        cal_pf.name,
-        monitor_a.display()
+        daemon.display(),
+        id.platform.name,
+        monitor.display()
     );
     step(6, "the same campaign with the calibrated model (after)");
-    let rec_a = dir_a.join("campaign.csv");
-    let (sum_a, attempts_a) = stack_run(
-        &a, &daemon_a, &monitor_a, &campaign, &dir_a, &rec_a, timeout_s, &name,
-    )?;
-    commands.push(sim_cmd_line(&dir_a));
-    all_rest_points("after", &sum_a, wps.len(), &dir_a)?;
+    campaign_run(
+        a,
+        plan,
+        &id.calibrated,
+        with_sg.then_some((sg, fit)),
+        (daemon, monitor),
+        &plan.dir_a,
+        "after",
+        commands,
+    )
+}
 
+/// The closed calibration loop (`crs calibrate loop`): the campaign on the stack with the
+/// nominal model, identification on its recording, the same campaign with the calibrated model,
+/// the report.
+pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Result<(), LoopError> {
+    let t_start = Instant::now();
+    let plan = prepare_loop(&a)?;
+    println!(
+        "crs calibrate loop: {} poses of {}, rest {} s each (plan {:.0} s per run), plant {}, controller {}",
+        plan.wps.len(),
+        a.campaign.display(),
+        a.dwell_s,
+        plan.plan_s,
+        a.plant.display(),
+        if plan.with_sg {
+            "kinematics + surrogate"
+        } else {
+            "kinematics only (--no-surrogate)"
+        }
+    );
+    let mut commands = Vec::new();
+    let before = run_before(&a, &plan, tools, &mut commands)?;
+    let id = identify(&a, &plan, tools, &before.record, &mut commands)?;
+    let after = run_after(&a, &plan, tools, &id, &mut commands)?;
     step(7, "report");
+    let report = loop_report(&a, command, &plan, before, id, after, commands, t_start);
+    write_report(&a, &report)
+}
+
+/// Step 7's report of the loop, the before/after ratios of the rest-point errors.
+#[allow(clippy::too_many_arguments)]
+fn loop_report(
+    a: &LoopOptions,
+    command: &str,
+    plan: &LoopPlan,
+    before: RunReport,
+    id: Identified,
+    after: RunReport,
+    commands: Vec<String>,
+    t_start: Instant,
+) -> LoopReport {
     let ratio = |b: f64, a: f64| if a > 0.0 { b / a } else { f64::INFINITY };
-    let report = LoopReport {
+    let (rb, ra) = (&before.summary.rest, &after.summary.rest);
+    LoopReport {
         command: command.to_string(),
         plant: a.plant.clone(),
         campaign: a.campaign.clone(),
-        poses: wps.len(),
+        poses: plan.wps.len(),
         dwell_s: a.dwell_s,
         settle_s: a.settle_s,
-        control_model: if with_sg {
+        control_model: if plan.with_sg {
             "kinematic+surrogate".into()
         } else {
             "kinematic".into()
         },
-        before: RunReport {
-            platform: a.platform.clone(),
-            surrogate: with_sg.then(|| sg_b.clone()),
-            surrogate_max_offset_mm: rep_sg_b.map(|r| r.max_abs_offset_mm),
-            daemon_config: daemon_b,
-            monitor_config: monitor_b,
-            record: rec_b,
-            attempts: attempts_b,
-            summary: sum_b.clone(),
-        },
-        identification: rep
+        improvement_position_mean: ratio(rb.position_mean_mm, ra.position_mean_mm),
+        improvement_position_max: ratio(rb.position_max_mm, ra.position_max_mm),
+        improvement_rotation_mean: ratio(rb.rotation_mean_deg, ra.rotation_mean_deg),
+        before,
+        identification: id
+            .report
             .stages
             .iter()
             .map(|s| StageRow {
@@ -863,40 +1012,30 @@ pub fn run_loop(a: LoopOptions, command: &str, tools: &mut dyn LoopTools) -> Res
                 holdout: s.holdout.clone(),
             })
             .collect(),
-        identification_train: rep.n_train,
-        identification_holdout: rep.n_holdout,
-        deployed_stage,
-        calibrated_platform: calibrated.clone(),
-        after: RunReport {
-            platform: calibrated.clone(),
-            surrogate: with_sg.then(|| sg_a.clone()),
-            surrogate_max_offset_mm: rep_sg_a.map(|r| r.max_abs_offset_mm),
-            daemon_config: daemon_a,
-            monitor_config: monitor_a,
-            record: rec_a,
-            attempts: attempts_a,
-            summary: sum_a.clone(),
-        },
-        improvement_position_mean: ratio(sum_b.rest.position_mean_mm, sum_a.rest.position_mean_mm),
-        improvement_position_max: ratio(sum_b.rest.position_max_mm, sum_a.rest.position_max_mm),
-        improvement_rotation_mean: ratio(
-            sum_b.rest.rotation_mean_deg,
-            sum_a.rest.rotation_mean_deg,
-        ),
+        identification_train: id.report.n_train,
+        identification_holdout: id.report.n_holdout,
+        deployed_stage: id.report.final_stage().name.clone(),
+        calibrated_platform: id.calibrated,
+        after,
         runtime_s: t_start.elapsed().as_secs_f64(),
         commands,
-    };
-    let md = markdown(&report);
+    }
+}
+
+/// report.md and report.json, the before/after table and the verdict against
+/// `--min-improvement`.
+fn write_report(a: &LoopOptions, report: &LoopReport) -> Result<(), LoopError> {
+    let md = markdown(report);
     let md_file = a.out.join("report.md");
     std::fs::write(&md_file, &md).map_err(output(&md_file))?;
     let json_file = a.out.join("report.json");
-    std::fs::write(&json_file, serde_json::to_string_pretty(&report)?)
+    std::fs::write(&json_file, serde_json::to_string_pretty(report)?)
         .map_err(output(&json_file))?;
-    println!("\n{}", before_after_table(&report));
+    println!("\n{}", before_after_table(report));
     println!(
         "measured mean position error {:.2} mm → {:.2} mm ({:.1}×) in {:.0} s; report {}",
-        sum_b.rest.position_mean_mm,
-        sum_a.rest.position_mean_mm,
+        report.before.summary.rest.position_mean_mm,
+        report.after.summary.rest.position_mean_mm,
         report.improvement_position_mean,
         report.runtime_s,
         a.out.join("report.md").display()

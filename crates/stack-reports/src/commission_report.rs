@@ -1,7 +1,7 @@
 //! What `crs commission` prints of a [`Commission`]: the set-up wrench, the payload against the
 //! configured one, the cable offsets, the initial tension and the pre-ride verdict.
 
-use crate::commission::{Commission, Verdict};
+use calibration_campaigns::commission::{Commission, Verdict};
 use std::fmt;
 use std::path::Path;
 

@@ -5,7 +5,7 @@
 //! The bin dir holds empty stand-ins for the stack's binaries: if the launcher got as far as
 //! starting processes, spawning them would fail with a different error and leave child logs.
 
-use crs_stack::sim_run::{SimError, SimOptions, execute};
+use sim_runs::sim_run::{SimError, SimOptions, execute};
 use std::path::{Path, PathBuf};
 
 fn repo() -> PathBuf {

@@ -296,6 +296,16 @@ pub fn run(c: &WalkConfig) -> Result<WalkResult, WalkError> {
         };
         samples.push(sample);
     }
+    walk_result(&base_cfg.name, c.subject_kg, samples)
+}
+
+/// The walk's statistics over its samples: the estimate's position error (mean, p95, max), the
+/// share within the seed's tracking figure, the mean estimated mass and stated deviation.
+fn walk_result(
+    plant: &str,
+    subject_kg: f64,
+    samples: Vec<WalkSample>,
+) -> Result<WalkResult, WalkError> {
     let mut errs: Vec<f64> = samples
         .iter()
         .filter_map(|s| {
@@ -314,8 +324,8 @@ pub fn run(c: &WalkConfig) -> Result<WalkResult, WalkError> {
     let ne = errs.len() as f64;
     let est: Vec<&PointLoad> = samples.iter().filter_map(|s| s.estimate.as_ref()).collect();
     Ok(WalkResult {
-        plant: base_cfg.name.clone(),
-        subject_kg: c.subject_kg,
+        plant: plant.to_string(),
+        subject_kg,
         error_mean_m: errs.iter().sum::<f64>() / ne,
         error_p95_m: quantile_sorted(&errs, 0.95).unwrap_or(f64::NAN),
         error_max_m: *errs.last().unwrap_or(&f64::NAN),

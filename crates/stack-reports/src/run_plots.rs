@@ -11,7 +11,6 @@
 //! Routine events (motion-core's plan announcement and the monitor's epoch announcement, each
 //! about once a second) are kept only when they change something.
 
-use crate::sim_run::Summary;
 use cdpr_model::Pose;
 use crs_console::status::{
     bus_state_name, describe_event, monitor_state_name, motion_state_name, process_name,
@@ -20,6 +19,7 @@ use crs_ipc::{
     EventKind, JointSetpoint, LoopStatsSample, MAX_CABLES, PLAN_OPEN_END, PlantTruth, ProcessId,
     StateEvent,
 };
+use sim_runs::sim_run::Summary;
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 
@@ -757,8 +757,8 @@ fn link_target(out: &Path, p: &Path) -> String {
     }
 }
 
-fn summary_table(s: &Summary) -> String {
-    let mut t = Table(String::new());
+/// The outcome: completed, who stopped it, what ran.
+fn outcome_rows(t: &mut Table, s: &Summary) {
     t.section("Outcome");
     t.row(
         "completed",
@@ -791,6 +791,10 @@ fn summary_table(s: &Summary) -> String {
         if s.monitor { "on" } else { "off" }.into(),
         "",
     );
+}
+
+/// Tracking during the run, at rest after it and at the recorded rest points.
+fn tracking_rows(t: &mut Table, s: &Summary) {
     t.section("Tracking (plant pose vs the setpoints)");
     t.row(
         "tracking_position_mean_mm",
@@ -868,6 +872,10 @@ fn summary_table(s: &Summary) -> String {
             "mm",
         );
     }
+}
+
+/// The cable forces seen against the limits.
+fn forces_rows(t: &mut Table, s: &Summary) {
     t.section("Cable forces");
     let seen = s.force_min_n <= s.force_max_n;
     t.row(
@@ -900,6 +908,10 @@ fn summary_table(s: &Summary) -> String {
         },
         "",
     );
+}
+
+/// motion-core's loop statistics and the samples received.
+fn hard_loop_rows(t: &mut Table, s: &Summary) {
     t.section("Loop (motion-core)");
     t.row("loop_cycles", "cycles", s.loop_cycles.to_string(), "");
     t.row("loop_overruns", "overruns", s.loop_overruns.to_string(), "");
@@ -949,6 +961,10 @@ fn summary_table(s: &Summary) -> String {
         s.non_converged_plant_steps.to_string(),
         "",
     );
+}
+
+/// E-stops, monitor trips and heartbeats, drive faults and bus stops.
+fn safety_rows(t: &mut Table, s: &Summary) {
     t.section("Safety");
     t.row("estops", "e-stops", s.estops.to_string(), "");
     for (k, trip) in s.monitor_trips.iter().enumerate() {
@@ -986,6 +1002,10 @@ fn summary_table(s: &Summary) -> String {
     for reason in &s.bus_stop_reasons {
         t.row("bus_stop_reasons", "drive-io said", reason.clone(), "");
     }
+}
+
+/// The wire model's buses (wire modes only).
+fn buses_rows(t: &mut Table, s: &Summary) {
     if !s.wire.is_empty() {
         t.section("Buses (wire model)");
         for w in &s.wire {
@@ -1014,6 +1034,10 @@ fn summary_table(s: &Summary) -> String {
             );
         }
     }
+}
+
+/// The hover flight of a helicopter ride.
+fn hover_flight_rows(t: &mut Table, s: &Summary) {
     if let Some(r) = &s.ride {
         t.section("Hover flight");
         t.row("ride.pilot", "pilot", r.pilot.clone(), "");
@@ -1039,6 +1063,10 @@ fn summary_table(s: &Summary) -> String {
             "",
         );
     }
+}
+
+/// The motion cueing of a vehicle track.
+fn cueing_rows(t: &mut Table, s: &Summary) {
     if let Some(c) = &s.cueing {
         t.section("Motion cueing");
         t.row("cueing.source", "vehicle", c.source.clone(), "");
@@ -1060,11 +1088,127 @@ fn summary_table(s: &Summary) -> String {
             "",
         );
     }
+}
+
+/// The recorded data set.
+fn recording_rows(t: &mut Table, s: &Summary) {
     if let Some(p) = &s.record {
         t.section("Recording");
         t.row("record", "data set", p.display().to_string(), "");
     }
+}
+
+/// The summary as the index's table, section by section: every row names its summary.json
+/// field and unit.
+fn summary_table(s: &Summary) -> String {
+    let mut t = Table(String::new());
+    outcome_rows(&mut t, s);
+    tracking_rows(&mut t, s);
+    forces_rows(&mut t, s);
+    hard_loop_rows(&mut t, s);
+    safety_rows(&mut t, s);
+    buses_rows(&mut t, s);
+    hover_flight_rows(&mut t, s);
+    cueing_rows(&mut t, s);
+    recording_rows(&mut t, s);
     t.0
+}
+
+/// The events table's rows, in time order.
+fn events_rows(r: &RunRecord) -> String {
+    // In time order (the topics of several processes arrive interleaved).
+    let mut events = r.events.clone();
+    events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    let mut ev = String::new();
+    for e in &events {
+        ev.push_str(&format!(
+            "<tr{}><td>{:.3}</td><td>{}</td><td>{}</td></tr>\n",
+            if e.alarm { " class=\"alarm\"" } else { "" },
+            e.t_s,
+            html_escape(&e.source),
+            html_escape(&e.what)
+        ));
+    }
+    if events.is_empty() {
+        ev.push_str("<tr><td colspan=\"3\">no events</td></tr>\n");
+    }
+    ev
+}
+
+/// The figures the run's motion source made (the hover flight's path, the cueing's
+/// perception and motion), each under its title.
+fn source_figures(out: &Path, summary: &Summary) -> String {
+    let mut extra = String::new();
+    let mut figure = |title: &str, p: &Path, alt: &str| {
+        let href = html_escape(&link_target(out, p));
+        extra.push_str(&format!(
+            "<h2>{title}</h2><p><a href=\"{href}\">{href}</a></p><img src=\"{href}\" alt=\"{alt}\">\n"
+        ));
+    };
+    if let Some(p) = summary.ride.as_ref().and_then(|r| r.path_svg.as_ref()) {
+        figure("Hover flight: the ride's path", p, "hover flight path");
+    }
+    if let Some(c) = &summary.cueing {
+        if let Some(p) = &c.perception_svg {
+            figure("Motion cueing: perception", p, "cueing perception");
+        }
+        if let Some(p) = &c.motion_svg {
+            figure("Motion cueing: motion", p, "cueing motion");
+        }
+    }
+    extra
+}
+
+/// The path section's links: path.svg and, for a ride, the hover flight's own plot.
+fn ride_path_links(out: &Path, summary: &Summary) -> String {
+    match summary.ride.as_ref().and_then(|r| r.path_svg.as_ref()) {
+        Some(p) => {
+            let href = html_escape(&link_target(out, p));
+            format!(
+                "<a href=\"path.svg\">path.svg</a> (reference and plant) and the hover flight's <a href=\"{href}\">{href}</a>"
+            )
+        }
+        None => "<a href=\"path.svg\">path.svg</a>".into(),
+    }
+}
+
+/// Links to the logs and files this run wrote (only those that exist).
+fn file_links(out: &Path) -> String {
+    let mut files: Vec<String> = [
+        "sim-plant.log",
+        "safety-monitor.log",
+        "drive-io.log",
+        "motion-core.log",
+        "can-wire.log",
+        "summary.json",
+        "waypoints-timed.csv",
+    ]
+    .iter()
+    .filter(|f| out.join(f).is_file())
+    .map(|f| format!("<a href=\"{f}\">{f}</a>"))
+    .collect();
+    if files.is_empty() {
+        files.push("none written".into());
+    }
+    files.join(", ")
+}
+
+/// The verdict line at the top of the index.
+fn verdict(summary: &Summary) -> String {
+    if summary.completed {
+        "<p class=\"verdict ok\">Completed: the ride ran to its end and the platform held.</p>"
+            .to_string()
+    } else {
+        format!(
+            "<p class=\"verdict stopped\">STOPPED before the ride ended: {}</p>",
+            html_escape(
+                summary
+                    .stopped_by
+                    .as_deref()
+                    .unwrap_or("the run ended early (see the events)")
+            )
+        )
+    }
 }
 
 /// Writes the plots and index.html into `out`; returns the index path.
@@ -1085,82 +1229,11 @@ pub fn write(out: &Path, r: &RunRecord, summary: &Summary) -> Result<PathBuf, Ru
         }
     }
     let rows = summary_table(summary);
-    // In time order (the topics of several processes arrive interleaved).
-    let mut events = r.events.clone();
-    events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-    let mut ev = String::new();
-    for e in &events {
-        ev.push_str(&format!(
-            "<tr{}><td>{:.3}</td><td>{}</td><td>{}</td></tr>\n",
-            if e.alarm { " class=\"alarm\"" } else { "" },
-            e.t_s,
-            html_escape(&e.source),
-            html_escape(&e.what)
-        ));
-    }
-    if events.is_empty() {
-        ev.push_str("<tr><td colspan=\"3\">no events</td></tr>\n");
-    }
-    // The ride's own figures, where the run's source made them.
-    let mut extra = String::new();
-    let mut figure = |title: &str, p: &Path, alt: &str| {
-        let href = html_escape(&link_target(out, p));
-        extra.push_str(&format!(
-            "<h2>{title}</h2><p><a href=\"{href}\">{href}</a></p><img src=\"{href}\" alt=\"{alt}\">\n"
-        ));
-    };
-    if let Some(p) = summary.ride.as_ref().and_then(|r| r.path_svg.as_ref()) {
-        figure("Hover flight: the ride's path", p, "hover flight path");
-    }
-    if let Some(c) = &summary.cueing {
-        if let Some(p) = &c.perception_svg {
-            figure("Motion cueing: perception", p, "cueing perception");
-        }
-        if let Some(p) = &c.motion_svg {
-            figure("Motion cueing: motion", p, "cueing motion");
-        }
-    }
-    let ride_path = match summary.ride.as_ref().and_then(|r| r.path_svg.as_ref()) {
-        Some(p) => {
-            let href = html_escape(&link_target(out, p));
-            format!(
-                "<a href=\"path.svg\">path.svg</a> (reference and plant) and the hover flight's <a href=\"{href}\">{href}</a>"
-            )
-        }
-        None => "<a href=\"path.svg\">path.svg</a>".into(),
-    };
-    // Links only to the files this run wrote.
-    let mut files: Vec<String> = [
-        "sim-plant.log",
-        "safety-monitor.log",
-        "drive-io.log",
-        "motion-core.log",
-        "can-wire.log",
-        "summary.json",
-        "waypoints-timed.csv",
-    ]
-    .iter()
-    .filter(|f| out.join(f).is_file())
-    .map(|f| format!("<a href=\"{f}\">{f}</a>"))
-    .collect();
-    if files.is_empty() {
-        files.push("none written".into());
-    }
-    let files = files.join(", ");
-    let verdict = if summary.completed {
-        "<p class=\"verdict ok\">Completed: the ride ran to its end and the platform held.</p>"
-            .to_string()
-    } else {
-        format!(
-            "<p class=\"verdict stopped\">STOPPED before the ride ended: {}</p>",
-            html_escape(
-                summary
-                    .stopped_by
-                    .as_deref()
-                    .unwrap_or("the run ended early (see the events)")
-            )
-        )
-    };
+    let ev = events_rows(r);
+    let extra = source_figures(out, summary);
+    let ride_path = ride_path_links(out, summary);
+    let files = file_links(out);
+    let verdict = verdict(summary);
     let html = format!(
         r#"<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>crs sim run: {platform}</title>

@@ -75,6 +75,21 @@ fn forbid(krate: &str, forbidden: &[&str]) {
     assert!(hits.is_empty(), "{krate} depends on {hits:?}");
 }
 
+/// The stack library, by domain, in the order its crates may use each other (a crate may use
+/// those before it, never those after it).
+const STACK: [&str; 5] = [
+    "crs-supervisor",
+    "sim-runs",
+    "plant-experiments",
+    "calibration-campaigns",
+    "stack-reports",
+];
+
+/// `forbidden` followed by every crate of the stack library.
+fn and_the_stack<'a>(forbidden: &[&'a str]) -> Vec<&'a str> {
+    forbidden.iter().copied().chain(STACK).collect()
+}
+
 /// IPC, real time, CAN and CLI crates.
 const RUNTIME: [&str; 7] = [
     "iceoryx2",
@@ -94,22 +109,22 @@ fn the_model_library_and_the_data_format_pull_in_no_ipc_rt_can_or_cli() {
     forbid("load-tracking", &RUNTIME);
     forbid("config-diagnostics", &RUNTIME);
     // The load estimator reads forces; it needs neither the simulator nor the bus.
-    forbid("load-tracking", &["sim-plant", "drive-io", "crs-stack"]);
+    forbid("load-tracking", &and_the_stack(&["sim-plant", "drive-io"]));
     // The ride physics is a model too: the stack runs it, it knows no IPC or real time.
     forbid("ride-physics", &RUNTIME);
-    forbid("ride-physics", &["motion-core", "crs-stack"]);
+    forbid("ride-physics", &and_the_stack(&["motion-core"]));
     // So is the motion cueing (washout, tilt coordination, vestibular models): the stack runs
     // it and feeds motion-core, which it only knows through its tests.
     forbid("motion-cueing", &RUNTIME);
     forbid(
         "motion-cueing",
-        &["motion-core", "crs-stack", "sim-plant", "drive-io"],
+        &and_the_stack(&["motion-core", "sim-plant", "drive-io"]),
     );
     // The model's analyses (`crs model …`) are model too: the plant's measurement is handed in.
     forbid("model-analysis", &RUNTIME);
     forbid(
         "model-analysis",
-        &["motion-core", "sim-plant", "drive-io", "crs-stack"],
+        &and_the_stack(&["motion-core", "sim-plant", "drive-io"]),
     );
 }
 
@@ -117,13 +132,7 @@ fn the_model_library_and_the_data_format_pull_in_no_ipc_rt_can_or_cli() {
 fn the_contract_crates_depend_on_no_other_layer() {
     forbid(
         "crs-ipc",
-        &[
-            "cdpr-model",
-            "motion-core",
-            "drive-io",
-            "sim-plant",
-            "crs-stack",
-        ],
+        &and_the_stack(&["cdpr-model", "motion-core", "drive-io", "sim-plant"]),
     );
     forbid(
         "can-transport",
@@ -181,7 +190,7 @@ fn the_closure_is_transitive() {
 fn the_daemon_does_not_link_the_bus_the_simulator_or_the_stack() {
     forbid(
         "motion-core",
-        &[
+        &and_the_stack(&[
             "drive-io",
             "drive-bus",
             "drives-config",
@@ -190,8 +199,7 @@ fn the_daemon_does_not_link_the_bus_the_simulator_or_the_stack() {
             "socketcan",
             "sim-plant",
             "calibrate",
-            "crs-stack",
-        ],
+        ]),
     );
 }
 
@@ -199,7 +207,7 @@ fn the_daemon_does_not_link_the_bus_the_simulator_or_the_stack() {
 fn the_safety_monitor_shares_no_code_with_the_controller() {
     forbid(
         "safety-monitor",
-        &[
+        &and_the_stack(&[
             "cdpr-model",
             "motion-core",
             "surrogate",
@@ -209,8 +217,7 @@ fn the_safety_monitor_shares_no_code_with_the_controller() {
             "drives-config",
             "cia402-drive",
             "drive-commissioning",
-            "crs-stack",
-        ],
+        ]),
     );
 }
 
@@ -333,21 +340,64 @@ fn the_rt_utility_stays_small() {
 
 #[test]
 fn only_the_command_line_and_the_safety_hil_use_the_stack_library() {
-    // The safety HIL (a test harness) runs its processes under the stack's one supervisor.
+    // The safety HIL (a test harness) runs its processes under the stack's one supervisor,
+    // and uses nothing else of the stack library.
     let (deps, name_of) = graph();
     for (id, ds) in &deps {
-        let who = &name_of[id];
-        if who == "crs" {
+        let who = name_of[id].as_str();
+        if who == "crs" || STACK.contains(&who) {
             continue;
         }
-        let may_use_stack = who == "safety-hil";
-        assert!(
-            !ds.iter()
-                .any(|d| name_of[d] == "crs" || (!may_use_stack && name_of[d] == "crs-stack")),
-            "{who} depends on the stack library or the CLI"
-        );
+        for d in ds {
+            let d = name_of[d].as_str();
+            let allowed = who == "safety-hil" && d == "crs-supervisor";
+            assert!(
+                allowed || !(d == "crs" || STACK.contains(&d)),
+                "{who} depends on {d} (the stack library or the CLI)"
+            );
+        }
     }
-    assert!(closure("safety-hil").contains("crs-stack"));
+    let hil = closure("safety-hil");
+    assert!(hil.contains("crs-supervisor"), "{hil:?}");
+    let beyond_the_supervisor: Vec<&str> = STACK[1..]
+        .iter()
+        .copied()
+        .chain([
+            "sim-plant",
+            "calibrate",
+            "cdpr-model",
+            "motion-core",
+            "surrogate",
+            "plotters",
+            "tokio",
+        ])
+        .collect();
+    forbid("safety-hil", &beyond_the_supervisor);
+}
+
+#[test]
+fn the_stack_library_uses_its_crates_downwards_only() {
+    // Each crate of the stack library may use those listed before it in STACK, none after it.
+    for (i, krate) in STACK.iter().enumerate() {
+        forbid(krate, &STACK[i + 1..]);
+    }
+    // The supervisor (what the safety HIL links) holds processes, transports and timing
+    // profiles: no simulator, model, calibration or console.
+    forbid(
+        "crs-supervisor",
+        &[
+            "sim-plant",
+            "calibrate",
+            "cdpr-model",
+            "motion-core",
+            "surrogate",
+            "crs-console",
+            "plotters",
+        ],
+    );
+    // The plant experiments run the plant model alone, not the stack's processes.
+    forbid("plant-experiments", &["crs-supervisor", "sim-runs"]);
+    assert!(closure("stack-reports").contains("calibration-campaigns"));
 }
 
 #[test]
@@ -368,7 +418,7 @@ fn nothing_depends_on_the_safety_hil() {
 fn nothing_links_the_test_rigs_or_the_wire_hub() {
     // The drive rigs (winch emulator, HIL scenarios, bus bench) are test doubles and the
     // can-wire hub is the simulated wire: a daemon that linked either could run against a
-    // double in production. crs-stack starts the hub's binary, it does not link it; only the
+    // double in production. crs-supervisor starts the hub's binary, it does not link it; only the
     // rigs' bus bench runs a hub in its own process.
     let (deps, name_of) = graph();
     for (krate, allowed) in [("drive-rig", &[][..]), ("can-wire", &["drive-rig"][..])] {

@@ -21,17 +21,25 @@
 //! force sensors, reference — and the summary reports the measured pose error at the rest points.
 
 use crate::campaign::{timed_waypoints, write_waypoints};
+use crate::cueing_run::CueingRun;
 use crate::rest_recording::{RestErrors, RestRecorder, rest_errors, to_dataset};
-use crate::supervisor::{self, Supervisor};
-use crate::transport;
+use crate::ride_run::PreparedRide;
 use cdpr_model::Pose;
+use cdpr_model::config::Platform;
 use cdpr_model::config::load_platform;
 use crs_ipc::{
     DriveFeedback, Heartbeat, IpcNode, JointSetpoint, LoopStatsSample, PlantTruth, ProcessId,
-    StateEvent, TrackerPose,
+    StateEvent, TopicSubscriber, TrackerPose,
 };
+use crs_supervisor::supervisor::{self, Supervisor};
+use crs_supervisor::transport;
+use drive_commissioning::budget::InterfaceBudget;
+use drives_config::DrivesConfig;
+use motion_core::daemon::config::DaemonConfig;
 use motion_core::daemon::lifecycle;
 use motion_core::daemon::trajectory::{self};
+use ride_physics::HoverModel;
+use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -166,7 +174,7 @@ pub struct Summary {
     pub cueing: Option<crate::cueing_run::CueingSummary>,
     /// The wire model's final statistics per bus (load, frames dropped at a full transmit
     /// queue, worst frame latency); empty without the hub (`--transport udpbus` / explicit).
-    pub wire: Vec<crate::transport::WireSummary>,
+    pub wire: Vec<crs_supervisor::transport::WireSummary>,
     pub duration_s: f64,
 }
 
@@ -381,7 +389,7 @@ pub enum SimError {
     )]
     OperatorStartWithoutRide,
     #[error(transparent)]
-    Transport(#[from] crate::transport::BadTransport),
+    Transport(#[from] crs_supervisor::transport::BadTransport),
     #[error("{}: {source}", drives.display())]
     Budget {
         drives: PathBuf,
@@ -444,12 +452,58 @@ pub fn execute(a: &SimOptions) -> Result<Summary, SimError> {
     execute_observed(a, &mut NoObserver)
 }
 
-/// [`execute`] with an observer.
+/// [`execute`] with an observer, in four stages: prepare (every input checked, nothing
+/// started) → start (the processes in order, each waited for) → follow (until motion-core
+/// ends its plan, a process dies, Ctrl-C or the timeout) → finish (stop all, summary,
+/// recording).
 pub fn execute_observed(
     a: &SimOptions,
     observer: &mut dyn RunObserver,
 ) -> Result<Summary, SimError> {
-    let run_no = RUNS.fetch_add(1, Ordering::Relaxed);
+    let mut run = prepare(a)?;
+    let mut started = start(a, &run, observer)?;
+    let mut followed = Following::new(&run, started.first_truth.take());
+    let result = follow(a, &mut run, &mut started, &mut followed, observer);
+    finish(a, run, started, followed, result, observer)
+}
+
+/// A run checked and set up before any process starts: the inputs validated, the motion
+/// source prepared, the waypoints timed, the run's iceoryx2 prefix chosen.
+struct Prepared {
+    run_no: u32,
+    bin_dir: PathBuf,
+    with_monitor: bool,
+    daemon: DaemonConfig,
+    platform: Platform,
+    drives: DrivesConfig,
+    budgets: Vec<InterfaceBudget>,
+    bus_mode: transport::BusMode,
+    recorder: Option<RestRecorder>,
+    configured: lifecycle::Configured,
+    /// The helicopter ride, until its thread starts (with motion-core's first setpoint).
+    ride: Option<PreparedRide>,
+    ride_model: Option<HoverModel>,
+    cueing: Option<CueingRun>,
+    /// The controller's command at home: the drives are homed to it.
+    home_q: Vec<f64>,
+    /// The waypoint file of the plan (the option's or the daemon TOML's).
+    waypoint_file: Option<PathBuf>,
+    /// The waypoint file motion-core is given (the timed copy with --dwell-s).
+    waypoints_arg: Option<PathBuf>,
+    control_socket: Option<PathBuf>,
+    rt: Option<i32>,
+    transport: String,
+    prefix: String,
+}
+
+impl Prepared {
+    fn exe(&self, name: &str) -> PathBuf {
+        self.bin_dir.join(name)
+    }
+}
+
+/// The directory of the stack's binaries (the option's, else this executable's), each checked.
+fn locate_binaries(a: &SimOptions) -> Result<PathBuf, SimError> {
     let bin_dir = match &a.bin_dir {
         Some(d) => d.clone(),
         None => std::env::current_exe()
@@ -458,18 +512,29 @@ pub fn execute_observed(
             .map(Path::to_path_buf)
             .ok_or(SimError::NoBinDir)?,
     };
-    let exe = |name: &str| bin_dir.join(name);
     for need in ["motion-core", "drive-io", "sim-plant", "can-wire"] {
-        if !exe(need).is_file() {
-            return Err(SimError::MissingBinary { exe: exe(need) });
+        if !bin_dir.join(need).is_file() {
+            return Err(SimError::MissingBinary {
+                exe: bin_dir.join(need),
+            });
         }
     }
-    let with_monitor = !a.no_monitor && exe("safety-monitor").is_file();
-    // Validate the inputs before anything starts.
+    Ok(bin_dir)
+}
+
+/// The configs of a run, read and checked against each other before anything starts.
+struct Inputs {
+    daemon: DaemonConfig,
+    platform: Platform,
+    drives: DrivesConfig,
+    budgets: Vec<InterfaceBudget>,
+    bus_mode: transport::BusMode,
+    recorder: Option<RestRecorder>,
+}
+
+fn check_inputs(a: &SimOptions, bin_dir: &Path, with_monitor: bool) -> Result<Inputs, SimError> {
     let daemon = motion_core::daemon::config::load(&a.config)?;
     let platform = load_platform(&daemon.platform)?;
-    let p = platform.model.params();
-    let (f_min, f_max) = (p.f_min, p.f_max);
     for f in [&a.drives, &a.plant] {
         if !f.is_file() {
             return Err(SimError::NoSuchFile { path: f.clone() });
@@ -477,23 +542,22 @@ pub fn execute_observed(
     }
     // Drives that validate the monitor's safety heartbeat never enable without it: refuse the
     // run up front instead of letting drive-io time out waiting for operational drives.
-    let drives_cfg =
-        drives_config::DrivesConfig::load(&a.drives).map_err(|source| SimError::Drives {
-            drives: a.drives.clone(),
-            source,
-        })?;
+    let drives = DrivesConfig::load(&a.drives).map_err(|source| SimError::Drives {
+        drives: a.drives.clone(),
+        source,
+    })?;
     // The bus budget of every interface, with the frames every node will be configured with:
     // a layout the wire cannot carry is refused before anything starts.
     let budgets =
-        drive_commissioning::budget::check(&drives_cfg).map_err(|source| SimError::Budget {
+        drive_commissioning::budget::check(&drives).map_err(|source| SimError::Budget {
             drives: a.drives.clone(),
             source,
         })?;
     let bus_mode = transport::BusMode::parse(&a.transport)?;
-    if drives_cfg.safety_heartbeat.is_some() && !with_monitor {
+    if drives.safety_heartbeat.is_some() && !with_monitor {
         return Err(SimError::HeartbeatWithoutMonitor {
             drives: a.drives.clone(),
-            monitor_exe: (!a.no_monitor).then(|| exe("safety-monitor")),
+            monitor_exe: (!a.no_monitor).then(|| bin_dir.join("safety-monitor")),
         });
     }
     if !(a.hold_s.is_finite() && a.hold_s >= 0.0 && a.timeout_s > 0.0) {
@@ -502,7 +566,7 @@ pub fn execute_observed(
             timeout_s: a.timeout_s,
         });
     }
-    let mut recorder = match &a.record {
+    let recorder = match &a.record {
         Some(_) => Some(RestRecorder::new(a.settle_s)?.averaging_forces(a.record_mean_forces)),
         None => None,
     };
@@ -512,6 +576,29 @@ pub fn execute_observed(
             settle_s: a.settle_s,
         });
     }
+    Ok(Inputs {
+        daemon,
+        platform,
+        drives,
+        budgets,
+        bus_mode,
+        recorder,
+    })
+}
+
+/// Stage 1: every input checked and the run set up; no process started yet.
+fn prepare(a: &SimOptions) -> Result<Prepared, SimError> {
+    let run_no = RUNS.fetch_add(1, Ordering::Relaxed);
+    let bin_dir = locate_binaries(a)?;
+    let with_monitor = !a.no_monitor && bin_dir.join("safety-monitor").is_file();
+    let Inputs {
+        daemon,
+        platform,
+        drives,
+        budgets,
+        bus_mode,
+        recorder,
+    } = check_inputs(a, &bin_dir, with_monitor)?;
     // The controller's command at home (the drives are homed to it) and, with --dwell-s, the
     // waypoints timed for a rest at each.
     let mut configured = lifecycle::configure(&daemon, &platform)?;
@@ -524,14 +611,14 @@ pub fn execute_observed(
             &platform,
         )?;
     }
-    let mut ride = match &a.ride {
+    let ride = match &a.ride {
         Some(spec) => Some(crate::ride_run::prepare(spec, &platform)?),
         None => None,
     };
     if ride.is_some() && (a.record.is_some() || a.dwell_s.is_some() || a.waypoints.is_some()) {
         return Err(SimError::RideWithWaypointPlan);
     }
-    let mut cueing = match &a.cueing {
+    let cueing = match &a.cueing {
         Some(_)
             if ride.is_some()
                 || a.record.is_some()
@@ -540,9 +627,11 @@ pub fn execute_observed(
         {
             return Err(crate::cueing_run::CueingError::WithOtherSource.into());
         }
-        Some(spec) => Some(crate::cueing_run::CueingRun::new(
-            crate::cueing_run::prepare(spec, &platform, &configured)?,
-        )),
+        Some(spec) => Some(CueingRun::new(crate::cueing_run::prepare(
+            spec,
+            &platform,
+            &configured,
+        )?)),
         None => None,
     };
     let home_q = configured.home_command().map_err(SimError::HomePose)?;
@@ -561,7 +650,55 @@ pub fn execute_observed(
         configured.verify_ride(&ride_file)?;
     }
     std::fs::create_dir_all(&a.out).map_err(output(&a.out))?;
-    let waypoints_arg = match (a.dwell_s, &waypoint_file) {
+    let waypoints_arg = time_waypoints(a, &platform, &configured, waypoint_file.as_deref())?;
+    let rt = rt_priority(a);
+    let transport = bus_mode.describe();
+    let prefix = format!("crs-sim-{}-{run_no}/", std::process::id());
+    println!(
+        "crs sim: platform `{}`, buses: {transport}, iceoryx2 prefix {prefix}, safety monitor {}",
+        platform.name,
+        if with_monitor {
+            "on"
+        } else if a.no_monitor {
+            "off (--no-monitor)"
+        } else {
+            "not built (crates/safety-monitor): running without"
+        }
+    );
+    let ride_model = ride.as_ref().map(|r| r.model);
+    Ok(Prepared {
+        run_no,
+        bin_dir,
+        with_monitor,
+        daemon,
+        platform,
+        drives,
+        budgets,
+        bus_mode,
+        recorder,
+        configured,
+        ride,
+        ride_model,
+        cueing,
+        home_q,
+        waypoint_file,
+        waypoints_arg,
+        control_socket,
+        rt,
+        transport,
+        prefix,
+    })
+}
+
+/// The waypoint file motion-core is given: with --dwell-s the plan's waypoints timed for a rest
+/// at each, written into the run's directory; else the option's file (None: the daemon TOML's).
+fn time_waypoints(
+    a: &SimOptions,
+    platform: &Platform,
+    configured: &lifecycle::Configured,
+    waypoint_file: Option<&Path>,
+) -> Result<Option<PathBuf>, SimError> {
+    match (a.dwell_s, waypoint_file) {
         (Some(dwell), Some(file)) => {
             let wps = trajectory::read_waypoints(file)?;
             let (timed, dur) = timed_waypoints(
@@ -585,86 +722,126 @@ pub fn execute_observed(
                 timed.len(),
                 path.display()
             );
-            Some(path)
+            Ok(Some(path))
         }
-        (Some(_), None) => {
-            return Err(SimError::DwellWithoutWaypoints);
-        }
-        (None, _) => a.waypoints.clone(),
-    };
-    // SCHED_FIFO + mlockall for drive-io and sim-plant only where it cannot fail (root).
-    // SAFETY: geteuid(2) has no preconditions.
-    let rt = a.rt_priority.filter(|_| {
+        (Some(_), None) => Err(SimError::DwellWithoutWaypoints),
+        (None, _) => Ok(a.waypoints.clone()),
+    }
+}
+
+/// SCHED_FIFO + mlockall for drive-io and sim-plant only where it cannot fail (root).
+fn rt_priority(a: &SimOptions) -> Option<i32> {
+    a.rt_priority.filter(|_| {
+        // SAFETY: geteuid(2) has no preconditions.
         let root = unsafe { libc::geteuid() } == 0;
         if !root {
             println!("  --rt-priority ignored: not root (drive-io and sim-plant run SCHED_OTHER)");
         }
         root
-    });
-    let transport = bus_mode.describe();
-    let prefix = format!("crs-sim-{}-{run_no}/", std::process::id());
-    println!(
-        "crs sim: platform `{}`, buses: {transport}, iceoryx2 prefix {prefix}, safety monitor {}",
-        platform.name,
-        if with_monitor {
-            "on"
-        } else if a.no_monitor {
-            "off (--no-monitor)"
-        } else {
-            "not built (crates/safety-monitor): running without"
-        }
-    );
+    })
+}
 
-    supervisor::install_interrupt_handler();
-    let node = IpcNode::with_prefix("crs-sim", &prefix)?;
-    let truth = node.subscriber::<PlantTruth>()?;
-    let setpoints = node.subscriber::<JointSetpoint>()?;
-    let loop_stats = node.subscriber::<LoopStatsSample>()?;
-    let events = node.subscriber::<StateEvent>()?;
-    let heartbeats = node.subscriber::<Heartbeat>()?;
-    let feedback = node.subscriber::<DriveFeedback>()?;
-    let tracker = node.subscriber::<TrackerPose>()?;
-    observer.started(&RunStart {
-        prefix: &prefix,
-        daemon: &daemon,
-        platform: &platform,
-        waypoints: waypoints_arg.as_deref().or(waypoint_file.as_deref()),
-        control: control_socket.as_deref(),
-    })?;
+/// The topics the launcher listens to (on the run's own prefix).
+struct Topics {
+    truth: TopicSubscriber<PlantTruth>,
+    setpoints: TopicSubscriber<JointSetpoint>,
+    loop_stats: TopicSubscriber<LoopStatsSample>,
+    events: TopicSubscriber<StateEvent>,
+    heartbeats: TopicSubscriber<Heartbeat>,
+    feedback: TopicSubscriber<DriveFeedback>,
+    tracker: TopicSubscriber<TrackerPose>,
+}
 
-    let mut stack = Supervisor::new(&prefix, &a.out);
-    let s = |p: &Path| p.display().to_string();
-    let wait_for =
-        |what: &str, secs: f64, ready: &mut dyn FnMut() -> bool, stack: &mut Supervisor| {
-            let t0 = Instant::now();
-            while !ready() {
-                if let Some(e) = stack.exited() {
-                    return Err(SimError::ExitedWhileWaiting {
-                        name: e.name,
-                        status: e.status,
-                        what: what.to_string(),
-                        log_tail: supervisor::log_tail(&e.log, 15),
-                    });
-                }
-                if supervisor::interrupted() {
-                    return Err(SimError::InterruptedWhileWaiting);
-                }
-                if t0.elapsed().as_secs_f64() > secs {
-                    return Err(SimError::WaitTimeout {
-                        secs,
-                        what: what.to_string(),
-                    });
-                }
-                std::thread::sleep(Duration::from_millis(10));
-            }
-            Ok(())
-        };
+impl Topics {
+    fn subscribe(node: &IpcNode) -> Result<Self, SimError> {
+        Ok(Self {
+            truth: node.subscriber()?,
+            setpoints: node.subscriber()?,
+            loop_stats: node.subscriber()?,
+            events: node.subscriber()?,
+            heartbeats: node.subscriber()?,
+            feedback: node.subscriber()?,
+            tracker: node.subscriber()?,
+        })
+    }
+}
 
-    let rt_args = |p: Option<i32>| match p {
+/// The processes of a started run and what the launcher listens to. The supervisor is
+/// dropped first (it stops whatever still runs), the IPC node last.
+struct Started {
+    stack: Supervisor,
+    buses: transport::StackBuses,
+    topics: Topics,
+    _node: IpcNode,
+    /// The plant's first state (waited for before the drives start).
+    first_truth: Option<PlantTruth>,
+}
+
+fn arg(p: &Path) -> String {
+    p.display().to_string()
+}
+
+fn rt_args(p: Option<i32>) -> Vec<String> {
+    match p {
         Some(p) => vec!["--rt-priority".to_string(), p.to_string()],
         None => Vec::new(),
-    };
-    for ib in &budgets {
+    }
+}
+
+/// Polls `ready` every 10 ms until it holds; a process that exits, Ctrl-C or `secs` end the
+/// wait with an error naming `what` was awaited.
+fn wait_for(
+    what: &str,
+    secs: f64,
+    ready: &mut dyn FnMut() -> bool,
+    stack: &mut Supervisor,
+) -> Result<(), SimError> {
+    let t0 = Instant::now();
+    while !ready() {
+        if let Some(e) = stack.exited() {
+            return Err(SimError::ExitedWhileWaiting {
+                name: e.name,
+                status: e.status,
+                what: what.to_string(),
+                log_tail: supervisor::log_tail(&e.log, 15),
+            });
+        }
+        if supervisor::interrupted() {
+            return Err(SimError::InterruptedWhileWaiting);
+        }
+        if t0.elapsed().as_secs_f64() > secs {
+            return Err(SimError::WaitTimeout {
+                secs,
+                what: what.to_string(),
+            });
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Ok(())
+}
+
+/// Stage 2: the observer, then the buses, the plant, the monitor, the drive adapter and
+/// motion-core, in that order, each waited for where the next one needs it.
+fn start(
+    a: &SimOptions,
+    run: &Prepared,
+    observer: &mut dyn RunObserver,
+) -> Result<Started, SimError> {
+    supervisor::install_interrupt_handler();
+    let node = IpcNode::with_prefix("crs-sim", &run.prefix)?;
+    let topics = Topics::subscribe(&node)?;
+    observer.started(&RunStart {
+        prefix: &run.prefix,
+        daemon: &run.daemon,
+        platform: &run.platform,
+        waypoints: run
+            .waypoints_arg
+            .as_deref()
+            .or(run.waypoint_file.as_deref()),
+        control: run.control_socket.as_deref(),
+    })?;
+    let mut stack = Supervisor::new(&run.prefix, &a.out);
+    for ib in &run.budgets {
         println!(
             "  bus {}: {:.1} % of {} kbit/s (budget {:.0} %), RPDO window {:.0} µs",
             ib.name,
@@ -676,48 +853,92 @@ pub fn execute_observed(
     }
     // The buses first: every CAN node of the run connects to them.
     let mut nodes = vec!["sim-plant", "drive-io"];
-    if with_monitor {
+    if run.with_monitor {
         nodes.push("safety-monitor");
     }
     let buses = transport::start(
-        &bus_mode,
-        &drives_cfg,
+        &run.bus_mode,
+        &run.drives,
         &nodes,
         &mut stack,
-        &exe("can-wire"),
+        &run.exe("can-wire"),
         &a.out,
-        &format!("{}-{run_no}", std::process::id()),
+        &format!("{}-{}", std::process::id(), run.run_no),
     )?;
+    spawn_plant(a, run, &buses, &mut stack)?;
+    let mut first_truth = None;
+    wait_for(
+        "the plant's first state",
+        20.0,
+        &mut || {
+            while let Ok(Some(t)) = topics.truth.receive() {
+                first_truth = Some(t);
+            }
+            first_truth.is_some()
+        },
+        &mut stack,
+    )?;
+    spawn_drive_side(a, run, &buses, &mut stack)?;
+    wait_for(
+        "the drives to be operational (NMT boot, SDO, CiA 402 enable)",
+        30.0,
+        &mut || {
+            let mut ok = false;
+            while let Ok(Some(f)) = topics.feedback.receive() {
+                ok |= f.bus() == Ok(crs_ipc::BusState::Ready);
+            }
+            ok
+        },
+        &mut stack,
+    )?;
+    spawn_motion_core(a, run, &mut stack)?;
+    Ok(Started {
+        stack,
+        buses,
+        topics,
+        _node: node,
+        first_truth,
+    })
+}
+
+/// sim-plant, homed to the controller's command at home, with the operator's hand on the
+/// safety I/O node (its reset key and e-stop) as a control file.
+fn spawn_plant(
+    a: &SimOptions,
+    run: &Prepared,
+    buses: &transport::StackBuses,
+    stack: &mut Supervisor,
+) -> Result<(), SimError> {
     stack.spawn(
         "sim-plant",
-        &exe("sim-plant"),
+        &run.exe("sim-plant"),
         &[
-            rt_args(rt.map(|p| p - 5)),
+            rt_args(run.rt.map(|p| p - 5)),
             vec![
                 "--plant".into(),
-                s(&a.plant),
+                arg(&a.plant),
                 "--drives".into(),
-                s(&a.drives),
+                arg(&a.drives),
             ],
             buses.args("sim-plant"),
             vec![
                 "--control-platform".into(),
-                s(&daemon.platform),
+                arg(&run.daemon.platform),
                 "--home-lengths-m".into(),
-                home_q
+                run.home_q
                     .iter()
                     .map(|q| format!("{q:?}"))
                     .collect::<Vec<_>>()
                     .join(","),
                 // The operator's hand on the safety I/O node (its reset key and e-stop).
                 "--io-control".into(),
-                s(&a.out.join("safety-io.control")),
+                arg(&a.out.join("safety-io.control")),
             ],
         ]
         .concat(),
         &[],
     )?;
-    if with_monitor && drives_cfg.safety_io.is_some() {
+    if run.with_monitor && run.drives.safety_io.is_some() {
         println!(
             "  the safety I/O node's reset key: `echo reset_key on > {0}` then `: > {0}` (turned \
              and released: the monitor's operator reset); `echo estop pressed > {0}`: its \
@@ -725,24 +946,22 @@ pub fn execute_observed(
             a.out.join("safety-io.control").display()
         );
     }
-    let mut first_truth = None;
-    wait_for(
-        "the plant's first state",
-        20.0,
-        &mut || {
-            while let Ok(Some(t)) = truth.receive() {
-                first_truth = Some(t);
-            }
-            first_truth.is_some()
-        },
-        &mut stack,
-    )?;
-    if with_monitor {
+    Ok(())
+}
+
+/// The safety monitor (when the run has it), then the drive adapter.
+fn spawn_drive_side(
+    a: &SimOptions,
+    run: &Prepared,
+    buses: &transport::StackBuses,
+    stack: &mut Supervisor,
+) -> Result<(), SimError> {
+    if run.with_monitor {
         stack.spawn(
             "safety-monitor",
-            &exe("safety-monitor"),
+            &run.exe("safety-monitor"),
             &[
-                vec!["--config".to_string(), s(&a.monitor_config)],
+                vec!["--config".to_string(), arg(&a.monitor_config)],
                 buses.args("safety-monitor"),
             ]
             .concat(),
@@ -751,105 +970,139 @@ pub fn execute_observed(
     }
     // The heartbeat is mandatory for drive-io: only a run without the monitor (--no-monitor, a
     // bench) with a drives config without it runs the test rigs' bench executable instead.
-    let drive_io_exe = if !with_monitor && drives_cfg.safety_heartbeat.is_none() {
-        exe(drives_config::BENCH_EXECUTABLE)
+    let drive_io_exe = if !run.with_monitor && run.drives.safety_heartbeat.is_none() {
+        run.exe(drives_config::BENCH_EXECUTABLE)
     } else {
-        exe("drive-io")
+        run.exe("drive-io")
     };
     stack.spawn(
         "drive-io",
         &drive_io_exe,
         &[
-            rt_args(rt),
-            vec!["--config".into(), s(&a.drives)],
+            rt_args(run.rt),
+            vec!["--config".into(), arg(&a.drives)],
             buses.args("drive-io"),
         ]
         .concat(),
         &[],
     )?;
-    wait_for(
-        "the drives to be operational (NMT boot, SDO, CiA 402 enable)",
-        30.0,
-        &mut || {
-            let mut ok = false;
-            while let Ok(Some(f)) = feedback.receive() {
-                ok |= f.bus() == Ok(crs_ipc::BusState::Ready);
-            }
-            ok
-        },
-        &mut stack,
-    )?;
+    Ok(())
+}
+
+/// motion-core on its input: the cueing input (a ride or motion cueing), the control socket
+/// (an operator starts the ride) or the waypoint plan.
+fn spawn_motion_core(
+    a: &SimOptions,
+    run: &Prepared,
+    stack: &mut Supervisor,
+) -> Result<(), SimError> {
     let mut mc_args = vec![
         "--config".into(),
-        s(&a.config),
+        arg(&a.config),
         "--exit-after-plan-s".into(),
         a.hold_s.to_string(),
     ];
-    if ride.is_some() || cueing.is_some() {
+    if run.ride.is_some() || run.cueing.is_some() {
         mc_args.extend(["--input".into(), "cueing".into()]);
-    } else if let Some(sock) = &control_socket {
+    } else if let Some(sock) = &run.control_socket {
         // Idle and holding until an operator starts the ride on the control socket.
-        mc_args.extend(["--control".into(), s(sock)]);
+        mc_args.extend(["--control".into(), arg(sock)]);
         println!(
             "  motion-core idles at home, holding: the ride starts when an operator starts it \
              (the console's START RIDE, or `crs ride start FILE --socket {}`)",
             sock.display()
         );
-    } else if let Some(w) = &waypoints_arg {
+    } else if let Some(w) = &run.waypoints_arg {
         mc_args.push("--waypoints".into());
-        mc_args.push(s(w));
+        mc_args.push(arg(w));
     }
-    stack.spawn("motion-core", &exe("motion-core"), &mc_args, &[])?;
-    // The hover model starts with motion-core's first setpoint (its cueing subscriber is up).
-    let mut ride_thread: Option<crate::ride_run::RideThread> = None;
-    let ride_model = ride.as_ref().map(|r| r.model);
-    let mut ride_reference: Vec<[f64; 3]> = Vec::new();
+    stack.spawn("motion-core", &run.exe("motion-core"), &mc_args, &[])?;
+    Ok(())
+}
 
-    // Follow the run.
-    let mut sum = Summary {
-        platform: platform.name.clone(),
-        transport: transport.clone(),
-        monitor: with_monitor,
-        force_min_n: f64::INFINITY,
-        static_position_mm: f64::NAN,
-        static_rotation_deg: f64::NAN,
-        force_max_n: f64::NEG_INFINITY,
-        f_min_n: f_min,
-        f_max_n: f_max,
-        ..Summary::default()
-    };
-    let mut refs: std::collections::VecDeque<(u64, [f64; 6])> = Default::default();
-    let (mut sum_p, mut sum_r, mut n_track) = (0.0, 0.0, 0u64);
-    let mut last_truth = first_truth;
-    let mut last_ref = None;
-    let mut last_sp_ns = 0u64;
-    let mut was_running = false;
-    let mut bus_stop: Option<(u64, u32)> = None;
-    let mut echoed_stop: Option<String> = None;
-    let t0 = Instant::now();
-    let result: Result<(), SimError> = loop {
-        std::thread::sleep(Duration::from_millis(5));
-        while let Ok(Some(sp)) = setpoints.receive() {
+/// What the launcher gathers while it follows the run.
+struct Following {
+    sum: Summary,
+    /// The newest references (timestamp, pose), for the tracking error of each plant state.
+    refs: VecDeque<(u64, [f64; 6])>,
+    /// Sums of the tracking errors (m, rad) over `n_track` plant states.
+    sum_p: f64,
+    sum_r: f64,
+    n_track: u64,
+    last_truth: Option<PlantTruth>,
+    last_ref: Option<[f64; 6]>,
+    last_sp_ns: u64,
+    was_running: bool,
+    /// The first bus state other than running after it ran (timestamp, state).
+    bus_stop: Option<(u64, u32)>,
+    /// A stop named only by the monitor's echo of somebody's e-stop event.
+    echoed_stop: Option<String>,
+    /// The hover model's thread, started with motion-core's first setpoint.
+    ride_thread: Option<crate::ride_run::RideThread>,
+    /// Every 10th reference position, for the ride's path plot.
+    ride_reference: Vec<[f64; 3]>,
+    t0: Instant,
+}
+
+impl Following {
+    fn new(run: &Prepared, first_truth: Option<PlantTruth>) -> Self {
+        let p = run.platform.model.params();
+        Self {
+            sum: Summary {
+                platform: run.platform.name.clone(),
+                transport: run.transport.clone(),
+                monitor: run.with_monitor,
+                force_min_n: f64::INFINITY,
+                static_position_mm: f64::NAN,
+                static_rotation_deg: f64::NAN,
+                force_max_n: f64::NEG_INFINITY,
+                f_min_n: p.f_min,
+                f_max_n: p.f_max,
+                ..Summary::default()
+            },
+            refs: VecDeque::new(),
+            sum_p: 0.0,
+            sum_r: 0.0,
+            n_track: 0,
+            last_truth: first_truth,
+            last_ref: None,
+            last_sp_ns: 0,
+            was_running: false,
+            bus_stop: None,
+            echoed_stop: None,
+            ride_thread: None,
+            ride_reference: Vec::new(),
+            t0: Instant::now(),
+        }
+    }
+
+    fn setpoints(&mut self, run: &mut Prepared, topics: &Topics, observer: &mut dyn RunObserver) {
+        while let Ok(Some(sp)) = topics.setpoints.receive() {
             observer.setpoint(&sp);
-            sum.setpoints += 1;
-            last_sp_ns = last_sp_ns.max(sp.timestamp_ns);
-            if let Some(r) = recorder.as_mut() {
+            self.sum.setpoints += 1;
+            self.last_sp_ns = self.last_sp_ns.max(sp.timestamp_ns);
+            if let Some(r) = run.recorder.as_mut() {
                 let m = (sp.cable_count as usize).min(crs_ipc::MAX_CABLES);
                 r.setpoint(sp.timestamp_ns, sp.pose, &sp.cable_length_m[..m]);
             }
-            refs.push_back((sp.timestamp_ns, sp.pose));
-            last_ref = Some(sp.pose);
-            if let Some(c) = cueing.as_mut() {
+            self.refs.push_back((sp.timestamp_ns, sp.pose));
+            self.last_ref = Some(sp.pose);
+            if let Some(c) = run.cueing.as_mut() {
                 c.setpoint(&sp);
             }
-            if ride_model.is_some() && sum.setpoints.is_multiple_of(10) {
-                ride_reference.push([sp.pose[0], sp.pose[1], sp.pose[2]]);
+            if run.ride_model.is_some() && self.sum.setpoints.is_multiple_of(10) {
+                self.ride_reference
+                    .push([sp.pose[0], sp.pose[1], sp.pose[2]]);
             }
-            if refs.len() > 4000 {
-                refs.pop_front();
+            if self.refs.len() > 4000 {
+                self.refs.pop_front();
             }
         }
-        while let Ok(Some(t)) = truth.receive() {
+    }
+
+    fn truths(&mut self, run: &mut Prepared, topics: &Topics, observer: &mut dyn RunObserver) {
+        let sum = &mut self.sum;
+        while let Ok(Some(t)) = topics.truth.receive() {
             observer.truth(&t);
             sum.plant_samples += 1;
             if t.converged == 0 {
@@ -860,25 +1113,30 @@ pub fn execute_observed(
                 sum.force_max_n = sum.force_max_n.max(*f);
             }
             // Tracking error against the newest reference published before this plant state.
-            if let Some((_, x_ref)) = refs.iter().rev().find(|(ts, _)| *ts <= t.timestamp_ns) {
+            if let Some((_, x_ref)) = self.refs.iter().rev().find(|(ts, _)| *ts <= t.timestamp_ns) {
                 let (dp, dr) = Pose::from_array(t.pose).error_to(&Pose::from_array(*x_ref));
-                sum_p += dp;
-                sum_r += dr;
-                n_track += 1;
+                self.sum_p += dp;
+                self.sum_r += dr;
+                self.n_track += 1;
                 sum.tracking_position_max_mm = sum.tracking_position_max_mm.max(dp * 1e3);
                 sum.tracking_rotation_max_deg = sum.tracking_rotation_max_deg.max(dr.to_degrees());
             }
-            if let Some(r) = recorder.as_mut() {
+            if let Some(r) = run.recorder.as_mut() {
                 r.truth(t.timestamp_ns, t.pose);
             }
-            last_truth = Some(t);
+            self.last_truth = Some(t);
         }
-        while let Ok(Some(tp)) = tracker.receive() {
-            if let Some(r) = recorder.as_mut() {
+    }
+
+    /// The tracker, the loop statistics, the state events and the heartbeats.
+    fn reports(&mut self, run: &mut Prepared, topics: &Topics, observer: &mut dyn RunObserver) {
+        let sum = &mut self.sum;
+        while let Ok(Some(tp)) = topics.tracker.receive() {
+            if let Some(r) = run.recorder.as_mut() {
                 r.tracker(tp.timestamp_ns, tp.pose, tp.valid != 0);
             }
         }
-        while let Ok(Some(s)) = loop_stats.receive() {
+        while let Ok(Some(s)) = topics.loop_stats.receive() {
             observer.loop_stats(&s);
             sum.loop_cycles = s.cycles;
             sum.loop_overruns = s.overruns;
@@ -888,7 +1146,7 @@ pub fn execute_observed(
             sum.loop_lateness_max_us = s.lateness_max_ns as f64 * 1e-3;
             sum.loop_compute_p99_us = s.compute_p99_ns as f64 * 1e-3;
         }
-        while let Ok(Some(e)) = events.receive() {
+        while let Ok(Some(e)) = topics.events.receive() {
             observer.event(&e);
             if let Some(words) = crs_console::status::estop_in_words(&e) {
                 sum.estops += 1;
@@ -899,128 +1157,206 @@ pub fn execute_observed(
                 let echo = e.source() == ProcessId::SafetyMonitor
                     && e.trip_cause() == Ok(crs_ipc::TripCause::EStopEvent);
                 if echo {
-                    echoed_stop.get_or_insert(words);
+                    self.echoed_stop.get_or_insert(words);
                 } else {
                     sum.stopped_by.get_or_insert(words);
                 }
             }
         }
-        while let Ok(Some(h)) = heartbeats.receive() {
+        while let Ok(Some(h)) = topics.heartbeats.receive() {
             if h.source == ProcessId::SafetyMonitor as u32 {
                 sum.monitor_heartbeats += 1;
             }
         }
-        while let Ok(Some(f)) = feedback.receive() {
+    }
+
+    fn drive_feedback(&mut self, run: &mut Prepared, topics: &Topics) {
+        while let Ok(Some(f)) = topics.feedback.receive() {
             if f.fault() != Ok(crs_ipc::FaultCode::None) {
-                sum.drive_faults += 1;
+                self.sum.drive_faults += 1;
             }
             let running = f.bus() == Ok(crs_ipc::BusState::Running);
-            was_running |= running;
-            if was_running && bus_stop.is_none() && !running {
-                bus_stop = Some((f.timestamp_ns, f.bus_state));
+            self.was_running |= running;
+            if self.was_running && self.bus_stop.is_none() && !running {
+                self.bus_stop = Some((f.timestamp_ns, f.bus_state));
             }
-            if let Some(r) = recorder.as_mut() {
+            if let Some(r) = run.recorder.as_mut() {
                 let m = (f.cable_count as usize).min(crs_ipc::MAX_CABLES);
                 r.forces(f.timestamp_ns, &f.cable_force_n[..m]);
             }
         }
-        if sum.setpoints > 0
-            && ride_thread.is_none()
-            && let Some(r) = ride.take()
+    }
+
+    /// The ride's or the cueing's source starts with motion-core's first setpoint (its cueing
+    /// subscriber is up).
+    fn start_source(&mut self, run: &mut Prepared) -> Result<(), SimError> {
+        if self.sum.setpoints > 0
+            && self.ride_thread.is_none()
+            && let Some(r) = run.ride.take()
         {
             println!(
                 "  hover physics (eq. 5.21-5.22) flying {} for {:.1} s on motion-core's cueing input",
                 r.describe, r.duration_s
             );
-            match crate::ride_run::start(r, &prefix, platform.home) {
-                Ok(t) => ride_thread = Some(t),
-                Err(e) => break Err(e.into()),
-            }
+            self.ride_thread = Some(crate::ride_run::start(r, &run.prefix, run.platform.home)?);
         }
-        if let Some(c) = cueing
+        if let Some(c) = run
+            .cueing
             .as_mut()
-            .filter(|c| sum.setpoints > 0 && !c.started())
-            && let Err(e) = c.start(&prefix)
+            .filter(|c| self.sum.setpoints > 0 && !c.started())
         {
-            break Err(e.into());
+            c.start(&run.prefix)?;
         }
+        Ok(())
+    }
+}
+
+/// Stage 3: every 5 ms, what arrived on the topics into the summary and the recording, until
+/// motion-core ends its plan (Ok), a process exits, Ctrl-C or the timeout.
+fn follow(
+    a: &SimOptions,
+    run: &mut Prepared,
+    started: &mut Started,
+    f: &mut Following,
+    observer: &mut dyn RunObserver,
+) -> Result<(), SimError> {
+    loop {
+        std::thread::sleep(Duration::from_millis(5));
+        f.setpoints(run, &started.topics, observer);
+        f.truths(run, &started.topics, observer);
+        f.reports(run, &started.topics, observer);
+        f.drive_feedback(run, &started.topics);
+        f.start_source(run)?;
         if supervisor::interrupted() {
-            break Err(SimError::Interrupted);
+            return Err(SimError::Interrupted);
         }
-        if let Some(e) = stack.exited() {
+        if let Some(e) = started.stack.exited() {
             if e.name == "motion-core" && e.status.success() {
-                break Ok(());
+                return Ok(());
             }
-            break Err(SimError::Exited {
+            return Err(SimError::Exited {
                 name: e.name,
                 status: e.status,
                 log_tail: supervisor::log_tail(&e.log, 20),
             });
         }
-        if t0.elapsed().as_secs_f64() > a.timeout_s {
-            break Err(SimError::Timeout {
+        if f.t0.elapsed().as_secs_f64() > a.timeout_s {
+            return Err(SimError::Timeout {
                 timeout_s: a.timeout_s,
             });
         }
-    };
-    // Let the last plant states arrive, then stop everything.
-    std::thread::sleep(Duration::from_millis(50));
-    while let Ok(Some(t)) = truth.receive() {
-        last_truth = Some(t);
     }
-    stack.stop_all_then("can-wire");
+}
+
+/// Stage 4: stop every process (the hub last), collect what the motion source and the hub
+/// measured, conclude the summary, print and write it (and the recording of a run that ended
+/// well), tell the observer.
+fn finish(
+    a: &SimOptions,
+    mut run: Prepared,
+    mut started: Started,
+    mut f: Following,
+    result: Result<(), SimError>,
+    observer: &mut dyn RunObserver,
+) -> Result<Summary, SimError> {
+    stop(a, &mut run, &mut started, &mut f)?;
+    conclude(a, &mut run, &mut f, result.is_ok());
+    let mut sum = f.sum;
+    print_summary(&sum);
+    if let (Some(path), Some(r), Ok(())) = (&a.record, &run.recorder, &result) {
+        write_recording(a, &run, r, path)?;
+        sum.record = Some(path.clone());
+    }
+    let json = a.out.join("summary.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&sum)?).map_err(output(&json))?;
+    println!("summary written to {}", json.display());
+    observer.finished(&a.out, &sum);
+    result?;
+    if sum.plant_samples == 0 || sum.setpoints == 0 {
+        return Err(SimError::NoSamples);
+    }
+    Ok(sum)
+}
+
+/// Lets the last plant states arrive, stops everything, and collects the wire hub's
+/// statistics, the ride's summary and plot and the cueing's perception report.
+fn stop(
+    a: &SimOptions,
+    run: &mut Prepared,
+    started: &mut Started,
+    f: &mut Following,
+) -> Result<(), SimError> {
+    std::thread::sleep(Duration::from_millis(50));
+    while let Ok(Some(t)) = started.topics.truth.receive() {
+        f.last_truth = Some(t);
+    }
+    started.stack.stop_all_then("can-wire");
     // The hub stopped last (it started first): its statistics cover the whole run.
-    if let Some(p) = &buses.stats {
+    if let Some(p) = &started.buses.stats {
         match transport::read_wire_stats(p) {
-            Some(w) => sum.wire = w,
+            Some(w) => f.sum.wire = w,
             None => println!(
                 "  the wire hub's statistics {} could not be read",
                 p.display()
             ),
         }
     }
-    if let (Some(t), Some(model)) = (ride_thread.take(), ride_model) {
+    if let (Some(t), Some(model)) = (f.ride_thread.take(), run.ride_model) {
         let (mut rs, path) = t.join()?;
-        crate::ride_run::write_svg(&a.out, &platform, &model, &mut rs, &path, &ride_reference)?;
-        sum.ride = Some(rs);
+        crate::ride_run::write_svg(
+            &a.out,
+            &run.platform,
+            &model,
+            &mut rs,
+            &path,
+            &f.ride_reference,
+        )?;
+        f.sum.ride = Some(rs);
     }
-    if let Some(c) = cueing.take() {
-        sum.cueing = c.finish(&a.out, configured.period_s())?;
+    if let Some(c) = run.cueing.take() {
+        f.sum.cueing = c.finish(&a.out, run.configured.period_s())?;
     }
-    if n_track > 0 {
-        sum.tracking_position_mean_mm = sum_p / n_track as f64 * 1e3;
-        sum.tracking_rotation_mean_deg = (sum_r / n_track as f64).to_degrees();
+    Ok(())
+}
+
+/// The summary's conclusions: means, whether the run completed, the static error, who stopped
+/// it and why.
+fn conclude(a: &SimOptions, run: &mut Prepared, f: &mut Following, ended_well: bool) {
+    let sum = &mut f.sum;
+    if f.n_track > 0 {
+        sum.tracking_position_mean_mm = f.sum_p / f.n_track as f64 * 1e3;
+        sum.tracking_rotation_mean_deg = (f.sum_r / f.n_track as f64).to_degrees();
     }
-    sum.completed = result.is_ok() && sum.estops == 0 && sum.loop_rejected == 0;
+    sum.completed = ended_well && sum.estops == 0 && sum.loop_rejected == 0;
     // The static error is only that after a completed run (motion-core ended its plan and
     // held); a stopped run leaves it NaN ("not reached").
-    if let (Some(t), Some(r), true) = (last_truth, last_ref, sum.completed) {
+    if let (Some(t), Some(r), true) = (f.last_truth, f.last_ref, sum.completed) {
         let (dp, dr) = Pose::from_array(t.pose).error_to(&Pose::from_array(r));
         sum.static_position_mm = dp * 1e3;
         sum.static_rotation_deg = dr.to_degrees();
     }
-    sum.duration_s = t0.elapsed().as_secs_f64();
+    sum.duration_s = f.t0.elapsed().as_secs_f64();
     // A stop after the last setpoint is the normal end (motion-core exited, setpoints went
     // stale); one while setpoints kept coming (50 ms later) interrupted the run.
-    if let Some((ts, state)) = bus_stop
-        && last_sp_ns > ts + 50_000_000
+    if let Some((ts, state)) = f.bus_stop
+        && f.last_sp_ns > ts + 50_000_000
     {
         let name = crs_ipc::BusState::try_from(state)
             .map_or(format!("state {state}"), |b| format!("{b:?}"));
         sum.bus_stopped_during_run = Some(format!(
             "{name} {:.3} s before the last setpoint",
-            (last_sp_ns - ts) as f64 * 1e-9
+            (f.last_sp_ns - ts) as f64 * 1e-9
         ));
     }
-    if let Some(r) = recorder.as_mut() {
+    if let Some(r) = run.recorder.as_mut() {
         r.finish();
         sum.rest = rest_errors(&r.samples);
         sum.rest_points_skipped = r.skipped.len();
     }
-    if let Some(words) = echoed_stop {
+    if let Some(words) = f.echoed_stop.take() {
         sum.stopped_by.get_or_insert(words);
     }
-    if sum.estops > 0 && with_monitor {
+    if sum.estops > 0 && run.with_monitor {
         sum.monitor_trips =
             supervisor::log_lines(&a.out.join("safety-monitor.log"), "SAFETY TRIP", 4);
     }
@@ -1040,62 +1376,61 @@ pub fn execute_observed(
     if sum.bus_stopped_during_run.is_some() {
         sum.bus_stop_reasons = supervisor::log_lines(&a.out.join("drive-io.log"), " ERROR ", 2);
     }
-    print_summary(&sum);
-    if let (Some(path), Some(r), Ok(())) = (&a.record, &recorder, &result) {
-        let m = platform.model.m();
-        let campaign = a.campaign.clone().unwrap_or_else(|| {
-            waypoint_file
-                .as_ref()
-                .and_then(|f| f.file_stem())
-                .map_or("waypoints".into(), |n| n.to_string_lossy().into_owned())
-        });
-        let meta = vec![
-            (
-                "platform".to_string(),
-                format!("{} ({})", platform.name, daemon.platform.display()),
+}
+
+/// The rest points of the run as a `crs-dataset 1` file at `path`.
+fn write_recording(
+    a: &SimOptions,
+    run: &Prepared,
+    r: &RestRecorder,
+    path: &Path,
+) -> Result<(), SimError> {
+    let platform = &run.platform;
+    let m = platform.model.m();
+    let p = platform.model.params();
+    let campaign = a.campaign.clone().unwrap_or_else(|| {
+        run.waypoint_file
+            .as_ref()
+            .and_then(|f| f.file_stem())
+            .map_or("waypoints".into(), |n| n.to_string_lossy().into_owned())
+    });
+    let meta = vec![
+        (
+            "platform".to_string(),
+            format!("{} ({})", platform.name, run.daemon.platform.display()),
+        ),
+        (
+            "control_model".into(),
+            if run.daemon.surrogate.is_some() {
+                "kinematic+surrogate".into()
+            } else {
+                "kinematic".into()
+            },
+        ),
+        ("campaign".into(), campaign),
+        (
+            "recorded".into(),
+            format!(
+                "crs sim on the running stack ({}): rest points after {} s settled, last tracker/force reading before the reference moved",
+                run.transport, a.settle_s
             ),
-            (
-                "control_model".into(),
-                if daemon.surrogate.is_some() {
-                    "kinematic+surrogate".into()
-                } else {
-                    "kinematic".into()
-                },
-            ),
-            ("campaign".into(), campaign),
-            (
-                "recorded".into(),
-                format!(
-                    "crs sim on the running stack ({}): rest points after {} s settled, last tracker/force reading before the reference moved",
-                    transport, a.settle_s
-                ),
-            ),
-            ("force_limits_n".into(), format!("{f_min} {f_max}")),
-        ];
-        let ds = to_dataset(&r.samples, m, meta)?;
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(output(dir))?;
-        }
-        crs_dataset::save_dataset(path, &ds).map_err(|source| SimError::Record {
-            path: path.clone(),
-            source,
-        })?;
-        println!(
-            "recorded {} rest points to {}",
-            r.samples.len(),
-            path.display()
-        );
-        sum.record = Some(path.clone());
+        ),
+        ("force_limits_n".into(), format!("{} {}", p.f_min, p.f_max)),
+    ];
+    let ds = to_dataset(&r.samples, m, meta)?;
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(output(dir))?;
     }
-    let json = a.out.join("summary.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&sum)?).map_err(output(&json))?;
-    println!("summary written to {}", json.display());
-    observer.finished(&a.out, &sum);
-    result?;
-    if sum.plant_samples == 0 || sum.setpoints == 0 {
-        return Err(SimError::NoSamples);
-    }
-    Ok(sum)
+    crs_dataset::save_dataset(path, &ds).map_err(|source| SimError::Record {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    println!(
+        "recorded {} rest points to {}",
+        r.samples.len(),
+        path.display()
+    );
+    Ok(())
 }
 
 fn print_summary(s: &Summary) {

@@ -15,8 +15,6 @@
 //! What it found goes to `<out>/commission.toml` for review (with the plant's truth next to it
 //! when the run is simulated), never over the operator's config.
 
-use crate::campaign::write_waypoints;
-use crate::sim_run::{self, SimOptions};
 use cdpr_model::config::{Platform, load_platform};
 use cdpr_model::{Data, Pose};
 use crs_dataset::load_dataset;
@@ -25,6 +23,8 @@ use load_tracking::setup::{self, InitialTension};
 use load_tracking::wrench_from_forces;
 use motion_core::daemon::trajectory::{Waypoint, read_waypoints};
 use nalgebra::{Vector3, Vector6};
+use sim_runs::campaign::write_waypoints;
+use sim_runs::sim_run::{self, SimOptions};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -43,7 +43,7 @@ pub enum CommissionError {
     },
     /// Writing the commissioning tour.
     #[error(transparent)]
-    Tour(#[from] crate::campaign::CampaignError),
+    Tour(#[from] sim_runs::campaign::CampaignError),
     /// The run of the stack.
     #[error(transparent)]
     Run(#[from] sim_run::SimError),

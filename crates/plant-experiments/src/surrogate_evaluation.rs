@@ -229,6 +229,39 @@ pub fn evaluate(
             platform: pf.name.clone(),
         })?;
     let mut plant = Plant::new(cfg)?;
+    let poses = grid_poses(pf, grid);
+    let mut target = OffsetTarget::new(&pf.model);
+    let mut f_ref = Vec::with_capacity(poses.len());
+    let mut feasible = Vec::with_capacity(poses.len());
+    for x in &poses {
+        let (f, fd) = target.reference_forces(x)?;
+        f_ref.push(f.to_vec());
+        feasible.push(fd.feasible);
+    }
+    let campaign = Campaign {
+        pf,
+        sg,
+        f_ini: &f_ini,
+        poses: &poses,
+        f_ref: &f_ref,
+        feasible: &feasible,
+    };
+    let mut data = Data::new(&pf.model);
+    let kinematic = track(&campaign, &mut plant, &mut target, &mut data, false)?;
+    let surrogate = track(&campaign, &mut plant, &mut target, &mut data, true)?;
+    Ok(Evaluation {
+        platform: pf.name.clone(),
+        plant: plant_name,
+        poses: poses.len(),
+        wrench_feasible: feasible.iter().filter(|f| **f).count(),
+        kinematic,
+        surrogate,
+    })
+}
+
+/// The evaluation grid: `grid`³ positions spanning the region's box, each with the 27
+/// combinations of the lowest, zero (clamped into the region) and highest angle per axis.
+fn grid_poses(pf: &Platform, grid: usize) -> Vec<Pose> {
     let (lo, hi) = region_box(&pf.region);
     let mut poses = Vec::new();
     let at = |d: usize, k: usize, n: usize| lo[d] + (hi[d] - lo[d]) * k as f64 / (n - 1) as f64;
@@ -253,125 +286,128 @@ pub fn evaluate(
             }
         }
     }
-    let mut target = OffsetTarget::new(&pf.model);
-    let mut f_ref = Vec::with_capacity(poses.len());
-    let mut feasible = Vec::with_capacity(poses.len());
-    for x in &poses {
-        let (f, fd) = target.reference_forces(x)?;
-        f_ref.push(f.to_vec());
-        feasible.push(fd.feasible);
-    }
+    poses
+}
+
+/// What both controllers are evaluated on: the poses with their reference forces f_ref
+/// (eq. 3.41) and wrench feasibility, the kinematic controller's set-up tension f_ini.
+struct Campaign<'a> {
+    pf: &'a Platform,
+    sg: &'a Surrogate,
+    f_ini: &'a [f64],
+    poses: &'a [Pose],
+    f_ref: &'a [Vec<f64>],
+    feasible: &'a [bool],
+}
+
+/// One controller (kinematic, or with the surrogate) set up at home, then commanded to every
+/// pose of the campaign in turn.
+fn track(
+    c: &Campaign<'_>,
+    plant: &mut Plant,
+    target: &mut OffsetTarget,
+    data: &mut Data,
+    use_surrogate: bool,
+) -> Result<Tracking, EvaluationError> {
+    let (pf, sg, m) = (c.pf, c.sg, c.pf.model.m());
     let p = pf.model.params();
-    let mut data = Data::new(&pf.model);
-    let mut run = |use_surrogate: bool| -> Result<Tracking, EvaluationError> {
-        // Set-up at home (sec. 6.1, eq. 3.14/6.24): the operator tensions the cables at the home
-        // pose and zeroes the cable offsets there. The kinematic controller is set up with the
-        // spec's initial tension f_ini (eq. 6.22); the surrogate controller with its own
-        // reference f_ref(home) (eq. 3.41), so the offsets c only absorb what the control model
-        // does not know (encoder offsets, drive-train length): c = q_setup − (φ + φ_sg)(home).
-        let f_setup: Vec<f64> = if use_surrogate {
-            target.reference_forces(&pf.home)?.0.to_vec()
-        } else {
-            f_ini.clone()
-        };
-        let setup = plant.setup_tension(&pf.home, &f_setup)?;
-        kinematics::inverse(&pf.model, &mut data, &pf.home)?;
-        let mut sg_home = vec![0.0; m];
-        if use_surrogate {
-            sg.eval(&pf.home.to_array(), &mut sg_home)
-                .map_err(EvaluationError::Surrogate)?;
-        }
-        let q_setup: Vec<f64> = (0..m)
-            .map(|i| setup.q_cmd[i] - data.q[i] - sg_home[i])
-            .collect();
-        plant.step(&setup.q_cmd)?;
-        let mut last_pose = pf.home;
-        let mut t = Tracking::default();
-        let mut q = vec![0.0; m];
-        let mut qs = vec![0.0; m];
-        let mut off = vec![0.0; m];
-        let mut command = |x: &Pose, q: &mut [f64]| -> Result<(), EvaluationError> {
-            kinematics::inverse(&pf.model, &mut data, x)?;
-            if use_surrogate {
-                sg.eval(&x.to_array(), &mut off)
-                    .map_err(EvaluationError::Surrogate)?;
-            } else {
-                off.fill(0.0);
-            }
-            for i in 0..m {
-                q[i] = data.q[i] + off[i] + q_setup[i];
-            }
-            Ok(())
-        };
-        for (k, x) in poses.iter().enumerate() {
-            command(x, &mut q)?;
-            let before = plant.state();
-            // Move there as the robot would: along the straight pose path from the last
-            // settled pose in sub-steps of ≤ 50 mm and ≤ 1°, each commanded by the same
-            // controller, so the plant's equilibrium search starts close (continuation).
-            let a = last_pose.to_array();
-            let b = x.to_array();
-            let dp = (0..3).map(|d| (b[d] - a[d]).abs()).fold(0.0, f64::max);
-            let dr = (3..6).map(|d| (b[d] - a[d]).abs()).fold(0.0, f64::max);
-            let n_sub = ((dp / 0.05).max(dr / 1f64.to_radians()).ceil() as usize).max(1);
-            let mut result = Err(sim_plant::PlantError::WrongLength {
-                expected: m,
-                got: 0,
-            });
-            for s in 1..=n_sub {
-                let w = s as f64 / n_sub as f64;
-                let mut xs = [0.0; 6];
-                for d in 0..6 {
-                    xs[d] = a[d] + w * (b[d] - a[d]);
-                }
-                command(&Pose::from_array(xs), &mut qs)?;
-                result = plant.step(&qs);
-                if result.is_err() {
-                    break;
-                }
-            }
-            match result {
-                Ok(eq) => {
-                    last_pose = *x;
-                    let (dp, dr) = eq.pose.error_to(x);
-                    let fe = eq
-                        .forces
-                        .iter()
-                        .zip(&f_ref[k])
-                        .map(|(a, b)| (a - b).abs())
-                        .fold(0.0, f64::max);
-                    t.force_error_n.push(fe);
-                    t.position_error_mm.push(dp * 1e3);
-                    t.orientation_error_deg.push(dr.to_degrees());
-                    let ok = eq.forces.iter().all(|f| *f >= p.f_min && *f <= p.f_max);
-                    if feasible[k] && ok {
-                        t.reachable += 1;
-                    }
-                }
-                Err(e) => {
-                    if std::env::var_os("CRS_DEBUG_PLANT").is_some() {
-                        eprintln!("pose {k} {:?}: {e}", x.to_array());
-                    }
-                    plant.restore(&before);
-                    t.failed += 1;
-                    t.force_error_n.push(f64::NAN);
-                    t.position_error_mm.push(f64::NAN);
-                    t.orientation_error_deg.push(f64::NAN);
-                }
-            }
-        }
-        Ok(t)
+    // Set-up at home (sec. 6.1, eq. 3.14/6.24): the operator tensions the cables at the home
+    // pose and zeroes the cable offsets there. The kinematic controller is set up with the
+    // spec's initial tension f_ini (eq. 6.22); the surrogate controller with its own
+    // reference f_ref(home) (eq. 3.41), so the offsets c only absorb what the control model
+    // does not know (encoder offsets, drive-train length): c = q_setup − (φ + φ_sg)(home).
+    let f_setup: Vec<f64> = if use_surrogate {
+        target.reference_forces(&pf.home)?.0.to_vec()
+    } else {
+        c.f_ini.to_vec()
     };
-    let kinematic = run(false)?;
-    let surrogate = run(true)?;
-    Ok(Evaluation {
-        platform: pf.name.clone(),
-        plant: plant_name,
-        poses: poses.len(),
-        wrench_feasible: feasible.iter().filter(|f| **f).count(),
-        kinematic,
-        surrogate,
-    })
+    let setup = plant.setup_tension(&pf.home, &f_setup)?;
+    kinematics::inverse(&pf.model, data, &pf.home)?;
+    let mut sg_home = vec![0.0; m];
+    if use_surrogate {
+        sg.eval(&pf.home.to_array(), &mut sg_home)
+            .map_err(EvaluationError::Surrogate)?;
+    }
+    let q_setup: Vec<f64> = (0..m)
+        .map(|i| setup.q_cmd[i] - data.q[i] - sg_home[i])
+        .collect();
+    plant.step(&setup.q_cmd)?;
+    let mut last_pose = pf.home;
+    let mut t = Tracking::default();
+    let mut q = vec![0.0; m];
+    let mut qs = vec![0.0; m];
+    let mut off = vec![0.0; m];
+    let mut command = |x: &Pose, q: &mut [f64]| -> Result<(), EvaluationError> {
+        kinematics::inverse(&pf.model, data, x)?;
+        if use_surrogate {
+            sg.eval(&x.to_array(), &mut off)
+                .map_err(EvaluationError::Surrogate)?;
+        } else {
+            off.fill(0.0);
+        }
+        for i in 0..m {
+            q[i] = data.q[i] + off[i] + q_setup[i];
+        }
+        Ok(())
+    };
+    for (k, x) in c.poses.iter().enumerate() {
+        command(x, &mut q)?;
+        let before = plant.state();
+        // Move there as the robot would: along the straight pose path from the last
+        // settled pose in sub-steps of ≤ 50 mm and ≤ 1°, each commanded by the same
+        // controller, so the plant's equilibrium search starts close (continuation).
+        let a = last_pose.to_array();
+        let b = x.to_array();
+        let dp = (0..3).map(|d| (b[d] - a[d]).abs()).fold(0.0, f64::max);
+        let dr = (3..6).map(|d| (b[d] - a[d]).abs()).fold(0.0, f64::max);
+        let n_sub = ((dp / 0.05).max(dr / 1f64.to_radians()).ceil() as usize).max(1);
+        let mut result = Err(sim_plant::PlantError::WrongLength {
+            expected: m,
+            got: 0,
+        });
+        for s in 1..=n_sub {
+            let w = s as f64 / n_sub as f64;
+            let mut xs = [0.0; 6];
+            for d in 0..6 {
+                xs[d] = a[d] + w * (b[d] - a[d]);
+            }
+            command(&Pose::from_array(xs), &mut qs)?;
+            result = plant.step(&qs);
+            if result.is_err() {
+                break;
+            }
+        }
+        match result {
+            Ok(eq) => {
+                last_pose = *x;
+                let (dp, dr) = eq.pose.error_to(x);
+                let fe = eq
+                    .forces
+                    .iter()
+                    .zip(&c.f_ref[k])
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max);
+                t.force_error_n.push(fe);
+                t.position_error_mm.push(dp * 1e3);
+                t.orientation_error_deg.push(dr.to_degrees());
+                let ok = eq.forces.iter().all(|f| *f >= p.f_min && *f <= p.f_max);
+                if c.feasible[k] && ok {
+                    t.reachable += 1;
+                }
+            }
+            Err(e) => {
+                if std::env::var_os("CRS_DEBUG_PLANT").is_some() {
+                    eprintln!("pose {k} {:?}: {e}", x.to_array());
+                }
+                plant.restore(&before);
+                t.failed += 1;
+                t.force_error_n.push(f64::NAN);
+                t.position_error_mm.push(f64::NAN);
+                t.orientation_error_deg.push(f64::NAN);
+            }
+        }
+    }
+    Ok(t)
 }
 
 pub fn stats(v: &[f64]) -> (f64, f64, f64) {

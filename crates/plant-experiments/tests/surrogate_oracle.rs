@@ -1,5 +1,5 @@
 //! The surrogate's evaluation on the plant (`crs surrogate fit`'s tracking table,
-//! `crs_stack::surrogate_evaluation::evaluate`) against an independent plant. `evaluate`
+//! `plant_experiments::surrogate_evaluation::evaluate`) against an independent plant. `evaluate`
 //! measures each controller on sim-plant, whose equilibrium is the model library's own
 //! elastostatics — the equations the surrogate's target q_off = φ_el(x, f_ref) − φ(x) was
 //! computed with — so an error both share (the stretch law, a moment arm) would cancel in its
@@ -11,7 +11,7 @@
 use cdpr_model::config::load_platform;
 use cdpr_model::offset_target::OffsetTarget;
 use cdpr_model::{Data, Pose, kinematics};
-use crs_stack::surrogate_evaluation::{evaluate, fit_platform};
+use plant_experiments::surrogate_evaluation::{evaluate, fit_platform};
 use plant_oracle::{PoseQ, cable_length, equilibrium};
 use std::path::{Path, PathBuf};
 

@@ -7,8 +7,8 @@
 //! afford on two cores.
 
 use bench_plant::Kind;
+use calibration_campaigns::diagnosis_bench::{BenchConfig, Generator, RunResult, independent_run};
 use cdpr_model::config::load_platform;
-use crs_stack::diagnosis_bench::{BenchConfig, Generator, RunResult, independent_run};
 use std::path::PathBuf;
 
 fn config() -> BenchConfig {

@@ -1,10 +1,10 @@
 //! What `crs sim` runs next to the stack ([`RunObserver`]): the operator console while the run
 //! lasts (`--console ADDR`) and the run's report (`<out>/index.html` + its plots, [`run_plots`]).
 
-use crate::console_setup::console_config;
 use crate::run_plots::{self, RunRecord};
-use crate::sim_run::{RunObserver, RunStart, Summary};
 use crs_ipc::{JointSetpoint, LoopStatsSample, PlantTruth, StateEvent};
+use sim_runs::console_setup::console_config;
+use sim_runs::sim_run::{RunObserver, RunStart, Summary};
 use std::net::SocketAddr;
 use std::path::Path;
 
@@ -38,7 +38,7 @@ impl SimObserver {
 }
 
 impl RunObserver for SimObserver {
-    fn started(&mut self, run: &RunStart<'_>) -> Result<(), crate::sim_run::ObserverError> {
+    fn started(&mut self, run: &RunStart<'_>) -> Result<(), sim_runs::sim_run::ObserverError> {
         if let Some(req) = &self.console_request {
             let mut cfg = console_config(
                 req.addr,
@@ -50,7 +50,7 @@ impl RunObserver for SimObserver {
             );
             // The START RIDE button when the ride waits for an operator.
             if let Some(sock) = run.control {
-                cfg.rides = crate::console_setup::ride_setup(
+                cfg.rides = sim_runs::console_setup::ride_setup(
                     run.daemon,
                     run.platform,
                     Some(sock.to_path_buf()),

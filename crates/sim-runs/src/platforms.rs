@@ -256,7 +256,7 @@ pub enum SelectError {
     #[error(transparent)]
     Plant(#[from] PlantLoadError),
     #[error(transparent)]
-    Timing(#[from] crate::timing::TimingError),
+    Timing(#[from] crs_supervisor::timing::TimingError),
 }
 
 /// Single files that replace those of a platform's set (`crs sim --config/--drives/--plant/
@@ -281,7 +281,7 @@ pub struct RunFiles {
 /// The files of a run: the set of `platform` (or of the daemon override, see [`select`]) with
 /// single files replaced by `overrides`; the daemon, drives and monitor configs as the timing
 /// profile `timing` runs them (non-spec profiles: relaxed copies written under
-/// `out/timing-<profile>/`, [`crate::timing::write_profile`]).
+/// `out/timing-<profile>/`, [`crs_supervisor::timing::write_profile`]).
 pub fn run_files(
     platform: Option<&str>,
     overrides: &Overrides,
@@ -295,10 +295,10 @@ pub fn run_files(
     )?;
     let pick =
         |flag: &Option<PathBuf>, default: &PathBuf| flag.clone().unwrap_or_else(|| default.clone());
-    let profile: crate::timing::TimingProfile = timing.parse()?;
-    let timed = crate::timing::write_profile(
+    let profile: crs_supervisor::timing::TimingProfile = timing.parse()?;
+    let timed = crs_supervisor::timing::write_profile(
         profile,
-        &crate::timing::TimedConfigs {
+        &crs_supervisor::timing::TimedConfigs {
             daemon: pick(&overrides.daemon, &set.daemon),
             drives: pick(&overrides.drives, &set.drives),
             monitor: pick(&overrides.monitor, &set.monitor),
@@ -463,10 +463,10 @@ mod tests {
         ));
     }
 
-    // The shipped platforms' configs under the timing profiles (crate::timing).
-    fn shipped(k: &KnownPlatform) -> crate::timing::TimedConfigs {
+    // The shipped platforms' configs under the timing profiles (crs_supervisor::timing).
+    fn shipped(k: &KnownPlatform) -> crs_supervisor::timing::TimedConfigs {
         let s = k.configs(&config_dir());
-        crate::timing::TimedConfigs {
+        crs_supervisor::timing::TimedConfigs {
             daemon: s.daemon,
             drives: s.drives,
             monitor: s.monitor,
@@ -480,8 +480,8 @@ mod tests {
     fn every_platform_relaxes_and_the_copies_load() {
         for k in KNOWN {
             for profile in [
-                crate::timing::TimingProfile::Relaxed,
-                crate::timing::TimingProfile::Emulated,
+                crs_supervisor::timing::TimingProfile::Relaxed,
+                crs_supervisor::timing::TimingProfile::Emulated,
             ] {
                 let dir = std::env::temp_dir().join(format!(
                     "crs-timing-{}-{}-{}",
@@ -489,7 +489,7 @@ mod tests {
                     profile.name(),
                     std::process::id()
                 ));
-                let out = crate::timing::write_profile(profile, &shipped(&k), &dir)
+                let out = crs_supervisor::timing::write_profile(profile, &shipped(&k), &dir)
                     .expect("relaxed copies");
                 let d = motion_core::daemon::config::load(&out.daemon).expect("daemon loads");
                 assert_eq!(d.realtime.period_ns, 4_000_000, "{}", k.name);
@@ -500,7 +500,7 @@ mod tests {
                 assert_eq!(mon.monitor.silence_cycles, 10);
                 assert_eq!(mon.monitor.identity_grace_cycles, 40);
                 assert_eq!(mon.can.reader_stall_cycles, 40);
-                if profile == crate::timing::TimingProfile::Emulated {
+                if profile == crs_supervisor::timing::TimingProfile::Emulated {
                     assert_eq!(d.realtime.priority, 0);
                     assert_eq!(drives.bus.boot_timeout_ms, 20000);
                 }

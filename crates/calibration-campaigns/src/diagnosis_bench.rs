@@ -593,6 +593,58 @@ fn evaluate(
         .ok_or(BenchError::NoElastostaticStep)?;
     let fin = rep.final_stage();
     let fk_failed = rep.stages.iter().any(|st| st.failed());
+    let non_physical = non_physical_params(fin);
+    let (true_pos, matters) =
+        true_effect_model(a, &cfg, &rep, base, platform, train, held, &truth)?;
+    let sel = rep.selection.as_ref();
+    let chosen = sel.map(|s| s.chosen.clone()).unwrap_or_default();
+    let forms = sel.map(|s| s.forms.clone()).unwrap_or_default();
+    let magnitudes = fitted_truth(&rep, &truth);
+    let truth_label = truth.iter().map(|e| e.name()).collect::<Vec<_>>().join("+");
+    let candidate_lines = candidate_lines(sel, generator, &scenario, seed, &truth_label);
+    let r = RunResult {
+        candidate_lines,
+        generator,
+        scenario,
+        seed,
+        truth,
+        out_of_catalogue,
+        u,
+        chosen,
+        forms,
+        fk_failed,
+        non_physical,
+        base_pos: base.holdout.pos_mean_mm,
+        final_pos: fin.holdout.pos_mean_mm,
+        true_pos,
+        matters,
+        seconds,
+        cpu_seconds,
+        structure: rep.structure.as_ref().is_some_and(|st| st.any()),
+        magnitudes,
+        rows: (train.len(), held.len()),
+    };
+    if a.verbose {
+        print_run(&r, fin);
+    }
+    let missed = r
+        .truth
+        .iter()
+        .zip(&r.matters)
+        .any(|(t, m)| *m && !r.named(*t));
+    let wrong = r.chosen.iter().any(|c| !r.truth.contains(c));
+    if a.explain_misses
+        && (missed || wrong)
+        && let Some(sel) = &rep.selection
+    {
+        explain(sel);
+    }
+    Ok(r)
+}
+
+/// The final model's parameters outside their physical bounds (k_F and every bounded free
+/// parameter), each as `name = value`.
+fn non_physical_params(fin: &pipeline::Stage) -> Vec<String> {
     let mut non_physical = Vec::new();
     for (i, k) in fin.model.k_f.iter().enumerate() {
         if !(calibrate::params::KF_MIN_N..=calibrate::params::KF_MAX_N).contains(k) {
@@ -608,6 +660,23 @@ fn evaluate(
             }
         }
     }
+    non_physical
+}
+
+/// How well the model that carries the plant's true effects fits the held-out data (its mean
+/// position error), and whether each true effect matters: an effect matters when its model
+/// gains more than the noise of the fit.
+#[allow(clippy::too_many_arguments)]
+fn true_effect_model(
+    a: &BenchConfig,
+    cfg: &PipelineConfig,
+    rep: &PipelineReport,
+    base: &pipeline::Stage,
+    platform: &Platform,
+    train: &[Observation],
+    held: &[Observation],
+    truth: &[Effect],
+) -> Result<(Option<f64>, Vec<bool>), BenchError> {
     let round1 = rep.selection.as_ref().and_then(|s| s.rounds.first());
     let row = |e: Effect| round1.and_then(|r| r.iter().find(|c| c.effect == e && c.pair.is_none()));
     let base_force = base.holdout.force_mean_n;
@@ -628,7 +697,7 @@ fn evaluate(
             None => (None, None),
         }
     };
-    let (true_pos, matters) = match truth.as_slice() {
+    Ok(match truth {
         [] => (Some(base.holdout.pos_mean_mm), vec![]),
         [e] => {
             let (p, f) = single(*e);
@@ -668,20 +737,23 @@ fn evaluate(
                 .collect();
             (bp, matters)
         }
-    };
-    let sel = rep.selection.as_ref();
-    let chosen = sel.map(|s| s.chosen.clone()).unwrap_or_default();
-    let forms = sel.map(|s| s.forms.clone()).unwrap_or_default();
-    let magnitudes = fitted_truth(&rep, &truth);
-    let truth_label = truth.iter().map(|e| e.name()).collect::<Vec<_>>().join("+");
-    let candidate_lines = sel
+    })
+}
+
+/// One CSV line per candidate of every selection round (the bench's candidates file).
+fn candidate_lines(
+    sel: Option<&calibrate::effects::Selection>,
+    generator: &str,
+    scenario: &str,
+    seed: u64,
+    truth_label: &str,
+) -> Vec<String> {
+    sel
         .map(|s| {
             s.rounds
                 .iter()
                 .enumerate()
                 .flat_map(|(k, round)| {
-                    let scenario = &scenario;
-                    let truth_label = &truth_label;
                     round.iter().map(move |c| {
                         let o = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
                         format!(
@@ -708,95 +780,65 @@ fn evaluate(
                 })
                 .collect()
         })
-        .unwrap_or_default();
-    let r = RunResult {
-        candidate_lines,
+        .unwrap_or_default()
+}
+
+/// One run on stderr (`--verbose`): what was chosen, whether it matters, the errors before,
+/// after and of the true-effect model, the time and the fitted sizes against the truth.
+fn print_run(r: &RunResult, fin: &pipeline::Stage) {
+    let (generator, seed, fk_failed, cpu_seconds) =
+        (r.generator, r.seed, r.fk_failed, r.cpu_seconds);
+    eprintln!(
+        "{:<10} {:<44} seed {seed:<4} u {}: chosen [{}]{}{} base {:.2} mm → final {} (true-effect model {}) {:.2} s CPU{}",
         generator,
-        scenario,
-        seed,
-        truth,
-        out_of_catalogue,
-        u,
-        chosen,
-        forms,
-        fk_failed,
-        non_physical,
-        base_pos: base.holdout.pos_mean_mm,
-        final_pos: fin.holdout.pos_mean_mm,
-        true_pos,
-        matters,
-        seconds,
-        cpu_seconds,
-        structure: rep.structure.as_ref().is_some_and(|st| st.any()),
-        magnitudes,
-        rows: (train.len(), held.len()),
-    };
-    if a.verbose {
-        eprintln!(
-            "{:<10} {:<44} seed {seed:<4} u {}: chosen [{}]{}{} base {:.2} mm → final {} (true-effect model {}) {:.2} s CPU{}",
-            generator,
-            r.scenario,
-            r.u.iter()
-                .map(|u| format!("{u:.2}"))
-                .collect::<Vec<_>>()
-                .join("/"),
-            r.chosen
-                .iter()
-                .zip(&r.forms)
-                .map(|(e, f)| if f.describe().is_empty() {
-                    e.name().to_string()
-                } else {
-                    format!("{} ({})", e.name(), f.describe())
-                })
-                .collect::<Vec<_>>()
-                .join(", "),
-            if r.matters.iter().any(|m| *m) {
-                format!(" (matters: {:?})", r.matters)
+        r.scenario,
+        r.u.iter()
+            .map(|u| format!("{u:.2}"))
+            .collect::<Vec<_>>()
+            .join("/"),
+        r.chosen
+            .iter()
+            .zip(&r.forms)
+            .map(|(e, f)| if f.describe().is_empty() {
+                e.name().to_string()
             } else {
-                String::new()
-            },
-            if fk_failed { " FK FAILED" } else { "" },
-            r.base_pos,
-            fin.holdout
-                .failure_text()
-                .unwrap_or_else(|| format!("{:.2} mm", r.final_pos)),
-            r.true_pos
-                .map_or("FK failed".into(), |p| format!("{p:.2} mm")),
-            cpu_seconds,
-            r.magnitudes
-                .iter()
-                .map(|m| format!(
-                    " {}: {:.0} % off{}{}",
-                    m.what,
-                    100.0 * m.relative_error,
-                    m.size.map_or(String::new(), |c| format!(
-                        " ({:.3} ± {:.3} ‰ vs {:.3} ‰)",
-                        1e3 * c.fitted,
-                        1e3 * c.sigma,
-                        1e3 * c.truth
-                    )),
-                    if m.within_two_sigma {
-                        " (within 2σ)"
-                    } else {
-                        " (beyond 2σ)"
-                    }
-                ))
-                .collect::<String>()
-        );
-    }
-    let missed = r
-        .truth
-        .iter()
-        .zip(&r.matters)
-        .any(|(t, m)| *m && !r.named(*t));
-    let wrong = r.chosen.iter().any(|c| !r.truth.contains(c));
-    if a.explain_misses
-        && (missed || wrong)
-        && let Some(sel) = &rep.selection
-    {
-        explain(sel);
-    }
-    Ok(r)
+                format!("{} ({})", e.name(), f.describe())
+            })
+            .collect::<Vec<_>>()
+            .join(", "),
+        if r.matters.iter().any(|m| *m) {
+            format!(" (matters: {:?})", r.matters)
+        } else {
+            String::new()
+        },
+        if fk_failed { " FK FAILED" } else { "" },
+        r.base_pos,
+        fin.holdout
+            .failure_text()
+            .unwrap_or_else(|| format!("{:.2} mm", r.final_pos)),
+        r.true_pos
+            .map_or("FK failed".into(), |p| format!("{p:.2} mm")),
+        cpu_seconds,
+        r.magnitudes
+            .iter()
+            .map(|m| format!(
+                " {}: {:.0} % off{}{}",
+                m.what,
+                100.0 * m.relative_error,
+                m.size.map_or(String::new(), |c| format!(
+                    " ({:.3} ± {:.3} ‰ vs {:.3} ‰)",
+                    1e3 * c.fitted,
+                    1e3 * c.sigma,
+                    1e3 * c.truth
+                )),
+                if m.within_two_sigma {
+                    " (within 2σ)"
+                } else {
+                    " (beyond 2σ)"
+                }
+            ))
+            .collect::<String>()
+    );
 }
 
 fn explain(sel: &calibrate::effects::Selection) {
@@ -898,6 +940,54 @@ fn parse_independent(names: &[String]) -> Result<Vec<Vec<Kind>>, BenchError> {
         .collect()
 }
 
+/// ‖f − t‖ / ‖t‖.
+fn relative_distance(f: &[f64], t: &[f64]) -> f64 {
+    let num: f64 = f
+        .iter()
+        .zip(t)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let den: f64 = t.iter().map(|b| b * b).sum::<f64>().sqrt();
+    num / den.max(1e-300)
+}
+
+/// The drum's per-cable scales against the truth's `truth`, and its size (the scales' rms).
+fn drum_checks(
+    size: &calibrate::effects::EffectSize,
+    fitted: &[(f64, f64)],
+    truth: &[f64],
+    magnitude: f64,
+    out: &mut Vec<MagnitudeCheck>,
+) {
+    // Both kinds are ε_i = s_i in the candidate's q_θ = (1 + ε_i) q_cmd + δ_i (from
+    // the set-up: δ_i takes −s_i q₀,i). The layer step has no scale to compare.
+    let f: Vec<f64> = fitted.iter().map(|x| x.0).collect();
+    out.push(MagnitudeCheck {
+        effect: Effect::Drum,
+        what: DRUM_PER_CABLE.into(),
+        relative_error: relative_distance(&f, truth),
+        tolerance: None,
+        within_two_sigma: fitted
+            .iter()
+            .zip(truth)
+            .all(|((x, sd), b)| sd.is_finite() && (x - b).abs() <= 2.0 * sd),
+        magnitude,
+        size: None,
+    });
+    // No covariance, no size: counted as a miss (NaN is within no tolerance).
+    let c = size.rms.map(|r| calibrate::magnitude::check_rms(&r, truth));
+    out.push(MagnitudeCheck {
+        effect: Effect::Drum,
+        what: DRUM_SIZE.into(),
+        relative_error: c.map_or(f64::NAN, |c| c.relative_error),
+        tolerance: Some(0.2),
+        within_two_sigma: c.is_some_and(|c| c.within_two_sigma),
+        magnitude,
+        size: c,
+    });
+}
+
 /// Compares the final model's parameters with the independent plant's truth, for the named
 /// effects that have a truth in the calibrate parameterisation.
 fn independent_magnitudes(truth: &bench_plant::Truth, rep: &PipelineReport) -> Vec<MagnitudeCheck> {
@@ -920,49 +1010,9 @@ fn independent_magnitudes(truth: &bench_plant::Truth, rep: &PipelineReport) -> V
             .position(|k| *k == v.kind)
             .map_or(f64::NAN, |k| truth.magnitudes[k]);
         let fitted: Vec<(f64, f64)> = size.params.iter().map(|(_, x, sd)| (*x, *sd)).collect();
-        let rel = |f: &[f64], t: &[f64]| {
-            let num: f64 = f
-                .iter()
-                .zip(t)
-                .map(|(a, b)| (a - b).powi(2))
-                .sum::<f64>()
-                .sqrt();
-            let den: f64 = t.iter().map(|b| b * b).sum::<f64>().sqrt();
-            num / den.max(1e-300)
-        };
-        let two_sigma = |t: &[f64]| {
-            fitted
-                .iter()
-                .zip(t)
-                .all(|((x, sd), b)| sd.is_finite() && (x - b).abs() <= 2.0 * sd)
-        };
         match (v.kind, size.effect, size.form) {
             (Kind::DrumFromSetUp | Kind::DrumFromZero, Effect::Drum, _) => {
-                // Both kinds are ε_i = s_i in the candidate's q_θ = (1 + ε_i) q_cmd + δ_i (from
-                // the set-up: δ_i takes −s_i q₀,i). The layer step has no scale to compare.
-                let f: Vec<f64> = fitted.iter().map(|x| x.0).collect();
-                out.push(MagnitudeCheck {
-                    effect: Effect::Drum,
-                    what: DRUM_PER_CABLE.into(),
-                    relative_error: rel(&f, &v.values),
-                    tolerance: None,
-                    within_two_sigma: two_sigma(&v.values),
-                    magnitude,
-                    size: None,
-                });
-                // No covariance, no size: counted as a miss (NaN is within no tolerance).
-                let c = size
-                    .rms
-                    .map(|r| calibrate::magnitude::check_rms(&r, &v.values));
-                out.push(MagnitudeCheck {
-                    effect: Effect::Drum,
-                    what: DRUM_SIZE.into(),
-                    relative_error: c.map_or(f64::NAN, |c| c.relative_error),
-                    tolerance: Some(0.2),
-                    within_two_sigma: c.is_some_and(|c| c.within_two_sigma),
-                    magnitude,
-                    size: c,
-                });
+                drum_checks(size, &fitted, &v.values, magnitude, &mut out);
             }
             (
                 Kind::HysteresisCommand
@@ -1011,7 +1061,7 @@ fn independent_magnitudes(truth: &bench_plant::Truth, rep: &PipelineReport) -> V
                 out.push(MagnitudeCheck {
                     effect: Effect::Powertrain,
                     what: "stored rope l_i".into(),
-                    relative_error: rel(&lv, &v.values),
+                    relative_error: relative_distance(&lv, &v.values),
                     tolerance: None,
                     within_two_sigma: l
                         .iter()
@@ -1140,6 +1190,13 @@ fn print_summary(s: &Summary, generator: &str, a: &BenchConfig) {
             scenarios.push(&r.scenario);
         }
     }
+    confusion_matrix(&runs, &scenarios, generator, a);
+    figures_table(s, &runs, generator);
+    acceptance_table(s, &runs, generator);
+}
+
+/// The confusion matrix: scenario × effect named, with the runs where the true effect matters.
+fn confusion_matrix(runs: &[&RunResult], scenarios: &[&str], generator: &str, a: &BenchConfig) {
     println!(
         "## Diagnosis benchmark, generator `{generator}`: {} scenarios, {} runs, {} identification poses (first seed {})\n",
         scenarios.len(),
@@ -1158,7 +1215,7 @@ fn print_summary(s: &Summary, generator: &str, a: &BenchConfig) {
     }
     println!("{hdr}");
     println!("|---|---|---|{}", "---|".repeat(Effect::ALL.len()));
-    for sc in &scenarios {
+    for sc in scenarios {
         let mine: Vec<&&RunResult> = runs.iter().filter(|r| r.scenario == *sc).collect();
         let matter = |r: &RunResult| !r.matters.is_empty() && r.matters.iter().all(|m| *m);
         let cell = |f: &dyn Fn(&RunResult) -> bool| {
@@ -1181,6 +1238,11 @@ fn print_summary(s: &Summary, generator: &str, a: &BenchConfig) {
         }
         println!("{line}");
     }
+}
+
+/// The benchmark's figures: failures, effects named, baselines, held-out errors, the sizes
+/// of the fitted effects against the truth's, the pipeline's time.
+fn figures_table(s: &Summary, runs: &[&RunResult], generator: &str) {
     let (fk, n) = s.fk_failures(generator);
     let (np, _) = s.non_physical(generator);
     let (sn, sd) = s.single_named(generator);
@@ -1189,8 +1251,6 @@ fn print_summary(s: &Summary, generator: &str, a: &BenchConfig) {
     let (w, wd, worst) = s.within_true_model(generator);
     let (mean_s, max_s) = s.seconds(generator, false);
     let (mean_c, max_c) = s.seconds(generator, true);
-    let (dn, dd) = s.magnitudes_within(generator, Effect::Drum);
-    let (hn, hd) = s.magnitudes_within(generator, Effect::Hysteresis);
     println!();
     println!("| figure | value |\n|---|---|");
     println!("| runs | {n} |");
@@ -1239,80 +1299,93 @@ fn print_summary(s: &Summary, generator: &str, a: &BenchConfig) {
         "| held-out position error within 10 % of the true-effect model | {} (worst ratio {worst:.2}) |",
         ratio(w, wd)
     );
-    if dd > 0 || hd > 0 {
-        println!(
-            "| {DRUM_SIZE} within 20 % of the truth's (runs naming the drum of a drum-scale scenario) | {} |",
-            ratio(dn, dd)
-        );
-        let sized: Vec<calibrate::magnitude::SizeCheck> = runs
-            .iter()
-            .flat_map(|r| r.magnitudes.iter())
-            .filter_map(|m| m.size)
-            .collect();
-        if !sized.is_empty() {
-            println!(
-                "| … the truth within ±2σ of the fitted size / relative error median, max / 1σ relative to the true size median, max | {} / {:.0} %, {:.0} % / {:.0} %, {:.0} % |",
-                ratio(
-                    sized.iter().filter(|c| c.within_two_sigma).count(),
-                    sized.len()
-                ),
-                100.0 * median(&sized.iter().map(|c| c.relative_error).collect::<Vec<_>>()),
-                100.0 * sized.iter().map(|c| c.relative_error).fold(0.0, f64::max),
-                100.0 * median(&sized.iter().map(|c| c.sigma / c.truth).collect::<Vec<_>>()),
-                100.0 * sized.iter().map(|c| c.sigma / c.truth).fold(0.0, f64::max),
-            );
-        }
-        let (pc, p2, pn) = s.drum_per_cable(generator);
-        println!(
-            "| {DRUM_PER_CABLE} within 20 % (‖ε − s‖/‖s‖) / the truth within ±2σ on every cable (no tolerance of their own) | {} / {} |",
-            ratio(pc, pn),
-            ratio(p2, pn)
-        );
-        let big: Vec<&MagnitudeCheck> = runs
-            .iter()
-            .flat_map(|r| r.magnitudes.iter())
-            .filter(|m| m.what == DRUM_PER_CABLE && m.magnitude >= DRUM_RESOLVED)
-            .collect();
-        println!(
-            "| … per cable within 20 %, runs with the largest \\|s_i\\| ≥ {:.2} % | {} |",
-            DRUM_RESOLVED * 100.0,
-            ratio(
-                big.iter().filter(|m| m.relative_error <= 0.2).count(),
-                big.len()
-            )
-        );
-        println!(
-            "| hysteresis h within 30 % of the truth (runs naming hysteresis) | {} |",
-            ratio(hn, hd)
-        );
-        let all: Vec<&MagnitudeCheck> = runs.iter().flat_map(|r| r.magnitudes.iter()).collect();
-        for e in [Effect::Hysteresis, Effect::Powertrain] {
-            let c: Vec<&&MagnitudeCheck> = all.iter().filter(|m| m.effect == e).collect();
-            if !c.is_empty() {
-                println!(
-                    "| {}: fitted size within ±2σ of the truth (every component; the report's 1σ) | {} |",
-                    e.name(),
-                    ratio(c.iter().filter(|m| m.within_two_sigma).count(), c.len())
-                );
-            }
-        }
-        let pt: Vec<f64> = all
-            .iter()
-            .filter(|m| m.effect == Effect::Powertrain)
-            .map(|m| m.relative_error)
-            .collect();
-        if !pt.is_empty() {
-            println!(
-                "| stored rope l_i: relative error median / max (no tolerance set) | {:.0} % / {:.0} % |",
-                100.0 * median(&pt),
-                100.0 * pt.iter().copied().fold(0.0, f64::max)
-            );
-        }
-    }
+    magnitude_rows(s, runs, generator);
     println!("| pipeline time per set, wall clock (mean / max) | {mean_s:.2} / {max_s:.2} s |");
     println!(
         "| pipeline time per set, CPU time of its thread (mean / max) | {mean_c:.2} / {max_c:.2} s |"
     );
+}
+
+/// The fitted effects' sizes against the truth's (drum scale and per cable, hysteresis, stored
+/// rope), where the scenarios carry them.
+fn magnitude_rows(s: &Summary, runs: &[&RunResult], generator: &str) {
+    let (dn, dd) = s.magnitudes_within(generator, Effect::Drum);
+    let (hn, hd) = s.magnitudes_within(generator, Effect::Hysteresis);
+    if dd == 0 && hd == 0 {
+        return;
+    }
+    println!(
+        "| {DRUM_SIZE} within 20 % of the truth's (runs naming the drum of a drum-scale scenario) | {} |",
+        ratio(dn, dd)
+    );
+    let sized: Vec<calibrate::magnitude::SizeCheck> = runs
+        .iter()
+        .flat_map(|r| r.magnitudes.iter())
+        .filter_map(|m| m.size)
+        .collect();
+    if !sized.is_empty() {
+        println!(
+            "| … the truth within ±2σ of the fitted size / relative error median, max / 1σ relative to the true size median, max | {} / {:.0} %, {:.0} % / {:.0} %, {:.0} % |",
+            ratio(
+                sized.iter().filter(|c| c.within_two_sigma).count(),
+                sized.len()
+            ),
+            100.0 * median(&sized.iter().map(|c| c.relative_error).collect::<Vec<_>>()),
+            100.0 * sized.iter().map(|c| c.relative_error).fold(0.0, f64::max),
+            100.0 * median(&sized.iter().map(|c| c.sigma / c.truth).collect::<Vec<_>>()),
+            100.0 * sized.iter().map(|c| c.sigma / c.truth).fold(0.0, f64::max),
+        );
+    }
+    let (pc, p2, pn) = s.drum_per_cable(generator);
+    println!(
+        "| {DRUM_PER_CABLE} within 20 % (‖ε − s‖/‖s‖) / the truth within ±2σ on every cable (no tolerance of their own) | {} / {} |",
+        ratio(pc, pn),
+        ratio(p2, pn)
+    );
+    let big: Vec<&MagnitudeCheck> = runs
+        .iter()
+        .flat_map(|r| r.magnitudes.iter())
+        .filter(|m| m.what == DRUM_PER_CABLE && m.magnitude >= DRUM_RESOLVED)
+        .collect();
+    println!(
+        "| … per cable within 20 %, runs with the largest \\|s_i\\| ≥ {:.2} % | {} |",
+        DRUM_RESOLVED * 100.0,
+        ratio(
+            big.iter().filter(|m| m.relative_error <= 0.2).count(),
+            big.len()
+        )
+    );
+    println!(
+        "| hysteresis h within 30 % of the truth (runs naming hysteresis) | {} |",
+        ratio(hn, hd)
+    );
+    let all: Vec<&MagnitudeCheck> = runs.iter().flat_map(|r| r.magnitudes.iter()).collect();
+    for e in [Effect::Hysteresis, Effect::Powertrain] {
+        let c: Vec<&&MagnitudeCheck> = all.iter().filter(|m| m.effect == e).collect();
+        if !c.is_empty() {
+            println!(
+                "| {}: fitted size within ±2σ of the truth (every component; the report's 1σ) | {} |",
+                e.name(),
+                ratio(c.iter().filter(|m| m.within_two_sigma).count(), c.len())
+            );
+        }
+    }
+    let pt: Vec<f64> = all
+        .iter()
+        .filter(|m| m.effect == Effect::Powertrain)
+        .map(|m| m.relative_error)
+        .collect();
+    if !pt.is_empty() {
+        println!(
+            "| stored rope l_i: relative error median / max (no tolerance set) | {:.0} % / {:.0} % |",
+            100.0 * median(&pt),
+            100.0 * pt.iter().copied().fold(0.0, f64::max)
+        );
+    }
+}
+
+/// The acceptance items with their targets, and the runs with a non-physical final parameter.
+fn acceptance_table(s: &Summary, runs: &[&RunResult], generator: &str) {
     println!("\n| acceptance | measured | target | met |\n|---|---|---|---|");
     for c in s.acceptance(generator) {
         println!(

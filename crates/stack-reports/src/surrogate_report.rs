@@ -1,7 +1,7 @@
 //! The report of a surrogate evaluation on the plant (`crs surrogate fit --plant`, `crs surrogate
 //! evaluate`): report.md (the table of both controllers), report.json and tracking.svg.
 
-use crate::surrogate_evaluation::{Evaluation, stats};
+use plant_experiments::surrogate_evaluation::{Evaluation, stats};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
