@@ -52,7 +52,7 @@ fn bench(c: &mut Criterion) {
             s
         })
         .collect();
-    let mut m = Monitor::new(Limits::from_config(&cfg), kin, id);
+    let mut m = Monitor::new(Limits::from(&cfg), kin, id);
     m.on_identity(&PlatformIdentity::new(id, 8));
     let mut seq = 0u64;
     let mut now = 0u64;
@@ -74,7 +74,7 @@ fn bench(c: &mut Criterion) {
         ("cycle_full", true),
         ("cycle_full_without_force_and_motion", false),
     ] {
-        let mut lim = Limits::from_config(&cfg);
+        let mut lim = Limits::from(&cfg);
         lim.forces.check = checks;
         lim.motion.check = checks;
         let mut m = Monitor::new(lim, kin, id);

@@ -461,7 +461,7 @@ pub fn configure<'a>(
     let identity = platform_identity(&cfg.platform);
     let kin = StandardKinematics::new(&cfg.platform);
     let instance = random_instance();
-    let monitor = Monitor::new(Limits::from_config(cfg), kin, identity).with_instance(instance);
+    let monitor = Monitor::new(Limits::from(cfg), kin, identity).with_instance(instance);
     let cob = cfg.can.safety_cob_id;
     let ports = Ports {
         setpoints: ipc.subscriber::<JointSetpoint>()?,

@@ -6,40 +6,29 @@
 //!
 //! | job | module |
 //! |---|---|
-//! | own platform TOML reading (glam, no motion-core code) | [`platform`] |
-//! | own platform identity (SHA-256 of the parameters) | [`identity`] |
-//! | own standard inverse kinematics φ*(x), eq. 2.2–2.7 | [`kinematics`] |
-//! | the monitor's settings (config/safety-monitor.toml) | [`config`] |
-//! | every check + the latched state machine | [`monitor`] |
-//! | trip causes and the trip log | [`trip`] |
+//! | own platform reading, identity, kinematics φ*(x), every check, the latched state machine, trip causes | crate `safety-monitor-checks` (re-exported: [`platform`], [`identity`], [`kinematics`], [`monitor`], [`trip`]) |
+//! | the monitor's settings (config/safety-monitor.toml) | crate `safety-monitor-config` (re-exported: [`config`]) |
 //! | the CANopen frames of the stop path | [`bus_frames`] |
 //! | health of the own bus reader thread (fail closed) | [`bus_watch`] |
-//! | who may reset: the safety I/O node's key, the reset socket (SO_PEERCRED) | [`operator`], [`reset_socket`] |
+//! | who may reset: the safety I/O node's key, the reset socket (SO_PEERCRED) | crate `safety-monitor-checks` (re-exported: [`operator`], [`reset_socket`]) |
 //! | stop frames with retry and escalation (NMT stop → heartbeat inhibit) | [`stop_path`] |
 //! | the process: 15 ms cycle, iceoryx2, CAN stop, safety heartbeat, reset | [`daemon`] |
 //!
 //! Diverse redundancy: nothing here uses motion-core or nalgebra (motion-core is a
 //! dev-dependency only, to test that both implementations agree). The doubled safety heartbeat
 //! is `can_transport::safety_frame`; the drives' and drive-io's validation of it is
-//! `drive_io::safety_watch`. See docs/safety-monitor.md.
+//! `drive_bus::safety_watch`. See docs/safety-monitor.md.
 
-pub mod accept;
 pub mod bus_frames;
-pub mod bus_layout;
 pub mod bus_watch;
-pub mod capacity;
-pub mod config;
 pub mod daemon;
-pub mod identity;
-pub mod kinematics;
-pub mod monitor;
-pub mod operator;
 pub mod ownership;
-pub mod platform;
-pub mod reset_socket;
 pub mod stop_path;
-pub mod trip;
 pub mod tx_buses;
 
-pub use monitor::{Limits, Monitor, MonitorState, ResetDecision, StateCode};
-pub use trip::{Cause, Fault, TripRecord};
+// The checks and the settings, under the paths this crate has always offered.
+pub use safety_monitor_checks::{
+    Cause, Fault, Limits, Monitor, MonitorState, ResetDecision, StateCode, TripRecord, capacity,
+    identity, kinematics, monitor, operator, platform, reset_socket, trip,
+};
+pub use safety_monitor_config::{accept, bus_layout, config};

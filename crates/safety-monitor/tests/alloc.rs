@@ -31,7 +31,7 @@ fn a_cycle_allocates_nothing() {
     .unwrap();
     let kin = StandardKinematics::new(&cfg.platform);
     let id = platform_identity(&cfg.platform);
-    let mut m = Monitor::new(Limits::from_config(&cfg), kin, id);
+    let mut m = Monitor::new(Limits::from(&cfg), kin, id);
     let ident = PlatformIdentity::new(id, 8);
     let mut base = JointSetpoint {
         cable_count: 8,

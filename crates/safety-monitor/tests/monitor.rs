@@ -44,7 +44,7 @@ fn mc() -> &'static cdpr_model::Model {
 /// A monitor for the checks: started ready (the start-up state has its own tests below).
 fn monitor_with(f: impl FnOnce(&mut Limits)) -> Monitor {
     let c = cfg();
-    let mut lim = Limits::from_config(c);
+    let mut lim = Limits::from(c);
     lim.require_ready = false;
     f(&mut lim);
     let mut m = Monitor::new(
@@ -283,7 +283,7 @@ fn an_announced_end_of_stream_disarms_silence_and_a_new_stream_rearms() {
 #[test]
 fn identity_mismatch_and_missing_identity_trip() {
     let c = cfg();
-    let mut lim = Limits::from_config(c);
+    let mut lim = Limits::from(c);
     lim.require_ready = false;
     let own = platform_identity(&c.platform);
     let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
@@ -316,7 +316,7 @@ fn identity_mismatch_and_missing_identity_trip() {
 fn motion_needs_a_verified_identity_holding_does_not() {
     let c = cfg();
     let own = platform_identity(&c.platform);
-    let mut lim = Limits::from_config(c);
+    let mut lim = Limits::from(c);
     lim.require_ready = false;
     let mut m = Monitor::new(lim, StandardKinematics::new(&c.platform), own);
     // Holding setpoints without an identity: within the grace, no trip.
@@ -571,7 +571,7 @@ fn only_an_accepted_reset_advances_the_epoch() {
     // Not ready: nothing either.
     let c = cfg();
     let mut n = Monitor::new(
-        Limits::from_config(c),
+        Limits::from(c),
         StandardKinematics::new(&c.platform),
         platform_identity(&c.platform),
     )
@@ -714,7 +714,7 @@ fn the_limit_is_configurable_but_never_above_100_mm() {
     let c = config::load(&p).unwrap();
     assert_eq!(c.dq_limit_m(), 0.05);
     let mut m = Monitor::new(
-        Limits::from_config(&c),
+        Limits::from(&c),
         StandardKinematics::new(&c.platform),
         platform_identity(&c.platform),
     );
@@ -857,7 +857,7 @@ fn force_cycle(
 #[test]
 fn slack_and_overload_trip_after_k_of_n_readings_with_the_cable_and_force() {
     let c = cfg();
-    let fl = Limits::from_config(c).forces;
+    let fl = Limits::from(c).forces;
     assert!(fl.check, "the shipped configuration supervises forces");
     assert_eq!(
         fl.slack_below_n,
@@ -906,7 +906,7 @@ fn slack_and_overload_trip_after_k_of_n_readings_with_the_cable_and_force() {
 /// fluttering force trips once k of the last n readings are out of range, k - 1 do not.
 #[test]
 fn a_fluttering_force_trips_k_minus_one_violations_do_not() {
-    let fl = Limits::from_config(cfg()).forces;
+    let fl = Limits::from(cfg()).forces;
     assert!(fl.window_violations * 2 <= fl.window_readings, "{fl:?}");
     // 200 N <-> 3 kN at 20 Hz with one reading per 5 ms (the shipped load cells): 5 low, 5
     // high, ...
@@ -971,7 +971,7 @@ fn a_fluttering_force_trips_k_minus_one_violations_do_not() {
 
 #[test]
 fn forces_inside_the_limits_and_short_transients_do_not_trip() {
-    let fl = Limits::from_config(cfg()).forces;
+    let fl = Limits::from(cfg()).forces;
     let mut m = monitor();
     let (mut seq, mut t) = (1, 0);
     for cyc in 0..40u64 {
@@ -1001,7 +1001,7 @@ fn forces_inside_the_limits_and_short_transients_do_not_trip() {
 
 #[test]
 fn one_reading_beyond_the_hard_limit_of_either_sign_trips_at_once() {
-    let fl = Limits::from_config(cfg()).forces;
+    let fl = Limits::from(cfg()).forces;
     for f in [fl.hard_limit_n + 1.0, -fl.hard_limit_n - 1.0] {
         let mut m = monitor();
         let (seq, _) = force_cycle(&mut m, 1, 0, 2, 4000.0);
@@ -1018,7 +1018,7 @@ fn one_reading_beyond_the_hard_limit_of_either_sign_trips_at_once() {
 
 #[test]
 fn a_silent_or_non_numeric_force_sensor_trips_fail_closed() {
-    let fl = Limits::from_config(cfg()).forces;
+    let fl = Limits::from(cfg()).forces;
     // Operational drive 4 stops sending force readings.
     let mut m = monitor();
     let (mut seq, _) = force_cycle(&mut m, 1, 0, 0, 4000.0);
@@ -1211,7 +1211,7 @@ fn ramp_path(v: f64, a: f64, n: usize) -> Vec<[f64; 6]> {
 
 #[test]
 fn motion_within_the_limits_and_a_hold_do_not_trip() {
-    let mc = Limits::from_config(cfg()).motion;
+    let mc = Limits::from(cfg()).motion;
     assert!(mc.check);
     // 95 % of table 5.1 (5 m/s, 14 m/s²) before the margin, then an abrupt hold (same pose).
     let l = &cfg().platform.limits;
@@ -1245,7 +1245,7 @@ fn a_consistent_pose_jump_inside_the_box_trips_motion_velocity() {
 
 #[test]
 fn an_acceleration_beyond_the_limit_trips() {
-    let mc = Limits::from_config(cfg()).motion;
+    let mc = Limits::from(cfg()).motion;
     // 1 m/s, then 2 m/s from one period to the next: 1000 m/s².
     let mut poses = ramp_path(1.0, 10.0, 150);
     let mut p = *poses.last().unwrap();
@@ -1301,7 +1301,7 @@ fn a_producer_faster_than_real_time_trips_on_the_monitors_clock() {
 
 #[test]
 fn feedback_whose_applied_setpoint_is_unknown_trips_after_n_cycles() {
-    let n = Limits::from_config(cfg()).unchecked_cycles;
+    let n = Limits::from(cfg()).unchecked_cycles;
     assert!(n >= 1);
     let q = sp(1, HOME, 0, 0.0).cable_length_m[..8].to_vec();
     let mut m = monitor();
@@ -1352,7 +1352,7 @@ fn bus_observation_failures_trip() {
 fn the_monitor_starts_not_ready_and_arms_only_when_every_drive_is_verified() {
     use can_transport::safety_frame::SafetyState;
     let c = cfg();
-    let lim = Limits::from_config(c);
+    let lim = Limits::from(c);
     assert!(
         lim.require_ready,
         "the shipped configuration starts not ready"
@@ -1403,7 +1403,7 @@ fn the_monitor_starts_not_ready_and_arms_only_when_every_drive_is_verified() {
 fn a_fault_while_not_ready_latches_and_readiness_names_what_is_missing() {
     let c = cfg();
     let mut m = Monitor::new(
-        Limits::from_config(c),
+        Limits::from(c),
         StandardKinematics::new(&c.platform),
         platform_identity(&c.platform),
     );
@@ -1721,7 +1721,7 @@ fn state_codes_are_the_contract_constants() {
 /// hold from speed does not trip (the safe direction).
 #[test]
 fn a_jump_from_rest_to_a_plausible_speed_trips_motion_acceleration() {
-    let mc = Limits::from_config(cfg()).motion;
+    let mc = Limits::from(cfg()).motion;
     let v = 5.0;
     assert!(v <= mc.linear_velocity && v / 1e-3 > mc.linear_acceleration);
     for (hold_first, what) in [(60usize, "out of a hold"), (1, "the stream's first step")] {
@@ -1814,12 +1814,8 @@ fn a_restarted_instance_resets_only_for_waiting_consumers() {
         ("drive-io", true, true),
         ("nobody", true, false),
     ] {
-        let mut m = Monitor::new(
-            Limits::from_config(c),
-            StandardKinematics::new(&c.platform),
-            own,
-        )
-        .with_instance(0x1234);
+        let mut m = Monitor::new(Limits::from(c), StandardKinematics::new(&c.platform), own)
+            .with_instance(0x1234);
         let mut t = 0;
         let mut cycles = 0;
         let mut cycle = |m: &mut Monitor| {
@@ -1950,7 +1946,7 @@ fn stale_or_future_feedback_is_not_a_live_drive_adapter() {
         assert_eq!(tr.fault.cause, Cause::FeedbackStale, "future {future}");
         // The first sample counts when fresh, then silence_cycles without a fresh one; a
         // future-stamped first sample arms the check without counting.
-        let n = u64::from(Limits::from_config(cfg()).feedback_silence_cycles);
+        let n = u64::from(Limits::from(cfg()).feedback_silence_cycles);
         assert_eq!(k, if future { n - 1 } else { n }, "future {future}");
         assert!(m.stats().feedback_stale > 0);
     }
@@ -1975,7 +1971,7 @@ fn silence_after_a_fresh_sample_is_feedback_silence_not_stale() {
     (fb.cycle, fb.timestamp_ns) = (2, t);
     m.on_feedback(&fb); // fresh again
     seq = good_cycle(&mut m, seq, t);
-    let n = Limits::from_config(cfg()).feedback_silence_cycles;
+    let n = Limits::from(cfg()).feedback_silence_cycles;
     for _ in 0..n {
         t += 15 * MS;
         m.begin_cycle(t);
@@ -2027,7 +2023,7 @@ fn a_timestamp_jump_does_not_blind_the_rpdo_check() {
 
     // Enabling RPDOs before any setpoint that hold where the drive was enabled: no motion,
     // checked, never a trip.
-    let n = Limits::from_config(cfg()).unchecked_cycles;
+    let n = Limits::from(cfg()).unchecked_cycles;
     let mut m = monitor();
     for k in 1..=3 * n {
         m.begin_cycle(u64::from(k) * 15 * MS);

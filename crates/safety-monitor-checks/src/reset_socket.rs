@@ -21,35 +21,6 @@ pub const MAX_PENDING: usize = 4;
 /// A connection that has not sent its request within this is closed (ns).
 pub const REQUEST_TIMEOUT_NS: u64 = 1_000_000_000;
 
-/// The gid of `group`: a group name (looked up in the group database) or a numeric gid.
-pub fn resolve_group(group: &str) -> Result<u32, String> {
-    if let Ok(gid) = group.trim().parse::<u32>() {
-        return Ok(gid);
-    }
-    let name =
-        std::ffi::CString::new(group.trim()).map_err(|_| format!("{group:?}: not a group name"))?;
-    let mut grp: libc::group = unsafe { std::mem::zeroed() };
-    let mut buf = vec![0 as libc::c_char; 16 * 1024];
-    let mut out: *mut libc::group = std::ptr::null_mut();
-    // SAFETY: every pointer is valid for the call; `buf` outlives it; getgrnam_r writes only
-    // into `grp` and `buf`.
-    let rc = unsafe {
-        libc::getgrnam_r(
-            name.as_ptr(),
-            &mut grp,
-            buf.as_mut_ptr(),
-            buf.len(),
-            &mut out,
-        )
-    };
-    if rc != 0 || out.is_null() {
-        return Err(format!(
-            "{group:?}: no such group (create it, or give a numeric gid)"
-        ));
-    }
-    Ok(grp.gr_gid)
-}
-
 /// Who is on the other end of a connection, as the kernel reported it at `connect`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Peer {
@@ -378,7 +349,5 @@ mod tests {
             Err(SocketError::NotASocket(_))
         ));
         let _ = std::fs::remove_dir_all(&dir);
-        assert!(resolve_group("0").is_ok());
-        assert!(resolve_group("no-such-group-crs-test").is_err());
     }
 }

@@ -913,7 +913,7 @@ impl ResetSection {
                     "missing: the reset socket accepts only members of this group (name or gid)",
                 ));
             }
-            let gid = crate::reset_socket::resolve_group(&self.operator_group)
+            let gid = crate::group::resolve_group(&self.operator_group)
                 .map_err(|e| at.err("reset.operator_group", e))?;
             Some((relative_to(config, &self.socket), gid))
         };
@@ -1666,4 +1666,55 @@ fn load_cell(
 pub fn sha256_of(bytes: &[u8]) -> [u8; 32] {
     use sha2::Digest;
     sha2::Sha256::digest(bytes).into()
+}
+
+/// The monitor's limits from its configuration and its own reading of the platform.
+impl From<&MonitorConfig> for safety_monitor_checks::Limits {
+    fn from(c: &MonitorConfig) -> Self {
+        use crate::capacity::{HISTORY, MAX_FORCE_WINDOW, MAX_GAP_WINDOW};
+        use safety_monitor_checks::monitor::{ForceLimits, MotionCheck};
+        let m = &c.monitor;
+        Self {
+            dq_limit_m: c.dq_limit_m(),
+            silence_cycles: m.silence_cycles,
+            max_missing_setpoints: m.max_missing_setpoints,
+            gap_window_cycles: m.gap_window_cycles.min(MAX_GAP_WINDOW as u32),
+            identity_grace_cycles: m.identity_grace_cycles,
+            workspace: c
+                .platform
+                .workspace
+                .widened(m.workspace_margin_m, m.workspace_margin_deg.to_radians()),
+            reset_clear_cycles: m.reset_clear_cycles,
+            check_following_error: c.feedback.check_following_error,
+            following_error_m: c.feedback.following_error_mm * 1e-3,
+            window_setpoints: c.feedback.window_setpoints.min(HISTORY as u32),
+            feedback_silence_cycles: c.feedback.silence_cycles,
+            unchecked_cycles: c.feedback.unchecked_cycles,
+            check_rpdo: c.can.check_rpdo,
+            require_ready: c.monitor.require_ready,
+            forces: ForceLimits {
+                check: c.forces.check,
+                slack_below_n: c.platform.f_min_n - c.forces.slack_margin_n,
+                overload_above_n: c.platform.f_max_n + c.forces.overload_margin_n,
+                window_readings: c.forces.window_readings.clamp(1, MAX_FORCE_WINDOW),
+                window_violations: c.forces.window_violations.max(1),
+                hard_limit_n: c.forces.hard_limit_n,
+                silence_cycles: c.forces.silence_cycles,
+            },
+            motion: {
+                let k = 1.0 + c.motion.margin;
+                let l = &c.platform.limits;
+                MotionCheck {
+                    check: c.motion.check,
+                    period_s: c.motion.setpoint_period_ms * 1e-3,
+                    linear_velocity: l.linear_velocity_m_per_s * k,
+                    angular_velocity: l.angular_velocity_rad_per_s * k,
+                    linear_acceleration: l.linear_acceleration_m_per_s2 * k,
+                    angular_acceleration: l.angular_acceleration_rad_per_s2 * k,
+                }
+            },
+            safety_io: c.safety_io.is_some(),
+            safety_io_silence_cycles: c.can.safety_io_silence_cycles,
+        }
+    }
 }

@@ -1,6 +1,6 @@
 //! The monitor's core: every check of one 15 ms cycle and the latched state machine. Pure logic
 //! (inputs in, decisions out), no I/O, no allocation after construction, never panics on any
-//! payload: the process ([`crate::daemon`]) feeds it from iceoryx2 and CAN.
+//! payload: the process (the `safety-monitor` crate's daemon) feeds it from iceoryx2 and CAN.
 //!
 //! Per cycle, for EVERY setpoint published since the last cycle (sec. 5.6):
 //! * Δq_i = φ*_i(x) − q_θ,i with the monitor's own standard kinematics; |Δq_i| > limit
@@ -29,7 +29,6 @@
 //! epoch carried in the safety heartbeat (drives and drive-io leave their inhibit/latch only on
 //! a newer epoch).
 
-use crate::config::MonitorConfig;
 use crate::kinematics::StandardKinematics;
 use crate::platform::WorkspaceBox;
 use crate::trip::{Cause, CauseSet, Fault, TripLog, TripRecord};
@@ -120,54 +119,6 @@ pub struct ForceLimits {
     pub hard_limit_n: f64,
     /// Cycles an operational drive may go without a force reading.
     pub silence_cycles: u32,
-}
-
-impl Limits {
-    pub fn from_config(c: &MonitorConfig) -> Self {
-        let m = &c.monitor;
-        Self {
-            dq_limit_m: c.dq_limit_m(),
-            silence_cycles: m.silence_cycles,
-            max_missing_setpoints: m.max_missing_setpoints,
-            gap_window_cycles: m.gap_window_cycles.min(MAX_GAP_WINDOW as u32),
-            identity_grace_cycles: m.identity_grace_cycles,
-            workspace: c
-                .platform
-                .workspace
-                .widened(m.workspace_margin_m, m.workspace_margin_deg.to_radians()),
-            reset_clear_cycles: m.reset_clear_cycles,
-            check_following_error: c.feedback.check_following_error,
-            following_error_m: c.feedback.following_error_mm * 1e-3,
-            window_setpoints: c.feedback.window_setpoints.min(HISTORY as u32),
-            feedback_silence_cycles: c.feedback.silence_cycles,
-            unchecked_cycles: c.feedback.unchecked_cycles,
-            check_rpdo: c.can.check_rpdo,
-            require_ready: c.monitor.require_ready,
-            forces: ForceLimits {
-                check: c.forces.check,
-                slack_below_n: c.platform.f_min_n - c.forces.slack_margin_n,
-                overload_above_n: c.platform.f_max_n + c.forces.overload_margin_n,
-                window_readings: c.forces.window_readings.clamp(1, MAX_FORCE_WINDOW),
-                window_violations: c.forces.window_violations.max(1),
-                hard_limit_n: c.forces.hard_limit_n,
-                silence_cycles: c.forces.silence_cycles,
-            },
-            motion: {
-                let k = 1.0 + c.motion.margin;
-                let l = &c.platform.limits;
-                MotionCheck {
-                    check: c.motion.check,
-                    period_s: c.motion.setpoint_period_ms * 1e-3,
-                    linear_velocity: l.linear_velocity_m_per_s * k,
-                    angular_velocity: l.angular_velocity_rad_per_s * k,
-                    linear_acceleration: l.linear_acceleration_m_per_s2 * k,
-                    angular_acceleration: l.angular_acceleration_rad_per_s2 * k,
-                }
-            },
-            safety_io: c.safety_io.is_some(),
-            safety_io_silence_cycles: c.can.safety_io_silence_cycles,
-        }
-    }
 }
 
 /// Per-cable state of the force supervision.
