@@ -599,7 +599,7 @@ fn fuzz_monitor() -> safety_monitor::Monitor {
         let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/safety-monitor.toml");
         config::load(&p).expect("the shipped monitor config loads")
     });
-    let lim = safety_monitor::monitor::Limits::from_config(c);
+    let lim = safety_monitor::monitor::Limits::from(c);
     let id = safety_monitor::identity::platform_identity(&c.platform);
     let mut m = safety_monitor::Monitor::new(
         lim,
