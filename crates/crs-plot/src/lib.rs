@@ -127,6 +127,9 @@ pub struct HLine {
     pub dashed: bool,
 }
 
+/// An axis range (lo, hi) in data units.
+type Span = (f64, f64);
+
 /// One x–y panel. The axis ranges are the data's (padded by 5 %) unless given.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Chart {
@@ -160,7 +163,7 @@ impl Chart {
     }
 
     /// (x range, y range) of the finite data, `None` without any.
-    fn data_ranges(&self) -> (Option<(f64, f64)>, Option<(f64, f64)>) {
+    fn data_ranges(&self) -> (Option<Span>, Option<Span>) {
         let mut x = Extent::default();
         let mut y = Extent::default();
         for r in &self.rects {
@@ -264,13 +267,31 @@ impl Figure {
     pub fn svg(&self) -> Result<String, PlotError> {
         let mut out = String::new();
         {
-            let root = SVGBackend::with_string(&mut out, self.size.max((64, 64))).into_drawing_area();
+            let root =
+                SVGBackend::with_string(&mut out, self.size.max((64, 64))).into_drawing_area();
             self.draw(&root).map_err(|source| PlotError::Draw {
                 title: self.title.clone(),
                 source,
             })?;
         }
         Ok(out)
+    }
+
+    /// The figure as an SVG document, or — should plotters fail — an SVG that says what
+    /// failed instead of a partial figure (for writers that hand on text, not a `Result`).
+    pub fn render(&self) -> String {
+        self.svg().unwrap_or_else(|e| {
+            let failed = Figure {
+                title: self.title.clone(),
+                size: self.size,
+                columns: 1,
+                panels: Vec::new(),
+                notes: vec![format!("this figure could not be drawn: {e}")],
+            };
+            failed.svg().unwrap_or_else(|_| {
+                "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"400\" height=\"40\"><text x=\"10\" y=\"20\">this figure could not be drawn</text></svg>\n".to_string()
+            })
+        })
     }
 
     fn draw(&self, root: &Area<'_>) -> DrawResult<()> {
@@ -286,8 +307,9 @@ impl Figure {
             ))?;
             body = rest;
         }
-        let notes_px = (NOTE_PX * self.notes.len() as u32 + if self.notes.is_empty() { 0 } else { 6 })
-            .min(h / 2);
+        let notes_px = (NOTE_PX * self.notes.len() as u32
+            + if self.notes.is_empty() { 0 } else { 6 })
+        .min(h / 2);
         if notes_px > 0 {
             let (_, bh) = body.dim_in_pixel();
             let (rest, bottom) = body.split_vertically(bh.saturating_sub(notes_px));
@@ -395,7 +417,8 @@ fn draw_chart(area: &Area<'_>, c: &Chart) -> DrawResult<()> {
         .configure_mesh()
         .x_desc(c.x_label.as_str())
         .y_desc(c.y_label.as_str())
-        .light_line_style(RGBColor(235, 235, 235))
+        .light_line_style(TRANSPARENT)
+        .bold_line_style(RGBColor(225, 225, 225))
         .label_style((FONT, 12))
         .axis_desc_style((FONT, 13))
         .draw()?;
@@ -411,18 +434,10 @@ fn draw_chart(area: &Area<'_>, c: &Chart) -> DrawResult<()> {
             )))?;
         }
         if let Some((col, width, dashed)) = r.stroke {
-            let ring = vec![
-                r.min,
-                (r.max.0, r.min.1),
-                r.max,
-                (r.min.0, r.max.1),
-                r.min,
-            ];
+            let ring = vec![r.min, (r.max.0, r.min.1), r.max, (r.min.0, r.max.1), r.min];
             let style = col.rgba(1.0).stroke_width(width);
             if dashed {
-                chart.draw_series(std::iter::once(DashedPathElement::new(
-                    ring, 6, 4, style,
-                )))?;
+                chart.draw_series(std::iter::once(DashedPathElement::new(ring, 6, 4, style)))?;
             } else {
                 chart.draw_series(std::iter::once(PathElement::new(ring, style)))?;
             }
@@ -544,7 +559,12 @@ fn draw_bars(area: &Area<'_>, b: &Bars) -> DrawResult<()> {
     // Group names under their groups; turned upright when they would run into each other.
     let (w, _) = inner.dim_in_pixel();
     let per_group = w.saturating_sub(2 * MARGIN + Y_LABEL_AREA) as f64 / n as f64;
-    let longest = b.groups.iter().map(|g| g.chars().count()).max().unwrap_or(0);
+    let longest = b
+        .groups
+        .iter()
+        .map(|g| g.chars().count())
+        .max()
+        .unwrap_or(0);
     let upright = longest as f64 * 7.0 > per_group;
     let label_area = if upright {
         (longest as u32 * 7 + 12).min(180)
@@ -561,7 +581,8 @@ fn draw_bars(area: &Area<'_>, b: &Bars) -> DrawResult<()> {
         .disable_x_mesh()
         .x_labels(0)
         .y_desc(b.y_label.as_str())
-        .light_line_style(RGBColor(235, 235, 235))
+        .light_line_style(TRANSPARENT)
+        .bold_line_style(RGBColor(225, 225, 225))
         .label_style((FONT, 12))
         .axis_desc_style((FONT, 13))
         .draw()?;

@@ -30,7 +30,11 @@ fn line_figure(lines: Vec<Line>) -> Figure {
 #[test]
 fn a_line_chart_has_one_polyline_per_solid_line_through_every_finite_point_and_a_legend() {
     let a = Line::new("first", Rgb::BLUE, vec![(0.0, 0.0), (1.0, 1.0), (2.0, 4.0)]);
-    let b = Line::new("second", Rgb::RED, vec![(0.0, 1.0), (f64::NAN, 2.0), (2.0, 2.0)]);
+    let b = Line::new(
+        "second",
+        Rgb::RED,
+        vec![(0.0, 1.0), (f64::NAN, 2.0), (2.0, 2.0)],
+    );
     let svg = line_figure(vec![a, b]).svg().unwrap();
     let doc = parse(&svg);
     assert_eq!(doc.root_element().tag_name().name(), "svg");
@@ -45,7 +49,14 @@ fn a_line_chart_has_one_polyline_per_solid_line_through_every_finite_point_and_a
     sorted.sort();
     assert_eq!(sorted, vec![2, 2, 2, 3], "{data:?}");
     let t = texts(&doc);
-    for want in ["first", "second", "panel", "t (s)", "x (m)", "title & <escaped>"] {
+    for want in [
+        "first",
+        "second",
+        "panel",
+        "t (s)",
+        "x (m)",
+        "title & <escaped>",
+    ] {
         assert!(t.iter().any(|s| s == want), "{want} missing in {t:?}");
     }
 }
@@ -53,10 +64,16 @@ fn a_line_chart_has_one_polyline_per_solid_line_through_every_finite_point_and_a
 #[test]
 fn markers_are_one_circle_per_finite_point_with_their_texts() {
     let mut c = Chart::new("scatter", "a", "b");
-    let mut m = Markers::new("pts", Rgb::GREEN, vec![(0.0, 0.0), (1.0, 2.0), (f64::INFINITY, 1.0)]);
+    let mut m = Markers::new(
+        "pts",
+        Rgb::GREEN,
+        vec![(0.0, 0.0), (1.0, 2.0), (f64::INFINITY, 1.0)],
+    );
     m.texts = vec!["p0".into(), "p1".into(), "never".into()];
     c.markers.push(m);
-    let svg = Figure::single("", (500, 400), Panel::Chart(c)).svg().unwrap();
+    let svg = Figure::single("", (500, 400), Panel::Chart(c))
+        .svg()
+        .unwrap();
     let doc = parse(&svg);
     // Two points and the legend's sample.
     assert_eq!(count(&doc, "circle"), 3);
@@ -74,7 +91,9 @@ fn cells_are_rectangles_with_their_text_and_an_equal_scale_keeps_squares_square(
         r.text = Some(format!("cell {i}"));
         c.rects.push(r);
     }
-    let svg = Figure::single("", (800, 300), Panel::Chart(c)).svg().unwrap();
+    let svg = Figure::single("", (800, 300), Panel::Chart(c))
+        .svg()
+        .unwrap();
     let doc = parse(&svg);
     let cells: Vec<(f64, f64)> = doc
         .descendants()
@@ -110,7 +129,9 @@ fn bars_are_one_rectangle_per_finite_value_with_the_group_names() {
             },
         ],
     };
-    let svg = Figure::single("", (700, 400), Panel::Bars(b)).svg().unwrap();
+    let svg = Figure::single("", (700, 400), Panel::Bars(b))
+        .svg()
+        .unwrap();
     let doc = parse(&svg);
     let filled = |c: &str| {
         doc.descendants()
@@ -129,7 +150,11 @@ fn bars_are_one_rectangle_per_finite_value_with_the_group_names() {
 #[test]
 fn empty_and_degenerate_input_draws_an_empty_state_not_a_panic() {
     let cases = vec![
-        Figure::single("none", (300, 200), Panel::Chart(Chart::new("empty", "x", "y"))),
+        Figure::single(
+            "none",
+            (300, 200),
+            Panel::Chart(Chart::new("empty", "x", "y")),
+        ),
         line_figure(vec![Line::new("nan", Rgb::BLACK, vec![(f64::NAN, 1.0)])]),
         Figure::single(
             "bars",
@@ -157,22 +182,32 @@ fn empty_and_degenerate_input_draws_an_empty_state_not_a_panic() {
         );
     }
     // One point, or all points equal: a visible range around it.
-    let svg = line_figure(vec![Line::new("one", Rgb::BLACK, vec![(3.0, 3.0), (3.0, 3.0)])])
-        .svg()
-        .unwrap();
+    let svg = line_figure(vec![Line::new(
+        "one",
+        Rgb::BLACK,
+        vec![(3.0, 3.0), (3.0, 3.0)],
+    )])
+    .svg()
+    .unwrap();
     parse(&svg);
     // A given range that is not one falls back to the data's.
     let mut c = Chart::new("bad range", "x", "y");
     c.x_range = Some((1.0, 1.0));
     c.y_range = Some((f64::NAN, 2.0));
-    c.lines.push(Line::new("l", Rgb::BLACK, vec![(0.0, 0.0), (1.0, 1.0)]));
-    parse(&Figure::single("", (300, 200), Panel::Chart(c)).svg().unwrap());
+    c.lines
+        .push(Line::new("l", Rgb::BLACK, vec![(0.0, 0.0), (1.0, 1.0)]));
+    parse(
+        &Figure::single("", (300, 200), Panel::Chart(c))
+            .svg()
+            .unwrap(),
+    );
 }
 
 #[test]
 fn limits_and_notes_are_drawn() {
     let mut c = Chart::new("limits", "t (s)", "m");
-    c.lines.push(Line::new("x", Rgb::BLUE, vec![(0.0, 0.0), (1.0, 0.5)]));
+    c.lines
+        .push(Line::new("x", Rgb::BLUE, vec![(0.0, 0.0), (1.0, 0.5)]));
     c.hlines.push(HLine {
         y: 1.0,
         color: Rgb(255, 0, 0),
@@ -184,7 +219,9 @@ fn limits_and_notes_are_drawn() {
     let doc = parse(&svg);
     assert_eq!(
         doc.descendants()
-            .filter(|n| n.tag_name().name() == "polyline" && n.attribute("stroke") == Some("#FF0000"))
+            .filter(
+                |n| n.tag_name().name() == "polyline" && n.attribute("stroke") == Some("#FF0000")
+            )
             .count(),
         1
     );
