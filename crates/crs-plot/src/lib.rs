@@ -268,7 +268,7 @@ impl Figure {
         let mut out = String::new();
         {
             let root =
-                SVGBackend::with_string(&mut out, self.size.max((64, 64))).into_drawing_area();
+                SVGBackend::with_string(&mut out, (self.size.0.max(64), self.size.1.max(64))).into_drawing_area();
             self.draw(&root).map_err(|source| PlotError::Draw {
                 title: self.title.clone(),
                 source,

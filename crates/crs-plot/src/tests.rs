@@ -190,6 +190,28 @@ fn empty_and_degenerate_input_draws_an_empty_state_not_a_panic() {
     .svg()
     .unwrap();
     parse(&svg);
+    // Dashed lines of no, one and only non-finite points; a limit that is not a number.
+    let dashed = |points: Vec<(f64, f64)>| {
+        let mut l = Line::new("dashed", Rgb::GREY, points);
+        l.dashed = true;
+        l
+    };
+    let mut c = Chart::new("dashed", "x", "y");
+    c.lines = vec![
+        dashed(vec![]),
+        dashed(vec![(1.0, 1.0)]),
+        dashed(vec![(f64::NAN, f64::NAN), (2.0, 2.0)]),
+    ];
+    c.hlines.push(HLine {
+        y: f64::NAN,
+        color: Rgb::RED,
+        dashed: true,
+    });
+    parse(&Figure::single("", (300, 200), Panel::Chart(c)).svg().unwrap());
+    // A height of zero is drawn at the smallest size.
+    let tiny = Figure::single("", (500, 0), Panel::Chart(Chart::new("t", "x", "y")));
+    let svg = tiny.svg().unwrap();
+    assert_eq!(parse(&svg).root_element().attribute("height"), Some("64"));
     // A given range that is not one falls back to the data's.
     let mut c = Chart::new("bad range", "x", "y");
     c.x_range = Some((1.0, 1.0));
