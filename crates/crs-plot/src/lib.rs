@@ -268,7 +268,8 @@ impl Figure {
         let mut out = String::new();
         {
             let root =
-                SVGBackend::with_string(&mut out, (self.size.0.max(64), self.size.1.max(64))).into_drawing_area();
+                SVGBackend::with_string(&mut out, (self.size.0.max(64), self.size.1.max(64)))
+                    .into_drawing_area();
             self.draw(&root).map_err(|source| PlotError::Draw {
                 title: self.title.clone(),
                 source,
@@ -549,8 +550,10 @@ fn draw_bars(area: &Area<'_>, b: &Bars) -> DrawResult<()> {
         .copied()
         .filter(|v| v.is_finite())
         .fold(0.0, f64::min);
+    // Head room above the highest bar for the legend (about 7 % of the height per entry).
     let (lo, hi) = padded((bottom, top.max(0.0)), 0.08);
-    let (lo, hi) = (if bottom >= 0.0 { 0.0 } else { lo }, hi);
+    let hi = hi + (hi - lo) * 0.07 * b.series.len() as f64;
+    let lo = if bottom >= 0.0 { 0.0 } else { lo };
     let inner = if b.title.is_empty() {
         area.clone()
     } else {

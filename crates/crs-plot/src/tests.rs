@@ -207,7 +207,11 @@ fn empty_and_degenerate_input_draws_an_empty_state_not_a_panic() {
         color: Rgb::RED,
         dashed: true,
     });
-    parse(&Figure::single("", (300, 200), Panel::Chart(c)).svg().unwrap());
+    parse(
+        &Figure::single("", (300, 200), Panel::Chart(c))
+            .svg()
+            .unwrap(),
+    );
     // A height of zero is drawn at the smallest size.
     let tiny = Figure::single("", (500, 0), Panel::Chart(Chart::new("t", "x", "y")));
     let svg = tiny.svg().unwrap();
