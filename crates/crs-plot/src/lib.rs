@@ -359,10 +359,11 @@ impl Extent {
     }
 }
 
-/// `r` padded by `pad` of its span; a zero span widened to a visible one.
+/// `r` padded by `pad` of its span; a span of rounding noise (below 1e-9 of the values or of
+/// 1) widened to a visible one, so its ticks do not all read the same number.
 fn padded((lo, hi): (f64, f64), pad: f64) -> (f64, f64) {
     let span = hi - lo;
-    if span > 1e-12 * lo.abs().max(hi.abs()).max(1e-300) {
+    if span > 1e-9 * lo.abs().max(hi.abs()).max(1.0) {
         (lo - pad * span, hi + pad * span)
     } else {
         let w = (lo.abs() * 0.05).max(0.5);

@@ -38,9 +38,11 @@ const DEMAND: Rgb = Rgb(153, 153, 153);
 const TILT: Rgb = Rgb(44, 160, 44);
 const LIMIT: Rgb = Rgb(255, 0, 0);
 
-/// Panels in a grid of `columns`, with a title line on top; time in s on every x axis.
+/// Panels in a grid of `columns`, with a title line on top; time in s on every x axis. A
+/// series' legend entry is drawn in the first panel that has it only.
 pub fn panels_svg(title: &str, panels: &[Panel], columns: usize) -> String {
     let columns = columns.max(1);
+    let mut named = std::collections::BTreeSet::new();
     let rows = panels.len().div_ceil(columns).max(1) as u32;
     let charts = panels
         .iter()
@@ -70,6 +72,9 @@ pub fn panels_svg(title: &str, panels: &[Panel], columns: usize) -> String {
                         s.points.iter().step_by(step).copied().collect(),
                     );
                     l.dashed = s.dashed;
+                    if !named.insert(s.label.clone()) {
+                        l.label = None;
+                    }
                     l
                 })
                 .collect();
@@ -297,9 +302,9 @@ mod tests {
         let svg = perception_svg("braking", &s, &r);
         let d = doc(&svg);
         // Solid vehicle (black) and cabin lines: one per panel with all points, plus the
-        // legend's sample (2 points) in each of the six panels.
+        // legend's sample (2 points) in the first panel only.
         assert_eq!(lines(&d, "#000000").iter().filter(|c| **c == n).count(), 6);
-        assert_eq!(lines(&d, "#1F77B4"), [vec![2; 6], vec![n; 6]].concat());
+        assert_eq!(lines(&d, "#1F77B4"), [vec![2], vec![n; 6]].concat());
         let t = texts(&d);
         assert!(
             t.iter()
@@ -332,9 +337,9 @@ mod tests {
             &[1.0, 1.0, 1.0, 0.1, 0.1, 0.1],
         );
         let d = doc(&svg);
-        assert_eq!(lines(&d, "#1F77B4"), [vec![2; 6], vec![10; 6]].concat());
+        assert_eq!(lines(&d, "#1F77B4"), [vec![2], vec![10; 6]].concat());
         let t = texts(&d);
-        assert_eq!(t.iter().filter(|x| *x == "tilt part").count(), 2, "{t:?}");
+        assert_eq!(t.iter().filter(|x| *x == "tilt part").count(), 1, "{t:?}");
         // The box's limits are dashed red lines: present in every panel.
         assert!(
             d.descendants()
