@@ -9,6 +9,7 @@ use crate::residual::Kind;
 use crate::validate;
 use cdpr_model::ModelError;
 use cdpr_model::config::Platform;
+use crs_plot::{BarSeries, Bars, Chart, Figure, Markers, Panel, Rgb};
 use std::fmt::Write as _;
 
 /// A figure that may not have been computed (a screening fit has no condition numbers).
@@ -502,175 +503,50 @@ pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
 }
 
 // ----------------------------------------------------------------------------------------
-// SVG plots (hand-written, no plotting dependency).
+// Plots, drawn with the plot layer (`crs-plot`).
 
-const W: f64 = 760.0;
-const H: f64 = 360.0;
-const ML: f64 = 70.0;
-const MB: f64 = 40.0;
-const MT: f64 = 30.0;
-
-fn svg_frame(title: &str, ylabel: &str) -> String {
-    format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{W}\" height=\"{H}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n<text x=\"{}\" y=\"18\" text-anchor=\"middle\" font-size=\"14\">{title}</text>\n<text x=\"14\" y=\"{}\" transform=\"rotate(-90 14 {})\" text-anchor=\"middle\">{ylabel}</text>\n",
-        W / 2.0,
-        H / 2.0,
-        H / 2.0
-    )
-}
+const SIZE: (u32, u32) = (760, 400);
 
 /// Grouped bar chart: `series` (name, colour, values per group).
 pub fn bar_chart(
     title: &str,
     ylabel: &str,
     groups: &[String],
-    series: &[(String, &str, Vec<f64>)],
+    series: &[(String, Rgb, Vec<f64>)],
 ) -> String {
-    let mut s = svg_frame(title, ylabel);
-    let ymax = series
-        .iter()
-        .flat_map(|x| x.2.iter())
-        .fold(0.0f64, |a, b| a.max(*b))
-        .max(1e-12)
-        * 1.1;
-    let pw = W - ML - 20.0;
-    let ph = H - MT - MB;
-    let y = |v: f64| MT + ph * (1.0 - v / ymax);
-    let _ = writeln!(
-        s,
-        "<line x1=\"{ML}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" stroke=\"black\"/>",
-        MT + ph,
-        ML + pw,
-        MT + ph
-    );
-    let _ = writeln!(
-        s,
-        "<line x1=\"{ML}\" y1=\"{MT}\" x2=\"{ML}\" y2=\"{}\" stroke=\"black\"/>",
-        MT + ph
-    );
-    for k in 0..=4 {
-        let v = ymax * k as f64 / 4.0;
-        let _ = writeln!(
-            s,
-            "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{:.3}</text>",
-            ML - 4.0,
-            y(v) + 4.0,
-            v
-        );
-    }
-    let gw = pw / groups.len().max(1) as f64;
-    let bw = gw * 0.8 / series.len().max(1) as f64;
-    for (g, name) in groups.iter().enumerate() {
-        let _ = writeln!(
-            s,
-            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{name}</text>",
-            ML + gw * (g as f64 + 0.5),
-            MT + ph + 16.0
-        );
-        for (k, (_, colour, vals)) in series.iter().enumerate() {
-            let v = vals.get(g).copied().unwrap_or(0.0);
-            let x = ML + gw * g as f64 + gw * 0.1 + bw * k as f64;
-            let _ = writeln!(
-                s,
-                "<rect x=\"{x:.1}\" y=\"{:.1}\" width=\"{bw:.1}\" height=\"{:.1}\" fill=\"{colour}\"/>",
-                y(v),
-                MT + ph - y(v)
-            );
-        }
-    }
-    // Legend: one entry per line, top right.
-    for (k, (name, colour, _)) in series.iter().enumerate() {
-        let (x, yl) = (W - 320.0, MT + 4.0 + 15.0 * k as f64);
-        let _ = writeln!(
-            s,
-            "<rect x=\"{x}\" y=\"{yl}\" width=\"10\" height=\"10\" fill=\"{colour}\"/><text x=\"{}\" y=\"{}\">{name}</text>",
-            x + 14.0,
-            yl + 9.0
-        );
-    }
-    s.push_str("</svg>\n");
-    s
+    let bars = Bars {
+        title: String::new(),
+        y_label: ylabel.to_string(),
+        groups: groups.to_vec(),
+        series: series
+            .iter()
+            .map(|(label, color, values)| BarSeries {
+                label: label.clone(),
+                color: *color,
+                values: values.clone(),
+            })
+            .collect(),
+    };
+    Figure::single(title, SIZE, Panel::Bars(bars)).render()
 }
 
 /// A named, coloured set of (x, y) points.
-pub type PointSeries<'a> = (String, &'a str, Vec<(f64, f64)>);
+pub type PointSeries = (String, Rgb, Vec<(f64, f64)>);
 
 /// Scatter of (x, y) point sets.
-pub fn scatter(title: &str, xlabel: &str, ylabel: &str, series: &[PointSeries<'_>]) -> String {
-    let mut s = svg_frame(title, ylabel);
-    let pts = series.iter().flat_map(|x| x.2.iter());
-    let (mut x0, mut x1, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
-    for (x, y) in pts {
-        x0 = x0.min(*x);
-        x1 = x1.max(*x);
-        y1 = y1.max(*y);
-    }
-    if !x0.is_finite() || x1 <= x0 {
-        x0 = 0.0;
-        x1 = 1.0;
-    }
-    y1 = y1.max(1e-12) * 1.1;
-    let pw = W - ML - 20.0;
-    let ph = H - MT - MB;
-    let px = |v: f64| ML + pw * (v - x0) / (x1 - x0);
-    let py = |v: f64| MT + ph * (1.0 - v / y1);
-    let _ = writeln!(
-        s,
-        "<line x1=\"{ML}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" stroke=\"black\"/>",
-        MT + ph,
-        ML + pw,
-        MT + ph
-    );
-    let _ = writeln!(
-        s,
-        "<line x1=\"{ML}\" y1=\"{MT}\" x2=\"{ML}\" y2=\"{}\" stroke=\"black\"/>",
-        MT + ph
-    );
-    for k in 0..=4 {
-        let v = y1 * k as f64 / 4.0;
-        let _ = writeln!(
-            s,
-            "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{:.3}</text>",
-            ML - 4.0,
-            py(v) + 4.0,
-            v
-        );
-        let xv = x0 + (x1 - x0) * k as f64 / 4.0;
-        let _ = writeln!(
-            s,
-            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{:.2}</text>",
-            px(xv),
-            MT + ph + 14.0,
-            xv
-        );
-    }
-    let _ = writeln!(
-        s,
-        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{xlabel}</text>",
-        ML + pw / 2.0,
-        H - 20.0
-    );
-    for (k, (name, colour, pts)) in series.iter().enumerate() {
-        for (x, y) in pts {
-            let _ = writeln!(
-                s,
-                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"3\" fill=\"{colour}\"/>",
-                px(*x),
-                py(*y)
-            );
-        }
-        let lx = W - 320.0;
-        let _ = writeln!(
-            s,
-            "<circle cx=\"{lx}\" cy=\"{}\" r=\"4\" fill=\"{colour}\"/><text x=\"{}\" y=\"{}\">{name}</text>",
-            MT + 4.0 + 15.0 * k as f64,
-            lx + 8.0,
-            MT + 8.0 + 15.0 * k as f64
-        );
-    }
-    s.push_str("</svg>\n");
-    s
+pub fn scatter(title: &str, xlabel: &str, ylabel: &str, series: &[PointSeries]) -> String {
+    let mut c = Chart::new("", xlabel, ylabel);
+    c.markers = series
+        .iter()
+        .map(|(label, color, pts)| Markers::new(label.as_str(), *color, pts.clone()))
+        .collect();
+    Figure::single(title, SIZE, Panel::Chart(c)).render()
 }
+
+const RED: Rgb = Rgb(214, 39, 40);
+const BLUE: Rgb = Rgb(31, 119, 180);
+const GREEN: Rgb = Rgb(44, 160, 44);
+const ORANGE: Rgb = Rgb(255, 127, 14);
 
 /// The report's plots: (file name, SVG text).
 pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(String, String)> {
@@ -685,12 +561,12 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
             .map(|v| 1e3 * (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt())
             .collect()
     };
-    let mut series = vec![(first.name.clone(), "#d62728", rms_per_cable(first))];
+    let mut series = vec![(first.name.clone(), RED, rms_per_cable(first))];
     if let Some(e) = rep.stage("optimal elastostatic") {
-        series.push((e.name.clone(), "#1f77b4", rms_per_cable(e)));
+        series.push((e.name.clone(), BLUE, rms_per_cable(e)));
     }
     if last.name != "optimal elastostatic" {
-        series.push((last.name.clone(), "#2ca02c", rms_per_cable(last)));
+        series.push((last.name.clone(), GREEN, rms_per_cable(last)));
     }
     out.push((
         "residuals_per_cable.svg".into(),
@@ -703,7 +579,7 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
     ));
     // Error over the workspace: position error vs distance from the workspace centre.
     let mut sc = Vec::new();
-    for (st, colour) in [(first, "#d62728"), (last, "#2ca02c")] {
+    for (st, colour) in [(first, RED), (last, GREEN)] {
         let mut pts = Vec::new();
         for o in holdout {
             if let Ok(p) = validate::predict(st.kind, &st.model, o) {
@@ -741,7 +617,7 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
             "Mean held-out position error per step",
             "mm",
             &names,
-            &[("position".into(), "#1f77b4", pos)],
+            &[("position".into(), BLUE, pos)],
         ),
     ));
     // Condition numbers.
@@ -768,7 +644,7 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
             "log10 cond(J): SI units vs preconditioned (eq. 4.42)",
             "log10",
             &labels,
-            &[("SI".into(), "#d62728", cu), ("W_pc".into(), "#1f77b4", cs)],
+            &[("SI".into(), RED, cu), ("W_pc".into(), BLUE, cs)],
         ),
     ));
     // Parameter changes of the geometry with uncertainty.
@@ -792,10 +668,7 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
                 "|Δ geometry| (nominal → identified) and 1σ",
                 "parameter index (a, b)",
                 "mm",
-                &[
-                    ("|Δp|".into(), "#1f77b4", pts),
-                    ("1σ".into(), "#ff7f0e", sds),
-                ],
+                &[("|Δp|".into(), BLUE, pts), ("1σ".into(), ORANGE, sds)],
             ),
         ));
     }
@@ -821,8 +694,8 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
                     "%",
                     &names,
                     &[
-                        ("position".into(), "#1f77b4", pos),
-                        ("force".into(), "#2ca02c", force),
+                        ("position".into(), BLUE, pos),
+                        ("force".into(), GREEN, force),
                     ],
                 ),
             ));
@@ -839,12 +712,12 @@ pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(Strin
                 &[
                     (
                         "residual".into(),
-                        "#1f77b4",
+                        BLUE,
                         st.cables.iter().map(|c| c.residual_rms_mm).collect(),
                     ),
                     (
                         "structured part (regression)".into(),
-                        "#d62728",
+                        RED,
                         st.cables.iter().map(|c| c.structured_rms_mm).collect(),
                     ),
                 ],
@@ -992,5 +865,48 @@ fn structure_section(s: &mut String, st: &crate::structure::StructureReport) {
                 _ => "–".into(),
             }
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn says_no_data(svg: &str) -> bool {
+        let doc = roxmltree::Document::parse(svg).expect("well-formed SVG");
+        doc.descendants()
+            .filter_map(|n| n.text())
+            .any(|t| t.trim().ends_with("no data"))
+    }
+
+    #[test]
+    fn empty_charts_say_no_data() {
+        assert!(says_no_data(&bar_chart("steps", "mm", &[], &[])));
+        let nan = vec![("x".to_string(), BLUE, vec![f64::NAN])];
+        assert!(says_no_data(&bar_chart("steps", "mm", &["a".into()], &nan)));
+        assert!(says_no_data(&scatter("error", "m", "mm", &[])));
+        let empty = vec![("first".to_string(), RED, Vec::new())];
+        assert!(says_no_data(&scatter("error", "m", "mm", &empty)));
+    }
+
+    #[test]
+    fn a_scatter_draws_each_point_and_a_legend_per_series() {
+        let s = vec![
+            (
+                "|Δp|".to_string(),
+                BLUE,
+                vec![(0.0, 1.0), (1.0, 2.0), (2.0, 0.5)],
+            ),
+            ("1σ".to_string(), ORANGE, vec![(0.0, 0.1)]),
+        ];
+        let svg = scatter("changes", "parameter index (a, b)", "mm", &s);
+        let doc = roxmltree::Document::parse(&svg).expect("well-formed SVG");
+        let dots = |c: &str| {
+            doc.descendants()
+                .filter(|n| n.tag_name().name() == "circle" && n.attribute("fill") == Some(c))
+                .count()
+        };
+        assert_eq!((dots("#1F77B4"), dots("#FF7F0E")), (3 + 1, 1 + 1));
+        assert!(svg.contains("parameter index (a, b)") && svg.contains("|Δp|"));
     }
 }

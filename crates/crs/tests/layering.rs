@@ -129,6 +129,46 @@ fn the_model_library_and_the_data_format_pull_in_no_ipc_rt_can_or_cli() {
 }
 
 #[test]
+fn the_plot_layer_is_plotters_alone() {
+    // Every SVG of the model, calibration and ride crates is drawn through crs-plot, so it sits
+    // below all of them: plotters (its SVG backend) and thiserror, no crate of this workspace.
+    let c = closure("crs-plot");
+    let beyond: Vec<&String> = c
+        .iter()
+        .filter(|n| {
+            ![
+                "plotters",
+                "plotters-backend",
+                "plotters-svg",
+                "num-traits",
+                "autocfg",
+                "libm",
+                "thiserror",
+                "thiserror-impl",
+                "proc-macro2",
+                "quote",
+                "syn",
+                "unicode-ident",
+            ]
+            .contains(&n.as_str())
+        })
+        .collect();
+    assert!(beyond.is_empty(), "crs-plot depends on {beyond:?}");
+    assert!(c.contains("plotters"), "{c:?}");
+    for user in [
+        "model-analysis",
+        "calibrate",
+        "ride-physics",
+        "motion-cueing",
+    ] {
+        assert!(
+            closure(user).contains("crs-plot"),
+            "{user} should draw its SVGs with crs-plot"
+        );
+    }
+}
+
+#[test]
 fn the_contract_crates_depend_on_no_other_layer() {
     forbid(
         "crs-ipc",

@@ -70,8 +70,8 @@ pub enum AnalysisError {
     Csv(#[from] csv::Error),
     #[error(transparent)]
     Io(#[from] std::io::Error),
-    #[error("formatting an SVG: {0}")]
-    Format(#[from] std::fmt::Error),
+    #[error(transparent)]
+    Plot(#[from] crs_plot::PlotError),
 }
 
 /// A report of an analysis: a table for people (`Display`) and JSON for scripts.

@@ -6,9 +6,10 @@
 
 use crate::AnalysisError;
 use cdpr_model::planar::{self, AreaTest, PlanarModel, PlanarPose, Reachable};
+use crs_plot::{Chart, Figure, Markers, Panel, Rect, Rgb};
 use nalgebra::{DVector, Vector2};
 use serde_json::json;
-use std::fmt::{self, Write as _};
+use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// The parameters varied from the spec's example.
@@ -109,73 +110,63 @@ impl PlanarReport {
     }
 
     /// Area map: grey = W_PHYS by the exact test only, blue = also the closed form, outlined
-    /// dots = reachable by the kinematic controller (W_R); frame anchors as red squares.
+    /// cells = reachable by the kinematic controller (W_R); frame anchors as red dots.
     pub fn write_svg(&mut self, path: &Path) -> Result<(), AnalysisError> {
         let (model, grid, h, x_ini) = (&self.model, &self.grid, self.request.grid_m, &self.x_ini);
-        let (x0, y0, x1, y1) = (-6.6, -0.7, 5.7, 8.7);
-        let s = 60.0; // px per m
-        let px = |x: f64| (x - x0) * s;
-        let py = |y: f64| (y1 - y) * s;
-        let mut svg = String::new();
-        writeln!(
-            svg,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{:.0}" height="{:.0}" font-family="sans-serif" font-size="12">"#,
-            (x1 - x0) * s,
-            (y1 - y0) * s + 40.0
-        )?;
-        let reach_pts: Vec<bool> = grid
-            .iter()
-            .map(|r| {
-                planar::reachable(model, model, x_ini, std::slice::from_ref(r), h)
-                    .is_ok_and(|re| re.area_m2 > 0.0)
-            })
-            .collect();
-        for (r, reach) in grid.iter().zip(reach_pts) {
+        let mut c = Chart::new("", "x (m)", "y (m)");
+        c.equal_scale = true;
+        c.x_range = Some((-6.6, 5.7));
+        c.y_range = Some((-0.7, 8.7));
+        for r in grid {
+            let reach = planar::reachable(model, model, x_ini, std::slice::from_ref(r), h)
+                .is_ok_and(|re| re.area_m2 > 0.0);
             let pose = PlanarPose { r: *r, theta: 0.0 };
-            let Ok(c) = planar::inverse(model, &pose) else {
+            let Ok(cables) = planar::inverse(model, &pose) else {
                 continue;
             };
-            let at = planar::structure_matrix(model, &pose, &c);
+            let at = planar::structure_matrix(model, &pose, &cables);
             let exact = planar::exact(model, &at).is_ok_and(|e| e.feasible);
             let closed = planar::closed_form(model, &at).is_ok_and(|(_, m)| m >= 0.0);
             let fill = match (exact, closed) {
-                (true, true) => "#4a7fc1",
-                (true, false) => "#b9b9b9",
+                (true, true) => CLOSED_FORM,
+                (true, false) => EXACT_ONLY,
                 _ => continue,
             };
-            let stroke = if reach {
-                r##" stroke="#e0218a" stroke-width="1.5""##
-            } else {
-                ""
-            };
-            writeln!(
-                svg,
-                r#"<rect x="{:.1}" y="{:.1}" width="{:.1}" height="{:.1}" fill="{fill}"{stroke}/>"#,
-                px(r.x - h / 2.0),
-                py(r.y + h / 2.0),
-                h * s * 0.9,
-                h * s * 0.9
-            )?;
+            let half = 0.45 * h;
+            let mut cell = Rect::filled(
+                (r.x - half, r.y - half),
+                (r.x + half, r.y + half),
+                fill,
+                1.0,
+            );
+            if reach {
+                cell.stroke = Some((REACHABLE, 2, false));
+            }
+            c.rects.push(cell);
         }
-        for a in &model.params().a {
-            writeln!(
-                svg,
-                r#"<rect x="{:.1}" y="{:.1}" width="8" height="8" fill="red"/>"#,
-                px(a.x) - 4.0,
-                py(a.y) - 4.0
-            )?;
-        }
-        writeln!(
-            svg,
-            r#"<text x="10" y="{:.0}">blue: wrench feasible by eq. 3.41 (and 3.29); grey: by the exact test (eq. 3.29) only</text><text x="10" y="{:.0}">magenta outline: reachable by the kinematic controller (W_R, eq. 3.33-3.35); red: frame anchors</text></svg>"#,
-            (y1 - y0) * s + 15.0,
-            (y1 - y0) * s + 32.0
-        )?;
-        std::fs::write(path, svg)?;
+        c.markers.push(Markers::new(
+            "frame anchors",
+            Rgb(255, 0, 0),
+            model.params().a.iter().map(|a| (a.x, a.y)).collect(),
+        ));
+        let mut figure = Figure::single(
+            "planar 4-cable robot (eq. 3.40 / 4.24): wrench-feasible and reachable areas",
+            (820, 760),
+            Panel::Chart(c),
+        );
+        figure.notes = vec![
+            "blue: wrench feasible by eq. 3.41 (and 3.29); grey: by the exact test (eq. 3.29) only".into(),
+            "magenta outline: reachable by the kinematic controller (W_R, eq. 3.33-3.35); red: frame anchors".into(),
+        ];
+        std::fs::write(path, figure.svg()?)?;
         self.svg = Some(path.to_path_buf());
         Ok(())
     }
 }
+
+const CLOSED_FORM: Rgb = Rgb(0x4a, 0x7f, 0xc1);
+const EXACT_ONLY: Rgb = Rgb(0xb9, 0xb9, 0xb9);
+const REACHABLE: Rgb = Rgb(0xe0, 0x21, 0x8a);
 
 impl fmt::Display for PlanarReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

@@ -10,9 +10,10 @@ use cdpr_model::config::Platform;
 use cdpr_model::workspace::{self, PositionBox, Reach, ReachableAnalysis};
 use cdpr_model::{Data, Pose};
 use crs_limits::quantile::quantile_sorted;
+use crs_plot::{Chart, Figure, Markers, Panel, Rect, Rgb};
 use nalgebra::{Vector3, Vector6};
 use serde_json::json;
-use std::fmt::{self, Write as _};
+use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// What a plant did at one reference pose.
@@ -250,26 +251,15 @@ impl ReachableReport {
         let (n, b) = (self.resolution, &self.bounds);
         // The z layer nearest the home position.
         let home_z = self.home.r.z;
-        let kz = (0..n)
+        let kz = (0..n.min(refs.len()))
             .min_by(|&a, &c| {
                 (refs[a].r.z - home_z)
                     .abs()
                     .total_cmp(&(refs[c].r.z - home_z).abs())
             })
             .unwrap_or(0);
-        let (w, h) = (b.max.x - b.min.x, b.max.y - b.min.y);
-        let s = 520.0 / w.max(h);
-        let cw = w / (n - 1) as f64 * s;
-        let ch = h / (n - 1) as f64 * s;
-        let px = |x: f64| 20.0 + cw / 2.0 + (x - b.min.x) * s;
-        let py = |y: f64| 20.0 + ch / 2.0 + (b.max.y - y) * s;
-        let mut svg = String::new();
-        writeln!(
-            svg,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{:.0}" height="{:.0}" font-family="sans-serif" font-size="12">"#,
-            (w * s + 40.0 + cw).max(640.0),
-            h * s + 110.0 + ch
-        )?;
+        let steps = n.saturating_sub(1).max(1) as f64;
+        let (cw, ch) = ((b.max.x - b.min.x) / steps, (b.max.y - b.min.y) / steps);
         let max_dr = pred
             .points
             .iter()
@@ -282,68 +272,79 @@ impl ReachableReport {
                 _ => None,
             })
             .fold(0.0, f64::max);
-        for (idx, x) in refs.iter().enumerate() {
-            if idx % n != kz {
-                continue;
-            }
-            let (fill, opacity) = match &pred.points[idx].1 {
-                Reach::Settled {
+        let mut c = Chart::new("", "x (m)", "y (m)");
+        c.equal_scale = true;
+        c.x_range = Some((b.min.x - cw / 2.0, b.max.x + cw / 2.0));
+        c.y_range = Some((b.min.y - ch / 2.0, b.max.y + ch / 2.0));
+        let mut disagree = Markers::new("the plant disagrees", DISAGREE, Vec::new());
+        disagree.filled = false;
+        disagree.radius = 5;
+        for (idx, x) in refs
+            .iter()
+            .enumerate()
+            .filter(|(idx, _)| idx % n.max(1) == kz)
+        {
+            let (fill, opacity) = match pred.points.get(idx).map(|p| &p.1) {
+                Some(Reach::Settled {
                     within_limits: true,
                     compliance_dr_m,
                     ..
-                } => (
-                    "#1f6fbf",
+                }) => (
+                    REACHABLE,
                     // No compliance (singular K_wx): the lightest shade, not a number.
                     0.25 + 0.75 * compliance_dr_m.unwrap_or(0.0) / max_dr.max(1e-12),
                 ),
-                _ if exact[idx] => ("#b0b0b0", 1.0),
+                _ if exact.get(idx).copied().unwrap_or(false) => (FEASIBLE_ONLY, 1.0),
                 _ => continue,
             };
-            writeln!(
-                svg,
-                r#"<rect x="{:.1}" y="{:.1}" width="{:.1}" height="{:.1}" fill="{fill}" fill-opacity="{opacity:.2}"/>"#,
-                px(x.r.x) - cw / 2.0,
-                py(x.r.y) - ch / 2.0,
-                cw * 0.92,
-                ch * 0.92
-            )?;
-            if let Some(ms) = measured {
-                let pred_ok = settled_within(&pred.points[idx].1);
-                let meas_ok = matches!(ms[idx], Measured::Reachable { .. });
-                if pred_ok != meas_ok {
-                    writeln!(
-                        svg,
-                        r##"<circle cx="{:.1}" cy="{:.1}" r="{:.1}" fill="none" stroke="#d62728" stroke-width="2"/>"##,
-                        px(x.r.x),
-                        py(x.r.y),
-                        cw.min(ch) * 0.3
-                    )?;
+            let (hx, hy) = (0.46 * cw, 0.46 * ch);
+            c.rects.push(Rect::filled(
+                (x.r.x - hx, x.r.y - hy),
+                (x.r.x + hx, x.r.y + hy),
+                fill,
+                opacity,
+            ));
+            if let (Some(ms), Some((_, o))) = (measured, pred.points.get(idx)) {
+                let meas_ok = matches!(ms.get(idx), Some(Measured::Reachable { .. }));
+                if settled_within(o) != meas_ok {
+                    disagree.points.push((x.r.x, x.r.y));
                 }
             }
         }
-        let y0 = h * s + 45.0 + ch;
-        writeln!(
-            svg,
-            r#"<text x="20" y="{y0:.0}">slice z = {:.2} m. Blue: W_R predicted (darker = larger |Δr| for +1 kN payload, max {:.2} mm)</text>"#,
-            refs[kz].r.z,
-            max_dr * 1e3
-        )?;
-        writeln!(
-            svg,
-            r#"<text x="20" y="{:.0}">grey: wrench feasible (exact, eq. 3.29) but not reachable by the kinematic controller</text>"#,
-            y0 + 18.0
-        )?;
-        writeln!(
-            svg,
-            r#"<text x="20" y="{:.0}">red circles: the plant ({}) disagrees with the prediction</text></svg>"#,
-            y0 + 36.0,
-            self.plant.as_ref().map_or("not run", |p| p.config.as_str())
-        )?;
-        std::fs::write(path, svg)?;
+        if disagree.points.is_empty() {
+            disagree.label = None;
+        }
+        c.markers.push(disagree);
+        let mut figure = Figure::single(
+            format!(
+                "{}: reachable workspace W_R of the kinematic controller (eq. 3.33-3.35)",
+                self.platform
+            ),
+            (720, 800),
+            Panel::Chart(c),
+        );
+        figure.notes = vec![
+            format!(
+                "slice z = {:.2} m. Blue: W_R predicted (darker = larger |Δr| for +1 kN payload, max {:.2} mm)",
+                refs.get(kz).map_or(f64::NAN, |p| p.r.z),
+                max_dr * 1e3
+            ),
+            "grey: wrench feasible (exact, eq. 3.29) but not reachable by the kinematic controller"
+                .into(),
+            format!(
+                "red circles: the plant ({}) disagrees with the prediction",
+                self.plant.as_ref().map_or("not run", |p| p.config.as_str())
+            ),
+        ];
+        std::fs::write(path, figure.svg()?)?;
         self.svg = Some(path.to_path_buf());
         Ok(())
     }
 }
+
+const REACHABLE: Rgb = Rgb(0x1f, 0x6f, 0xbf);
+const FEASIBLE_ONLY: Rgb = Rgb(0xb0, 0xb0, 0xb0);
+const DISAGREE: Rgb = Rgb(0xd6, 0x27, 0x28);
 
 impl fmt::Display for ReachableReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

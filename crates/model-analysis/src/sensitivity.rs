@@ -10,9 +10,10 @@ use cdpr_model::sensitivity::{
 };
 use cdpr_model::{Data, Model, Pose, workspace};
 use crs_limits::quantile::quantile_sorted;
+use crs_plot::{Chart, Figure, Panel, Rect, Rgb};
 use nalgebra::Vector3;
 use serde_json::json;
-use std::fmt::{self, Write as _};
+use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// The parameter uncertainties in the units people give them, and what to show.
@@ -287,22 +288,18 @@ impl SensitivityReport {
             return Ok(());
         };
         let (b, e) = (&self.region, &self.errors);
-        let n = (pts.len() as f64).cbrt().round() as usize;
+        let n = ((pts.len() as f64).cbrt().round() as usize).max(1);
+        let steps = n.saturating_sub(1).max(1) as f64;
+        let z = |k: usize| b.min.z + (b.max.z - b.min.z) * k as f64 / steps;
         // The z layer nearest the home height.
         let kz = (0..n)
             .min_by(|&i, &j| {
-                let z = |k: usize| b.min.z + (b.max.z - b.min.z) * k as f64 / (n - 1) as f64;
                 (z(i) - self.home_z)
                     .abs()
                     .total_cmp(&(z(j) - self.home_z).abs())
             })
             .unwrap_or(0);
-        let (w, h) = (b.max.x - b.min.x, b.max.y - b.min.y);
-        let s = 560.0 / w.max(h);
-        let cw = w / (n - 1) as f64 * s;
-        let ch = h / (n - 1) as f64 * s;
-        let px = |x: f64| 20.0 + cw / 2.0 + (x - b.min.x) * s;
-        let py = |y: f64| 20.0 + ch / 2.0 + (b.max.y - y) * s;
+        let (cw, ch) = ((b.max.x - b.min.x) / steps, (b.max.y - b.min.y) / steps);
         let max = pts
             .iter()
             .filter_map(|(_, p)| match p {
@@ -310,63 +307,65 @@ impl SensitivityReport {
                 _ => None,
             })
             .fold(0.0, f64::max);
-        let mut svg = String::new();
-        writeln!(
-            svg,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{:.0}" height="{:.0}" font-family="sans-serif" font-size="12">"#,
-            (w * s + 40.0 + cw).max(640.0),
-            h * s + 90.0 + ch
-        )?;
-        for (idx, (x, p)) in pts.iter().enumerate() {
-            if idx % n != kz {
-                continue;
-            }
+        let mut c = Chart::new("", "x (m)", "y (m)");
+        c.equal_scale = true;
+        c.x_range = Some((b.min.x - cw / 2.0, b.max.x + cw / 2.0));
+        c.y_range = Some((b.min.y - ch / 2.0, b.max.y + ch / 2.0));
+        // Numbers in the cells while they fit (up to 19 cells a row).
+        let labelled = n <= 19;
+        for (x, p) in pts
+            .iter()
+            .enumerate()
+            .filter(|(idx, _)| idx % n == kz)
+            .map(|(_, v)| v)
+        {
             let (fill, opacity, label) = match p {
                 MapPoint::Estimated(v) => (
-                    "#d95f02",
+                    ESTIMATED,
                     0.15 + 0.85 * v / max.max(1e-12),
-                    format!("{:.1}", v * 1e3),
+                    labelled.then(|| format!("{:.1}", v * 1e3)),
                 ),
-                MapPoint::NotFeasible => ("#b0b0b0", 1.0, String::new()),
-                MapPoint::Failed(_) => ("#000000", 1.0, "fail".into()),
+                MapPoint::NotFeasible => (NOT_FEASIBLE, 1.0, None),
+                MapPoint::Failed(_) => (Rgb::BLACK, 1.0, None),
             };
-            writeln!(
-                svg,
-                r#"<rect x="{:.1}" y="{:.1}" width="{:.1}" height="{:.1}" fill="{fill}" fill-opacity="{opacity:.2}"/>"#,
-                px(x.r.x) - cw / 2.0,
-                py(x.r.y) - ch / 2.0,
-                cw * 0.94,
-                ch * 0.94
-            )?;
-            if !label.is_empty() && cw > 30.0 {
-                writeln!(
-                    svg,
-                    r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="10">{label}</text>"#,
-                    px(x.r.x),
-                    py(x.r.y) + 4.0
-                )?;
-            }
+            let (hx, hy) = (0.47 * cw, 0.47 * ch);
+            let mut cell = Rect::filled(
+                (x.r.x - hx, x.r.y - hy),
+                (x.r.x + hx, x.r.y + hy),
+                fill,
+                opacity,
+            );
+            cell.text = label;
+            c.rects.push(cell);
         }
-        let y0 = h * s + 45.0 + ch;
-        let zk = b.min.z + (b.max.z - b.min.z) * kz as f64 / (n - 1) as f64;
-        writeln!(
-            svg,
-            r#"<text x="20" y="{y0:.0}">slice z = {zk:.2} m, level platform: RMS position error (mm, eq. 3.28) for σ(a) = {:.1} mm, σ(b) = {:.1} mm, σ(k_F) = {:.0} %; max {:.2} mm</text>"#,
-            e.frame_anchor_m * 1e3,
-            e.platform_anchor_m * 1e3,
-            e.stiffness_rel * 1e2,
-            max * 1e3
-        )?;
-        writeln!(
-            svg,
-            r#"<text x="20" y="{:.0}">grey: not wrench feasible with the closed form (eq. 3.41); black: computation failed</text></svg>"#,
-            y0 + 18.0
-        )?;
-        std::fs::write(path, svg)?;
+        let mut figure = Figure::single(
+            format!(
+                "{}: pose sensitivity to parameter errors (eq. 3.28)",
+                self.platform
+            ),
+            (720, 800),
+            Panel::Chart(c),
+        );
+        figure.notes = vec![
+            format!(
+                "slice z = {:.2} m, level platform: RMS position error (mm, eq. 3.28) for σ(a) = {:.1} mm, σ(b) = {:.1} mm, σ(k_F) = {:.0} %; max {:.2} mm",
+                z(kz),
+                e.frame_anchor_m * 1e3,
+                e.platform_anchor_m * 1e3,
+                e.stiffness_rel * 1e2,
+                max * 1e3
+            ),
+            "grey: not wrench feasible with the closed form (eq. 3.41); black: computation failed"
+                .into(),
+        ];
+        std::fs::write(path, figure.svg()?)?;
         self.svg = Some(path.to_path_buf());
         Ok(())
     }
 }
+
+const ESTIMATED: Rgb = Rgb(0xd9, 0x5f, 0x02);
+const NOT_FEASIBLE: Rgb = Rgb(0xb0, 0xb0, 0xb0);
 
 impl fmt::Display for SensitivityReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

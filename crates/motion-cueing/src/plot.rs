@@ -1,16 +1,16 @@
-//! SVG figures of a cueing run (hand-written SVG, no plotting dependency in the model layer):
-//! panels of time series ([`panels_svg`]), the perception figure (vehicle vs cabin vs
-//! perceived, per axis: [`perception_svg`]), the cabin's motion in its cueing box
-//! ([`motion_svg`]) and a scatter of tunings ([`scatter_svg`]).
+//! Figures of a cueing run, drawn with the plot layer (`crs-plot`): panels of time series
+//! ([`panels_svg`]), the perception figure (vehicle vs cabin vs perceived, per axis:
+//! [`perception_svg`]), the cabin's motion in its cueing box ([`motion_svg`]) and a scatter of
+//! tunings ([`scatter_svg`]).
 
 use crate::perception::{PerceptionReport, PerceptionSeries};
-use std::fmt::Write;
+use crs_plot::{Chart, Figure, HLine, Line, Markers, Rgb};
 
 /// One line of a panel.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Series {
     pub label: String,
-    pub color: &'static str,
+    pub color: Rgb,
     pub dashed: bool,
     pub points: Vec<(f64, f64)>,
 }
@@ -24,190 +24,71 @@ pub struct Panel {
     pub limits: Vec<f64>,
 }
 
-const PANEL_W: f64 = 460.0;
-const PANEL_H: f64 = 170.0;
+const PANEL_W: u32 = 460;
+const PANEL_H: u32 = 230;
+/// Points drawn per line at most (every k-th point of a longer one): a figure of a 10 min
+/// run stays a few hundred kB.
 const MAX_POINTS: usize = 500;
 
-pub(crate) fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
+const BLACK: Rgb = Rgb::BLACK;
+const CABIN: Rgb = Rgb(31, 119, 180);
+const PERCEIVED_VEHICLE: Rgb = Rgb(85, 85, 85);
+const PERCEIVED_CABIN: Rgb = Rgb(255, 127, 14);
+const DEMAND: Rgb = Rgb(153, 153, 153);
+const TILT: Rgb = Rgb(44, 160, 44);
+const LIMIT: Rgb = Rgb(255, 0, 0);
 
-/// Panels in a grid of `columns`, with a title line on top.
+/// Panels in a grid of `columns`, with a title line on top; time in s on every x axis. A
+/// series' legend entry is drawn in the first panel that has it only.
 pub fn panels_svg(title: &str, panels: &[Panel], columns: usize) -> String {
     let columns = columns.max(1);
-    let rows = panels.len().div_ceil(columns);
-    let mut s = String::new();
-    let _ = write!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{:.0}" height="{:.0}" font-family="sans-serif" font-size="11">"#,
-        columns as f64 * PANEL_W,
-        rows as f64 * PANEL_H + 30.0
-    );
-    let _ = write!(s, r#"<rect width="100%" height="100%" fill="white"/>"#);
-    let _ = write!(
-        s,
-        r#"<text x="8" y="18" font-size="13">{}</text>"#,
-        esc(title)
-    );
-    for (i, p) in panels.iter().enumerate() {
-        let (x0, y0) = (
-            (i % columns) as f64 * PANEL_W,
-            30.0 + (i / columns) as f64 * PANEL_H,
-        );
-        panel(&mut s, p, x0, y0);
+    let mut named = std::collections::BTreeSet::new();
+    let rows = panels.len().div_ceil(columns).max(1) as u32;
+    let charts = panels
+        .iter()
+        .map(|p| {
+            let mut c = Chart::new(
+                format!("{} ({})", p.title, p.unit),
+                "t (s)",
+                p.unit.as_str(),
+            );
+            c.hlines = p
+                .limits
+                .iter()
+                .map(|&y| HLine {
+                    y,
+                    color: LIMIT,
+                    dashed: true,
+                })
+                .collect();
+            c.lines = p
+                .series
+                .iter()
+                .map(|s| {
+                    let step = s.points.len().div_ceil(MAX_POINTS).max(1);
+                    let mut l = Line::new(
+                        s.label.as_str(),
+                        s.color,
+                        s.points.iter().step_by(step).copied().collect(),
+                    );
+                    l.dashed = s.dashed;
+                    if !named.insert(s.label.clone()) {
+                        l.label = None;
+                    }
+                    l
+                })
+                .collect();
+            crs_plot::Panel::Chart(c)
+        })
+        .collect();
+    Figure {
+        title: title.to_string(),
+        size: (columns as u32 * PANEL_W, rows * PANEL_H + 30),
+        columns,
+        panels: charts,
+        notes: Vec::new(),
     }
-    s.push_str("</svg>\n");
-    s
-}
-
-fn panel(s: &mut String, p: &Panel, x0: f64, y0: f64) {
-    let (l, r, t, b) = (52.0, 10.0, 18.0, 22.0);
-    let (w, h) = (PANEL_W - l - r, PANEL_H - t - b);
-    let pts = p.series.iter().flat_map(|s| s.points.iter());
-    let (mut xmin, mut xmax, mut ymin, mut ymax) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for &(x, y) in pts.filter(|(x, y)| x.is_finite() && y.is_finite()) {
-        xmin = xmin.min(x);
-        xmax = xmax.max(x);
-        ymin = ymin.min(y);
-        ymax = ymax.max(y);
-    }
-    for &lim in &p.limits {
-        ymin = ymin.min(lim);
-        ymax = ymax.max(lim);
-    }
-    if !(xmin.is_finite() && ymin.is_finite()) {
-        let _ = write!(
-            s,
-            r#"<text x="{:.0}" y="{:.0}">{}: no data</text>"#,
-            x0 + l,
-            y0 + t + 20.0,
-            esc(&p.title)
-        );
-        return;
-    }
-    if xmax - xmin < 1e-12 {
-        xmax = xmin + 1.0;
-    }
-    let span = (ymax - ymin).max(1e-9);
-    ymin -= 0.05 * span;
-    ymax += 0.05 * span;
-    let px = |x: f64| x0 + l + (x - xmin) / (xmax - xmin) * w;
-    let py = |y: f64| y0 + t + h - (y - ymin) / (ymax - ymin) * h;
-    let _ = write!(
-        s,
-        r##"<rect x="{:.1}" y="{:.1}" width="{w:.1}" height="{h:.1}" fill="none" stroke="#888"/>"##,
-        x0 + l,
-        y0 + t
-    );
-    let _ = write!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}">{} ({})</text>"#,
-        x0 + l,
-        y0 + t - 5.0,
-        esc(&p.title),
-        esc(&p.unit)
-    );
-    // Axis labels: y min/max, x min/max, zero line.
-    let _ = write!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"#,
-        x0 + l - 3.0,
-        py(ymax) + 9.0,
-        fmt(ymax)
-    );
-    let _ = write!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"#,
-        x0 + l - 3.0,
-        py(ymin),
-        fmt(ymin)
-    );
-    let _ = write!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}">{}</text>"#,
-        x0 + l,
-        y0 + t + h + 13.0,
-        fmt(xmin)
-    );
-    let _ = write!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{} s</text>"#,
-        x0 + l + w,
-        y0 + t + h + 13.0,
-        fmt(xmax)
-    );
-    if ymin < 0.0 && ymax > 0.0 {
-        let _ = write!(
-            s,
-            r##"<line x1="{:.1}" x2="{:.1}" y1="{:.1}" y2="{:.1}" stroke="#ccc"/>"##,
-            x0 + l,
-            x0 + l + w,
-            py(0.0),
-            py(0.0)
-        );
-    }
-    for &lim in &p.limits {
-        let _ = write!(
-            s,
-            r#"<line x1="{:.1}" x2="{:.1}" y1="{:.1}" y2="{:.1}" stroke="red" stroke-dasharray="4 3"/>"#,
-            x0 + l,
-            x0 + l + w,
-            py(lim),
-            py(lim)
-        );
-    }
-    for (k, ser) in p.series.iter().enumerate() {
-        let step = ser.points.len().div_ceil(MAX_POINTS).max(1);
-        let mut d = String::new();
-        for (x, y) in ser
-            .points
-            .iter()
-            .step_by(step)
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
-        {
-            let _ = write!(d, "{:.1},{:.1} ", px(*x), py(*y));
-        }
-        let dash = if ser.dashed {
-            r#" stroke-dasharray="5 3""#
-        } else {
-            ""
-        };
-        let _ = write!(
-            s,
-            r#"<polyline fill="none" stroke="{}" stroke-width="1.3"{dash} points="{}"/>"#,
-            ser.color,
-            d.trim_end()
-        );
-        let lx = x0 + l + 6.0 + k as f64 * 110.0;
-        let _ = write!(
-            s,
-            r#"<line x1="{lx:.1}" x2="{:.1}" y1="{:.1}" y2="{:.1}" stroke="{}" stroke-width="2"{dash}/><text x="{:.1}" y="{:.1}">{}</text>"#,
-            lx + 14.0,
-            y0 + t + 10.0,
-            y0 + t + 10.0,
-            ser.color,
-            lx + 17.0,
-            y0 + t + 13.0,
-            esc(&ser.label)
-        );
-    }
-}
-
-fn fmt(v: f64) -> String {
-    if v.abs() >= 100.0 {
-        format!("{v:.0}")
-    } else if v.abs() >= 1.0 {
-        format!("{v:.2}")
-    } else {
-        format!("{v:.3}")
-    }
+    .render()
 }
 
 /// Vehicle vs cabin vs perceived, per axis: left column specific force x, y, z (m/s²), right
@@ -260,25 +141,25 @@ pub fn perception_svg(title: &str, s: &PerceptionSeries, r: &PerceptionReport) -
                 series: vec![
                     Series {
                         label: "vehicle".into(),
-                        color: "black",
+                        color: BLACK,
                         dashed: false,
                         points: pick(veh),
                     },
                     Series {
                         label: "cabin".into(),
-                        color: "#1f77b4",
+                        color: CABIN,
                         dashed: false,
                         points: pick(cab),
                     },
                     Series {
                         label: "perceived vehicle".into(),
-                        color: "#555555",
+                        color: PERCEIVED_VEHICLE,
                         dashed: true,
                         points: pick(pveh),
                     },
                     Series {
                         label: "perceived cabin".into(),
-                        color: "#ff7f0e",
+                        color: PERCEIVED_CABIN,
                         dashed: true,
                         points: pick(pcab),
                     },
@@ -313,13 +194,13 @@ pub fn motion_svg(
             let mut series = vec![
                 Series {
                     label: "washout demand".into(),
-                    color: "#999999",
+                    color: DEMAND,
                     dashed: true,
                     points: col(desired),
                 },
                 Series {
                     label: "cabin".into(),
-                    color: "#1f77b4",
+                    color: CABIN,
                     dashed: false,
                     points: col(pose),
                 },
@@ -327,7 +208,7 @@ pub fn motion_svg(
             if (3..5).contains(&k) {
                 series.push(Series {
                     label: "tilt part".into(),
-                    color: "#2ca02c",
+                    color: TILT,
                     dashed: true,
                     points: t_s
                         .iter()
@@ -355,106 +236,147 @@ pub fn scatter_svg(
     y_title: &str,
     points: &[(f64, f64, String, bool)],
 ) -> String {
-    let (w, h, l, b, t, r) = (820.0, 440.0, 60.0, 40.0, 30.0, 120.0);
-    let mut s = String::new();
-    let _ = write!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="11"><rect width="100%" height="100%" fill="white"/>"#
-    );
-    let _ = write!(
-        s,
-        r#"<text x="8" y="18" font-size="13">{}</text>"#,
-        esc(title)
-    );
-    let fin: Vec<&(f64, f64, String, bool)> = points
-        .iter()
-        .filter(|p| p.0.is_finite() && p.1.is_finite())
-        .collect();
-    if fin.is_empty() {
-        s.push_str("<text x=\"60\" y=\"60\">no data</text></svg>\n");
-        return s;
+    let mut c = Chart::new("", x_title, y_title);
+    for (highlight, color) in [(false, CABIN), (true, Rgb::RED)] {
+        let pick: Vec<&(f64, f64, String, bool)> =
+            points.iter().filter(|p| p.3 == highlight).collect();
+        let mut m = Markers::new("", color, pick.iter().map(|p| (p.0, p.1)).collect());
+        m.label = None;
+        m.radius = 4;
+        m.texts = pick.iter().map(|p| p.2.clone()).collect();
+        c.markers.push(m);
     }
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for p in &fin {
-        x0 = x0.min(p.0);
-        x1 = x1.max(p.0);
-        y0 = y0.min(p.1);
-        y1 = y1.max(p.1);
+    Figure::single(title, (900, 520), crs_plot::Panel::Chart(c)).render()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    fn doc(svg: &str) -> roxmltree::Document<'_> {
+        roxmltree::Document::parse(svg).unwrap_or_else(|e| panic!("not XML: {e}\n{svg}"))
     }
-    let (dx, dy) = ((x1 - x0).max(1e-9) * 0.08, (y1 - y0).max(1e-9) * 0.08);
-    let (x0, x1, y0, y1) = (x0 - dx, x1 + dx, y0 - dy, y1 + dy);
-    let px = |x: f64| l + (x - x0) / (x1 - x0) * (w - l - r);
-    let py = |y: f64| h - b - (y - y0) / (y1 - y0) * (h - b - t);
-    let _ = write!(
-        s,
-        r##"<rect x="{l}" y="{t}" width="{:.1}" height="{:.1}" fill="none" stroke="#888"/>"##,
-        w - l - r,
-        h - b - t
-    );
-    let _ = write!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text>"#,
-        (l + w - r) / 2.0,
-        h - 8.0,
-        esc(x_title)
-    );
-    let _ = write!(
-        s,
-        r#"<text x="14" y="{:.1}" transform="rotate(-90 14 {:.1})" text-anchor="middle">{}</text>"#,
-        (t + h - b) / 2.0,
-        (t + h - b) / 2.0,
-        esc(y_title)
-    );
-    let _ = write!(
-        s,
-        r#"<text x="{l}" y="{:.1}">{}</text>"#,
-        h - b + 13.0,
-        fmt(x0)
-    );
-    let _ = write!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"#,
-        w - r,
-        h - b + 13.0,
-        fmt(x1)
-    );
-    let _ = write!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"#,
-        l - 3.0,
-        py(y0),
-        fmt(y0)
-    );
-    let _ = write!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"#,
-        l - 3.0,
-        py(y1) + 9.0,
-        fmt(y1)
-    );
-    for p in fin {
-        let c = if p.3 { "red" } else { "#1f77b4" };
-        let _ = write!(
-            s,
-            r#"<circle cx="{:.1}" cy="{:.1}" r="3.5" fill="{c}"/>"#,
-            px(p.0),
-            py(p.1)
+
+    /// Point counts of the polylines drawn in `color` (`#RRGGBB`).
+    fn lines(d: &roxmltree::Document<'_>, color: &str) -> Vec<usize> {
+        let mut v: Vec<usize> = d
+            .descendants()
+            .filter(|n| n.tag_name().name() == "polyline" && n.attribute("stroke") == Some(color))
+            .map(|n| n.attribute("points").unwrap().split_whitespace().count())
+            .collect();
+        v.sort();
+        v
+    }
+
+    fn texts(d: &roxmltree::Document<'_>) -> Vec<String> {
+        d.descendants()
+            .filter(|n| n.tag_name().name() == "text")
+            .filter_map(|n| n.text().map(|t| t.trim().to_string()))
+            .collect()
+    }
+
+    #[test]
+    fn the_perception_figure_has_six_panels_of_vehicle_and_cabin_with_their_errors() {
+        let n = 40;
+        let mut s = PerceptionSeries::default();
+        for k in 0..n {
+            let t = k as f64 * 0.05;
+            let v = Vector3::new(t.sin(), 0.1 * t, 9.81);
+            s.t_s.push(t);
+            for x in [
+                &mut s.vehicle_f,
+                &mut s.vehicle_w,
+                &mut s.cabin_f,
+                &mut s.cabin_w,
+                &mut s.perceived_vehicle_f,
+                &mut s.perceived_vehicle_w,
+                &mut s.perceived_cabin_f,
+                &mut s.perceived_cabin_w,
+            ] {
+                x.push(v);
+            }
+        }
+        let mut r = PerceptionReport::default();
+        r.specific_force[0].perceived.rms_error = 0.123;
+        let svg = perception_svg("braking", &s, &r);
+        let d = doc(&svg);
+        // Solid vehicle (black) and cabin lines: one per panel with all points, plus the
+        // legend's sample (2 points) in the first panel only.
+        assert_eq!(lines(&d, "#000000").iter().filter(|c| **c == n).count(), 6);
+        assert_eq!(lines(&d, "#1F77B4"), [vec![2], vec![n; 6]].concat());
+        let t = texts(&d);
+        assert!(
+            t.iter()
+                .any(|x| x.starts_with("f_x: perceived RMS error 0.123, corr. –")),
+            "{t:?}"
         );
-        if !p.2.is_empty() {
-            let _ = write!(
-                s,
-                r#"<text x="{:.1}" y="{:.1}" fill="{c}">{}</text>"#,
-                px(p.0) + 5.0,
-                py(p.1) - 4.0,
-                esc(&p.2)
-            );
+        for want in [
+            "braking",
+            "vehicle",
+            "cabin",
+            "perceived vehicle",
+            "perceived cabin",
+        ] {
+            assert!(t.iter().any(|x| x == want), "{want} missing: {t:?}");
         }
     }
-    s.push_str("</svg>\n");
-    s
+
+    #[test]
+    fn the_motion_figure_draws_the_cueing_box_and_the_tilt_of_roll_and_pitch() {
+        let t: Vec<f64> = (0..10).map(|k| k as f64 * 0.1).collect();
+        let pose: Vec<[f64; 6]> = t.iter().map(|t| [*t, 0.0, 0.0, 0.01, 0.02, 0.0]).collect();
+        let tilt: Vec<[f64; 2]> = t.iter().map(|_| [0.01, 0.02]).collect();
+        let svg = motion_svg(
+            "motion",
+            &t,
+            &pose,
+            &pose,
+            &tilt,
+            &[-1.0, -1.0, -1.0, -0.1, -0.1, -0.1],
+            &[1.0, 1.0, 1.0, 0.1, 0.1, 0.1],
+        );
+        let d = doc(&svg);
+        assert_eq!(lines(&d, "#1F77B4"), [vec![2], vec![10; 6]].concat());
+        let t = texts(&d);
+        assert_eq!(t.iter().filter(|x| *x == "tilt part").count(), 1, "{t:?}");
+        // The box's limits are dashed red lines: present in every panel.
+        assert!(
+            d.descendants()
+                .filter(|n| n.attribute("stroke") == Some("#FF0000"))
+                .count()
+                >= 12
+        );
+    }
+
+    #[test]
+    fn the_scatter_has_a_circle_and_a_label_per_tuning_and_red_highlights() {
+        let pts = vec![
+            (10.0, 0.2, "a".to_string(), false),
+            (20.0, 0.1, "b".to_string(), false),
+            (15.0, 0.15, "shipped: c".to_string(), true),
+            (f64::NAN, 0.1, "lost".to_string(), false),
+        ];
+        let svg = scatter_svg("trade-off", "use (%)", "error", &pts);
+        let d = doc(&svg);
+        let fill = |c: &str| {
+            d.descendants()
+                .filter(|n| n.tag_name().name() == "circle" && n.attribute("fill") == Some(c))
+                .count()
+        };
+        assert_eq!((fill("#1F77B4"), fill("#D62728")), (2, 1));
+        let t = texts(&d);
+        for want in ["a", "b", "shipped: c", "use (%)", "error", "trade-off"] {
+            assert!(t.iter().any(|x| x == want), "{want} missing: {t:?}");
+        }
+        assert!(!t.iter().any(|x| x == "lost"));
+    }
+
+    #[test]
+    fn no_data_is_said_not_drawn() {
+        let d = scatter_svg("none", "x", "y", &[]);
+        assert!(texts(&doc(&d)).iter().any(|t| t.ends_with("no data")));
+        let p = panels_svg("empty", &[], 2);
+        assert!(texts(&doc(&p)).iter().any(|t| t.ends_with("no data")));
+    }
 }

@@ -1,10 +1,10 @@
-//! The flown path against the walls as SVG (cf. fig. 5.19a): a top view (x–y) and a side view
-//! (x–z) with the operating region the hard loop enforces (grey), the elastic walls (red,
-//! dashed), the path (blue) and where a wall pushed (orange).
+//! The flown path against the walls (cf. fig. 5.19a), drawn with the plot layer (`crs-plot`):
+//! a top view (x–y) and a side view (x–z) with the operating region the hard loop enforces
+//! (grey), the elastic walls (red, dashed), the path (blue) and where a wall pushed (orange).
 
 use crate::walls::Walls;
 use cdpr_model::config::Region;
-use std::fmt::Write;
+use crs_plot::{Chart, Figure, Line, Markers, Panel, Rect, Rgb};
 
 /// One recorded point of a flight.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -16,6 +16,11 @@ pub struct PathPoint {
     pub contact: bool,
 }
 
+const HOVER: Rgb = Rgb(17, 85, 204);
+const REFERENCE: Rgb = Rgb(34, 170, 34);
+const CONTACT: Rgb = Rgb(255, 136, 0);
+const WALL: Rgb = Rgb(204, 0, 0);
+
 /// The SVG of `hover` (the model's path) and, when given, `reference` (what the hard loop
 /// followed, e.g. motion-core's setpoints) in the `region` with the `walls`.
 pub fn path_svg(
@@ -25,121 +30,153 @@ pub fn path_svg(
     hover: &[PathPoint],
     reference: &[[f64; 3]],
 ) -> String {
-    let (w, h, pad) = (460.0, 420.0, 40.0);
-    let mut s = String::new();
-    let _ = write!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}" font-family="sans-serif" font-size="12">"#,
-        2.0 * w,
-        h + 60.0
-    );
-    let _ = write!(
-        s,
-        r#"<text x="10" y="18" font-size="14">{}</text>"#,
-        esc(title)
-    );
-    for (panel, (ax, ay, name)) in [
-        (0usize, 1usize, "top view x–y (m)"),
-        (0, 2, "side view x–z (m)"),
+    let (lo, hi) = (region.position.min, region.position.max);
+    let panels = [
+        (1usize, "top view x–y (m)", "y (m)"),
+        (2, "side view x–z (m)", "z (m)"),
     ]
-    .iter()
-    .enumerate()
-    .map(|(k, v)| (k, *v))
-    {
-        let x0 = panel as f64 * w;
-        let lo = [region.position.min[ax] - 0.3, region.position.min[ay] - 0.3];
-        let hi = [region.position.max[ax] + 0.3, region.position.max[ay] + 0.3];
-        let scale = ((w - 2.0 * pad) / (hi[0] - lo[0])).min((h - 2.0 * pad) / (hi[1] - lo[1]));
-        let px = |v: f64| x0 + pad + (v - lo[0]) * scale;
-        let py = |v: f64| 30.0 + h - pad - (v - lo[1]) * scale;
-        let rect = |s: &mut String, a: [f64; 2], b: [f64; 2], style: &str| {
-            let _ = write!(
-                s,
-                r#"<rect x="{:.1}" y="{:.1}" width="{:.1}" height="{:.1}" {style}/>"#,
-                px(a[0]),
-                py(b[1]),
-                (b[0] - a[0]) * scale,
-                (b[1] - a[1]) * scale
-            );
-        };
-        rect(
-            &mut s,
-            [region.position.min[ax], region.position.min[ay]],
-            [region.position.max[ax], region.position.max[ay]],
-            r##"fill="#eee" stroke="#888""##,
-        );
-        rect(
-            &mut s,
-            [walls.min[ax], walls.min[ay]],
-            [walls.max[ax], walls.max[ay]],
-            r##"fill="none" stroke="#c00" stroke-dasharray="6 4""##,
-        );
-        let _ = write!(
-            s,
-            r#"<text x="{:.1}" y="{:.1}">{name}</text>"#,
-            x0 + pad,
-            30.0 + h - 8.0
-        );
-        for (v, label) in [(lo[0], lo[0]), (hi[0], hi[0])] {
-            let _ = write!(
-                s,
-                r#"<text x="{:.1}" y="{:.1}" font-size="10">{label:.1}</text>"#,
-                px(v),
-                30.0 + h - pad + 14.0
-            );
-        }
-        for (v, label) in [(lo[1], lo[1]), (hi[1], hi[1])] {
-            let _ = write!(
-                s,
-                r#"<text x="{:.1}" y="{:.1}" font-size="10">{label:.2}</text>"#,
-                x0 + 4.0,
-                py(v)
-            );
-        }
+    .into_iter()
+    .map(|(ay, name, y_label)| {
+        let mut c = Chart::new(name, "x (m)", y_label);
+        c.equal_scale = true;
+        c.x_range = Some((lo[0] - 0.3, hi[0] + 0.3));
+        c.y_range = Some((lo[ay] - 0.3, hi[ay] + 0.3));
+        let mut grey = Rect::filled((lo[0], lo[ay]), (hi[0], hi[ay]), Rgb(238, 238, 238), 1.0);
+        grey.stroke = Some((Rgb(136, 136, 136), 1, false));
+        c.rects.push(grey);
+        c.rects.push(Rect::outlined(
+            (walls.min[0], walls.min[ay]),
+            (walls.max[0], walls.max[ay]),
+            WALL,
+            true,
+        ));
         if !reference.is_empty() {
-            let pts: Vec<String> = reference
+            let mut l = Line::new(
+                "motion-core's reference",
+                REFERENCE,
+                reference.iter().map(|p| (p[0], p[ay])).collect(),
+            );
+            l.width = 3;
+            l.opacity = 0.5;
+            c.lines.push(l);
+        }
+        c.lines.push(Line::new(
+            "hover model",
+            HOVER,
+            hover.iter().map(|p| (p.pose[0], p.pose[ay])).collect(),
+        ));
+        let mut pushed = Markers::new(
+            "wall pushing",
+            CONTACT,
+            hover
                 .iter()
-                .map(|p| format!("{:.1},{:.1}", px(p[ax]), py(p[ay])))
-                .collect();
-            let _ = write!(
-                s,
-                r##"<polyline fill="none" stroke="#2a2" stroke-width="3" stroke-opacity="0.5" points="{}"/>"##,
-                pts.join(" ")
-            );
-        }
-        let pts: Vec<String> = hover
-            .iter()
-            .map(|p| format!("{:.1},{:.1}", px(p.pose[ax]), py(p.pose[ay])))
-            .collect();
-        let _ = write!(
-            s,
-            r##"<polyline fill="none" stroke="#15c" stroke-width="1" points="{}"/>"##,
-            pts.join(" ")
+                .filter(|p| p.contact)
+                .step_by(5)
+                .map(|p| (p.pose[0], p.pose[ay]))
+                .collect(),
         );
-        for p in hover.iter().filter(|p| p.contact).step_by(5) {
-            let _ = write!(
-                s,
-                r##"<circle cx="{:.1}" cy="{:.1}" r="1.5" fill="#f80"/>"##,
-                px(p.pose[ax]),
-                py(p.pose[ay])
-            );
-        }
+        pushed.radius = 2;
+        c.markers.push(pushed);
+        // The note under the views names the colours; a legend box would cover the path.
+        c.lines.iter_mut().for_each(|l| l.label = None);
+        c.markers.iter_mut().for_each(|m| m.label = None);
+        Panel::Chart(c)
+    })
+    .collect();
+    Figure {
+        title: title.to_string(),
+        size: (920, 520),
+        columns: 2,
+        panels,
+        notes: vec![format!(
+            "grey: operating region (hard loop) · red dashed: elastic walls (eq. 5.22) · blue: hover model · orange: wall pushing{}",
+            if reference.is_empty() {
+                ""
+            } else {
+                " · green: motion-core's reference"
+            }
+        )],
     }
-    let _ = write!(
-        s,
-        r##"<text x="10" y="{:.0}">grey: operating region (hard loop) · red dashed: elastic walls (eq. 5.22) · blue: hover model · orange: wall pushing{}</text></svg>"##,
-        h + 52.0,
-        if reference.is_empty() {
-            ""
-        } else {
-            " · green: motion-core's reference"
-        }
-    );
-    s
+    .render()
 }
 
-fn esc(t: &str) -> String {
-    t.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cdpr_model::workspace::PositionBox;
+    use nalgebra::Vector3;
+
+    fn region() -> Region {
+        Region {
+            position: PositionBox {
+                min: Vector3::new(-2.0, -1.5, 1.0),
+                max: Vector3::new(2.0, 1.5, 3.0),
+            },
+            rotation_min: Vector3::repeat(-0.2),
+            rotation_max: Vector3::repeat(0.2),
+        }
+    }
+
+    fn walls() -> Walls {
+        Walls {
+            min: Vector3::new(-1.8, -1.3, 1.2),
+            max: Vector3::new(1.8, 1.3, 2.8),
+            stiffness: 1e4,
+            damping: 1e3,
+        }
+    }
+
+    fn polylines<'a>(doc: &'a roxmltree::Document<'a>, stroke: &str) -> Vec<usize> {
+        doc.descendants()
+            .filter(|n| n.tag_name().name() == "polyline" && n.attribute("stroke") == Some(stroke))
+            .map(|n| n.attribute("points").unwrap().split_whitespace().count())
+            .collect()
+    }
+
+    #[test]
+    fn both_views_draw_the_path_its_reference_and_the_wall_contacts() {
+        // 12 points, 11 of them pushing a wall: every 5th contact drawn, 3 per view.
+        let hover: Vec<PathPoint> = (0..12)
+            .map(|k| PathPoint {
+                t_s: k as f64 * 0.1,
+                pose: [0.1 * k as f64, 0.05 * k as f64, 2.0, 0.0, 0.0, 0.0],
+                contact: k > 0,
+            })
+            .collect();
+        let reference = [[0.0, 0.0, 2.0], [0.5, 0.2, 2.1], [1.0, 0.4, 2.2]];
+        let svg = path_svg("flight <1>", &region(), &walls(), &hover, &reference);
+        let doc = roxmltree::Document::parse(&svg).expect("well-formed SVG");
+        // Per view: the path (12 points) and the reference (3).
+        assert_eq!(polylines(&doc, "#1155CC"), vec![12, 12], "{svg}");
+        assert_eq!(polylines(&doc, "#22AA22"), vec![3, 3]);
+        let contacts = doc
+            .descendants()
+            .filter(|n| n.tag_name().name() == "circle" && n.attribute("fill") == Some("#FF8800"))
+            .count();
+        assert_eq!(contacts, 2 * 3, "3 contacts per view");
+        let text: String = doc
+            .descendants()
+            .filter_map(|n| n.text())
+            .collect::<Vec<_>>()
+            .join("|");
+        for want in [
+            "flight <1>",
+            "top view x–y (m)",
+            "side view x–z (m)",
+            "elastic walls",
+            "motion-core's reference",
+        ] {
+            assert!(text.contains(want), "{want} missing: {text}");
+        }
+    }
+
+    #[test]
+    fn an_empty_flight_draws_the_region_and_no_path() {
+        let svg = path_svg("empty", &region(), &walls(), &[], &[]);
+        let doc = roxmltree::Document::parse(&svg).expect("well-formed SVG");
+        assert!(polylines(&doc, "#1155CC").is_empty(), "no path drawn");
+        // The region's and the walls' outlines are drawn all the same (one each per view).
+        assert_eq!(polylines(&doc, "#888888"), vec![5, 5]);
+        assert!(!svg.contains("motion-core's reference"));
+    }
 }

@@ -1,0 +1,255 @@
+//! The figures parsed back with a real XML parser (roxmltree): well-formed, and holding the
+//! elements their data asks for.
+
+use super::*;
+
+/// The SVG parsed; panics with the parser's message (a test failure) if it is not XML.
+fn parse(svg: &str) -> roxmltree::Document<'_> {
+    roxmltree::Document::parse(svg).unwrap_or_else(|e| panic!("not well-formed XML: {e}\n{svg}"))
+}
+
+fn count(doc: &roxmltree::Document<'_>, tag: &str) -> usize {
+    doc.descendants()
+        .filter(|n| n.tag_name().name() == tag)
+        .count()
+}
+
+fn texts(doc: &roxmltree::Document<'_>) -> Vec<String> {
+    doc.descendants()
+        .filter(|n| n.tag_name().name() == "text")
+        .filter_map(|n| n.text().map(|t| t.trim().to_string()))
+        .collect()
+}
+
+fn line_figure(lines: Vec<Line>) -> Figure {
+    let mut c = Chart::new("panel", "t (s)", "x (m)");
+    c.lines = lines;
+    Figure::single("title & <escaped>", (600, 400), Panel::Chart(c))
+}
+
+#[test]
+fn a_line_chart_has_one_polyline_per_solid_line_through_every_finite_point_and_a_legend() {
+    let a = Line::new("first", Rgb::BLUE, vec![(0.0, 0.0), (1.0, 1.0), (2.0, 4.0)]);
+    let b = Line::new(
+        "second",
+        Rgb::RED,
+        vec![(0.0, 1.0), (f64::NAN, 2.0), (2.0, 2.0)],
+    );
+    let svg = line_figure(vec![a, b]).svg().unwrap();
+    let doc = parse(&svg);
+    assert_eq!(doc.root_element().tag_name().name(), "svg");
+    let data: Vec<usize> = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "polyline")
+        .filter(|n| matches!(n.attribute("stroke"), Some("#1F77B4") | Some("#D62728")))
+        .map(|n| n.attribute("points").unwrap().split_whitespace().count())
+        .collect();
+    // Two data lines (3 and 2 finite points) and their two legend samples (2 points each).
+    let mut sorted = data.clone();
+    sorted.sort();
+    assert_eq!(sorted, vec![2, 2, 2, 3], "{data:?}");
+    let t = texts(&doc);
+    for want in [
+        "first",
+        "second",
+        "panel",
+        "t (s)",
+        "x (m)",
+        "title & <escaped>",
+    ] {
+        assert!(t.iter().any(|s| s == want), "{want} missing in {t:?}");
+    }
+}
+
+#[test]
+fn markers_are_one_circle_per_finite_point_with_their_texts() {
+    let mut c = Chart::new("scatter", "a", "b");
+    let mut m = Markers::new(
+        "pts",
+        Rgb::GREEN,
+        vec![(0.0, 0.0), (1.0, 2.0), (f64::INFINITY, 1.0)],
+    );
+    m.texts = vec!["p0".into(), "p1".into(), "never".into()];
+    c.markers.push(m);
+    let svg = Figure::single("", (500, 400), Panel::Chart(c))
+        .svg()
+        .unwrap();
+    let doc = parse(&svg);
+    // Two points and the legend's sample.
+    assert_eq!(count(&doc, "circle"), 3);
+    let t = texts(&doc);
+    assert!(t.contains(&"p0".to_string()) && t.contains(&"p1".to_string()));
+    assert!(!t.contains(&"never".to_string()));
+}
+
+#[test]
+fn cells_are_rectangles_with_their_text_and_an_equal_scale_keeps_squares_square() {
+    let mut c = Chart::new("map", "x (m)", "y (m)");
+    c.equal_scale = true;
+    for i in 0..3 {
+        let mut r = Rect::filled((i as f64, 0.0), (i as f64 + 1.0, 1.0), Rgb::ORANGE, 0.5);
+        r.text = Some(format!("cell {i}"));
+        c.rects.push(r);
+    }
+    let svg = Figure::single("", (800, 300), Panel::Chart(c))
+        .svg()
+        .unwrap();
+    let doc = parse(&svg);
+    let cells: Vec<(f64, f64)> = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "rect" && n.attribute("fill") == Some("#FF7F0E"))
+        .map(|n| {
+            let v = |a| n.attribute(a).unwrap().parse::<f64>().unwrap();
+            (v("width"), v("height"))
+        })
+        .collect();
+    assert_eq!(cells.len(), 3, "{svg}");
+    for (w, h) in cells {
+        assert!((w - h).abs() <= 2.0, "a 1 m × 1 m cell drawn {w} × {h} px");
+    }
+    assert!(texts(&doc).contains(&"cell 2".to_string()));
+}
+
+#[test]
+fn bars_are_one_rectangle_per_finite_value_with_the_group_names() {
+    let b = Bars {
+        title: "bars".into(),
+        y_label: "mm".into(),
+        groups: vec!["g1".into(), "g2".into(), "g3".into()],
+        series: vec![
+            BarSeries {
+                label: "s1".into(),
+                color: Rgb::RED,
+                values: vec![1.0, 2.0, 3.0],
+            },
+            BarSeries {
+                label: "s2".into(),
+                color: Rgb::BLUE,
+                values: vec![0.5, f64::NAN, 1.5],
+            },
+        ],
+    };
+    let svg = Figure::single("", (700, 400), Panel::Bars(b))
+        .svg()
+        .unwrap();
+    let doc = parse(&svg);
+    let filled = |c: &str| {
+        doc.descendants()
+            .filter(|n| n.tag_name().name() == "rect" && n.attribute("fill") == Some(c))
+            .count()
+    };
+    // Bars and one legend sample per series.
+    assert_eq!(filled("#D62728"), 3 + 1);
+    assert_eq!(filled("#1F77B4"), 2 + 1);
+    let t = texts(&doc);
+    for want in ["g1", "g2", "g3", "s1", "s2", "mm"] {
+        assert!(t.iter().any(|s| s == want), "{want} missing in {t:?}");
+    }
+}
+
+#[test]
+fn empty_and_degenerate_input_draws_an_empty_state_not_a_panic() {
+    let cases = vec![
+        Figure::single(
+            "none",
+            (300, 200),
+            Panel::Chart(Chart::new("empty", "x", "y")),
+        ),
+        line_figure(vec![Line::new("nan", Rgb::BLACK, vec![(f64::NAN, 1.0)])]),
+        Figure::single(
+            "bars",
+            (300, 200),
+            Panel::Bars(Bars {
+                title: "no groups".into(),
+                ..Bars::default()
+            }),
+        ),
+        Figure {
+            title: "no panels".into(),
+            size: (0, 0),
+            columns: 0,
+            panels: vec![],
+            notes: vec!["a note".into()],
+        },
+    ];
+    for f in cases {
+        let svg = f.svg().unwrap();
+        let doc = parse(&svg);
+        assert!(
+            texts(&doc).iter().any(|t| t.ends_with("no data")),
+            "{}: {svg}",
+            f.title
+        );
+    }
+    // One point, or all points equal: a visible range around it.
+    let svg = line_figure(vec![Line::new(
+        "one",
+        Rgb::BLACK,
+        vec![(3.0, 3.0), (3.0, 3.0)],
+    )])
+    .svg()
+    .unwrap();
+    parse(&svg);
+    // Dashed lines of no, one and only non-finite points; a limit that is not a number.
+    let dashed = |points: Vec<(f64, f64)>| {
+        let mut l = Line::new("dashed", Rgb::GREY, points);
+        l.dashed = true;
+        l
+    };
+    let mut c = Chart::new("dashed", "x", "y");
+    c.lines = vec![
+        dashed(vec![]),
+        dashed(vec![(1.0, 1.0)]),
+        dashed(vec![(f64::NAN, f64::NAN), (2.0, 2.0)]),
+    ];
+    c.hlines.push(HLine {
+        y: f64::NAN,
+        color: Rgb::RED,
+        dashed: true,
+    });
+    parse(
+        &Figure::single("", (300, 200), Panel::Chart(c))
+            .svg()
+            .unwrap(),
+    );
+    // A height of zero is drawn at the smallest size.
+    let tiny = Figure::single("", (500, 0), Panel::Chart(Chart::new("t", "x", "y")));
+    let svg = tiny.svg().unwrap();
+    assert_eq!(parse(&svg).root_element().attribute("height"), Some("64"));
+    // A given range that is not one falls back to the data's.
+    let mut c = Chart::new("bad range", "x", "y");
+    c.x_range = Some((1.0, 1.0));
+    c.y_range = Some((f64::NAN, 2.0));
+    c.lines
+        .push(Line::new("l", Rgb::BLACK, vec![(0.0, 0.0), (1.0, 1.0)]));
+    parse(
+        &Figure::single("", (300, 200), Panel::Chart(c))
+            .svg()
+            .unwrap(),
+    );
+}
+
+#[test]
+fn limits_and_notes_are_drawn() {
+    let mut c = Chart::new("limits", "t (s)", "m");
+    c.lines
+        .push(Line::new("x", Rgb::BLUE, vec![(0.0, 0.0), (1.0, 0.5)]));
+    c.hlines.push(HLine {
+        y: 1.0,
+        color: Rgb(255, 0, 0),
+        dashed: false,
+    });
+    let mut f = Figure::single("", (400, 300), Panel::Chart(c));
+    f.notes = vec!["red: the limit".into()];
+    let svg = f.svg().unwrap();
+    let doc = parse(&svg);
+    assert_eq!(
+        doc.descendants()
+            .filter(
+                |n| n.tag_name().name() == "polyline" && n.attribute("stroke") == Some("#FF0000")
+            )
+            .count(),
+        1
+    );
+    assert!(texts(&doc).contains(&"red: the limit".to_string()));
+}
