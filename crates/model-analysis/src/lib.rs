@@ -18,7 +18,7 @@
 //!
 //! Layer: model. It depends on `cdpr-model` and knows nothing of IPC, real time, CAN, the
 //! simulated plant or command lines; the plant's measurement of the reachable workspace
-//! (`crs_stack::reachable_on_plant`) is handed in as [`reachable::Measured`] values.
+//! (`plant_experiments::reachable_on_plant`) is handed in as [`reachable::Measured`] values.
 
 pub mod kinematics;
 pub mod planar;

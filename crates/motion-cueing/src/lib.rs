@@ -20,7 +20,7 @@
 //! | the generated vehicle profiles of `config/vehicle/` | [`profiles`] | |
 //! | SVG plots of a run | [`plot`] | |
 //!
-//! No IPC, real time or CLI here: `crs-stack` runs a [`source::CueingSource`] at 1 kHz on a
+//! No IPC, real time or CLI here: `sim-runs` runs a [`source::CueingSource`] at 1 kHz on a
 //! thread off the hard loop and feeds motion-core's cueing input (`crs sim --source cueing`).
 
 pub mod cabin;

@@ -14,7 +14,7 @@
 //! | the ride TOML (damping, walls, assist) + the platform's `[dynamics]` | [`settings`] | 5.13–5.14, 5.21–5.22 |
 //! | SVG of the flown path against the walls | [`plot`] | fig. 5.19 |
 //!
-//! No IPC, real time or CLI here: `crs-stack` runs the model at 1 kHz on a thread off the hard
+//! No IPC, real time or CLI here: `sim-runs` runs the model at 1 kHz on a thread off the hard
 //! loop and feeds motion-core's cueing input (`crs sim --source helicopter`).
 
 pub mod hover;

@@ -1,4 +1,4 @@
-//! Pilot inputs: a recorded pilot CSV, a scripted manoeuvre, or (in `crs-stack`) a live game
+//! Pilot inputs: a recorded pilot CSV, a scripted manoeuvre, or (in `sim-runs`) a live game
 //! controller, all as a track of [`PilotInput`] over time.
 //!
 //! Pilot CSV (one header line, then one row per sample; `#` lines are comments):
