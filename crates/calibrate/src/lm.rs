@@ -1,17 +1,20 @@
-//! Dense Levenberg–Marquardt (Moré 1978) on the normal equations with Marquardt's diagonal
-//! scaling, for the nonlinear least-squares problems of eq. (4.10–4.16): the Gauss–Newton step
-//! of eq. (4.11) with J^T J as the Hessian approximation (eq. 4.16), damped until it descends.
+//! Levenberg–Marquardt for the nonlinear least-squares problems of eq. (4.10–4.16) in the
+//! form identification poses them: a residual vector, its Jacobian and a box. The iteration is
+//! the model library's ([`cdpr_model::levenberg_marquardt`]: the Gauss–Newton step of
+//! eq. (4.11) with JᵀJ as the Hessian approximation, eq. 4.16, damped with Marquardt's scaling
+//! until it descends); this module adds the box and the stopping rules of [`LmOptions`].
 //!
 //! Box constraints (a parameter's physical range) are kept by projection with an active set
 //! (as in projected Levenberg–Marquardt / trust-region reflective solvers): a variable at a
 //! bound whose gradient pushes it outwards is held for the step, the others take the damped
 //! step of the reduced system, and the trial point is clipped into the box. Treating a step
-//! outside the box as uphill instead (the earlier design) stalls a fit that starts at a bound
-//! (a stored rope of 0 m whose gradient wants one cable negative) or that a bound stops: every
-//! coupled step leaves the box, the damping grows until the step vanishes, and the fit reports
-//! its start as the optimum.
+//! outside the box as uphill instead stalls a fit that starts at a bound (a stored rope of
+//! 0 m whose gradient wants one cable negative) or that a bound stops: every coupled step
+//! leaves the box, the damping grows until the step vanishes, and the fit reports its start as
+//! the optimum.
 
-use nalgebra::{DMatrix, DVector};
+use cdpr_model::levenberg_marquardt as lm;
+use nalgebra::{DMatrix, DVector, Dyn};
 
 /// A least-squares problem in the (preconditioned) variables z.
 pub trait LsqProblem {
@@ -85,9 +88,15 @@ pub enum LmError<E> {
     /// The Jacobian could not be evaluated at an accepted point.
     #[error("Jacobian: {0}")]
     Jacobian(E),
+    /// The cost at the start point or the gradient at an accepted point is not finite.
+    #[error("the cost or the gradient is not finite (iteration {iteration})")]
+    NonFinite { iteration: usize },
 }
 
-/// Runs Levenberg–Marquardt from `z0`. `on_iteration(iteration, cost)` reports progress.
+/// Runs Levenberg–Marquardt from `z0` (the model library's
+/// [`cdpr_model::levenberg_marquardt`], with Marquardt's scaling, the box held by the active
+/// set and the residual-vector problem's own stopping rules). `on_iteration(iteration, cost)`
+/// reports progress.
 pub fn solve<P: LsqProblem>(
     p: &mut P,
     z0: DVector<f64>,
@@ -96,130 +105,152 @@ pub fn solve<P: LsqProblem>(
 ) -> Result<LmResult, LmError<P::Error>> {
     let n = z0.len();
     let nr = p.n_residuals();
-    let mut z = z0;
-    let mut r = DVector::zeros(nr);
-    p.residual(&z, &mut r).map_err(LmError::AtStart)?;
-    let mut cost = 0.5 * r.norm_squared();
-    let mut history = vec![cost];
-    let mut j = DMatrix::zeros(nr, n);
-    let mut mu = opts.initial_damping;
-    let mut evaluations = 1;
-    let mut r_new = DVector::zeros(nr);
-    let mut converged = false;
-    let mut iterations = 0;
     let bounds: Vec<(f64, f64)> = (0..n).map(|k| p.bounds(k)).collect();
     let bounded = bounds
         .iter()
         .any(|(lo, hi)| lo.is_finite() || hi.is_finite());
-    for it in 1..=opts.max_iterations {
-        iterations = it;
-        if p.start_iteration(&z) {
-            p.residual(&z, &mut r).map_err(LmError::AtAccepted)?;
-            cost = 0.5 * r.norm_squared();
+    let mut adapter = Residuals {
+        p,
+        opts,
+        bounds,
+        bounded,
+        r: DVector::zeros(nr),
+        j: DMatrix::zeros(nr, n),
+        history: Vec::new(),
+        on_iteration,
+    };
+    let settings = lm::Settings {
+        max_iterations: opts.max_iterations,
+        max_trials: 60,
+        initial_damping: opts.initial_damping,
+        decrease: 3.0,
+        min_damping: 1e-15,
+        increase: 4.0,
+        max_damping: 1e16,
+        damping: lm::Damping::Marquardt { floor: 1e-30 },
+        on_singular: lm::OnSingular::IncreaseDamping,
+        gradient_tolerance: Some(opts.gtol),
+    };
+    let out = lm::solve(&mut adapter, z0, &settings).map_err(|e| match e {
+        lm::LmError::Start(LmError::AtAccepted(e)) => LmError::AtStart(e),
+        lm::LmError::Start(e) | lm::LmError::Problem { source: e, .. } => e,
+        lm::LmError::NonFiniteStart => LmError::NonFinite { iteration: 0 },
+        lm::LmError::NonFiniteGradient { iteration } | lm::LmError::Singular { iteration } => {
+            LmError::NonFinite { iteration }
         }
-        if cost == 0.0 {
-            converged = true;
-            break;
-        }
-        j.fill(0.0);
-        p.residual(&z, &mut r).map_err(LmError::AtAccepted)?;
-        p.jacobian(&z, &mut j).map_err(LmError::Jacobian)?;
-        // gemm (matrixmultiply) is much faster than tr_mul's column dots for tall J.
-        let jtj = j.transpose() * &j;
-        let g = j.tr_mul(&r);
-        if g.amax() <= opts.gtol {
-            converged = true;
-            break;
-        }
-        // Active set: variables at a bound whose descent direction −g leaves the box.
-        let active: Vec<bool> = (0..n)
-            .map(|k| {
-                let (lo, hi) = bounds[k];
-                (z[k] <= lo && g[k] > 0.0) || (z[k] >= hi && g[k] < 0.0)
-            })
-            .collect();
-        if bounded
-            && (0..n)
-                .filter(|k| !active[*k])
-                .all(|k| g[k].abs() <= opts.gtol)
-        {
-            converged = true;
-            break;
-        }
-        let mut accepted = false;
-        for _ in 0..60 {
-            let mut a = jtj.clone();
-            let mut rhs = -&g;
-            for k in 0..n {
-                a[(k, k)] += mu * jtj[(k, k)].max(1e-30);
-            }
-            for k in (0..n).filter(|k| active[*k]) {
-                a.row_mut(k).fill(0.0);
-                a.column_mut(k).fill(0.0);
-                a[(k, k)] = 1.0;
-                rhs[k] = 0.0;
-            }
-            let step = match a.cholesky() {
-                Some(c) => c.solve(&rhs),
-                None => {
-                    mu = (mu * 10.0).max(1e-12);
-                    continue;
-                }
-            };
-            let mut z_new = &z + &step;
-            if bounded {
-                for k in 0..n {
-                    z_new[k] = z_new[k].clamp(bounds[k].0, bounds[k].1);
-                }
-            }
-            let step = &z_new - &z;
-            evaluations += 1;
-            let ok = p.residual(&z_new, &mut r_new).is_ok();
-            let cost_new = if ok {
-                0.5 * r_new.norm_squared()
-            } else {
-                f64::INFINITY
-            };
-            if cost_new <= cost {
-                let small_step = step.norm() <= opts.xtol * (z.norm() + opts.xtol);
-                let small_gain = cost - cost_new <= opts.ftol * cost;
-                z = z_new;
-                std::mem::swap(&mut r, &mut r_new);
-                cost = cost_new;
-                mu = (mu / 3.0).max(1e-15);
-                accepted = true;
-                history.push(cost);
-                on_iteration(it, cost);
-                if small_step || small_gain {
-                    converged = true;
-                }
-                break;
-            }
-            mu *= 4.0;
-            if mu > 1e16 {
-                break;
-            }
-        }
-        if !accepted {
-            // No descent direction left: a stationary point to working precision.
-            converged = true;
-            break;
-        }
-        if converged {
-            break;
-        }
-    }
-    p.residual(&z, &mut r).map_err(LmError::AtAccepted)?;
-    cost = 0.5 * r.norm_squared();
+    })?;
+    let Residuals {
+        p, mut r, history, ..
+    } = adapter;
+    p.residual(&out.point, &mut r)
+        .map_err(LmError::AtAccepted)?;
+    let cost = 0.5 * r.norm_squared();
+    // A stop by the start-of-iteration test (zero cost) counts the iteration it stopped in.
+    let iterations = match out.stop {
+        lm::Stop::Satisfied => out.iterations + 1,
+        _ => out.iterations,
+    };
     Ok(LmResult {
-        z,
+        z: out.point,
         cost,
         residual: r,
         iterations,
-        evaluations,
+        evaluations: out.evaluations,
         history,
-        converged,
+        converged: out.stop != lm::Stop::MaxIterations,
     })
+}
+
+/// An [`LsqProblem`] as the solver's problem: JᵀJ from the residual Jacobian, the box by
+/// projection and an active set (a variable at a bound whose descent direction −g leaves the
+/// box is held for the step).
+struct Residuals<'a, P: LsqProblem> {
+    p: &'a mut P,
+    opts: &'a LmOptions,
+    bounds: Vec<(f64, f64)>,
+    bounded: bool,
+    r: DVector<f64>,
+    j: DMatrix<f64>,
+    /// Cost at the start and after every accepted step.
+    history: Vec<f64>,
+    on_iteration: &'a mut dyn FnMut(usize, f64),
+}
+
+impl<P: LsqProblem> lm::Problem<Dyn> for Residuals<'_, P> {
+    type Point = DVector<f64>;
+    type Error = LmError<P::Error>;
+
+    fn dim(&self) -> Dyn {
+        Dyn(self.bounds.len())
+    }
+
+    fn cost(&mut self, z: &DVector<f64>) -> Result<f64, Self::Error> {
+        self.p
+            .residual(z, &mut self.r)
+            .map_err(LmError::AtAccepted)?;
+        let cost = 0.5 * self.r.norm_squared();
+        // The first evaluation is the start point's.
+        if self.history.is_empty() {
+            self.history.push(cost);
+        }
+        Ok(cost)
+    }
+
+    fn begin(&mut self, z: &DVector<f64>, cost: &mut f64) -> Result<lm::Flow, Self::Error> {
+        if self.p.start_iteration(z) {
+            self.p
+                .residual(z, &mut self.r)
+                .map_err(LmError::AtAccepted)?;
+            *cost = 0.5 * self.r.norm_squared();
+        }
+        Ok(if *cost == 0.0 {
+            lm::Flow::Done
+        } else {
+            lm::Flow::Continue
+        })
+    }
+
+    fn normal_equations(
+        &mut self,
+        z: &DVector<f64>,
+        jtj: &mut DMatrix<f64>,
+        g: &mut DVector<f64>,
+    ) -> Result<(), Self::Error> {
+        self.j.fill(0.0);
+        self.p
+            .residual(z, &mut self.r)
+            .map_err(LmError::AtAccepted)?;
+        self.p.jacobian(z, &mut self.j).map_err(LmError::Jacobian)?;
+        // gemm (matrixmultiply) is much faster than tr_mul's column dots for tall J.
+        jtj.copy_from(&(self.j.transpose() * &self.j));
+        self.j.tr_mul_to(&self.r, g);
+        Ok(())
+    }
+
+    fn retract(&self, z: &DVector<f64>, step: &DVector<f64>) -> DVector<f64> {
+        let mut z_new = z + step;
+        if self.bounded {
+            for (v, (lo, hi)) in z_new.iter_mut().zip(&self.bounds) {
+                *v = v.clamp(*lo, *hi);
+            }
+        }
+        z_new
+    }
+
+    fn held(&self, z: &DVector<f64>, g: &DVector<f64>, k: usize) -> bool {
+        let (lo, hi) = self.bounds[k];
+        (z[k] <= lo && g[k] > 0.0) || (z[k] >= hi && g[k] < 0.0)
+    }
+
+    fn accepted(&mut self, s: &lm::Accepted<'_, DVector<f64>, Dyn>) -> bool {
+        // The step actually taken (after the projection into the box).
+        let step = s.to - s.from;
+        let small_step = step.norm() <= self.opts.xtol * (s.from.norm() + self.opts.xtol);
+        let small_gain = s.cost_before - s.cost_after <= self.opts.ftol * s.cost_before;
+        self.history.push(s.cost_after);
+        (self.on_iteration)(s.iteration, s.cost_after);
+        small_step || small_gain
+    }
 }
 
 #[cfg(test)]

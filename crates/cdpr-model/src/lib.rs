@@ -11,6 +11,7 @@
 //! | statics, force distribution | [`statics`] | 2.30–2.31, 2.38–2.40, 3.41, 5.11 |
 //! | elastostatics, stiffness | [`elastostatics`] | 2.33–2.41, 2.66–2.80 |
 //! | forward kinematics ν, ν_el | [`forward`] | 2.9–2.15, 2.42–2.43, 2.81 |
+//! | Levenberg–Marquardt for small dense least squares (every solver above and calibration's) | [`levenberg_marquardt`] | 2.12–2.15, 4.11, 4.16 |
 //! | wrench-feasible workspace, reachable workspace W_R | [`workspace`] | 3.29, 3.33–3.35 |
 //! | pose sensitivity to parameter errors | [`sensitivity`] | 3.25–3.28 |
 //! | exact wrench feasibility (LP) | [`feasibility`] | 3.29, 2.38–2.40 |
@@ -37,6 +38,7 @@ pub mod elastostatics;
 pub mod feasibility;
 pub mod forward;
 pub mod kinematics;
+pub mod levenberg_marquardt;
 pub mod model;
 pub mod offset_target;
 pub mod planar;

@@ -11,7 +11,8 @@
 //! condition number of the identification Jacobian J_qa (eq. 4.23).
 
 use crate::feasibility::{self, ExactFeasibility, FeasibilityError};
-use nalgebra::{DMatrix, DVector, Vector2};
+use crate::levenberg_marquardt as lm;
+use nalgebra::{DMatrix, DVector, Dyn, Vector2};
 
 /// Degrees of freedom of the planar platform.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -325,35 +326,106 @@ pub fn exact(model: &PlanarModel, at: &DMatrix<f64>) -> Result<ExactFeasibility,
 }
 
 /// Elastostatic forward kinematics (eq. 2.42): the pose where A^T f + w_e = 0 with
-/// f_i = max(0, k_F,i (q_i − q_θ,i) / q_i) (eq. 2.33–2.36, slack cables carry nothing), by
-/// damped Newton steps with a central-difference Jacobian (n ≤ 3). Returns pose and forces.
+/// f_i = max(0, k_F,i (q_i − q_θ,i) / q_i) (eq. 2.33–2.36, slack cables carry nothing), by the
+/// library's Levenberg–Marquardt on ½|γ|² (eq. 2.12–2.15) with a central-difference Jacobian
+/// (n ≤ 3). Returns pose and forces.
 pub fn elastostatic_fk(
     model: &PlanarModel,
     q_theta: &[f64],
     guess: &PlanarPose,
 ) -> Result<(PlanarPose, DVector<f64>), PlanarError> {
     let n = model.n();
-    let residual = |z: &DVector<f64>| -> Result<(DVector<f64>, DVector<f64>), PlanarError> {
-        let pose = to_pose(model, z);
-        let c = inverse(model, &pose)?;
-        let f = DVector::from_iterator(
-            model.m(),
-            (0..model.m()).map(|i| (model.p.k_f[i] * (c.q[i] - q_theta[i]) / c.q[i]).max(0.0)),
-        );
-        if f.iter().all(|fi| *fi == 0.0) {
-            return Err(PlanarError::AllSlack);
-        }
-        let at = structure_matrix(model, &pose, &c);
-        Ok((at * &f + &model.p.w_e, f))
+    let z0 = DVector::from_iterator(n, [guess.r.x, guess.r.y, guess.theta].into_iter().take(n));
+    let mut problem = PlanarEquilibrium {
+        model,
+        q_theta,
+        tol: 1e-7 * model.p.f_max.max(1.0),
+        last: DVector::zeros(n),
     };
-    let mut z = DVector::from_iterator(n, [guess.r.x, guess.r.y, guess.theta].into_iter().take(n));
-    let (mut g, _) = residual(&z)?;
-    let tol = 1e-7 * model.p.f_max.max(1.0);
-    let mut mu = 1e-3;
-    for _ in 0..200 {
-        if g.norm() < tol {
-            break;
-        }
+    let settings = lm::Settings {
+        max_iterations: 200,
+        max_trials: 20,
+        initial_damping: 1e-3,
+        decrease: 1.0 / 0.3,
+        min_damping: 1e-12,
+        increase: 10.0,
+        max_damping: f64::INFINITY,
+        damping: lm::Damping::Levenberg,
+        on_singular: lm::OnSingular::IncreaseDamping,
+        gradient_tolerance: None,
+    };
+    let out = lm::solve(&mut problem, z0, &settings).map_err(|e| match e {
+        lm::LmError::Start(e) | lm::LmError::Problem { source: e, .. } => e,
+        lm::LmError::Singular { .. }
+        | lm::LmError::NonFiniteStart
+        | lm::LmError::NonFiniteGradient { .. } => PlanarError::BadValue {
+            what: "the equilibrium residual",
+        },
+    })?;
+    let (g, f) = planar_residual(model, q_theta, &out.point)?;
+    if g.norm() >= problem.tol {
+        return Err(PlanarError::NotConverged { residual: g.norm() });
+    }
+    Ok((to_pose(model, &out.point), f))
+}
+
+/// γ(z) = A^T f + w_e and the forces f at the pose coordinates z.
+fn planar_residual(
+    model: &PlanarModel,
+    q_theta: &[f64],
+    z: &DVector<f64>,
+) -> Result<(DVector<f64>, DVector<f64>), PlanarError> {
+    let pose = to_pose(model, z);
+    let c = inverse(model, &pose)?;
+    let f = DVector::from_iterator(
+        model.m(),
+        (0..model.m()).map(|i| (model.p.k_f[i] * (c.q[i] - q_theta[i]) / c.q[i]).max(0.0)),
+    );
+    if f.iter().all(|fi| *fi == 0.0) {
+        return Err(PlanarError::AllSlack);
+    }
+    let at = structure_matrix(model, &pose, &c);
+    Ok((at * &f + &model.p.w_e, f))
+}
+
+/// The planar ν_el as a least-squares problem: residual γ, central-difference Jacobian.
+struct PlanarEquilibrium<'a> {
+    model: &'a PlanarModel,
+    q_theta: &'a [f64],
+    /// Converged when |γ| < this (N).
+    tol: f64,
+    /// γ of the last evaluated point.
+    last: DVector<f64>,
+}
+
+impl lm::Problem<Dyn> for PlanarEquilibrium<'_> {
+    type Point = DVector<f64>;
+    type Error = PlanarError;
+
+    fn dim(&self) -> Dyn {
+        Dyn(self.model.n())
+    }
+
+    fn cost(&mut self, z: &DVector<f64>) -> Result<f64, PlanarError> {
+        self.last = planar_residual(self.model, self.q_theta, z)?.0;
+        Ok(0.5 * self.last.norm_squared())
+    }
+
+    fn begin(&mut self, _z: &DVector<f64>, _cost: &mut f64) -> Result<lm::Flow, PlanarError> {
+        Ok(if self.last.norm() < self.tol {
+            lm::Flow::Done
+        } else {
+            lm::Flow::Continue
+        })
+    }
+
+    fn normal_equations(
+        &mut self,
+        z: &DVector<f64>,
+        jtj: &mut DMatrix<f64>,
+        g: &mut DVector<f64>,
+    ) -> Result<(), PlanarError> {
+        let n = z.len();
         let h = 1e-7;
         let mut jac = DMatrix::zeros(n, n);
         for k in 0..n {
@@ -361,41 +433,27 @@ pub fn elastostatic_fk(
             let mut zm = z.clone();
             zp[k] += h;
             zm[k] -= h;
-            let gp = residual(&zp)?.0;
-            let gm = residual(&zm)?.0;
+            let gp = planar_residual(self.model, self.q_theta, &zp)?.0;
+            let gm = planar_residual(self.model, self.q_theta, &zm)?.0;
             jac.set_column(k, &((gp - gm) / (2.0 * h)));
         }
-        // Levenberg–Marquardt step on ½|γ|² (eq. 2.12–2.15 style damping).
-        let jt = jac.transpose();
-        let mut accepted = false;
-        for _ in 0..20 {
-            let lhs =
-                &jt * &jac + DMatrix::identity(n, n) * mu * (jt.clone() * &jac).diagonal().max();
-            let Some(step) = lhs.lu().solve(&(-&jt * &g)) else {
-                mu *= 10.0;
-                continue;
-            };
-            let zn = &z + step;
-            if let Ok((gn, _)) = residual(&zn)
-                && gn.norm() < g.norm()
-            {
-                z = zn;
-                g = gn;
-                mu = (mu * 0.3).max(1e-12);
-                accepted = true;
-                break;
-            }
-            mu *= 10.0;
-        }
-        if !accepted {
-            break;
-        }
+        jtj.copy_from(&(jac.transpose() * &jac));
+        g.copy_from(&(jac.transpose() * &self.last));
+        Ok(())
     }
-    if g.norm() >= tol {
-        return Err(PlanarError::NotConverged { residual: g.norm() });
+
+    fn retract(&self, z: &DVector<f64>, step: &DVector<f64>) -> DVector<f64> {
+        z + step
     }
-    let (_, f) = residual(&z)?;
-    Ok((to_pose(model, &z), f))
+
+    fn accepts(&mut self, cost: f64, cost_new: f64) -> bool {
+        cost_new < cost
+    }
+
+    fn accepted(&mut self, _step: &lm::Accepted<'_, DVector<f64>, Dyn>) -> bool {
+        // Only the residual tolerance ends the solve.
+        false
+    }
 }
 
 fn to_pose(model: &PlanarModel, z: &DVector<f64>) -> PlanarPose {

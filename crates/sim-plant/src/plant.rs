@@ -5,10 +5,11 @@
 
 use crate::cable_law::{HysteresisState, PlantLaw};
 use crate::config::{Effects, PlantConfig};
-use cdpr_model::elastostatics::{self, Stiffness};
-use cdpr_model::forward::{FkError, FkOptions, FkSolution, elastostatic_with_law};
+use cdpr_model::elastostatics;
+use cdpr_model::forward::{
+    FkError, FkOptions, FkSolution, WrenchResidual, elastostatic_with, elastostatic_with_law,
+};
 use cdpr_model::kinematics::{self, KinematicsError};
-use cdpr_model::pose::twist_from_coordinates;
 use cdpr_model::statics::{self, StaticsError};
 use cdpr_model::{Data, Model, ModelError, Pose, Pulleys};
 use nalgebra::{Vector3, Vector6};
@@ -170,14 +171,7 @@ impl Plant {
     /// The platform load at pose x (effect 7, or the platform's nominal wrench). With sag on,
     /// the solver adds the rope-weight share (see [`Equilibrium::wrench`] for the total).
     pub fn wrench_at(&self, x: &Pose) -> Vector6<f64> {
-        match &self.config.effects.load {
-            None => self.model.params().w_e,
-            Some(l) => {
-                let fg = Vector3::new(0.0, 0.0, -l.mass * l.gravity);
-                let tau = (x.rotation() * l.center_of_gravity).cross(&fg);
-                Vector6::new(fg.x, fg.y, fg.z, tau.x, tau.y, tau.z) + l.extra_wrench
-            }
-        }
+        load_at(&self.config, &self.model, x)
     }
 
     fn pose_dependent(&self) -> bool {
@@ -192,29 +186,8 @@ impl Plant {
     /// Sets the pose-dependent inputs (chord angles, wrench) from the kinematics at x.
     fn freeze_at(&mut self, x: &Pose) -> Result<(), PlantError> {
         kinematics::inverse(&self.model, &mut self.data, x)?;
-        self.sag_inputs_from_data(x);
+        self.w_e = sag_inputs(&self.config, &self.model, &self.data, &mut self.law, x);
         Ok(())
-    }
-
-    /// With the kinematics of x in `data`: chord angles for the sag law and the wrench, with
-    /// the share of the rope weight the platform carries under sag (effect 5): half of each
-    /// free span's weight μ g q_f,i hangs at its platform anchor b_i (parabolic span, the
-    /// other half at the pulley), w += Σ [−½ μ g q_f,i e_z; b_i × (−½ μ g q_f,i e_z)].
-    fn sag_inputs_from_data(&mut self, x: &Pose) {
-        self.w_e = self.wrench_at(x);
-        if let Some(sag) = self.config.effects.sag {
-            for i in 0..self.m() {
-                let uz = self.data.u[i].z;
-                self.law.sag_cos2[i] = (1.0 - uz * uz).max(0.0);
-                let g = Vector3::new(
-                    0.0,
-                    0.0,
-                    -0.5 * sag.mass_per_length * sag.gravity * self.data.q_free[i],
-                );
-                let tau = self.data.b_world[i].cross(&g);
-                self.w_e += Vector6::new(g.x, g.y, g.z, tau.x, tau.y, tau.z);
-            }
-        }
     }
 
     /// Physical controlled lengths from the commands (effect 6): q_θ = s q_cmd + o.
@@ -323,92 +296,38 @@ impl Plant {
         self.solve_pose_dependent(guess)
     }
 
-    /// Residual wrench ρ(x) = A^T f + w_e(x) (eq. 2.43) with the chord angles (sag) and the
-    /// gravity torque (load) evaluated at x itself.
-    fn eval(&mut self, x: &Pose) -> Result<Vector6<f64>, PlantError> {
-        kinematics::inverse(&self.model, &mut self.data, x)?;
-        self.sag_inputs_from_data(x);
-        elastostatics::cable_forces(&mut self.data, &self.law, &self.q_phys);
-        Ok(statics::cable_wrench(&self.data, &self.data.f) + self.w_e)
-    }
-
-    fn scale(&self) -> f64 {
-        self.data.f.iter().sum::<f64>() + self.w_e.amax() + 1.0
-    }
-
-    /// ν_el for pose-dependent inputs: Levenberg–Marquardt on the exact residual (angles and
-    /// wrench at the trial pose) with the Jacobian K_G − K_C (eq. 2.74, 2.76) of the frozen
-    /// inputs; the neglected ∂(chord angle, gravity torque)/∂x terms are small, so it still
-    /// converges to the exact equilibrium, only not quadratically.
+    /// ν_el for pose-dependent inputs: the model's ν_el on the exact residual
+    /// ρ(x) = A^T f + w_e(x) (eq. 2.43), with the chord angles (sag) and the gravity torque
+    /// (load) evaluated at the trial pose x itself; its Jacobian K_G − K_C (eq. 2.74, 2.76)
+    /// holds those inputs frozen, and the neglected ∂(chord angle, gravity torque)/∂x terms are
+    /// small, so it still converges to the exact equilibrium, only not quadratically.
     fn solve_pose_dependent(&mut self, guess: Pose) -> Result<FkSolution, PlantError> {
-        let opts = self.opts;
-        let mut x = guess;
-        let mut rho = self.eval(&x)?;
-        let mut cost = 0.5 * rho.norm_squared();
-        let mut mu = opts.initial_damping;
-        for it in 1..=MAX_ITERATIONS {
-            if self.data.f.iter().all(|f| *f == 0.0) {
-                return Err(FkError::AllSlack.into());
-            }
-            if rho.amax() <= opts.wrench_tolerance * self.scale() {
-                return Ok(FkSolution {
-                    pose: x,
-                    iterations: it - 1,
-                    residual_norm: rho.norm(),
-                });
-            }
-            let j = Stiffness::at(&self.model, &self.data).k_wx * twist_from_coordinates(&x);
-            let jtj = j.transpose() * j;
-            let jtr = j.transpose() * rho;
-            loop {
-                let mut lhs = jtj;
-                for k in 0..6 {
-                    lhs[(k, k)] += mu * jtj[(k, k)].max(1e-12);
-                }
-                let step = lhs
-                    .cholesky()
-                    .ok_or(FkError::Singular { iteration: it })?
-                    .solve(&(-jtr));
-                let x_new = x.add_increment(&step);
-                let accepted = match self.eval(&x_new) {
-                    Ok(r) if 0.5 * r.norm_squared() <= cost => Some(r),
-                    _ => None,
-                };
-                if let Some(r) = accepted {
-                    x = x_new;
-                    rho = r;
-                    cost = 0.5 * rho.norm_squared();
-                    mu = (mu / 5.0).max(1e-15);
-                    if step.amax() < opts.step_tolerance {
-                        return self.accept(x, it);
-                    }
-                    break;
-                }
-                mu *= 4.0;
-                if mu > 1e12 {
-                    return self.accept(x, it);
-                }
-            }
-        }
-        self.accept(x, MAX_ITERATIONS)
-    }
-
-    fn accept(&mut self, x: Pose, iterations: usize) -> Result<FkSolution, PlantError> {
-        let rho = self.eval(&x)?;
-        if self.data.f.iter().all(|f| *f == 0.0) {
-            return Err(FkError::AllSlack.into());
-        }
-        if rho.amax() > self.opts.wrench_acceptance * self.scale() {
-            return Err(FkError::NotConverged {
-                iterations,
-                residual: rho.norm(),
-            }
-            .into());
-        }
-        Ok(FkSolution {
-            pose: x,
-            iterations,
-            residual_norm: rho.norm(),
+        let opts = FkOptions {
+            max_iterations: MAX_ITERATIONS,
+            ..self.opts
+        };
+        let Self {
+            config,
+            model,
+            data,
+            law,
+            w_e,
+            q_phys,
+            ..
+        } = self;
+        let residual = |data: &mut Data, x: &Pose| {
+            kinematics::inverse(model, data, x)?;
+            *w_e = sag_inputs(config, model, data, law, x);
+            elastostatics::cable_forces(data, &*law, q_phys);
+            Ok(WrenchResidual {
+                rho: statics::cable_wrench(data, &data.f) + *w_e,
+                load: w_e.amax(),
+            })
+        };
+        elastostatic_with(model, data, residual, &guess, &opts).map_err(|e| match e {
+            // A pose the kinematics refuse is the plant's kinematics error, as in `freeze_at`.
+            FkError::Kinematics(k) => PlantError::Kinematics(k),
+            e => PlantError::NoEquilibrium(e),
         })
     }
 
@@ -479,6 +398,46 @@ impl Plant {
         self.last_q = Some((0..m).map(|i| self.winch(i, q_cmd[i])).collect());
         Ok(TensionSetup { q_cmd, forces })
     }
+}
+
+/// The platform load at pose x (effect 7, or the platform's nominal wrench).
+fn load_at(config: &PlantConfig, model: &Model, x: &Pose) -> Vector6<f64> {
+    match &config.effects.load {
+        None => model.params().w_e,
+        Some(l) => {
+            let fg = Vector3::new(0.0, 0.0, -l.mass * l.gravity);
+            let tau = (x.rotation() * l.center_of_gravity).cross(&fg);
+            Vector6::new(fg.x, fg.y, fg.z, tau.x, tau.y, tau.z) + l.extra_wrench
+        }
+    }
+}
+
+/// With the kinematics of x in `data`: sets the chord angles of the sag law and returns the
+/// wrench, with the share of the rope weight the platform carries under sag (effect 5): half
+/// of each free span's weight μ g q_f,i hangs at its platform anchor b_i (parabolic span, the
+/// other half at the pulley), w += Σ [−½ μ g q_f,i e_z; b_i × (−½ μ g q_f,i e_z)].
+fn sag_inputs(
+    config: &PlantConfig,
+    model: &Model,
+    data: &Data,
+    law: &mut PlantLaw,
+    x: &Pose,
+) -> Vector6<f64> {
+    let mut w_e = load_at(config, model, x);
+    if let Some(sag) = config.effects.sag {
+        for i in 0..model.m() {
+            let uz = data.u[i].z;
+            law.sag_cos2[i] = (1.0 - uz * uz).max(0.0);
+            let g = Vector3::new(
+                0.0,
+                0.0,
+                -0.5 * sag.mass_per_length * sag.gravity * data.q_free[i],
+            );
+            let tau = data.b_world[i].cross(&g);
+            w_e += Vector6::new(g.x, g.y, g.z, tau.x, tau.y, tau.z);
+        }
+    }
+    w_e
 }
 
 fn gaussian(rng: &mut StdRng, sigma: f64) -> f64 {

@@ -2,11 +2,12 @@
 //! Levenberg–Marquardt on the linearisation ρ(x0 + Δx) = ρ(x0) + J_qx Δx (eq. 2.12–2.15) with
 //! J_qx = −A (eq. 2.54) in pose coordinates (J_qx · diag(I, J_P)).
 
-use super::{FkError, FkOptions, FkSolution, check_input};
+use super::{FkError, FkOptions, FkSolution, check_input, from_lm};
 use crate::kinematics;
+use crate::levenberg_marquardt::{self as lm, Accepted, Flow};
 use crate::model::{Data, Model};
 use crate::pose::{Pose, twist_from_coordinates};
-use nalgebra::{Matrix6, Vector6};
+use nalgebra::{Matrix6, U6, Vector6};
 
 /// Solves ν(q_θ) from `guess`. Allocation-free; leaves the inverse kinematics of the solution
 /// in `data`.
@@ -17,63 +18,95 @@ pub fn least_squares(
     guess: &Pose,
     opts: &FkOptions,
 ) -> Result<FkSolution, FkError> {
-    let m = model.m();
-    check_input(m, q_theta, guess)?;
-    let mut x = *guess;
-    let mut cost = eval(model, data, &x, q_theta)?;
-    let mut grad = gradient(model, data, &x, q_theta);
-    let mut mu = opts.initial_damping;
-    for it in 1..=opts.max_iterations {
-        // Normal equations in pose coordinates: J = −A T, JᵀJ = Tᵀ(AᵀA)T, Jᵀρ = −Tᵀ Σ v_i ρ_i.
-        let t = twist_from_coordinates(&x);
+    check_input(model.m(), q_theta, guess)?;
+    let mut problem = LengthResidual {
+        model,
+        data,
+        q_theta,
+        opts,
+        grad: 0.0,
+        last_grad: 0.0,
+        last_roundoff: 0.0,
+    };
+    let out = lm::solve(&mut problem, *guess, &opts.lm_settings(3.0)).map_err(from_lm)?;
+    match out.stop {
+        lm::Stop::MaxIterations => Err(FkError::NotConverged {
+            iterations: out.iterations,
+            residual: (2.0 * out.cost).sqrt(),
+        }),
+        _ => finish(model, data, out.point, q_theta, out.iterations, opts),
+    }
+}
+
+/// ρ = q(x) − q_θ with the state of the last evaluated point (the gradient and the cost's
+/// round-off there, for the acceptance rule).
+struct LengthResidual<'a> {
+    model: &'a Model,
+    data: &'a mut Data,
+    q_theta: &'a [f64],
+    opts: &'a FkOptions,
+    /// ‖Jᵀρ‖_∞ at the current point.
+    grad: f64,
+    last_grad: f64,
+    last_roundoff: f64,
+}
+
+impl lm::Problem<U6> for LengthResidual<'_> {
+    type Point = Pose;
+    type Error = FkError;
+
+    fn dim(&self) -> U6 {
+        U6
+    }
+
+    fn cost(&mut self, x: &Pose) -> Result<f64, FkError> {
+        let cost = eval(self.model, self.data, x, self.q_theta)?;
+        self.last_grad = gradient(self.model, self.data, x, self.q_theta);
+        self.last_roundoff = cost_roundoff(self.data, self.q_theta);
+        Ok(cost)
+    }
+
+    fn begin(&mut self, _x: &Pose, _cost: &mut f64) -> Result<Flow, FkError> {
+        // The current point was the last one evaluated.
+        self.grad = self.last_grad;
+        Ok(Flow::Continue)
+    }
+
+    fn normal_equations(
+        &mut self,
+        x: &Pose,
+        jtj: &mut Matrix6<f64>,
+        g: &mut Vector6<f64>,
+    ) -> Result<(), FkError> {
+        // J = −A T, JᵀJ = Tᵀ(AᵀA)T, Jᵀρ = −Tᵀ Σ v_i ρ_i.
+        let t = twist_from_coordinates(x);
         let mut ata = Matrix6::zeros();
         let mut atr = Vector6::zeros();
-        for i in 0..m {
-            let v = data.at[i];
+        for i in 0..self.model.m() {
+            let v = self.data.at[i];
             ata += v * v.transpose();
-            atr += v * (data.q[i] - q_theta[i]);
+            atr += v * (self.data.q[i] - self.q_theta[i]);
         }
-        let jtj = t.transpose() * ata * t;
-        let jtr = -(t.transpose() * atr);
-        loop {
-            let mut lhs = jtj;
-            for k in 0..6 {
-                lhs[(k, k)] += mu * jtj[(k, k)].max(1e-12);
-            }
-            let step = lhs
-                .cholesky()
-                .ok_or(FkError::Singular { iteration: it })?
-                .solve(&(-jtr));
-            let x_new = x.add_increment(&step);
-            // A step that leaves the valid region (IK error) counts as uphill: damp more.
-            let cost_new = eval(model, data, &x_new, q_theta).unwrap_or(f64::INFINITY);
-            // With inconsistent lengths the cost stays finite and its change drops below
-            // round-off before the pose has converged; there the gradient decides.
-            let grad_new = gradient(model, data, &x_new, q_theta);
-            let at_roundoff = (cost_new - cost).abs() <= cost_roundoff(data, q_theta);
-            if (cost_new < cost && !at_roundoff) || (at_roundoff && grad_new < grad) {
-                x = x_new;
-                let small = step.amax() < opts.step_tolerance;
-                cost = cost_new;
-                grad = grad_new;
-                mu = (mu / 3.0).max(1e-15);
-                if small || cost == 0.0 {
-                    return finish(model, data, x, q_theta, it, opts);
-                }
-                break;
-            }
-            mu *= 4.0;
-            if mu > 1e12 {
-                // No descent possible any more: a stationary point (or stuck).
-                eval(model, data, &x, q_theta)?;
-                return finish(model, data, x, q_theta, it, opts);
-            }
-        }
+        *jtj = t.transpose() * ata * t;
+        *g = -(t.transpose() * atr);
+        Ok(())
     }
-    Err(FkError::NotConverged {
-        iterations: opts.max_iterations,
-        residual: (2.0 * cost).sqrt(),
-    })
+
+    fn retract(&self, x: &Pose, step: &Vector6<f64>) -> Pose {
+        x.add_increment(step)
+    }
+
+    fn accepts(&mut self, cost: f64, cost_new: f64) -> bool {
+        // With inconsistent lengths the cost stays finite and its change drops below
+        // round-off before the pose has converged; there the gradient decides.
+        let at_roundoff = (cost_new - cost).abs() <= self.last_roundoff;
+        (cost_new < cost && !at_roundoff) || (at_roundoff && self.last_grad < self.grad)
+    }
+
+    fn accepted(&mut self, s: &Accepted<'_, Pose, U6>) -> bool {
+        self.grad = self.last_grad;
+        s.step.amax() < self.opts.step_tolerance || s.cost_after == 0.0
+    }
 }
 
 fn eval(model: &Model, data: &mut Data, x: &Pose, q_theta: &[f64]) -> Result<f64, FkError> {

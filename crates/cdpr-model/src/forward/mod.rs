@@ -1,14 +1,16 @@
 //! Forward kinematics: least-squares ν(q_θ) (eq. 2.9–2.15) and elastostatic
-//! (x, f) = ν_el(q_θ, w_e) (eq. 2.42–2.43), both by Levenberg–Marquardt with analytic Jacobians,
-//! for the standard and the pulley model. Non-convergence is an error value, never a pose.
+//! (x, f) = ν_el(q_θ, w_e) (eq. 2.42–2.43), both by the library's Levenberg–Marquardt
+//! ([`crate::levenberg_marquardt`]) with analytic Jacobians, for the standard and the pulley
+//! model. Non-convergence is an error value, never a pose.
 
 mod elastostatic;
 mod least_squares;
 
-pub use elastostatic::{elastostatic, elastostatic_with_law};
+pub use elastostatic::{WrenchResidual, elastostatic, elastostatic_with, elastostatic_with_law};
 pub use least_squares::least_squares;
 
 use crate::kinematics::KinematicsError;
+use crate::levenberg_marquardt::{self as lm, Damping, OnSingular};
 use crate::pose::Pose;
 
 /// Solver settings. The defaults reach round-off on the CRS geometry in a handful of steps.
@@ -65,6 +67,39 @@ pub enum FkError {
     AllSlack,
     #[error("no convergence after {iterations} iterations (residual {residual:.3e})")]
     NotConverged { iterations: usize, residual: f64 },
+    #[error("the residual or its gradient is not finite (iteration {iteration})")]
+    NonFinite { iteration: usize },
+}
+
+impl FkOptions {
+    /// The Levenberg–Marquardt bounds of both pose solvers: damping relative to diag(JᵀJ)
+    /// (floor 1e-12), ×4 after a rejected step up to 1e12, ÷`decrease` after an accepted one.
+    pub(crate) fn lm_settings(&self, decrease: f64) -> lm::Settings {
+        lm::Settings {
+            max_iterations: self.max_iterations,
+            // ×4 from the smallest damping to the largest is < 50 trials; this only bounds
+            // a degenerate `initial_damping` (0 would never grow).
+            max_trials: 200,
+            initial_damping: self.initial_damping,
+            decrease,
+            min_damping: 1e-15,
+            increase: 4.0,
+            max_damping: 1e12,
+            damping: Damping::Marquardt { floor: 1e-12 },
+            on_singular: OnSingular::Fail,
+            gradient_tolerance: None,
+        }
+    }
+}
+
+/// The solver's failures as forward-kinematics errors (the problem's own errors unchanged).
+pub(crate) fn from_lm(e: lm::LmError<FkError>) -> FkError {
+    match e {
+        lm::LmError::Start(e) | lm::LmError::Problem { source: e, .. } => e,
+        lm::LmError::Singular { iteration } => FkError::Singular { iteration },
+        lm::LmError::NonFiniteStart => FkError::NonFinite { iteration: 0 },
+        lm::LmError::NonFiniteGradient { iteration } => FkError::NonFinite { iteration },
+    }
 }
 
 pub(crate) fn check_input(m: usize, q_theta: &[f64], guess: &Pose) -> Result<(), FkError> {
