@@ -984,6 +984,14 @@ impl Master {
         self.restart_nmt = std::mem::take(&mut self.nmt_stopped);
         self.fault_code = FaultCode::None;
         self.fault_node = 0;
+        // The drives were NMT-stopped: their velocity and force TPDOs restart with the NMT
+        // start. Enable waits for fresh ones as at start-up; the stamps from before the stop
+        // would let Ready judge them stale in its first cycle (TPDO timeout right after the
+        // reset when the drives answer a few ms late).
+        for d in &mut self.drives[..self.n] {
+            d.vel_rx_ns = 0;
+            d.force_rx_ns = 0;
+        }
         self.set_phase(Phase::Enable);
         self.boot_start_ns = Some(now_ns);
         Ok(epoch)

@@ -20,6 +20,8 @@ struct Sim {
     log: Vec<Message>,
     /// Pulley force each drive reports in TPDO2, mN.
     force_mn: Vec<i32>,
+    /// For this many more cycles the drives' TPDO2 (velocity, force) does not reach drive-io.
+    tpdo2_late: u32,
 }
 
 impl Sim {
@@ -49,6 +51,7 @@ impl Sim {
             dead: None,
             log: Vec::new(),
             force_mn: vec![1000; 8],
+            tpdo2_late: 0,
         };
         let mut out = FrameBuf::default();
         for (i, sl) in s.slaves.iter_mut().enumerate() {
@@ -125,6 +128,16 @@ impl Sim {
             }
             sl.set_heartbeat_muted(self.mute == Some(i));
             sl.poll(self.now, &mut s_out);
+        }
+        if self.tpdo2_late > 0 {
+            self.tpdo2_late -= 1;
+            let mut kept = FrameBuf::default();
+            for f in s_out.as_slice() {
+                if !(0x281..=0x2FF).contains(&f.id()) {
+                    kept.push(*f);
+                }
+            }
+            s_out = kept;
         }
         self.deliver_to_master(&s_out);
     }
@@ -968,6 +981,51 @@ fn reset_after_an_escalation_restarts_the_drives_and_the_heartbeat() {
         assert_eq!(sl.ds402_state(), Ds402State::OperationEnabled);
         assert_eq!(sl.nmt_state(), canopen::NmtState::Operational);
     }
+}
+
+/// After a reset the drives' velocity and force TPDOs come back some cycles after their
+/// statusword: drive-io waits for fresh ones before Ready, as at start-up, instead of judging
+/// the stamps from before the stop (a TPDO timeout right after the reset).
+#[test]
+fn reset_waits_for_fresh_tpdos_before_ready() {
+    let mut s = Sim::new();
+    s.boot();
+    estop(&mut s);
+    // Stopped for longer than the TPDO timeout (300 ms): the last stamps are stale.
+    for _ in 0..2 * s.cfg.bus.quick_stop_timeout_ms + 400 {
+        s.step(None);
+    }
+    let mut ev = crs_ipc::StateEvent::new(
+        crs_ipc::ProcessId::SafetyMonitor,
+        crs_ipc::EventKind::Reset,
+        2,
+    );
+    ev.detail = 1;
+    ev.timestamp_ns = s.now;
+    let grant = drive_io::reset::ResetGate::new()
+        .check_unauthenticated(&ev, s.now)
+        .unwrap();
+    assert_eq!(s.master.reset(grant, s.now).ok(), Some(1));
+    s.tpdo2_late = 30;
+    let mut ready_at = None;
+    for k in 0..300 {
+        s.step(None);
+        assert_ne!(
+            s.master.state(),
+            BusState::Fault,
+            "cycle {k} after the reset: fault {:?} node {}",
+            s.master.feedback().fault(),
+            s.master.feedback().fault_node
+        );
+        if ready_at.is_none() && s.master.state() == BusState::Ready {
+            ready_at = Some(k);
+        }
+    }
+    let k = ready_at.expect("Ready after the reset");
+    assert!(
+        k >= 30,
+        "Ready in cycle {k}, before any fresh TPDO2 arrived"
+    );
 }
 
 /// Four winches on one interface, lenient timeouts (virtual time needs none of them tight).

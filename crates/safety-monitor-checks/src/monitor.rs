@@ -286,7 +286,7 @@ pub mod authority {
     /// epoch. No public constructor (private field), not `Clone`: used once.
     ///
     /// ```compile_fail,E0451
-    /// let forged = safety_monitor::monitor::authority::ResetToken { epoch: 1 };
+    /// let forged = safety_monitor_checks::monitor::authority::ResetToken { epoch: 1 };
     /// ```
     #[derive(Debug, PartialEq, Eq)]
     pub struct ResetToken {

@@ -55,8 +55,8 @@ impl fmt::Display for ResetChannel {
 /// credential check, and consumed by [`crate::Monitor::request_reset`].
 ///
 /// ```compile_fail,E0451
-/// let forged = safety_monitor::operator::OperatorReset {
-///     channel: safety_monitor::operator::ResetChannel::Key,
+/// let forged = safety_monitor_checks::operator::OperatorReset {
+///     channel: safety_monitor_checks::operator::ResetChannel::Key,
 /// };
 /// ```
 #[derive(Debug, PartialEq, Eq)]
