@@ -188,12 +188,15 @@ impl EmulatorControl {
     /// The measured force winch `i` reports (mN), given the stand-in's.
     fn reported_force_mn(&self, i: usize, stand_in_mn: i32) -> i32 {
         if self.force_override_mask.load(Ordering::Acquire) & (1 << i) != 0 {
-            let _ = self.force_override_applied_ns[i].compare_exchange(
-                0,
-                crs_ipc::monotonic_ns(),
-                Ordering::AcqRel,
-                Ordering::Relaxed,
-            );
+            let applied = &self.force_override_applied_ns[i];
+            if applied.load(Ordering::Acquire) == 0 {
+                let _ = applied.compare_exchange(
+                    0,
+                    crs_ipc::monotonic_ns(),
+                    Ordering::AcqRel,
+                    Ordering::Relaxed,
+                );
+            }
             self.force_override_mn[i].load(Ordering::Acquire)
         } else {
             stand_in_mn

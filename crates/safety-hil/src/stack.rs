@@ -428,6 +428,33 @@ impl Stack {
         Ok(())
     }
 
+    /// A faulty node's frames, sent every `period` from `t0` on until the monitor trips (at
+    /// most 10 s): a single frame lost by the emulated guest's bus must not decide a scenario;
+    /// on the host the timing bound still holds the monitor to the first one. Returns how
+    /// many were sent.
+    pub fn send_until_trip(
+        &mut self,
+        t0: u64,
+        period: Duration,
+        what: &str,
+        mut send: impl FnMut() -> Res<()>,
+    ) -> Res<u32> {
+        let mut sent = 0u32;
+        while self.monitor_estops.is_empty() {
+            if monotonic_ns() - t0 > 10_000_000_000 {
+                return Err(format!(
+                    "no trip in 10 s of {what} ({sent} sent, one per {} us)",
+                    period.as_micros()
+                ));
+            }
+            send()?;
+            sent += 1;
+            std::thread::sleep(period);
+            self.poll()?;
+        }
+        Ok(sent)
+    }
+
     /// drive-io Running and the drives following (some cable moved by > 1 mm).
     pub fn wait_following(&mut self, moving: bool) -> Res<()> {
         self.wait("drive-io Running", 30.0, |s| {
