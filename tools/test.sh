@@ -133,22 +133,15 @@ HIL_SUITES=(
   "HIL: the full simulated stack on vcan (QEMU guest)|tools/stack-hil.sh"
   "HIL: the wire model's vcan forwarding (QEMU guest)|tools/wire-hil.sh"
 )
-# The guest matrix (behaviour only; the host suite above asserts timing): under TCG a scenario
-# fails now and then after its fault was injected (2026-11-26: 2 of 5 guest runs, a different
-# scenario each time, stop_frame_lost and tampered_safety_config; 2026-11-27 on a quiet host:
-# pose_jump_inside_box tripped identity_missing instead of motion_velocity). Until that is found,
-# a failed run is followed by ONE rerun of the whole matrix, printed as such; the suite fails
-# when both do.
-guest_safety_matrix() {
-  bash tools/safety-hil.sh && return 0
-  echo "GUEST SAFETY MATRIX: the first run FAILED (see above); one rerun of the whole matrix"
-  bash tools/safety-hil.sh
-}
+# The guest matrix (behaviour only; the host suite above asserts timing). One run: a scenario
+# whose stack the emulator stalled BEFORE its fault was injected runs once more, printed with the
+# stall's cause, within a budget of 3 per run (tools/safety-hil.sh); a failure after the injection,
+# or past the budget, fails the suite (docs/testing.md, "Retries": why the whole-matrix rerun
+# after a failed run is gone).
 if [ "${CRS_SKIP_HIL:-0}" = 1 ]; then
   skip "HIL: safety monitor fault-injection matrix on vcan (QEMU guest)" "CRS_SKIP_HIL=1"
 else
-  suite "HIL: safety monitor fault-injection matrix on vcan (QEMU guest; one rerun after a failed run, printed)" \
-    guest_safety_matrix
+  suite "HIL: safety monitor fault-injection matrix on vcan (QEMU guest)" bash tools/safety-hil.sh
 fi
 for s in "${HIL_SUITES[@]}"; do
   if [ "${CRS_SKIP_HIL:-0}" = 1 ]; then

@@ -177,6 +177,20 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
     if monitor_stale == monitor {
         return Err("safety-monitor-stale.toml: could not set the feedback silence".into());
     }
+    // `unknown_applied_sequence`: the same replacement, but its fault is the replacement's
+    // first sample and nothing in it is timed, so the silence only has to outlast taking over
+    // the publisher (in the emulated guest 280-706 ms after the kill, longer than the stale
+    // scenario's 600 ms: the replacement stalled on both attempts).
+    let monitor_replacement = monitor.replace(
+        &stale_silence,
+        &format!(
+            "window_setpoints = 200\nsilence_cycles = {}\n",
+            replacement_feedback_silence_cycles(args.feedback_silence_cycles)
+        ),
+    );
+    if monitor_replacement == monitor {
+        return Err("safety-monitor-replacement.toml: could not set the feedback silence".into());
+    }
     // The drives (winch emulator) of `heartbeat_config_crc_mismatch`: one SRDO parameter (their
     // validation time) differs from what the monitor announces.
     let drives_mismatch = drives.replace(
@@ -193,6 +207,10 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
         ("safety-monitor.toml", monitor.as_str()),
         ("safety-monitor-strict.toml", strict.as_str()),
         ("safety-monitor-stale.toml", monitor_stale.as_str()),
+        (
+            "safety-monitor-replacement.toml",
+            monitor_replacement.as_str(),
+        ),
         ("motion-core.toml", motion.as_str()),
         ("waypoints.csv", waypoints),
     ] {
@@ -206,6 +224,12 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
 /// run's own if longer.
 pub fn stale_feedback_silence_cycles(run: u32) -> u32 {
     run.max(40)
+}
+
+/// The monitor's feedback silence (cycles) in `unknown_applied_sequence`: 67 (1 s, the most
+/// the monitor's configuration accepts).
+pub fn replacement_feedback_silence_cycles(run: u32) -> u32 {
+    run.max(67)
 }
 
 /// The load cells report every this many SYNCs (the shipped drives file's rate).
@@ -226,6 +250,7 @@ pub fn monitor_config(scenario: &str) -> &'static str {
     match scenario {
         "foreign_publisher" => "safety-monitor-strict.toml",
         "stale_published_feedback" => "safety-monitor-stale.toml",
+        "unknown_applied_sequence" => "safety-monitor-replacement.toml",
         _ => "safety-monitor.toml",
     }
 }

@@ -91,7 +91,8 @@ pub fn kill_monitor(st: &mut Stack) -> Res<Outcome> {
 /// drive-io dies and a faulty adapter takes its place at once: it keeps the drives
 /// synchronised (SYNC, so they keep sending forces) and publishes Running feedback whose
 /// applied setpoint the monitor never saw. The following-error check cannot be evaluated:
-/// after `unchecked_cycles` (10) it trips instead of skipping.
+/// after `unchecked_cycles` (10) it trips instead of skipping. The monitor's feedback silence
+/// is `configs::replacement_feedback_silence_cycles`: taking over the publisher must fit into it.
 pub fn unknown_applied_sequence(st: &mut Stack) -> Res<Outcome> {
     let c = st.fake()?.clone();
     st.wait_following(false)?;
