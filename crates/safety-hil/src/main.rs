@@ -434,4 +434,40 @@ mod tests {
         assert!(within_budget(3, 3));
         assert!(!within_budget(4, 3));
     }
+
+    /// Every scenario's monitor configuration, as generated for the host (the spec's
+    /// thresholds) and for the emulated guest (tools/safety-hil.sh's arguments), is one the
+    /// production monitor loads: a threshold past the loader's bounds would end the scenario
+    /// before its fault, as a stall the matrix would retry instead of a configuration error.
+    #[test]
+    fn every_scenario_config_loads_in_the_monitor() {
+        let guest = [
+            "safety-hil",
+            "--validation-ms",
+            "150",
+            "--silence-cycles",
+            "10",
+            "--feedback-silence-cycles",
+            "20",
+            "--period-us",
+            "4000",
+        ];
+        for (label, argv) in [("host", &["safety-hil"][..]), ("guest", &guest[..])] {
+            let args = Args::parse_from(argv);
+            let dir = std::env::temp_dir()
+                .join(format!("safety-hil-configs-{label}-{}", std::process::id()));
+            configs::write_configs(&dir, &args).unwrap();
+            for (name, _) in SCENARIOS {
+                let path = dir.join(configs::monitor_config(name));
+                if let Err(e) = safety_monitor::config::load(&path) {
+                    panic!("{label}, scenario {name}: {}: {e}", path.display());
+                }
+                let drives = dir.join(configs::emulator_drives(name));
+                if let Err(e) = safety_monitor::config::load_drives(&drives) {
+                    panic!("{label}, scenario {name}: {}: {e}", drives.display());
+                }
+            }
+            std::fs::remove_dir_all(&dir).unwrap();
+        }
+    }
 }
