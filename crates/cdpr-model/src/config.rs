@@ -135,7 +135,7 @@ struct RawPlatform {
     workspace: RawWorkspace,
     home: RawHome,
     #[serde(default)]
-    sections: std::collections::BTreeMap<String, Spanned<Vec<i64>>>,
+    sections: RawSections,
     dynamics: Option<RawDynamics>,
 }
 
@@ -306,6 +306,8 @@ impl<'de, const N: usize> Deserialize<'de> for Fixed<N> {
 /// Rows of exactly three numbers (anchor points, pulley axes), each row and element with its
 /// span.
 type Rows = Spanned<Vec<Spanned<Fixed<3>>>>;
+/// `[sections]`: a name per group of cables (numbered from 1).
+type RawSections = std::collections::BTreeMap<String, Spanned<Vec<i64>>>;
 
 /// Every element of every row finite; a bad one is named `key[row][column]` (the element the
 /// operator must fix, as the safety monitor's own reader names it) at its line and column.
@@ -454,190 +456,278 @@ fn vec3(a: &[f64; 3]) -> Vector3<f64> {
     Vector3::new(a[0], a[1], a[2])
 }
 
+/// Each section of the platform file checks itself (`validate`) and yields its part of the
+/// platform; `build` only puts the parts together, in the order the errors are reported.
 fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
-    let g = &raw.geometry;
-    let m = g.frame_anchors_m.get_ref().len();
-    finite_rows(loc, &g.frame_anchors_m, "geometry.frame_anchors_m")?;
-    finite_rows(loc, &g.platform_anchors_m, "geometry.platform_anchors_m")?;
-    if g.platform_anchors_m.get_ref().len() != m {
-        return Err(loc.err(
-            g.platform_anchors_m.span(),
-            "geometry.platform_anchors_m",
-            format!(
-                "has {} rows but geometry.frame_anchors_m has {m}",
-                g.platform_anchors_m.get_ref().len()
-            ),
-        ));
-    }
+    let anchors = raw.geometry.validate(loc)?;
+    let m = anchors.frame.len();
     let pulleys = match &raw.pulleys {
         None => None,
-        Some(p) => {
-            let radius = per_cable(loc, &p.radius_m, "pulleys.radius_m", m)?;
-            if let Some(i) = radius.iter().position(|r| *r < 0.0) {
-                return Err(loc.err(
-                    p.radius_m.span(),
-                    format!("pulleys.radius_m[{i}]"),
-                    "must be >= 0",
-                ));
-            }
-            let axes = p.swivel_axes.get_ref();
-            if axes.len() != m {
-                return Err(loc.err(
-                    p.swivel_axes.span(),
-                    "pulleys.swivel_axes",
-                    format!("has {} rows but there are {m} cables", axes.len()),
-                ));
-            }
-            finite_rows(loc, &p.swivel_axes, "pulleys.swivel_axes")?;
-            Some(Pulleys {
-                radius,
-                axis: axes.iter().map(|r| vec3(r.get_ref())).collect(),
-            })
-        }
+        Some(p) => Some(p.validate(loc, m)?),
     };
     let k_f = per_cable(loc, &raw.elasticity.k_f_n, "elasticity.k_f_n", m)?;
     let w = raw.load.wrench_n_nm.get_ref();
     w.finite(loc, "load.wrench_n_nm")?;
-    let fo = &raw.forces;
-    let f_min = *fo.f_min_n.get_ref();
-    loc.finite(&fo.f_min_n, "forces.f_min_n", &[f_min])?;
-    let f_max = loc.positive(&fo.f_max_n, "forces.f_max_n")?;
-    let f_abs_max = loc.positive(&fo.f_abs_max_n, "forces.f_abs_max_n")?;
-    if f_min < 0.0 || f_min >= f_max {
-        return Err(loc.err(
-            fo.f_min_n.span(),
-            "forces.f_min_n",
-            format!("must satisfy 0 <= f_min_n < f_max_n ({f_min} N vs {f_max} N)"),
-        ));
-    }
-    if f_max > f_abs_max {
-        return Err(loc.err(
-            fo.f_max_n.span(),
-            "forces.f_max_n",
-            format!("must not exceed forces.f_abs_max_n ({f_max} N > {f_abs_max} N)"),
-        ));
-    }
-
+    let forces = raw.forces.validate(loc)?;
     let params = ModelParams {
-        a: g.frame_anchors_m
-            .get_ref()
-            .iter()
-            .map(|r| vec3(r.get_ref()))
-            .collect(),
-        b: g.platform_anchors_m
-            .get_ref()
-            .iter()
-            .map(|r| vec3(r.get_ref()))
-            .collect(),
+        a: anchors.frame,
+        b: anchors.platform,
         pulleys,
         k_f,
         w_e: Vector6::from_column_slice(&w[..]),
-        f_min,
-        f_max,
+        f_min: forces.f_min,
+        f_max: forces.f_max,
     };
     let model = Model::new(params).map_err(|e| model_error(loc, &raw, e))?;
-
-    let l = &raw.limits;
-    let limits = MotionLimits {
-        linear_velocity_max: loc.positive(
-            &l.linear_velocity_max_m_per_s,
-            "limits.linear_velocity_max_m_per_s",
-        )?,
-        angular_velocity_max: loc
-            .positive(
-                &l.angular_velocity_max_deg_per_s,
-                "limits.angular_velocity_max_deg_per_s",
-            )?
-            .to_radians(),
-        linear_acceleration_max: loc.positive(
-            &l.linear_acceleration_max_m_per_s2,
-            "limits.linear_acceleration_max_m_per_s2",
-        )?,
-        angular_acceleration_max: loc
-            .positive(
-                &l.angular_acceleration_max_deg_per_s2,
-                "limits.angular_acceleration_max_deg_per_s2",
-            )?
-            .to_radians(),
+    let limits = raw.limits.validate(loc)?;
+    let winch = raw.winch.validate(loc)?;
+    let region = raw.workspace.validate(loc)?;
+    let (home, f_ini) = raw.home.validate(loc, &region, m, forces.f_abs_max)?;
+    let sections = sections(loc, &raw.sections, m)?;
+    let dynamics = match &raw.dynamics {
+        None => None,
+        Some(d) => Some(dynamics(loc, d, model.params().w_e)?),
     };
-    let winch = WinchData {
-        drum_diameter: loc.positive(&raw.winch.drum_diameter_m, "winch.drum_diameter_m")?,
-        rope_diameter: loc.positive(&raw.winch.rope_diameter_m, "winch.rope_diameter_m")?,
-    };
-
-    let ws = &raw.workspace;
-    for (v, key) in [
-        (&ws.position_min_m, "workspace.position_min_m"),
-        (&ws.position_max_m, "workspace.position_max_m"),
-        (&ws.rotation_min_deg, "workspace.rotation_min_deg"),
-        (&ws.rotation_max_deg, "workspace.rotation_max_deg"),
-    ] {
-        v.get_ref().finite(loc, key)?;
-    }
-    for k in 0..3 {
-        if ws.position_min_m.get_ref()[k] >= ws.position_max_m.get_ref()[k] {
-            return Err(loc.err(
-                ws.position_max_m.span(),
-                format!("workspace.position_max_m[{k}]"),
-                "must be greater than workspace.position_min_m",
-            ));
-        }
-        if ws.rotation_min_deg.get_ref()[k] > ws.rotation_max_deg.get_ref()[k] {
-            return Err(loc.err(
-                ws.rotation_max_deg.span(),
-                format!("workspace.rotation_max_deg[{k}]"),
-                "must be >= workspace.rotation_min_deg",
-            ));
-        }
-    }
-    let region = Region {
-        position: PositionBox {
-            min: vec3(ws.position_min_m.get_ref()),
-            max: vec3(ws.position_max_m.get_ref()),
-        },
-        rotation_min: vec3(ws.rotation_min_deg.get_ref()).map(f64::to_radians),
-        rotation_max: vec3(ws.rotation_max_deg.get_ref()).map(f64::to_radians),
-    };
-
-    let h = &raw.home;
-    h.position_m.get_ref().finite(loc, "home.position_m")?;
-    h.rotation_deg.get_ref().finite(loc, "home.rotation_deg")?;
-    let home = Pose::new(
-        vec3(h.position_m.get_ref()),
-        vec3(h.rotation_deg.get_ref()).map(f64::to_radians),
-    );
-    if !region.contains(&home) {
+    let name = raw.platform.name.get_ref().trim().to_string();
+    if name.is_empty() {
         return Err(loc.err(
-            h.position_m.span(),
-            "home",
-            "the home pose lies outside the workspace region",
+            raw.platform.name.span(),
+            "platform.name",
+            "must not be empty",
         ));
     }
-    let f_ini = match &h.f_ini_n {
-        None => None,
-        Some(v) => {
-            let f = v.get_ref();
-            if f.len() != m {
-                return Err(loc.err(
-                    v.span(),
-                    "home.f_ini_n",
-                    format!("has {} entries but there are {m} cables", f.len()),
-                ));
-            }
-            loc.finite(v, "home.f_ini_n", f)?;
-            if let Some(i) = f.iter().position(|x| *x <= 0.0 || *x > f_abs_max) {
-                return Err(loc.err(
-                    v.span(),
-                    format!("home.f_ini_n[{i}]"),
-                    format!("must lie in (0, f_abs_max_n], got {} N", f[i]),
-                ));
-            }
-            Some(f.clone())
-        }
-    };
+    Ok(Platform {
+        name,
+        description: raw.platform.description.clone(),
+        model,
+        f_abs_max: forces.f_abs_max,
+        limits,
+        winch,
+        region,
+        home,
+        f_ini,
+        sections,
+        dynamics,
+    })
+}
 
+/// The anchors of `[geometry]`: a_i on the frame, b_i on the platform (eq. 2.1).
+struct Anchors {
+    frame: Vec<Vector3<f64>>,
+    platform: Vec<Vector3<f64>>,
+}
+
+/// The force limits of `[forces]`, checked against each other.
+struct ForceLimits {
+    f_min: f64,
+    f_max: f64,
+    f_abs_max: f64,
+}
+
+impl RawGeometry {
+    /// The frame and platform anchors a_i, b_i (eq. 2.1), one row per cable each.
+    fn validate(&self, loc: &Locator) -> Result<Anchors, ConfigError> {
+        let m = self.frame_anchors_m.get_ref().len();
+        finite_rows(loc, &self.frame_anchors_m, "geometry.frame_anchors_m")?;
+        finite_rows(loc, &self.platform_anchors_m, "geometry.platform_anchors_m")?;
+        if self.platform_anchors_m.get_ref().len() != m {
+            return Err(loc.err(
+                self.platform_anchors_m.span(),
+                "geometry.platform_anchors_m",
+                format!(
+                    "has {} rows but geometry.frame_anchors_m has {m}",
+                    self.platform_anchors_m.get_ref().len()
+                ),
+            ));
+        }
+        let rows = |r: &Rows| r.get_ref().iter().map(|r| vec3(r.get_ref())).collect();
+        Ok(Anchors {
+            frame: rows(&self.frame_anchors_m),
+            platform: rows(&self.platform_anchors_m),
+        })
+    }
+}
+
+impl RawPulleys {
+    fn validate(&self, loc: &Locator, m: usize) -> Result<Pulleys, ConfigError> {
+        let radius = per_cable(loc, &self.radius_m, "pulleys.radius_m", m)?;
+        if let Some(i) = radius.iter().position(|r| *r < 0.0) {
+            return Err(loc.err(
+                self.radius_m.span(),
+                format!("pulleys.radius_m[{i}]"),
+                "must be >= 0",
+            ));
+        }
+        let axes = self.swivel_axes.get_ref();
+        if axes.len() != m {
+            return Err(loc.err(
+                self.swivel_axes.span(),
+                "pulleys.swivel_axes",
+                format!("has {} rows but there are {m} cables", axes.len()),
+            ));
+        }
+        finite_rows(loc, &self.swivel_axes, "pulleys.swivel_axes")?;
+        Ok(Pulleys {
+            radius,
+            axis: axes.iter().map(|r| vec3(r.get_ref())).collect(),
+        })
+    }
+}
+
+impl RawForces {
+    fn validate(&self, loc: &Locator) -> Result<ForceLimits, ConfigError> {
+        let f_min = *self.f_min_n.get_ref();
+        loc.finite(&self.f_min_n, "forces.f_min_n", &[f_min])?;
+        let f_max = loc.positive(&self.f_max_n, "forces.f_max_n")?;
+        let f_abs_max = loc.positive(&self.f_abs_max_n, "forces.f_abs_max_n")?;
+        if f_min < 0.0 || f_min >= f_max {
+            return Err(loc.err(
+                self.f_min_n.span(),
+                "forces.f_min_n",
+                format!("must satisfy 0 <= f_min_n < f_max_n ({f_min} N vs {f_max} N)"),
+            ));
+        }
+        if f_max > f_abs_max {
+            return Err(loc.err(
+                self.f_max_n.span(),
+                "forces.f_max_n",
+                format!("must not exceed forces.f_abs_max_n ({f_max} N > {f_abs_max} N)"),
+            ));
+        }
+        Ok(ForceLimits {
+            f_min,
+            f_max,
+            f_abs_max,
+        })
+    }
+}
+
+impl RawLimits {
+    /// The motion limits in SI units (degrees converted to radians here, at the edge).
+    fn validate(&self, loc: &Locator) -> Result<MotionLimits, ConfigError> {
+        Ok(MotionLimits {
+            linear_velocity_max: loc.positive(
+                &self.linear_velocity_max_m_per_s,
+                "limits.linear_velocity_max_m_per_s",
+            )?,
+            angular_velocity_max: loc
+                .positive(
+                    &self.angular_velocity_max_deg_per_s,
+                    "limits.angular_velocity_max_deg_per_s",
+                )?
+                .to_radians(),
+            linear_acceleration_max: loc.positive(
+                &self.linear_acceleration_max_m_per_s2,
+                "limits.linear_acceleration_max_m_per_s2",
+            )?,
+            angular_acceleration_max: loc
+                .positive(
+                    &self.angular_acceleration_max_deg_per_s2,
+                    "limits.angular_acceleration_max_deg_per_s2",
+                )?
+                .to_radians(),
+        })
+    }
+}
+
+impl RawWinch {
+    fn validate(&self, loc: &Locator) -> Result<WinchData, ConfigError> {
+        Ok(WinchData {
+            drum_diameter: loc.positive(&self.drum_diameter_m, "winch.drum_diameter_m")?,
+            rope_diameter: loc.positive(&self.rope_diameter_m, "winch.rope_diameter_m")?,
+        })
+    }
+}
+
+impl RawWorkspace {
+    /// The workspace region: a position box and rotation bounds (radians inside).
+    fn validate(&self, loc: &Locator) -> Result<Region, ConfigError> {
+        for (v, key) in [
+            (&self.position_min_m, "workspace.position_min_m"),
+            (&self.position_max_m, "workspace.position_max_m"),
+            (&self.rotation_min_deg, "workspace.rotation_min_deg"),
+            (&self.rotation_max_deg, "workspace.rotation_max_deg"),
+        ] {
+            v.get_ref().finite(loc, key)?;
+        }
+        for k in 0..3 {
+            if self.position_min_m.get_ref()[k] >= self.position_max_m.get_ref()[k] {
+                return Err(loc.err(
+                    self.position_max_m.span(),
+                    format!("workspace.position_max_m[{k}]"),
+                    "must be greater than workspace.position_min_m",
+                ));
+            }
+            if self.rotation_min_deg.get_ref()[k] > self.rotation_max_deg.get_ref()[k] {
+                return Err(loc.err(
+                    self.rotation_max_deg.span(),
+                    format!("workspace.rotation_max_deg[{k}]"),
+                    "must be >= workspace.rotation_min_deg",
+                ));
+            }
+        }
+        Ok(Region {
+            position: PositionBox {
+                min: vec3(self.position_min_m.get_ref()),
+                max: vec3(self.position_max_m.get_ref()),
+            },
+            rotation_min: vec3(self.rotation_min_deg.get_ref()).map(f64::to_radians),
+            rotation_max: vec3(self.rotation_max_deg.get_ref()).map(f64::to_radians),
+        })
+    }
+}
+
+impl RawHome {
+    /// The home pose (inside the workspace region) and the optional initial cable forces.
+    fn validate(
+        &self,
+        loc: &Locator,
+        region: &Region,
+        m: usize,
+        f_abs_max: f64,
+    ) -> Result<(Pose, Option<Vec<f64>>), ConfigError> {
+        self.position_m.get_ref().finite(loc, "home.position_m")?;
+        self.rotation_deg
+            .get_ref()
+            .finite(loc, "home.rotation_deg")?;
+        let home = Pose::new(
+            vec3(self.position_m.get_ref()),
+            vec3(self.rotation_deg.get_ref()).map(f64::to_radians),
+        );
+        if !region.contains(&home) {
+            return Err(loc.err(
+                self.position_m.span(),
+                "home",
+                "the home pose lies outside the workspace region",
+            ));
+        }
+        let Some(v) = &self.f_ini_n else {
+            return Ok((home, None));
+        };
+        let f = v.get_ref();
+        if f.len() != m {
+            return Err(loc.err(
+                v.span(),
+                "home.f_ini_n",
+                format!("has {} entries but there are {m} cables", f.len()),
+            ));
+        }
+        loc.finite(v, "home.f_ini_n", f)?;
+        if let Some(i) = f.iter().position(|x| *x <= 0.0 || *x > f_abs_max) {
+            return Err(loc.err(
+                v.span(),
+                format!("home.f_ini_n[{i}]"),
+                format!("must lie in (0, f_abs_max_n], got {} N", f[i]),
+            ));
+        }
+        Ok((home, Some(f.clone())))
+    }
+}
+
+/// `[sections]`: named groups of cables, numbered 1..=m in the file, 0-based inside.
+fn sections(loc: &Locator, raw: &RawSections, m: usize) -> Result<Vec<Section>, ConfigError> {
     let mut sections = Vec::new();
-    for (name, cables) in &raw.sections {
+    for (name, cables) in raw {
         let mut idx = Vec::new();
         for c in cables.get_ref() {
             if *c < 1 || *c as usize > m {
@@ -662,33 +752,7 @@ fn build(raw: RawPlatform, loc: &Locator) -> Result<Platform, ConfigError> {
             cables: idx,
         });
     }
-
-    let dynamics = match &raw.dynamics {
-        None => None,
-        Some(d) => Some(dynamics(loc, d, model.params().w_e)?),
-    };
-
-    let name = raw.platform.name.get_ref().trim().to_string();
-    if name.is_empty() {
-        return Err(loc.err(
-            raw.platform.name.span(),
-            "platform.name",
-            "must not be empty",
-        ));
-    }
-    Ok(Platform {
-        name,
-        description: raw.platform.description.clone(),
-        model,
-        f_abs_max,
-        limits,
-        winch,
-        region,
-        home,
-        f_ini,
-        sections,
-        dynamics,
-    })
+    Ok(sections)
 }
 
 fn body(loc: &Locator, b: &RawBody, key: &str) -> Result<RigidBody, ConfigError> {
