@@ -182,17 +182,66 @@ impl Check<'_> {
         }
         Ok(Vector3::from(v))
     }
-    fn high_pass(&self, r: &RawHighPass, section: &str) -> Result<[HighPass; 3], SettingsError> {
-        let w = self.range3(
-            r.omega_n_rad_per_s,
+}
+
+/// `[scaling]`: gains and limits of the specific force and angular velocity (SI inside).
+struct Scaling {
+    specific_force_gain: Vector3<f64>,
+    specific_force_limit: Vector3<f64>,
+    angular_velocity_gain: Vector3<f64>,
+    angular_velocity_limit: Vector3<f64>,
+}
+
+impl RawScaling {
+    fn validate(&self, c: &Check) -> Result<Scaling, SettingsError> {
+        Ok(Scaling {
+            specific_force_gain: c.range3(
+                self.specific_force_gain,
+                "scaling.specific_force_gain",
+                0.0,
+                1.0,
+                false,
+            )?,
+            specific_force_limit: c.range3(
+                self.specific_force_limit_m_per_s2,
+                "scaling.specific_force_limit_m_per_s2",
+                0.0,
+                5.0,
+                false,
+            )?,
+            angular_velocity_gain: c.range3(
+                self.angular_velocity_gain,
+                "scaling.angular_velocity_gain",
+                0.0,
+                1.0,
+                false,
+            )?,
+            angular_velocity_limit: c
+                .range3(
+                    self.angular_velocity_limit_deg_per_s,
+                    "scaling.angular_velocity_limit_deg_per_s",
+                    0.0,
+                    30.0,
+                    false,
+                )?
+                .map(f64::to_radians),
+        })
+    }
+}
+
+impl RawHighPass {
+    /// `[translation]` or `[rotation]` (`section`): one high-pass filter per axis.
+    fn validate(&self, c: &Check, section: &str) -> Result<[HighPass; 3], SettingsError> {
+        let w = c.range3(
+            self.omega_n_rad_per_s,
             &format!("{section}.omega_n_rad_per_s"),
             0.0,
             20.0,
             true,
         )?;
-        let z = self.range3(r.zeta, &format!("{section}.zeta"), 0.0, 3.0, true)?;
-        let b = self.range3(
-            r.omega_b_rad_per_s,
+        let z = c.range3(self.zeta, &format!("{section}.zeta"), 0.0, 3.0, true)?;
+        let b = c.range3(
+            self.omega_b_rad_per_s,
             &format!("{section}.omega_b_rad_per_s"),
             0.0,
             10.0,
@@ -203,6 +252,207 @@ impl Check<'_> {
             zeta: z[k],
             omega_b: b[k],
         }))
+    }
+}
+
+impl RawWorkspace {
+    fn validate(&self, c: &Check) -> Result<WorkspaceParams, SettingsError> {
+        let position_min = c.range3(
+            self.position_min_m,
+            "workspace.position_min_m",
+            -5.0,
+            0.0,
+            false,
+        )?;
+        let position_max = c.range3(
+            self.position_max_m,
+            "workspace.position_max_m",
+            0.0,
+            5.0,
+            false,
+        )?;
+        let rotation_max = c
+            .range3(
+                self.rotation_max_deg,
+                "workspace.rotation_max_deg",
+                0.0,
+                30.0,
+                false,
+            )?
+            .map(f64::to_radians);
+        Ok(WorkspaceParams {
+            neutral_offset: c.range3(
+                self.neutral_offset_m,
+                "workspace.neutral_offset_m",
+                -5.0,
+                5.0,
+                false,
+            )?,
+            neutral_rotation: c
+                .range3(
+                    self.neutral_rotation_deg,
+                    "workspace.neutral_rotation_deg",
+                    -30.0,
+                    30.0,
+                    false,
+                )?
+                .map(f64::to_radians),
+            position_min,
+            position_max,
+            rotation_max,
+            linear_velocity_max: c.range(
+                self.linear_velocity_max_m_per_s,
+                "workspace.linear_velocity_max_m_per_s",
+                0.0,
+                10.0,
+                true,
+            )?,
+            linear_acceleration_max: c.range(
+                self.linear_acceleration_max_m_per_s2,
+                "workspace.linear_acceleration_max_m_per_s2",
+                0.0,
+                20.0,
+                true,
+            )?,
+            angular_velocity_max: c
+                .range(
+                    self.angular_velocity_max_deg_per_s,
+                    "workspace.angular_velocity_max_deg_per_s",
+                    0.0,
+                    180.0,
+                    true,
+                )?
+                .to_radians(),
+            angular_acceleration_max: c
+                .range(
+                    self.angular_acceleration_max_deg_per_s2,
+                    "workspace.angular_acceleration_max_deg_per_s2",
+                    0.0,
+                    360.0,
+                    true,
+                )?
+                .to_radians(),
+            return_omega: c.range(
+                self.return_omega_rad_per_s,
+                "workspace.return_omega_rad_per_s",
+                0.0,
+                50.0,
+                true,
+            )?,
+        })
+    }
+}
+
+impl RawTilt {
+    /// `[tilt]`, inside the workspace's rotation, rate and acceleration limits (`raw_ws` for
+    /// the file's own numbers in the messages).
+    fn validate(
+        &self,
+        c: &Check,
+        raw_ws: &RawWorkspace,
+        workspace: &WorkspaceParams,
+    ) -> Result<TiltParams, SettingsError> {
+        let max_deg = [
+            c.range(self.max_deg[0], "tilt.max_deg[0]", 0.0, 30.0, false)?,
+            c.range(self.max_deg[1], "tilt.max_deg[1]", 0.0, 30.0, false)?,
+        ];
+        let tilt = TiltParams {
+            omega_n: c.range(
+                self.omega_n_rad_per_s,
+                "tilt.omega_n_rad_per_s",
+                0.0,
+                20.0,
+                true,
+            )?,
+            zeta: c.range(self.zeta, "tilt.zeta", 0.0, 3.0, true)?,
+            max_rad: max_deg.map(f64::to_radians),
+            rate_max: c
+                .range(
+                    self.rate_max_deg_per_s,
+                    "tilt.rate_max_deg_per_s",
+                    0.0,
+                    10.0,
+                    true,
+                )?
+                .to_radians(),
+            acceleration_max: c
+                .range(
+                    self.acceleration_max_deg_per_s2,
+                    "tilt.acceleration_max_deg_per_s2",
+                    0.0,
+                    100.0,
+                    true,
+                )?
+                .to_radians(),
+        };
+        // The tilt lives inside the cueing rotation range. (A sustained specific force beyond
+        // g sin(tilt.max_deg) is held at that: with specific_force_limit at most that, every
+        // sustained part the scaling lets through is reproduced.)
+        for (k, deg) in max_deg.iter().enumerate() {
+            if tilt.max_rad[k] > workspace.rotation_max[k] {
+                return Err(c.err(
+                    &format!("tilt.max_deg[{k}]"),
+                    format!(
+                        "{deg} exceeds workspace.rotation_max_deg[{k}] = {}",
+                        raw_ws.rotation_max_deg[k]
+                    ),
+                ));
+            }
+        }
+        if tilt.acceleration_max > workspace.angular_acceleration_max {
+            return Err(c.err(
+                "tilt.acceleration_max_deg_per_s2",
+                "exceeds workspace.angular_acceleration_max_deg_per_s2".into(),
+            ));
+        }
+        if tilt.rate_max > workspace.angular_velocity_max {
+            return Err(c.err(
+                "tilt.rate_max_deg_per_s",
+                "exceeds workspace.angular_velocity_max_deg_per_s".into(),
+            ));
+        }
+        Ok(tilt)
+    }
+}
+
+impl RawPerception {
+    fn validate(&self, c: &Check) -> Result<VestibularParams, SettingsError> {
+        let tau = |x: f64, key: &str| c.range(x, &format!("perception.{key}"), 0.0, 1000.0, true);
+        Ok(VestibularParams {
+            otolith_tau_a_s: tau(self.otolith_tau_a_s, "otolith_tau_a_s")?,
+            otolith_tau_l_s: tau(self.otolith_tau_l_s, "otolith_tau_l_s")?,
+            otolith_tau_s_s: tau(self.otolith_tau_s_s, "otolith_tau_s_s")?,
+            canal_tau_a_s: tau(self.canal_tau_a_s, "canal_tau_a_s")?,
+            canal_tau_l_s: tau(self.canal_tau_l_s, "canal_tau_l_s")?,
+            canal_tau_s_s: tau(self.canal_tau_s_s, "canal_tau_s_s")?,
+            canal_tau_lead_s: tau(self.canal_tau_lead_s, "canal_tau_lead_s")?,
+            threshold_specific_force: c.range(
+                self.threshold_specific_force_m_per_s2,
+                "perception.threshold_specific_force_m_per_s2",
+                0.0,
+                10.0,
+                true,
+            )?,
+            threshold_angular_velocity: c
+                .range(
+                    self.threshold_angular_velocity_deg_per_s,
+                    "perception.threshold_angular_velocity_deg_per_s",
+                    0.0,
+                    30.0,
+                    true,
+                )?
+                .to_radians(),
+        })
+    }
+}
+
+impl RawRun {
+    fn validate(&self, c: &Check) -> Result<RawRun, SettingsError> {
+        Ok(RawRun {
+            fade_s: c.range(self.fade_s, "run.fade_s", 0.0, 10.0, false)?,
+            settle_max_s: c.range(self.settle_max_s, "run.settle_max_s", 0.0, 120.0, true)?,
+            tracker_lead_s: c.range(self.tracker_lead_s, "run.tracker_lead_s", 0.0, 0.1, false)?,
+        })
     }
 }
 
@@ -228,184 +478,13 @@ impl CueingSettings {
             message: e.message().trim().to_string(),
         })?;
         let c = Check { file };
-        let g = GRAVITY_M_PER_S2;
-        let s = &raw.scaling;
-        let specific_force_gain = c.range3(
-            s.specific_force_gain,
-            "scaling.specific_force_gain",
-            0.0,
-            1.0,
-            false,
-        )?;
-        let specific_force_limit = c.range3(
-            s.specific_force_limit_m_per_s2,
-            "scaling.specific_force_limit_m_per_s2",
-            0.0,
-            5.0,
-            false,
-        )?;
-        let angular_velocity_gain = c.range3(
-            s.angular_velocity_gain,
-            "scaling.angular_velocity_gain",
-            0.0,
-            1.0,
-            false,
-        )?;
-        let angular_velocity_limit = c
-            .range3(
-                s.angular_velocity_limit_deg_per_s,
-                "scaling.angular_velocity_limit_deg_per_s",
-                0.0,
-                30.0,
-                false,
-            )?
-            .map(f64::to_radians);
-        let translation = c.high_pass(&raw.translation, "translation")?;
-        let rotation = c.high_pass(&raw.rotation, "rotation")?;
-        let ws = &raw.workspace;
-        let position_min = c.range3(
-            ws.position_min_m,
-            "workspace.position_min_m",
-            -5.0,
-            0.0,
-            false,
-        )?;
-        let position_max = c.range3(
-            ws.position_max_m,
-            "workspace.position_max_m",
-            0.0,
-            5.0,
-            false,
-        )?;
-        let rotation_max = c
-            .range3(
-                ws.rotation_max_deg,
-                "workspace.rotation_max_deg",
-                0.0,
-                30.0,
-                false,
-            )?
-            .map(f64::to_radians);
-        let workspace = WorkspaceParams {
-            neutral_offset: c.range3(
-                ws.neutral_offset_m,
-                "workspace.neutral_offset_m",
-                -5.0,
-                5.0,
-                false,
-            )?,
-            neutral_rotation: c
-                .range3(
-                    ws.neutral_rotation_deg,
-                    "workspace.neutral_rotation_deg",
-                    -30.0,
-                    30.0,
-                    false,
-                )?
-                .map(f64::to_radians),
-            position_min,
-            position_max,
-            rotation_max,
-            linear_velocity_max: c.range(
-                ws.linear_velocity_max_m_per_s,
-                "workspace.linear_velocity_max_m_per_s",
-                0.0,
-                10.0,
-                true,
-            )?,
-            linear_acceleration_max: c.range(
-                ws.linear_acceleration_max_m_per_s2,
-                "workspace.linear_acceleration_max_m_per_s2",
-                0.0,
-                20.0,
-                true,
-            )?,
-            angular_velocity_max: c
-                .range(
-                    ws.angular_velocity_max_deg_per_s,
-                    "workspace.angular_velocity_max_deg_per_s",
-                    0.0,
-                    180.0,
-                    true,
-                )?
-                .to_radians(),
-            angular_acceleration_max: c
-                .range(
-                    ws.angular_acceleration_max_deg_per_s2,
-                    "workspace.angular_acceleration_max_deg_per_s2",
-                    0.0,
-                    360.0,
-                    true,
-                )?
-                .to_radians(),
-            return_omega: c.range(
-                ws.return_omega_rad_per_s,
-                "workspace.return_omega_rad_per_s",
-                0.0,
-                50.0,
-                true,
-            )?,
-        };
-        let t = &raw.tilt;
-        let max_deg = [
-            c.range(t.max_deg[0], "tilt.max_deg[0]", 0.0, 30.0, false)?,
-            c.range(t.max_deg[1], "tilt.max_deg[1]", 0.0, 30.0, false)?,
-        ];
-        let tilt = TiltParams {
-            omega_n: c.range(
-                t.omega_n_rad_per_s,
-                "tilt.omega_n_rad_per_s",
-                0.0,
-                20.0,
-                true,
-            )?,
-            zeta: c.range(t.zeta, "tilt.zeta", 0.0, 3.0, true)?,
-            max_rad: max_deg.map(f64::to_radians),
-            rate_max: c
-                .range(
-                    t.rate_max_deg_per_s,
-                    "tilt.rate_max_deg_per_s",
-                    0.0,
-                    10.0,
-                    true,
-                )?
-                .to_radians(),
-            acceleration_max: c
-                .range(
-                    t.acceleration_max_deg_per_s2,
-                    "tilt.acceleration_max_deg_per_s2",
-                    0.0,
-                    100.0,
-                    true,
-                )?
-                .to_radians(),
-        };
-        // The tilt lives inside the cueing rotation range. (A sustained specific force beyond
-        // g sin(tilt.max_deg) is held at that: with specific_force_limit at most that, every
-        // sustained part the scaling lets through is reproduced.)
-        for k in 0..2 {
-            if tilt.max_rad[k] > rotation_max[k] {
-                return Err(c.err(
-                    &format!("tilt.max_deg[{k}]"),
-                    format!(
-                        "{} exceeds workspace.rotation_max_deg[{k}] = {}",
-                        max_deg[k], ws.rotation_max_deg[k]
-                    ),
-                ));
-            }
-        }
-        if tilt.acceleration_max > workspace.angular_acceleration_max {
-            return Err(c.err(
-                "tilt.acceleration_max_deg_per_s2",
-                "exceeds workspace.angular_acceleration_max_deg_per_s2".into(),
-            ));
-        }
-        if tilt.rate_max > workspace.angular_velocity_max {
-            return Err(c.err(
-                "tilt.rate_max_deg_per_s",
-                "exceeds workspace.angular_velocity_max_deg_per_s".into(),
-            ));
-        }
+        // Section by section, in the file's order of dependence: the tilt is checked against
+        // the workspace it lives in.
+        let scaling = raw.scaling.validate(&c)?;
+        let translation = raw.translation.validate(&c, "translation")?;
+        let rotation = raw.rotation.validate(&c, "rotation")?;
+        let workspace = raw.workspace.validate(&c)?;
+        let tilt = raw.tilt.validate(&c, &raw.workspace, &workspace)?;
         let head_m = c.range3(
             raw.rider.head_position_m,
             "rider.head_position_m",
@@ -413,56 +492,25 @@ impl CueingSettings {
             3.0,
             false,
         )?;
-        let pr = &raw.perception;
-        let tau = |x: f64, key: &str| c.range(x, &format!("perception.{key}"), 0.0, 1000.0, true);
-        let perception = VestibularParams {
-            otolith_tau_a_s: tau(pr.otolith_tau_a_s, "otolith_tau_a_s")?,
-            otolith_tau_l_s: tau(pr.otolith_tau_l_s, "otolith_tau_l_s")?,
-            otolith_tau_s_s: tau(pr.otolith_tau_s_s, "otolith_tau_s_s")?,
-            canal_tau_a_s: tau(pr.canal_tau_a_s, "canal_tau_a_s")?,
-            canal_tau_l_s: tau(pr.canal_tau_l_s, "canal_tau_l_s")?,
-            canal_tau_s_s: tau(pr.canal_tau_s_s, "canal_tau_s_s")?,
-            canal_tau_lead_s: tau(pr.canal_tau_lead_s, "canal_tau_lead_s")?,
-            threshold_specific_force: c.range(
-                pr.threshold_specific_force_m_per_s2,
-                "perception.threshold_specific_force_m_per_s2",
-                0.0,
-                10.0,
-                true,
-            )?,
-            threshold_angular_velocity: c
-                .range(
-                    pr.threshold_angular_velocity_deg_per_s,
-                    "perception.threshold_angular_velocity_deg_per_s",
-                    0.0,
-                    30.0,
-                    true,
-                )?
-                .to_radians(),
-        };
+        let perception = raw.perception.validate(&c)?;
+        let run = raw.run.validate(&c)?;
         Ok(Self {
             washout: WashoutParams {
-                specific_force_gain,
-                specific_force_limit,
-                angular_velocity_gain,
-                angular_velocity_limit,
+                specific_force_gain: scaling.specific_force_gain,
+                specific_force_limit: scaling.specific_force_limit,
+                angular_velocity_gain: scaling.angular_velocity_gain,
+                angular_velocity_limit: scaling.angular_velocity_limit,
                 translation,
                 rotation,
                 tilt,
                 workspace,
                 head_m,
-                gravity: g,
+                gravity: GRAVITY_M_PER_S2,
             },
             perception,
-            fade_s: c.range(raw.run.fade_s, "run.fade_s", 0.0, 10.0, false)?,
-            settle_max_s: c.range(raw.run.settle_max_s, "run.settle_max_s", 0.0, 120.0, true)?,
-            tracker_lead_s: c.range(
-                raw.run.tracker_lead_s,
-                "run.tracker_lead_s",
-                0.0,
-                0.1,
-                false,
-            )?,
+            fade_s: run.fade_s,
+            settle_max_s: run.settle_max_s,
+            tracker_lead_s: run.tracker_lead_s,
         })
     }
 
