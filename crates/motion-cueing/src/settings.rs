@@ -579,8 +579,30 @@ fn check_platform(
     c: &Check,
 ) -> Result<Feasibility, SettingsError> {
     let w = &p.workspace;
-    let reg = &platform.region;
     let neutral = Washout::neutral_of(p, &platform.home);
+    box_inside_region(w, &neutral, platform, c)?;
+    limiter_within_platform_limits(w, platform, c)?;
+    let poses = checked_poses(&neutral, w, &platform.home);
+    let min_margin = static_margin(&poses, platform, c)?;
+    let acceleration_scale = match &platform.dynamics {
+        None => None,
+        Some(body) => Some(dynamic_scale(w, body, &poses, platform, c)?),
+    };
+    Ok(Feasibility {
+        poses: poses.len(),
+        min_static_margin_n: min_margin,
+        acceleration_scale,
+    })
+}
+
+/// The cueing box around `neutral` inside the platform's operating region and rotation range.
+fn box_inside_region(
+    w: &WorkspaceParams,
+    neutral: &Pose,
+    platform: &Platform,
+    c: &Check,
+) -> Result<(), SettingsError> {
+    let reg = &platform.region;
     for k in 0..3 {
         if neutral.r[k] + w.position_min[k] < reg.position.min[k] - 1e-12 {
             return Err(c.err(
@@ -616,6 +638,15 @@ fn check_platform(
             ));
         }
     }
+    Ok(())
+}
+
+/// The limiter's per-coordinate limits within the platform's (table 5.1).
+fn limiter_within_platform_limits(
+    w: &WorkspaceParams,
+    platform: &Platform,
+    c: &Check,
+) -> Result<(), SettingsError> {
     let lim = &platform.limits;
     for (x, max, key) in [
         (
@@ -647,23 +678,33 @@ fn check_platform(
             ));
         }
     }
-    // The box's grid, and the straight way from home to the neutral pose (the cabin moves
-    // there before the drive and back after it, at most at the limiter's accelerations).
-    let mut poses = box_grid(&neutral, w);
+    Ok(())
+}
+
+/// The box's grid, and the straight way from home to the neutral pose (the cabin moves
+/// there before the drive and back after it, at most at the limiter's accelerations).
+fn checked_poses(neutral: &Pose, w: &WorkspaceParams, home: &Pose) -> Vec<Pose> {
+    let mut poses = box_grid(neutral, w);
     let way = TRANSITION_SAMPLES;
     for i in 0..=way {
         let s = i as f64 / way as f64;
         poses.push(Pose::new(
-            platform.home.r + (neutral.r - platform.home.r) * s,
-            platform.home.phi + (neutral.phi - platform.home.phi) * s,
+            home.r + (neutral.r - home.r) * s,
+            home.phi + (neutral.phi - home.phi) * s,
         ));
     }
+    poses
+}
+
+/// The smallest static margin (eq. 3.41) over `poses`; an error at the first pose that is not
+/// wrench feasible at rest.
+fn static_margin(poses: &[Pose], platform: &Platform, c: &Check) -> Result<f64, SettingsError> {
     let model = &platform.model;
     let pp = model.params();
     let mut data = cdpr_model::Data::new(model);
     let mut forces = vec![0.0; model.m()];
     let mut min_margin = f64::INFINITY;
-    for pose in &poses {
+    for pose in poses {
         let infeasible = |why: String| {
             c.err(
                 "workspace",
@@ -697,54 +738,57 @@ fn check_platform(
         }
         min_margin = min_margin.min(fd.margin);
     }
-    let acceleration_scale = match &platform.dynamics {
-        None => None,
-        Some(body) => {
-            // Per-coordinate limits: the norm of (a_x, a_y, a_z) reaches √3 a_max.
-            let r3 = 3f64.sqrt();
-            let s = cdpr_model::dynamics::feasible_acceleration_scale(
-                model,
-                body,
-                &poses,
-                f64::NEG_INFINITY,
-                r3 * w.linear_acceleration_max,
-                r3 * w.angular_acceleration_max,
-                r3 * w.angular_velocity_max,
-            )
-            .map_err(|e| {
-                c.err(
-                    "workspace",
-                    format!("dynamic wrench on `{}`: {e}", platform.name),
-                )
-            })?;
-            if s.scale < FEASIBILITY_MARGIN {
-                let at = poses[s.pose_index];
-                return Err(c.err(
-                    "workspace",
-                    format!(
-                        "the limiter's accelerations are not wrench feasible with margin on `{}`: \
-                         scale {:.2} < {FEASIBILITY_MARGIN} at [{:.3}, {:.3}, {:.3}] m, [{:.2}, {:.2}, {:.2}]°, cable {} \
-                         (lower workspace.linear_acceleration_max_m_per_s2 / angular limits or shrink the box)",
-                        platform.name,
-                        s.scale,
-                        at.r.x,
-                        at.r.y,
-                        at.r.z,
-                        at.phi.x.to_degrees(),
-                        at.phi.y.to_degrees(),
-                        at.phi.z.to_degrees(),
-                        s.cable + 1
-                    ),
-                ));
-            }
-            Some(s.scale)
-        }
-    };
-    Ok(Feasibility {
-        poses: poses.len(),
-        min_static_margin_n: min_margin,
-        acceleration_scale,
-    })
+    Ok(min_margin)
+}
+
+/// The largest factor on the limiter's accelerations that keeps every pose feasible with the
+/// dynamic wrench of `body`; an error below `FEASIBILITY_MARGIN`.
+fn dynamic_scale(
+    w: &WorkspaceParams,
+    body: &cdpr_model::dynamics::RigidBody,
+    poses: &[Pose],
+    platform: &Platform,
+    c: &Check,
+) -> Result<f64, SettingsError> {
+    let model = &platform.model;
+    // Per-coordinate limits: the norm of (a_x, a_y, a_z) reaches √3 a_max.
+    let r3 = 3f64.sqrt();
+    let s = cdpr_model::dynamics::feasible_acceleration_scale(
+        model,
+        body,
+        poses,
+        f64::NEG_INFINITY,
+        r3 * w.linear_acceleration_max,
+        r3 * w.angular_acceleration_max,
+        r3 * w.angular_velocity_max,
+    )
+    .map_err(|e| {
+        c.err(
+            "workspace",
+            format!("dynamic wrench on `{}`: {e}", platform.name),
+        )
+    })?;
+    if s.scale < FEASIBILITY_MARGIN {
+        let at = poses[s.pose_index];
+        return Err(c.err(
+            "workspace",
+            format!(
+                "the limiter's accelerations are not wrench feasible with margin on `{}`: \
+                 scale {:.2} < {FEASIBILITY_MARGIN} at [{:.3}, {:.3}, {:.3}] m, [{:.2}, {:.2}, {:.2}]°, cable {} \
+                 (lower workspace.linear_acceleration_max_m_per_s2 / angular limits or shrink the box)",
+                platform.name,
+                s.scale,
+                at.r.x,
+                at.r.y,
+                at.r.z,
+                at.phi.x.to_degrees(),
+                at.phi.y.to_degrees(),
+                at.phi.z.to_degrees(),
+                s.cable + 1
+            ),
+        ));
+    }
+    Ok(s.scale)
 }
 
 #[cfg(test)]
