@@ -7,14 +7,15 @@
 //! elastostatic forward kinematics (eq. 2.44). Eq. 3.42 chooses f_ini to minimise
 //! Σ_s ‖f_ref(s) − f(s, f_ini)‖² with f_ref from eq. 3.41. f_ini must itself balance the
 //! load at x_0, so it moves only in the kernel of A^T(x_0) (eq. 2.40): f_ini = f_p + H λ,
-//! λ ∈ R^{m−6}; the forces depend on λ almost linearly, and a few Gauss–Newton steps with a
-//! finite-difference Jacobian solve it.
+//! λ ∈ R^{m−6}; the forces depend on λ almost linearly, and a few steps of the stack's one
+//! Levenberg–Marquardt (nearly Gauss–Newton) with a finite-difference Jacobian solve it.
 
 use cdpr_model::forward::{self, FkError, FkOptions};
 use cdpr_model::kinematics::{self, KinematicsError};
+use cdpr_model::levenberg_marquardt as lm;
 use cdpr_model::statics::{self, StaticsError};
 use cdpr_model::{Data, Model, Pose, elastostatics};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, Dyn};
 
 /// Cable offsets q_off = φ_el(x_0, f) − φ(x_0) = −K^{-1} f (eq. 6.24), m.
 pub fn cable_offsets(
@@ -40,6 +41,10 @@ pub enum SetupError {
     Forward { sample: usize, err: FkError },
     #[error("the path is empty")]
     EmptyPath,
+    #[error("the solver for f_ini: singular normal equations (iteration {iteration})")]
+    Singular { iteration: usize },
+    #[error("the solver for f_ini: a cost or gradient is not finite (iteration {iteration})")]
+    NonFinite { iteration: usize },
     #[error("f_ini(λ) is not wrench feasible at the set-up pose: cable {cable} at {force:.0} N")]
     Infeasible { cable: usize, force: f64 },
 }
@@ -86,65 +91,49 @@ pub fn initial_tension(
         f_ref.push(f);
     }
     let ref_vec = DVector::from_iterator(m * path.len(), f_ref.iter().flatten().copied());
-    let forces = |lambda: &DVector<f64>, data: &mut Data| -> Result<DVector<f64>, SetupError> {
-        let f_ini = DVector::from_column_slice(&f_p) + &h * lambda;
-        let q_off = cable_offsets(model, data, x0, f_ini.as_slice())?;
-        let mut out = DVector::zeros(m * path.len());
-        let mut q_theta = vec![0.0; m];
-        let opts = FkOptions::default();
-        for (s, x) in path.iter().enumerate() {
-            kinematics::inverse(model, data, x)?;
-            for i in 0..m {
-                q_theta[i] = data.q[i] + q_off[i];
-            }
-            forward::elastostatic(model, data, &q_theta, x, &opts)
-                .map_err(|err| SetupError::Forward { sample: s, err })?;
-            out.rows_mut(s * m, m).copy_from_slice(&data.f);
-        }
-        Ok(out)
+    let mut problem = Tension {
+        model,
+        x0,
+        path,
+        f_p: DVector::from_column_slice(&f_p),
+        h,
+        ref_vec,
+        data,
+        f_now: DVector::zeros(0),
     };
-    let k = h.ncols();
-    let mut lambda = DVector::zeros(k);
-    let f_start = forces(&lambda, &mut data)?;
-    let rms = |f: &DVector<f64>| ((&ref_vec - f).norm_squared() / f.len() as f64).sqrt();
-    let rms_start = rms(&f_start);
-    let mut f_now = f_start;
-    let mut iterations = 0;
-    for it in 0..8 {
-        iterations = it + 1;
-        // Finite-difference Jacobian ∂f/∂λ (10 N steps: the law is linear in f, the geometry
-        // barely moves).
-        let mut jac = DMatrix::zeros(f_now.len(), k);
-        for c in 0..k {
-            let mut l2 = lambda.clone();
-            l2[c] += 10.0;
-            let f2 = forces(&l2, &mut data)?;
-            jac.set_column(c, &((&f2 - &f_now) / 10.0));
+    let k = problem.h.ncols();
+    let start = problem.forces(&DVector::zeros(k))?;
+    let rms_start = problem.rms(&start);
+    let settings = lm::Settings {
+        // The forces depend on λ almost linearly: a few steps; ‖δλ‖ < 1 N ends it.
+        max_iterations: 8,
+        max_trials: 10,
+        // Nearly Gauss–Newton, damped only where the FK fails or the cost rises.
+        initial_damping: 1e-9,
+        decrease: 10.0,
+        min_damping: 1e-12,
+        increase: 10.0,
+        max_damping: 1e6,
+        damping: lm::Damping::Marquardt { floor: 1e-12 },
+        on_singular: lm::OnSingular::IncreaseDamping,
+        gradient_tolerance: None,
+    };
+    let outcome = match lm::solve(&mut problem, DVector::zeros(k), &settings) {
+        Ok(o) => o,
+        Err(lm::LmError::Start(e) | lm::LmError::Problem { source: e, .. }) => return Err(e),
+        Err(lm::LmError::Singular { iteration }) => {
+            return Err(SetupError::Singular { iteration });
         }
-        let step = (jac.transpose() * &jac)
-            .try_inverse()
-            .map(|inv| inv * (jac.transpose() * (&ref_vec - &f_now)))
-            .unwrap_or_else(|| DVector::zeros(k));
-        // Damped: halve until the cost drops (the FK may fail far out: treat as uphill).
-        let mut t = 1.0;
-        let mut accepted = false;
-        while t > 1e-3 {
-            let cand = &lambda + &step * t;
-            if let Ok(f) = forces(&cand, &mut data)
-                && rms(&f) < rms(&f_now)
-            {
-                lambda = cand;
-                f_now = f;
-                accepted = true;
-                break;
-            }
-            t *= 0.5;
+        Err(lm::LmError::NonFiniteStart) => return Err(SetupError::NonFinite { iteration: 0 }),
+        Err(lm::LmError::NonFiniteGradient { iteration }) => {
+            return Err(SetupError::NonFinite { iteration });
         }
-        if !accepted || step.norm() * t < 1.0 {
-            break;
-        }
-    }
-    let f_ini = DVector::from_column_slice(&f_p) + &h * &lambda;
+    };
+    let lambda = outcome.point;
+    let f_now = problem.forces(&lambda)?;
+    let rms_chosen = problem.rms(&f_now);
+    let mut data = problem.data;
+    let f_ini = &problem.f_p + &problem.h * &lambda;
     if let Some((cable, force)) = f_ini
         .iter()
         .enumerate()
@@ -157,12 +146,105 @@ pub fn initial_tension(
     Ok(InitialTension {
         f_ini: f_ini.iter().copied().collect(),
         q_off,
-        rms_chosen_n: rms(&f_now),
+        rms_chosen_n: rms_chosen,
         rms_start_n: rms_start,
         f_min_n: f_now.min(),
         f_max_n: f_now.max(),
-        iterations,
+        iterations: outcome.iterations,
     })
+}
+
+/// Eq. 3.42 as a least-squares problem in λ (f_ini = f_p + H λ): r(λ) = f(λ) − f_ref over the
+/// path, J = ∂f/∂λ by finite differences.
+struct Tension<'a> {
+    model: &'a Model,
+    x0: &'a Pose,
+    path: &'a [Pose],
+    f_p: DVector<f64>,
+    h: DMatrix<f64>,
+    ref_vec: DVector<f64>,
+    data: Data,
+    /// The forces at the last point whose cost was evaluated (the solver's current point when
+    /// it asks for the normal equations).
+    f_now: DVector<f64>,
+}
+
+impl Tension<'_> {
+    /// The cable forces along the path for λ: the offsets f_ini implies at x_0 (eq. 6.24),
+    /// then the elastostatic forward kinematics at each path pose (eq. 2.44).
+    fn forces(&mut self, lambda: &DVector<f64>) -> Result<DVector<f64>, SetupError> {
+        let m = self.model.m();
+        let f_ini = &self.f_p + &self.h * lambda;
+        let q_off = cable_offsets(self.model, &mut self.data, self.x0, f_ini.as_slice())?;
+        let mut out = DVector::zeros(m * self.path.len());
+        let mut q_theta = vec![0.0; m];
+        let opts = FkOptions::default();
+        for (s, x) in self.path.iter().enumerate() {
+            kinematics::inverse(self.model, &mut self.data, x)?;
+            for i in 0..m {
+                q_theta[i] = self.data.q[i] + q_off[i];
+            }
+            forward::elastostatic(self.model, &mut self.data, &q_theta, x, &opts)
+                .map_err(|err| SetupError::Forward { sample: s, err })?;
+            out.rows_mut(s * m, m).copy_from_slice(&self.data.f);
+        }
+        Ok(out)
+    }
+
+    /// RMS of f_ref − f over the path, N.
+    fn rms(&self, f: &DVector<f64>) -> f64 {
+        ((&self.ref_vec - f).norm_squared() / f.len() as f64).sqrt()
+    }
+}
+
+impl lm::Problem<Dyn> for Tension<'_> {
+    type Point = DVector<f64>;
+    type Error = SetupError;
+
+    fn dim(&self) -> Dyn {
+        Dyn(self.h.ncols())
+    }
+
+    /// A λ whose forward kinematics fails somewhere on the path counts as uphill.
+    fn cost(&mut self, lambda: &DVector<f64>) -> Result<f64, SetupError> {
+        self.f_now = self.forces(lambda)?;
+        Ok(0.5 * (&self.f_now - &self.ref_vec).norm_squared())
+    }
+
+    fn normal_equations(
+        &mut self,
+        lambda: &DVector<f64>,
+        jtj: &mut DMatrix<f64>,
+        g: &mut DVector<f64>,
+    ) -> Result<(), SetupError> {
+        // Forward differences with 10 N steps: the law is linear in f, the geometry barely
+        // moves.
+        let f0 = self.f_now.clone();
+        let mut jac = DMatrix::zeros(f0.len(), lambda.len());
+        for c in 0..lambda.len() {
+            let mut l2 = lambda.clone();
+            l2[c] += 10.0;
+            let f2 = self.forces(&l2)?;
+            jac.set_column(c, &((f2 - &f0) / 10.0));
+        }
+        self.f_now = f0;
+        jtj.copy_from(&(jac.transpose() * &jac));
+        g.copy_from(&(jac.transpose() * (&self.f_now - &self.ref_vec)));
+        Ok(())
+    }
+
+    fn retract(&self, lambda: &DVector<f64>, step: &DVector<f64>) -> DVector<f64> {
+        lambda + step
+    }
+
+    /// Only a strict decrease replaces the point.
+    fn accepts(&mut self, cost: f64, cost_new: f64) -> bool {
+        cost_new < cost
+    }
+
+    fn accepted(&mut self, step: &lm::Accepted<'_, DVector<f64>, Dyn>) -> bool {
+        step.step.norm() < 1.0
+    }
 }
 
 #[cfg(test)]
