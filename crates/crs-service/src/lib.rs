@@ -1,4 +1,4 @@
-//! # crs-service: a daemon of the stack as systemd and man see it
+//! # crs-service: a daemon of the stack as systemd, man and the administrator see it
 //!
 //! * [`notify_ready`]: `READY=1` (with a `STATUS=` line) once the daemon's ports and sockets
 //!   are open, so a `Type=notify` unit is "started" when the daemon can do its job, and units
@@ -10,7 +10,12 @@
 //! * [`gen_man_if_asked`]: `DAEMON --gen-man DIR` writes `DIR/DAEMON.1` from the daemon's clap
 //!   command line (clap_mangen), so the installed page never drifts from the flags.
 //!
+//! * [`paths`]: where every binary finds its configuration (the one lookup rule: installed
+//!   `/etc/crs/config`, from the repository `config/`).
+//!
 //! Outside systemd (no `NOTIFY_SOCKET` / `WATCHDOG_USEC`) every call here is a no-op.
+
+pub mod paths;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;

@@ -1,4 +1,4 @@
-//! The stack's one configuration lookup rule (crates/crs-paths, docs/install.md) as an
+//! The stack's one configuration lookup rule (crates/crs-service/src/paths.rs, docs/install.md) as an
 //! installed binary meets it outside the repository: `config/…` defaults resolve to
 //! $CRS_CONFIG_DIR, else ./config, else /etc/crs/config — for `crs sim` and the daemons.
 //! Nothing starts in these runs: `crs sim` stops at its ride check, the daemons at their config.

@@ -23,7 +23,7 @@ pub enum Bench {
 pub struct Args {
     /// Drive bus configuration (TOML; `config/…` is looked up by the stack's rule:
     /// $CRS_CONFIG_DIR, ./config, else /etc/crs/config).
-    #[arg(long, default_value = "config/drives.toml", value_parser = crs_paths::parse_config)]
+    #[arg(long, default_value = "config/drives.toml", value_parser = crs_service::paths::parse_config)]
     config: PathBuf,
     /// Override an interface's transport: `NAME=SPEC` (repeat per interface), or a bare SPEC
     /// when the configuration has one interface (e.g. socketcan:can0, wire:/run/crs/can0.sock).

@@ -52,9 +52,9 @@ pub const KNOWN: [KnownPlatform; 2] = [
 ];
 
 /// The configuration directory's name in the repository; `crs sim` reads the directory the
-/// stack's lookup rule gives ([`crs_paths::config_dir`]: $CRS_CONFIG_DIR, ./config, else
+/// stack's lookup rule gives ([`crs_service::paths::config_dir`]: $CRS_CONFIG_DIR, ./config, else
 /// /etc/crs/config).
-pub const CONFIG_DIR: &str = crs_paths::CONFIG_PREFIX;
+pub const CONFIG_DIR: &str = crs_service::paths::CONFIG_PREFIX;
 
 /// A resolved platform: the files of one run of the stack.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -291,7 +291,7 @@ pub fn run_files(
     let set = select(
         platform,
         overrides.daemon.as_deref(),
-        &crs_paths::config_dir(),
+        &crs_service::paths::config_dir(),
     )?;
     let pick =
         |flag: &Option<PathBuf>, default: &PathBuf| flag.clone().unwrap_or_else(|| default.clone());

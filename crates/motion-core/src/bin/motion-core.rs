@@ -33,7 +33,7 @@ use std::time::Duration;
 struct Args {
     /// Daemon TOML (`config/…` is looked up by the stack's rule: $CRS_CONFIG_DIR, ./config,
     /// else /etc/crs/config).
-    #[arg(long, default_value = "config/motion-core.toml", value_parser = crs_paths::parse_config)]
+    #[arg(long, default_value = "config/motion-core.toml", value_parser = crs_service::paths::parse_config)]
     config: PathBuf,
     /// Waypoint CSV to run (overrides [trajectory].waypoints).
     #[arg(long)]

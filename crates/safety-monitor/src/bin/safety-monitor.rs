@@ -27,7 +27,7 @@ struct Args {
     cmd: Option<Cmd>,
     /// Monitor TOML (`config/…` is looked up by the stack's rule: $CRS_CONFIG_DIR, ./config,
     /// else /etc/crs/config).
-    #[arg(long, default_value = "config/safety-monitor.toml", global = true, value_parser = crs_paths::parse_config)]
+    #[arg(long, default_value = "config/safety-monitor.toml", global = true, value_parser = crs_service::paths::parse_config)]
     config: PathBuf,
     /// Override an interface's transport: `NAME=SPEC` per interface (names from the drives
     /// file), or a bare SPEC when there is one: socketcan:<iface> | udpbus:<group>:<port> |

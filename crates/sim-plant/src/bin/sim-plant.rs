@@ -23,11 +23,11 @@ use std::time::Duration;
 )]
 struct Args {
     /// Plant TOML (effects; its `plant.platform` is the nominal platform).
-    #[arg(long, default_value = "config/plant/icosahedron.toml", value_parser = crs_paths::parse_config)]
+    #[arg(long, default_value = "config/plant/icosahedron.toml", value_parser = crs_service::paths::parse_config)]
     plant: PathBuf,
     /// Drive bus configuration (TOML): transport, SYNC period, the winches' length <-> counts
     /// scaling (the same file drive-io reads).
-    #[arg(long, default_value = "config/drives.toml", value_parser = crs_paths::parse_config)]
+    #[arg(long, default_value = "config/drives.toml", value_parser = crs_service::paths::parse_config)]
     drives: PathBuf,
     /// Platform TOML of the CONTROL model whose φ(home) the drives read at start (default: the
     /// plant's nominal platform). Must be the one motion-core runs.

@@ -1,4 +1,4 @@
-//! # crs-paths: where every binary of the stack finds its configuration
+//! Where every binary of the stack finds its configuration.
 //!
 //! The one lookup rule, used by every binary's default paths (`motion-core`, `drive-io`,
 //! `safety-monitor`, `sim-plant`, `crs`) and by their `--config`-style arguments:
@@ -54,7 +54,7 @@ pub fn resolve_in(path: &Path, dir: &Path) -> PathBuf {
     }
 }
 
-/// A clap value parser for configuration paths (`value_parser = crs_paths::parse_config`):
+/// A clap value parser for configuration paths (`value_parser = crs_service::paths::parse_config`):
 /// the argument, or its default, resolved under the rule.
 pub fn parse_config(arg: &str) -> Result<PathBuf, std::convert::Infallible> {
     Ok(resolve(Path::new(arg)))
