@@ -104,6 +104,12 @@ const RUNTIME: [&str; 7] = [
 #[test]
 fn the_model_library_and_the_data_format_pull_in_no_ipc_rt_can_or_cli() {
     forbid("cdpr-model", &RUNTIME);
+    forbid("cdpr-analysis", &RUNTIME);
+    // The design analyses sit on the model library, below its reports and every daemon.
+    forbid(
+        "cdpr-analysis",
+        &and_the_stack(&["model-analysis", "motion-core", "sim-plant", "drive-io"]),
+    );
     forbid("crs-dataset", &RUNTIME);
     forbid("surrogate", &RUNTIME);
     forbid("load-tracking", &RUNTIME);
