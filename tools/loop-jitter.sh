@@ -44,7 +44,7 @@ have_stress=yes; have_or_install stress-ng stress-ng || have_stress=no
 have_cyclic=yes; have_or_install cyclictest rt-tests || have_cyclic=no
 
 echo "== building loop-jitter (release)"
-cargo build --release -q -p motion-core --bin loop-jitter
+cargo build --release -q -p loop-jitter --bin loop-jitter
 BIN=${CARGO_TARGET_DIR:-target}/release/loop-jitter
 
 # cyclictest -h prints one line per µs bucket ("000123 000045"), then "# Max Latencies: ...";

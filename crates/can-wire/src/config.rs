@@ -48,7 +48,7 @@ impl std::str::FromStr for BusSpec {
         let mut name = None;
         let mut bitrate = None;
         let mut endpoint = None;
-        let mut queue_len = can_transport::wire::model::DEFAULT_QUEUE_LEN;
+        let mut queue_len = can_bus_model::DEFAULT_QUEUE_LEN;
         let mut max_nodes = None;
         let mut max_ids = 128;
         for part in s.split(',') {
@@ -148,8 +148,8 @@ impl std::str::FromStr for BusSpec {
 }
 
 impl BusSpec {
-    pub fn model_config(&self) -> can_transport::wire::model::BusConfig {
-        can_transport::wire::model::BusConfig {
+    pub fn model_config(&self) -> can_bus_model::BusConfig {
+        can_bus_model::BusConfig {
             bitrate_bps: self.bitrate_bps,
             max_nodes: self.max_nodes,
             queue_len: self.queue_len,

@@ -12,7 +12,7 @@
 use crate::config::{BusSpec, Endpoint, HubConfig};
 use crate::counters::Counters;
 use crate::stats::{HubBusStats, NodeEvent, ToWriter, Writer};
-use can_transport::wire::model::{Bus, BusStats, Delivery, SubmitError};
+use can_bus_model::{Bus, BusStats, Delivery, SubmitError};
 use can_transport::wire::proto::{self, Kind, MAX_MESSAGE, RECORD_LEN, Record};
 use can_transport::{CanBus, RxEvent, SocketCanBus};
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd, RawFd};

@@ -1,6 +1,6 @@
 //! `can-wire`: the drive bus as it is on the wire, for every simulation of the stack.
 //!
-//! The hub runs can-transport's bus model (`can_transport::wire::model`: bit time from the
+//! The hub runs the bus model (`can-bus-model`: bit time from the
 //! exact stuffed frame length, arbitration by identifier, a FIFO transmit queue per node) for
 //! one or more buses in real time and connects the stack's processes to it:
 //! * host: each process opens the transport `wire:<socket path>` (a node per connection);

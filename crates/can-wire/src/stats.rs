@@ -4,9 +4,7 @@
 //! The hub thread never formats or writes anything itself.
 
 use crate::config::{Endpoint, HubConfig};
-use can_transport::wire::model::{
-    BusStats, HISTOGRAM_MAX_NS, HISTOGRAM_SIGFIG, IdStats, WINDOW_NS,
-};
+use can_bus_model::{BusStats, HISTOGRAM_MAX_NS, HISTOGRAM_SIGFIG, IdStats, WINDOW_NS};
 use hdrhistogram::Histogram;
 use serde::Serialize;
 use std::path::PathBuf;

@@ -7,8 +7,8 @@
 
 mod common;
 
+use can_bus_model::arbitration_key;
 use can_transport::wire::bits;
-use can_transport::wire::model::arbitration_key;
 use can_transport::{CanBus, CanError, CanFrame, RxEvent, monotonic_ns, open};
 use common::{HubProc, test_dir};
 use std::path::Path;
@@ -384,7 +384,7 @@ fn an_overloaded_bus_fails_visibly_a_light_one_does_not() {
     // delivered the frame, and a SCHED_OTHER debug-build hub on a loaded 2-core test host was
     // seen to stall for 139 ms, which the sender sees as a full queue of 10. The light bus's
     // verdict here is its latency; both buses with the same queue of 10, in model time:
-    // crates/can-transport/tests/wire_model.rs.
+    // crates/can-bus-model/tests/wire_model.rs.
     let dir = test_dir("overload");
     let heavy = dir.join("heavy.sock");
     let light = dir.join("light.sock");

@@ -2,8 +2,8 @@
 //! min ½‖r(x)‖²: the Gauss–Newton step (JᵀJ) δ = −Jᵀr of eq. (2.12–2.15) / (4.11, 4.16), damped
 //! until it descends (Marquardt 1963, Moré 1978). Every solver of the model library and of
 //! calibration runs on it: ν and ν_el ([`crate::forward`]), the plant's pose-dependent ν_el, the
-//! planar ν_el ([`crate::planar`]) and calibration's identification. docs/adr/0013 says why it
-//! is written here and not taken from the `levenberg-marquardt` crate.
+//! planar ν_el (`cdpr_analysis::planar`) and calibration's identification. docs/adr/0013 says
+//! why it is written here and not taken from the `levenberg-marquardt` crate.
 //!
 //! Bounded: at most `max_iterations` Jacobians and `max_trials` damped steps per Jacobian, the
 //! damping clamped to `[min_damping, max_damping]`. The outcome is typed ([`Stop`], [`LmError`]);

@@ -13,15 +13,13 @@
 //! | forward kinematics ν, ν_el | [`forward`] | 2.9–2.15, 2.42–2.43, 2.81 |
 //! | Levenberg–Marquardt for small dense least squares (every solver above and calibration's) | [`levenberg_marquardt`] | 2.12–2.15, 4.11, 4.16 |
 //! | wrench-feasible workspace, reachable workspace W_R | [`workspace`] | 3.29, 3.33–3.35 |
-//! | pose sensitivity to parameter errors | [`sensitivity`] | 3.25–3.28 |
 //! | exact wrench feasibility (LP) | [`feasibility`] | 3.29, 2.38–2.40 |
-//! | planar robots (n = 2, 3; any m > n): IK with pulleys, forces, W_WF, W_R, cond(J_qa) | [`planar`] | 2.3–2.8, 2.30, 2.42, 3.29, 3.33–3.41, 4.23 |
-//! | icosahedron space-frame truss check (matrix stiffness method) | [`truss`] | 5.2–5.7 |
 //! | rigid-body dynamics, inertial wrench w_in | [`dynamics`] | 5.13–5.16, 5.21 |
 //! | operator TOML | [`config`] | tables 5.1, eq. 5.8, 5.12, 5.17, 6.1, 6.20 |
 //!
 //! This crate knows nothing of IPC, real time, CAN or command lines: the daemon (`motion-core`),
-//! the plant, calibration and the CLI build on it.
+//! the plant, calibration and the CLI build on it; the design analyses (planar robots, parameter
+//! sensitivity, the cabin truss) are `cdpr-analysis`.
 //!
 //! Model/Data split: [`Model`] is immutable and validated; [`Data`] is preallocated per
 //! thread, and every hot-path function (inverse kinematics, force distribution, forward
@@ -41,11 +39,8 @@ pub mod kinematics;
 pub mod levenberg_marquardt;
 pub mod model;
 pub mod offset_target;
-pub mod planar;
 pub mod pose;
-pub mod sensitivity;
 pub mod statics;
-pub mod truss;
 pub mod workspace;
 
 pub use model::{Data, MAX_CABLES, MIN_CABLES, Model, ModelError, ModelParams, Pulleys};

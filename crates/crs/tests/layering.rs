@@ -104,6 +104,12 @@ const RUNTIME: [&str; 7] = [
 #[test]
 fn the_model_library_and_the_data_format_pull_in_no_ipc_rt_can_or_cli() {
     forbid("cdpr-model", &RUNTIME);
+    forbid("cdpr-analysis", &RUNTIME);
+    // The design analyses sit on the model library, below its reports and every daemon.
+    forbid(
+        "cdpr-analysis",
+        &and_the_stack(&["model-analysis", "motion-core", "sim-plant", "drive-io"]),
+    );
     forbid("crs-dataset", &RUNTIME);
     forbid("surrogate", &RUNTIME);
     forbid("load-tracking", &RUNTIME);
@@ -173,6 +179,18 @@ fn the_contract_crates_depend_on_no_other_layer() {
     forbid(
         "crs-ipc",
         &and_the_stack(&["cdpr-model", "motion-core", "drive-io", "sim-plant"]),
+    );
+    // The bus model sits on the transport's frame and bit lengths only.
+    forbid(
+        "can-bus-model",
+        &[
+            "cdpr-model",
+            "motion-core",
+            "crs-ipc",
+            "drive-io",
+            "sim-plant",
+            "can-wire",
+        ],
     );
     forbid(
         "can-transport",
@@ -459,9 +477,13 @@ fn nothing_links_the_test_rigs_or_the_wire_hub() {
     // The drive rigs (winch emulator, HIL scenarios, bus bench) are test doubles and the
     // can-wire hub is the simulated wire: a daemon that linked either could run against a
     // double in production. crs-supervisor starts the hub's binary, it does not link it; only the
-    // rigs' bus bench runs a hub in its own process.
+    // rigs' bus bench runs a hub in its own process. The bus model is the hub's alone.
     let (deps, name_of) = graph();
-    for (krate, allowed) in [("drive-rig", &[][..]), ("can-wire", &["drive-rig"][..])] {
+    for (krate, allowed) in [
+        ("drive-rig", &[][..]),
+        ("can-wire", &["drive-rig"][..]),
+        ("can-bus-model", &["can-wire"][..]),
+    ] {
         assert!(name_of.values().any(|n| n == krate), "{krate} missing");
         for (id, ds) in &deps {
             assert!(

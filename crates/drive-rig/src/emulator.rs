@@ -210,150 +210,116 @@ impl EmulatorControl {
 /// Runs the emulator until `control.stop` is set, answering as the drives of every interface
 /// (`buses[k]` = interface k of `cfg.drives`). Bus errors other than a full TX queue end it.
 pub fn run<B: CanBus>(
-    mut buses: Vec<B>,
+    buses: Vec<B>,
     cfg: &EmulatorConfig,
     control: &EmulatorControl,
 ) -> Result<(), can_transport::CanError> {
-    let m = cfg.winches.len().min(MAX_CABLES);
-    let mut bank = DriveBanks::from_parts(
-        &cfg.drives,
-        &cfg.winch_eds,
-        cfg.force_nodes.clone(),
-        cfg.default_heartbeat_ms,
-    );
-    // Interval between the SYNCs of each interface: a CSP drive interpolates over the time
-    // that really passed (on the wire model, SYNC jitter shows as motion).
-    let mut last_sync: Vec<Option<u64>> = vec![None; bank.interfaces()];
-    let mut cursor = 0usize;
-    // With a safety I/O node the drives are real CiA 402 drives: they ignore the monitor's
-    // frames, the node drives their STO inputs; otherwise they validate the heartbeat.
-    let mut io = match (&cfg.safety_io, cfg.safety_watch) {
-        (Some(io_cfg), Some(sw)) => cfg
-            .drives
-            .safety_io_interface()
-            .map(|iface| (iface, SafetyIoNode::new(io_cfg, sw), FrameBuf::default())),
-        _ => None,
-    };
-    match (cfg.safety_watch, &io) {
-        (Some(sw), None) => {
-            bank.enable_safety_watch(sw);
-            control.safety_inhibit.store(true, Ordering::Release);
-        }
-        (_, Some(_)) => {
-            bank.set_sto(true);
-            control.safety_inhibit.store(true, Ordering::Release);
-        }
-        _ => {}
-    }
-    let mut axes: Vec<WinchAxis> = (0..m)
-        .map(|i| {
-            WinchAxis::new(
-                cfg.initial_length_m.get(i).copied().unwrap_or(5.0),
-                cfg.max_speed_m_per_s,
-                cfg.max_accel_m_per_s2,
-            )
-        })
-        .collect();
-    for (i, (w, ax)) in cfg.winches.iter().zip(&axes).enumerate() {
-        let c = w.length_to_counts(ax.length_m).unwrap_or(0);
-        bank.set_actual(i, c, 0, (cfg.pretension_n * 1000.0) as i32);
-    }
-    bank.start(crs_ipc::monotonic_ns());
-    if let Some((_, node, out)) = io.as_mut() {
-        node.start(crs_ipc::monotonic_ns(), out);
-    }
-    let publish = |bank: &DriveBanks, axes: &[WinchAxis], now: u64| {
-        // Seqlock writer: odd while publishing; the fence orders the odd count before the
-        // stores below, the Release of the even count the stores before it.
-        control.publish_seq.fetch_add(1, Ordering::Relaxed);
-        std::sync::atomic::fence(Ordering::Release);
-        for (i, ax) in axes.iter().enumerate() {
-            let d = match bank.demand(i) {
-                MotionDemand::Follow { .. } => DEMAND_FOLLOW,
-                MotionDemand::QuickStop => DEMAND_QUICK_STOP,
-                MotionDemand::Hold => DEMAND_HOLD,
-            };
-            if control.demand[i].swap(d, Ordering::AcqRel) == DEMAND_FOLLOW && d != DEMAND_FOLLOW {
-                control.left_follow_ns[i].store(now, Ordering::Release);
-            }
-            control.length_bits[i].store(ax.length_m.to_bits(), Ordering::Release);
-            control.velocity_bits[i].store(ax.velocity_m_per_s.to_bits(), Ordering::Release);
-            if let Some(s) = bank.slave(i) {
-                control.statusword[i].store(s.statusword(), Ordering::Release);
-                control.nmt[i].store(u16::from(s.nmt_state().code()), Ordering::Release);
-            }
-        }
-        control.publish_seq.fetch_add(1, Ordering::Release);
-    };
-    publish(&bank, &axes, crs_ipc::monotonic_ns());
-    let mut last_pass_ns = crs_ipc::monotonic_ns();
-    let mut last_stall_log_ns = 0u64;
+    let mut em = Emulator::configure(buses, cfg, control);
+    em.activate();
     while !control.stop.load(Ordering::Acquire) {
-        bank.flush(&mut buses)?;
-        flush_io(&mut io, &mut buses)?;
-        // The emulated drives are hardware with their own CPUs: they see each frame when it
-        // arrives on the bus, not when this process (on a non-real-time host, or in the TCG
-        // guest) gets round to reading it. So every frame is handled at its ARRIVAL time —
-        // the kernel's receive stamp where the transport has one (SocketCAN) — and the watches
-        // are judged at the bus time processed so far. Judging at the read time faulted a
-        // starved emulator on its own backlog: the first frame read after a 700 ms stall
-        // checked the safety watch (DriveBank::handle_frame does, per frame) against the last
-        // pair handled before the stall, while the pairs that arrived meanwhile were still
-        // queued (the guest safety-hil flakes of forged_stopping and
-        // forged_rpdo_other_enabling_controlword, "safety heartbeat invalid or missing:
-        // Timeout").
-        let mut rx = can_transport::recv_any(&mut buses, Duration::from_millis(2), &mut cursor)?;
-        let rt_minus_mono = realtime_minus_monotonic_ns();
-        let mut handled = 0;
-        let mut bus_time_ns = 0;
-        while let Some((iface, ev)) = rx {
-            let RxEvent::Frame(frame) = ev else {
-                handled += 1;
-                rx = next_event(&mut buses, handled, &mut cursor)?;
-                continue;
-            };
-            let at = arrival_ns(&frame, rt_minus_mono);
-            bus_time_ns = at;
-            if let Some((io_iface, node, out)) = io.as_mut()
-                && *io_iface == iface
-            {
-                node.handle_frame(&frame.frame, at, out);
-                bank.set_sto(!node.sto_released());
+        em.pass()?;
+    }
+    Ok(())
+}
+
+/// The safety I/O node with its interface and its outgoing frames.
+type IoNode = (usize, SafetyIoNode, FrameBuf);
+
+/// The emulator's state between passes of its loop.
+struct Emulator<'a, B: CanBus> {
+    buses: Vec<B>,
+    cfg: &'a EmulatorConfig,
+    control: &'a EmulatorControl,
+    /// Winches emulated (at most `MAX_CABLES`).
+    m: usize,
+    bank: DriveBanks,
+    /// With a safety I/O node the drives are real CiA 402 drives: they ignore the monitor's
+    /// frames, the node drives their STO inputs; otherwise they validate the heartbeat.
+    io: Option<IoNode>,
+    axes: Vec<WinchAxis>,
+    /// Interval between the SYNCs of each interface: a CSP drive interpolates over the time
+    /// that really passed (on the wire model, SYNC jitter shows as motion).
+    last_sync: Vec<Option<u64>>,
+    /// Round-robin position of `recv_any` over the interfaces.
+    cursor: usize,
+    last_pass_ns: u64,
+    last_stall_log_ns: u64,
+}
+
+impl<'a, B: CanBus> Emulator<'a, B> {
+    /// The drives, the safety I/O node and the winch axes at their initial lengths and the
+    /// pretension, nothing sent yet.
+    fn configure(buses: Vec<B>, cfg: &'a EmulatorConfig, control: &'a EmulatorControl) -> Self {
+        let m = cfg.winches.len().min(MAX_CABLES);
+        let mut bank = DriveBanks::from_parts(
+            &cfg.drives,
+            &cfg.winch_eds,
+            cfg.force_nodes.clone(),
+            cfg.default_heartbeat_ms,
+        );
+        let last_sync: Vec<Option<u64>> = vec![None; bank.interfaces()];
+        let io = match (&cfg.safety_io, cfg.safety_watch) {
+            (Some(io_cfg), Some(sw)) => cfg
+                .drives
+                .safety_io_interface()
+                .map(|iface| (iface, SafetyIoNode::new(io_cfg, sw), FrameBuf::default())),
+            _ => None,
+        };
+        match (cfg.safety_watch, &io) {
+            (Some(sw), None) => {
+                bank.enable_safety_watch(sw);
+                control.safety_inhibit.store(true, Ordering::Release);
             }
-            if bank.handle_frame(iface, &frame.frame, at) {
-                let dt = sync_interval_s(&mut last_sync[iface], at, cfg.sync_period_s);
-                for (i, (w, ax)) in cfg.winches.iter().zip(axes.iter_mut()).enumerate() {
-                    if bank.interface_of(i) != Some(iface) {
-                        continue;
-                    }
-                    match bank.demand(i) {
-                        MotionDemand::Follow { target_counts } => {
-                            ax.step(Some(w.counts_to_length(target_counts)), dt)
-                        }
-                        MotionDemand::QuickStop => ax.step(None, dt),
-                        MotionDemand::Hold => ax.hold(),
-                    }
-                    let pos = w
-                        .length_to_counts(ax.length_m)
-                        .unwrap_or(if ax.length_m < 0.0 { 0 } else { i32::MAX });
-                    let force = cfg.pretension_n + cfg.damping_n_per_m_per_s * ax.velocity_m_per_s;
-                    bank.set_actual(
-                        i,
-                        pos,
-                        w.m_per_s_to_counts_per_s(ax.velocity_m_per_s),
-                        control.reported_force_mn(i, (force * 1000.0) as i32),
-                    );
-                }
-                bank.transmit_pdos_on(iface);
-                // The answer to this SYNC goes out now, not after the backlog.
-                bank.flush(&mut buses)?;
-                if iface == 0 {
-                    control.syncs.fetch_add(1, Ordering::AcqRel);
-                }
+            (_, Some(_)) => {
+                bank.set_sto(true);
+                control.safety_inhibit.store(true, Ordering::Release);
             }
-            handled += 1;
-            rx = next_event(&mut buses, handled, &mut cursor)?;
+            _ => {}
         }
+        let axes: Vec<WinchAxis> = (0..m)
+            .map(|i| {
+                WinchAxis::new(
+                    cfg.initial_length_m.get(i).copied().unwrap_or(5.0),
+                    cfg.max_speed_m_per_s,
+                    cfg.max_accel_m_per_s2,
+                )
+            })
+            .collect();
+        for (i, (w, ax)) in cfg.winches.iter().zip(&axes).enumerate() {
+            let c = w.length_to_counts(ax.length_m).unwrap_or(0);
+            bank.set_actual(i, c, 0, (cfg.pretension_n * 1000.0) as i32);
+        }
+        Self {
+            buses,
+            cfg,
+            control,
+            m,
+            bank,
+            io,
+            axes,
+            last_sync,
+            cursor: 0,
+            last_pass_ns: 0,
+            last_stall_log_ns: 0,
+        }
+    }
+
+    /// Starts the drives and the safety I/O node (boot-up) and publishes the first status.
+    fn activate(&mut self) {
+        self.bank.start(crs_ipc::monotonic_ns());
+        if let Some((_, node, out)) = self.io.as_mut() {
+            node.start(crs_ipc::monotonic_ns(), out);
+        }
+        self.publish(crs_ipc::monotonic_ns());
+        self.last_pass_ns = crs_ipc::monotonic_ns();
+    }
+
+    /// One pass of the loop: send what is queued, handle what arrived, judge the watches,
+    /// publish the status.
+    fn pass(&mut self) -> Result<(), can_transport::CanError> {
+        self.bank.flush(&mut self.buses)?;
+        flush_io(&mut self.io, &mut self.buses)?;
+        let (handled, bus_time_ns) = self.receive()?;
         let now = crs_ipc::monotonic_ns();
         // Judged at the bus time handled so far while frames are still queued (the backlog
         // cap was hit), else now.
@@ -362,25 +328,115 @@ pub fn run<B: CanBus>(
         } else {
             now
         };
-        // A test double on a non-real-time host: say when this loop itself was not scheduled
-        // for a while (at most once a second), so a watch trip shows whose stall it was.
-        let gap = now.saturating_sub(last_pass_ns);
-        if gap > 50_000_000 && now.saturating_sub(last_stall_log_ns) > 1_000_000_000 {
-            last_stall_log_ns = now;
+        self.log_stall(now, handled);
+        self.judge(judge_at);
+        self.publish(now);
+        Ok(())
+    }
+
+    /// Handles the frames that arrived, up to `MAX_BACKLOG`. Returns how many events were
+    /// handled and the arrival time of the last frame.
+    ///
+    /// The emulated drives are hardware with their own CPUs: they see each frame when it
+    /// arrives on the bus, not when this process (on a non-real-time host, or in the TCG
+    /// guest) gets round to reading it. So every frame is handled at its ARRIVAL time — the
+    /// kernel's receive stamp where the transport has one (SocketCAN) — and the watches are
+    /// judged at the bus time processed so far. Judging at the read time faulted a starved
+    /// emulator on its own backlog: the first frame read after a 700 ms stall checked the
+    /// safety watch (DriveBank::handle_frame does, per frame) against the last pair handled
+    /// before the stall, while the pairs that arrived meanwhile were still queued (the guest
+    /// safety-hil flakes of forged_stopping and forged_rpdo_other_enabling_controlword,
+    /// "safety heartbeat invalid or missing: Timeout").
+    fn receive(&mut self) -> Result<(usize, u64), can_transport::CanError> {
+        let mut rx =
+            can_transport::recv_any(&mut self.buses, Duration::from_millis(2), &mut self.cursor)?;
+        let rt_minus_mono = realtime_minus_monotonic_ns();
+        let mut handled = 0;
+        let mut bus_time_ns = 0;
+        while let Some((iface, ev)) = rx {
+            if let RxEvent::Frame(frame) = ev {
+                let at = arrival_ns(&frame, rt_minus_mono);
+                bus_time_ns = at;
+                if let Some((io_iface, node, out)) = self.io.as_mut()
+                    && *io_iface == iface
+                {
+                    node.handle_frame(&frame.frame, at, out);
+                    self.bank.set_sto(!node.sto_released());
+                }
+                if self.bank.handle_frame(iface, &frame.frame, at) {
+                    self.on_sync(iface, at)?;
+                }
+            }
+            handled += 1;
+            rx = next_event(&mut self.buses, handled, &mut self.cursor)?;
+        }
+        Ok((handled, bus_time_ns))
+    }
+
+    /// A SYNC on `iface` at `at`: the winches of that interface move for the interval since
+    /// the last one, report their position, velocity and force, and the answer goes out now,
+    /// not after the backlog.
+    fn on_sync(&mut self, iface: usize, at: u64) -> Result<(), can_transport::CanError> {
+        let cfg = self.cfg;
+        let bank = &mut self.bank;
+        let dt = sync_interval_s(&mut self.last_sync[iface], at, cfg.sync_period_s);
+        for (i, (w, ax)) in cfg.winches.iter().zip(self.axes.iter_mut()).enumerate() {
+            if bank.interface_of(i) != Some(iface) {
+                continue;
+            }
+            match bank.demand(i) {
+                MotionDemand::Follow { target_counts } => {
+                    ax.step(Some(w.counts_to_length(target_counts)), dt)
+                }
+                MotionDemand::QuickStop => ax.step(None, dt),
+                MotionDemand::Hold => ax.hold(),
+            }
+            let pos = w
+                .length_to_counts(ax.length_m)
+                .unwrap_or(if ax.length_m < 0.0 { 0 } else { i32::MAX });
+            let force = cfg.pretension_n + cfg.damping_n_per_m_per_s * ax.velocity_m_per_s;
+            bank.set_actual(
+                i,
+                pos,
+                w.m_per_s_to_counts_per_s(ax.velocity_m_per_s),
+                self.control.reported_force_mn(i, (force * 1000.0) as i32),
+            );
+        }
+        bank.transmit_pdos_on(iface);
+        bank.flush(&mut self.buses)?;
+        if iface == 0 {
+            self.control.syncs.fetch_add(1, Ordering::AcqRel);
+        }
+        Ok(())
+    }
+
+    /// A test double on a non-real-time host: say when this loop itself was not scheduled for
+    /// a while (at most once a second), so a watch trip shows whose stall it was.
+    fn log_stall(&mut self, now: u64, handled: usize) {
+        let gap = now.saturating_sub(self.last_pass_ns);
+        if gap > 50_000_000 && now.saturating_sub(self.last_stall_log_ns) > 1_000_000_000 {
+            self.last_stall_log_ns = now;
             tracing::warn!(
                 gap_ms = gap as f64 * 1e-6,
                 frames_handled = handled,
                 "emulator loop stalled (frames were handled with their receive time)"
             );
         }
-        last_pass_ns = now;
+        self.last_pass_ns = now;
+    }
+
+    /// The test's heartbeat mutes, the safety I/O node's inputs and watch, and the drives'
+    /// heartbeats and safety watch, judged at `judge_at`; trips are counted in the control.
+    fn judge(&mut self, judge_at: u64) {
+        let control = self.control;
+        let bank = &mut self.bank;
         let mute = control.heartbeat_mute_mask.load(Ordering::Acquire);
-        for i in 0..m {
+        for i in 0..self.m {
             if let Some(s) = bank.slave_mut(i) {
                 s.set_heartbeat_muted(mute & (1 << i) != 0);
             }
         }
-        if let Some((_, node, out)) = io.as_mut() {
+        if let Some((_, node, out)) = self.io.as_mut() {
             let inputs = control.io_inputs.load(Ordering::Acquire);
             node.set_inputs(inputs & 1 == 0, inputs & 2 != 0);
             node.poll(judge_at, out);
@@ -413,9 +469,33 @@ pub fn run<B: CanBus>(
                 .safety_inhibit
                 .store(!bank.safety_permits(), Ordering::Release);
         }
-        publish(&bank, &axes, now);
     }
-    Ok(())
+
+    /// Publishes the drives' status to the test (seqlock).
+    fn publish(&self, now: u64) {
+        let control = self.control;
+        // Seqlock writer: odd while publishing; the fence orders the odd count before the
+        // stores below, the Release of the even count the stores before it.
+        control.publish_seq.fetch_add(1, Ordering::Relaxed);
+        std::sync::atomic::fence(Ordering::Release);
+        for (i, ax) in self.axes.iter().enumerate() {
+            let d = match self.bank.demand(i) {
+                MotionDemand::Follow { .. } => DEMAND_FOLLOW,
+                MotionDemand::QuickStop => DEMAND_QUICK_STOP,
+                MotionDemand::Hold => DEMAND_HOLD,
+            };
+            if control.demand[i].swap(d, Ordering::AcqRel) == DEMAND_FOLLOW && d != DEMAND_FOLLOW {
+                control.left_follow_ns[i].store(now, Ordering::Release);
+            }
+            control.length_bits[i].store(ax.length_m.to_bits(), Ordering::Release);
+            control.velocity_bits[i].store(ax.velocity_m_per_s.to_bits(), Ordering::Release);
+            if let Some(s) = self.bank.slave(i) {
+                control.statusword[i].store(s.statusword(), Ordering::Release);
+                control.nmt[i].store(u16::from(s.nmt_state().code()), Ordering::Release);
+            }
+        }
+        control.publish_seq.fetch_add(1, Ordering::Release);
+    }
 }
 
 /// Sends the safety I/O node's frames on its interface.

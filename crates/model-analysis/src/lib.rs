@@ -47,11 +47,11 @@ pub enum AnalysisError {
     #[error(transparent)]
     Workspace(#[from] cdpr_model::workspace::WorkspaceError),
     #[error(transparent)]
-    Sensitivity(#[from] cdpr_model::sensitivity::SensitivityError),
+    Sensitivity(#[from] cdpr_analysis::sensitivity::SensitivityError),
     #[error(transparent)]
-    Planar(#[from] cdpr_model::planar::PlanarError),
+    Planar(#[from] cdpr_analysis::planar::PlanarError),
     #[error(transparent)]
-    Truss(#[from] cdpr_model::truss::TrussError),
+    Truss(#[from] cdpr_analysis::truss::TrussError),
     /// The sensitivity needs the controller's forces, which a pose outside the closed form's
     /// workspace does not have.
     #[error(

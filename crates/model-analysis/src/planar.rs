@@ -5,7 +5,7 @@
 //! values the spec prints. [`PlanarReport::write_svg`] draws the area map.
 
 use crate::AnalysisError;
-use cdpr_model::planar::{self, AreaTest, PlanarModel, PlanarPose, Reachable};
+use cdpr_analysis::planar::{self, AreaTest, PlanarModel, PlanarPose, Reachable};
 use crs_plot::{Chart, Figure, Markers, Panel, Rect, Rgb};
 use nalgebra::{DVector, Vector2};
 use serde_json::json;

@@ -4,10 +4,10 @@
 //! and platform anchors and the cable stiffness must be known.
 
 use crate::{AnalysisError, fmt_pose, pose_json};
-use cdpr_model::config::Platform;
-use cdpr_model::sensitivity::{
+use cdpr_analysis::sensitivity::{
     self, Parameter, ParameterErrors, ParameterSensitivity, PoseErrorEstimate,
 };
+use cdpr_model::config::Platform;
 use cdpr_model::{Data, Model, Pose, workspace};
 use crs_limits::quantile::quantile_sorted;
 use crs_plot::{Chart, Figure, Panel, Rect, Rgb};

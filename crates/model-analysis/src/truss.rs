@@ -3,8 +3,8 @@
 //! (fig. 5.10b: 10 kN per joint), against the rods' 151 kN rating.
 
 use crate::{AnalysisError, fmt_pose, pose_json};
+use cdpr_analysis::truss::{self, ROD_RATING_N, Truss, TrussSolution};
 use cdpr_model::config::Platform;
-use cdpr_model::truss::{self, ROD_RATING_N, Truss, TrussSolution};
 use cdpr_model::{Data, Pose, kinematics, statics};
 use nalgebra::Vector3;
 use serde_json::json;

@@ -90,7 +90,7 @@ fn truss_worst_case_is_at_least_the_home_pose() {
         pose: pf.home,
         worst_case: false,
         joint_load_n: 0.0,
-        rod_ea_n: cdpr_model::truss::ROD_EA_DEFAULT_N,
+        rod_ea_n: cdpr_analysis::truss::ROD_EA_DEFAULT_N,
     };
     let home = truss::truss(&pf, &req).unwrap();
     let worst = truss::truss(

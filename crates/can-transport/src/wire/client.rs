@@ -1,5 +1,5 @@
 //! The `wire:<socket path>` transport: this process is one node of a bus that the `can-wire`
-//! hub runs in its bus model ([`super::model`]).
+//! hub runs in its bus model (the `can-bus-model` crate).
 //!
 //! * `send` stamps the frame with CLOCK_MONOTONIC and hands it to the hub. It refuses with
 //!   [`CanError::TxFull`] at once when the node already holds `queue_len` frames not yet off

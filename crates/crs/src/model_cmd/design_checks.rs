@@ -4,7 +4,7 @@
 //! sensitivity}`.
 
 use super::{Common, PoseArgs, Res, load, show};
-use cdpr_model::truss::ROD_EA_DEFAULT_N;
+use cdpr_analysis::truss::ROD_EA_DEFAULT_N;
 use model_analysis::planar::PlanarRequest;
 use model_analysis::sensitivity::SensitivityRequest;
 use model_analysis::truss::TrussRequest;

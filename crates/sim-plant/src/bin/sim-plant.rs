@@ -5,11 +5,12 @@
 //! (`crs/v1/tracker_pose`) on iceoryx2 every plant cycle. See `sim_plant::bus` for the set-up
 //! and offset convention (eq. 3.14 / 6.24) and docs/plant-figures.md.
 
+use can_transport::{CanBus, CanError, TransportSpec};
 use cdpr_model::config::load_platform;
 use clap::{CommandFactory, Parser};
-use crs_ipc::{Heartbeat, IpcNode, PlantTruth, TrackerPose};
+use crs_ipc::{Heartbeat, IpcNode, PlantTruth, TopicPublisher, TrackerPose};
 use drives_config::DrivesConfig;
-use sim_plant::bus::{self, BusOptions, ConfigFiles, PlantBus};
+use sim_plant::bus::{self, BusOptions, ConfigFiles, LoopSummary, PlantBus};
 use sim_plant::load_plant;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -123,7 +124,28 @@ fn io_control_loop(path: &std::path::Path, inputs: &std::sync::atomic::AtomicU8)
     }
 }
 
-fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
+type BoxError = Box<dyn std::error::Error>;
+
+/// The daemon as its lifecycle: configure (files, the oracle check, the plant at home),
+/// activate (signals, iceoryx2, the buses, real time, systemd), run (the plant loop until a
+/// signal), deactivate.
+fn run(args: Args) -> Result<(), BoxError> {
+    let configured = configure(&args)?;
+    let mut active = activate(&args, configured)?;
+    let summary = run_plant(&mut active, &args);
+    deactivate(active, summary)
+}
+
+/// The configured plant: set up at the home pose, nothing opened yet.
+struct Configured {
+    plant: PlantBus,
+    /// One transport per drive-bus interface.
+    specs: Vec<TransportSpec>,
+}
+
+/// Reads the plant, drives and control platform files, proves the plant's equilibrium against
+/// the independent oracle and sets the plant up at the home pose.
+fn configure(args: &Args) -> Result<Configured, BoxError> {
     let plant_file = args.plant.display().to_string();
     let drives_file = args.drives.display().to_string();
     // Plant TOML errors carry file:line:column and the key (motion-core's ConfigError).
@@ -165,7 +187,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     tracing::info!(agreement = %oracle, "equilibrium agrees with the independent oracle (minimum potential energy)");
     let name = plant_cfg.name.clone();
     let effects = plant_cfg.effects.enabled_names().join(", ");
-    let mut plant = PlantBus::new(plant_cfg, &control, &drives, opts)?;
+    let plant = PlantBus::new(plant_cfg, &control, &drives, opts)?;
     let (lo, hi) = plant
         .q_off()
         .iter()
@@ -191,7 +213,27 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         q_off_max_mm = hi * 1e3,
         "initial tension set (eq. 3.19); encoders homed so the drives read q_home (eq. 3.14/6.24)"
     );
+    Ok(Configured { plant, specs })
+}
 
+/// The running daemon's resources. Field order is drop order: the publishers go before the
+/// iceoryx2 node that made them.
+struct Active {
+    plant: PlantBus,
+    buses: Vec<Box<dyn CanBus>>,
+    truth_pub: TopicPublisher<PlantTruth>,
+    tracker_pub: TopicPublisher<TrackerPose>,
+    heartbeat_pub: TopicPublisher<Heartbeat>,
+    /// Plant steps, for the systemd watchdog.
+    steps: crs_service::CycleCounter,
+    watchdog: Option<crs_service::Watchdog>,
+    _ipc: IpcNode,
+}
+
+/// Installs the signal handlers, opens the iceoryx2 ports and the buses, starts the
+/// `--io-control` reader, applies the real-time settings and tells systemd it is ready.
+fn activate(args: &Args, configured: Configured) -> Result<Active, BoxError> {
+    let Configured { plant, specs } = configured;
     // SAFETY: the handler only stores to an atomic (async-signal-safe).
     unsafe {
         libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
@@ -204,7 +246,7 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
     let truth_pub = ipc.publisher::<PlantTruth>()?;
     let tracker_pub = ipc.publisher::<TrackerPose>()?;
     let heartbeat_pub = ipc.publisher::<Heartbeat>()?;
-    let mut buses = specs
+    let buses = specs
         .iter()
         .map(|spec| can_transport::open(spec).map_err(|e| format!("transport {spec}: {e}")))
         .collect::<Result<Vec<_>, _>>()?;
@@ -231,12 +273,30 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
         move || steps.get()
     })?;
     crs_service::notify_ready("CAN interfaces and iceoryx2 ports open, plant stepping");
+    Ok(Active {
+        plant,
+        buses,
+        truth_pub,
+        tracker_pub,
+        heartbeat_pub,
+        steps,
+        watchdog,
+        _ipc: ipc,
+    })
+}
+
+/// The plant loop until SIGINT / SIGTERM: every step publishes the ground truth and the
+/// tracker pose (failures logged, never fatal), logs brake and convergence changes and sends
+/// the plant's heartbeat every 100th step.
+fn run_plant(a: &mut Active, args: &Args) -> Result<LoopSummary, CanError> {
     let mut publish_errors = 0u64;
     let mut was_braked = None;
     let mut was_converged = true;
-    let summary = bus::run(
-        &mut buses,
-        &mut plant,
+    let (steps, truth_pub, tracker_pub, heartbeat_pub) =
+        (&a.steps, &a.truth_pub, &a.tracker_pub, &a.heartbeat_pub);
+    bus::run(
+        &mut a.buses,
+        &mut a.plant,
         Duration::from_micros(u64::from(args.period_us)),
         &STOP,
         |truth, tracker| {
@@ -274,9 +334,13 @@ fn run(args: Args) -> Result<(), Box<dyn std::error::Error>> {
                 let _ = heartbeat_pub.publish(&hb);
             }
         },
-    );
+    )
+}
+
+/// Tells systemd the daemon is stopping, stops the watchdog and reports how the loop ended.
+fn deactivate(a: Active, summary: Result<LoopSummary, CanError>) -> Result<(), BoxError> {
     crs_service::notify_stopping();
-    if let Some(w) = watchdog {
+    if let Some(w) = a.watchdog {
         w.stop();
     }
     let summary = summary?;

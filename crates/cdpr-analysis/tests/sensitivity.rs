@@ -4,8 +4,8 @@
 //! Monte-Carlo of such robots.
 
 mod common;
+use cdpr_analysis::sensitivity::{self, Parameter, ParameterErrors};
 use cdpr_model::forward::{self, FkOptions};
-use cdpr_model::sensitivity::{self, Parameter, ParameterErrors};
 use cdpr_model::{Data, Model, Pose, elastostatics};
 use rand::{Rng, SeedableRng};
 

@@ -1,9 +1,9 @@
 //! The bus model in virtual time: bit times against hand computation, arbitration, FIFO per
 //! node, queue overflow, load windows, violations, no allocation per frame.
 
+use can_bus_model::{Bus, BusConfig, Delivery, IdStats, SubmitError, WINDOW_NS};
 use can_transport::CanFrame;
 use can_transport::wire::bits;
-use can_transport::wire::model::{Bus, BusConfig, Delivery, IdStats, SubmitError, WINDOW_NS};
 
 fn bus(bitrate: u32) -> Bus {
     Bus::new(BusConfig::new(bitrate), 0).unwrap()
@@ -289,8 +289,8 @@ fn a_node_that_leaves_loses_its_waiting_frames() {
 fn swapped_statistics_merge_to_the_whole() {
     let mut b = bus(1_000_000);
     let n = b.add_node().unwrap();
-    let mut spare = Box::new(can_transport::wire::model::BusStats::new(b.config()));
-    let mut total = can_transport::wire::model::BusStats::new(b.config());
+    let mut spare = Box::new(can_bus_model::BusStats::new(b.config()));
+    let mut total = can_bus_model::BusStats::new(b.config());
     for k in 0..100u64 {
         b.submit(n, std(0x201, &[1, 2]), k * 100_000, 0).unwrap();
         let _ = run(&mut b, k * 100_000 + 90_000);

@@ -2,7 +2,7 @@
 //! equilibrium at every joint, rigid-body modes, determinacy, and the rod rating.
 
 mod common;
-use cdpr_model::truss::{self, ROD_EA_DEFAULT_N, ROD_RATING_N};
+use cdpr_analysis::truss::{self, ROD_EA_DEFAULT_N, ROD_RATING_N};
 use cdpr_model::{Data, Pose, kinematics, statics};
 use nalgebra::Vector3;
 

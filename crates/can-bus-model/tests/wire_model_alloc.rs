@@ -1,7 +1,7 @@
 //! The bus model allocates nothing per frame once set up (counting allocator, this thread).
 
+use can_bus_model::{Bus, BusConfig, BusStats};
 use can_transport::CanFrame;
-use can_transport::wire::model::{Bus, BusConfig, BusStats};
 use crs_test_support::alloc::{CountingAlloc, count_allocations};
 
 #[global_allocator]

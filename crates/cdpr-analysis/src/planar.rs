@@ -5,13 +5,13 @@
 //! What the spatial model does for the CRS, this does in the plane, with the same equations:
 //! inverse kinematics (eq. 2.3–2.8) with optional planar pulleys (sec. 2.3 / 3.8), the
 //! structure matrix (eq. 2.30), the closed-form distribution (eq. 3.41) and the exact test
-//! (eq. 3.29, [`crate::feasibility`]), the elastostatic forward kinematics with the linear cable
-//! law k = k_F / q (eq. 2.33–2.36, 2.42), the wrench-feasible area W_WF (eq. 3.29), the
+//! (eq. 3.29, [`cdpr_model::feasibility`]), the elastostatic forward kinematics with the linear
+//! cable law k = k_F / q (eq. 2.33–2.36, 2.42), the wrench-feasible area W_WF (eq. 3.29), the
 //! reachable workspace W_R of a kinematic controller on the elastic robot (eq. 3.33–3.35) and the
 //! condition number of the identification Jacobian J_qa (eq. 4.23).
 
-use crate::feasibility::{self, ExactFeasibility, FeasibilityError};
-use crate::levenberg_marquardt as lm;
+use cdpr_model::feasibility::{self, ExactFeasibility, FeasibilityError};
+use cdpr_model::levenberg_marquardt as lm;
 use nalgebra::{DMatrix, DVector, Dyn, Vector2};
 
 /// Degrees of freedom of the planar platform.

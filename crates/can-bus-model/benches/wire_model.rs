@@ -1,9 +1,9 @@
-//! The bus model's cost per frame (the hub's pure-logic share): `cargo bench -p can-transport
+//! The bus model's cost per frame (the hub's pure-logic share): `cargo bench -p can-bus-model
 //! --bench wire_model`.
 
+use can_bus_model::{Bus, BusConfig};
 use can_transport::CanFrame;
 use can_transport::wire::bits;
-use can_transport::wire::model::{Bus, BusConfig};
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 

@@ -31,12 +31,16 @@ use cdpr_model::offset_target::{OffsetTarget, region_box};
 use clap::Parser;
 use crs_ipc::JointSetpoint;
 use crs_limits::quantile::quantile_sorted;
+use motion_core::daemon::config::DaemonConfig;
+use motion_core::daemon::lifecycle::Configured;
 use motion_core::daemon::realtime::{self, RealtimeSettings, monotonic_ns, sleep_until};
 use motion_core::daemon::stats::LoopStats;
 use motion_core::daemon::trajectory::{self, Waypoint};
-use motion_core::daemon::{self, Command, CommandSource, LoopState, SetpointSink, lifecycle};
+use motion_core::daemon::{
+    self, Command, CommandSource, HardLoop, LoopState, SetpointSink, lifecycle,
+};
 use std::cell::Cell;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -240,7 +244,31 @@ fn fit_surrogate(pf: &Platform) -> Result<surrogate::Surrogate, String> {
     Ok(sg)
 }
 
+/// The bench as its steps: check the flags, configure the daemon's loop as `motion-core`
+/// does, plan the tour, measure both loops, report, judge.
 fn run(args: Args) -> Result<ExitCode, String> {
+    check_args(&args)?;
+    let cfg = daemon::config::load(&args.config).map_err(|e| e.to_string())?;
+    let platform = load_platform(&cfg.platform).map_err(|e| e.to_string())?;
+    let rt = realtime_settings(&args, cfg.realtime)?;
+    let (configured, surrogate_note) = configure(&args, &cfg, &platform)?;
+    let waypoints = repeated_tour(&args, &cfg, &configured, &platform, rt.period_ns)?;
+    let mut hard_loop = configured.activate(waypoints, |e| eprintln!("loop-jitter: planner: {e}"));
+    let stats = LoopStats::default();
+    let Some(m) = measure(&args, &rt, &mut hard_loop, &stats) else {
+        eprintln!("loop-jitter: a real-time setting degraded and --require-rt was given");
+        return Ok(ExitCode::from(2));
+    };
+    let state = hard_loop.state();
+    print_report(&args, &m, &stats, state, &surrogate_note);
+    if let Some(path) = &args.json {
+        write_json(path, &args, &m, &stats, state, &surrogate_note)?;
+    }
+    Ok(verdict(&args, &m, &stats, state))
+}
+
+/// The flags' ranges, before anything is loaded.
+fn check_args(args: &Args) -> Result<(), String> {
     if !(args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= 3600.0) {
         return Err(format!(
             "--seconds must lie in (0, 3600], got {}",
@@ -253,9 +281,11 @@ fn run(args: Args) -> Result<ExitCode, String> {
             args.block_ms
         ));
     }
-    let cfg = daemon::config::load(&args.config).map_err(|e| e.to_string())?;
-    let platform = load_platform(&cfg.platform).map_err(|e| e.to_string())?;
-    let mut rt: RealtimeSettings = cfg.realtime;
+    Ok(())
+}
+
+/// The TOML's `[realtime]` with `--priority` and `--cpu` applied.
+fn realtime_settings(args: &Args, mut rt: RealtimeSettings) -> Result<RealtimeSettings, String> {
     if let Some(p) = args.priority {
         if !(0..=99).contains(&p) {
             return Err(format!("--priority must lie in 0..=99, got {p}"));
@@ -268,32 +298,48 @@ fn run(args: Args) -> Result<ExitCode, String> {
         }
         rt.cpu = (c >= 0).then_some(c as usize);
     }
-    let period_ns = rt.period_ns;
+    Ok(rt)
+}
 
-    // The daemon's own configure step (surrogate of the TOML, identity- and bound-checked);
-    // without one in the TOML a degree-3 surrogate is fitted here so the bench measures the
-    // loop with an offset model, as the daemon runs it.
+/// The daemon's own configure step (surrogate of the TOML, identity- and bound-checked);
+/// without one in the TOML a degree-3 surrogate is fitted here so the bench measures the loop
+/// with an offset model, as the daemon runs it. Returns the configured loop and what the
+/// report says of its surrogate.
+fn configure(
+    args: &Args,
+    cfg: &DaemonConfig,
+    platform: &Platform,
+) -> Result<(Configured, String), String> {
     let mut daemon_cfg = cfg.clone();
     if args.no_surrogate {
         daemon_cfg.surrogate = None;
     }
-    let mut configured = lifecycle::configure(&daemon_cfg, &platform).map_err(|e| e.to_string())?;
+    let mut configured = lifecycle::configure(&daemon_cfg, platform).map_err(|e| e.to_string())?;
     let surrogate_note = if args.no_surrogate {
         "none (--no-surrogate)".to_string()
     } else if let Some(s) = configured.surrogate() {
         format!("{}", s.path.display())
     } else {
-        let sg = fit_surrogate(&platform)?;
+        let sg = fit_surrogate(platform)?;
         let n = sg.n_cables();
         configured
             .install_surrogate(Box::new(sg), n)
             .map_err(|e| e.to_string())?;
         "degree 3, fitted at start-up".to_string()
     };
+    Ok((configured, surrogate_note))
+}
 
-    // The demo tour, repeated so the plan outlasts the daemon's share of the run (it starts and
-    // ends at home, so the repeats join up). A refused reference would latch the loop and
-    // shorten its cycles: checked after the run.
+/// The demo tour, repeated so the plan outlasts the daemon's share of the run (it starts and
+/// ends at home, so the repeats join up). A refused reference would latch the loop and
+/// shorten its cycles: checked after the run ([`verdict`]).
+fn repeated_tour(
+    args: &Args,
+    cfg: &DaemonConfig,
+    configured: &Configured,
+    platform: &Platform,
+    period_ns: u64,
+) -> Result<Vec<Waypoint>, String> {
     let t = &cfg.trajectory;
     let lim = configured.planner_limits();
     let period_s = period_ns as f64 * 1e-9;
@@ -312,15 +358,65 @@ fn run(args: Args) -> Result<ExitCode, String> {
     } else {
         (daemon_s / (tour_samples as f64 * period_s)).ceil() as usize + 1
     };
-    let waypoints: Vec<Waypoint> = tour
+    Ok(tour
         .iter()
         .copied()
         .cycle()
         .take(tour.len() * repeats)
-        .collect();
-    let mut hard_loop = configured.activate(waypoints, |e| eprintln!("loop-jitter: planner: {e}"));
+        .collect())
+}
 
-    // Everything the loops touch is allocated now, before mlockall and the real-time settings.
+/// What one run measured.
+struct Measurement {
+    period_ns: u64,
+    /// Pairs of blocks (daemon, bare).
+    pairs: u64,
+    /// The real-time settings as applied (`name: outcome`).
+    applied: Vec<String>,
+    realtime_degraded: bool,
+    loadavg_before: String,
+    loadavg_after: String,
+    /// Wake-up lateness of the daemon loop.
+    daemon: Summary,
+    /// Wake-up lateness of the bare loop.
+    bare: Summary,
+    /// The daemon's compute per cycle (wake → setpoint in the sink).
+    compute: Summary,
+    bare_overruns: u64,
+    /// Samples that did not fit the preallocated buffers (should stay 0).
+    lost_samples: u64,
+}
+
+impl Measurement {
+    /// Daemon over bare at p50, p99, p99.9 and max (NaN where the bare loop has no sample).
+    fn ratios(&self) -> [f64; 4] {
+        let ratio = |x: u64, y: u64| {
+            if y == 0 {
+                f64::NAN
+            } else {
+                x as f64 / y as f64
+            }
+        };
+        let (d, b) = (&self.daemon, &self.bare);
+        [
+            ratio(d.p50_ns, b.p50_ns),
+            ratio(d.p99_ns, b.p99_ns),
+            ratio(d.p999_ns, b.p999_ns),
+            ratio(d.max_ns, b.max_ns),
+        ]
+    }
+}
+
+/// Runs the two loops in alternating blocks on one timeline. Everything the loops touch is
+/// allocated first, then the real-time settings are applied; `None` when one degraded and
+/// `--require-rt` was given (nothing measured).
+fn measure(
+    args: &Args,
+    rt: &RealtimeSettings,
+    hard_loop: &mut HardLoop,
+    stats: &LoopStats,
+) -> Option<Measurement> {
+    let period_ns = rt.period_ns;
     let block_ns = args.block_ms * 1_000_000;
     let total_ns = (args.seconds * 1e9) as u64;
     // Pairs of blocks (daemon, bare); each block runs block/period cycles plus at most one.
@@ -337,13 +433,12 @@ fn run(args: Args) -> Result<ExitCode, String> {
     };
     let mut compute = Samples::with_capacity(cycles_per_loop);
     let mut bare = Samples::with_capacity(cycles_per_loop);
-    let stats = LoopStats::default();
     let stop = AtomicBool::new(false);
     let mut cmds = NoCommands;
     // Let the planner fill its look-ahead queue, as the daemon's 50 ms start offset does.
     std::thread::sleep(std::time::Duration::from_millis(300));
 
-    let report = realtime::apply(&rt);
+    let report = realtime::apply(rt);
     let applied: Vec<String> = report
         .lines()
         .iter()
@@ -353,8 +448,7 @@ fn run(args: Args) -> Result<ExitCode, String> {
         println!("realtime {line}");
     }
     if args.require_rt && report.degraded() {
-        eprintln!("loop-jitter: a real-time setting degraded and --require-rt was given");
-        return Ok(ExitCode::from(2));
+        return None;
     }
     let loadavg_before = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
 
@@ -370,12 +464,12 @@ fn run(args: Args) -> Result<ExitCode, String> {
         deadline.set(next);
         stop.store(false, Ordering::Relaxed);
         daemon::run_timed(
-            &mut hard_loop,
+            hard_loop,
             next,
             &timeline,
             &mut sink,
             &mut cmds,
-            &stats,
+            stats,
             &stop,
             |_, done| {
                 compute.record(done.saturating_sub(woke.get()));
@@ -397,34 +491,45 @@ fn run(args: Args) -> Result<ExitCode, String> {
     }
     let loadavg_after = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
 
-    let state = hard_loop.state();
-    let rejected = stats.rejected.load(Ordering::Relaxed);
-    let cycles = stats.cycles.load(Ordering::Relaxed);
-    let d = sink.lateness.summary();
-    let b = bare.summary();
-    let c = compute.summary();
-    let ratio = |x: u64, y: u64| {
-        if y == 0 {
-            f64::NAN
-        } else {
-            x as f64 / y as f64
-        }
-    };
-    let ratios = [
-        ratio(d.p50_ns, b.p50_ns),
-        ratio(d.p99_ns, b.p99_ns),
-        ratio(d.p999_ns, b.p999_ns),
-        ratio(d.max_ns, b.max_ns),
-    ];
-    let us = |ns: u64| ns as f64 / 1e3;
+    Some(Measurement {
+        period_ns,
+        pairs,
+        applied,
+        realtime_degraded: report.degraded(),
+        loadavg_before,
+        loadavg_after,
+        daemon: sink.lateness.summary(),
+        bare: bare.summary(),
+        compute: compute.summary(),
+        bare_overruns,
+        lost_samples: sink.lateness.lost + bare.lost + compute.lost,
+    })
+}
+
+fn us(ns: u64) -> f64 {
+    ns as f64 / 1e3
+}
+
+/// The report on stdout: both loops' lateness and their ratio, the daemon's compute, overruns,
+/// the daemon's own `LoopStats` as a cross-check and, with `--markdown`, the two table rows.
+fn print_report(
+    args: &Args,
+    m: &Measurement,
+    stats: &LoopStats,
+    state: LoopState,
+    surrogate_note: &str,
+) {
+    let (d, b, c) = (&m.daemon, &m.bare, &m.compute);
+    let ratios = m.ratios();
     println!(
-        "scenario `{}`: period {} µs, {pairs} blocks of {} ms per loop, surrogate {surrogate_note}",
+        "scenario `{}`: period {} µs, {} blocks of {} ms per loop, surrogate {surrogate_note}",
         args.label,
-        period_ns / 1000,
+        m.period_ns / 1000,
+        m.pairs,
         args.block_ms
     );
-    println!("load average before: {}", loadavg_before.trim());
-    println!("load average after:  {}", loadavg_after.trim());
+    println!("load average before: {}", m.loadavg_before.trim());
+    println!("load average after:  {}", m.loadavg_after.trim());
     println!("wake-up lateness, µs     n       p50      p99    p99.9      max");
     for (name, s) in [("daemon loop", d), ("bare loop  ", b)] {
         println!(
@@ -448,8 +553,11 @@ fn run(args: Args) -> Result<ExitCode, String> {
         us(c.max_ns)
     );
     println!(
-        "overruns: daemon {} (LoopStats), bare {bare_overruns}; daemon cycles {cycles}, rejected references {rejected}, final state {state:?}",
-        stats.overruns.load(Ordering::Relaxed)
+        "overruns: daemon {} (LoopStats), bare {}; daemon cycles {}, rejected references {}, final state {state:?}",
+        stats.overruns.load(Ordering::Relaxed),
+        m.bare_overruns,
+        stats.cycles.load(Ordering::Relaxed),
+        stats.rejected.load(Ordering::Relaxed),
     );
     println!(
         "cross-check, the daemon's own LoopStats: lateness {}; compute {}",
@@ -474,52 +582,67 @@ fn run(args: Args) -> Result<ExitCode, String> {
         };
         println!(
             "{}",
-            row("motion-core loop (HardLoop + run_timed)", &d, Some(&ratios))
+            row("motion-core loop (HardLoop + run_timed)", d, Some(&ratios))
         );
         println!(
             "{}",
-            row("bare clock_nanosleep, same thread, interleaved", &b, None)
+            row("bare clock_nanosleep, same thread, interleaved", b, None)
         );
     }
-    if let Some(path) = &args.json {
-        let json = serde_json::json!({
-            "label": args.label,
-            "period_ns": period_ns,
-            "block_ms": args.block_ms,
-            "blocks_per_loop": pairs,
-            "surrogate": surrogate_note,
-            "realtime": applied,
-            "realtime_degraded": report.degraded(),
-            "loadavg_before": loadavg_before.trim(),
-            "loadavg_after": loadavg_after.trim(),
-            "daemon_lateness": d,
-            "bare_lateness": b,
-            "ratio_daemon_over_bare": {"p50": ratios[0], "p99": ratios[1], "p999": ratios[2], "max": ratios[3]},
-            "daemon_compute": c,
-            "daemon_overruns": stats.overruns.load(Ordering::Relaxed),
-            "bare_overruns": bare_overruns,
-            "rejected": rejected,
-            "final_state": format!("{state:?}"),
-            "lost_samples": sink.lateness.lost + bare.lost + compute.lost,
-        });
-        std::fs::write(path, format!("{json:#}\n"))
-            .map_err(|e| format!("{}: {e}", path.display()))?;
-    }
+}
+
+/// The figures as JSON (`--json`).
+fn write_json(
+    path: &Path,
+    args: &Args,
+    m: &Measurement,
+    stats: &LoopStats,
+    state: LoopState,
+    surrogate_note: &str,
+) -> Result<(), String> {
+    let ratios = m.ratios();
+    let json = serde_json::json!({
+        "label": args.label,
+        "period_ns": m.period_ns,
+        "block_ms": args.block_ms,
+        "blocks_per_loop": m.pairs,
+        "surrogate": surrogate_note,
+        "realtime": m.applied,
+        "realtime_degraded": m.realtime_degraded,
+        "loadavg_before": m.loadavg_before.trim(),
+        "loadavg_after": m.loadavg_after.trim(),
+        "daemon_lateness": m.daemon,
+        "bare_lateness": m.bare,
+        "ratio_daemon_over_bare": {"p50": ratios[0], "p99": ratios[1], "p999": ratios[2], "max": ratios[3]},
+        "daemon_compute": m.compute,
+        "daemon_overruns": stats.overruns.load(Ordering::Relaxed),
+        "bare_overruns": m.bare_overruns,
+        "rejected": stats.rejected.load(Ordering::Relaxed),
+        "final_state": format!("{state:?}"),
+        "lost_samples": m.lost_samples,
+    });
+    std::fs::write(path, format!("{json:#}\n")).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Failure when the loop refused a reference (its cycles are not representative) or, with
+/// `--max-p99-ratio`, when the daemon's p99 is too far above the bare loop's.
+fn verdict(args: &Args, m: &Measurement, stats: &LoopStats, state: LoopState) -> ExitCode {
+    let rejected = stats.rejected.load(Ordering::Relaxed);
     if state != LoopState::Running || rejected > 0 {
         eprintln!(
             "loop-jitter: the loop refused a reference (state {state:?}): its cycles are not representative"
         );
-        return Ok(ExitCode::FAILURE);
+        return ExitCode::FAILURE;
     }
     // A NaN ratio (no bare samples) fails too.
+    let p99_ratio = m.ratios()[1];
     if let Some(max) = args.max_p99_ratio
-        && (ratios[1].is_nan() || ratios[1] > max)
+        && (p99_ratio.is_nan() || p99_ratio > max)
     {
         eprintln!(
-            "loop-jitter: p99 ratio daemon/bare {:.2} exceeds --max-p99-ratio {max}",
-            ratios[1]
+            "loop-jitter: p99 ratio daemon/bare {p99_ratio:.2} exceeds --max-p99-ratio {max}"
         );
-        return Ok(ExitCode::from(3));
+        return ExitCode::from(3);
     }
-    Ok(ExitCode::SUCCESS)
+    ExitCode::SUCCESS
 }

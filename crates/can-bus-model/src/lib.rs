@@ -1,6 +1,9 @@
-//! One classic CAN bus as it is on the wire: a bit rate, nodes with a bounded FIFO transmit
-//! queue each, arbitration by identifier whenever the bus is idle, and every frame occupying
-//! the bus for its exact length in bits ([`super::bits::exact`]).
+//! # can-bus-model: one classic CAN bus as it is on the wire
+//!
+//! A bit rate, nodes with a bounded FIFO transmit queue each, arbitration by identifier
+//! whenever the bus is idle, and every frame occupying the bus for its exact length in bits
+//! ([`can_transport::wire::bits::exact`]). The `can-wire` hub runs it for every simulated
+//! bus; the processes on the bus reach it through can-transport's `wire:` client.
 //!
 //! Pure logic: time is passed in (CLOCK_MONOTONIC ns in the hub, any ns in tests), there is no
 //! I/O, and nothing allocates after [`Bus::new`].
@@ -14,8 +17,9 @@
 //!   field wins ([`arbitration_key`]: identifier bit by bit, dominant 0 first; a standard frame
 //!   beats an extended one with the same base identifier; a data frame beats a remote frame).
 //! * The winner starts at that instant, is complete at its end of frame
-//!   (start + [`super::bits::FrameBits::to_eof`] bit times): delivered to every other node and
-//!   confirmed to its sender then; the bus is free again after the 3-bit intermission.
+//!   (start + [`can_transport::wire::bits::FrameBits::to_eof`] bit times): delivered to every
+//!   other node and confirmed to its sender then; the bus is free again after the 3-bit
+//!   intermission.
 //! * A submission stamped before an arbitration decision already taken is a model violation:
 //!   the frame should have competed in it but was not known yet (the hub learned of it too
 //!   late). It is counted, and the frame competes at the next arbitration.
@@ -24,8 +28,8 @@
 //! exact bit position of an arbitration loss (a loser simply waits for the next idle bus),
 //! frames from two nodes with the same arbitration field (the lower node index wins; counted).
 
-use super::bits;
-use crate::frame::CanFrame;
+use can_transport::CanFrame;
+use can_transport::wire::bits;
 use hdrhistogram::Histogram;
 
 /// Length of a load window, ns.

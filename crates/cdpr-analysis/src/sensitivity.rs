@@ -15,14 +15,14 @@
 //! for the linear law, so ∂f_i/∂k_F,i = f_i / k_F,i). The tests check J_xp against the full
 //! elastostatic forward kinematics of a perturbed robot (eq. 2.42), an independent path.
 
-use crate::elastostatics::{self, ElastostaticsError, Stiffness};
-use crate::kinematics;
-use crate::kinematics::KinematicsError;
-use crate::model::ModelError;
-use crate::model::{Data, Model};
-use crate::pose::Pose;
-use crate::statics;
-use crate::statics::StaticsError;
+use cdpr_model::elastostatics::{self, ElastostaticsError, Stiffness};
+use cdpr_model::kinematics;
+use cdpr_model::kinematics::KinematicsError;
+use cdpr_model::model::ModelError;
+use cdpr_model::model::{Data, Model};
+use cdpr_model::pose::Pose;
+use cdpr_model::statics;
+use cdpr_model::statics::StaticsError;
 use nalgebra::{DMatrix, Vector3, Vector6};
 
 /// Why a sensitivity could not be computed.

@@ -1,8 +1,8 @@
 //! The planar robots of the spec's chapters 3–4 (eq. 3.40 / 4.24): numbers the text gives,
-//! reproduced from the model library (`cdpr_model::planar`); docs/analysis.md lists each with the
-//! spec's value and what is missing where one is not reproduced exactly.
+//! reproduced from the analysis library (`cdpr_analysis::planar`); docs/analysis.md lists each
+//! with the spec's value and what is missing where one is not reproduced exactly.
 
-use cdpr_model::planar::{self, AreaTest, PlanarPose};
+use cdpr_analysis::planar::{self, AreaTest, PlanarPose};
 use nalgebra::{DVector, Vector2};
 
 #[test]
