@@ -540,13 +540,10 @@ fn draw_chart(area: &Area<'_>, c: &Chart) -> DrawResult<()> {
     }
 }
 
-/// The mesh and everything of `c` on a chart whose y axis is linear or logarithmic.
-fn fill_chart<'b, Y>(
-    inner: &Area<'b>,
+/// The axes, their labels and the grid; named rows as the y axis's tick labels.
+fn draw_mesh<'b, Y>(
     chart: &mut ChartContext<'b, SVGBackend<'b>, Cartesian2d<RangedCoordf64, Y>>,
     c: &Chart,
-    x: Span,
-    y: Span,
 ) -> DrawResult<()>
 where
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
@@ -571,8 +568,21 @@ where
         mesh.y_labels(rows.len()).y_label_formatter(&row_name);
     }
     mesh.draw()?;
-    let finite = |p: &(f64, f64)| p.0.is_finite() && p.1.is_finite() && (!c.y_log || p.1 > 0.0);
-    for r in &c.rects {
+    Ok(())
+}
+
+/// The rectangles: fill, outline, text at the centre; those with a corner `finite` rejects are
+/// left out.
+fn draw_rects<'b, Y>(
+    inner: &Area<'b>,
+    chart: &mut ChartContext<'b, SVGBackend<'b>, Cartesian2d<RangedCoordf64, Y>>,
+    rects: &[Rect],
+    finite: impl Fn(&(f64, f64)) -> bool,
+) -> DrawResult<()>
+where
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    for r in rects {
         if !(finite(&r.min) && finite(&r.max)) {
             continue;
         }
@@ -603,6 +613,23 @@ where
             )))?;
         }
     }
+    Ok(())
+}
+
+/// The mesh and everything of `c` on a chart whose y axis is linear or logarithmic.
+fn fill_chart<'b, Y>(
+    inner: &Area<'b>,
+    chart: &mut ChartContext<'b, SVGBackend<'b>, Cartesian2d<RangedCoordf64, Y>>,
+    c: &Chart,
+    x: Span,
+    y: Span,
+) -> DrawResult<()>
+where
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    draw_mesh(chart, c)?;
+    let finite = |p: &(f64, f64)| p.0.is_finite() && p.1.is_finite() && (!c.y_log || p.1 > 0.0);
+    draw_rects(inner, chart, &c.rects, finite)?;
     for h in &c.hlines {
         if !h.y.is_finite() {
             continue;
