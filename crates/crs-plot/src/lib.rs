@@ -1,12 +1,16 @@
 //! The one plot layer of the stack: a [`Figure`] of panels — [`Chart`]s (lines with a legend,
-//! markers, filled or outlined rectangles, horizontal limits) and grouped [`Bars`] — drawn as SVG
-//! with plotters' SVG backend. Every writer of an SVG in the model and calibration crates
+//! markers, filled or outlined rectangles, horizontal limits, vertical marks, text labels, a
+//! linear or logarithmic y axis, named rows) and grouped [`Bars`] — drawn as SVG with plotters'
+//! SVG backend. A figure's legend is either each chart's own (on the data) or one strip above
+//! all panels ([`Figure::legend`]). Every writer of an SVG in the model and calibration crates
 //! describes its figure with these types and calls [`Figure::svg`]; none writes SVG text itself.
 //!
 //! Input is data, not layout: non-finite values are left out, a panel without data draws
 //! "no data", a degenerate range is widened, so a figure never panics on what it is handed.
 
 use plotters::coord::Shift;
+use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -22,6 +26,12 @@ impl Rgb {
     pub const ORANGE: Rgb = Rgb(255, 127, 14);
     pub const GREEN: Rgb = Rgb(44, 160, 44);
     pub const GREY: Rgb = Rgb(153, 153, 153);
+
+    /// The `i`-th colour of plotters' 99-colour palette (cables, one colour each).
+    pub fn palette(i: usize) -> Rgb {
+        let c = Palette99::pick(i).to_rgba();
+        Rgb(c.0, c.1, c.2)
+    }
 
     fn rgba(self, opacity: f64) -> RGBAColor {
         RGBColor(self.0, self.1, self.2).mix(opacity.clamp(0.0, 1.0))
@@ -127,6 +137,22 @@ pub struct HLine {
     pub dashed: bool,
 }
 
+/// A vertical line across the chart at `x` (an event on a time axis).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VLine {
+    pub x: f64,
+    pub color: Rgb,
+    pub dashed: bool,
+}
+
+/// Text whose top-left corner sits at `at` in data coordinates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Label {
+    pub at: (f64, f64),
+    pub text: String,
+    pub color: Rgb,
+}
+
 /// An axis range (lo, hi) in data units.
 type Span = (f64, f64);
 
@@ -141,11 +167,17 @@ pub struct Chart {
     /// One metre is as long on both axes (maps, views of a path): the shorter range is
     /// widened about its centre to the panel's aspect.
     pub equal_scale: bool,
-    /// Drawn first, then the limits, the lines and the markers on top.
+    /// A logarithmic y axis; values ≤ 0 are left out, as non-finite ones are.
+    pub y_log: bool,
+    /// Names of the rows y = 0, 1, … written as the y axis's tick labels instead of numbers.
+    pub y_categories: Vec<String>,
+    /// Drawn first, then the limits and marks, the lines, the markers and the labels on top.
     pub rects: Vec<Rect>,
     pub hlines: Vec<HLine>,
+    pub vlines: Vec<VLine>,
     pub lines: Vec<Line>,
     pub markers: Vec<Markers>,
+    pub labels: Vec<Label>,
 }
 
 impl Chart {
@@ -165,7 +197,11 @@ impl Chart {
     /// (x range, y range) of the finite data, `None` without any.
     fn data_ranges(&self) -> (Option<Span>, Option<Span>) {
         let mut x = Extent::default();
-        let mut y = Extent::default();
+        // On a logarithmic axis only positive values have a place.
+        let mut y = Extent {
+            positive_only: self.y_log,
+            ..Extent::default()
+        };
         for r in &self.rects {
             for p in [r.min, r.max] {
                 x.add(p.0);
@@ -183,6 +219,10 @@ impl Chart {
                 x.add(p.0);
                 y.add(p.1);
             }
+        }
+        for l in &self.labels {
+            x.add(l.at.0);
+            y.add(l.at.1);
         }
         // A limit widens y only when there is data to place it against.
         if x.get().is_some() {
@@ -228,6 +268,9 @@ pub struct Figure {
     pub panels: Vec<Panel>,
     /// One line of text each, under the panels (what the colours mean, the source).
     pub notes: Vec<String>,
+    /// A legend strip under the title, above every panel (a line sample in the colour and
+    /// the text, one entry after the other): never on the data. Empty: no strip.
+    pub legend: Vec<(String, Rgb)>,
 }
 
 /// Why a figure could not be drawn.
@@ -238,6 +281,19 @@ pub enum PlotError {
         title: String,
         #[source]
         source: DrawingAreaErrorKind<std::io::Error>,
+    },
+    #[error("drawing {} (\"{title}\"): {source}", path.display())]
+    DrawFile {
+        path: std::path::PathBuf,
+        title: String,
+        #[source]
+        source: DrawingAreaErrorKind<std::io::Error>,
+    },
+    #[error("writing {}: {source}", path.display())]
+    Write {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
     },
 }
 
@@ -250,6 +306,8 @@ const MARGIN: u32 = 8;
 const X_LABEL_AREA: u32 = 36;
 const Y_LABEL_AREA: u32 = 62;
 const FONT: &str = "sans-serif";
+/// Height of a figure's legend strip above its panels (px).
+pub const LEGEND_STRIP_PX: u32 = 30;
 
 impl Figure {
     /// A figure of one panel.
@@ -260,7 +318,24 @@ impl Figure {
             columns: 1,
             panels: vec![panel],
             notes: Vec::new(),
+            legend: Vec::new(),
         }
+    }
+
+    /// [`Figure::svg`] written to `path`; an error names the file.
+    pub fn write(&self, path: &std::path::Path) -> Result<(), PlotError> {
+        let svg = self.svg().map_err(|e| match e {
+            PlotError::Draw { title, source } => PlotError::DrawFile {
+                path: path.to_path_buf(),
+                title,
+                source,
+            },
+            other => other,
+        })?;
+        std::fs::write(path, svg).map_err(|source| PlotError::Write {
+            path: path.to_path_buf(),
+            source,
+        })
     }
 
     /// The figure as an SVG document.
@@ -288,6 +363,7 @@ impl Figure {
                 columns: 1,
                 panels: Vec::new(),
                 notes: vec![format!("this figure could not be drawn: {e}")],
+                legend: Vec::new(),
             };
             failed.svg().unwrap_or_else(|_| {
                 "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"400\" height=\"40\"><text x=\"10\" y=\"20\">this figure could not be drawn</text></svg>\n".to_string()
@@ -306,6 +382,11 @@ impl Figure {
                 (10, 8),
                 (FONT, 17).into_font(),
             ))?;
+            body = rest;
+        }
+        if !self.legend.is_empty() {
+            let (strip, rest) = body.split_vertically(LEGEND_STRIP_PX);
+            legend_strip(&strip, &self.legend)?;
             body = rest;
         }
         let notes_px = (NOTE_PX * self.notes.len() as u32
@@ -341,21 +422,24 @@ impl Figure {
     }
 }
 
-/// Min and max of finite values.
+/// Min and max of finite (and, if asked, positive) values.
 #[derive(Default)]
-struct Extent(Option<(f64, f64)>);
+struct Extent {
+    range: Option<(f64, f64)>,
+    positive_only: bool,
+}
 
 impl Extent {
     fn add(&mut self, v: f64) {
-        if v.is_finite() {
-            self.0 = Some(match self.0 {
+        if v.is_finite() && (!self.positive_only || v > 0.0) {
+            self.range = Some(match self.range {
                 None => (v, v),
                 Some((a, b)) => (a.min(v), b.max(v)),
             });
         }
     }
     fn get(&self) -> Option<(f64, f64)> {
-        self.0
+        self.range
     }
 }
 
@@ -376,6 +460,26 @@ fn valid(r: (f64, f64)) -> Option<(f64, f64)> {
     (r.0.is_finite() && r.1.is_finite() && r.0 < r.1).then_some(r)
 }
 
+/// One entry after the other: a line sample in the colour, then the text.
+fn legend_strip(strip: &Area<'_>, items: &[(String, Rgb)]) -> DrawResult<()> {
+    let y = (LEGEND_STRIP_PX / 2) as i32;
+    let mut x = 70i32;
+    for (label, colour) in items {
+        strip.draw(&PathElement::new(
+            vec![(x, y), (x + 22, y)],
+            colour.rgba(1.0).stroke_width(3),
+        ))?;
+        strip.draw(&Text::new(
+            label.clone(),
+            (x + 28, y - 7),
+            (FONT, 15).into_font(),
+        ))?;
+        // Room for the text at ~8 px per character of a 15 px sans-serif font.
+        x += 28 + 8 * label.chars().count() as i32 + 24;
+    }
+    Ok(())
+}
+
 fn no_data(area: &Area<'_>, title: &str) -> DrawResult<()> {
     let text = if title.is_empty() {
         "no data".to_string()
@@ -389,7 +493,16 @@ fn no_data(area: &Area<'_>, title: &str) -> DrawResult<()> {
 fn draw_chart(area: &Area<'_>, c: &Chart) -> DrawResult<()> {
     let (dx, dy) = c.data_ranges();
     let x = c.x_range.and_then(valid).or(dx.map(|r| padded(r, 0.05)));
-    let y = c.y_range.and_then(valid).or(dy.map(|r| padded(r, 0.05)));
+    let y = if c.y_log {
+        // Padded by 5 % of the decades spanned; a range that is not positive is none.
+        let positive = |r: Span| (r.0 > 0.0).then_some(r);
+        c.y_range.and_then(valid).and_then(positive).or(dy.map(|r| {
+            let (lo, hi) = padded((r.0.log10(), r.1.log10()), 0.05);
+            (10f64.powf(lo), 10f64.powf(hi))
+        }))
+    } else {
+        c.y_range.and_then(valid).or(dy.map(|r| padded(r, 0.05)))
+    };
     let (Some(mut x), Some(mut y)) = (x, y) else {
         return no_data(area, &c.title);
     };
@@ -398,9 +511,12 @@ fn draw_chart(area: &Area<'_>, c: &Chart) -> DrawResult<()> {
     } else {
         area.titled(&c.title, (FONT, 15))?
     };
-    if c.equal_scale {
+    // Row names need room for their text left of the axis.
+    let longest = c.y_categories.iter().map(|s| s.chars().count()).max();
+    let y_label_area = longest.map_or(Y_LABEL_AREA, |n| Y_LABEL_AREA.max(n as u32 * 7 + 20));
+    if c.equal_scale && !c.y_log {
         let (w, h) = inner.dim_in_pixel();
-        let pw = w.saturating_sub(2 * MARGIN + Y_LABEL_AREA).max(1) as f64;
+        let pw = w.saturating_sub(2 * MARGIN + y_label_area).max(1) as f64;
         let ph = h.saturating_sub(2 * MARGIN + X_LABEL_AREA).max(1) as f64;
         let s = (pw / (x.1 - x.0)).min(ph / (y.1 - y.0));
         let widen = |r: (f64, f64), px: f64| {
@@ -410,22 +526,63 @@ fn draw_chart(area: &Area<'_>, c: &Chart) -> DrawResult<()> {
         x = widen(x, pw);
         y = widen(y, ph);
     }
-    let mut chart = ChartBuilder::on(&inner)
+    let mut builder = ChartBuilder::on(&inner);
+    builder
         .margin(MARGIN)
         .x_label_area_size(X_LABEL_AREA)
-        .y_label_area_size(Y_LABEL_AREA)
-        .build_cartesian_2d(x.0..x.1, y.0..y.1)?;
-    chart
-        .configure_mesh()
-        .x_desc(c.x_label.as_str())
+        .y_label_area_size(y_label_area);
+    if c.y_log {
+        let mut chart = builder.build_cartesian_2d(x.0..x.1, (y.0..y.1).log_scale())?;
+        fill_chart(&inner, &mut chart, c, x, y)
+    } else {
+        let mut chart = builder.build_cartesian_2d(x.0..x.1, y.0..y.1)?;
+        fill_chart(&inner, &mut chart, c, x, y)
+    }
+}
+
+/// The axes, their labels and the grid; named rows as the y axis's tick labels.
+fn draw_mesh<'b, Y>(
+    chart: &mut ChartContext<'b, SVGBackend<'b>, Cartesian2d<RangedCoordf64, Y>>,
+    c: &Chart,
+) -> DrawResult<()>
+where
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    let rows = &c.y_categories;
+    let row_name = |v: &f64| {
+        let k = v.round();
+        if (v - k).abs() < 1e-6 && k >= 0.0 && (k as usize) < rows.len() {
+            rows[k as usize].clone()
+        } else {
+            String::new()
+        }
+    };
+    let mut mesh = chart.configure_mesh();
+    mesh.x_desc(c.x_label.as_str())
         .y_desc(c.y_label.as_str())
         .light_line_style(TRANSPARENT)
         .bold_line_style(RGBColor(225, 225, 225))
         .label_style((FONT, 12))
-        .axis_desc_style((FONT, 13))
-        .draw()?;
-    let finite = |p: &(f64, f64)| p.0.is_finite() && p.1.is_finite();
-    for r in &c.rects {
+        .axis_desc_style((FONT, 13));
+    if !rows.is_empty() {
+        mesh.y_labels(rows.len()).y_label_formatter(&row_name);
+    }
+    mesh.draw()?;
+    Ok(())
+}
+
+/// The rectangles: fill, outline, text at the centre; those with a corner `finite` rejects are
+/// left out.
+fn draw_rects<'b, Y>(
+    inner: &Area<'b>,
+    chart: &mut ChartContext<'b, SVGBackend<'b>, Cartesian2d<RangedCoordf64, Y>>,
+    rects: &[Rect],
+    finite: impl Fn(&(f64, f64)) -> bool,
+) -> DrawResult<()>
+where
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    for r in rects {
         if !(finite(&r.min) && finite(&r.max)) {
             continue;
         }
@@ -451,11 +608,28 @@ fn draw_chart(area: &Area<'_>, c: &Chart) -> DrawResult<()> {
                 centre,
                 (FONT, 11)
                     .into_font()
-                    .into_text_style(&inner)
+                    .into_text_style(inner)
                     .pos(Pos::new(HPos::Center, VPos::Center)),
             )))?;
         }
     }
+    Ok(())
+}
+
+/// The mesh and everything of `c` on a chart whose y axis is linear or logarithmic.
+fn fill_chart<'b, Y>(
+    inner: &Area<'b>,
+    chart: &mut ChartContext<'b, SVGBackend<'b>, Cartesian2d<RangedCoordf64, Y>>,
+    c: &Chart,
+    x: Span,
+    y: Span,
+) -> DrawResult<()>
+where
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    draw_mesh(chart, c)?;
+    let finite = |p: &(f64, f64)| p.0.is_finite() && p.1.is_finite() && (!c.y_log || p.1 > 0.0);
+    draw_rects(inner, chart, &c.rects, finite)?;
     for h in &c.hlines {
         if !h.y.is_finite() {
             continue;
@@ -463,6 +637,18 @@ fn draw_chart(area: &Area<'_>, c: &Chart) -> DrawResult<()> {
         let pts = vec![(x.0, h.y), (x.1, h.y)];
         let style = h.color.rgba(1.0).stroke_width(1);
         if h.dashed {
+            chart.draw_series(std::iter::once(DashedPathElement::new(pts, 5, 3, style)))?;
+        } else {
+            chart.draw_series(std::iter::once(PathElement::new(pts, style)))?;
+        }
+    }
+    for v in &c.vlines {
+        if !v.x.is_finite() {
+            continue;
+        }
+        let pts = vec![(v.x, y.0), (v.x, y.1)];
+        let style = v.color.rgba(1.0).stroke_width(1);
+        if v.dashed {
             chart.draw_series(std::iter::once(DashedPathElement::new(pts, 5, 3, style)))?;
         } else {
             chart.draw_series(std::iter::once(PathElement::new(pts, style)))?;
@@ -520,6 +706,17 @@ fn draw_chart(area: &Area<'_>, c: &Chart) -> DrawResult<()> {
                 )
         }))?;
     }
+    let labels = c
+        .labels
+        .iter()
+        .filter(|l| finite(&l.at) && !l.text.is_empty());
+    chart.draw_series(labels.map(|l| {
+        Text::new(
+            l.text.clone(),
+            l.at,
+            (FONT, 12).into_font().color(&l.color.rgba(1.0)),
+        )
+    }))?;
     if legend {
         chart
             .configure_series_labels()

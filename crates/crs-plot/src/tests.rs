@@ -170,6 +170,7 @@ fn empty_and_degenerate_input_draws_an_empty_state_not_a_panic() {
             columns: 0,
             panels: vec![],
             notes: vec!["a note".into()],
+            legend: Vec::new(),
         },
     ];
     for f in cases {
@@ -252,4 +253,139 @@ fn limits_and_notes_are_drawn() {
         1
     );
     assert!(texts(&doc).contains(&"red: the limit".to_string()));
+}
+
+#[test]
+fn a_legend_strip_sits_above_every_panel_and_the_charts_draw_no_legend_of_their_own() {
+    let mut panels = Vec::new();
+    for k in 0..2 {
+        let mut c = Chart::new(format!("panel {k}"), "t (s)", "m");
+        let mut l = Line::new("unused", Rgb::BLUE, vec![(0.0, 1.0), (1.0, 2.0)]);
+        l.label = None;
+        c.lines.push(l);
+        panels.push(Panel::Chart(c));
+    }
+    let f = Figure {
+        title: String::new(),
+        size: (800, 300),
+        columns: 2,
+        panels,
+        notes: Vec::new(),
+        legend: vec![
+            ("reference".into(), Rgb::ORANGE),
+            ("plant".into(), Rgb::BLUE),
+        ],
+    };
+    let svg = f.svg().unwrap();
+    let doc = parse(&svg);
+    let t = texts(&doc);
+    assert!(t.contains(&"reference".to_string()) && t.contains(&"plant".to_string()));
+    assert!(!t.contains(&"unused".to_string()), "{t:?}");
+    // The strip's samples lie above the top of every plot area (the strip is 30 px high).
+    let samples: Vec<f64> = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "polyline" && n.attribute("stroke-width") == Some("3"))
+        .map(|n| {
+            let pts = n.attribute("points").unwrap();
+            pts.split([' ', ','])
+                .filter(|s| !s.is_empty())
+                .nth(1)
+                .unwrap()
+                .parse()
+                .unwrap()
+        })
+        .collect();
+    assert_eq!(samples.len(), 2, "{svg}");
+    assert!(samples.iter().all(|y| *y < 30.0), "{samples:?}");
+    // Both data lines drawn below the strip.
+    let data_y: Vec<f64> = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "polyline" && n.attribute("stroke-width") == Some("1"))
+        .filter(|n| n.attribute("stroke") == Some("#1F77B4"))
+        .flat_map(|n| {
+            n.attribute("points")
+                .unwrap()
+                .split_whitespace()
+                .map(|p| p.split(',').nth(1).unwrap().parse::<f64>().unwrap())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert_eq!(data_y.len(), 4);
+    assert!(data_y.iter().all(|y| *y > 30.0), "{data_y:?}");
+}
+
+#[test]
+fn marks_labels_named_rows_and_a_log_axis_are_drawn() {
+    let mut c = Chart::new("events", "t (s)", "");
+    c.y_categories = vec!["motion-core".into(), "drive-io".into()];
+    c.x_range = Some((0.0, 10.0));
+    c.y_range = Some((-0.5, 1.5));
+    c.vlines = vec![
+        VLine {
+            x: 2.0,
+            color: Rgb(200, 30, 30),
+            dashed: false,
+        },
+        VLine {
+            x: f64::NAN,
+            color: Rgb(200, 30, 30),
+            dashed: false,
+        },
+    ];
+    c.labels = vec![
+        Label {
+            at: (2.0, 1.0),
+            text: "fault".into(),
+            color: Rgb::BLACK,
+        },
+        Label {
+            at: (f64::NAN, 1.0),
+            text: "never".into(),
+            color: Rgb::BLACK,
+        },
+    ];
+    let svg = Figure::single("", (600, 300), Panel::Chart(c))
+        .svg()
+        .unwrap();
+    let doc = parse(&svg);
+    let t = texts(&doc);
+    for want in ["motion-core", "drive-io", "fault"] {
+        assert!(t.iter().any(|s| s == want), "{want} missing in {t:?}");
+    }
+    assert!(!t.contains(&"never".to_string()));
+    let marks = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "polyline" && n.attribute("stroke") == Some("#C81E1E"))
+        .count();
+    assert_eq!(marks, 1);
+
+    // Log axis: 1 … 1000 spans three decades; values ≤ 0 are left out.
+    let mut c = Chart::new("lateness", "t (s)", "µs");
+    c.y_log = true;
+    c.lines.push(Line::new(
+        "p99",
+        Rgb::GREEN,
+        vec![(0.0, 1.0), (1.0, 0.0), (2.0, 10.0), (3.0, 1000.0)],
+    ));
+    let svg = Figure::single("", (600, 300), Panel::Chart(c))
+        .svg()
+        .unwrap();
+    let doc = parse(&svg);
+    let ys: Vec<f64> = doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "polyline" && n.attribute("stroke") == Some("#2CA02C"))
+        .filter(|n| n.attribute("points").unwrap().split_whitespace().count() == 3)
+        .flat_map(|n| {
+            n.attribute("points")
+                .unwrap()
+                .split_whitespace()
+                .map(|p| p.split(',').nth(1).unwrap().parse::<f64>().unwrap())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert_eq!(ys.len(), 3, "{svg}");
+    // Equal ratios are equal distances: 1 → 10 as far as 10 → 1000 is half of.
+    let (d1, d2) = (ys[0] - ys[1], ys[1] - ys[2]);
+    assert!((d2 - 2.0 * d1).abs() <= 2.0, "{ys:?}");
+    assert_ne!(Rgb::palette(0), Rgb::palette(1));
 }

@@ -166,12 +166,23 @@ fn the_plot_layer_is_plotters_alone() {
         "calibrate",
         "ride-physics",
         "motion-cueing",
+        "stack-reports",
+        "plant-experiments",
     ] {
         assert!(
             closure(user).contains("crs-plot"),
             "{user} should draw its SVGs with crs-plot"
         );
     }
+    // No other crate of the workspace draws with plotters directly.
+    let (deps, name_of) = graph();
+    let direct: Vec<&String> = deps
+        .iter()
+        .filter(|(id, _)| id.starts_with("path+file://") && name_of[*id] != "crs-plot")
+        .filter(|(_, ds)| ds.iter().any(|d| name_of[d] == "plotters"))
+        .map(|(id, _)| &name_of[id])
+        .collect();
+    assert!(direct.is_empty(), "{direct:?} use plotters directly");
 }
 
 #[test]

@@ -87,6 +87,7 @@ pub fn panels_svg(title: &str, panels: &[Panel], columns: usize) -> String {
         columns,
         panels: charts,
         notes: Vec::new(),
+        legend: Vec::new(),
     }
     .render()
 }

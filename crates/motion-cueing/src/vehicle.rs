@@ -87,6 +87,8 @@ pub enum VehicleError {
     },
     #[error("{file}: cannot write: {message}")]
     Write { file: String, message: String },
+    #[error("formatting the vehicle CSV: {0}")]
+    Csv(String),
 }
 
 /// A vehicle's motion over time.
@@ -220,34 +222,54 @@ impl VehicleTrack {
         Ok(Self { samples })
     }
 
-    /// The CSV text of the track, `comment` lines first (prefixed with `# `).
-    pub fn to_csv(&self, comment: &[String]) -> String {
-        let mut s = String::new();
+    /// The CSV text of the track, `comment` lines first (prefixed with `# `); the numbers in
+    /// fixed decimals (ms, 10 µm/s², µrad/s), as the shipped profiles in config/vehicle/ hold them.
+    pub fn to_csv(&self, comment: &[String]) -> Result<String, VehicleError> {
+        let mut text = Vec::new();
         for c in comment {
-            s.push_str("# ");
-            s.push_str(c);
-            s.push('\n');
+            text.extend_from_slice(format!("# {c}\n").as_bytes());
         }
-        s.push_str(&COLUMNS.join(","));
-        s.push('\n');
+        let mut w = csv::Writer::from_writer(text);
         for (t, v) in &self.samples {
             let f = v.specific_force;
-            let w = v.angular_velocity;
-            s.push_str(&format!(
-                "{t:.3},{:.5},{:.5},{:.5},{:.6},{:.6},{:.6}\n",
-                f.x, f.y, f.z, w.x, w.y, w.z
-            ));
+            let o = v.angular_velocity;
+            w.serialize(VehicleRow {
+                t_s: format!("{t:.3}"),
+                f_x_m_per_s2: format!("{:.5}", f.x),
+                f_y_m_per_s2: format!("{:.5}", f.y),
+                f_z_m_per_s2: format!("{:.5}", f.z),
+                omega_x_rad_per_s: format!("{:.6}", o.x),
+                omega_y_rad_per_s: format!("{:.6}", o.y),
+                omega_z_rad_per_s: format!("{:.6}", o.z),
+            })
+            .map_err(|e| VehicleError::Csv(e.to_string()))?;
         }
-        s
+        let text = w
+            .into_inner()
+            .map_err(|e| VehicleError::Csv(e.error().to_string()))?;
+        // Every piece written is a `String`: the bytes are UTF-8.
+        String::from_utf8(text).map_err(|e| VehicleError::Csv(e.to_string()))
     }
 
     /// Writes [`Self::to_csv`] to `path`.
     pub fn write_csv(&self, path: &Path, comment: &[String]) -> Result<(), VehicleError> {
-        std::fs::write(path, self.to_csv(comment)).map_err(|e| VehicleError::Write {
+        std::fs::write(path, self.to_csv(comment)?).map_err(|e| VehicleError::Write {
             file: path.display().to_string(),
             message: e.to_string(),
         })
     }
+}
+
+/// One row of a vehicle CSV, its fields named as [`COLUMNS`], the numbers already formatted.
+#[derive(serde::Serialize)]
+struct VehicleRow {
+    t_s: String,
+    f_x_m_per_s2: String,
+    f_y_m_per_s2: String,
+    f_z_m_per_s2: String,
+    omega_x_rad_per_s: String,
+    omega_y_rad_per_s: String,
+    omega_z_rad_per_s: String,
 }
 
 #[cfg(test)]
@@ -266,7 +288,7 @@ mod tests {
             (m.specific_force.x + 1.0).abs() < 1e-12 && (m.angular_velocity.y - 0.05).abs() < 1e-12
         );
         assert_eq!(t.at(0.6), None);
-        let again = VehicleTrack::parse_csv(&t.to_csv(&["x".into()]), "e.csv").unwrap();
+        let again = VehicleTrack::parse_csv(&t.to_csv(&["x".into()]).unwrap(), "e.csv").unwrap();
         assert_eq!(again, t);
     }
 

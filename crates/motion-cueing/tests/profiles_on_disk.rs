@@ -12,7 +12,7 @@ fn shipped_profiles_equal_the_generator_and_read_back() {
         let path = dir.join(format!("{}.csv", p.name));
         let on_disk =
             std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let made = (p.make)().to_csv(&header(p));
+        let made = (p.make)().to_csv(&header(p)).unwrap();
         assert!(
             on_disk == made,
             "{} differs from the generator's output: regenerate it",

@@ -15,6 +15,7 @@
 use cdpr_model::Data;
 use cdpr_model::config::{Platform, load_platform};
 use crs_limits::quantile::quantile_sorted;
+use crs_plot::{Chart, Figure, Line, Markers, Panel, Rgb};
 use load_tracking::G;
 use load_tracking::point_load::{self, PointLoad};
 use nalgebra::{Vector3, Vector6};
@@ -52,13 +53,9 @@ pub enum WalkWriteError {
     /// Serialising walk.json.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
-    /// Drawing walk.svg (`path`).
-    #[error("{source}")]
-    Plot {
-        path: PathBuf,
-        #[source]
-        source: plotters::drawing::DrawingAreaErrorKind<std::io::Error>,
-    },
+    /// Drawing or writing walk.svg.
+    #[error(transparent)]
+    Plot(#[from] crs_plot::PlotError),
 }
 
 /// What to run.
@@ -164,16 +161,14 @@ impl std::fmt::Display for WalkResult {
     }
 }
 
-/// Writes `walk.svg` ([`plot`]) and `walk.json` into `out`; returns their paths.
+/// Writes `walk.svg` ([`figure`]) and `walk.json` into `out`; returns their paths.
 pub fn write(r: &WalkResult, out: &Path) -> Result<(PathBuf, PathBuf), WalkWriteError> {
     std::fs::create_dir_all(out).map_err(|source| WalkWriteError::Write {
         path: out.to_path_buf(),
         source,
     })?;
     let svg = out.join("walk.svg");
-    if let Err(source) = plot(r, &svg) {
-        return Err(WalkWriteError::Plot { path: svg, source });
-    }
+    figure(r).write(&svg)?;
     let json = out.join("walk.json");
     if let Err(source) = std::fs::write(&json, serde_json::to_string_pretty(r)?) {
         return Err(WalkWriteError::Write { path: json, source });
@@ -337,14 +332,8 @@ fn walk_result(
     })
 }
 
-/// The walk as an SVG: the walked path and the estimates (top view of the cabin floor).
-pub fn plot(
-    r: &WalkResult,
-    path: &Path,
-) -> Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
-    use plotters::prelude::*;
-    let root = SVGBackend::new(path, (720, 600)).into_drawing_area();
-    root.fill(&WHITE)?;
+/// The walk as a figure: the walked path and the estimates (top view of the cabin floor).
+pub fn figure(r: &WalkResult) -> Figure {
     let lim = r
         .samples
         .iter()
@@ -359,50 +348,41 @@ pub fn plot(
         })
         .fold(0.2f64, f64::max)
         * 1.15;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!(
-                "walking subject {:.0} kg on `{}`: mean {:.1} cm, p95 {:.1} cm (seed ±9.7 cm)",
-                r.subject_kg,
-                r.plant,
-                r.error_mean_m * 100.0,
-                r.error_p95_m * 100.0
-            ),
-            ("sans-serif", 16),
-        )
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(50)
-        .build_cartesian_2d(-lim..lim, -lim..lim)?;
-    chart
-        .configure_mesh()
-        .x_desc("x on the cabin floor (m)")
-        .y_desc("y (m)")
-        .draw()?;
-    chart
-        .draw_series(LineSeries::new(
-            r.samples.iter().map(|s| (s.true_xy_m[0], s.true_xy_m[1])),
-            GREEN.stroke_width(3),
-        ))?
-        .label("walked path (plant truth)")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], GREEN));
-    chart
-        .draw_series(
-            r.samples
-                .iter()
-                .filter_map(|s| s.estimate)
-                .map(|e| Circle::new((e.x_m, e.y_m), 2, RED.filled())),
-        )?
-        .label("estimate from the cable forces (eq. 5.9)")
-        .legend(|(x, y)| Circle::new((x + 9, y), 3, RED.filled()));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
-    root.present()?;
-    Ok(())
+    let mut c = Chart::new(
+        format!(
+            "walking subject {:.0} kg on `{}`: mean {:.1} cm, p95 {:.1} cm (seed ±9.7 cm)",
+            r.subject_kg,
+            r.plant,
+            r.error_mean_m * 100.0,
+            r.error_p95_m * 100.0
+        ),
+        "x on the cabin floor (m)",
+        "y (m)",
+    );
+    c.x_range = Some((-lim, lim));
+    c.y_range = Some((-lim, lim));
+    let mut walked = Line::new(
+        "walked path (plant truth)",
+        Rgb::GREEN,
+        r.samples
+            .iter()
+            .map(|s| (s.true_xy_m[0], s.true_xy_m[1]))
+            .collect(),
+    );
+    walked.width = 3;
+    c.lines.push(walked);
+    let mut est = Markers::new(
+        "estimate from the cable forces (eq. 5.9)",
+        Rgb::RED,
+        r.samples
+            .iter()
+            .filter_map(|s| s.estimate)
+            .map(|e| (e.x_m, e.y_m))
+            .collect(),
+    );
+    est.radius = 2;
+    c.markers.push(est);
+    Figure::single("", (720, 600), Panel::Chart(c))
 }
 
 #[cfg(test)]

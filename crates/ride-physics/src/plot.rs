@@ -96,6 +96,7 @@ pub fn path_svg(
                 " · green: motion-core's reference"
             }
         )],
+        legend: Vec::new(),
     }
     .render()
 }

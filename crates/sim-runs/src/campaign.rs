@@ -31,6 +31,13 @@ pub enum CampaignError {
         #[source]
         source: std::io::Error,
     },
+    /// Formatting the waypoint CSV for `path`.
+    #[error("{}: formatting the CSV: {source}", path.display())]
+    Csv {
+        path: PathBuf,
+        #[source]
+        source: csv::Error,
+    },
 }
 
 /// i-th element of the van der Corput sequence in `base` (one Halton coordinate).
@@ -168,30 +175,47 @@ pub fn timed_waypoints(
     Ok((out, t))
 }
 
+/// One row of a waypoint CSV: the numbers as `{:?}` writes them (shortest text that reads back
+/// to the same f64), so a written campaign reads back bit for bit.
+#[derive(serde::Serialize)]
+struct WaypointRow {
+    t_s: String,
+    x_m: String,
+    y_m: String,
+    z_m: String,
+    phi_x_deg: String,
+    phi_y_deg: String,
+    phi_z_deg: String,
+}
+
 /// Writes waypoints in the CSV format motion-core reads (`trajectory::read_waypoints`), the
 /// comment as `#` lines on top.
 pub fn write_waypoints(path: &Path, wps: &[Waypoint], comment: &str) -> Result<(), CampaignError> {
-    use std::fmt::Write as _;
-    let mut s = String::new();
+    let csv_err = |source| CampaignError::Csv {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut text = Vec::new();
     for line in comment.lines() {
-        let _ = writeln!(s, "# {line}");
+        text.extend_from_slice(format!("# {line}\n").as_bytes());
     }
-    s.push_str("t_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n");
-    for w in wps {
-        let p = w.pose.to_array();
-        let _ = writeln!(
-            s,
-            "{:?},{:?},{:?},{:?},{:?},{:?},{:?}",
-            w.not_before_s,
-            p[0],
-            p[1],
-            p[2],
-            p[3].to_degrees(),
-            p[4].to_degrees(),
-            p[5].to_degrees()
-        );
+    let mut w = csv::Writer::from_writer(text);
+    for wp in wps {
+        let p = wp.pose.to_array();
+        let f = |v: f64| format!("{v:?}");
+        w.serialize(WaypointRow {
+            t_s: f(wp.not_before_s),
+            x_m: f(p[0]),
+            y_m: f(p[1]),
+            z_m: f(p[2]),
+            phi_x_deg: f(p[3].to_degrees()),
+            phi_y_deg: f(p[4].to_degrees()),
+            phi_z_deg: f(p[5].to_degrees()),
+        })
+        .map_err(csv_err)?;
     }
-    std::fs::write(path, s).map_err(|source| CampaignError::Write {
+    let text = w.into_inner().map_err(|e| csv_err(e.into_error().into()))?;
+    std::fs::write(path, text).map_err(|source| CampaignError::Write {
         path: path.to_path_buf(),
         source,
     })
@@ -278,6 +302,15 @@ mod tests {
         ];
         let p = std::env::temp_dir().join(format!("crs-stack-wps-{}.csv", std::process::id()));
         write_waypoints(&p, &wps, "two\nlines").unwrap();
+        // The exact text: comments, the header, `{:?}` numbers, no quotes, `\n` line ends.
+        let d = |r: f64| format!("{:?}", r.to_degrees());
+        let want = format!(
+            "# two\n# lines\nt_s,x_m,y_m,z_m,phi_x_deg,phi_y_deg,phi_z_deg\n1.5,0.1,-0.2,2.0,{},{},{}\n3.25,0.0,0.0,2.0,0.0,0.0,0.0\n",
+            d(0.01),
+            d(-0.02),
+            d(0.03)
+        );
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), want);
         let back = trajectory::read_waypoints(&p).unwrap();
         assert_eq!(back.len(), 2);
         for (a, b) in wps.iter().zip(&back) {

@@ -19,6 +19,7 @@ use crs_ipc::{
     EventKind, JointSetpoint, LoopStatsSample, MAX_CABLES, PLAN_OPEN_END, PlantTruth, ProcessId,
     StateEvent,
 };
+use crs_plot::{Chart, Figure, HLine, Label, Line, Markers, Panel, Rect, Rgb, VLine};
 use sim_runs::sim_run::Summary;
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -30,8 +31,6 @@ const BIN_US: f64 = 20.0;
 const HIST_MAX_US: f64 = 3000.0;
 /// Setpoints kept to pair each plant state with the newest reference published before it.
 const RECENT_SETPOINTS: usize = 256;
-/// Height of the legend strip above a figure's plot areas (px).
-const LEGEND_STRIP_PX: u32 = 30;
 
 /// One event of the run, in words.
 #[derive(Clone, Debug)]
@@ -224,21 +223,12 @@ impl RunRecord {
     }
 }
 
-/// What one plot's drawing returns: plotters' error of the SVG backend (file I/O).
-type Plot = Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>>;
-type Area<'a> =
-    plotters::drawing::DrawingArea<plotters::prelude::SVGBackend<'a>, plotters::coord::Shift>;
-
 /// Why the run's plots could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum RunPlotError {
-    /// Drawing the SVG `file`.
-    #[error("{source}")]
-    Draw {
-        file: PathBuf,
-        #[source]
-        source: plotters::drawing::DrawingAreaErrorKind<std::io::Error>,
-    },
+    /// Drawing or writing one of the SVGs (the error names the file).
+    #[error(transparent)]
+    Draw(#[from] crs_plot::PlotError),
     /// Writing `index.html` (`file`).
     #[error("{source}")]
     Write {
@@ -248,61 +238,62 @@ pub enum RunPlotError {
     },
 }
 
-const REFERENCE: plotters::style::RGBColor = plotters::style::RGBColor(239, 143, 0);
-const PLANT: plotters::style::RGBColor = plotters::style::RGBColor(25, 90, 210);
-const EVENT_GREY: plotters::style::RGBColor = plotters::style::RGBColor(150, 150, 150);
-const ALARM: plotters::style::RGBColor = plotters::style::RGBColor(200, 30, 30);
+const REFERENCE: Rgb = Rgb(239, 143, 0);
+const PLANT: Rgb = Rgb(25, 90, 210);
+const EVENT_GREY: Rgb = Rgb(150, 150, 150);
+const ALARM: Rgb = Rgb(200, 30, 30);
+/// plotters' pure primaries, the loop plot's colours.
+const PURE_RED: Rgb = Rgb(255, 0, 0);
+const PURE_GREEN: Rgb = Rgb(0, 255, 0);
+const PURE_BLUE: Rgb = Rgb(0, 0, 255);
 
-/// Splits off the legend strip at the top of `root` and draws the legend in it, one entry
-/// after the other (a line sample and its label): outside every plot area by construction.
-fn legend_strip<'a>(
-    root: &Area<'a>,
-    items: &[(String, plotters::style::RGBColor)],
-) -> Result<Area<'a>, plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
-    use plotters::prelude::*;
-    let (strip, body) = root.split_vertically(LEGEND_STRIP_PX);
-    let y = (LEGEND_STRIP_PX / 2) as i32;
-    let mut x = 70i32;
-    for (label, colour) in items {
-        strip.draw(&PathElement::new(
-            vec![(x, y), (x + 22, y)],
-            colour.stroke_width(3),
-        ))?;
-        strip.draw(&Text::new(
-            label.clone(),
-            (x + 28, y - 7),
-            ("sans-serif", 17).into_font(),
-        ))?;
-        // Room for the label at ~8 px per character of a 14 px sans-serif font.
-        x += 28 + 8 * label.chars().count() as i32 + 24;
+/// A line without a legend entry of its own (the figure's strip names it).
+fn line(color: Rgb, width: u32, points: Vec<(f64, f64)>) -> Line {
+    Line {
+        label: None,
+        color,
+        width,
+        dashed: false,
+        opacity: 1.0,
+        points,
     }
-    Ok(body)
 }
 
-fn draw_events<DB: plotters::prelude::DrawingBackend>(
-    chart: &mut plotters::prelude::ChartContext<
-        '_,
-        DB,
-        plotters::prelude::Cartesian2d<
-            plotters::coord::types::RangedCoordf64,
-            plotters::coord::types::RangedCoordf64,
-        >,
-    >,
-    events: &[RunEvent],
-    y: (f64, f64),
-) -> Result<(), plotters::drawing::DrawingAreaErrorKind<DB::ErrorType>>
-where
-    DB::ErrorType: 'static,
-{
-    use plotters::prelude::*;
-    for e in events {
-        let colour = if e.alarm { ALARM } else { EVENT_GREY };
-        chart.draw_series(std::iter::once(PathElement::new(
-            vec![(e.t_s, y.0), (e.t_s, y.1)],
-            colour.stroke_width(1),
-        )))?;
+/// The run's events as vertical marks: grey, red for e-stops and faults.
+fn event_marks(events: &[RunEvent]) -> Vec<VLine> {
+    events
+        .iter()
+        .map(|e| VLine {
+            x: e.t_s,
+            color: if e.alarm { ALARM } else { EVENT_GREY },
+            dashed: false,
+        })
+        .collect()
+}
+
+/// A chart with the given axis ranges.
+fn chart(title: &str, x_label: &str, y_label: &str, x: (f64, f64), y: (f64, f64)) -> Chart {
+    let mut c = Chart::new(title, x_label, y_label);
+    c.x_range = Some(x);
+    c.y_range = Some(y);
+    c
+}
+
+/// A figure without title whose legend is the strip above its panels.
+fn figure(
+    size: (u32, u32),
+    columns: usize,
+    legend: Vec<(String, Rgb)>,
+    panels: Vec<Chart>,
+) -> Figure {
+    Figure {
+        title: String::new(),
+        size,
+        columns,
+        panels: panels.into_iter().map(Panel::Chart).collect(),
+        notes: Vec::new(),
+        legend,
     }
-    Ok(())
 }
 
 /// (lo, hi) of `vals` padded by 8 % and at least `min_pad`; (0, 1) without values.
@@ -317,75 +308,73 @@ fn range(vals: impl Iterator<Item = f64>, min_pad: f64) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
-fn pose_plot(r: &RunRecord, path: &Path) -> Plot {
-    use plotters::prelude::*;
-    let root = SVGBackend::new(path, (1100, 670)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let body = legend_strip(
-        &root,
-        &[
+fn pose_plot(r: &RunRecord) -> Figure {
+    let names = ["x (m)", "y (m)", "z (m)", "φx (°)", "φy (°)", "φz (°)"];
+    let t_end = r.t_end();
+    let panels = (0..6)
+        .map(|k| {
+            let scale = if k < 3 {
+                1.0
+            } else {
+                180.0 / std::f64::consts::PI
+            };
+            let y = range(
+                r.reference
+                    .iter()
+                    .map(|(_, p)| p[k] * scale)
+                    .chain(r.actual.iter().map(|(_, p, _)| p[k] * scale)),
+                if k < 3 { 0.01 } else { 0.1 },
+            );
+            let mut c = chart(names[k], "t (s)", "", (0.0, t_end), y);
+            c.vlines = event_marks(&r.events);
+            c.lines = vec![
+                line(
+                    REFERENCE,
+                    2,
+                    r.reference
+                        .iter()
+                        .map(|(t, p)| (*t, p[k] * scale))
+                        .collect(),
+                ),
+                line(
+                    PLANT,
+                    1,
+                    r.actual
+                        .iter()
+                        .map(|(t, p, _)| (*t, p[k] * scale))
+                        .collect(),
+                ),
+            ];
+            c
+        })
+        .collect();
+    figure(
+        (1100, 670),
+        3,
+        vec![
             ("reference (setpoints)".into(), REFERENCE),
             ("plant (true pose)".into(), PLANT),
             ("event (grey) / e-stop, fault (red)".into(), EVENT_GREY),
         ],
-    )?;
-    let panels = body.split_evenly((2, 3));
-    let names = ["x (m)", "y (m)", "z (m)", "φx (°)", "φy (°)", "φz (°)"];
-    let t_end = r.t_end();
-    for (k, area) in panels.iter().enumerate() {
-        let scale = if k < 3 {
-            1.0
-        } else {
-            180.0 / std::f64::consts::PI
-        };
-        let (lo, hi) = range(
-            r.reference
-                .iter()
-                .map(|(_, p)| p[k] * scale)
-                .chain(r.actual.iter().map(|(_, p, _)| p[k] * scale)),
-            if k < 3 { 0.01 } else { 0.1 },
-        );
-        let mut chart = ChartBuilder::on(area)
-            .caption(names[k], ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(55)
-            .build_cartesian_2d(0f64..t_end, lo..hi)?;
-        chart.configure_mesh().x_desc("t (s)").draw()?;
-        draw_events(&mut chart, &r.events, (lo, hi))?;
-        chart.draw_series(LineSeries::new(
-            r.reference.iter().map(|(t, p)| (*t, p[k] * scale)),
-            REFERENCE.stroke_width(2),
-        ))?;
-        chart.draw_series(LineSeries::new(
-            r.actual.iter().map(|(t, p, _)| (*t, p[k] * scale)),
-            PLANT.stroke_width(1),
-        ))?;
-    }
-    root.present()?;
-    Ok(())
+        panels,
+    )
 }
 
 /// The tracking error where it is visible: mm and degrees, not the metre axes of the pose plot.
-fn tracking_plot(r: &RunRecord, path: &Path) -> Plot {
-    use plotters::prelude::*;
-    let root = SVGBackend::new(path, (1100, 720)).into_drawing_area();
-    root.fill(&WHITE)?;
+fn tracking_plot(r: &RunRecord) -> Figure {
     let axes = [
-        ("x", RGBColor(200, 30, 30)),
-        ("y", RGBColor(30, 150, 30)),
-        ("z", RGBColor(25, 90, 210)),
+        ("x", Rgb(200, 30, 30)),
+        ("y", Rgb(30, 150, 30)),
+        ("z", Rgb(25, 90, 210)),
     ];
-    let mut legend: Vec<(String, RGBColor)> = axes
+    let mut legend: Vec<(String, Rgb)> = axes
         .iter()
         .map(|(a, c)| (format!("{a}: plant − reference"), *c))
         .collect();
-    legend.push(("|plant − reference|".into(), BLACK));
-    let body = legend_strip(&root, &legend)?;
-    let rows = body.split_evenly((3, 1));
+    legend.push(("|plant − reference|".into(), Rgb::BLACK));
     let t_end = r.t_end();
     // Position error: components and norm (mm).
-    let (lo, hi) = range(
+    let y = range(
         r.tracking.iter().flat_map(|s| {
             s.position_mm
                 .into_iter()
@@ -393,61 +382,60 @@ fn tracking_plot(r: &RunRecord, path: &Path) -> Plot {
         }),
         0.05,
     );
-    let mut chart = ChartBuilder::on(&rows[0])
-        .caption(
-            "position tracking error (plant vs the newest setpoint before it)",
-            ("sans-serif", 15),
-        )
-        .margin(8)
-        .x_label_area_size(28)
-        .y_label_area_size(64)
-        .build_cartesian_2d(0f64..t_end, lo..hi)?;
-    chart.configure_mesh().x_desc("t (s)").y_desc("mm").draw()?;
-    draw_events(&mut chart, &r.events, (lo, hi))?;
+    let mut position = chart(
+        "position tracking error (plant vs the newest setpoint before it)",
+        "t (s)",
+        "mm",
+        (0.0, t_end),
+        y,
+    );
+    position.vlines = event_marks(&r.events);
     for (k, (_, c)) in axes.iter().enumerate() {
-        chart.draw_series(LineSeries::new(
-            r.tracking.iter().map(|s| (s.t_s, s.position_mm[k])),
-            c.stroke_width(1),
-        ))?;
+        position.lines.push(line(
+            *c,
+            1,
+            r.tracking
+                .iter()
+                .map(|s| (s.t_s, s.position_mm[k]))
+                .collect(),
+        ));
     }
-    chart.draw_series(LineSeries::new(
-        r.tracking.iter().map(|s| (s.t_s, s.position_norm_mm)),
-        BLACK.stroke_width(2),
-    ))?;
+    position.lines.push(line(
+        Rgb::BLACK,
+        2,
+        r.tracking
+            .iter()
+            .map(|s| (s.t_s, s.position_norm_mm))
+            .collect(),
+    ));
     // Rotation error (°).
     let (lo, hi) = range(r.tracking.iter().map(|s| s.rotation_deg), 0.005);
-    let lo = lo.min(0.0);
-    let mut chart = ChartBuilder::on(&rows[1])
-        .caption(
-            "rotation tracking error (angle, eq. 3.3)",
-            ("sans-serif", 15),
-        )
-        .margin(8)
-        .x_label_area_size(28)
-        .y_label_area_size(64)
-        .build_cartesian_2d(0f64..t_end, lo..hi)?;
-    chart.configure_mesh().x_desc("t (s)").y_desc("°").draw()?;
-    draw_events(&mut chart, &r.events, (lo, hi))?;
-    chart.draw_series(LineSeries::new(
-        r.tracking.iter().map(|s| (s.t_s, s.rotation_deg)),
-        BLACK.stroke_width(2),
-    ))?;
+    let mut rotation = chart(
+        "rotation tracking error (angle, eq. 3.3)",
+        "t (s)",
+        "°",
+        (0.0, t_end),
+        (lo.min(0.0), hi),
+    );
+    rotation.vlines = event_marks(&r.events);
+    rotation.lines.push(line(
+        Rgb::BLACK,
+        2,
+        r.tracking.iter().map(|s| (s.t_s, s.rotation_deg)).collect(),
+    ));
     // Winch length against the commanded cable length, per cable (mm).
-    let (lo, hi) = range(
+    let y = range(
         r.tracking.iter().flat_map(|s| s.length_mm.iter().copied()),
         0.05,
     );
-    let mut chart = ChartBuilder::on(&rows[2])
-        .caption(
-            "cable length: winch − commanded, per cable (colours: cable 1 … m, as in forces.svg)",
-            ("sans-serif", 15),
-        )
-        .margin(8)
-        .x_label_area_size(28)
-        .y_label_area_size(64)
-        .build_cartesian_2d(0f64..t_end, lo..hi)?;
-    chart.configure_mesh().x_desc("t (s)").y_desc("mm").draw()?;
-    draw_events(&mut chart, &r.events, (lo, hi))?;
+    let mut length = chart(
+        "cable length: winch − commanded, per cable (colours: cable 1 … m, as in forces.svg)",
+        "t (s)",
+        "mm",
+        (0.0, t_end),
+        y,
+    );
+    length.vlines = event_marks(&r.events);
     let m = r
         .tracking
         .iter()
@@ -455,88 +443,75 @@ fn tracking_plot(r: &RunRecord, path: &Path) -> Plot {
         .max()
         .unwrap_or(0);
     for i in 0..m {
-        chart.draw_series(LineSeries::new(
+        length.lines.push(line(
+            Rgb::palette(i),
+            1,
             r.tracking
                 .iter()
-                .filter_map(|s| s.length_mm.get(i).map(|v| (s.t_s, *v))),
-            Palette99::pick(i).stroke_width(1),
-        ))?;
+                .filter_map(|s| s.length_mm.get(i).map(|v| (s.t_s, *v)))
+                .collect(),
+        ));
     }
-    root.present()?;
-    Ok(())
+    figure((1100, 720), 1, legend, vec![position, rotation, length])
 }
 
 /// The ride's path: top view (x–y) and side view (x–z), reference and plant.
-fn path_plot(r: &RunRecord, path: &Path) -> Plot {
-    use plotters::prelude::*;
-    let root = SVGBackend::new(path, (1100, 520)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let body = legend_strip(
-        &root,
-        &[
+fn path_plot(r: &RunRecord) -> Figure {
+    let panels = [(1usize, "top view: y (m)"), (2, "side view: z (m)")]
+        .into_iter()
+        .map(|(j, name)| {
+            let x = range(
+                r.reference
+                    .iter()
+                    .map(|(_, p)| p[0])
+                    .chain(r.actual.iter().map(|(_, p, _)| p[0])),
+                0.05,
+            );
+            let y = range(
+                r.reference
+                    .iter()
+                    .map(|(_, p)| p[j])
+                    .chain(r.actual.iter().map(|(_, p, _)| p[j])),
+                0.05,
+            );
+            let title = if j == 1 {
+                "top view (x–y)"
+            } else {
+                "side view (x–z)"
+            };
+            let mut c = chart(title, "x (m)", name, x, y);
+            c.lines = vec![
+                line(
+                    REFERENCE,
+                    2,
+                    r.reference.iter().map(|(_, p)| (p[0], p[j])).collect(),
+                ),
+                line(
+                    PLANT,
+                    1,
+                    r.actual.iter().map(|(_, p, _)| (p[0], p[j])).collect(),
+                ),
+            ];
+            c
+        })
+        .collect();
+    figure(
+        (1100, 520),
+        2,
+        vec![
             ("reference (setpoints)".into(), REFERENCE),
             ("plant (true pose)".into(), PLANT),
         ],
-    )?;
-    let (left, right) = body.split_horizontally(550);
-    for (area, (j, name)) in [
-        (&left, (1usize, "top view: y (m)")),
-        (&right, (2, "side view: z (m)")),
-    ] {
-        let (x0, x1) = range(
-            r.reference
-                .iter()
-                .map(|(_, p)| p[0])
-                .chain(r.actual.iter().map(|(_, p, _)| p[0])),
-            0.05,
-        );
-        let (y0, y1) = range(
-            r.reference
-                .iter()
-                .map(|(_, p)| p[j])
-                .chain(r.actual.iter().map(|(_, p, _)| p[j])),
-            0.05,
-        );
-        let mut chart = ChartBuilder::on(area)
-            .caption(
-                if j == 1 {
-                    "top view (x–y)"
-                } else {
-                    "side view (x–z)"
-                },
-                ("sans-serif", 15),
-            )
-            .margin(10)
-            .x_label_area_size(32)
-            .y_label_area_size(60)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
-        chart.configure_mesh().x_desc("x (m)").y_desc(name).draw()?;
-        chart.draw_series(LineSeries::new(
-            r.reference.iter().map(|(_, p)| (p[0], p[j])),
-            REFERENCE.stroke_width(2),
-        ))?;
-        chart.draw_series(LineSeries::new(
-            r.actual.iter().map(|(_, p, _)| (p[0], p[j])),
-            PLANT.stroke_width(1),
-        ))?;
-    }
-    root.present()?;
-    Ok(())
+        panels,
+    )
 }
 
-fn force_plot(r: &RunRecord, path: &Path) -> Plot {
-    use plotters::prelude::*;
-    let root = SVGBackend::new(path, (1100, 500)).into_drawing_area();
-    root.fill(&WHITE)?;
+fn force_plot(r: &RunRecord) -> Figure {
     let m = r.actual.first().map_or(0, |a| a.2.len());
-    let mut legend: Vec<(String, RGBColor)> = (0..m)
-        .map(|i| {
-            let c = Palette99::pick(i).to_rgba();
-            (format!("cable {}", i + 1), RGBColor(c.0, c.1, c.2))
-        })
+    let mut legend: Vec<(String, Rgb)> = (0..m)
+        .map(|i| (format!("cable {}", i + 1), Rgb::palette(i)))
         .collect();
     legend.push(("f_min, f_max".into(), ALARM));
-    let body = legend_strip(&root, &legend)?;
     let t_end = r.t_end();
     let f_top = r
         .actual
@@ -544,82 +519,64 @@ fn force_plot(r: &RunRecord, path: &Path) -> Plot {
         .flat_map(|(_, _, f)| f.iter().copied())
         .fold(r.f_max, f64::max)
         * 1.05;
-    let mut chart = ChartBuilder::on(&body)
-        .caption(
-            "cable forces (plant truth) and the limits f_min, f_max",
-            ("sans-serif", 18),
-        )
-        .margin(10)
-        .x_label_area_size(34)
-        .y_label_area_size(64)
-        .build_cartesian_2d(0f64..t_end, 0f64..f_top)?;
-    chart.configure_mesh().x_desc("t (s)").y_desc("N").draw()?;
-    draw_events(&mut chart, &r.events, (0.0, f_top))?;
-    for lim in [r.f_min, r.f_max] {
-        chart.draw_series(DashedLineSeries::new(
-            vec![(0.0, lim), (t_end, lim)],
-            8,
-            5,
-            ALARM.stroke_width(2),
-        ))?;
-    }
+    let mut c = chart(
+        "cable forces (plant truth) and the limits f_min, f_max",
+        "t (s)",
+        "N",
+        (0.0, t_end),
+        (0.0, f_top),
+    );
+    c.vlines = event_marks(&r.events);
+    c.hlines = [r.f_min, r.f_max]
+        .map(|y| HLine {
+            y,
+            color: ALARM,
+            dashed: true,
+        })
+        .to_vec();
     for i in 0..m {
-        chart.draw_series(LineSeries::new(
-            r.actual.iter().map(|(t, _, f)| (*t, f[i])),
-            Palette99::pick(i).stroke_width(1),
-        ))?;
+        c.lines.push(line(
+            Rgb::palette(i),
+            1,
+            r.actual.iter().map(|(t, _, f)| (*t, f[i])).collect(),
+        ));
     }
-    root.present()?;
-    Ok(())
+    figure((1100, 500), 1, legend, vec![c])
 }
 
-fn loop_plot(r: &RunRecord, path: &Path) -> Plot {
-    use plotters::prelude::*;
-    let root = SVGBackend::new(path, (1100, 450)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let body = legend_strip(
-        &root,
-        &[
-            ("periods (count)".into(), BLUE),
-            ("periods ≥ 3 ms".into(), RED),
-            ("lateness p50".into(), GREEN),
-            ("p99".into(), BLUE),
-            ("max".into(), RED),
-        ],
-    )?;
-    let (left, right) = body.split_horizontally(600);
+fn loop_plot(r: &RunRecord) -> Figure {
     let total: u64 = r.period_hist.iter().sum::<u64>().max(1);
     // Log-scaled counts: the tail bins (a few stalls) must stay visible next to the 1 ms peak.
     let y_top = (r.period_hist.iter().copied().max().unwrap_or(1).max(1) as f64 * 2.0).log10();
-    let mut chart = ChartBuilder::on(&left)
-        .caption(
-            format!(
-                "setpoint period histogram ({total} periods, max {:.0} µs)",
-                r.period_max_us
-            ),
-            ("sans-serif", 16),
-        )
-        .margin(10)
-        .x_label_area_size(34)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0f64..HIST_MAX_US + BIN_US, 0f64..y_top.max(1.0))?;
-    chart
-        .configure_mesh()
-        .x_desc("time between consecutive setpoints (µs; last bin: ≥ 3 ms)")
-        .y_desc("log10(count + 1)")
-        .draw()?;
-    chart.draw_series(r.period_hist.iter().enumerate().map(|(k, n)| {
-        let x0 = k as f64 * BIN_US;
-        Rectangle::new(
-            [(x0, 0.0), (x0 + BIN_US, ((*n + 1) as f64).log10())],
-            if k + 1 == r.period_hist.len() {
-                RED
+    let mut hist = chart(
+        &format!(
+            "setpoint period histogram ({total} periods, max {:.0} µs)",
+            r.period_max_us
+        ),
+        "time between consecutive setpoints (µs; last bin: ≥ 3 ms)",
+        "log10(count + 1)",
+        (0.0, HIST_MAX_US + BIN_US),
+        (0.0, y_top.max(1.0)),
+    );
+    hist.rects = r
+        .period_hist
+        .iter()
+        .enumerate()
+        .map(|(k, n)| {
+            let x0 = k as f64 * BIN_US;
+            let colour = if k + 1 == r.period_hist.len() {
+                PURE_RED
             } else {
-                BLUE
-            }
-            .filled(),
-        )
-    }))?;
+                PURE_BLUE
+            };
+            Rect::filled(
+                (x0, 0.0),
+                (x0 + BIN_US, ((*n + 1) as f64).log10()),
+                colour,
+                1.0,
+            )
+        })
+        .collect();
     let t_end = r.t_end();
     let y_max = r
         .lateness
@@ -627,31 +584,39 @@ fn loop_plot(r: &RunRecord, path: &Path) -> Plot {
         .map(|l| l.3)
         .fold(1.0f64, f64::max)
         .max(1.0);
-    let mut chart = ChartBuilder::on(&right)
-        .caption(
-            "motion-core lateness (cumulative quantiles)",
-            ("sans-serif", 16),
-        )
-        .margin(10)
-        .x_label_area_size(34)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0f64..t_end, (1f64..y_max * 2.0).log_scale())?;
-    chart.configure_mesh().x_desc("t (s)").y_desc("µs").draw()?;
-    for (k, colour) in [GREEN, BLUE, RED].into_iter().enumerate() {
-        chart.draw_series(LineSeries::new(
-            r.lateness.iter().map(move |l| {
-                let v = [l.1, l.2, l.3][k];
-                (l.0, v.max(1.0))
-            }),
-            colour.stroke_width(2),
-        ))?;
+    let mut lateness = chart(
+        "motion-core lateness (cumulative quantiles)",
+        "t (s)",
+        "µs",
+        (0.0, t_end),
+        (1.0, y_max * 2.0),
+    );
+    lateness.y_log = true;
+    for (k, colour) in [PURE_GREEN, PURE_BLUE, PURE_RED].into_iter().enumerate() {
+        lateness.lines.push(line(
+            colour,
+            2,
+            r.lateness
+                .iter()
+                .map(|l| (l.0, [l.1, l.2, l.3][k].max(1.0)))
+                .collect(),
+        ));
     }
-    root.present()?;
-    Ok(())
+    figure(
+        (1100, 450),
+        2,
+        vec![
+            ("periods (count)".into(), PURE_BLUE),
+            ("periods ≥ 3 ms".into(), PURE_RED),
+            ("lateness p50".into(), PURE_GREEN),
+            ("p99".into(), PURE_BLUE),
+            ("max".into(), PURE_RED),
+        ],
+        vec![hist, lateness],
+    )
 }
 
-fn events_plot(r: &RunRecord, path: &Path) -> Plot {
-    use plotters::prelude::*;
+fn events_plot(r: &RunRecord) -> Figure {
     let sources = [
         "motion-core",
         "drive-io",
@@ -659,56 +624,46 @@ fn events_plot(r: &RunRecord, path: &Path) -> Plot {
         "operator",
         "other",
     ];
-    let root = SVGBackend::new(path, (1100, 300)).into_drawing_area();
-    root.fill(&WHITE)?;
     let t_end = r.t_end();
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!(
-                "events on the process bus ({}; state changes only)",
-                r.events.len()
-            ),
-            ("sans-serif", 16),
-        )
-        .margin(10)
-        .x_label_area_size(30)
-        .y_label_area_size(110)
-        .build_cartesian_2d(0f64..t_end, -0.5f64..(sources.len() as f64 - 0.5))?;
-    chart
-        .configure_mesh()
-        .x_desc("t (s)")
-        .y_labels(sources.len())
-        .y_label_formatter(&|y| {
-            let k = y.round();
-            if (y - k).abs() < 1e-6 && k >= 0.0 && (k as usize) < sources.len() {
-                sources[k as usize].to_string()
-            } else {
-                String::new()
-            }
-        })
-        .draw()?;
+    let mut c = chart(
+        &format!(
+            "events on the process bus ({}; state changes only)",
+            r.events.len()
+        ),
+        "t (s)",
+        "",
+        (0.0, t_end),
+        (-0.5, sources.len() as f64 - 0.5),
+    );
+    c.y_categories = sources.iter().map(|s| s.to_string()).collect();
+    let dot = |color| Markers {
+        label: None,
+        color,
+        radius: 5,
+        filled: true,
+        points: Vec::new(),
+        texts: Vec::new(),
+    };
+    let (mut plain, mut alarm) = (dot(PLANT), dot(ALARM));
     // Labels of events close in time on one row alternate above and below the marker.
     let mut last: [(f64, usize); 5] = [(f64::NEG_INFINITY, 0); 5];
     for e in &r.events {
         let k = sources.iter().position(|s| *s == e.source).unwrap_or(4);
         let row = k as f64;
-        let colour = if e.alarm { ALARM } else { PLANT };
         let near = e.t_s - last[k].0 < 0.12 * t_end;
         let level = if near { (last[k].1 + 1) % 2 } else { 0 };
         last[k] = (e.t_s, level);
-        chart.draw_series(std::iter::once(Circle::new(
-            (e.t_s, row),
-            5,
-            colour.filled(),
-        )))?;
-        chart.draw_series(std::iter::once(Text::new(
-            e.what.clone(),
-            (e.t_s, row + if level == 0 { 0.3 } else { -0.12 }),
-            ("sans-serif", 12),
-        )))?;
+        if e.alarm { &mut alarm } else { &mut plain }
+            .points
+            .push((e.t_s, row));
+        c.labels.push(Label {
+            at: (e.t_s, row + if level == 0 { 0.3 } else { -0.12 }),
+            text: e.what.clone(),
+            color: Rgb::BLACK,
+        });
     }
-    root.present()?;
-    Ok(())
+    c.markers = vec![plain, alarm];
+    figure((1100, 300), 1, Vec::new(), vec![c])
 }
 
 fn html_escape(s: &str) -> String {
@@ -1213,7 +1168,7 @@ fn verdict(summary: &Summary) -> String {
 
 /// Writes the plots and index.html into `out`; returns the index path.
 pub fn write(out: &Path, r: &RunRecord, summary: &Summary) -> Result<PathBuf, RunPlotError> {
-    type Draw = fn(&RunRecord, &Path) -> Plot;
+    type Draw = fn(&RunRecord) -> Figure;
     let plots: [(&str, Draw); 6] = [
         ("pose.svg", pose_plot),
         ("tracking.svg", tracking_plot),
@@ -1223,10 +1178,7 @@ pub fn write(out: &Path, r: &RunRecord, summary: &Summary) -> Result<PathBuf, Ru
         ("events.svg", events_plot),
     ];
     for (name, plot) in plots {
-        let file = out.join(name);
-        if let Err(source) = plot(r, &file) {
-            return Err(RunPlotError::Draw { file, source });
-        }
+        plot(r).write(&out.join(name))?;
     }
     let rows = summary_table(summary);
     let ev = events_rows(r);
@@ -1422,7 +1374,10 @@ mod tests {
                 .unwrap()
                 .parse()
                 .unwrap();
-            assert!(y < f64::from(LEGEND_STRIP_PX), "{label} at y = {y}: {tag}");
+            assert!(
+                y < f64::from(crs_plot::LEGEND_STRIP_PX),
+                "{label} at y = {y}: {tag}"
+            );
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -1,6 +1,7 @@
 //! The report of a surrogate evaluation on the plant (`crs surrogate fit --plant`, `crs surrogate
 //! evaluate`): report.md (the table of both controllers), report.json and tracking.svg.
 
+use crs_plot::{Chart, Figure, Line, Panel, Rgb};
 use plant_experiments::surrogate_evaluation::{Evaluation, stats};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -21,13 +22,9 @@ pub enum ReportError {
     /// Serialising report.json.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
-    /// Drawing tracking.svg (`path`).
-    #[error("{}: {source}", path.display())]
-    Plot {
-        path: PathBuf,
-        #[source]
-        source: plotters::drawing::DrawingAreaErrorKind<std::io::Error>,
-    },
+    /// Drawing or writing tracking.svg.
+    #[error(transparent)]
+    Plot(#[from] crs_plot::PlotError),
 }
 
 fn write_err(path: &Path) -> impl FnOnce(std::io::Error) -> ReportError + '_ {
@@ -111,9 +108,7 @@ pub fn write(
     let json_file = dir.join("report.json");
     std::fs::write(&json_file, serde_json::to_string_pretty(ev)?).map_err(write_err(&json_file))?;
     let svg = dir.join("tracking.svg");
-    if let Err(source) = plot(ev, &svg) {
-        return Err(ReportError::Plot { path: svg, source });
-    }
+    figure(ev).write(&svg)?;
     Ok(Written {
         markdown: md,
         files: vec![dir.join("report.md"), dir.join("report.json"), svg],
@@ -121,20 +116,20 @@ pub fn write(
 }
 
 /// Two panels: sorted force error and sorted position error of both controllers.
-fn plot(
-    ev: &Evaluation,
-    path: &Path,
-) -> Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
-    use plotters::prelude::*;
-    let root = SVGBackend::new(path, (1000, 420)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let panels = root.split_evenly((1, 2));
+fn figure(ev: &Evaluation) -> Figure {
     let series = |v: &[f64]| {
         let mut s: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
         s.sort_by(f64::total_cmp);
         s
     };
-    for (area, (title, unit, kin, sg)) in panels.iter().zip([
+    let line = |s: &[f64]| {
+        let len = s.len().max(2) as f64 - 1.0;
+        s.iter()
+            .enumerate()
+            .map(move |(i, v)| (100.0 * i as f64 / len, *v))
+            .collect::<Vec<_>>()
+    };
+    let panels = [
         (
             "max cable force error |f̂ − f_ref|",
             "N",
@@ -147,7 +142,9 @@ fn plot(
             series(&ev.kinematic.position_error_mm),
             series(&ev.surrogate.position_error_mm),
         ),
-    ]) {
+    ]
+    .into_iter()
+    .map(|(title, unit, kin, sg)| {
         let y_max = kin
             .iter()
             .chain(sg.iter())
@@ -155,39 +152,26 @@ fn plot(
             .fold(0.0f64, f64::max)
             .max(1e-9)
             * 1.05;
-        let mut chart = ChartBuilder::on(area)
-            .caption(title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(36)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0f64..100f64, 0f64..y_max)?;
-        chart
-            .configure_mesh()
-            .x_desc("poses, sorted (%)")
-            .y_desc(unit)
-            .draw()?;
-        let line = |s: &[f64]| {
-            let len = s.len().max(2) as f64 - 1.0;
-            s.iter()
-                .enumerate()
-                .map(move |(i, v)| (100.0 * i as f64 / len, *v))
-                .collect::<Vec<_>>()
-        };
-        chart
-            .draw_series(LineSeries::new(line(&kin), RED.stroke_width(2)))?
-            .label("kinematics + set-up offsets")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], RED));
-        chart
-            .draw_series(LineSeries::new(line(&sg), BLUE.stroke_width(2)))?
-            .label("kinematics + surrogate")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLUE));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        let mut c = Chart::new(title, "poses, sorted (%)", unit);
+        c.x_range = Some((0.0, 100.0));
+        c.y_range = Some((0.0, y_max));
+        for (label, color, s) in [
+            ("kinematics + set-up offsets", Rgb::RED, &kin),
+            ("kinematics + surrogate", Rgb::BLUE, &sg),
+        ] {
+            let mut l = Line::new(label, color, line(s));
+            l.width = 2;
+            c.lines.push(l);
+        }
+        Panel::Chart(c)
+    })
+    .collect();
+    Figure {
+        title: String::new(),
+        size: (1000, 420),
+        columns: 2,
+        panels,
+        notes: Vec::new(),
+        legend: Vec::new(),
     }
-    root.present()?;
-    Ok(())
 }
