@@ -20,9 +20,9 @@
 //!   drawn log-uniformly over each kind's range ([`bench_plant::Kind::range`]).
 
 use bench_plant::Kind;
-use calibrate::effects::{Effect, Form};
-use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
 use calibrate::{Observation, from_dataset};
+use calibrate_diagnosis::effects::{Effect, Form};
+use calibrate_diagnosis::pipeline::{self, PipelineConfig, PipelineReport};
 use cdpr_model::config::{Platform, load_platform};
 use crs_limits::quantile::quantile_sorted;
 use nalgebra::Vector3;
@@ -303,12 +303,12 @@ pub struct MagnitudeCheck {
     /// The drawn magnitude of the effect (in its kind's unit, [`Kind::range`]).
     pub magnitude: f64,
     /// For a size made of one number (the drum's RMS over the cables): fitted ±1σ and truth.
-    pub size: Option<calibrate::magnitude::SizeCheck>,
+    pub size: Option<calibrate_diagnosis::magnitude::SizeCheck>,
 }
 
 /// What the drum's acceptance compares: the effect's size, the RMS of the scales over the
 /// cables (noise bias taken off, ±1σ through the fit's covariance) against the RMS of the true
-/// scales ([`calibrate::magnitude`]).
+/// scales ([`calibrate_diagnosis::magnitude`]).
 pub const DRUM_SIZE: &str = "drum size (RMS of s_i over the cables)";
 /// The per-cable comparison, ‖ε − s‖/‖s‖ (reported next to the size, no tolerance of its own).
 pub const DRUM_PER_CABLE: &str = "drum scale s_i per cable";
@@ -717,7 +717,7 @@ fn true_effect_model(
                 .iter()
                 .map(|e| (*e, row(*e).map_or(e.forms()[0], |c| c.form)))
                 .collect();
-            let both = calibrate::effects::fit_effects(&base_fit, &spec, train, &forms)
+            let both = calibrate_diagnosis::effects::fit_effects(&base_fit, &spec, train, &forms)
                 .ok()
                 .map(|f| calibrate::validate::evaluate(f.kind, &f.model, held))
                 .filter(|e| !e.failed());
@@ -742,7 +742,7 @@ fn true_effect_model(
 
 /// One CSV line per candidate of every selection round (the bench's candidates file).
 fn candidate_lines(
-    sel: Option<&calibrate::effects::Selection>,
+    sel: Option<&calibrate_diagnosis::effects::Selection>,
     generator: &str,
     scenario: &str,
     seed: u64,
@@ -841,7 +841,7 @@ fn print_run(r: &RunResult, fin: &pipeline::Stage) {
     );
 }
 
-fn explain(sel: &calibrate::effects::Selection) {
+fn explain(sel: &calibrate_diagnosis::effects::Selection) {
     for (r, round) in sel.rounds.iter().enumerate() {
         for c in round {
             let pct = |g: Option<f64>| g.map_or("–".into(), |g| format!("{:+.1} %", 100.0 * g));
@@ -954,7 +954,7 @@ fn relative_distance(f: &[f64], t: &[f64]) -> f64 {
 
 /// The drum's per-cable scales against the truth's `truth`, and its size (the scales' rms).
 fn drum_checks(
-    size: &calibrate::effects::EffectSize,
+    size: &calibrate_diagnosis::effects::EffectSize,
     fitted: &[(f64, f64)],
     truth: &[f64],
     magnitude: f64,
@@ -976,7 +976,9 @@ fn drum_checks(
         size: None,
     });
     // No covariance, no size: counted as a miss (NaN is within no tolerance).
-    let c = size.rms.map(|r| calibrate::magnitude::check_rms(&r, truth));
+    let c = size
+        .rms
+        .map(|r| calibrate_diagnosis::magnitude::check_rms(&r, truth));
     out.push(MagnitudeCheck {
         effect: Effect::Drum,
         what: DRUM_SIZE.into(),
@@ -1318,7 +1320,7 @@ fn magnitude_rows(s: &Summary, runs: &[&RunResult], generator: &str) {
         "| {DRUM_SIZE} within 20 % of the truth's (runs naming the drum of a drum-scale scenario) | {} |",
         ratio(dn, dd)
     );
-    let sized: Vec<calibrate::magnitude::SizeCheck> = runs
+    let sized: Vec<calibrate_diagnosis::magnitude::SizeCheck> = runs
         .iter()
         .flat_map(|r| r.magnitudes.iter())
         .filter_map(|m| m.size)

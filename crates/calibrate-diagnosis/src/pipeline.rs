@@ -2,14 +2,14 @@
 //! nominal kinematic → optimal kinematic (eq. 4.8, sec. 6.2) → nominal elastostatic (offsets
 //! from the measured tension, eq. 3.14 / 6.24, sec. 6.4) → optimal elastostatic (eq. 4.38,
 //! sec. 6.5) → + the effects the residuals support ([`crate::effects`]). Every figure is
-//! computed on held-out samples through the forward kinematics ([`crate::validate`]).
+//! computed on held-out samples through the forward kinematics ([`calibrate::validate`]).
 
 use crate::effects::{self, Effect, SelectConfig, Selection};
-use crate::identify::{self, Fit, FitError, FitSpec};
-use crate::observation::Observation;
-use crate::params::{CalModel, Group, ParamId, group};
-use crate::residual::{Kind, Weights};
-use crate::validate::{self, Errors};
+use calibrate::identify::{self, Fit, FitError, FitSpec};
+use calibrate::observation::Observation;
+use calibrate::params::{CalModel, Group, ParamId, group};
+use calibrate::residual::{Kind, Weights};
+use calibrate::validate::{self, Errors};
 use cdpr_model::Model;
 use serde::Serialize;
 
@@ -31,7 +31,7 @@ pub struct PipelineConfig {
     pub kinematic_b: bool,
     pub select: SelectConfig,
     /// After the diagnosis, also fit the flexible per-cable length correction
-    /// ([`crate::params::ParamId::Flex`]) as its own, clearly labelled stage.
+    /// ([`calibrate::params::ParamId::Flex`]) as its own, clearly labelled stage.
     pub flexible: bool,
     /// Skip the diagnosis/extension loop.
     pub no_extension: bool,
@@ -116,36 +116,6 @@ impl PipelineReport {
     }
 }
 
-/// Offsets δ_i from the measured data with the model fixed (eq. 3.14 / 6.24 with the measured
-/// poses and forces instead of the single set-up pose): δ_i = mean_j(φ(_el)(x_Mj, f_Mj) − q_cmd,ij).
-pub fn estimate_offsets(
-    kind: Kind,
-    cal: &mut CalModel,
-    obs: &[Observation],
-    w: Weights,
-) -> Result<(), FitError> {
-    let m = cal.m();
-    cal.offset.iter_mut().for_each(|d| *d = 0.0);
-    let unit = Weights {
-        wrench: w.wrench,
-        length: 1.0,
-    };
-    let r = identify::residual(kind, cal, obs, unit)?;
-    let mut sum = vec![0.0; m];
-    let mut row = 0;
-    for o in obs {
-        let n = crate::residual::rows_per_sample(kind, m, o);
-        for i in 0..m {
-            sum[i] += r[row + n - m + i];
-        }
-        row += n;
-    }
-    for i in 0..m {
-        cal.offset[i] = sum[i] / obs.len() as f64;
-    }
-    Ok(())
-}
-
 /// The optimal elastostatic step's fit (eq. 4.38): p = (a, b, k_F, w_e) + offsets with the
 /// configured ridge/lasso penalties.
 pub fn elastostatic_spec(cfg: &PipelineConfig, m: usize) -> FitSpec {
@@ -214,7 +184,7 @@ pub fn run(
     let mut stages = Vec::new();
     // 1. Nominal kinematic model p_N (offsets from the data).
     let mut nom_k = CalModel::from_model(nominal);
-    estimate_offsets(Kind::Kinematic, &mut nom_k, train, cfg.weights)?;
+    identify::estimate_offsets(Kind::Kinematic, &mut nom_k, train, cfg.weights)?;
     stages.push(Stage {
         name: "nominal kinematic".into(),
         kind: Kind::Kinematic,
@@ -280,7 +250,7 @@ pub fn run(
     }
     // 3. Nominal elastostatic model: k_F, w_e of the platform, offsets from the tension (6.24).
     let mut nom_e = CalModel::from_model(nominal);
-    estimate_offsets(Kind::Elastostatic, &mut nom_e, train, cfg.weights)?;
+    identify::estimate_offsets(Kind::Elastostatic, &mut nom_e, train, cfg.weights)?;
     stages.push(Stage {
         name: "nominal elastostatic".into(),
         kind: Kind::Elastostatic,
@@ -425,15 +395,14 @@ pub fn run(
         && let Some(last) = stages.last().and_then(|st| st.fit.clone())
     {
         let mut spec = spec_e.clone();
-        spec.free = last
-            .free
-            .iter()
-            .copied()
-            .chain(
-                (0..m)
-                    .flat_map(|i| (0..crate::params::FLEX_TERMS).map(move |k| ParamId::Flex(i, k))),
-            )
-            .collect();
+        spec.free =
+            last.free
+                .iter()
+                .copied()
+                .chain((0..m).flat_map(|i| {
+                    (0..calibrate::params::FLEX_TERMS).map(move |k| ParamId::Flex(i, k))
+                }))
+                .collect();
         match identify::fit(&last.model, train, &spec, &mut |it, c| {
             progress("flexible correction", it, c)
         }) {

@@ -2,10 +2,11 @@
 //! declared in the data set) must lead the pipeline, started from the nominal model, to choose
 //! that effect and cut the held-out error; with no effect nothing may be added.
 
+#[path = "../../calibrate/tests/common/mod.rs"]
 mod common;
-use calibrate::effects::Effect;
-use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
 use calibrate::split;
+use calibrate_diagnosis::effects::Effect;
+use calibrate_diagnosis::pipeline::{self, PipelineConfig, PipelineReport};
 use common::*;
 use sim_plant::config::Effects;
 

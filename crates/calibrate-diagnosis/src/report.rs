@@ -3,10 +3,10 @@
 //! a side file for the effects the platform schema cannot express.
 
 use crate::effects::Effect;
-use crate::params::{CalModel, ParamId};
 use crate::pipeline::{PipelineReport, Stage};
-use crate::residual::Kind;
-use crate::validate;
+use calibrate::params::{CalModel, ParamId};
+use calibrate::residual::Kind;
+use calibrate::validate;
 use cdpr_model::ModelError;
 use cdpr_model::config::Platform;
 use crs_plot::{BarSeries, Bars, Chart, Figure, Markers, Panel, Rgb};
@@ -22,7 +22,7 @@ fn fmt_opt(v: Option<f64>, prec: usize) -> String {
 }
 
 /// The 1σ of free parameter `k` of a fit, or why there is none (never NaN or ±0).
-pub fn std_text(f: &crate::identify::Fit, k: usize) -> String {
+pub fn std_text(f: &calibrate::identify::Fit, k: usize) -> String {
     let p = f.free[k];
     if f.at_bound.contains(&p) {
         "at physical bound".into()
@@ -461,7 +461,7 @@ pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
     let _ = writeln!(
         s,
         "stiffness_reference_force_n = {:?}",
-        crate::params::STIFFNESS_REFERENCE_FORCE_N
+        calibrate::params::STIFFNESS_REFERENCE_FORCE_N
     );
     let _ = writeln!(s, "hysteresis_half_width_n = {:?}", cal.hysteresis);
     let _ = writeln!(s, "hysteresis_length_m = {:?}", cal.hysteresis_length);
@@ -469,10 +469,10 @@ pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
         s,
         "hysteresis_direction = {:?}",
         match cal.hysteresis_source {
-            crate::observation::DirectionSource::Force => "force change",
-            crate::observation::DirectionSource::ForceBeyondNoise =>
+            calibrate::observation::DirectionSource::Force => "force change",
+            calibrate::observation::DirectionSource::ForceBeyondNoise =>
                 "force change beyond the noise",
-            crate::observation::DirectionSource::Command => "command sequence (held)",
+            calibrate::observation::DirectionSource::Command => "command sequence (held)",
         }
     );
     let _ = writeln!(
@@ -489,7 +489,7 @@ pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
     if cal
         .flex
         .iter()
-        .any(|c| *c != [0.0; crate::params::FLEX_TERMS])
+        .any(|c| *c != [0.0; calibrate::params::FLEX_TERMS])
     {
         s.push_str("\n# Flexible per-cable length correction (NOT a physical effect; --flexible):\n# delta_q_i = c_i0 u + c_i1 u^2 + c_i2 v + c_i3 v^2, u = f_i/5000 N - 1, v = q_i/10 m (m).\n");
         let rows: Vec<String> = cal
@@ -549,7 +549,7 @@ const GREEN: Rgb = Rgb(44, 160, 44);
 const ORANGE: Rgb = Rgb(255, 127, 14);
 
 /// The report's plots: (file name, SVG text).
-pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(String, String)> {
+pub fn plots(rep: &PipelineReport, holdout: &[calibrate::Observation]) -> Vec<(String, String)> {
     let mut out = Vec::new();
     let first: &Stage = &rep.stages[0];
     let last = rep.final_stage();
