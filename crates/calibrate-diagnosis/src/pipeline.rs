@@ -93,6 +93,54 @@ pub struct PipelineReport {
     pub structure: Option<crate::structure::StructureReport>,
     /// Why the optional flexible correction could not be fitted (`None`: fitted or not asked).
     pub flexible_failure: Option<String>,
+    /// The chosen model's parameters estimated on every sample (training + held-out) once the
+    /// held-out set has chosen it; `None` without effects or without a held-out set.
+    pub all_samples: Option<AllSamplesEstimate>,
+    /// Why that estimate could not be made (the training-only fit then stands alone).
+    pub all_samples_failure: Option<String>,
+}
+
+/// The final estimate of the chosen model: the held-out set chose the effects and validated the
+/// training-only fit; the same parameters (free, fixed, penalties, start at the training
+/// optimum) are then estimated on the training and held-out samples together, as a
+/// calibration engineer estimates a chosen model on all the data. Its sizes have ≈ √(n_train /
+/// n_all) of the training fit's 1σ. Its held-out errors would be in-sample, so the report's
+/// held-out figures stay those of the training-only fit.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AllSamplesEstimate {
+    pub samples: usize,
+    pub fit: Fit,
+    /// Sizes of the chosen effects in this fit, ±1σ (same order as the selection's).
+    pub sizes: Vec<effects::EffectSize>,
+}
+
+/// The chosen model of `sel` estimated on `train` and `holdout` together (see
+/// [`AllSamplesEstimate`]).
+pub fn estimate_on_all_samples(
+    sel: &Selection,
+    spec: &FitSpec,
+    train: &[Observation],
+    holdout: &[Observation],
+    progress: &mut dyn FnMut(&str, usize, f64),
+) -> Result<AllSamplesEstimate, FitError> {
+    let all: Vec<Observation> = train.iter().chain(holdout).cloned().collect();
+    let mut spec = spec.clone();
+    spec.free = sel.fit.free.clone();
+    let fit = identify::fit(&sel.fit.model, &all, &spec, &mut |it, c| {
+        progress("final estimate on all samples", it, c)
+    })?;
+    let chosen: Vec<(Effect, effects::Form)> = sel
+        .chosen
+        .iter()
+        .copied()
+        .zip(sel.forms.iter().copied())
+        .collect();
+    let sizes = effects::effect_sizes(&fit, &chosen, &all);
+    Ok(AllSamplesEstimate {
+        samples: all.len(),
+        fit,
+        sizes,
+    })
 }
 
 impl PipelineReport {
@@ -241,6 +289,8 @@ pub fn run(
             config: cfg.clone(),
             structure: structure_of(stages.last(), holdout),
             flexible_failure: None,
+            all_samples: None,
+            all_samples_failure: None,
             stages,
             selection: None,
             repeatability: None,
@@ -386,6 +436,16 @@ pub fn run(
         }
         Some(sel)
     };
+    // 5b. The chosen model's final estimate on every sample.
+    let (all_samples, all_samples_failure) = match &selection {
+        Some(sel) if !sel.chosen.is_empty() && !holdout.is_empty() => {
+            match estimate_on_all_samples(sel, &spec_e, train, holdout, progress) {
+                Ok(est) => (Some(est), None),
+                Err(e) => (None, Some(e.to_string())),
+            }
+        }
+        _ => (None, None),
+    };
     // The structure test judges the catalogue's best model, before any flexible correction.
     let structure = structure_of(stages.last(), holdout);
     // 6. Optional flexible correction: for when accuracy matters more than
@@ -425,6 +485,8 @@ pub fn run(
         config: cfg.clone(),
         structure,
         flexible_failure,
+        all_samples,
+        all_samples_failure,
         stages,
         selection,
         repeatability: None,

@@ -206,40 +206,31 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
                 .map(|(e, f)| effect_label(*e, *f))
                 .collect();
             let _ = writeln!(s, "Chosen effects, in order: **{}**.\n", names.join(", "));
-            s.push_str("Sizes in the final model (±1σ from the fit's covariance; \"at bound\" where a parameter rests on its physical range and has no 1σ):\n\n| effect | parameter | value | ±1σ |\n|---|---|---|---|\n");
-            for size in &sel.sizes {
-                for (n, v, sd) in &size.params {
+            match &rep.all_samples {
+                Some(all) => {
                     let _ = writeln!(
                         s,
-                        "| {} | {n} | {v:.4e} | {} |",
-                        effect_label(size.effect, size.form),
-                        if sd.is_finite() && *sd > 0.0 {
-                            format!("{sd:.2e}")
-                        } else {
-                            "at bound or unidentifiable".into()
-                        }
+                        "Sizes in the final estimate of the chosen model on all {} samples (training + held-out), made after the held-out set chose it; the held-out errors above are those of the fit on the {} training samples, whose sizes follow below it (±1σ from the fit's covariance; \"at bound\" where a parameter rests on its physical range and has no 1σ):\n",
+                        all.samples, rep.n_train
+                    );
+                    sizes_table(&mut s, &all.sizes);
+                    let _ = writeln!(
+                        s,
+                        "\nSizes in the fit on the {} training samples:\n",
+                        rep.n_train
                     );
                 }
-                if let Some(r) = size.rms {
-                    let _ = writeln!(
-                        s,
-                        "| {} | size: RMS over the cables (noise bias taken off; plain RMS {:.3} ‰) | {:.3} ‰ | {:.3} ‰ |",
-                        effect_label(size.effect, size.form),
-                        r.raw * 1e3,
-                        r.value * 1e3,
-                        r.sigma * 1e3
-                    );
-                }
-                if let Some((h, sd)) = size.length_equivalent {
-                    let _ = writeln!(
-                        s,
-                        "| {} | ≙ length offset h (H × mean compliance of the training samples) | {:.3} mm | {:.3} mm |",
-                        effect_label(size.effect, size.form),
-                        h * 1e3,
-                        sd * 1e3
-                    );
+                None => {
+                    if let Some(e) = &rep.all_samples_failure {
+                        let _ = writeln!(
+                            s,
+                            "The final estimate on all samples failed ({e}); the sizes are those of the fit on the training samples.\n"
+                        );
+                    }
+                    s.push_str("Sizes in the final model (±1σ from the fit's covariance; \"at bound\" where a parameter rests on its physical range and has no 1σ):\n\n");
                 }
             }
+            sizes_table(&mut s, &sel.sizes);
             s.push('\n');
         }
         let c = &rep.config.select;
@@ -427,6 +418,45 @@ pub fn platform_toml(
             "force), so no mass/COG agrees with it; set [dynamics] after review (docs/ride-physics.md).",
         ],
     )?)
+}
+
+/// The chosen effects' sizes as a table (each parameter ±1σ, a drum's RMS, a force band's
+/// length equivalent).
+fn sizes_table(s: &mut String, sizes: &[crate::effects::EffectSize]) {
+    s.push_str("| effect | parameter | value | ±1σ |\n|---|---|---|---|\n");
+    for size in sizes {
+        for (n, v, sd) in &size.params {
+            let _ = writeln!(
+                s,
+                "| {} | {n} | {v:.4e} | {} |",
+                effect_label(size.effect, size.form),
+                if sd.is_finite() && *sd > 0.0 {
+                    format!("{sd:.2e}")
+                } else {
+                    "at bound or unidentifiable".into()
+                }
+            );
+        }
+        if let Some(r) = size.rms {
+            let _ = writeln!(
+                s,
+                "| {} | size: RMS over the cables (noise bias taken off; plain RMS {:.3} ‰) | {:.3} ‰ | {:.3} ‰ |",
+                effect_label(size.effect, size.form),
+                r.raw * 1e3,
+                r.value * 1e3,
+                r.sigma * 1e3
+            );
+        }
+        if let Some((h, sd)) = size.length_equivalent {
+            let _ = writeln!(
+                s,
+                "| {} | ≙ length offset h (H × mean compliance of the samples fitted) | {:.3} mm | {:.3} mm |",
+                effect_label(size.effect, size.form),
+                h * 1e3,
+                sd * 1e3
+            );
+        }
+    }
 }
 
 /// An effect with its form, e.g. "hysteresis (±h length offset, direction from the command
