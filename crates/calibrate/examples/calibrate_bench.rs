@@ -5,8 +5,8 @@
 //! Usage: cargo run --release -p calibrate --example calibrate_bench -- [--export FILE.json] [--repeat N]
 //! Writes the data, start point, scales, weights and the Rust optimum/timing to FILE.json.
 
+use calibrate::identify::estimate_offsets;
 use calibrate::params::{Group, group};
-use calibrate::pipeline::estimate_offsets;
 use calibrate::{CalModel, FitSpec, Kind, ParamId, fit, from_dataset};
 use crs_dataset::Phase;
 use std::path::PathBuf;

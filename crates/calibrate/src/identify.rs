@@ -599,3 +599,33 @@ pub fn split_rms(kind: Kind, obs: &[Observation], m: usize, w: Weights, r: &[f64
     let rms = |s: f64, n: usize| if n > 0 { (s / n as f64).sqrt() } else { 0.0 };
     (rms(sw, nw), rms(sl, nl))
 }
+
+/// Offsets δ_i from the measured data with the model fixed (eq. 3.14 / 6.24 with the measured
+/// poses and forces instead of the single set-up pose): δ_i = mean_j(φ(_el)(x_Mj, f_Mj) − q_cmd,ij).
+pub fn estimate_offsets(
+    kind: Kind,
+    cal: &mut CalModel,
+    obs: &[Observation],
+    w: Weights,
+) -> Result<(), FitError> {
+    let m = cal.m();
+    cal.offset.iter_mut().for_each(|d| *d = 0.0);
+    let unit = Weights {
+        wrench: w.wrench,
+        length: 1.0,
+    };
+    let r = residual(kind, cal, obs, unit)?;
+    let mut sum = vec![0.0; m];
+    let mut row = 0;
+    for o in obs {
+        let n = crate::residual::rows_per_sample(kind, m, o);
+        for i in 0..m {
+            sum[i] += r[row + n - m + i];
+        }
+        row += n;
+    }
+    for i in 0..m {
+        cal.offset[i] = sum[i] / obs.len() as f64;
+    }
+    Ok(())
+}

@@ -1,6 +1,6 @@
 //! The identified parameter set p = (a, b, k_F, w_e) of the elastostatic control model
 //! (eq. 6.14) plus the cable offsets (eq. 3.14, 6.24) and the parameters of the candidate
-//! model extensions of [`crate::effects`]. Every extension reduces exactly to the base model
+//! model extensions of calibrate-diagnosis (`effects`). Every extension reduces exactly to the base model
 //! when its parameters are zero (eq. 2.1).
 
 use crate::observation::DirectionSource;

@@ -14,7 +14,7 @@
 //!   A^T (eq. 2.30, 2.54), ξ the twist (δr, δθ world frame).
 //!
 //! All take q_θ = (1 + ε_i) q_cmd + δ_i (cable offsets δ, eq. 3.14 / 6.24; drum candidate ε)
-//! and, for the candidates of [`crate::effects`], the extended inverse model
+//! and, for the candidates of calibrate-diagnosis (`effects`), the extended inverse model
 //!   φ_el = q + (μg cos α)² q³ / (24 f²) − (q + l_i)/k_F,i · (g(f) − d H),
 //!   g(f) = f + κ (f − f_s)² / (2 f_s),
 //! with the external wrench w_e + [0; ((R − I) c) × f_e]. All extension terms vanish at zero.

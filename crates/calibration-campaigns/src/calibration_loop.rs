@@ -25,8 +25,8 @@
 //! progress through the caller's [`Progress`](crate::progress::Progress).
 
 use calibrate::Observation;
-use calibrate::pipeline::PipelineReport;
 use calibrate::{from_dataset, split};
+use calibrate_diagnosis::pipeline::PipelineReport;
 use cdpr_model::config::{Platform, load_platform};
 use motion_core::daemon::config::DaemonConfig;
 use motion_core::daemon::lifecycle;
@@ -241,7 +241,7 @@ impl LoopTools for StackTools<'_> {
         ridge_kf: f64,
         command: &str,
     ) -> Result<PipelineReport, crate::calibration_output::OutputError> {
-        let cfg = calibrate::pipeline::PipelineConfig {
+        let cfg = calibrate_diagnosis::pipeline::PipelineConfig {
             ridge_kf,
             no_extension: true,
             ..Default::default()

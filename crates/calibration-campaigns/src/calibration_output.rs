@@ -2,9 +2,10 @@
 //! report.json, the plots, `calibrated.toml` (the last step that validated, never a failed one:
 //! a failed computation never reaches the robot) and the side file with what the platform schema cannot express.
 
-use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
-use calibrate::repeatability::{self, RepeatabilityConfig};
-use calibrate::{FitError, Observation, report};
+use calibrate::{FitError, Observation};
+use calibrate_diagnosis::pipeline::{self, PipelineConfig, PipelineReport};
+use calibrate_diagnosis::repeatability::{self, RepeatabilityConfig};
+use calibrate_diagnosis::report;
 use cdpr_model::config::{ConfigError, Platform, load_platform};
 use std::path::{Path, PathBuf};
 

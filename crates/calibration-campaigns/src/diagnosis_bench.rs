@@ -20,9 +20,9 @@
 //!   drawn log-uniformly over each kind's range ([`bench_plant::Kind::range`]).
 
 use bench_plant::Kind;
-use calibrate::effects::{Effect, Form};
-use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
 use calibrate::{Observation, from_dataset};
+use calibrate_diagnosis::effects::{Effect, Form};
+use calibrate_diagnosis::pipeline::{self, PipelineConfig, PipelineReport};
 use cdpr_model::config::{Platform, load_platform};
 use crs_limits::quantile::quantile_sorted;
 use nalgebra::Vector3;
@@ -303,12 +303,12 @@ pub struct MagnitudeCheck {
     /// The drawn magnitude of the effect (in its kind's unit, [`Kind::range`]).
     pub magnitude: f64,
     /// For a size made of one number (the drum's RMS over the cables): fitted ±1σ and truth.
-    pub size: Option<calibrate::magnitude::SizeCheck>,
+    pub size: Option<calibrate_diagnosis::magnitude::SizeCheck>,
 }
 
 /// What the drum's acceptance compares: the effect's size, the RMS of the scales over the
 /// cables (noise bias taken off, ±1σ through the fit's covariance) against the RMS of the true
-/// scales ([`calibrate::magnitude`]).
+/// scales ([`calibrate_diagnosis::magnitude`]).
 pub const DRUM_SIZE: &str = "drum size (RMS of s_i over the cables)";
 /// The per-cable comparison, ‖ε − s‖/‖s‖ (reported next to the size, no tolerance of its own).
 pub const DRUM_PER_CABLE: &str = "drum scale s_i per cable";
@@ -361,7 +361,11 @@ pub struct RunResult {
     pub cpu_seconds: f64,
     /// The final model's held-out residuals show unexplained structure.
     pub structure: bool,
+    /// The sizes of the report: the chosen model estimated on every sample (training +
+    /// held-out), or on the training samples when there is no such estimate.
     pub magnitudes: Vec<MagnitudeCheck>,
+    /// The same comparisons for the training-only fit (the alternative, reported next to them).
+    pub training_magnitudes: Vec<MagnitudeCheck>,
     pub rows: (usize, usize),
     /// Every candidate row of every round, as CSV lines (see [`CANDIDATE_CSV_HEADER`]).
     pub candidate_lines: Vec<String>,
@@ -576,7 +580,7 @@ fn evaluate(
     truth: Vec<Effect>,
     out_of_catalogue: bool,
     u: Vec<f64>,
-    fitted_truth: &dyn Fn(&PipelineReport, &[Effect]) -> Vec<MagnitudeCheck>,
+    fitted_truth: &dyn Fn(&PipelineReport, bool) -> Vec<MagnitudeCheck>,
 ) -> Result<RunResult, BenchError> {
     // As `crs calibrate run` runs by default: the k_F ridge chosen on the held-out set.
     let cfg = PipelineConfig {
@@ -599,7 +603,8 @@ fn evaluate(
     let sel = rep.selection.as_ref();
     let chosen = sel.map(|s| s.chosen.clone()).unwrap_or_default();
     let forms = sel.map(|s| s.forms.clone()).unwrap_or_default();
-    let magnitudes = fitted_truth(&rep, &truth);
+    let magnitudes = fitted_truth(&rep, false);
+    let training_magnitudes = fitted_truth(&rep, true);
     let truth_label = truth.iter().map(|e| e.name()).collect::<Vec<_>>().join("+");
     let candidate_lines = candidate_lines(sel, generator, &scenario, seed, &truth_label);
     let r = RunResult {
@@ -622,6 +627,7 @@ fn evaluate(
         cpu_seconds,
         structure: rep.structure.as_ref().is_some_and(|st| st.any()),
         magnitudes,
+        training_magnitudes,
         rows: (train.len(), held.len()),
     };
     if a.verbose {
@@ -717,7 +723,7 @@ fn true_effect_model(
                 .iter()
                 .map(|e| (*e, row(*e).map_or(e.forms()[0], |c| c.form)))
                 .collect();
-            let both = calibrate::effects::fit_effects(&base_fit, &spec, train, &forms)
+            let both = calibrate_diagnosis::effects::fit_effects(&base_fit, &spec, train, &forms)
                 .ok()
                 .map(|f| calibrate::validate::evaluate(f.kind, &f.model, held))
                 .filter(|e| !e.failed());
@@ -742,7 +748,7 @@ fn true_effect_model(
 
 /// One CSV line per candidate of every selection round (the bench's candidates file).
 fn candidate_lines(
-    sel: Option<&calibrate::effects::Selection>,
+    sel: Option<&calibrate_diagnosis::effects::Selection>,
     generator: &str,
     scenario: &str,
     seed: u64,
@@ -841,7 +847,7 @@ fn print_run(r: &RunResult, fin: &pipeline::Stage) {
     );
 }
 
-fn explain(sel: &calibrate::effects::Selection) {
+fn explain(sel: &calibrate_diagnosis::effects::Selection) {
     for (r, round) in sel.rounds.iter().enumerate() {
         for c in round {
             let pct = |g: Option<f64>| g.map_or("–".into(), |g| format!("{:+.1} %", 100.0 * g));
@@ -954,7 +960,7 @@ fn relative_distance(f: &[f64], t: &[f64]) -> f64 {
 
 /// The drum's per-cable scales against the truth's `truth`, and its size (the scales' rms).
 fn drum_checks(
-    size: &calibrate::effects::EffectSize,
+    size: &calibrate_diagnosis::effects::EffectSize,
     fitted: &[(f64, f64)],
     truth: &[f64],
     magnitude: f64,
@@ -976,7 +982,9 @@ fn drum_checks(
         size: None,
     });
     // No covariance, no size: counted as a miss (NaN is within no tolerance).
-    let c = size.rms.map(|r| calibrate::magnitude::check_rms(&r, truth));
+    let c = size
+        .rms
+        .map(|r| calibrate_diagnosis::magnitude::check_rms(&r, truth));
     out.push(MagnitudeCheck {
         effect: Effect::Drum,
         what: DRUM_SIZE.into(),
@@ -989,16 +997,24 @@ fn drum_checks(
 }
 
 /// Compares the final model's parameters with the independent plant's truth, for the named
-/// effects that have a truth in the calibrate parameterisation.
-fn independent_magnitudes(truth: &bench_plant::Truth, rep: &PipelineReport) -> Vec<MagnitudeCheck> {
+/// effects that have a truth in the calibrate parameterisation: the report's final estimate
+/// on every sample, or (`training_only`, and where there is no such estimate) the fit on the
+/// training samples.
+fn independent_magnitudes(
+    truth: &bench_plant::Truth,
+    rep: &PipelineReport,
+    training_only: bool,
+) -> Vec<MagnitudeCheck> {
     let Some(sel) = rep.selection.as_ref() else {
         return Vec::new();
     };
-    let fin = rep.final_stage();
+    let (sizes, k_f) = match (&rep.all_samples, training_only) {
+        (Some(all), false) => (&all.sizes, &all.fit.model.k_f),
+        _ => (&sel.sizes, &rep.final_stage().model.k_f),
+    };
     let mut out = Vec::new();
     for v in &truth.values {
-        let Some(size) = sel
-            .sizes
+        let Some(size) = sizes
             .iter()
             .find(|s| Some(s.effect.name()) == v.kind.effect())
         else {
@@ -1049,9 +1065,7 @@ fn independent_magnitudes(truth: &bench_plant::Truth, rep: &PipelineReport) -> V
                 // Stored rope per cable l_i = k_F,i c_s for a compliance (its 1σ likewise; the
                 // k_F's own uncertainty left out).
                 let l: Vec<(f64, f64)> = match form {
-                    Form::SharedCompliance => fin
-                        .model
-                        .k_f
+                    Form::SharedCompliance => k_f
                         .iter()
                         .map(|k| (k * fitted[0].0, k * fitted[0].1))
                         .collect(),
@@ -1119,7 +1133,7 @@ pub fn independent_run(
         truth,
         out_of_catalogue,
         u,
-        &move |rep, _| independent_magnitudes(&t, rep),
+        &move |rep, training_only| independent_magnitudes(&t, rep, training_only),
     )
 }
 
@@ -1318,7 +1332,7 @@ fn magnitude_rows(s: &Summary, runs: &[&RunResult], generator: &str) {
         "| {DRUM_SIZE} within 20 % of the truth's (runs naming the drum of a drum-scale scenario) | {} |",
         ratio(dn, dd)
     );
-    let sized: Vec<calibrate::magnitude::SizeCheck> = runs
+    let sized: Vec<calibrate_diagnosis::magnitude::SizeCheck> = runs
         .iter()
         .flat_map(|r| r.magnitudes.iter())
         .filter_map(|m| m.size)
@@ -1359,6 +1373,7 @@ fn magnitude_rows(s: &Summary, runs: &[&RunResult], generator: &str) {
         "| hysteresis h within 30 % of the truth (runs naming hysteresis) | {} |",
         ratio(hn, hd)
     );
+    training_only_rows(runs);
     let all: Vec<&MagnitudeCheck> = runs.iter().flat_map(|r| r.magnitudes.iter()).collect();
     for e in [Effect::Hysteresis, Effect::Powertrain] {
         let c: Vec<&&MagnitudeCheck> = all.iter().filter(|m| m.effect == e).collect();
@@ -1382,6 +1397,31 @@ fn magnitude_rows(s: &Summary, runs: &[&RunResult], generator: &str) {
             100.0 * pt.iter().copied().fold(0.0, f64::max)
         );
     }
+}
+
+/// The sizes of the fit on the training samples alone, next to the report's final estimate on
+/// every sample (the rows above).
+fn training_only_rows(runs: &[&RunResult]) {
+    let within = |what: &str, tol: f64| {
+        let c: Vec<&MagnitudeCheck> = runs
+            .iter()
+            .flat_map(|r| r.training_magnitudes.iter())
+            .filter(|m| m.what == what)
+            .collect();
+        let n = c.iter().filter(|m| m.relative_error <= tol).count();
+        (n, c.len(), c.iter().filter(|m| m.within_two_sigma).count())
+    };
+    let (dn, dd, d2) = within(DRUM_SIZE, 0.2);
+    let (hn, hd, _) = within("hysteresis h", 0.3);
+    if dd + hd == 0 {
+        return;
+    }
+    println!(
+        "| training samples alone (before the final estimate on all samples): {DRUM_SIZE} within 20 % / the truth within ±2σ; hysteresis h within 30 % | {} / {}; {} |",
+        ratio(dn, dd),
+        ratio(d2, dd),
+        ratio(hn, hd)
+    );
 }
 
 /// The acceptance items with their targets, and the runs with a non-physical final parameter.
@@ -1470,6 +1510,7 @@ mod tests {
                 check(DRUM_PER_CABLE, per_cable, None),
                 check(DRUM_SIZE, size, Some(0.2)),
             ],
+            training_magnitudes: vec![],
             rows: (120, 90),
             candidate_lines: vec![],
         }

@@ -1,12 +1,12 @@
 //! `crs calibrate …`: identification, residual diagnosis and model extension from measured
 //! data sets (docs/data-format.md), with a Markdown/JSON/SVG report and the identified model
-//! written back as a platform TOML (crates/calibrate, docs/calibration.md); the identification
+//! written back as a platform TOML (crates/calibrate, crates/calibrate-diagnosis, docs/calibration.md); the identification
 //! run is `calibration_campaigns::calibration_output`, the diagnosis benchmark `calibration_campaigns::diagnosis_bench`.
 
 use calibrate::Observation;
-use calibrate::effects::Effect;
-use calibrate::pipeline::{PipelineConfig, PipelineReport};
-use calibrate::repeatability::RepeatabilityConfig;
+use calibrate_diagnosis::effects::Effect;
+use calibrate_diagnosis::pipeline::{PipelineConfig, PipelineReport};
+use calibrate_diagnosis::repeatability::RepeatabilityConfig;
 use calibration_campaigns::calibration_output::{self, Identification};
 use calibration_campaigns::diagnosis_bench::{BenchConfig, Generator, run as run_bench};
 use calibration_campaigns::progress::Spinner;
@@ -149,10 +149,10 @@ pub struct Opts {
     pub(crate) candidates: Option<Vec<String>>,
     /// Minimum reduction of the held-out mean position error (through the FK) for an effect
     /// to be added (fraction); default from baseline data, see docs/calibration.md.
-    #[arg(long, default_value_t = calibrate::effects::SelectConfig::default().min_gain_pos)]
+    #[arg(long, default_value_t = calibrate_diagnosis::effects::SelectConfig::default().min_gain_pos)]
     pub(crate) min_gain_pos: f64,
     /// The same for the held-out mean force error ‖f_P − f_M‖ (fraction).
-    #[arg(long, default_value_t = calibrate::effects::SelectConfig::default().min_gain_force)]
+    #[arg(long, default_value_t = calibrate_diagnosis::effects::SelectConfig::default().min_gain_force)]
     pub(crate) min_gain_force: f64,
     /// Repeatability: the optimal elastostatic fit again from K random frame-anchor starts
     /// (eq. 6.8) and once on the held-out set (eq. 6.10); 0 = off.

@@ -163,7 +163,7 @@ fn the_plot_layer_is_plotters_alone() {
     assert!(c.contains("plotters"), "{c:?}");
     for user in [
         "model-analysis",
-        "calibrate",
+        "calibrate-diagnosis",
         "ride-physics",
         "motion-cueing",
         "stack-reports",
@@ -268,6 +268,7 @@ fn the_daemon_does_not_link_the_bus_the_simulator_or_the_stack() {
             "socketcan",
             "sim-plant",
             "calibrate",
+            "calibrate-diagnosis",
         ]),
     );
 }
@@ -327,6 +328,7 @@ fn the_benchmark_plant_shares_no_code_with_what_it_tests() {
     let c = closure("bench-plant");
     for f in [
         "calibrate",
+        "calibrate-diagnosis",
         "sim-plant",
         "cdpr-model",
         "nalgebra",
@@ -434,6 +436,7 @@ fn only_the_command_line_and_the_safety_hil_use_the_stack_library() {
         .chain([
             "sim-plant",
             "calibrate",
+            "calibrate-diagnosis",
             "cdpr-model",
             "motion-core",
             "surrogate",
@@ -457,6 +460,7 @@ fn the_stack_library_uses_its_crates_downwards_only() {
         &[
             "sim-plant",
             "calibrate",
+            "calibrate-diagnosis",
             "cdpr-model",
             "motion-core",
             "surrogate",
@@ -508,10 +512,11 @@ fn nothing_links_the_test_rigs_or_the_wire_hub() {
 
 #[test]
 fn calibration_needs_neither_the_simulator_nor_the_bus() {
-    forbid(
-        "calibrate",
-        &["sim-plant", "drive-io", "iceoryx2", "socketcan"],
-    );
+    for krate in ["calibrate", "calibrate-diagnosis"] {
+        forbid(krate, &["sim-plant", "drive-io", "iceoryx2", "socketcan"]);
+    }
+    // The identification core knows neither the effect diagnosis above it nor a plot.
+    forbid("calibrate", &["calibrate-diagnosis", "crs-plot"]);
 }
 
 #[test]

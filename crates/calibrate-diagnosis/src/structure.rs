@@ -14,12 +14,12 @@
 //! is wrong; it does not name a physical cause and it never picks the nearest catalogue entry.
 //!
 //! For when accuracy matters more than explanation, `PipelineConfig::flexible` fits a generic
-//! per-cable length correction ([`crate::params::ParamId::Flex`]) as its own, labelled step.
+//! per-cable length correction ([`calibrate::params::ParamId::Flex`]) as its own, labelled step.
 
-use crate::observation::Observation;
-use crate::params::CalModel;
-use crate::residual::Kind;
-use crate::validate;
+use calibrate::observation::Observation;
+use calibrate::params::CalModel;
+use calibrate::residual::Kind;
+use calibrate::validate;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 

@@ -2,7 +2,7 @@
 //!
 //! A catalogue of candidate effects, each an extension of the control model whose parameters
 //! reduce it exactly to the base model at zero (eq. 2.1; the terms are in
-//! [`crate::residual`]). After a fit, every candidate gets
+//! [`calibrate::residual`]). After a fit, every candidate gets
 //! 1. a signature test: the score (Lagrange-multiplier) statistic of its parameters on the
 //!    residual, LM = r^T P J_e (J_e^T P J_e)^+ J_e^T P r / σ² with P the projector off the base
 //!    Jacobian, compared with the χ²_k critical value — does the residual point along the
@@ -32,17 +32,17 @@
 //! fitted; the one with the lowest BIC on the training rows represents the effect.
 //!
 //! A candidate's fit starts where the base model is exactly itself (its parameters 0) and the
-//! bounded Levenberg–Marquardt of [`crate::lm`] can leave a bound the base optimum sits on
+//! bounded Levenberg–Marquardt of [`calibrate::lm`] can leave a bound the base optimum sits on
 //! (a k_F at 50 MN/m is re-examined with every candidate's parameters free); when its own
 //! parameters do not move from there, it is fitted again from non-degenerate starts in its
 //! own parameters, and when they still do not move the report says so instead of a gain.
 
-use crate::identify::{self, Fit, FitError, FitSpec};
-use crate::observation::DirectionSource;
-use crate::observation::Observation;
-use crate::params::{CalModel, ParamId};
-use crate::residual::Kind;
-use crate::validate::{self, ErrorChannel};
+use calibrate::identify::{self, Fit, FitError, FitSpec};
+use calibrate::observation::DirectionSource;
+use calibrate::observation::Observation;
+use calibrate::params::{CalModel, ParamId};
+use calibrate::residual::Kind;
+use calibrate::validate::{self, ErrorChannel};
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 

@@ -3,9 +3,10 @@
 //! model's held-out length residuals are flagged (the catalogue that was allowed does not
 //! explain them), and with the drum allowed the structure goes away.
 
+#[path = "../../calibrate/tests/common/mod.rs"]
 mod common;
-use calibrate::effects::Effect;
-use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
+use calibrate_diagnosis::effects::Effect;
+use calibrate_diagnosis::pipeline::{self, PipelineConfig, PipelineReport};
 use common::*;
 use sim_plant::config::Effects;
 
@@ -63,7 +64,7 @@ fn a_drum_error_outside_the_allowed_catalogue_is_flagged_and_goes_with_the_drum(
     let without = run(drum_effects(), Some(vec![Effect::Sag, Effect::Hysteresis]));
     let st = without.structure.as_ref().expect("structure test ran");
     assert!(st.any(), "{st:?}");
-    let md = calibrate::report::markdown(&without, "test", &[]);
+    let md = calibrate_diagnosis::report::markdown(&without, "test", &[]);
     assert!(md.contains("**Unexplained structure** remains"), "{md}");
     let with = run(drum_effects(), None);
     assert!(
@@ -134,8 +135,8 @@ fn the_flexible_correction_takes_up_what_the_allowed_catalogue_leaves_and_says_w
             .iter()
             .all(|e| Effect::ALL.contains(e))
     );
-    let md = calibrate::report::markdown(&rep, "test", &[]);
+    let md = calibrate_diagnosis::report::markdown(&rep, "test", &[]);
     assert!(md.contains("not a physical diagnosis"), "{md}");
-    let side = calibrate::report::side_file(&fin.model, &[]);
+    let side = calibrate_diagnosis::report::side_file(&fin.model, &[]);
     assert!(side.contains("flexible_correction_m = [["), "{side}");
 }

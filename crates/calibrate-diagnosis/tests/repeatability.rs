@@ -4,11 +4,12 @@
 //! the order of its 1σ, and the report must carry the section. A failed second run is reported
 //! as failed, never as a number.
 
+#[path = "../../calibrate/tests/common/mod.rs"]
 mod common;
-use calibrate::effects::Effect;
-use calibrate::pipeline::{self, PipelineConfig};
-use calibrate::repeatability::{self, Repeatability, RepeatabilityConfig, SecondRun};
 use calibrate::split;
+use calibrate_diagnosis::effects::Effect;
+use calibrate_diagnosis::pipeline::{self, PipelineConfig};
+use calibrate_diagnosis::repeatability::{self, Repeatability, RepeatabilityConfig, SecondRun};
 use common::*;
 use sim_plant::config::Effects;
 
@@ -77,7 +78,7 @@ fn multi_start_returns_to_the_optimum_and_the_bootstrap_keeps_the_drum() {
     }
     let mut with = rep.clone();
     with.repeatability = Some(r);
-    let md = calibrate::report::markdown(&with, "test", &[]);
+    let md = calibrate_diagnosis::report::markdown(&with, "test", &[]);
     assert!(md.contains("## Repeatability"), "{md}");
     assert!(md.contains("3 reached the pipeline's optimum"), "{md}");
 }
@@ -105,7 +106,7 @@ fn a_failed_second_run_is_reported_as_failed_without_numbers() {
         }),
         bootstrap: None,
     });
-    let md = calibrate::report::markdown(&rep, "test", &[]);
+    let md = calibrate_diagnosis::report::markdown(&rep, "test", &[]);
     let line = md
         .lines()
         .find(|l| l.starts_with("**Second run**"))

@@ -3,9 +3,11 @@
 //! hold the platform (no elastostatic equilibrium exists), so every elastostatic step must fail
 //! there while the kinematic least-squares FK still converges.
 
+#[path = "../../calibrate/tests/common/mod.rs"]
 mod common;
-use calibrate::pipeline::{self, PipelineConfig};
-use calibrate::{report, split};
+use calibrate::split;
+use calibrate_diagnosis::pipeline::{self, PipelineConfig};
+use calibrate_diagnosis::report;
 use common::*;
 use sim_plant::config::Effects;
 

@@ -2,9 +2,11 @@
 //! well-formed, the step chart has a bar for each step that validated and none for a failed
 //! one, and the per-cable chart a group per cable.
 
+#[path = "../../calibrate/tests/common/mod.rs"]
 mod common;
-use calibrate::pipeline::{self, PipelineConfig};
-use calibrate::{report, split};
+use calibrate::split;
+use calibrate_diagnosis::pipeline::{self, PipelineConfig};
+use calibrate_diagnosis::report;
 use common::*;
 
 fn filled(doc: &roxmltree::Document<'_>, color: &str) -> usize {

@@ -2,10 +2,11 @@
 //! declared in the data set) must lead the pipeline, started from the nominal model, to choose
 //! that effect and cut the held-out error; with no effect nothing may be added.
 
+#[path = "../../calibrate/tests/common/mod.rs"]
 mod common;
-use calibrate::effects::Effect;
-use calibrate::pipeline::{self, PipelineConfig, PipelineReport};
 use calibrate::split;
+use calibrate_diagnosis::effects::Effect;
+use calibrate_diagnosis::pipeline::{self, PipelineConfig, PipelineReport};
 use common::*;
 use sim_plant::config::Effects;
 
@@ -56,10 +57,20 @@ enum Metric {
 
 /// Asserts `effect` is chosen first and the held-out error `metric` of the final model is at
 /// least `factor` times smaller than that of the optimal base elastostatic model.
-fn check(effects: Effects, effect: Effect, metric: Metric, factor: f64) {
+fn check(effects: Effects, effect: Effect, metric: Metric, factor: f64) -> PipelineReport {
     let rep = run(effects);
     let sel = rep.selection.as_ref().expect("selection ran");
     assert_eq!(sel.chosen.first(), Some(&effect), "chosen {:?}", sel.chosen);
+    // The chosen model's final estimate uses every sample and sizes the same effects.
+    let all = rep
+        .all_samples
+        .as_ref()
+        .expect("final estimate on all samples");
+    assert_eq!(all.samples, rep.n_train + rep.n_holdout);
+    let effects_of = |s: &[calibrate_diagnosis::effects::EffectSize]| {
+        s.iter().map(|z| (z.effect, z.form)).collect::<Vec<_>>()
+    };
+    assert_eq!(effects_of(&all.sizes), effects_of(&sel.sizes));
     let base = rep.stage("optimal elastostatic").unwrap().holdout.clone();
     let fin = rep.final_stage().holdout.clone();
     let get = |e: &calibrate::validate::Errors| match metric {
@@ -73,6 +84,7 @@ fn check(effects: Effects, effect: Effect, metric: Metric, factor: f64) {
         get(&base),
         get(&fin)
     );
+    rep
 }
 
 fn crs() -> Effects {
@@ -89,6 +101,7 @@ fn no_effect_nothing_added() {
     };
     let rep = run(effects);
     assert!(rep.selection.unwrap().chosen.is_empty());
+    assert!(rep.all_samples.is_none() && rep.all_samples_failure.is_none());
 }
 
 #[test]
@@ -158,7 +171,7 @@ fn sag_is_found() {
 
 #[test]
 fn drum_radius_errors_are_found() {
-    check(
+    let rep = check(
         Effects {
             winch: crs().winch,
             ..Effects::default()
@@ -166,6 +179,19 @@ fn drum_radius_errors_are_found() {
         Effect::Drum,
         Metric::Position,
         10.0,
+    );
+    // More samples, a tighter size: the final estimate's 1σ is below the training fit's.
+    let sigma = |s: &[calibrate_diagnosis::effects::EffectSize]| {
+        s.iter()
+            .find_map(|z| z.rms)
+            .expect("a drum size with its 1σ")
+            .sigma
+    };
+    let train = sigma(&rep.selection.as_ref().unwrap().sizes);
+    let all = sigma(&rep.all_samples.as_ref().unwrap().sizes);
+    assert!(
+        all < train,
+        "1σ on all samples {all:e} vs training {train:e}"
     );
 }
 

@@ -1,10 +1,11 @@
 //! The identified model written back as a platform TOML loads with motion-core's loader and
-//! carries the identified parameters exactly; bad data sets give errors, not panics.
+//! carries the identified parameters exactly (bad data sets: calibrate's tests/data_errors.rs).
 
+#[path = "../../calibrate/tests/common/mod.rs"]
 mod common;
-use calibrate::effects::Effect;
-use calibrate::observation::ObservationError;
-use calibrate::{CalModel, from_dataset, report};
+use calibrate::CalModel;
+use calibrate_diagnosis::effects::Effect;
+use calibrate_diagnosis::report;
 use cdpr_model::config::parse_platform;
 use common::*;
 
@@ -35,30 +36,6 @@ fn platform_toml_round_trips_through_load_platform() {
         side.parse::<toml::Table>().is_ok(),
         "side file must be TOML"
     );
-}
-
-#[test]
-fn bad_data_sets_are_rejected_with_a_reason() {
-    let text = "# format: crs-dataset 1\n# units: SI (q_cmd m; x y z m; phi rad, R = Rx Ry Rz eq. 2.2; f N)\nsample,q_cmd_1,x,y,z,phi_x,phi_y,phi_z\n0,1.0,0,0,oops,0,0,0\n";
-    let err = crs_dataset::read_dataset(text.as_bytes(), "bad.csv").unwrap_err();
-    assert_eq!(err.line, Some(4), "{err}");
-    let ok = "# format: crs-dataset 1\n# units: SI (q_cmd m; x y z m; phi rad, R = Rx Ry Rz eq. 2.2; f N)\nsample,q_cmd_1,x,y,z,phi_x,phi_y,phi_z,f_1\n0,1.0,0,0,1,0,0,0,-5\n";
-    let ds = crs_dataset::read_dataset(ok.as_bytes(), "one.csv").unwrap();
-    assert_eq!(
-        from_dataset(&ds, 8),
-        Err(ObservationError::CableCount {
-            expected: 8,
-            got: 1
-        })
-    );
-    assert!(matches!(
-        from_dataset(&ds, 1),
-        Err(ObservationError::NonPositiveForce {
-            sample: 0,
-            cable: 1,
-            ..
-        })
-    ));
 }
 
 /// A platform with `[dynamics]` whose identified load moved (eq. 6.23): the written platform

@@ -3,10 +3,10 @@
 //! a side file for the effects the platform schema cannot express.
 
 use crate::effects::Effect;
-use crate::params::{CalModel, ParamId};
 use crate::pipeline::{PipelineReport, Stage};
-use crate::residual::Kind;
-use crate::validate;
+use calibrate::params::{CalModel, ParamId};
+use calibrate::residual::Kind;
+use calibrate::validate;
 use cdpr_model::ModelError;
 use cdpr_model::config::Platform;
 use crs_plot::{BarSeries, Bars, Chart, Figure, Markers, Panel, Rgb};
@@ -22,7 +22,7 @@ fn fmt_opt(v: Option<f64>, prec: usize) -> String {
 }
 
 /// The 1σ of free parameter `k` of a fit, or why there is none (never NaN or ±0).
-pub fn std_text(f: &crate::identify::Fit, k: usize) -> String {
+pub fn std_text(f: &calibrate::identify::Fit, k: usize) -> String {
     let p = f.free[k];
     if f.at_bound.contains(&p) {
         "at physical bound".into()
@@ -206,40 +206,31 @@ pub fn markdown(rep: &PipelineReport, command: &str, plots: &[String]) -> String
                 .map(|(e, f)| effect_label(*e, *f))
                 .collect();
             let _ = writeln!(s, "Chosen effects, in order: **{}**.\n", names.join(", "));
-            s.push_str("Sizes in the final model (±1σ from the fit's covariance; \"at bound\" where a parameter rests on its physical range and has no 1σ):\n\n| effect | parameter | value | ±1σ |\n|---|---|---|---|\n");
-            for size in &sel.sizes {
-                for (n, v, sd) in &size.params {
+            match &rep.all_samples {
+                Some(all) => {
                     let _ = writeln!(
                         s,
-                        "| {} | {n} | {v:.4e} | {} |",
-                        effect_label(size.effect, size.form),
-                        if sd.is_finite() && *sd > 0.0 {
-                            format!("{sd:.2e}")
-                        } else {
-                            "at bound or unidentifiable".into()
-                        }
+                        "Sizes in the final estimate of the chosen model on all {} samples (training + held-out), made after the held-out set chose it; the held-out errors above are those of the fit on the {} training samples, whose sizes follow below it (±1σ from the fit's covariance; \"at bound\" where a parameter rests on its physical range and has no 1σ):\n",
+                        all.samples, rep.n_train
+                    );
+                    sizes_table(&mut s, &all.sizes);
+                    let _ = writeln!(
+                        s,
+                        "\nSizes in the fit on the {} training samples:\n",
+                        rep.n_train
                     );
                 }
-                if let Some(r) = size.rms {
-                    let _ = writeln!(
-                        s,
-                        "| {} | size: RMS over the cables (noise bias taken off; plain RMS {:.3} ‰) | {:.3} ‰ | {:.3} ‰ |",
-                        effect_label(size.effect, size.form),
-                        r.raw * 1e3,
-                        r.value * 1e3,
-                        r.sigma * 1e3
-                    );
-                }
-                if let Some((h, sd)) = size.length_equivalent {
-                    let _ = writeln!(
-                        s,
-                        "| {} | ≙ length offset h (H × mean compliance of the training samples) | {:.3} mm | {:.3} mm |",
-                        effect_label(size.effect, size.form),
-                        h * 1e3,
-                        sd * 1e3
-                    );
+                None => {
+                    if let Some(e) = &rep.all_samples_failure {
+                        let _ = writeln!(
+                            s,
+                            "The final estimate on all samples failed ({e}); the sizes are those of the fit on the training samples.\n"
+                        );
+                    }
+                    s.push_str("Sizes in the final model (±1σ from the fit's covariance; \"at bound\" where a parameter rests on its physical range and has no 1σ):\n\n");
                 }
             }
+            sizes_table(&mut s, &sel.sizes);
             s.push('\n');
         }
         let c = &rep.config.select;
@@ -429,6 +420,45 @@ pub fn platform_toml(
     )?)
 }
 
+/// The chosen effects' sizes as a table (each parameter ±1σ, a drum's RMS, a force band's
+/// length equivalent).
+fn sizes_table(s: &mut String, sizes: &[crate::effects::EffectSize]) {
+    s.push_str("| effect | parameter | value | ±1σ |\n|---|---|---|---|\n");
+    for size in sizes {
+        for (n, v, sd) in &size.params {
+            let _ = writeln!(
+                s,
+                "| {} | {n} | {v:.4e} | {} |",
+                effect_label(size.effect, size.form),
+                if sd.is_finite() && *sd > 0.0 {
+                    format!("{sd:.2e}")
+                } else {
+                    "at bound or unidentifiable".into()
+                }
+            );
+        }
+        if let Some(r) = size.rms {
+            let _ = writeln!(
+                s,
+                "| {} | size: RMS over the cables (noise bias taken off; plain RMS {:.3} ‰) | {:.3} ‰ | {:.3} ‰ |",
+                effect_label(size.effect, size.form),
+                r.raw * 1e3,
+                r.value * 1e3,
+                r.sigma * 1e3
+            );
+        }
+        if let Some((h, sd)) = size.length_equivalent {
+            let _ = writeln!(
+                s,
+                "| {} | ≙ length offset h (H × mean compliance of the samples fitted) | {:.3} mm | {:.3} mm |",
+                effect_label(size.effect, size.form),
+                h * 1e3,
+                sd * 1e3
+            );
+        }
+    }
+}
+
 /// An effect with its form, e.g. "hysteresis (±h length offset, direction from the command
 /// sequence)".
 pub fn effect_label(e: Effect, f: crate::effects::Form) -> String {
@@ -461,7 +491,7 @@ pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
     let _ = writeln!(
         s,
         "stiffness_reference_force_n = {:?}",
-        crate::params::STIFFNESS_REFERENCE_FORCE_N
+        calibrate::params::STIFFNESS_REFERENCE_FORCE_N
     );
     let _ = writeln!(s, "hysteresis_half_width_n = {:?}", cal.hysteresis);
     let _ = writeln!(s, "hysteresis_length_m = {:?}", cal.hysteresis_length);
@@ -469,10 +499,10 @@ pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
         s,
         "hysteresis_direction = {:?}",
         match cal.hysteresis_source {
-            crate::observation::DirectionSource::Force => "force change",
-            crate::observation::DirectionSource::ForceBeyondNoise =>
+            calibrate::observation::DirectionSource::Force => "force change",
+            calibrate::observation::DirectionSource::ForceBeyondNoise =>
                 "force change beyond the noise",
-            crate::observation::DirectionSource::Command => "command sequence (held)",
+            calibrate::observation::DirectionSource::Command => "command sequence (held)",
         }
     );
     let _ = writeln!(
@@ -489,7 +519,7 @@ pub fn side_file(cal: &CalModel, chosen: &[Effect]) -> String {
     if cal
         .flex
         .iter()
-        .any(|c| *c != [0.0; crate::params::FLEX_TERMS])
+        .any(|c| *c != [0.0; calibrate::params::FLEX_TERMS])
     {
         s.push_str("\n# Flexible per-cable length correction (NOT a physical effect; --flexible):\n# delta_q_i = c_i0 u + c_i1 u^2 + c_i2 v + c_i3 v^2, u = f_i/5000 N - 1, v = q_i/10 m (m).\n");
         let rows: Vec<String> = cal
@@ -549,7 +579,7 @@ const GREEN: Rgb = Rgb(44, 160, 44);
 const ORANGE: Rgb = Rgb(255, 127, 14);
 
 /// The report's plots: (file name, SVG text).
-pub fn plots(rep: &PipelineReport, holdout: &[crate::Observation]) -> Vec<(String, String)> {
+pub fn plots(rep: &PipelineReport, holdout: &[calibrate::Observation]) -> Vec<(String, String)> {
     let mut out = Vec::new();
     let first: &Stage = &rep.stages[0];
     let last = rep.final_stage();

@@ -2,14 +2,14 @@
 //! nominal kinematic → optimal kinematic (eq. 4.8, sec. 6.2) → nominal elastostatic (offsets
 //! from the measured tension, eq. 3.14 / 6.24, sec. 6.4) → optimal elastostatic (eq. 4.38,
 //! sec. 6.5) → + the effects the residuals support ([`crate::effects`]). Every figure is
-//! computed on held-out samples through the forward kinematics ([`crate::validate`]).
+//! computed on held-out samples through the forward kinematics ([`calibrate::validate`]).
 
 use crate::effects::{self, Effect, SelectConfig, Selection};
-use crate::identify::{self, Fit, FitError, FitSpec};
-use crate::observation::Observation;
-use crate::params::{CalModel, Group, ParamId, group};
-use crate::residual::{Kind, Weights};
-use crate::validate::{self, Errors};
+use calibrate::identify::{self, Fit, FitError, FitSpec};
+use calibrate::observation::Observation;
+use calibrate::params::{CalModel, Group, ParamId, group};
+use calibrate::residual::{Kind, Weights};
+use calibrate::validate::{self, Errors};
 use cdpr_model::Model;
 use serde::Serialize;
 
@@ -31,7 +31,7 @@ pub struct PipelineConfig {
     pub kinematic_b: bool,
     pub select: SelectConfig,
     /// After the diagnosis, also fit the flexible per-cable length correction
-    /// ([`crate::params::ParamId::Flex`]) as its own, clearly labelled stage.
+    /// ([`calibrate::params::ParamId::Flex`]) as its own, clearly labelled stage.
     pub flexible: bool,
     /// Skip the diagnosis/extension loop.
     pub no_extension: bool,
@@ -93,6 +93,54 @@ pub struct PipelineReport {
     pub structure: Option<crate::structure::StructureReport>,
     /// Why the optional flexible correction could not be fitted (`None`: fitted or not asked).
     pub flexible_failure: Option<String>,
+    /// The chosen model's parameters estimated on every sample (training + held-out) once the
+    /// held-out set has chosen it; `None` without effects or without a held-out set.
+    pub all_samples: Option<AllSamplesEstimate>,
+    /// Why that estimate could not be made (the training-only fit then stands alone).
+    pub all_samples_failure: Option<String>,
+}
+
+/// The final estimate of the chosen model: the held-out set chose the effects and validated the
+/// training-only fit; the same parameters (free, fixed, penalties, start at the training
+/// optimum) are then estimated on the training and held-out samples together, as a
+/// calibration engineer estimates a chosen model on all the data. Its sizes have ≈ √(n_train /
+/// n_all) of the training fit's 1σ. Its held-out errors would be in-sample, so the report's
+/// held-out figures stay those of the training-only fit.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct AllSamplesEstimate {
+    pub samples: usize,
+    pub fit: Fit,
+    /// Sizes of the chosen effects in this fit, ±1σ (same order as the selection's).
+    pub sizes: Vec<effects::EffectSize>,
+}
+
+/// The chosen model of `sel` estimated on `train` and `holdout` together (see
+/// [`AllSamplesEstimate`]).
+pub fn estimate_on_all_samples(
+    sel: &Selection,
+    spec: &FitSpec,
+    train: &[Observation],
+    holdout: &[Observation],
+    progress: &mut dyn FnMut(&str, usize, f64),
+) -> Result<AllSamplesEstimate, FitError> {
+    let all: Vec<Observation> = train.iter().chain(holdout).cloned().collect();
+    let mut spec = spec.clone();
+    spec.free = sel.fit.free.clone();
+    let fit = identify::fit(&sel.fit.model, &all, &spec, &mut |it, c| {
+        progress("final estimate on all samples", it, c)
+    })?;
+    let chosen: Vec<(Effect, effects::Form)> = sel
+        .chosen
+        .iter()
+        .copied()
+        .zip(sel.forms.iter().copied())
+        .collect();
+    let sizes = effects::effect_sizes(&fit, &chosen, &all);
+    Ok(AllSamplesEstimate {
+        samples: all.len(),
+        fit,
+        sizes,
+    })
 }
 
 impl PipelineReport {
@@ -114,36 +162,6 @@ impl PipelineReport {
             .filter_map(|s| s.holdout.failure_text().map(|t| (s.name.clone(), t)))
             .collect()
     }
-}
-
-/// Offsets δ_i from the measured data with the model fixed (eq. 3.14 / 6.24 with the measured
-/// poses and forces instead of the single set-up pose): δ_i = mean_j(φ(_el)(x_Mj, f_Mj) − q_cmd,ij).
-pub fn estimate_offsets(
-    kind: Kind,
-    cal: &mut CalModel,
-    obs: &[Observation],
-    w: Weights,
-) -> Result<(), FitError> {
-    let m = cal.m();
-    cal.offset.iter_mut().for_each(|d| *d = 0.0);
-    let unit = Weights {
-        wrench: w.wrench,
-        length: 1.0,
-    };
-    let r = identify::residual(kind, cal, obs, unit)?;
-    let mut sum = vec![0.0; m];
-    let mut row = 0;
-    for o in obs {
-        let n = crate::residual::rows_per_sample(kind, m, o);
-        for i in 0..m {
-            sum[i] += r[row + n - m + i];
-        }
-        row += n;
-    }
-    for i in 0..m {
-        cal.offset[i] = sum[i] / obs.len() as f64;
-    }
-    Ok(())
 }
 
 /// The optimal elastostatic step's fit (eq. 4.38): p = (a, b, k_F, w_e) + offsets with the
@@ -214,7 +232,7 @@ pub fn run(
     let mut stages = Vec::new();
     // 1. Nominal kinematic model p_N (offsets from the data).
     let mut nom_k = CalModel::from_model(nominal);
-    estimate_offsets(Kind::Kinematic, &mut nom_k, train, cfg.weights)?;
+    identify::estimate_offsets(Kind::Kinematic, &mut nom_k, train, cfg.weights)?;
     stages.push(Stage {
         name: "nominal kinematic".into(),
         kind: Kind::Kinematic,
@@ -271,6 +289,8 @@ pub fn run(
             config: cfg.clone(),
             structure: structure_of(stages.last(), holdout),
             flexible_failure: None,
+            all_samples: None,
+            all_samples_failure: None,
             stages,
             selection: None,
             repeatability: None,
@@ -280,7 +300,7 @@ pub fn run(
     }
     // 3. Nominal elastostatic model: k_F, w_e of the platform, offsets from the tension (6.24).
     let mut nom_e = CalModel::from_model(nominal);
-    estimate_offsets(Kind::Elastostatic, &mut nom_e, train, cfg.weights)?;
+    identify::estimate_offsets(Kind::Elastostatic, &mut nom_e, train, cfg.weights)?;
     stages.push(Stage {
         name: "nominal elastostatic".into(),
         kind: Kind::Elastostatic,
@@ -416,6 +436,16 @@ pub fn run(
         }
         Some(sel)
     };
+    // 5b. The chosen model's final estimate on every sample.
+    let (all_samples, all_samples_failure) = match &selection {
+        Some(sel) if !sel.chosen.is_empty() && !holdout.is_empty() => {
+            match estimate_on_all_samples(sel, &spec_e, train, holdout, progress) {
+                Ok(est) => (Some(est), None),
+                Err(e) => (None, Some(e.to_string())),
+            }
+        }
+        _ => (None, None),
+    };
     // The structure test judges the catalogue's best model, before any flexible correction.
     let structure = structure_of(stages.last(), holdout);
     // 6. Optional flexible correction: for when accuracy matters more than
@@ -425,15 +455,14 @@ pub fn run(
         && let Some(last) = stages.last().and_then(|st| st.fit.clone())
     {
         let mut spec = spec_e.clone();
-        spec.free = last
-            .free
-            .iter()
-            .copied()
-            .chain(
-                (0..m)
-                    .flat_map(|i| (0..crate::params::FLEX_TERMS).map(move |k| ParamId::Flex(i, k))),
-            )
-            .collect();
+        spec.free =
+            last.free
+                .iter()
+                .copied()
+                .chain((0..m).flat_map(|i| {
+                    (0..calibrate::params::FLEX_TERMS).map(move |k| ParamId::Flex(i, k))
+                }))
+                .collect();
         match identify::fit(&last.model, train, &spec, &mut |it, c| {
             progress("flexible correction", it, c)
         }) {
@@ -456,6 +485,8 @@ pub fn run(
         config: cfg.clone(),
         structure,
         flexible_failure,
+        all_samples,
+        all_samples_failure,
         stages,
         selection,
         repeatability: None,

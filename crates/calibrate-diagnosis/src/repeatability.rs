@@ -17,10 +17,10 @@
 //! Off by default (it costs B pipeline runs); `crs calibrate run --multi-start K --bootstrap B`.
 
 use crate::effects::Effect;
-use crate::identify::{self, FitSpec};
-use crate::observation::Observation;
-use crate::params::{CalModel, ParamId};
 use crate::pipeline::{self, PipelineConfig, PipelineReport};
+use calibrate::identify::{self, FitSpec};
+use calibrate::observation::Observation;
+use calibrate::params::{CalModel, ParamId};
 use cdpr_model::Model;
 use nalgebra::Vector3;
 
