@@ -28,7 +28,7 @@ use crs_limits::quantile::quantile_sorted;
 use nalgebra::Vector3;
 use sim_plant::config::{Effects, ForceSensors};
 use sim_plant::{CampaignConfig, Plant, PlantConfig, PoseSet, run_campaign};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// What one benchmark run does (`crs calibrate bench-diagnosis`'s options).
 #[derive(Debug, Clone)]
@@ -367,12 +367,37 @@ pub struct RunResult {
     /// The same comparisons for the training-only fit (the alternative, reported next to them).
     pub training_magnitudes: Vec<MagnitudeCheck>,
     pub rows: (usize, usize),
-    /// Every candidate row of every round, as CSV lines (see [`CANDIDATE_CSV_HEADER`]).
-    pub candidate_lines: Vec<String>,
+    /// Every candidate row of every round (`--candidates-csv`).
+    pub candidate_rows: Vec<CandidateRow>,
 }
 
-/// Columns of `--candidates-csv`.
-pub const CANDIDATE_CSV_HEADER: &str = "generator,scenario,seed,truth,round,effect,pair,form,n_params,moved,fk_failed,gain_pos,z_pos,gain_force,z_force,score,score_critical,bic_before,bic_after,rms_gain,verdict";
+/// One row of `--candidates-csv`: a candidate of one selection round. The numbers are
+/// formatted here (fixed decimals; an empty field where the candidate has none), the csv
+/// writer does the separators and the quoting.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CandidateRow {
+    pub generator: String,
+    pub scenario: String,
+    pub seed: u64,
+    pub truth: String,
+    pub round: usize,
+    pub effect: String,
+    pub pair: String,
+    pub form: String,
+    pub n_params: usize,
+    pub moved: bool,
+    pub fk_failed: bool,
+    pub gain_pos: String,
+    pub z_pos: String,
+    pub gain_force: String,
+    pub z_force: String,
+    pub score: String,
+    pub score_critical: String,
+    pub bic_before: String,
+    pub bic_after: String,
+    pub rms_gain: String,
+    pub verdict: String,
+}
 
 impl RunResult {
     fn named(&self, e: Effect) -> bool {
@@ -606,9 +631,9 @@ fn evaluate(
     let magnitudes = fitted_truth(&rep, false);
     let training_magnitudes = fitted_truth(&rep, true);
     let truth_label = truth.iter().map(|e| e.name()).collect::<Vec<_>>().join("+");
-    let candidate_lines = candidate_lines(sel, generator, &scenario, seed, &truth_label);
+    let candidate_rows = candidate_rows(sel, generator, &scenario, seed, &truth_label);
     let r = RunResult {
-        candidate_lines,
+        candidate_rows,
         generator,
         scenario,
         seed,
@@ -746,47 +771,63 @@ fn true_effect_model(
     })
 }
 
-/// One CSV line per candidate of every selection round (the bench's candidates file).
-fn candidate_lines(
+/// One row per candidate of every selection round (the bench's candidates file).
+fn candidate_rows(
     sel: Option<&calibrate_diagnosis::effects::Selection>,
     generator: &str,
     scenario: &str,
     seed: u64,
     truth_label: &str,
-) -> Vec<String> {
-    sel
-        .map(|s| {
-            s.rounds
-                .iter()
-                .enumerate()
-                .flat_map(|(k, round)| {
-                    round.iter().map(move |c| {
-                        let o = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
-                        format!(
-                            "{generator},{scenario},{seed},{truth_label},{},{},{},{:?},{},{},{},{},{},{},{},{:.4},{:.4},{:.3},{:.3},{:.6},\"{}\"",
-                            k + 1,
-                            c.effect.name(),
-                            c.pair.map_or("", |(e, _)| e.name()),
-                            c.form,
-                            c.n_params,
-                            c.moved,
-                            c.fk_failure.is_some(),
-                            o(c.gain_pos),
-                            o(c.z_pos),
-                            o(c.gain_force),
-                            o(c.z_force),
-                            c.score,
-                            c.score_critical,
-                            c.bic_before,
-                            c.bic_after,
-                            1.0 - c.holdout_rms_after / c.holdout_rms_before,
-                            c.verdict.replace('"', "'")
-                        )
-                    })
-                })
-                .collect()
+) -> Vec<CandidateRow> {
+    let Some(sel) = sel else {
+        return Vec::new();
+    };
+    let o = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
+    sel.rounds
+        .iter()
+        .enumerate()
+        .flat_map(|(k, round)| {
+            round.iter().map(move |c| CandidateRow {
+                generator: generator.into(),
+                scenario: scenario.into(),
+                seed,
+                truth: truth_label.into(),
+                round: k + 1,
+                effect: c.effect.name().into(),
+                pair: c.pair.map_or("", |(e, _)| e.name()).into(),
+                form: format!("{:?}", c.form),
+                n_params: c.n_params,
+                moved: c.moved,
+                fk_failed: c.fk_failure.is_some(),
+                gain_pos: o(c.gain_pos),
+                z_pos: o(c.z_pos),
+                gain_force: o(c.gain_force),
+                z_force: o(c.z_force),
+                score: format!("{:.4}", c.score),
+                score_critical: format!("{:.4}", c.score_critical),
+                bic_before: format!("{:.3}", c.bic_before),
+                bic_after: format!("{:.3}", c.bic_after),
+                rms_gain: format!("{:.6}", 1.0 - c.holdout_rms_after / c.holdout_rms_before),
+                verdict: c.verdict.clone(),
+            })
         })
-        .unwrap_or_default()
+        .collect()
+}
+
+/// Writes `--candidates-csv`: a header from [`CandidateRow`]'s fields, then every run's rows.
+fn write_candidates(path: &Path, runs: &[RunResult]) -> Result<(), BenchError> {
+    let io = |err: csv::Error| BenchError::Write {
+        path: path.to_path_buf(),
+        err: std::io::Error::other(err),
+    };
+    let mut w = csv::Writer::from_path(path).map_err(io)?;
+    for row in runs.iter().flat_map(|r| r.candidate_rows.iter()) {
+        w.serialize(row).map_err(io)?;
+    }
+    w.flush().map_err(|err| BenchError::Write {
+        path: path.to_path_buf(),
+        err,
+    })
 }
 
 /// One run on stderr (`--verbose`): what was chosen, whether it matters, the errors before,
@@ -1177,16 +1218,7 @@ pub fn measure(a: &BenchConfig) -> Result<Summary, BenchError> {
 pub fn run(a: &BenchConfig) -> Result<Summary, BenchError> {
     let s = measure(a)?;
     if let Some(path) = &a.candidates_csv {
-        let mut text = String::from(CANDIDATE_CSV_HEADER);
-        text.push('\n');
-        for l in s.runs.iter().flat_map(|r| r.candidate_lines.iter()) {
-            text.push_str(l);
-            text.push('\n');
-        }
-        std::fs::write(path, text).map_err(|err| BenchError::Write {
-            path: path.clone(),
-            err,
-        })?;
+        write_candidates(path, &s.runs)?;
     }
     for g in ["sim-plant", "independent"] {
         if s.of(g).next().is_some() {
@@ -1512,8 +1544,54 @@ mod tests {
             ],
             training_magnitudes: vec![],
             rows: (120, 90),
-            candidate_lines: vec![],
+            candidate_rows: vec![],
         }
+    }
+
+    /// The candidates file as a spreadsheet or pandas reads it: the documented columns, and a
+    /// verdict with a comma and quotes comes back whole.
+    #[test]
+    fn the_candidates_csv_round_trips_through_a_csv_reader() {
+        let row = CandidateRow {
+            generator: "independent".into(),
+            scenario: "drum-setup".into(),
+            seed: 100,
+            truth: "drum".into(),
+            round: 1,
+            effect: "drum".into(),
+            pair: String::new(),
+            form: "Scale".into(),
+            n_params: 16,
+            moved: true,
+            fk_failed: false,
+            gain_pos: "0.123456".into(),
+            z_pos: String::new(),
+            gain_force: "0.010000".into(),
+            z_force: String::new(),
+            score: "65.0000".into(),
+            score_critical: "26.3000".into(),
+            bic_before: "-1.000".into(),
+            bic_after: "-2.000".into(),
+            rms_gain: "0.300000".into(),
+            verdict: "chosen: needed, \"LR 65\" > 26.3".into(),
+        };
+        let mut r = drum_run(0.1, 0.1);
+        r.candidate_rows = vec![row.clone(), row];
+        let path = std::env::temp_dir().join(format!("candidates-{}.csv", std::process::id()));
+        write_candidates(&path, &[r]).unwrap();
+        let mut rd = csv::Reader::from_path(&path).unwrap();
+        let header: Vec<String> = rd.headers().unwrap().iter().map(String::from).collect();
+        assert_eq!(
+            header.join(","),
+            "generator,scenario,seed,truth,round,effect,pair,form,n_params,moved,fk_failed,\
+             gain_pos,z_pos,gain_force,z_force,score,score_critical,bic_before,bic_after,\
+             rms_gain,verdict"
+        );
+        let rows: Vec<csv::StringRecord> = rd.records().map(Result::unwrap).collect();
+        assert_eq!(rows.len(), 2);
+        assert_eq!(&rows[0][20], "chosen: needed, \"LR 65\" > 26.3");
+        assert_eq!(&rows[0][2], "100");
+        std::fs::remove_file(&path).unwrap();
     }
 
     #[test]
