@@ -47,6 +47,7 @@ fn value(toml: &toml::Table, section: &str, key: &str) -> f64 {
 
 #[test]
 fn commissioning_finds_the_plants_payload_and_refuses_an_unexpected_rider() {
+    let _one = common::one_stack();
     stack_bin_dir(&crs());
     let base = std::env::temp_dir().join(format!("crs-commission-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&base);
@@ -113,6 +114,7 @@ fn commissioning_finds_the_plants_payload_and_refuses_an_unexpected_rider() {
 
 #[test]
 fn load_track_follows_the_walking_subject_within_the_seeds_accuracy() {
+    let _one = common::one_stack();
     let out = std::env::temp_dir().join(format!("crs-load-track-{}", std::process::id()));
     let o = Command::new(crs())
         .current_dir(root())

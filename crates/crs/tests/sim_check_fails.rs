@@ -18,11 +18,7 @@ use common::{root, stack_bin_dir};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
-
-/// One stack run at a time.
-static STACK: Mutex<()> = Mutex::new(());
 
 fn crs() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_crs"))
@@ -98,7 +94,7 @@ fn summary(dir: &Path) -> serde_json::Value {
 
 #[test]
 fn static_error_above_a_bound_the_plant_cannot_meet_fails() {
-    let _one = STACK.lock().unwrap_or_else(|p| p.into_inner());
+    let _one = common::one_stack();
     stack_bin_dir(&crs());
     let dir = scratch("static");
     // The tour ends at [0.4, 0.4, 1.8] m, (1°, 0, 1.5°): the default plant's mm assembly errors
@@ -128,7 +124,7 @@ fn static_error_above_a_bound_the_plant_cannot_meet_fails() {
 
 #[test]
 fn forces_outside_the_limits_fail() {
-    let _one = STACK.lock().unwrap_or_else(|p| p.into_inner());
+    let _one = common::one_stack();
     stack_bin_dir(&crs());
     let dir = scratch("forces");
     // The default plant with a cabin of 1000 kg where the model has 5500 N (561 kg): tensioned
@@ -180,7 +176,7 @@ fn forces_outside_the_limits_fail() {
 
 #[test]
 fn a_reference_motion_core_refuses_fails() {
-    let _one = STACK.lock().unwrap_or_else(|p| p.into_inner());
+    let _one = common::one_stack();
     stack_bin_dir(&crs());
     let dir = scratch("refused");
     // The demo pilot pushes into the upper corner; with walls of 10 N/m (60 kN/m shipped) the
@@ -216,7 +212,7 @@ fn a_reference_motion_core_refuses_fails() {
 
 #[test]
 fn a_drive_fault_fails() {
-    let _one = STACK.lock().unwrap_or_else(|p| p.into_inner());
+    let _one = common::one_stack();
     stack_bin_dir(&crs());
     let dir = scratch("fault");
     // drive-io's hard force limit at 6500 N (14 kN shipped): the tour out takes a cable above
@@ -257,7 +253,7 @@ fn a_drive_fault_fails() {
 
 #[test]
 fn a_run_that_does_not_complete_fails() {
-    let _one = STACK.lock().unwrap_or_else(|p| p.into_inner());
+    let _one = common::one_stack();
     stack_bin_dir(&crs());
     let dir = scratch("timeout");
     // The demo tour takes ~9 s; the run is given 3 s: it is stopped, never judged a pass, and
@@ -401,7 +397,7 @@ fn moving(st: &serde_json::Value) -> bool {
 
 #[test]
 fn an_operators_stop_fails() {
-    let _one = STACK.lock().unwrap_or_else(|p| p.into_inner());
+    let _one = common::one_stack();
     stack_bin_dir(&crs());
     let dir = scratch("estop");
     let wp = waypoints(&dir, &OUT_AND_HOME);
@@ -431,7 +427,7 @@ fn an_operators_stop_fails() {
 
 #[test]
 fn a_bus_stopped_while_the_plan_runs_fails() {
-    let _one = STACK.lock().unwrap_or_else(|p| p.into_inner());
+    let _one = common::one_stack();
     stack_bin_dir(&crs());
     let dir = scratch("busstop");
     let wp = waypoints(&dir, &OUT_AND_HOME);

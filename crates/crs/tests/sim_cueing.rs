@@ -82,11 +82,13 @@ fn run(label: &str, daemon: &str, monitor: &str, plant: Option<&str>) {
 
 #[test]
 fn braking_runs_clean_on_the_nominal_stack() {
+    let _one = common::one_stack();
     run("nominal", "motion-core.toml", "safety-monitor.toml", None);
 }
 
 #[test]
 fn braking_runs_clean_on_the_calibrated_stack() {
+    let _one = common::one_stack();
     let _ = root();
     run(
         "calibrated",

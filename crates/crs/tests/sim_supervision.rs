@@ -126,6 +126,7 @@ fn alive(pid: u32) -> bool {
 
 #[test]
 fn a_crashed_child_stops_the_whole_stack() {
+    let _one = common::one_stack();
     let mut sim = Sim::start("kill");
     let kids = sim.children();
     // All four run (motion-core was started after the drives were operational): killing
@@ -150,6 +151,7 @@ fn a_crashed_child_stops_the_whole_stack() {
 
 #[test]
 fn ctrl_c_stops_every_process() {
+    let _one = common::one_stack();
     let mut sim = Sim::start("int");
     let kids = sim.children();
     for (name, pid) in &kids {
@@ -201,6 +203,7 @@ fn a_monitor_timed_for_another_loop_period_is_refused_before_anything_starts() {
 
 #[test]
 fn an_operator_stop_is_summarised_as_stopped_in_words_and_exits_non_zero() {
+    let _one = common::one_stack();
     let mut sim = Sim::start("stop");
     let line = sim.wait_line("iceoryx2 prefix", 60);
     let prefix = line

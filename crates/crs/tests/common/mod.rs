@@ -4,6 +4,14 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// One whole stack at a time within a test binary: each runs five real-time processes, and two
+/// at once on the host's two cores starve each other (a motion-core stalled 170 ms and the
+/// monitor tripped `setpoint_silence`). Hold the guard for the whole run.
+pub fn one_stack() -> std::sync::MutexGuard<'static, ()> {
+    static STACK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    STACK.lock().unwrap_or_else(|p| p.into_inner())
+}
+
 pub fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
