@@ -3,6 +3,8 @@
 //! J_xp Δp must match where the perturbed robot settles, and the RMS estimate must match a
 //! Monte-Carlo of such robots.
 
+// The model library's test helpers (shipped platforms, feasible test poses), shared, not copied.
+#[path = "../../cdpr-model/tests/common/mod.rs"]
 mod common;
 use cdpr_analysis::sensitivity::{self, Parameter, ParameterErrors};
 use cdpr_model::forward::{self, FkOptions};

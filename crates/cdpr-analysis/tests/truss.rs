@@ -1,6 +1,8 @@
 //! The icosahedron cabin's space frame (eq. 5.2–5.7) under the cable forces of real poses:
 //! equilibrium at every joint, rigid-body modes, determinacy, and the rod rating.
 
+// The model library's test helpers (shipped platforms, feasible test poses), shared, not copied.
+#[path = "../../cdpr-model/tests/common/mod.rs"]
 mod common;
 use cdpr_analysis::truss::{self, ROD_EA_DEFAULT_N, ROD_RATING_N};
 use cdpr_model::{Data, Pose, kinematics, statics};
