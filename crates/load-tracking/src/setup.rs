@@ -219,7 +219,8 @@ impl lm::Problem<Dyn> for Tension<'_> {
     ) -> Result<(), SetupError> {
         // Forward differences with 10 N steps: the law is linear in f, the geometry barely
         // moves.
-        let f0 = self.f_now.clone();
+        // `forces` needs `self` mutably; the current point's forces are set aside meanwhile.
+        let f0 = std::mem::take(&mut self.f_now);
         let mut jac = DMatrix::zeros(f0.len(), lambda.len());
         for c in 0..lambda.len() {
             let mut l2 = lambda.clone();

@@ -163,34 +163,31 @@ pub fn write_configs(dir: &Path, args: &Args) -> Res<()> {
     // to take drive-io's publisher (a loaded host took up to 220 ms after the kill, longer
     // than the spec's 4 cycles): the scenario is about stale samples never counting as life and
     // the trip naming them, the spec's silence is timed by `kill_drive_io`.
-    let stale_silence = format!(
-        "window_setpoints = 200\nsilence_cycles = {}\n",
-        args.feedback_silence_cycles
-    );
-    let monitor_stale = monitor.replace(
-        &stale_silence,
-        &format!(
-            "window_setpoints = 200\nsilence_cycles = {}\n",
-            stale_feedback_silence_cycles(args.feedback_silence_cycles)
-        ),
-    );
-    if monitor_stale == monitor {
-        return Err("safety-monitor-stale.toml: could not set the feedback silence".into());
-    }
+    let feedback_silence =
+        |cycles: u32| format!("window_setpoints = 200\nsilence_cycles = {cycles}\n");
+    // The monitor's configuration with another feedback silence, refused if it did not change.
+    let with_feedback_silence = |file: &str, cycles: u32| -> Res<String> {
+        let text = monitor.replace(
+            &feedback_silence(args.feedback_silence_cycles),
+            &feedback_silence(cycles),
+        );
+        if text == monitor {
+            return Err(format!("{file}: could not set the feedback silence"));
+        }
+        Ok(text)
+    };
+    let monitor_stale = with_feedback_silence(
+        "safety-monitor-stale.toml",
+        stale_feedback_silence_cycles(args.feedback_silence_cycles),
+    )?;
     // `unknown_applied_sequence`: the same replacement, but its fault is the replacement's
     // first sample and nothing in it is timed, so the silence only has to outlast taking over
     // the publisher (in the emulated guest 280-706 ms after the kill, longer than the stale
     // scenario's 600 ms: the replacement stalled on both attempts).
-    let monitor_replacement = monitor.replace(
-        &stale_silence,
-        &format!(
-            "window_setpoints = 200\nsilence_cycles = {}\n",
-            replacement_feedback_silence_cycles(args.feedback_silence_cycles)
-        ),
-    );
-    if monitor_replacement == monitor {
-        return Err("safety-monitor-replacement.toml: could not set the feedback silence".into());
-    }
+    let monitor_replacement = with_feedback_silence(
+        "safety-monitor-replacement.toml",
+        replacement_feedback_silence_cycles(args.feedback_silence_cycles),
+    )?;
     // The drives (winch emulator) of `heartbeat_config_crc_mismatch`: one SRDO parameter (their
     // validation time) differs from what the monitor announces.
     let drives_mismatch = drives.replace(
